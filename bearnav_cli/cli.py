@@ -1,0 +1,362 @@
+"""The ``bearnav`` command line (DESIGN §5): the only place that reads YAML, prints or exits.
+
+Exit codes: 0 success (fresh stages included), 1 the run finished but the outcome
+failed (no route), 2 usage, 3 invalid input (one line naming file, field and problem).
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import json
+import logging
+from pathlib import Path
+from typing import Any, Callable, List, Optional
+
+import typer
+import yaml
+from rich.console import Console
+from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+from bearnav_cli import __version__, artifacts, pipeline
+from bearnav_cli.errors import BearnavError, InvalidMapError
+from bearnav_cli.stages.map_ import GridSource, MapSource
+
+app = typer.Typer(
+    add_completion=True,
+    no_args_is_help=True,
+    help="Certified bearing-only navigation controllers from a 2-D map.\n\n"
+    "Example: bearnav plan maps/kitchen.yaml",
+)
+out = Console()
+err = Console(stderr=True)
+
+EXIT_OUTCOME, EXIT_INVALID = 1, 3
+
+
+class _Quiet:
+    enabled = False
+
+
+class _WarningHandler(logging.Handler):
+    """Print library warnings as one line each on stderr."""
+
+    def emit(self, record: logging.LogRecord) -> None:
+        if not _Quiet.enabled or record.levelno >= logging.ERROR:
+            err.print(f"[yellow]warning:[/yellow] {record.getMessage()}", highlight=False, soft_wrap=True)
+
+
+def _setup_logging() -> None:
+    logger = logging.getLogger("bearnav_cli")
+    if not any(isinstance(h, _WarningHandler) for h in logger.handlers):
+        logger.addHandler(_WarningHandler(level=logging.WARNING))
+    logger.setLevel(logging.WARNING)
+    logger.propagate = False
+
+
+def _fail(message: str, code: int) -> typer.Exit:
+    err.print(f"[red]error:[/red] {message}", highlight=False, soft_wrap=True, markup=True)
+    return typer.Exit(code)
+
+
+def handles_errors(command: Callable) -> Callable:
+    """Turn bearnav errors into one line on stderr and exit code 3."""
+
+    @functools.wraps(command)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        _setup_logging()
+        try:
+            return command(*args, **kwargs)
+        except BearnavError as exc:
+            raise _fail(str(exc).replace("[", r"\["), EXIT_INVALID) from None
+
+    return wrapper
+
+
+@app.callback()
+def main(
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bars or warnings."),
+    version: bool = typer.Option(False, "--version", help="Print the version and exit."),
+) -> None:
+    """Certified bearing-only navigation controllers from a 2-D map."""
+    _Quiet.enabled = quiet
+    if version:
+        out.print(f"bearnav {__version__}")
+        raise typer.Exit(0)
+
+
+# --------------------------------------------------------------------------- reading maps
+
+
+def _read_bytes(path: Path, field: str | None = None, what: str = "file") -> bytes:
+    try:
+        return path.read_bytes()
+    except OSError as exc:
+        raise InvalidMapError(f"cannot read {what} ({exc.strerror or exc})", file=str(path), field=field) from exc
+
+
+def _read_yaml(path: Path) -> tuple[Any, bytes]:
+    data = _read_bytes(path)
+    try:
+        return yaml.safe_load(data), data
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" at line {mark.line + 1}" if mark else ""
+        problem = getattr(exc, "problem", None) or "syntax error"
+        raise InvalidMapError(f"not valid YAML ({problem}{where})", file=str(path)) from exc
+
+
+def _grid_source(grid_yaml: Path, owner: str, field: str) -> tuple[GridSource, list[bytes]]:
+    """Read a ROS map_server YAML and its image."""
+    if not grid_yaml.is_file():
+        raise InvalidMapError(f"occupancy file {str(grid_yaml)!r} does not exist", file=owner, field=field)
+    meta, meta_bytes = _read_yaml(grid_yaml)
+    if not isinstance(meta, dict) or not isinstance(meta.get("image"), str):
+        raise InvalidMapError("not a map_server YAML (needs an 'image' key)", file=str(grid_yaml), field="image")
+    image_path = (grid_yaml.parent / meta["image"]).resolve()
+    image = _read_bytes(image_path, field="image", what="image")
+    return GridSource(meta, image, str(grid_yaml), str(image_path)), [meta_bytes, image]
+
+
+def read_map_source(
+    path: Path,
+    goal: Optional[List[float]] = None,
+    landmarks: Optional[List[str]] = None,
+    starts: Optional[List[str]] = None,
+    robot_radius: Optional[float] = None,
+) -> MapSource:
+    """Read a bearnav map YAML (or a bare ROS map_server YAML plus options) into a MapSource."""
+    spec, data = _read_yaml(path)
+    if not isinstance(spec, dict):
+        raise InvalidMapError("expected a mapping at the top level", file=str(path))
+    blobs = [data]
+    grid = None
+    if "image" in spec:  # a bare map_server YAML: the rest comes from options
+        grid, extra = _grid_source(path, str(path), "image")
+        blobs = extra
+        spec = {"name": path.stem}
+        if goal is None:
+            raise InvalidMapError("a bare occupancy grid needs --goal X,Y", file=str(path), field="goal")
+        spec["goal"] = list(goal)
+        spec["landmarks"] = [_pair(text, "--landmark") for text in landmarks or []]
+        spec["starts"] = [_pair(text, "--start") for text in starts or []]
+        if robot_radius is not None:
+            spec["robot_radius"] = robot_radius
+    else:
+        spec.setdefault("name", path.stem)
+        if "occupancy" in spec:
+            if not isinstance(spec["occupancy"], str):
+                raise InvalidMapError("expected a file name", file=str(path), field="occupancy")
+            grid, extra = _grid_source(path.parent / spec["occupancy"], str(path), "occupancy")
+            blobs += extra
+    digest = hashlib.sha256()
+    for blob in blobs:
+        digest.update(hashlib.sha256(blob).digest())
+    return MapSource(spec=spec, file=str(path), sha256=digest.hexdigest(), grid=grid)
+
+
+def _pair(text: str, option: str) -> list[float]:
+    try:
+        x, y = (float(v) for v in text.split(","))
+    except ValueError:
+        raise BearnavError(f"{option}: expected X,Y, got {text!r}") from None
+    return [x, y]
+
+
+# --------------------------------------------------------------------------- output helpers
+
+
+def _report_line(report: pipeline.StageReport) -> str:
+    state = "ran  " if report.ran else "fresh"
+    timing = f"{report.elapsed_s:6.2f} s" if report.ran else "       -"
+    return f"{report.stage:<9} {state} {timing}  {report.path}  {report.summary}"
+
+
+def _progress_factory(progress: Progress) -> Callable[[str], pipeline.Progress]:
+    def make(stage: str) -> pipeline.Progress:
+        task = progress.add_task(stage, total=None)
+
+        def update(done: int, total: int) -> None:
+            progress.update(task, completed=done, total=total)
+
+        return update
+
+    return make
+
+
+def _progress_bar() -> Progress:
+    return Progress(
+        TextColumn("{task.description:<9}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
+        TimeElapsedColumn(), console=err, transient=True, disable=_Quiet.enabled,
+    )
+
+
+def _no_route(report: pipeline.StageReport) -> bool:
+    artifact = report.artifact
+    return hasattr(artifact, "nodes") and len(artifact.nodes) < 2
+
+
+def _finish(reports: list[pipeline.StageReport], as_json: bool) -> None:
+    if as_json:
+        rows = [
+            {"stage": r.stage, "ran": r.ran, "elapsed_s": r.elapsed_s, "path": str(r.path), "summary": r.summary}
+            for r in reports
+        ]
+        out.print_json(json.dumps(rows))
+    if reports and _no_route(reports[-1]):
+        raise _fail("no route: the tree has only its root (every sample fell in obstacles?)", EXIT_OUTCOME)
+
+
+# --------------------------------------------------------------------------- commands
+
+MAP_ARG = typer.Argument(..., help="Map YAML (bearnav format, or a ROS map_server YAML).")
+FORCE = typer.Option(False, "--force", help="Rerun even if the output is fresh.")
+JSON = typer.Option(False, "--json", help="Print machine-readable JSON.")
+
+
+@app.command("map")
+@handles_errors
+def map_command(
+    source: Path = MAP_ARG,
+    out_path: Optional[Path] = typer.Option(None, "-o", "--out", help="Output (default plans/<name>/map.json)."),
+    unknown: Optional[str] = typer.Option(None, help="Unknown grid cells count as 'obstacle' (default) or 'free'."),
+    circle_segments: Optional[int] = typer.Option(None, help="Vertices of a polygonised circle (64)."),
+    goal: Optional[str] = typer.Option(None, help="Goal X,Y (bare occupancy grids only)."),
+    landmark: Optional[List[str]] = typer.Option(None, help="Landmark X,Y, repeatable (bare grids only)."),
+    start: Optional[List[str]] = typer.Option(None, help="Start X,Y, repeatable (bare grids only)."),
+    robot_radius: Optional[float] = typer.Option(None, help="Robot radius (bare grids only)."),
+    force: bool = FORCE,
+    as_json: bool = JSON,
+) -> None:
+    """Validate a map and write map.json.
+
+    Example: bearnav map maps/kitchen.yaml -o /tmp/kitchen/map.json
+    """
+    goal_xy = _pair(goal, "--goal") if goal else None
+    src = read_map_source(source, goal_xy, landmark, start, robot_radius)
+    target = out_path or Path("plans") / str(src.spec.get("name", source.stem)) / "map.json"
+    report = pipeline.run_map(src, target, {"unknown": unknown, "circle_segments": circle_segments}, force)
+    if not as_json:
+        out.print(_report_line(report), highlight=False, soft_wrap=True)
+    _finish([report], as_json)
+
+
+@app.command("rrtstar")
+@handles_errors
+def rrtstar_command(
+    map_json: Path = typer.Argument(..., help="map.json from `bearnav map`."),
+    out_path: Optional[Path] = typer.Option(None, "-o", "--out", help="Output (default tree.npz next to the input)."),
+    iterations: Optional[int] = typer.Option(None, help="Random samples drawn (1500)."),
+    step: Optional[float] = typer.Option(None, help="Steering distance eta, map units (1.0)."),
+    seed: Optional[int] = typer.Option(None, help="Random seed (0)."),
+    collision_policy: Optional[str] = typer.Option(None, help="'skip' (default) or 'extend' after a collision sample."),
+    border_spacing: Optional[float] = typer.Option(None, help="Border pseudo-sample spacing (step/10; 0 = off)."),
+    force: bool = FORCE,
+    as_json: bool = JSON,
+) -> None:
+    """Grow an RRT* tree rooted at the goal, keeping the collision samples.
+
+    Example: bearnav rrtstar plans/kitchen/map.json --iterations 3000 --seed 1
+    """
+    overrides = dict(
+        iterations=iterations, step=step, seed=seed, collision_policy=collision_policy, border_spacing=border_spacing
+    )
+    _run_one("rrtstar", map_json, out_path, overrides, force, as_json)
+
+
+@app.command("simplify")
+@handles_errors
+def simplify_command(
+    tree_npz: Path = typer.Argument(..., help="tree.npz from `bearnav rrtstar`."),
+    out_path: Optional[Path] = typer.Option(None, "-o", "--out", help="Output (default simplified.npz next to the input)."),
+    max_rounds: Optional[int] = typer.Option(None, help="Rounds of PPR, CtL, RC, CtL at most (10)."),
+    ctl: Optional[str] = typer.Option(None, help="Leaves kept by cut-the-leaves: 'middle' (default) or 'extremes'."),
+    force: bool = FORCE,
+    as_json: bool = JSON,
+) -> None:
+    """Simplify the tree: shortcuts, leaf cutting and crossing removal to a fixed point.
+
+    Example: bearnav simplify plans/kitchen/tree.npz
+    """
+    _run_one("simplify", tree_npz, out_path, dict(max_rounds=max_rounds, ctl=ctl), force, as_json)
+
+
+def _run_one(stage: str, source: Path, out_path: Optional[Path], overrides: dict, force: bool, as_json: bool) -> None:
+    with _progress_bar() as progress:
+        report = pipeline.run_stage(stage, source, out_path, overrides, force, _progress_factory(progress)(stage))
+    if not as_json:
+        out.print(_report_line(report), highlight=False, soft_wrap=True)
+    _finish([report], as_json)
+
+
+@app.command("plan")
+@handles_errors
+def plan_command(
+    source: Path = MAP_ARG,
+    out_dir: Optional[Path] = typer.Option(None, "-o", "--out", help="Output folder (default plans/<name>/)."),
+    iterations: Optional[int] = typer.Option(None, help="RRT* iterations (map's params, else 1500)."),
+    step: Optional[float] = typer.Option(None, help="RRT* step (map's params, else 1.0)."),
+    seed: Optional[int] = typer.Option(None, help="RRT* seed."),
+    force: bool = FORCE,
+    as_json: bool = JSON,
+) -> None:
+    """Run every stage from the map to the last one, skipping fresh stages.
+
+    Example: bearnav plan maps/kitchen.yaml --seed 3
+    """
+    src = read_map_source(source)
+    target = out_dir or Path("plans") / str(src.spec.get("name", source.stem))
+    overrides = {"rrtstar": {"iterations": iterations, "step": step, "seed": seed}}
+
+    def show(report: pipeline.StageReport) -> None:
+        if not as_json:
+            out.print(_report_line(report), highlight=False, soft_wrap=True)
+
+    with _progress_bar() as progress:
+        reports = pipeline.plan(src, target, overrides, force, _progress_factory(progress), show)
+    _finish(reports, as_json)
+
+
+@app.command("inspect")
+@handles_errors
+def inspect_command(artifact: Path = typer.Argument(..., help="Any bearnav artifact."), as_json: bool = JSON) -> None:
+    """Check an artifact and print its manifest and one-line summary.
+
+    Example: bearnav inspect plans/kitchen/tree.npz
+    """
+    loaded = artifacts.load(artifact)
+    manifest = loaded.manifest
+    if as_json:
+        out.print_json(json.dumps(manifest))
+        return
+    out.print(f"[bold]{artifact}[/bold]  {manifest['schema']}  (stage {manifest['stage']} v{manifest['stage_version']})")
+    out.print(f"summary   {manifest.get('summary', '')}", highlight=False)
+    out.print(f"params    {json.dumps(manifest.get('params', {}), sort_keys=True)}", highlight=False)
+    inp = manifest.get("input", {})
+    out.print(f"input     {inp.get('path')}  sha256 {str(inp.get('content_sha256'))[:16]}…", highlight=False)
+    out.print(f"content   sha256 {manifest['content_sha256'][:16]}…  key {manifest['key'][:16]}…", highlight=False)
+    if manifest.get("stats"):
+        out.print(f"stats     {json.dumps(manifest['stats'], sort_keys=True)}", highlight=False)
+    software = ", ".join(f"{k} {v}" for k, v in manifest.get("software", {}).items())
+    out.print(f"software  {software}  elapsed {manifest.get('elapsed_s', 0):.3f} s", highlight=False)
+
+
+@app.command("plot")
+@handles_errors
+def plot_command(
+    artifact: Path = typer.Argument(..., help="Any bearnav artifact."),
+    out_path: Path = typer.Option(..., "-o", "--out", help="Figure file (.png, .pdf, .svg)."),
+    also: Optional[List[Path]] = typer.Option(None, "--also", help="Tree artifact drawn faintly underneath."),
+    title: Optional[str] = typer.Option(None, help="Figure title."),
+) -> None:
+    """Draw an artifact: map, tree, collision samples, simplified tree.
+
+    Example: bearnav plot plans/kitchen/simplified.npz --also plans/kitchen/tree.npz -o simplified.png
+    """
+    from bearnav_cli import plot  # matplotlib is slow to import: only here
+
+    loaded = artifacts.load(artifact)
+    background = [artifacts.load(p, ("tree", "simplified")).artifact for p in also or []]
+    fig = plot.figure_for(loaded.artifact, background=background, title=title)
+    plot.save_figure(fig, str(out_path))
+    out.print(f"wrote {out_path}", highlight=False)

@@ -1,0 +1,218 @@
+"""Collision and visibility queries behind one door (DESIGN §1.6, ALGORITHMS §1).
+
+:class:`FreeSpace` is built once from a :class:`~bearnav_cli.datatypes.Map` and
+answers every geometric question the stages ask, vectorised over numpy arrays
+with shapely 2. Edge tests are exact (segment against polygon); touching an
+obstacle counts as a collision.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+import shapely
+
+from bearnav_cli.datatypes import Map, Polygon
+
+#: Vertices of a polygonised circle (ALGORITHMS §1): the 64-gon circumscribes the disc.
+CIRCLE_SEGMENTS = 64
+#: Segments per quarter circle of the round joins used for inflation.
+BUFFER_QUAD_SEGS = 16
+
+
+def to_shapely(polygon: Polygon) -> shapely.Polygon:
+    """Convert a :class:`Polygon` to a shapely polygon."""
+    return shapely.Polygon(polygon.exterior, [h for h in polygon.holes])
+
+
+def from_shapely(geometry: shapely.Geometry) -> tuple[Polygon, ...]:
+    """Split a (multi)polygon into :class:`Polygon` parts, normalised and in a fixed order.
+
+    Rings are oriented as shapely's ``normalize`` leaves them and written without the
+    closing repeat, so equal geometries give identical coordinates.
+    """
+    parts = [g for g in shapely.get_parts(shapely.normalize(geometry)) if not g.is_empty]
+    parts = [p for p in parts if isinstance(p, shapely.Polygon) and p.area > 0]
+    parts.sort(key=lambda p: (p.bounds[0], p.bounds[1], p.bounds[2], p.bounds[3]))
+    return tuple(
+        Polygon(
+            np.asarray(p.exterior.coords)[:-1],
+            tuple(np.asarray(h.coords)[:-1] for h in p.interiors),
+        )
+        for p in parts
+    )
+
+
+def circle_polygon(center: tuple[float, float], radius: float, segments: int = CIRCLE_SEGMENTS) -> np.ndarray:
+    """Regular ``segments``-gon that contains the disc (vertices at ``r / cos(π/segments)``).
+
+    Returns
+    -------
+    ndarray, shape (segments, 2)
+        Counter-clockwise vertices.
+    """
+    outer = radius / math.cos(math.pi / segments)
+    angles = 2.0 * math.pi * np.arange(segments) / segments
+    return np.column_stack([center[0] + outer * np.cos(angles), center[1] + outer * np.sin(angles)])
+
+
+def inflate(raw: shapely.Geometry, radius: float) -> shapely.Geometry:
+    """Configuration-space obstacles: ``buffer(raw, ρ')`` with ``ρ' = ρ / cos(π/(4q))``.
+
+    The rounded-up radius makes the polygonal buffer contain the exact Minkowski sum
+    with the disc of radius ``ρ`` (ALGORITHMS §1).
+    """
+    if radius <= 0:
+        return raw
+    grown = radius / math.cos(math.pi / (4 * BUFFER_QUAD_SEGS))
+    return shapely.buffer(raw, grown, quad_segs=BUFFER_QUAD_SEGS, join_style="round")
+
+
+@dataclass(frozen=True)
+class FreeSpace:
+    """Free space ``B \\ O`` of a map, with exact vectorised queries.
+
+    Build it with :meth:`from_map`. All inputs are arrays of points in map units;
+    all outputs are numpy arrays.
+    """
+
+    bounds: np.ndarray
+    tol: float
+    obstacles: shapely.Geometry
+    raw_obstacles: shapely.Geometry
+
+    @classmethod
+    def from_map(cls, map_: Map) -> FreeSpace:
+        """Prepare the union of the map's inflated and raw obstacles."""
+        obstacles = shapely.union_all([to_shapely(p) for p in map_.obstacles])
+        raw = shapely.union_all([to_shapely(p) for p in map_.raw_obstacles])
+        shapely.prepare(obstacles)
+        shapely.prepare(raw)
+        return cls(np.asarray(map_.bounds, float), map_.tol, obstacles, raw)
+
+    @cached_property
+    def box(self) -> shapely.Polygon:
+        """The bounds ``B`` as a polygon."""
+        return shapely.box(*self.bounds)
+
+    @cached_property
+    def free_area(self) -> float:
+        """``A_free = area(B) − area(O ∩ B)`` (map units²)."""
+        return float(self.box.area - shapely.intersection(self.obstacles, self.box).area)
+
+    @cached_property
+    def free_region(self) -> shapely.Geometry:
+        """``B \\ O`` as a shapely geometry (possibly several components)."""
+        return shapely.difference(self.box, self.obstacles)
+
+    @cached_property
+    def _box_limits(self) -> tuple[np.ndarray, np.ndarray]:
+        """Lower and upper limits of ``B`` repeated for a segment's two endpoints, shape (4,)."""
+        return np.tile(self.bounds[:2], 2), np.tile(self.bounds[2:], 2)
+
+    def in_bounds(self, points: np.ndarray) -> np.ndarray:
+        """Whether each point lies in the closed box ``B``; shape (n,) bool."""
+        p = np.asarray(points, float).reshape(-1, 2)
+        return ((p >= self.bounds[:2]) & (p <= self.bounds[2:])).all(axis=1)
+
+    def in_obstacle(self, points: np.ndarray) -> np.ndarray:
+        """Whether each point lies in the closed obstacle set ``O``; shape (n,) bool."""
+        p = np.asarray(points, float).reshape(-1, 2)
+        if self.obstacles.is_empty:
+            return np.zeros(len(p), bool)
+        return shapely.intersects_xy(self.obstacles, p[:, 0], p[:, 1])
+
+    def points_free(self, points: np.ndarray) -> np.ndarray:
+        """Free points: in ``B`` and not in ``O`` (ALGORITHMS §1); shape (n,) bool."""
+        p = np.asarray(points, float).reshape(-1, 2)
+        free = self.in_bounds(p)
+        if free.any():
+            free[free] = ~self.in_obstacle(p[free])
+        return free
+
+    def points_strictly_free(self, points: np.ndarray) -> np.ndarray:
+        """Free points in the interior of ``B`` at positive distance from ``O``."""
+        p = np.asarray(points, float).reshape(-1, 2)
+        xmin, ymin, xmax, ymax = self.bounds
+        inside = (p[:, 0] > xmin) & (p[:, 0] < xmax) & (p[:, 1] > ymin) & (p[:, 1] < ymax)
+        return inside & ~self.in_obstacle(p)
+
+    def segments_free(self, starts: np.ndarray, ends: np.ndarray) -> np.ndarray:
+        """Exact segment test: each segment lies in ``B`` and does not touch ``O``.
+
+        Parameters
+        ----------
+        starts, ends : ndarray, shape (n, 2)
+            Segment endpoints (either may be a single point, broadcast against the other).
+
+        Returns
+        -------
+        ndarray of bool, shape (n,)
+        """
+        a = np.asarray(starts, float).reshape(-1, 2)
+        b = np.asarray(ends, float).reshape(-1, 2)
+        coords = np.empty((max(len(a), len(b)), 2, 2))
+        coords[:, 0] = a
+        coords[:, 1] = b
+        lo, hi = self._box_limits
+        # B is convex, so both endpoints in B put the whole segment in B
+        flat = coords.reshape(-1, 4)
+        free = ((flat >= lo) & (flat <= hi)).all(axis=1)
+        if self.obstacles.is_empty:
+            return free
+        if free.all():
+            return ~shapely.intersects(self.obstacles, shapely.linestrings(coords))
+        if free.any():
+            free[free] = ~shapely.intersects(self.obstacles, shapely.linestrings(coords[free]))
+        return free
+
+    def visible(self, points: np.ndarray, targets: np.ndarray) -> np.ndarray:
+        """Line of sight from points to landmarks through the raw obstacles.
+
+        The segment from ``p`` to ``l' = l − tol·unit(l − p)`` must not meet ``P_raw``,
+        so a landmark on a wall is visible (ALGORITHMS §1).
+
+        Parameters
+        ----------
+        points : ndarray, shape (n, 2)
+        targets : ndarray, shape (n, 2)
+            Paired with ``points`` row by row (broadcast one side to test many).
+
+        Returns
+        -------
+        ndarray of bool, shape (n,)
+        """
+        p, t = np.broadcast_arrays(np.asarray(points, float), np.asarray(targets, float))
+        p = p.reshape(-1, 2)
+        t = t.reshape(-1, 2)
+        delta = t - p
+        length = np.hypot(delta[:, 0], delta[:, 1])
+        ok = length > self.tol
+        result = np.zeros(len(p), bool)
+        if not ok.any():
+            return result
+        shortened = t[ok] - self.tol * delta[ok] / length[ok, None]
+        if self.raw_obstacles.is_empty:
+            result[ok] = True
+            return result
+        lines = shapely.linestrings(np.stack([p[ok], shortened], axis=1))
+        result[ok] = ~shapely.intersects(self.raw_obstacles, lines)
+        return result
+
+    def clearance(self, points: np.ndarray) -> np.ndarray:
+        """Distance from each point to ``O`` (0 inside), shape (n,); ``inf`` without obstacles."""
+        p = np.asarray(points, float).reshape(-1, 2)
+        if self.obstacles.is_empty:
+            return np.full(len(p), np.inf)
+        return shapely.distance(self.obstacles, shapely.points(p))
+
+    def component_of(self, point: np.ndarray) -> shapely.Geometry:
+        """The connected component of ``B \\ O`` that contains ``point`` (empty if none)."""
+        target = shapely.Point(point)
+        for part in shapely.get_parts(self.free_region):
+            if part.intersects(target):
+                return part
+        return shapely.Polygon()

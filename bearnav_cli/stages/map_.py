@@ -1,0 +1,358 @@
+"""Stage ``map``: validate a map description and normalise it (ALGORITHMS §1, DESIGN §4).
+
+Input is a :class:`MapSource` (the parsed YAML plus any occupancy grid bytes,
+read by the CLI); output is a :class:`~bearnav_cli.datatypes.Map` with circles
+and rectangles turned into polygons, occupancy grids vectorised and obstacles
+inflated by the robot radius. Every problem raises
+:class:`~bearnav_cli.errors.InvalidMapError` naming the file and the field.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import shapely
+
+from bearnav_cli import occupancy
+from bearnav_cli.datatypes import Map
+from bearnav_cli.errors import InvalidMapError
+from bearnav_cli.geometry import CIRCLE_SEGMENTS, FreeSpace, circle_polygon, from_shapely, inflate
+
+VERSION = 1
+log = logging.getLogger(__name__)
+
+#: Top-level keys of a bearnav map YAML.
+MAP_KEYS = (
+    "name", "description", "bounds", "robot_radius", "goal", "starts", "obstacles",
+    "landmarks", "occupancy", "params",
+)
+
+
+@dataclass(frozen=True)
+class Params:
+    """Parameters of the map stage.
+
+    Attributes
+    ----------
+    circle_segments : int
+        Vertices of the polygon that replaces a circle (it contains the disc).
+    unknown : {"obstacle", "free"}
+        How unknown cells of an occupancy grid count.
+    coverage_cells : int
+        The landmark-coverage check uses a grid of spacing ``D / coverage_cells``.
+    """
+
+    circle_segments: int = CIRCLE_SEGMENTS
+    unknown: str = "obstacle"
+    coverage_cells: int = 100
+
+
+@dataclass(frozen=True)
+class GridSource:
+    """An occupancy grid as read from disk: the map_server YAML and the image bytes."""
+
+    meta: dict
+    image: bytes
+    file: str
+    image_name: str
+
+
+@dataclass(frozen=True)
+class MapSource:
+    """A map description as read by the CLI.
+
+    Attributes
+    ----------
+    spec : dict
+        The parsed bearnav map YAML (or one assembled from CLI options for a bare grid).
+    file : str
+        Name of the file, for error messages.
+    sha256 : str
+        Hash of every byte read (map, grid YAML, image): the map stage's input hash.
+    grid : GridSource, optional
+        The occupancy grid referenced by ``occupancy:``.
+    """
+
+    spec: dict
+    file: str
+    sha256: str
+    grid: GridSource | None = None
+    extra: dict = field(default_factory=dict)
+
+
+class _Reader:
+    """Typed field access with errors that name the file and the field path."""
+
+    def __init__(self, file: str):
+        self.file = file
+
+    def fail(self, field: str, message: str) -> InvalidMapError:
+        return InvalidMapError(message, file=self.file, field=field)
+
+    def number(self, value: Any, field: str) -> float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise self.fail(field, f"expected a number, got {_describe(value)}")
+        if not math.isfinite(value):
+            raise self.fail(field, "must be finite")
+        return float(value)
+
+    def point(self, value: Any, field: str) -> np.ndarray:
+        if not isinstance(value, (list, tuple)) or len(value) != 2:
+            raise self.fail(field, f"expected [x, y], got {_describe(value)}")
+        return np.array([self.number(v, f"{field}[{k}]") for k, v in enumerate(value)])
+
+    def points(self, value: Any, field: str, minimum: int = 0) -> np.ndarray:
+        if not isinstance(value, (list, tuple)):
+            raise self.fail(field, f"expected a list of [x, y] points, got {_describe(value)}")
+        if len(value) < minimum:
+            raise self.fail(field, f"needs at least {minimum} points, got {len(value)}")
+        pts = [self.point(v, f"{field}[{k}]") for k, v in enumerate(value)]
+        return np.array(pts, float).reshape(-1, 2)
+
+    def mapping(self, value: Any, field: str, allowed: tuple[str, ...]) -> dict:
+        if not isinstance(value, dict):
+            raise self.fail(field, f"expected a mapping, got {_describe(value)}")
+        for key in value:
+            if key not in allowed:
+                prefix = f"{field}." if field else ""
+                raise self.fail(f"{prefix}{key}", f"unknown key (expected one of: {', '.join(allowed)})")
+        return value
+
+
+def _describe(value: Any) -> str:
+    text = repr(value)
+    return f"{type(value).__name__} {text[:40]}"
+
+
+def _obstacle(reader: _Reader, item: Any, field: str, segments: int) -> shapely.Polygon:
+    """One entry of ``obstacles:`` as a shapely polygon (raw, not inflated)."""
+    entry = reader.mapping(item, field, ("polygon", "rectangle", "circle"))
+    if len(entry) != 1:
+        raise reader.fail(field, "give exactly one of polygon, rectangle, circle")
+    kind, value = next(iter(entry.items()))
+    where = f"{field}.{kind}"
+    if kind == "polygon":
+        pts = reader.points(value, where, minimum=3)
+        poly = shapely.Polygon(pts)
+        if not poly.is_valid:
+            raise reader.fail(where, f"polygon is not simple ({shapely.is_valid_reason(poly)})")
+        if poly.area <= 0:
+            raise reader.fail(where, "polygon has zero area")
+        return shapely.orient_polygons(poly)
+    if kind == "rectangle":
+        if not isinstance(value, (list, tuple)) or len(value) != 4:
+            raise reader.fail(where, f"expected [xmin, ymin, xmax, ymax], got {_describe(value)}")
+        x0, y0, x1, y1 = (reader.number(v, f"{where}[{k}]") for k, v in enumerate(value))
+        if not (x0 < x1 and y0 < y1):
+            raise reader.fail(where, "needs xmin < xmax and ymin < ymax")
+        return shapely.box(x0, y0, x1, y1)
+    circle = reader.mapping(value, where, ("center", "radius"))
+    if "center" not in circle or "radius" not in circle:
+        raise reader.fail(where, "needs center and radius")
+    center = reader.point(circle["center"], f"{where}.center")
+    radius = reader.number(circle["radius"], f"{where}.radius")
+    if radius <= 0:
+        raise reader.fail(f"{where}.radius", "must be positive")
+    return shapely.Polygon(circle_polygon(tuple(center), radius, segments))
+
+
+def _landmarks(reader: _Reader, value: Any) -> tuple[tuple[str, ...], np.ndarray]:
+    if not isinstance(value, list):
+        raise reader.fail("landmarks", f"expected a list, got {_describe(value)}")
+    ids, positions = [], []
+    for k, item in enumerate(value):
+        where = f"landmarks[{k}]"
+        if isinstance(item, dict):
+            entry = reader.mapping(item, where, ("id", "position"))
+            if "position" not in entry:
+                raise reader.fail(where, "needs a position")
+            positions.append(reader.point(entry["position"], f"{where}.position"))
+            raw_id = entry.get("id", k)
+            if not isinstance(raw_id, (str, int)) or isinstance(raw_id, bool):
+                raise reader.fail(f"{where}.id", f"expected a string or integer, got {_describe(raw_id)}")
+            ids.append(str(raw_id))
+        else:
+            positions.append(reader.point(item, where))
+            ids.append(str(k))
+    for k, name in enumerate(ids):
+        if name in ids[:k]:
+            raise reader.fail(f"landmarks[{k}].id", f"duplicate id {name!r}")
+    return tuple(ids), np.array(positions, float).reshape(-1, 2)
+
+
+def run(source: MapSource, params: Params = Params(), progress: object = None) -> Map:
+    """Validate and normalise a map description.
+
+    Parameters
+    ----------
+    source : MapSource
+        The parsed description.
+    params : Params
+        Stage parameters.
+    progress : callable, optional
+        Accepted for the common stage signature; the map stage is quick and does not report.
+
+    Returns
+    -------
+    Map
+        The normalised map (obstacles inflated, polygons only).
+
+    Raises
+    ------
+    InvalidMapError
+        On any malformed or inconsistent field (the message names file and field).
+    """
+    reader = _Reader(source.file)
+    spec = reader.mapping(source.spec, "", MAP_KEYS)
+    if params.unknown not in ("obstacle", "free"):
+        raise reader.fail("params.map.unknown", "must be 'obstacle' or 'free'")
+    if params.circle_segments < 8:
+        raise reader.fail("params.map.circle_segments", "must be at least 8")
+
+    name = spec.get("name", "map")
+    if not isinstance(name, str) or not name or any(c in name for c in "/\\:") or name.startswith("."):
+        raise reader.fail("name", "must be a non-empty name without path separators")
+
+    raw_parts: list[shapely.Geometry] = []
+    grid_extent = None
+    if source.grid is not None:
+        grid = source.grid
+        polys, info = occupancy.grid_obstacles(
+            grid.meta, grid.image, file=grid.file, image_name=grid.image_name, unknown=params.unknown
+        )
+        raw_parts.extend(polys)
+        grid_extent = info["extent"]
+    elif "occupancy" in spec:
+        raise reader.fail("occupancy", "the occupancy grid was not loaded")
+
+    if "bounds" in spec:
+        bounds = spec["bounds"]
+        if not isinstance(bounds, (list, tuple)) or len(bounds) != 4:
+            raise reader.fail("bounds", f"expected [xmin, ymin, xmax, ymax], got {_describe(bounds)}")
+        bounds = np.array([reader.number(v, f"bounds[{k}]") for k, v in enumerate(bounds)])
+    elif grid_extent is not None:
+        bounds = np.array(grid_extent, float)
+    else:
+        raise reader.fail("bounds", "missing (required unless an occupancy grid gives the extent)")
+    if not (bounds[0] < bounds[2] and bounds[1] < bounds[3]):
+        raise reader.fail("bounds", "needs xmin < xmax and ymin < ymax")
+
+    robot_radius = reader.number(spec.get("robot_radius", 0.0), "robot_radius")
+    if robot_radius < 0:
+        raise reader.fail("robot_radius", "must be zero or positive")
+
+    obstacles = spec.get("obstacles", [])
+    if not isinstance(obstacles, list):
+        raise reader.fail("obstacles", f"expected a list, got {_describe(obstacles)}")
+    raw_parts.extend(
+        _obstacle(reader, item, f"obstacles[{k}]", params.circle_segments) for k, item in enumerate(obstacles)
+    )
+    raw = shapely.union_all(raw_parts) if raw_parts else shapely.Polygon()
+    inflated = inflate(raw, robot_radius)
+
+    if "goal" not in spec:
+        raise reader.fail("goal", "missing")
+    goal = reader.point(spec["goal"], "goal")
+    starts = reader.points(spec.get("starts", []), "starts")
+    if "landmarks" not in spec:
+        raise reader.fail("landmarks", "missing (at least 2 are needed)")
+    landmark_ids, landmarks = _landmarks(reader, spec["landmarks"])
+    stage_params = spec.get("params", {})
+    if not isinstance(stage_params, dict) or not all(isinstance(v, dict) for v in stage_params.values()):
+        raise reader.fail("params", "expected a mapping of stage name to a mapping of options")
+
+    map_ = Map(
+        name=name,
+        bounds=bounds,
+        robot_radius=robot_radius,
+        goal=goal,
+        starts=starts,
+        landmark_ids=landmark_ids,
+        landmarks=landmarks,
+        obstacles=from_shapely(inflated),
+        raw_obstacles=from_shapely(raw),
+        params=stage_params,
+        source={"file": source.file, "sha256": source.sha256},
+    )
+    _validate(reader, map_, params)
+    return map_
+
+
+def _validate(reader: _Reader, map_: Map, params: Params) -> None:
+    """The consistency checks of ALGORITHMS §1 on a built map."""
+    space = FreeSpace.from_map(map_)
+    if space.free_area <= 0:
+        raise reader.fail("obstacles", "the free space is empty")
+    if not space.points_strictly_free(map_.goal)[0]:
+        raise reader.fail("goal", f"{map_.goal.tolist()} is not strictly inside the free space")
+    component = space.component_of(map_.goal)
+    for k, start in enumerate(map_.starts):
+        where = f"starts[{k}]"
+        if not space.points_strictly_free(start)[0]:
+            raise reader.fail(where, f"{start.tolist()} is not strictly inside the free space")
+        if not component.intersects(shapely.Point(start)):
+            raise reader.fail(where, f"{start.tolist()} cannot reach the goal (another free component)")
+
+    L = len(map_.landmarks)
+    if L < 2:
+        raise reader.fail("landmarks", f"at least 2 landmarks are needed, got {L}")
+    for k, lm in enumerate(map_.landmarks):
+        where = f"landmarks[{k}]"
+        if not space.in_bounds(lm)[0]:
+            raise reader.fail(where, f"{lm.tolist()} is outside the bounds")
+        dup = np.flatnonzero(np.all(map_.landmarks[:k] == lm, axis=1))
+        if dup.size:
+            raise reader.fail(where, f"same position as landmarks[{dup[0]}]")
+        if not space.raw_obstacles.is_empty and shapely.contains_xy(space.raw_obstacles, *lm):
+            raise reader.fail(where, f"{lm.tolist()} lies inside an obstacle (a tag must be on its boundary)")
+    _coverage_warning(map_, space, params.coverage_cells)
+
+
+def landmark_coverage(map_: Map, space: FreeSpace, cells: int) -> tuple[np.ndarray, np.ndarray]:
+    """Count the landmarks in line of sight from a grid over the free space.
+
+    Returns
+    -------
+    points : ndarray, shape (P, 2)
+        Free grid points (spacing ``D / cells``).
+    counts : ndarray of int, shape (P,)
+        Landmarks in line of sight from each point.
+    """
+    xmin, ymin, xmax, ymax = map_.bounds
+    spacing = map_.diagonal / cells
+    xs = np.arange(xmin + spacing / 2, xmax, spacing)
+    ys = np.arange(ymin + spacing / 2, ymax, spacing)
+    grid = np.stack(np.meshgrid(xs, ys), axis=-1).reshape(-1, 2)
+    points = grid[space.points_free(grid)]
+    L = len(map_.landmarks)
+    pairs_p = np.repeat(points, L, axis=0)
+    pairs_l = np.tile(map_.landmarks, (len(points), 1))
+    counts = space.visible(pairs_p, pairs_l).reshape(-1, L).sum(axis=1)
+    return points, counts
+
+
+def _coverage_warning(map_: Map, space: FreeSpace, cells: int) -> None:
+    points, counts = landmark_coverage(map_, space, cells)
+    poor = points[counts < 2]
+    if len(poor) == 0 or len(points) == 0:
+        return
+    share = 100.0 * len(poor) / len(points)
+    lo, hi = poor.min(axis=0), poor.max(axis=0)
+    log.warning(
+        "fewer than 2 landmarks are in line of sight from %.1f%% of the free space, within "
+        "x in [%.3g, %.3g], y in [%.3g, %.3g] (e.g. at (%.3g, %.3g))",
+        share, lo[0], hi[0], lo[1], hi[1], poor[0][0], poor[0][1],
+    )
+
+
+def summary(map_: Map) -> str:
+    """One line for ``inspect`` and ``plan``."""
+    xmin, ymin, xmax, ymax = map_.bounds
+    return (
+        f"{map_.name}: {xmax - xmin:g} x {ymax - ymin:g} bounds, {len(map_.obstacles)} obstacles "
+        f"(robot radius {map_.robot_radius:g}), {len(map_.landmarks)} landmarks, {len(map_.starts)} starts"
+    )
