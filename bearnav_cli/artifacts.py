@@ -15,8 +15,8 @@ import os
 import platform
 import tempfile
 import zipfile
-from importlib import metadata
 from dataclasses import asdict, dataclass
+from importlib import metadata
 from pathlib import Path
 from typing import Any, Callable
 
@@ -76,8 +76,17 @@ def sha256_text(text: str) -> str:
     return hashlib.sha256(text.encode()).hexdigest()
 
 
-def content_hash(entries: dict[str, Any]) -> str:
-    """SHA-256 over data entries in sorted key order (name, dtype, shape and bytes of each)."""
+def content_hash(entries: dict[str, Any], kind: str | None = None) -> str:
+    """SHA-256 over data entries in sorted key order (name, dtype, shape and bytes of each).
+
+    For ``map.json`` the ``source`` field (file name and hash of the YAML) is provenance and
+    stays out of the hash: editing a comment in the YAML reruns the map stage, but an
+    identical map does not invalidate the stages after it.
+    """
+    if kind == "map":
+        document = json.loads(entries["map"])
+        document.pop("source", None)
+        entries = {"map": canonical_json(document)}
     digest = hashlib.sha256()
     for key in sorted(entries):
         value = entries[key]
@@ -134,7 +143,7 @@ def make_manifest(
         "stage_version": stage_version,
         "params": params,
         "input": {"path": input_path, "content_sha256": input_hash},
-        "content_sha256": content_hash(entries_of(artifact)),
+        "content_sha256": content_hash(entries_of(artifact), kind),
         "key": cache_key(stage, stage_version, params, input_hash),
         "software": software_versions(),
         "summary": summary,
@@ -241,7 +250,9 @@ def _read_raw(path: Path) -> tuple[dict, dict[str, Any]]:
         manifest = json.loads(str(data.pop("manifest")))
     except json.JSONDecodeError as exc:
         raise ArtifactError(f"manifest is not valid JSON ({exc})", file=str(path)) from exc
-    entries = {key: (str(value) if value.dtype.kind == "U" and value.ndim == 0 else value) for key, value in data.items()}
+    entries = {
+        key: (str(value) if value.dtype.kind == "U" and value.ndim == 0 else value) for key, value in data.items()
+    }
     return manifest, entries
 
 
@@ -294,7 +305,7 @@ def load(path: str | os.PathLike, expect: str | tuple[str, ...] | None = None) -
             raise ArtifactError(
                 f"expected {ndim}-d {dtype_kind} array, got {value.ndim}-d {value.dtype}", file=str(path), field=key
             )
-    if content_hash(entries) != manifest.get("content_sha256"):
+    if content_hash(entries, kind) != manifest.get("content_sha256"):
         raise ArtifactError("content hash mismatch (file corrupted or edited)", file=str(path))
     try:
         artifact = _from_entries(kind, entries, manifest)
@@ -312,4 +323,5 @@ def is_fresh(path: str | os.PathLike, key: str) -> bool:
         manifest, entries = _read_raw(path)
     except ArtifactError:
         return False
-    return manifest.get("key") == key and content_hash(entries) == manifest.get("content_sha256")
+    kind = kind_of_schema(str(manifest.get("schema")))
+    return manifest.get("key") == key and content_hash(entries, kind) == manifest.get("content_sha256")

@@ -211,6 +211,7 @@ def _finish(reports: list[pipeline.StageReport], as_json: bool) -> None:
 
 MAP_ARG = typer.Argument(..., help="Map YAML (bearnav format, or a ROS map_server YAML).")
 FORCE = typer.Option(False, "--force", help="Rerun even if the output is fresh.")
+QUIET = typer.Option(False, "--quiet", "-q", help="No progress bars or warnings.")
 JSON = typer.Option(False, "--json", help="Print machine-readable JSON.")
 
 
@@ -226,12 +227,14 @@ def map_command(
     start: Optional[List[str]] = typer.Option(None, help="Start X,Y, repeatable (bare grids only)."),
     robot_radius: Optional[float] = typer.Option(None, help="Robot radius (bare grids only)."),
     force: bool = FORCE,
+    quiet: bool = QUIET,
     as_json: bool = JSON,
 ) -> None:
     """Validate a map and write map.json.
 
     Example: bearnav map maps/kitchen.yaml -o /tmp/kitchen/map.json
     """
+    _Quiet.enabled |= quiet
     goal_xy = _pair(goal, "--goal") if goal else None
     src = read_map_source(source, goal_xy, landmark, start, robot_radius)
     target = out_path or Path("plans") / str(src.spec.get("name", source.stem)) / "map.json"
@@ -252,12 +255,14 @@ def rrtstar_command(
     collision_policy: Optional[str] = typer.Option(None, help="'skip' (default) or 'extend' after a collision sample."),
     border_spacing: Optional[float] = typer.Option(None, help="Border pseudo-sample spacing (step/10; 0 = off)."),
     force: bool = FORCE,
+    quiet: bool = QUIET,
     as_json: bool = JSON,
 ) -> None:
     """Grow an RRT* tree rooted at the goal, keeping the collision samples.
 
     Example: bearnav rrtstar plans/kitchen/map.json --iterations 3000 --seed 1
     """
+    _Quiet.enabled |= quiet
     overrides = dict(
         iterations=iterations, step=step, seed=seed, collision_policy=collision_policy, border_spacing=border_spacing
     )
@@ -268,16 +273,20 @@ def rrtstar_command(
 @handles_errors
 def simplify_command(
     tree_npz: Path = typer.Argument(..., help="tree.npz from `bearnav rrtstar`."),
-    out_path: Optional[Path] = typer.Option(None, "-o", "--out", help="Output (default simplified.npz next to the input)."),
+    out_path: Optional[Path] = typer.Option(
+        None, "-o", "--out", help="Output (default simplified.npz next to the input)."
+    ),
     max_rounds: Optional[int] = typer.Option(None, help="Rounds of PPR, CtL, RC, CtL at most (10)."),
     ctl: Optional[str] = typer.Option(None, help="Leaves kept by cut-the-leaves: 'middle' (default) or 'extremes'."),
     force: bool = FORCE,
+    quiet: bool = QUIET,
     as_json: bool = JSON,
 ) -> None:
     """Simplify the tree: shortcuts, leaf cutting and crossing removal to a fixed point.
 
     Example: bearnav simplify plans/kitchen/tree.npz
     """
+    _Quiet.enabled |= quiet
     _run_one("simplify", tree_npz, out_path, dict(max_rounds=max_rounds, ctl=ctl), force, as_json)
 
 
@@ -298,12 +307,14 @@ def plan_command(
     step: Optional[float] = typer.Option(None, help="RRT* step (map's params, else 1.0)."),
     seed: Optional[int] = typer.Option(None, help="RRT* seed."),
     force: bool = FORCE,
+    quiet: bool = QUIET,
     as_json: bool = JSON,
 ) -> None:
     """Run every stage from the map to the last one, skipping fresh stages.
 
     Example: bearnav plan maps/kitchen.yaml --seed 3
     """
+    _Quiet.enabled |= quiet
     src = read_map_source(source)
     target = out_dir or Path("plans") / str(src.spec.get("name", source.stem))
     overrides = {"rrtstar": {"iterations": iterations, "step": step, "seed": seed}}
@@ -329,7 +340,8 @@ def inspect_command(artifact: Path = typer.Argument(..., help="Any bearnav artif
     if as_json:
         out.print_json(json.dumps(manifest))
         return
-    out.print(f"[bold]{artifact}[/bold]  {manifest['schema']}  (stage {manifest['stage']} v{manifest['stage_version']})")
+    stage = f"stage {manifest['stage']} v{manifest['stage_version']}"
+    out.print(f"[bold]{artifact}[/bold]  {manifest['schema']}  ({stage})")
     out.print(f"summary   {manifest.get('summary', '')}", highlight=False)
     out.print(f"params    {json.dumps(manifest.get('params', {}), sort_keys=True)}", highlight=False)
     inp = manifest.get("input", {})

@@ -37,7 +37,7 @@ def frozen_array(value: Any, dtype: Any, shape: tuple[int | None, ...], name: st
     if array.size == 0 and len(shape) > 1 and array.ndim == 1:
         array = array.reshape((0,) + tuple(s or 0 for s in shape[1:]))
     if array.ndim != len(shape) or any(
-        want is not None and got != want for got, want in zip(array.shape, shape)
+        want is not None and got != want for got, want in zip(array.shape, shape, strict=False)
     ):
         raise ArtifactError(f"expected shape {_shape_text(shape)}, got {array.shape}", field=name)
     array.setflags(write=False)
@@ -151,7 +151,7 @@ class Map:
             "goal": self.goal.tolist(),
             "starts": self.starts.tolist(),
             "landmarks": [
-                {"id": i, "position": p.tolist()} for i, p in zip(self.landmark_ids, self.landmarks)
+                {"id": i, "position": p.tolist()} for i, p in zip(self.landmark_ids, self.landmarks, strict=True)
             ],
             "obstacles": [p.to_json() for p in self.obstacles],
             "raw_obstacles": [p.to_json() for p in self.raw_obstacles],

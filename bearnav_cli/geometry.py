@@ -140,13 +140,16 @@ class FreeSpace:
         inside = (p[:, 0] > xmin) & (p[:, 0] < xmax) & (p[:, 1] > ymin) & (p[:, 1] < ymax)
         return inside & ~self.in_obstacle(p)
 
-    def segments_free(self, starts: np.ndarray, ends: np.ndarray) -> np.ndarray:
+    def segments_free(self, starts: np.ndarray, ends: np.ndarray, *, known_in_box: bool = False) -> np.ndarray:
         """Exact segment test: each segment lies in ``B`` and does not touch ``O``.
 
         Parameters
         ----------
         starts, ends : ndarray, shape (n, 2)
             Segment endpoints (either may be a single point, broadcast against the other).
+    known_in_box : bool
+        The caller guarantees every endpoint lies in ``B`` (samples drawn in ``B``):
+        skip that check.
 
         Returns
         -------
@@ -157,6 +160,10 @@ class FreeSpace:
         coords = np.empty((max(len(a), len(b)), 2, 2))
         coords[:, 0] = a
         coords[:, 1] = b
+        if known_in_box:
+            if self.obstacles.is_empty:
+                return np.ones(len(coords), bool)
+            return ~shapely.intersects(self.obstacles, shapely.linestrings(coords))
         lo, hi = self._box_limits
         # B is convex, so both endpoints in B put the whole segment in B
         flat = coords.reshape(-1, 4)

@@ -104,9 +104,10 @@ def resolve_params(stage: str, map_params: dict | None, overrides: dict | None =
 
 def check_map_params(map_params: dict, file: str) -> None:
     """Reject unknown stage names and parameters in a map's ``params:`` section."""
-    for stage, section in map_params.items():
+    for stage in map_params:
         if stage not in STAGE_BY_NAME:
-            raise InvalidMapError(f"unknown stage (known: {', '.join(STAGE_BY_NAME)})", file=file, field=f"params.{stage}")
+            known = ", ".join(STAGE_BY_NAME)
+            raise InvalidMapError(f"unknown stage (known: {known})", file=file, field=f"params.{stage}")
         try:
             resolve_params(stage, map_params)
         except InvalidParamsError as exc:

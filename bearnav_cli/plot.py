@@ -45,7 +45,7 @@ def plot_map(ax: plt.Axes, map_: Map, *, landmarks: bool = True, starts: bool = 
     if landmarks and len(map_.landmarks):
         ax.scatter(*map_.landmarks.T, marker="^", s=40, color="#d62728", zorder=6, label="landmarks")
         offset = 0.008 * map_.diagonal
-        for name, (x, y) in zip(map_.landmark_ids, map_.landmarks):
+        for name, (x, y) in zip(map_.landmark_ids, map_.landmarks, strict=True):
             ax.annotate(name, (x, y), (x + offset, y + offset), fontsize=7, color="#d62728", zorder=6)
     if starts and len(map_.starts):
         ax.scatter(*map_.starts.T, marker="o", s=36, facecolor="white", edgecolor="#1f77b4", zorder=6,
@@ -92,7 +92,8 @@ def figure_for(artifact: Any, *, background: Sequence[Any] = (), title: str | No
     map_ = artifact if isinstance(artifact, Map) else artifact.map
     xmin, ymin, xmax, ymax = map_.bounds
     width = 8.0
-    fig, ax = plt.subplots(figsize=(width, max(3.0, width * (ymax - ymin) / (xmax - xmin))))
+    height = max(3.0, width * (ymax - ymin) / (xmax - xmin))
+    fig, ax = plt.subplots(figsize=(width + 1.8, height))  # the extra width holds the legend
     plot_map(ax, map_)
     for extra in background:
         plot_tree(ax, extra, color="#9ecae1", lw=0.5, alpha=0.8, label="RRT* tree")
@@ -100,7 +101,7 @@ def figure_for(artifact: Any, *, background: Sequence[Any] = (), title: str | No
         plot_samples(ax, artifact)
         plot_tree(ax, artifact, nodes=len(artifact.nodes) < 400, lw=1.0 if background else 0.7)
     ax.set_title(title or map_.name)
-    ax.legend(loc="upper right", fontsize=7, framealpha=0.85)
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=7, framealpha=0.85)
     fig.tight_layout()
     return fig
 

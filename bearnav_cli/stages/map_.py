@@ -307,7 +307,13 @@ def _validate(reader: _Reader, map_: Map, params: Params) -> None:
         dup = np.flatnonzero(np.all(map_.landmarks[:k] == lm, axis=1))
         if dup.size:
             raise reader.fail(where, f"same position as landmarks[{dup[0]}]")
-        if not space.raw_obstacles.is_empty and shapely.contains_xy(space.raw_obstacles, *lm):
+        # A tag drawn on a wall may sit a rounding error inside it (grid maps scale pixel
+        # corners by the resolution): only a tag deeper than the map tolerance is rejected.
+        if (
+            not space.raw_obstacles.is_empty
+            and shapely.contains_xy(space.raw_obstacles, *lm)
+            and shapely.distance(space.raw_obstacles.boundary, shapely.points(lm)) > map_.tol
+        ):
             raise reader.fail(where, f"{lm.tolist()} lies inside an obstacle (a tag must be on its boundary)")
     _coverage_warning(map_, space, params.coverage_cells)
 

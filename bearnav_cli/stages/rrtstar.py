@@ -25,6 +25,9 @@ from bearnav_cli.geometry import FreeSpace
 
 VERSION = 1
 POLICIES = ("skip", "extend")
+#: Buckets per step length along each axis: smaller buckets make nearest-node queries in a
+#: dense tree cheaper, at the price of more buckets to visit for a radius query.
+BUCKETS_PER_STEP = 3
 
 
 @dataclass(frozen=True)
@@ -131,17 +134,25 @@ class _BucketGrid:
         bucket[count] = index
         self.counts[flat] = count + 1
 
-    def _gather(self, ix: int, iy: int, ring: int) -> np.ndarray:
-        """Indices in the buckets at Chebyshev distance exactly ``ring`` (all within if ring < 0)."""
+    def _ring_cells(self, ix: int, iy: int, ring: int) -> list[int]:
+        """Flat ids of the buckets at Chebyshev distance exactly ``ring`` from bucket (ix, iy)."""
         nx, ny = self.shape
-        parts = []
-        for jx in range(max(ix - ring, 0), min(ix + ring, nx - 1) + 1):
-            edge_x = abs(jx - ix) == ring
-            for jy in range(max(iy - ring, 0), min(iy + ring, ny - 1) + 1):
-                if edge_x or abs(jy - iy) == ring:
-                    flat = jx * ny + jy
-                    if self.counts[flat]:
-                        parts.append(self.members[flat][: self.counts[flat]])
+        if ring == 0:
+            return [ix * ny + iy]
+        x0, x1, y0, y1 = ix - ring, ix + ring, iy - ring, iy + ring
+        cells = []
+        for jx in (x0, x1):  # the left and right columns, full height
+            if 0 <= jx < nx:
+                cells.extend(jx * ny + jy for jy in range(max(y0, 0), min(y1, ny - 1) + 1))
+        for jy in (y0, y1):  # the top and bottom rows, without the corners already taken
+            if 0 <= jy < ny:
+                cells.extend(jx * ny + jy for jx in range(max(x0 + 1, 0), min(x1 - 1, nx - 1) + 1))
+        return cells
+
+    def _gather(self, cells: list[int]) -> np.ndarray:
+        """Node indices held in the given buckets."""
+        counts = self.counts
+        parts = [self.members[c][: counts[c]] for c in cells if counts[c]]
         if not parts:
             return np.empty(0, np.int64)
         return parts[0] if len(parts) == 1 else np.concatenate(parts)
@@ -153,7 +164,7 @@ class _BucketGrid:
         ring = 0
         max_ring = max(self.shape)
         while ring <= max_ring:
-            idx = self._gather(ix, iy, ring)
+            idx = self._gather(self._ring_cells(ix, iy, ring))
             if len(idx):
                 d = self.nodes[idx] - p
                 d2 = d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1]
@@ -174,8 +185,10 @@ class _BucketGrid:
             return np.empty(0, np.int64)
         ix, iy = self._cell_of(p)
         reach = max(1, math.ceil(radius / self.cell))
-        parts = [self._gather(ix, iy, ring) for ring in range(reach + 1)]
-        idx = np.concatenate(parts)
+        nx, ny = self.shape
+        xs = range(max(ix - reach, 0), min(ix + reach, nx - 1) + 1)
+        ys = range(max(iy - reach, 0), min(iy + reach, ny - 1) + 1)
+        idx = self._gather([jx * ny + jy for jx in xs for jy in ys])
         d = self.nodes[idx] - p
         keep = d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] <= radius * radius
         return np.sort(idx[keep])
@@ -214,7 +227,7 @@ def run(map_: Map, params: Params = Params(), progress: Callable[[int, int], Non
     children: list[list[int]] = [[]]
     nodes[0] = map_.goal
     n = 1
-    grid = _BucketGrid(map_.bounds, eta, nodes)
+    grid = _BucketGrid(map_.bounds, eta / BUCKETS_PER_STEP, nodes)
     grid.insert(0)
     report_every = max(1, params.iterations // 100)
     skipped_duplicates = 0
@@ -232,7 +245,7 @@ def run(map_: Map, params: Params = Params(), progress: Callable[[int, int], Non
         if min(dist, eta) <= tol:
             skipped_duplicates += 1
             continue
-        if not space.segments_free(nodes[vn], xn)[0]:
+        if not space.segments_free(nodes[vn], xn, known_in_box=True)[0]:
             continue
 
         radius = rewiring_radius(n, free_area, eta)
@@ -247,7 +260,7 @@ def run(map_: Map, params: Params = Params(), progress: Callable[[int, int], Non
             cand = near[better]
             order = np.lexsort((cand, through[better]))
             cand, cand_cost = cand[order], through[better][order]
-            free = space.segments_free(nodes[cand], xn)
+            free = space.segments_free(nodes[cand], xn, known_in_box=True)
             hit = np.flatnonzero(free)
             if len(hit):
                 best_parent, best_cost = int(cand[hit[0]]), float(cand_cost[hit[0]])
@@ -265,8 +278,8 @@ def run(map_: Map, params: Params = Params(), progress: Callable[[int, int], Non
         cand_mask = (gain > tol) & (near != best_parent)
         if cand_mask.any():
             cand = near[cand_mask]
-            free = space.segments_free(nodes[cand], xn)
-            for v, dv in zip(cand[free], d_near[cand_mask][free]):
+            free = space.segments_free(nodes[cand], xn, known_in_box=True)
+            for v, dv in zip(cand[free], d_near[cand_mask][free], strict=True):
                 v = int(v)
                 new_cost = best_cost + dv
                 if new_cost < cost[v] - tol:  # costs only fall during rewiring: re-check

@@ -1,0 +1,455 @@
+"""Stage ``simplify``: PPR, cut-the-leaves and remove-crossings to a fixed point (ALGORITHMS §3).
+
+Each round runs PPR (shortcut to the grandparent, breadth-first), CtL (keep one
+leaf per parent), RC (split properly crossing edges at their crossing point)
+and CtL again; rounds repeat until nothing changes or ``max_rounds`` is reached.
+Collision samples are passed through untouched.
+
+Indices: deleted leaves are dropped by an order-preserving compaction and RC
+appends its new node after all others, so every "ascending index" rule sees the
+same order as with stable indices, and the final renumbering (root → 0, then
+ascending old index) is already in place.
+
+Speed: PPR is vectorised per BFS level (exactly the sequential result, see
+:func:`_shortcut`), CtL is pure numpy, and RC finds candidate pairs once with a
+``shapely.STRtree`` and afterwards re-tests only the split edges (:func:`_remove_crossings`).
+"""
+
+from __future__ import annotations
+
+import heapq
+import logging
+import math
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+import shapely
+from scipy.spatial import cKDTree
+
+from bearnav_cli.datatypes import Tree
+from bearnav_cli.errors import ArtifactError, InvalidParamsError
+from bearnav_cli.geometry import FreeSpace
+
+VERSION = 1
+CTL_MODES = ("middle", "extremes")
+#: Output nodes tried per discarded node for the ``discarded_reconnectable`` statistic.
+RECONNECT_NEIGHBOURS = 8
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class Params:
+    """Parameters of the simplification (ALGORITHMS §3).
+
+    Attributes
+    ----------
+    max_rounds : int
+        Upper bound on the rounds of PPR | CtL | RC | CtL (at least 1).
+    ctl : {"middle", "extremes"}
+        Which leaves CtL keeps among the leaf children of one parent, sorted by
+        angle from the incoming edge: the middle one, or the first and last.
+    """
+
+    max_rounds: int = 10
+    ctl: str = "middle"
+
+    def __post_init__(self) -> None:
+        if isinstance(self.max_rounds, bool) or not isinstance(self.max_rounds, int) or self.max_rounds < 1:
+            raise InvalidParamsError(f"must be an integer >= 1, got {self.max_rounds!r}", field="max_rounds")
+        if self.ctl not in CTL_MODES:
+            raise InvalidParamsError(f"must be one of {', '.join(CTL_MODES)}, got {self.ctl!r}", field="ctl")
+
+
+def bfs_levels(parent: np.ndarray) -> list[np.ndarray]:
+    """Breadth-first levels from the root; within a level, in BFS queue order.
+
+    Parameters
+    ----------
+    parent : ndarray of int, shape (N,)
+        ``-1`` at node 0 only.
+
+    Returns
+    -------
+    list of ndarray of int
+        ``levels[d]`` holds the nodes at depth ``d``; concatenated they are the
+        BFS order with children visited in ascending index.
+    """
+    n = len(parent)
+    child = np.argsort(parent[1:], kind="stable") + 1  # grouped by parent, ascending index inside
+    counts = np.bincount(parent[1:], minlength=n)
+    start = np.concatenate([[0], np.cumsum(counts)])
+    levels = [np.zeros(1, np.int64)]
+    seen = 1
+    while True:
+        front = levels[-1]
+        c = counts[front]
+        total = int(c.sum())
+        if total == 0:
+            break
+        offsets = np.repeat(start[front] - (np.cumsum(c) - c), c) + np.arange(total)
+        levels.append(child[offsets])
+        seen += total
+    if seen != n:  # a node that never hangs below the root sits on a cycle
+        raise ArtifactError(f"{n - seen} nodes do not reach the root (cycle)", field="parent")
+    return levels
+
+
+def tree_costs(nodes: np.ndarray, parent: np.ndarray, levels: list[np.ndarray]) -> np.ndarray:
+    """Path length to the root of every node, shape (N,), computed level by level."""
+    cost = np.zeros(len(nodes))
+    for level in levels[1:]:
+        d = nodes[level] - nodes[parent[level]]
+        cost[level] = cost[parent[level]] + np.hypot(d[:, 0], d[:, 1])
+    return cost
+
+
+def _shortcut(nodes: np.ndarray, parent: np.ndarray, space: FreeSpace, levels: list[np.ndarray]) -> int:
+    """PPR in place: hop each node to its grandparent while that edge is free.
+
+    Vectorised per BFS level, which gives exactly the sequential result: a node only
+    ever moves to one of its ancestors, all of which sit on lower levels and were
+    processed (hence final) before it, and two nodes of one level never read each
+    other's parent. Returns the number of accepted hops.
+    """
+    hops = 0
+    for level in levels[2:]:  # level 1 already hangs on the root
+        active = level
+        while active.size:
+            q = parent[parent[active]]
+            free = space.segments_free(nodes[active], nodes[q])
+            active, q = active[free], q[free]
+            parent[active] = q
+            hops += active.size
+            active = active[q != 0]
+    return hops
+
+
+def _cut_leaves(nodes: np.ndarray, parent: np.ndarray, mode: str) -> np.ndarray:
+    """CtL: the mask of nodes to keep, shape (N,) bool.
+
+    Leaf sets are taken once at the start, so the per-parent loop of the
+    specification has no order dependence and becomes a grouped numpy sort.
+    """
+    n = len(parent)
+    keep = np.ones(n, bool)
+    has_child = np.zeros(n, bool)
+    has_child[parent[1:]] = True
+    leaves = np.flatnonzero(~has_child)
+    leaves = leaves[leaves != 0]
+    owner = parent[leaves]
+    size = np.bincount(owner, minlength=n)
+    crowded = size[owner] >= 2
+    leaves, owner = leaves[crowded], owner[crowded]
+    if leaves.size == 0:
+        return keep
+    grand = parent[owner]
+    ref = np.where((grand >= 0)[:, None], nodes[owner] - nodes[np.maximum(grand, 0)], [1.0, 0.0])
+    v = nodes[leaves] - nodes[owner]
+    ang = np.arctan2(ref[:, 0] * v[:, 1] - ref[:, 1] * v[:, 0], ref[:, 0] * v[:, 0] + ref[:, 1] * v[:, 1])
+    ang[ang == -np.pi] = np.pi  # atan2(-0, x<0) = -π; the specification's range is (−π, π]
+    order = np.lexsort((leaves, ang, owner))
+    leaves, owner = leaves[order], owner[order]
+    pos = np.arange(leaves.size)
+    first = np.maximum.accumulate(np.where(np.r_[True, owner[1:] != owner[:-1]], pos, 0))
+    rank, count = pos - first, size[owner]
+    kept = rank == count // 2 if mode == "middle" else (rank == 0) | (rank == count - 1)
+    keep[leaves[~kept]] = False
+    return keep
+
+
+def _compact(keep: np.ndarray, *arrays: np.ndarray, parent: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Drop deleted nodes, preserving order; returns the kept ``arrays`` and the remapped parent."""
+    new_index = np.cumsum(keep) - 1
+    kept_parent = parent[keep]
+    remapped = np.where(kept_parent >= 0, new_index[np.maximum(kept_parent, 0)], -1)
+    return (*(a[keep] for a in arrays), remapped)
+
+
+class _NearNodes:
+    """Is any node within ``tol`` of a point? A k-d tree of the starting nodes plus a hash of added ones.
+
+    An added node is filed under its grid cell (side ``tol``) and the eight around
+    it, so a query looks up one cell per point.
+    """
+
+    def __init__(self, nodes: np.ndarray, tol: float):
+        self.tol = tol
+        self.kd = cKDTree(nodes)
+        self.cells: dict[tuple[int, int], list[np.ndarray]] = {}
+
+    def _keys(self, pts: np.ndarray):
+        cell = np.floor(pts / self.tol).astype(np.int64)
+        return zip(cell[:, 0].tolist(), cell[:, 1].tolist(), strict=True)
+
+    def add(self, p: np.ndarray) -> None:
+        for bx, by in self._keys(p[None]):
+            for key in ((bx + dx, by + dy) for dx in (-1, 0, 1) for dy in (-1, 0, 1)):
+                self.cells.setdefault(key, []).append(p)
+
+    def clear_of_added(self, pts: np.ndarray) -> np.ndarray:
+        """Whether every added node lies farther than ``tol`` from each point; shape (n,) bool."""
+        ok = np.ones(len(pts), bool)
+        if self.cells:
+            for row, key in enumerate(self._keys(pts)):
+                ok[row] = all(math.dist(q, pts[row]) > self.tol for q in self.cells.get(key, ()))
+        return ok
+
+    def clear_of(self, pts: np.ndarray) -> np.ndarray:
+        """Whether every node lies farther than ``tol`` from each point; shape (n,) bool."""
+        ok = self.kd.query(pts, k=1)[0] > self.tol
+        ok[ok] = self.clear_of_added(pts[ok])
+        return ok
+
+
+def _crossing(nodes, parent, e, f, near: _NearNodes, tol: float) -> tuple[np.ndarray, np.ndarray]:
+    """Proper crossings of edges ``(e, parent[e])`` and ``(f, parent[f])``, pairwise.
+
+    A pair crosses properly when the edges share no endpoint, are not parallel
+    (``|cross(r, s)| > tol·max(|r|, |s|)``: the shorter edge turns by more than
+    ``tol`` over its length), meet at ``k`` inside both, and ``k`` lies farther than
+    ``tol`` from the four endpoints and from every node.
+
+    Returns
+    -------
+    ok : ndarray of bool, shape (m,)
+    k : ndarray, shape (m, 2)
+        Crossing points (meaningful where ``ok``).
+    """
+    e, f = np.minimum(e, f), np.maximum(e, f)  # k is computed on the lower edge, whichever side asks
+    pe, pf = parent[e], parent[f]
+    a, b, c, d = nodes[e], nodes[pe], nodes[f], nodes[pf]
+    r, s, w = b - a, d - c, c - a
+    den = r[:, 0] * s[:, 1] - r[:, 1] * s[:, 0]
+    ok = (e != f) & (e != pf) & (pe != f) & (pe != pf)
+    ok &= np.abs(den) > tol * np.maximum(np.hypot(r[:, 0], r[:, 1]), np.hypot(s[:, 0], s[:, 1]))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (w[:, 0] * s[:, 1] - w[:, 1] * s[:, 0]) / den
+        u = (w[:, 0] * r[:, 1] - w[:, 1] * r[:, 0]) / den
+    ok &= (t > 0) & (t < 1) & (u > 0) & (u < 1)
+    k = a + t[:, None] * r
+    for end in (a, b, c, d):
+        ok &= np.hypot(k[:, 0] - end[:, 0], k[:, 1] - end[:, 1]) > tol
+    if ok.any():
+        ok[ok] = near.clear_of(k[ok])
+    return ok, k
+
+
+def _in_subtree(v: int, parent: np.ndarray, roots: tuple[int, int]) -> bool:
+    """Whether ``v`` lies in the subtree of either root: walk up from ``v`` (O(depth))."""
+    while v >= 0:
+        if v in roots:
+            return True
+        v = int(parent[v])
+    return False
+
+
+def _remove_crossings(nodes, parent, cost, tol: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """RC: split properly crossing edges until none is left (ALGORITHMS §3).
+
+    Order: each step takes the lexicographically smallest crossing pair ``(i, j)``,
+    ``i < j`` (edges named by their child), among the current edges, i.e. the scan
+    "ascending i, then the smallest j > i" restarted after every insertion. A heap
+    holds every crossing pair; entries of edges changed since are dropped when popped.
+
+    Every later edge is a sub-segment of a starting edge (its *origin*), so two
+    edges can only cross if their origins' bounding boxes (grown by ``tol``)
+    overlap; that neighbour relation, found once with an STRtree, bounds every
+    re-test. ``cost`` is trusted (PPR recomputes it just before).
+
+    Returns
+    -------
+    nodes (M, 2), parent (M,), cost (M,), insertions
+    """
+    n0 = len(nodes)
+    if n0 < 4:  # two edges without a common endpoint need four nodes
+        return nodes, parent, cost, 0
+    kids = np.arange(1, n0)
+    a, b = nodes[kids], nodes[parent[kids]]
+    lo, hi = np.minimum(a, b) - tol, np.maximum(a, b) + tol
+    boxes = shapely.box(lo[:, 0], lo[:, 1], hi[:, 0], hi[:, 1])
+    qa, qb = shapely.STRtree(boxes).query(boxes)
+    qa, qb = kids[qa[qa != qb]], kids[qb[qa != qb]]
+    order = np.argsort(qa, kind="stable")
+    nb_list, nb_start = qb[order], np.searchsorted(qa[order], np.arange(n0 + 1))
+    near = _NearNodes(nodes, tol)
+    upper = qa < qb
+    qa, qb = qa[upper], qb[upper]
+    ok, k = _crossing(nodes, parent, qa, qb, near, tol)
+    found = zip(qa[ok].tolist(), qb[ok].tolist(), k[ok].tolist(), strict=True)
+    heap = [(i, j, 0, 0, kx, ky) for i, j, (kx, ky) in found]
+    if not heap:
+        return nodes, parent, cost, 0
+    heapq.heapify(heap)
+
+    cap = n0 + len(heap) + 1  # each insertion removes at least one crossing pair
+    nodes = np.concatenate([nodes, np.empty((cap - n0, 2))])
+    parent = np.concatenate([parent, np.full(cap - n0, -1, np.int64)])
+    cost = np.concatenate([cost, np.zeros(cap - n0)])
+    origin = np.arange(cap)
+    version = [0] * cap
+    extra: dict[int, list[int]] = {}  # origin → nodes added whose edge lies on it
+    has_extra = np.zeros(n0, bool)
+    children: list[list[int]] = [[] for _ in range(cap)]
+    for c in range(1, n0):
+        children[parent[c]].append(c)
+    n = n0
+    while heap:
+        i, j, vi, vj, kx, ky = heapq.heappop(heap)
+        if version[i] != vi or version[j] != vj:
+            continue  # an edge changed since the pair was found; its new pieces were re-tested
+        k = np.array([kx, ky])
+        if not near.clear_of_added(k[None])[0]:  # a node added since lies within tol: never valid again
+            continue
+        if n == len(nodes):  # the bound above holds in exact arithmetic; stay safe under rounding
+            nodes, parent = np.concatenate([nodes, nodes]), np.concatenate([parent, parent])
+            cost, origin = np.concatenate([cost, cost]), np.concatenate([origin, origin])
+            version += [0] * n
+            children += [[] for _ in range(n)]
+        pi, pj = int(parent[i]), int(parent[j])
+        c_i = cost[pi] + math.dist(k, nodes[pi])
+        c_j = cost[pj] + math.dist(k, nodes[pj])
+        candidates = ((pi, c_i), (pj, c_j)) if c_i <= c_j else ((pj, c_j), (pi, c_i))
+        # cycle guard: a parent inside subtree(i) ∪ subtree(j) would hang the new node below itself
+        p, c_k = next((q, c) for q, c in candidates if not _in_subtree(q, parent, (i, j)))
+        new = n
+        n += 1
+        nodes[new], parent[new], cost[new] = k, p, c_k
+        origin[new] = origin[i] if p == pi else origin[j]
+        extra.setdefault(int(origin[new]), []).append(new)
+        has_extra[origin[new]] = True
+        near.add(k)
+        children[pi].remove(i)
+        children[pj].remove(j)
+        children[p].append(new)
+        children[new] = [i, j]
+        parent[i] = parent[j] = new
+        stack = [i, j]  # costs change in the two moved subtrees only
+        while stack:
+            v = stack.pop()
+            cost[v] = cost[parent[v]] + math.dist(nodes[v], nodes[parent[v]])
+            stack.extend(children[v])
+        version[i] += 1
+        version[j] += 1
+        # re-test the three changed edges against every piece of their origins' neighbours
+        edge_ids, cands = [], []
+        for e in (i, j, new):
+            o = origin[e]
+            cand = nb_list[nb_start[o] : nb_start[o + 1]]
+            split = cand[has_extra[cand]]
+            if split.size:
+                cand = np.concatenate([cand, *(extra[int(s)] for s in split)])
+            edge_ids.append(np.full(cand.size, e))
+            cands.append(cand)
+        es, fs = np.concatenate(edge_ids), np.concatenate(cands)
+        ok, k = _crossing(nodes, parent, es, fs, near, tol)
+        for e, f, (kx, ky) in zip(es[ok].tolist(), fs[ok].tolist(), k[ok].tolist(), strict=True):
+            lo_, hi_ = min(e, f), max(e, f)
+            heapq.heappush(heap, (lo_, hi_, version[lo_], version[hi_], kx, ky))
+    return nodes[:n], parent[:n], cost[:n], n - n0
+
+
+def _reconnectable(before: np.ndarray, after: np.ndarray, space: FreeSpace) -> float:
+    """Share of the input nodes missing from the output that see one of their nearest output nodes.
+
+    Nodes match by exact position; each discarded node tries its ``RECONNECT_NEIGHBOURS``
+    nearest output nodes (cKDTree). Two batched segment tests: the nearest for all,
+    then the others only for the nodes still unresolved (the answer is the same as
+    testing all at once, for a fraction of the work). ``1.0`` if none was discarded.
+    """
+    key_b = before[:, 0] + 1j * before[:, 1]
+    key_a = after[:, 0] + 1j * after[:, 1]
+    gone = before[~np.isin(key_b, key_a)]
+    if len(gone) == 0:
+        return 1.0
+    k = min(RECONNECT_NEIGHBOURS, len(after))
+    nearest = cKDTree(after).query(gone, k=k)[1].reshape(len(gone), k)
+    seen = space.segments_free(gone, after[nearest[:, 0]])
+    rest = np.flatnonzero(~seen)
+    if k > 1 and rest.size:
+        free = space.segments_free(np.repeat(gone[rest], k - 1, axis=0), after[nearest[rest, 1:].ravel()])
+        seen[rest] = free.reshape(-1, k - 1).any(axis=1)
+    return float(seen.mean())
+
+
+def run(tree: Tree, params: Params = Params(), progress: Callable[[int, int], None] | None = None) -> Tree:
+    """Simplify an RRT* tree: PPR | CtL | RC | CtL to a fixed point.
+
+    Parameters
+    ----------
+    tree : Tree
+        Input tree (node 0 the root at the goal); its ``cost`` is not used.
+    params : Params
+        ``max_rounds`` and the CtL mode.
+    progress : callable, optional
+        ``progress(round, max_rounds)`` after each round.
+
+    Returns
+    -------
+    Tree
+        Same map and collision samples; nodes (M, 2), parent (M,), cost (M,).
+        ``stats``: ``nodes_before``; ``nodes_per_round`` (count after each round);
+        ``rounds`` run (the last one changed nothing unless ``max_rounds`` stopped
+        it); ``crossings_removed`` (RC insertions); ``ppr_rewires`` (accepted
+        grandparent hops); ``leaves_cut``; ``discarded_reconnectable`` (see
+        :func:`_reconnectable`; reported, not enforced).
+
+    Raises
+    ------
+    ArtifactError
+        If some node does not reach the root (a cycle in ``parent``).
+    """
+    nodes = np.array(tree.nodes, float)
+    parent = np.array(tree.parent, np.int64)
+    stats = {
+        "nodes_before": len(nodes),
+        "nodes_per_round": [],
+        "rounds": 0,
+        "crossings_removed": 0,
+        "ppr_rewires": 0,
+        "leaves_cut": 0,
+        "discarded_reconnectable": 1.0,
+    }
+    if len(nodes) == 1:
+        return Tree(tree.map, tree.nodes, tree.parent, tree.cost, tree.collision_samples, stats)
+    space = FreeSpace.from_map(tree.map)
+    tol = tree.map.tol
+
+    def cut(nodes, parent, cost):
+        keep = _cut_leaves(nodes, parent, params.ctl)
+        stats["leaves_cut"] += int(len(keep) - keep.sum())
+        return _compact(keep, nodes, cost, parent=parent)
+
+    for rnd in range(1, params.max_rounds + 1):
+        size_before = len(nodes)
+        hops = _shortcut(nodes, parent, space, bfs_levels(parent))
+        stats["ppr_rewires"] += hops
+        cost = tree_costs(nodes, parent, bfs_levels(parent))
+        nodes, cost, parent = cut(nodes, parent, cost)
+        after_first_cut = len(nodes)
+        nodes, parent, cost, added = _remove_crossings(nodes, parent, cost, tol)
+        stats["crossings_removed"] += added
+        nodes, cost, parent = cut(nodes, parent, cost)
+        stats["rounds"] = rnd
+        stats["nodes_per_round"].append(len(nodes))
+        log.info("simplify round %d: %d nodes", rnd, len(nodes))
+        if progress is not None:
+            progress(rnd, params.max_rounds)
+        changed = hops > 0 or added > 0 or len(nodes) != after_first_cut or after_first_cut != size_before
+        if not changed:
+            break
+
+    stats["discarded_reconnectable"] = _reconnectable(tree.nodes, nodes, space)
+    return Tree(tree.map, nodes, parent, cost, tree.collision_samples, stats)
+
+
+def summary(tree: Tree) -> str:
+    """One line for ``inspect`` and ``plan``."""
+    s = tree.stats
+    share = s.get("discarded_reconnectable")
+    share_text = f"{100 * share:.0f}%" if isinstance(share, (int, float)) else "?"
+    return (
+        f"{len(tree.nodes)} nodes (from {s.get('nodes_before', '?')}) after {s.get('rounds', '?')} rounds: "
+        f"{s.get('ppr_rewires', '?')} shortcuts, {s.get('leaves_cut', '?')} leaves cut, "
+        f"{s.get('crossings_removed', '?')} crossings removed; {share_text} of discarded nodes reconnectable"
+    )

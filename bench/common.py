@@ -1,0 +1,111 @@
+"""Helpers shared by the benchmarks: maps, timing, markdown tables and README sections.
+
+Each benchmark script writes its results between its own pair of markers in
+``bench/README.md`` (``<!-- name:begin -->`` … ``<!-- name:end -->``) and leaves
+every other section alone, so several benchmarks can share the file.
+"""
+
+from __future__ import annotations
+
+import datetime
+import os
+import platform
+import time
+from importlib import metadata
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+import yaml
+
+from bearnav_cli.datatypes import Map
+from bearnav_cli.stages import map_
+
+#: Directory of the benchmark scripts.
+BENCH_DIR = Path(__file__).resolve().parent
+#: Root of the repository (``maps/`` lives there).
+REPO_DIR = BENCH_DIR.parent
+#: The results file the benchmarks update.
+README = BENCH_DIR / "README.md"
+
+
+def load_map(path: Path) -> Map:
+    """Build a normalised :class:`Map` from a bearnav map YAML.
+
+    Parameters
+    ----------
+    path : Path
+        The map file.
+
+    Returns
+    -------
+    Map
+    """
+    spec = yaml.safe_load(path.read_text())
+    return map_.run(map_.MapSource(spec=spec, file=path.name, sha256="bench"))
+
+
+def timed(fn: Callable[..., Any], *args: Any, **kwargs: Any) -> tuple[float, Any]:
+    """Call ``fn(*args, **kwargs)`` once.
+
+    Returns
+    -------
+    seconds : float
+        Wall time of the call (``time.perf_counter``).
+    result : object
+        What ``fn`` returned.
+    """
+    t0 = time.perf_counter()
+    result = fn(*args, **kwargs)
+    return time.perf_counter() - t0, result
+
+
+def version(package: str) -> str:
+    """Installed version of a distribution, or ``"not installed"``."""
+    try:
+        return metadata.version(package)
+    except metadata.PackageNotFoundError:
+        return "not installed"
+
+
+def machine_line(packages: Sequence[str] = ("numpy", "shapely", "ompl")) -> str:
+    """One line naming the machine, the interpreter, package versions and today's date."""
+    parts = [
+        f"{platform.system()} {platform.machine()}",
+        f"{os.cpu_count()} CPUs",
+        f"Python {platform.python_version()}",
+    ]
+    parts += [f"{name} {version(name)}" for name in packages]
+    return f"Machine: {', '.join(parts)}; run on {datetime.date.today().isoformat()}."
+
+
+def markdown_table(headers: Sequence[str], rows: Sequence[Sequence[Any]]) -> str:
+    """A GitHub markdown table; cells are converted with ``str``."""
+    lines = ["| " + " | ".join(headers) + " |", "|" + "|".join("---" for _ in headers) + "|"]
+    lines += ["| " + " | ".join(str(cell) for cell in row) + " |" for row in rows]
+    return "\n".join(lines)
+
+
+def replace_section(name: str, body: str, readme: Path = README) -> None:
+    """Replace the text between ``<!-- name:begin -->`` and ``<!-- name:end -->``.
+
+    The file is created with a title and a machine line if it does not exist, and the
+    markers are appended if they are missing. Everything outside the markers is kept.
+
+    Parameters
+    ----------
+    name : str
+        Section name used in the markers.
+    body : str
+        New markdown between the markers.
+    readme : Path
+        The results file.
+    """
+    begin, end = f"<!-- {name}:begin -->", f"<!-- {name}:end -->"
+    text = readme.read_text() if readme.exists() else f"# Benchmarks\n\n{machine_line()}\n"
+    block = f"{begin}\n{body.strip()}\n{end}"
+    head, found, rest = text.partition(begin)
+    if found and end in rest:
+        text = head + block + rest.partition(end)[2]
+    else:
+        text = text.rstrip("\n") + "\n\n" + block + "\n"
+    readme.write_text(text)

@@ -1,0 +1,66 @@
+"""Shared fixtures: small maps as dicts and YAML files, and a CLI runner in a scratch folder."""
+
+from __future__ import annotations
+
+import copy
+from pathlib import Path
+
+import pytest
+import yaml
+from typer.testing import CliRunner
+
+from bearnav_cli.stages import map_
+
+REPO = Path(__file__).resolve().parents[1]
+
+SMALL_MAP = {
+    "name": "small",
+    "bounds": [0, 0, 10, 8],
+    "robot_radius": 0.2,
+    "goal": [0.5, 0.5],
+    "starts": [[9, 7], [5, 7.5]],
+    "obstacles": [
+        {"polygon": [[1, 2], [3, 2], [3, 3]]},
+        {"rectangle": [4, 4, 6, 5]},
+        {"circle": {"center": [8, 2], "radius": 0.5}},
+    ],
+    "landmarks": [[0, 8], {"id": "tag12", "position": [10, 0]}, [10, 8], [5, 0]],
+    "params": {"rrtstar": {"iterations": 400, "step": 1.0, "seed": 0}},
+}
+
+
+@pytest.fixture
+def small_spec() -> dict:
+    """A fresh copy of a small valid map description (edit it freely)."""
+    return copy.deepcopy(SMALL_MAP)
+
+
+def build_map(spec: dict, **params) -> map_.Map:
+    """Run the map stage on a spec dict."""
+    return map_.run(map_.MapSource(spec=spec, file="test.yaml", sha256="0"), map_.Params(**params))
+
+
+@pytest.fixture
+def write_map(tmp_path):
+    """Write a spec dict as YAML in the scratch folder and return its path."""
+
+    def write(spec: dict, name: str = "small.yaml") -> Path:
+        path = tmp_path / name
+        path.write_text(yaml.safe_dump(spec, sort_keys=False))
+        return path
+
+    return write
+
+
+@pytest.fixture
+def cli(tmp_path, monkeypatch):
+    """Invoke ``bearnav`` inside the scratch folder; returns the typer result."""
+    from bearnav_cli.cli import app
+
+    monkeypatch.chdir(tmp_path)
+    runner = CliRunner()
+
+    def invoke(*args: str):
+        return runner.invoke(app, [str(a) for a in args])
+
+    return invoke

@@ -1,0 +1,149 @@
+"""Manifests, content hashes, cache keys, freshness, atomic writes and loading checks (DESIGN §3.1)."""
+
+from __future__ import annotations
+
+import json
+import zipfile
+
+import numpy as np
+import pytest
+
+from bearnav_cli import artifacts, pipeline
+from bearnav_cli.errors import ArtifactError
+
+MANIFEST_FIELDS = {
+    "schema", "stage", "stage_version", "params", "input", "content_sha256", "key", "software", "summary", "elapsed_s",
+}
+
+
+def _plan(cli, path, *extra):
+    result = cli("plan", path, "--quiet", *extra)
+    assert result.exit_code == 0, result.output
+    return result.output
+
+
+def test_plan_writes_every_artifact_with_a_complete_manifest(cli, write_map, small_spec, tmp_path):
+    _plan(cli, write_map(small_spec))
+    folder = tmp_path / "plans" / "small"
+    for stage in pipeline.STAGES:
+        loaded = artifacts.load(folder / stage.filename, stage.output_kind)
+        manifest = loaded.manifest
+        assert MANIFEST_FIELDS <= set(manifest)
+        assert manifest["stage"] == stage.name
+        assert manifest["schema"] == artifacts.KINDS[stage.output_kind].schema
+        # the manifest's params are complete: every field of the stage's Params is there
+        assert set(manifest["params"]) == {f for f in stage.module.Params.__dataclass_fields__}
+        assert manifest["key"] == artifacts.cache_key(
+            stage.name, stage.module.VERSION, manifest["params"], manifest["input"]["content_sha256"]
+        )
+    # the chain: each stage's input hash is the previous artifact's content hash
+    previous = None
+    for stage in pipeline.STAGES:
+        manifest = artifacts.read_manifest(folder / stage.filename)
+        if previous is not None:
+            assert manifest["input"]["content_sha256"] == previous["content_sha256"]
+        previous = manifest
+
+
+def test_second_plan_skips_and_changed_parameter_reruns(cli, write_map, small_spec, tmp_path):
+    path = write_map(small_spec)
+    first = _plan(cli, path)
+    assert first.count("ran") == 3
+    second = _plan(cli, path)
+    assert second.count("fresh") == 3 and "ran" not in second
+    third = _plan(cli, path, "--seed", "7")
+    lines = {line.split()[0]: line.split()[1] for line in third.splitlines() if line.strip()}
+    assert lines == {"map": "fresh", "rrtstar": "ran", "simplify": "ran"}
+    forced = _plan(cli, path, "--seed", "7", "--force")
+    assert forced.count("ran") == 3
+
+
+def test_content_identical_rerun_does_not_invalidate_the_next_stage(cli, write_map, small_spec, tmp_path):
+    path = write_map(small_spec)
+    _plan(cli, path)
+    # a comment changes the file (the map stage reruns) but not the map itself
+    path.write_text(path.read_text() + "\n# a comment\n")
+    out = _plan(cli, path)
+    lines = {line.split()[0]: line.split()[1] for line in out.splitlines() if line.strip()}
+    assert lines == {"map": "ran", "rrtstar": "fresh", "simplify": "fresh"}
+
+
+def test_same_seed_same_hash_other_seed_other_hash(cli, write_map, small_spec, tmp_path):
+    path = write_map(small_spec)
+    hashes = []
+    for seed, name in ((0, "a"), (0, "b"), (1, "c")):
+        result = cli("plan", path, "-o", tmp_path / name, "--seed", seed, "--quiet")
+        assert result.exit_code == 0, result.output
+        hashes.append(artifacts.read_manifest(tmp_path / name / "tree.npz")["content_sha256"])
+    assert hashes[0] == hashes[1] != hashes[2]
+
+
+def test_exception_during_save_leaves_no_file(cli, write_map, small_spec, tmp_path, monkeypatch):
+    _plan(cli, write_map(small_spec))
+    loaded = artifacts.load(tmp_path / "plans" / "small" / "tree.npz", "tree")
+    target = tmp_path / "out" / "tree.npz"
+
+    def broken(handle, **arrays):
+        handle.write(b"PK\x03\x04 half an archive")
+        raise RuntimeError("disk full")
+
+    monkeypatch.setattr(np, "savez_compressed", broken)
+    with pytest.raises(RuntimeError):
+        artifacts.save(target, loaded.artifact, loaded.manifest)
+    assert not target.exists()
+    assert list(target.parent.iterdir()) == []  # the temp file is gone too
+
+
+def test_tampered_and_corrupted_files_are_rejected(cli, write_map, small_spec, tmp_path):
+    _plan(cli, write_map(small_spec))
+    source = tmp_path / "plans" / "small" / "tree.npz"
+    with np.load(source, allow_pickle=False) as npz:
+        data = {k: npz[k] for k in npz.files}
+    data["nodes"] = data["nodes"] + 1e-6  # an edit that keeps the old manifest
+    tampered = tmp_path / "tampered.npz"
+    np.savez(tampered, **data)
+    with pytest.raises(ArtifactError, match="content hash"):
+        artifacts.load(tampered)
+    result = cli("simplify", tampered)
+    assert result.exit_code == 3 and "content hash" in result.output
+    assert not (tmp_path / "simplified.npz").exists()
+
+    corrupted = tmp_path / "corrupted.npz"
+    corrupted.write_bytes(source.read_bytes()[:200])
+    result = cli("simplify", corrupted)
+    assert result.exit_code == 3 and "corrupted" in result.output
+    assert len(result.output.strip().splitlines()) == 1
+
+
+def test_wrong_artifact_type_is_named(cli, write_map, small_spec, tmp_path):
+    _plan(cli, write_map(small_spec))
+    result = cli("simplify", tmp_path / "plans" / "small" / "map.json")
+    assert result.exit_code == 3
+    assert "bearnav.map/1" in result.output and "bearnav.tree/1" in result.output
+
+
+def test_npz_without_manifest_and_nan_entries(tmp_path):
+    plain = tmp_path / "plain.npz"
+    np.savez(plain, nodes=np.zeros((2, 2)))
+    with pytest.raises(ArtifactError, match="manifest"):
+        artifacts.load(plain)
+    not_zip = tmp_path / "text.npz"
+    not_zip.write_text("hello")
+    with pytest.raises(ArtifactError):
+        artifacts.load(not_zip)
+    assert zipfile.is_zipfile(plain)
+
+
+def test_nan_in_an_artifact_is_rejected(cli, write_map, small_spec, tmp_path):
+    _plan(cli, write_map(small_spec))
+    source = tmp_path / "plans" / "small" / "tree.npz"
+    with np.load(source, allow_pickle=False) as npz:
+        data = {k: npz[k] for k in npz.files}
+    manifest = json.loads(str(data.pop("manifest")))
+    data["cost"] = data["cost"].copy()
+    data["cost"][1] = np.nan
+    entries = {k: (str(v) if v.dtype.kind == "U" else v) for k, v in data.items()}
+    manifest["content_sha256"] = artifacts.content_hash(entries, "tree")  # a consistent but bad file
+    np.savez(tmp_path / "nan.npz", manifest=np.array(json.dumps(manifest)), **data)
+    with pytest.raises(ArtifactError, match="NaN"):
+        artifacts.load(tmp_path / "nan.npz")

@@ -1,0 +1,104 @@
+"""The import rules of DESIGN §2, checked by parsing every module's imports."""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+PACKAGE = Path(__file__).resolve().parents[1] / "bearnav_cli"
+
+#: Layer of each internal module; a module may import only strictly lower layers,
+#: except the pairs listed in SAME_LAYER_OK.
+LAYERS = {
+    "errors": 0,
+    "datatypes": 1,
+    "geometry": 2, "lp": 2, "bearing": 2, "occupancy": 2,
+    "stages": 3,
+    "artifacts": 4, "pipeline": 5,
+    "cli": 6,
+}
+EXTERNAL_ONLY_IN = {"highspy": {"lp"}, "matplotlib": {"plot"}, "yaml": {"cli"}, "typer": {"cli"}, "rich": {"cli"}}
+
+
+def _modules():
+    for path in sorted(PACKAGE.rglob("*.py")):
+        rel = path.relative_to(PACKAGE).with_suffix("")
+        parts = rel.parts
+        if parts[-1] == "__init__":
+            continue
+        name = "stages" if parts[0] == "stages" else parts[0]
+        yield name, ".".join(parts), ast.parse(path.read_text())
+
+
+def _imports(tree):
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            for alias in node.names:
+                yield alias.name
+        elif isinstance(node, ast.ImportFrom) and node.module:
+            if node.module.startswith("bearnav_cli"):
+                for alias in node.names:
+                    yield f"{node.module}.{alias.name}"
+            else:
+                yield node.module
+
+
+def _internal(target: str) -> str | None:
+    """The internal module a dotted import target belongs to (None for third-party imports)."""
+    return target.split(".")[1] if target.startswith("bearnav_cli.") else None
+
+
+def test_imports_flow_one_way():
+    problems = []
+    for layer_name, dotted, tree in _modules():
+        for target in _imports(tree):
+            top = target.split(".")[0]
+            allowed = EXTERNAL_ONLY_IN.get(top)
+            if allowed is not None and layer_name not in allowed:
+                problems.append(f"{dotted} imports {target} (only {sorted(allowed)} may)")
+            dep = _internal(target)
+            if dep is None or dep == "__version__":
+                continue
+            if layer_name == "plot":
+                if dep not in ("datatypes", "errors"):
+                    problems.append(f"plot imports {target} (plot depends on datatypes only)")
+                continue
+            if dep == "plot" and layer_name != "cli":
+                problems.append(f"{dotted} imports plot")
+            if layer_name == "stages" and dep == "stages" and target.count(".") >= 2:
+                problems.append(f"{dotted} imports another stage {target}")
+            if dep in LAYERS and layer_name in LAYERS and dep != "stages" and LAYERS[dep] >= LAYERS[layer_name]:
+                problems.append(f"{dotted} ({layer_name}) imports {target} against the layering")
+    assert not problems, "\n".join(problems)
+
+
+def test_only_cli_prints():
+    offenders = []
+    for layer_name, dotted, tree in _modules():
+        if layer_name == "cli":
+            continue
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == "print":
+                offenders.append(dotted)
+    assert not offenders
+
+
+FILE_METHODS = {
+    "read_text", "read_bytes", "write_text", "write_bytes", "savez", "savez_compressed", "savefig", "mkdir", "unlink",
+}
+
+
+def test_stages_do_no_file_io():
+    offenders = []
+    for layer_name, dotted, tree in _modules():
+        if layer_name not in ("stages", "geometry", "occupancy", "datatypes"):
+            continue
+        for node in ast.walk(tree):
+            if not isinstance(node, ast.Call):
+                continue
+            func = node.func
+            if isinstance(func, ast.Name) and func.id == "open":  # the builtin (Image.open on bytes is fine)
+                offenders.append(f"{dotted}: open")
+            if isinstance(func, ast.Attribute) and func.attr in FILE_METHODS:
+                offenders.append(f"{dotted}: {func.attr}")
+    assert not offenders, offenders
