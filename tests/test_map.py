@@ -69,27 +69,28 @@ def test_map_json_round_trips(small_spec):
     assert again.to_json_text() == m.to_json_text()
 
 
-@pytest.mark.parametrize(
-    "edit, field",
-    [
-        (lambda s: s.update(goal=[0, 4]), "goal"),                      # on the boundary of B
-        (lambda s: s.update(goal=[4.5, 4.5]), "goal"),                  # inside an obstacle
-        (lambda s: s["starts"].append([11, 3]), "starts[2]"),           # outside the bounds
-        (lambda s: s["starts"].append([5, 4.1]), "starts[2]"),          # inside an inflated obstacle
-        (lambda s: s.update(landmarks=[[0, 8]]), "landmarks"),          # fewer than two
-        (lambda s: s["landmarks"].append([0, 8]), "landmarks[4]"),      # duplicate position
-        (lambda s: s["landmarks"].append([5, 4.5]), "landmarks[4]"),    # inside a raw obstacle
-        (lambda s: s["landmarks"].append([12, 4]), "landmarks[4]"),     # outside the bounds
-        (lambda s: s.update(colour="red"), "colour"),                   # unknown key
-        (lambda s: s.update(robot_radius="big"), "robot_radius"),       # wrong type
-        (lambda s: s["obstacles"].append({"polygon": [[0, 0], [2, 2], [2, 0], [0, 2]]}), "obstacles[3].polygon"),
-        (lambda s: s["obstacles"].append({"circle": {"center": [1, 1], "radius": -1}}), "obstacles[3].circle.radius"),
-        (lambda s: s["obstacles"].append({"rectangle": [3, 3, 1, 1]}), "obstacles[3].rectangle"),
-        (lambda s: s["obstacles"].append({"hexagon": [1]}), "obstacles[3].hexagon"),
-        (lambda s: s.update(bounds=[0, 0, -1, 5]), "bounds"),
-        (lambda s: s["obstacles"].append({"rectangle": [-1, -1, 11, 9]}), "obstacles"),  # empty free space
-    ],
-)
+BAD_MAPS = [
+    (lambda s: s.update(goal=[0, 4]), "goal"),                      # on the boundary of B
+    (lambda s: s.update(goal=[4.5, 4.5]), "goal"),                  # inside an obstacle
+    (lambda s: s["starts"].append([11, 3]), "starts[2]"),           # outside the bounds
+    (lambda s: s["starts"].append([5, 4.1]), "starts[2]"),          # inside an inflated obstacle
+    (lambda s: s.update(landmarks=[[0, 8]]), "landmarks"),          # fewer than two
+    (lambda s: s["landmarks"].append([0, 8]), "landmarks[4]"),      # duplicate position
+    (lambda s: s["landmarks"].append([5, 4.5]), "landmarks[4]"),    # inside a raw obstacle
+    (lambda s: s["landmarks"].append([12, 4]), "landmarks[4]"),     # outside the bounds
+    (lambda s: s.update(colour="red"), "colour"),                   # unknown key
+    (lambda s: s.update(robot_radius="big"), "robot_radius"),       # wrong type
+    (lambda s: s["obstacles"].append({"polygon": [[0, 0], [2, 2], [2, 0], [0, 2]]}), "obstacles[3].polygon"),
+    (lambda s: s["obstacles"].append({"circle": {"center": [1, 1], "radius": -1}}), "obstacles[3].circle.radius"),
+    (lambda s: s["obstacles"].append({"rectangle": [3, 3, 1, 1]}), "obstacles[3].rectangle"),
+    (lambda s: s["obstacles"].append({"hexagon": [1]}), "obstacles[3].hexagon"),
+    (lambda s: s.update(bounds=[0, 0, -1, 5]), "bounds"),
+    (lambda s: s["obstacles"].append({"rectangle": [-1, -1, 11, 9]}), "obstacles"),  # empty free space
+    (lambda s: s["obstacles"].append({"rectangle": [6.5, 0, 7, 8]}), "starts[0]"),  # cut off from the goal
+]
+
+
+@pytest.mark.parametrize("edit, field", BAD_MAPS)
 def test_bad_maps_name_the_field(small_spec, edit, field):
     edit(small_spec)
     with pytest.raises(InvalidMapError) as info:
