@@ -9,6 +9,7 @@ artifact cannot be changed after it is built. Serialisation lives in
 from __future__ import annotations
 
 import dataclasses
+import enum
 import json
 import math
 from dataclasses import dataclass, field
@@ -245,6 +246,250 @@ class Tree:
             "cost": self.cost,
             "collision_samples": self.collision_samples,
         }
+
+
+class CellStatus(enum.IntEnum):
+    """Outcome of a cell's synthesis (``plan.npz`` ``status``, ALGORITHMS §5.3)."""
+
+    CERTIFIED = 0
+    RELAXED = 1  # certified after halving the constants
+    NOT_CERTIFIED = 2  # least-violation solution stored
+    SOLVER_FAILURE = 3
+    GOAL = 4
+
+
+class CellFlag(enum.IntFlag):
+    """Warnings attached to a cell by decomposition (ALGORITHMS §4.5, §5.4, §5.5)."""
+
+    NONE = 0
+    FEW_LANDMARKS = 1  # fewer than 2 landmarks visible from the whole cell (topped up)
+    DEGENERATE_RISK = 2  # every landmark line through the fixed landmark crosses the cell
+    LANDMARK_INSIDE = 4  # every candidate fixed landmark lies in the cell (s_min = 0)
+    SAMPLE_ON_EDGE = 8  # a collision sample on the edge line was skipped
+
+
+def ragged(coords: Any, offsets: Any, width: int | None, name: str, count: int, dtype: Any = float):
+    """Check a coords + offsets pair (DESIGN §3.1) and return both, read-only.
+
+    Item ``c`` is ``coords[offsets[c]:offsets[c + 1]]``; ``offsets`` has ``count + 1``
+    non-decreasing entries from 0 to ``len(coords)``.
+    """
+    shape = (None,) if width is None else (None, width)
+    coords = frozen_array(coords, dtype, shape, name)
+    offsets = frozen_array(offsets, np.int64, (count + 1,), f"{name} offsets")
+    if offsets[0] != 0 or offsets[-1] != len(coords) or np.any(np.diff(offsets) < 0):
+        raise ArtifactError("offsets must rise from 0 to the number of rows", field=f"{name} offsets")
+    return coords, offsets
+
+
+#: Per-cell arrays shared by ``cells.npz`` and ``plan.npz``: name -> (dtype, trailing shape).
+_CELL_FIELDS = {
+    "cell_node": (np.int64, ()),
+    "exit_point": (float, (2,)),
+    "exit_dir": (float, (2,)),
+    "fixed_landmark": (np.int64, ()),
+    "s_min": (float, ()),
+    "s_max": (float, ()),
+}
+
+
+@dataclass(frozen=True)
+class Cells:
+    """Convex cells with their CLF and CBF rows, one per tree node (``cells.npz``, ALGORITHMS §4).
+
+    C cells, R half-plane rows, V vertices, H barrier rows, L landmarks. Cell ``c``
+    is ``{x : cell_A[r] @ x <= cell_b[r]}`` for ``r`` in its row range; rows are the
+    outward unit normals of the CCW polygon edges, row ``q`` for edge ``v_q → v_{q+1}``.
+
+    Attributes
+    ----------
+    map : Map
+        The map.
+    nodes, parent, collision_samples : ndarray, shapes (N, 2), (N,), (S, 2)
+        The simplified tree the cells were cut along.
+    cell_node : ndarray of int64, shape (C,)
+        Node owning each cell (``cell_node[c] == c``; node 0's cell is the goal cell).
+    cell_A, cell_b, cell_row_offsets : ndarray, shapes (R, 2), (R,), (C + 1,)
+        Half-planes of each cell.
+    cell_vertices, cell_vertex_offsets : ndarray, shapes (V, 2), (C + 1,)
+        The same cells as CCW polygons (aligned with the rows).
+    exit_point, exit_dir : ndarray, shape (C, 2)
+        ``x_j`` and unit ``z`` into the cell: ``V(x) = z·(x − x_j)``; zeros for the goal cell.
+    cbf_A, cbf_b, cbf_offsets : ndarray, shapes (H, 2), (H,), (C + 1,)
+        Barrier rows ``h(x) = cbf_A @ x + cbf_b``, safe where ``h >= 0``.
+    cell_landmarks : ndarray of bool, shape (C, L)
+        Landmarks each cell's controller uses.
+    fixed_landmark : ndarray of int64, shape (C,)
+        Landmark ``f`` that rescales bearings in each cell (ALGORITHMS §5.5).
+    s_min, s_max : ndarray, shape (C,)
+        Exact smallest and largest distance from ``l_f`` to the cell (map units).
+    cell_flags : ndarray of int8, shape (C,)
+        :class:`CellFlag` bits.
+    stats : dict
+        Statistics for the manifest.
+    """
+
+    map: Map
+    nodes: np.ndarray
+    parent: np.ndarray
+    collision_samples: np.ndarray
+    cell_node: np.ndarray
+    cell_A: np.ndarray
+    cell_b: np.ndarray
+    cell_row_offsets: np.ndarray
+    cell_vertices: np.ndarray
+    cell_vertex_offsets: np.ndarray
+    exit_point: np.ndarray
+    exit_dir: np.ndarray
+    cbf_A: np.ndarray
+    cbf_b: np.ndarray
+    cbf_offsets: np.ndarray
+    cell_landmarks: np.ndarray
+    fixed_landmark: np.ndarray
+    s_min: np.ndarray
+    s_max: np.ndarray
+    cell_flags: np.ndarray
+    stats: dict = field(default_factory=dict, compare=False)
+
+    def __post_init__(self) -> None:
+        _check_cell_arrays(self)
+        c = len(self.cell_node)
+        object.__setattr__(self, "cell_flags", frozen_array(self.cell_flags, np.int8, (c,), "cell_flags"))
+
+    @property
+    def n_cells(self) -> int:
+        return len(self.cell_node)
+
+    def vertices(self, c: int) -> np.ndarray:
+        """CCW vertices of cell ``c``, shape (p, 2)."""
+        return self.cell_vertices[self.cell_vertex_offsets[c] : self.cell_vertex_offsets[c + 1]]
+
+    def rows(self, c: int) -> tuple[np.ndarray, np.ndarray]:
+        """``(A, b)`` of cell ``c``, shapes (p, 2) and (p,)."""
+        r0, r1 = self.cell_row_offsets[c], self.cell_row_offsets[c + 1]
+        return self.cell_A[r0:r1], self.cell_b[r0:r1]
+
+    def barrier(self, c: int) -> tuple[np.ndarray, np.ndarray]:
+        """Barrier rows ``(n, q)`` of cell ``c`` (``h = n @ x + q``), shapes (h, 2) and (h,)."""
+        r0, r1 = self.cbf_offsets[c], self.cbf_offsets[c + 1]
+        return self.cbf_A[r0:r1], self.cbf_b[r0:r1]
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """The data entries of ``cells.npz`` (without ``manifest`` and ``map``)."""
+        return {name: getattr(self, name) for name in CELL_KEYS + ("cell_flags",)}
+
+
+#: Data keys common to ``cells.npz`` and ``plan.npz`` (DESIGN §3.2).
+CELL_KEYS = (
+    "nodes", "parent", "collision_samples", "cell_node", "cell_A", "cell_b", "cell_row_offsets",
+    "cell_vertices", "cell_vertex_offsets", "exit_point", "exit_dir", "cbf_A", "cbf_b", "cbf_offsets",
+    "cell_landmarks", "fixed_landmark", "s_min", "s_max",
+)  # fmt: skip
+
+
+def _check_cell_arrays(obj: Any) -> None:
+    """Shape, dtype and finiteness checks shared by :class:`Cells` and :class:`Plan`."""
+    nodes = frozen_array(obj.nodes, float, (None, 2), "nodes")
+    n = len(nodes)
+    object.__setattr__(obj, "nodes", nodes)
+    object.__setattr__(obj, "parent", frozen_array(obj.parent, np.int64, (n,), "parent"))
+    object.__setattr__(
+        obj, "collision_samples", frozen_array(obj.collision_samples, float, (None, 2), "collision_samples")
+    )
+    c = len(np.asarray(obj.cell_node))
+    for name, (dtype, trailing) in _CELL_FIELDS.items():
+        object.__setattr__(obj, name, frozen_array(getattr(obj, name), dtype, (c, *trailing), name))
+    for coords, values, offsets, width in (
+        ("cell_A", "cell_b", "cell_row_offsets", 2),
+        ("cbf_A", "cbf_b", "cbf_offsets", 2),
+    ):
+        a, off = ragged(getattr(obj, coords), getattr(obj, offsets), width, coords, c)
+        object.__setattr__(obj, coords, a)
+        object.__setattr__(obj, offsets, off)
+        object.__setattr__(obj, values, frozen_array(getattr(obj, values), float, (len(a),), values))
+    verts, voff = ragged(obj.cell_vertices, obj.cell_vertex_offsets, 2, "cell_vertices", c)
+    object.__setattr__(obj, "cell_vertices", verts)
+    object.__setattr__(obj, "cell_vertex_offsets", voff)
+    lm = frozen_array(obj.cell_landmarks, bool, (c, len(obj.map.landmarks)), "cell_landmarks")
+    object.__setattr__(obj, "cell_landmarks", lm)
+    if n == 0 or obj.parent[0] != -1 or np.count_nonzero(obj.parent == -1) != 1:
+        raise ArtifactError("parent must be -1 exactly at node 0", field="parent")
+    if np.any((obj.cell_node < 0) | (obj.cell_node >= n)):
+        raise ArtifactError("cell_node index out of range", field="cell_node")
+    if np.any((obj.fixed_landmark < 0) | (obj.fixed_landmark >= len(obj.map.landmarks))):
+        raise ArtifactError("landmark index out of range", field="fixed_landmark")
+    if not np.array_equal(np.diff(obj.cell_row_offsets), np.diff(obj.cell_vertex_offsets)):
+        raise ArtifactError("one row per polygon edge expected", field="cell_row_offsets")
+    for name in ("nodes", "collision_samples", "cell_A", "cell_b", "cell_vertices", "exit_point", "exit_dir",
+                 "cbf_A", "cbf_b", "s_min", "s_max"):
+        if not np.all(np.isfinite(getattr(obj, name))):
+            raise ArtifactError("contains NaN or infinity", field=name)
+
+
+#: Data keys that ``plan.npz`` adds to the cell keys (DESIGN §3.2).
+PLAN_KEYS = ("landmarks", "gain", "c_h", "c_v", "u_max", "margin_h", "margin_v", "status", "goal_tolerance")
+
+
+@dataclass(frozen=True)
+class Plan:
+    """Cells with a synthesised, certified controller each (``plan.npz``, DESIGN §3.2, ALGORITHMS §5).
+
+    Attributes
+    ----------
+    cells : Cells
+        The decomposition the controllers were synthesised for.
+    gain : ndarray, shape (C, 2, 2L)
+        ``u(x) = gain[c] @ (landmarks − x).ravel()``; unused landmarks' columns are zero.
+    c_h, c_v, u_max : ndarray, shape (C,)
+        Constants the certificate is stated with; ``c_h`` is NaN in a cell without barrier rows.
+    margin_h, margin_v : ndarray, shape (C,)
+        Worst-case CBF and CLF slack over the cell (≤ 0 holds; NaN where no row).
+    status : ndarray of int8, shape (C,)
+        :class:`CellStatus` of each cell.
+    goal_tolerance : float
+        Success radius around the goal (map units).
+    stats : dict
+        Statistics for the manifest.
+    """
+
+    cells: Cells
+    gain: np.ndarray
+    c_h: np.ndarray
+    c_v: np.ndarray
+    u_max: np.ndarray
+    margin_h: np.ndarray
+    margin_v: np.ndarray
+    status: np.ndarray
+    goal_tolerance: float
+    stats: dict = field(default_factory=dict, compare=False)
+
+    def __post_init__(self) -> None:
+        c, n_lm = self.cells.n_cells, len(self.cells.map.landmarks)
+        object.__setattr__(self, "gain", frozen_array(self.gain, float, (c, 2, 2 * n_lm), "gain"))
+        for name in ("c_h", "c_v", "u_max", "margin_h", "margin_v"):
+            object.__setattr__(self, name, frozen_array(getattr(self, name), float, (c,), name))
+        object.__setattr__(self, "status", frozen_array(self.status, np.int8, (c,), "status"))
+        object.__setattr__(self, "goal_tolerance", float(self.goal_tolerance))
+        for name in ("gain", "c_v", "u_max"):
+            if not np.all(np.isfinite(getattr(self, name))):
+                raise ArtifactError("contains NaN or infinity", field=name)
+        if np.any((self.status < 0) | (self.status > 4)):
+            raise ArtifactError("status must be 0..4", field="status")
+
+    @property
+    def map(self) -> Map:
+        return self.cells.map
+
+    @property
+    def landmarks(self) -> np.ndarray:
+        return self.cells.map.landmarks
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """The data entries of ``plan.npz`` (without ``manifest`` and ``map``): exactly DESIGN §3.2."""
+        out = {name: getattr(self.cells, name) for name in CELL_KEYS}
+        out.update({name: np.asarray(getattr(self, name)) for name in PLAN_KEYS if name != "landmarks"})
+        out["landmarks"] = self.landmarks
+        return out
 
 
 def replace(artifact: Any, **changes: Any) -> Any:

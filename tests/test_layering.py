@@ -13,7 +13,8 @@ LAYERS = {
     "errors": 0,
     "datatypes": 1,
     "geometry": 2, "lp": 2, "bearing": 2, "occupancy": 2,
-    "stages": 3,
+    "runtime": 2,
+    "stages": 3, "verify": 3,
     "artifacts": 4, "pipeline": 5,
     "cli": 6,
 }
