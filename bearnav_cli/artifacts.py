@@ -23,7 +23,7 @@ from typing import Any, Callable
 import numpy as np
 
 from bearnav_cli import __version__
-from bearnav_cli.datatypes import Map, Tree
+from bearnav_cli.datatypes import CELL_KEYS, PLAN_KEYS, Cells, Map, Plan, Tree
 from bearnav_cli.errors import ArtifactError, BearnavError
 
 
@@ -48,10 +48,47 @@ _TREE_ENTRIES = {
     "collision_samples": ("f", 2),
 }
 
+_CELL_ENTRIES = {
+    "map": ("U", 0),
+    "nodes": ("f", 2),
+    "parent": ("i", 1),
+    "collision_samples": ("f", 2),
+    "cell_node": ("i", 1),
+    "cell_A": ("f", 2),
+    "cell_b": ("f", 1),
+    "cell_row_offsets": ("i", 1),
+    "cell_vertices": ("f", 2),
+    "cell_vertex_offsets": ("i", 1),
+    "exit_point": ("f", 2),
+    "exit_dir": ("f", 2),
+    "cbf_A": ("f", 2),
+    "cbf_b": ("f", 1),
+    "cbf_offsets": ("i", 1),
+    "cell_landmarks": ("b", 2),
+    "fixed_landmark": ("i", 1),
+    "s_min": ("f", 1),
+    "s_max": ("f", 1),
+}
+
+_PLAN_ENTRIES = {
+    **_CELL_ENTRIES,
+    "landmarks": ("f", 2),
+    "gain": ("f", 3),
+    "c_h": ("f", 1),
+    "c_v": ("f", 1),
+    "u_max": ("f", 1),
+    "margin_h": ("f", 1),
+    "margin_v": ("f", 1),
+    "status": ("i", 1),
+    "goal_tolerance": ("f", 0),
+}
+
 KINDS: dict[str, Kind] = {
     "map": Kind("map", "bearnav.map/1", "map.json", {}),
     "tree": Kind("tree", "bearnav.tree/1", "tree.npz", _TREE_ENTRIES),
     "simplified": Kind("simplified", "bearnav.simplified/1", "simplified.npz", _TREE_ENTRIES),
+    "cells": Kind("cells", "bearnav.cells/1", "cells.npz", {**_CELL_ENTRIES, "cell_flags": ("i", 1)}),
+    "plan": Kind("plan", "bearnav.plan/1", "plan.npz", _PLAN_ENTRIES),
 }
 
 
@@ -148,7 +185,7 @@ def make_manifest(
         "software": software_versions(),
         "summary": summary,
         "elapsed_s": round(float(elapsed_s), 6),
-        "stats": stats or {},
+        "stats": _stats_of(artifact, stats),
     }
 
 
@@ -156,31 +193,42 @@ def make_manifest(
 
 
 #: Which Python type each artifact kind holds.
-_TYPES: dict[str, type] = {"map": Map, "tree": Tree, "simplified": Tree}
+_TYPES: dict[str, type] = {"map": Map, "tree": Tree, "simplified": Tree, "cells": Cells, "plan": Plan}
 
 
 def entries_of(artifact: Any) -> dict[str, Any]:
     """The data entries of an artifact (what is hashed and stored besides the manifest)."""
     if isinstance(artifact, Map):
         return {"map": artifact.to_json_text()}
-    if isinstance(artifact, Tree):
+    if isinstance(artifact, (Tree, Cells, Plan)):
         return {"map": artifact.map.to_json_text(), **artifact.arrays()}
     raise TypeError(f"not an artifact: {type(artifact).__name__}")
 
 
+def _stats_of(artifact: Any, stats: dict | None) -> dict:
+    """Manifest statistics; a plan also keeps its cells' flags there (plan.npz has no key for them)."""
+    stats = dict(stats or {})
+    if isinstance(artifact, Plan):
+        stats["cell_flags"] = artifact.cells.cell_flags.tolist()
+    return stats
+
+
 def _from_entries(kind: str, entries: dict[str, Any], manifest: dict) -> Any:
-    if kind == "map":
-        return Map.from_json(json.loads(entries["map"]))
     map_ = Map.from_json(json.loads(entries["map"]))
+    if kind == "map":
+        return map_
     stats = dict(manifest.get("stats", {}))
-    return Tree(
-        map=map_,
-        nodes=entries["nodes"],
-        parent=entries["parent"],
-        cost=entries["cost"],
-        collision_samples=entries["collision_samples"],
-        stats=stats,
-    )
+    if kind in ("tree", "simplified"):
+        return Tree(map=map_, stats=stats, **{key: entries[key] for key in ("nodes", "parent", "cost",
+                                                                           "collision_samples")})
+    cell_arrays = {key: entries[key] for key in CELL_KEYS}
+    if kind == "cells":
+        return Cells(map=map_, cell_flags=entries["cell_flags"], stats=stats, **cell_arrays)
+    flags = stats.get("cell_flags", [0] * len(entries["cell_node"]))
+    cells = Cells(map=map_, cell_flags=flags, **cell_arrays)
+    if not np.allclose(entries["landmarks"], map_.landmarks, rtol=0, atol=0):
+        raise ArtifactError("landmarks differ from the embedded map's", field="landmarks")
+    return Plan(cells=cells, stats=stats, **{key: entries[key] for key in PLAN_KEYS if key != "landmarks"})
 
 
 # --------------------------------------------------------------------------- writing

@@ -19,6 +19,7 @@ from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
 from bearnav_cli import __version__, artifacts, pipeline
+from bearnav_cli.datatypes import CellFlag, CellStatus
 from bearnav_cli.errors import BearnavError, InvalidMapError
 from bearnav_cli.stages.map_ import GridSource, MapSource
 
@@ -191,9 +192,29 @@ def _progress_bar() -> Progress:
     )
 
 
-def _no_route(report: pipeline.StageReport) -> bool:
-    artifact = report.artifact
-    return hasattr(artifact, "nodes") and len(artifact.nodes) < 2
+def _cell_list(cells: list[int], limit: int = 20) -> str:
+    text = ", ".join(str(c) for c in cells[:limit])
+    return text + (f" … ({len(cells)} in all)" if len(cells) > limit else "")
+
+
+def _outcome_failure(artifact: Any) -> str | None:
+    """Why a finished run's result is not usable (exit 1), or None."""
+    nodes = getattr(artifact, "nodes", None)
+    if nodes is not None and len(nodes) < 2:
+        return "no route: the tree has only its root (every sample fell in obstacles?)"
+    cells = getattr(artifact, "cells", artifact)
+    flags = getattr(cells, "cell_flags", None)
+    if flags is not None:
+        blind = [int(c) for c in (flags & CellFlag.BLIND_SPOT).nonzero()[0]]
+        if blind:
+            return f"cells {_cell_list(blind)} have free points that see fewer than 2 landmarks (add landmarks there)"
+    status = getattr(artifact, "status", None)
+    if status is not None:
+        bad = (status == CellStatus.NOT_CERTIFIED) | (status == CellStatus.SOLVER_FAILURE)
+        failed = [int(c) for c in bad.nonzero()[0]]
+        if failed:
+            return f"cells {_cell_list(failed)} are not certified (status 2 or 3)"
+    return None
 
 
 def _finish(reports: list[pipeline.StageReport], as_json: bool) -> None:
@@ -203,8 +224,9 @@ def _finish(reports: list[pipeline.StageReport], as_json: bool) -> None:
             for r in reports
         ]
         out.print_json(json.dumps(rows))
-    if reports and _no_route(reports[-1]):
-        raise _fail("no route: the tree has only its root (every sample fell in obstacles?)", EXIT_OUTCOME)
+    problem = _outcome_failure(reports[-1].artifact) if reports else None
+    if problem:
+        raise _fail(problem, EXIT_OUTCOME)
 
 
 # --------------------------------------------------------------------------- commands
@@ -288,6 +310,28 @@ def simplify_command(
     """
     _Quiet.enabled |= quiet
     _run_one("simplify", tree_npz, out_path, dict(max_rounds=max_rounds, ctl=ctl), force, as_json)
+
+
+@app.command("decompose")
+@handles_errors
+def decompose_command(
+    tree_npz: Path = typer.Argument(..., help="simplified.npz from `bearnav simplify`."),
+    out_path: Optional[Path] = typer.Option(None, "-o", "--out", help="Output (default cells.npz next to the input)."),
+    bisector_rule: Optional[str] = typer.Option(None, help="'crossing' (default) or 'parent' bisector rule."),
+    cbf_apex: Optional[str] = typer.Option(None, help="Barrier wedge apex: 'child' (default) or 'parent'."),
+    cbf_filter: Optional[str] = typer.Option(None, help="Samples a barrier may use: 'both', 'projection', 'cell'."),
+    n_landmarks: Optional[int] = typer.Option(None, help="Landmarks per cell controller (4)."),
+    force: bool = FORCE,
+    quiet: bool = QUIET,
+    as_json: bool = JSON,
+) -> None:
+    """Cut the bounds into one convex cell per tree node, with CLF and barrier rows.
+
+    Example: bearnav decompose plans/kitchen/simplified.npz
+    """
+    _Quiet.enabled |= quiet
+    overrides = dict(bisector_rule=bisector_rule, cbf_apex=cbf_apex, cbf_filter=cbf_filter, n_landmarks=n_landmarks)
+    _run_one("decompose", tree_npz, out_path, overrides, force, as_json)
 
 
 def _run_one(stage: str, source: Path, out_path: Optional[Path], overrides: dict, force: bool, as_json: bool) -> None:

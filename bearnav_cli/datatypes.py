@@ -266,6 +266,7 @@ class CellFlag(enum.IntFlag):
     DEGENERATE_RISK = 2  # every landmark line through the fixed landmark crosses the cell
     LANDMARK_INSIDE = 4  # every candidate fixed landmark lies in the cell (s_min = 0)
     SAMPLE_ON_EDGE = 8  # a collision sample on the edge line was skipped
+    BLIND_SPOT = 16  # a free point of the coverage grid (spacing D/100) in the cell sees < 2 landmarks
 
 
 def ragged(coords: Any, offsets: Any, width: int | None, name: str, count: int, dtype: Any = float):

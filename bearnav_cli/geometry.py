@@ -176,7 +176,7 @@ class FreeSpace:
             free[free] = ~shapely.intersects(self.obstacles, shapely.linestrings(coords[free]))
         return free
 
-    def visible(self, points: np.ndarray, targets: np.ndarray) -> np.ndarray:
+    def visible(self, points: np.ndarray, targets: np.ndarray, *, from_boundary: bool = False) -> np.ndarray:
         """Line of sight from points to landmarks through the raw obstacles.
 
         The segment from ``p`` to ``l' = l − tol·unit(l − p)`` must not meet ``P_raw``,
@@ -187,6 +187,10 @@ class FreeSpace:
         points : ndarray, shape (n, 2)
         targets : ndarray, shape (n, 2)
             Paired with ``points`` row by row (broadcast one side to test many).
+        from_boundary : bool
+            Also shorten the segment by ``tol`` at ``p``. Vertices of a cell's free part
+            may lie on an obstacle's boundary (on ``P_raw`` itself when the robot radius
+            is 0); seen from just off the wall they see what the wall does not hide.
 
         Returns
         -------
@@ -201,11 +205,13 @@ class FreeSpace:
         result = np.zeros(len(p), bool)
         if not ok.any():
             return result
-        shortened = t[ok] - self.tol * delta[ok] / length[ok, None]
+        step = self.tol * delta[ok] / length[ok, None]
+        shortened = t[ok] - step
+        start = p[ok] + step if from_boundary else p[ok]
         if self.raw_obstacles.is_empty:
             result[ok] = True
             return result
-        lines = shapely.linestrings(np.stack([p[ok], shortened], axis=1))
+        lines = shapely.linestrings(np.stack([start, shortened], axis=1))
         result[ok] = ~shapely.intersects(self.raw_obstacles, lines)
         return result
 
@@ -223,3 +229,34 @@ class FreeSpace:
             if part.intersects(target):
                 return part
         return shapely.Polygon()
+
+
+def landmark_coverage(map_: Map, space: FreeSpace, cells: int = 100) -> tuple[np.ndarray, np.ndarray]:
+    """Count the landmarks in line of sight from a grid over the free space (ALGORITHMS §1).
+
+    Parameters
+    ----------
+    map_ : Map
+    space : FreeSpace
+        Built from ``map_``.
+    cells : int
+        Grid spacing ``D / cells`` (D the bounds' diagonal); points at cell centres.
+
+    Returns
+    -------
+    points : ndarray, shape (P, 2)
+        Free grid points.
+    counts : ndarray of int, shape (P,)
+        Landmarks in line of sight from each point.
+    """
+    xmin, ymin, xmax, ymax = map_.bounds
+    spacing = map_.diagonal / cells
+    xs = np.arange(xmin + spacing / 2, xmax, spacing)
+    ys = np.arange(ymin + spacing / 2, ymax, spacing)
+    grid = np.stack(np.meshgrid(xs, ys), axis=-1).reshape(-1, 2)
+    points = grid[space.points_free(grid)]
+    n_landmarks = len(map_.landmarks)
+    pairs_p = np.repeat(points, n_landmarks, axis=0)
+    pairs_l = np.tile(map_.landmarks, (len(points), 1))
+    counts = space.visible(pairs_p, pairs_l).reshape(-1, n_landmarks).sum(axis=1)
+    return points, counts

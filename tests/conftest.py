@@ -24,7 +24,7 @@ SMALL_MAP = {
         {"rectangle": [4, 4, 6, 5]},
         {"circle": {"center": [8, 2], "radius": 0.5}},
     ],
-    "landmarks": [[0, 8], {"id": "tag12", "position": [10, 0]}, [10, 8], [5, 0]],
+    "landmarks": [[0, 8], {"id": "tag12", "position": [10, 0]}, [10, 8], [5, 0], [0, 4]],
     "params": {"rrtstar": {"iterations": 400, "step": 1.0, "seed": 0}},
 }
 

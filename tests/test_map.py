@@ -16,7 +16,7 @@ from .conftest import build_map
 
 def test_every_shape_kind_is_parsed(small_spec):
     m = build_map(small_spec)
-    assert len(m.landmarks) == 4 and m.landmark_ids[1] == "tag12" and m.landmark_ids[0] == "0"
+    assert len(m.landmarks) == 5 and m.landmark_ids[1] == "tag12" and m.landmark_ids[0] == "0"
     raw = shapely.union_all([to_shapely(p) for p in m.raw_obstacles])
     # the triangle, the rectangle and the 64-gon are all there, disjoint
     assert len(m.raw_obstacles) == 3
@@ -75,9 +75,9 @@ BAD_MAPS = [
     (lambda s: s["starts"].append([11, 3]), "starts[2]"),           # outside the bounds
     (lambda s: s["starts"].append([5, 4.1]), "starts[2]"),          # inside an inflated obstacle
     (lambda s: s.update(landmarks=[[0, 8]]), "landmarks"),          # fewer than two
-    (lambda s: s["landmarks"].append([0, 8]), "landmarks[4]"),      # duplicate position
-    (lambda s: s["landmarks"].append([5, 4.5]), "landmarks[4]"),    # inside a raw obstacle
-    (lambda s: s["landmarks"].append([12, 4]), "landmarks[4]"),     # outside the bounds
+    (lambda s: s["landmarks"].append([0, 8]), "landmarks[5]"),      # duplicate position
+    (lambda s: s["landmarks"].append([5, 4.5]), "landmarks[5]"),    # inside a raw obstacle
+    (lambda s: s["landmarks"].append([12, 4]), "landmarks[5]"),     # outside the bounds
     (lambda s: s.update(colour="red"), "colour"),                   # unknown key
     (lambda s: s.update(robot_radius="big"), "robot_radius"),       # wrong type
     (lambda s: s["obstacles"].append({"polygon": [[0, 0], [2, 2], [2, 0], [0, 2]]}), "obstacles[3].polygon"),

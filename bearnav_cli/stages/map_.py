@@ -20,7 +20,7 @@ import shapely
 from bearnav_cli import occupancy
 from bearnav_cli.datatypes import Map
 from bearnav_cli.errors import InvalidMapError
-from bearnav_cli.geometry import CIRCLE_SEGMENTS, FreeSpace, circle_polygon, from_shapely, inflate
+from bearnav_cli.geometry import CIRCLE_SEGMENTS, FreeSpace, circle_polygon, from_shapely, inflate, landmark_coverage
 
 VERSION = 1
 log = logging.getLogger(__name__)
@@ -316,29 +316,6 @@ def _validate(reader: _Reader, map_: Map, params: Params) -> None:
         ):
             raise reader.fail(where, f"{lm.tolist()} lies inside an obstacle (a tag must be on its boundary)")
     _coverage_warning(map_, space, params.coverage_cells)
-
-
-def landmark_coverage(map_: Map, space: FreeSpace, cells: int) -> tuple[np.ndarray, np.ndarray]:
-    """Count the landmarks in line of sight from a grid over the free space.
-
-    Returns
-    -------
-    points : ndarray, shape (P, 2)
-        Free grid points (spacing ``D / cells``).
-    counts : ndarray of int, shape (P,)
-        Landmarks in line of sight from each point.
-    """
-    xmin, ymin, xmax, ymax = map_.bounds
-    spacing = map_.diagonal / cells
-    xs = np.arange(xmin + spacing / 2, xmax, spacing)
-    ys = np.arange(ymin + spacing / 2, ymax, spacing)
-    grid = np.stack(np.meshgrid(xs, ys), axis=-1).reshape(-1, 2)
-    points = grid[space.points_free(grid)]
-    L = len(map_.landmarks)
-    pairs_p = np.repeat(points, L, axis=0)
-    pairs_l = np.tile(map_.landmarks, (len(points), 1))
-    counts = space.visible(pairs_p, pairs_l).reshape(-1, L).sum(axis=1)
-    return points, counts
 
 
 def _coverage_warning(map_: Map, space: FreeSpace, cells: int) -> None:
