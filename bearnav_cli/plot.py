@@ -19,7 +19,7 @@ from matplotlib.collections import LineCollection  # noqa: E402
 from matplotlib.patches import PathPatch  # noqa: E402
 from matplotlib.path import Path as MplPath  # noqa: E402
 
-from bearnav_cli.datatypes import Map, Polygon, Tree  # noqa: E402
+from bearnav_cli.datatypes import Cells, CellStatus, Map, Plan, Polygon, Tree  # noqa: E402
 
 RAW_COLOR = "#4d4d4d"
 INFLATED_COLOR = "#c9c9c9"
@@ -58,18 +58,103 @@ def plot_map(ax: plt.Axes, map_: Map, *, landmarks: bool = True, starts: bool = 
     return ax
 
 
-def plot_tree(ax: plt.Axes, tree: Tree, *, color: str = "#1f77b4", lw: float = 0.8, alpha: float = 1.0,
+#: Fill colour of each cell status (``plan.npz`` ``status``).
+STATUS_COLORS = {
+    CellStatus.CERTIFIED: "#a1d99b",
+    CellStatus.RELAXED: "#fdd49e",
+    CellStatus.NOT_CERTIFIED: "#fc9272",
+    CellStatus.SOLVER_FAILURE: "#de2d26",
+    CellStatus.GOAL: "#9ecae1",
+}
+
+
+def _edges(nodes: np.ndarray, parent: np.ndarray) -> np.ndarray:
+    """Child → parent segments, shape (N−1, 2, 2)."""
+    child = np.flatnonzero(parent >= 0)
+    return np.stack([nodes[child], nodes[parent[child]]], axis=1)
+
+
+def plot_cells(ax: plt.Axes, cells: Cells, status: np.ndarray | None = None) -> plt.Axes:
+    """Cell outlines; filled by synthesis status when ``status`` (shape (C,)) is given."""
+    for c in range(cells.n_cells):
+        v = cells.vertices(c)
+        closed = np.vstack([v, v[:1]])
+        if status is not None:
+            ax.fill(*v.T, color=STATUS_COLORS[CellStatus(int(status[c]))], alpha=0.25, lw=0, zorder=0.5)
+        ax.plot(*closed.T, color="#6a51a3", lw=0.4, alpha=0.6, zorder=0.6)
+    if status is not None:
+        for value in sorted({int(s) for s in status}):
+            name = CellStatus(value).name.lower().replace("_", " ")
+            ax.fill([], [], color=STATUS_COLORS[CellStatus(value)], alpha=0.5, label=f"cells: {name}")
+    return ax
+
+
+def _line_in_polygon(normal: np.ndarray, offset: float, A: np.ndarray, b: np.ndarray) -> np.ndarray | None:
+    """The part of the line ``normal·x + offset = 0`` inside ``{A x <= b}``, shape (2, 2), or None."""
+    point = -offset * normal
+    direction = np.array([-normal[1], normal[0]])
+    rate, slack = A @ direction, b - A @ point
+    lo, hi = -np.inf, np.inf
+    for r, s in zip(rate, slack, strict=True):
+        if abs(r) < 1e-15:
+            if s < 0:
+                return None
+        elif r > 0:
+            hi = min(hi, s / r)
+        else:
+            lo = max(lo, s / r)
+    if not lo < hi:
+        return None
+    return np.stack([point + lo * direction, point + hi * direction])
+
+
+def plot_barriers(ax: plt.Axes, cells: Cells, *, color: str = "#e6550d") -> plt.Axes:
+    """Every barrier line ``h(x) = 0``, clipped to its cell."""
+    segments = []
+    for c in range(cells.n_cells):
+        A, b = cells.rows(c)
+        normals, offsets = cells.barrier(c)
+        for n, q in zip(normals, offsets, strict=True):
+            seg = _line_in_polygon(n, q, A, b)
+            if seg is not None:
+                segments.append(seg)
+    if segments:
+        ax.add_collection(LineCollection(segments, colors=color, linewidths=0.7, linestyles="--", zorder=3.5,
+                                         label="barrier lines"))
+    return ax
+
+
+def plot_field(ax: plt.Axes, plan: Plan, *, arrows: int = 40) -> plt.Axes:
+    """Unit arrows of the controller a robot would run at each point: its Voronoi owner's cell."""
+    map_ = plan.map
+    xmin, ymin, xmax, ymax = map_.bounds
+    step = max(xmax - xmin, ymax - ymin) / arrows
+    xs, ys = np.meshgrid(np.arange(xmin + step / 2, xmax, step), np.arange(ymin + step / 2, ymax, step))
+    points = np.column_stack([xs.ravel(), ys.ravel()])
+    nodes = plan.cells.nodes
+    owner = np.argmin(((points[:, None, :] - nodes[None, :, :]) ** 2).sum(axis=2), axis=1)
+    y = (map_.landmarks[None, :, :] - points[:, None, :]).reshape(len(points), -1)
+    u = np.einsum("pij,pj->pi", plan.gain[owner], y)
+    norm = np.hypot(u[:, 0], u[:, 1])
+    keep = norm > 0
+    u = u[keep] / norm[keep, None]
+    ax.quiver(*points[keep].T, *u.T, angles="xy", scale_units="xy", scale=1.6 / step, width=0.0018,
+              color="#3f007d", alpha=0.7, zorder=3.8, label="vector field (direction)")
+    return ax
+
+
+def plot_tree(ax: plt.Axes, tree: Tree | Cells, *, color: str = "#1f77b4", lw: float = 0.8, alpha: float = 1.0,
               nodes: bool = False, label: str | None = "tree") -> plt.Axes:
     """Tree edges (child → parent) and, optionally, its nodes."""
     if len(tree.nodes) > 1:
-        ax.add_collection(LineCollection(tree.edges, colors=color, linewidths=lw, alpha=alpha, zorder=4,
-                                         label=label))
+        segments = _edges(tree.nodes, tree.parent)
+        ax.add_collection(LineCollection(segments, colors=color, linewidths=lw, alpha=alpha, zorder=4, label=label))
     if nodes:
         ax.scatter(*tree.nodes.T, s=6, color=color, alpha=alpha, zorder=5)
     return ax
 
 
-def plot_samples(ax: plt.Axes, tree: Tree, *, color: str = "#ff7f0e") -> plt.Axes:
+def plot_samples(ax: plt.Axes, tree: Tree | Cells, *, color: str = "#ff7f0e") -> plt.Axes:
     """The collision samples kept by RRT* (random ones and border pseudo-samples)."""
     if len(tree.collision_samples):
         ax.scatter(*tree.collision_samples.T, s=3, marker="x", linewidths=0.6, color=color, zorder=3,
@@ -78,12 +163,13 @@ def plot_samples(ax: plt.Axes, tree: Tree, *, color: str = "#ff7f0e") -> plt.Axe
 
 
 def figure_for(artifact: Any, *, background: Sequence[Any] = (), title: str | None = None) -> plt.Figure:
-    """A figure with the layers that suit ``artifact`` (Map or Tree).
+    """A figure with the layers that suit ``artifact``.
 
     Parameters
     ----------
-    artifact : Map or Tree
-        The main artifact.
+    artifact : Map, Tree, Cells or Plan
+        The main artifact: a map; a tree with its samples; cells with barrier lines; a
+        plan adds the cells' status colours and its vector field.
     background : sequence of Tree
         Trees drawn faintly underneath (e.g. the RRT* tree under its simplification).
     title : str, optional
@@ -100,6 +186,14 @@ def figure_for(artifact: Any, *, background: Sequence[Any] = (), title: str | No
     if isinstance(artifact, Tree):
         plot_samples(ax, artifact)
         plot_tree(ax, artifact, nodes=len(artifact.nodes) < 400, lw=1.0 if background else 0.7)
+    cells = artifact.cells if isinstance(artifact, Plan) else artifact if isinstance(artifact, Cells) else None
+    if cells is not None:
+        plot_cells(ax, cells, artifact.status if isinstance(artifact, Plan) else None)
+        plot_samples(ax, cells)
+        plot_barriers(ax, cells)
+        plot_tree(ax, cells, nodes=True, lw=1.0)
+        if isinstance(artifact, Plan):
+            plot_field(ax, artifact)
     ax.set_title(title or map_.name)
     ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=7, framealpha=0.85)
     fig.tight_layout()
