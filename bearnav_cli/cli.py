@@ -199,10 +199,10 @@ def _cell_list(cells: list[int], limit: int = 20) -> str:
 
 def _outcome_failure(artifact: Any) -> str | None:
     """Why a finished run's result is not usable (exit 1), or None."""
-    nodes = getattr(artifact, "nodes", None)
+    cells = getattr(artifact, "cells", artifact)  # a Plan holds its Cells
+    nodes = getattr(cells, "nodes", None)
     if nodes is not None and len(nodes) < 2:
         return "no route: the tree has only its root (every sample fell in obstacles?)"
-    cells = getattr(artifact, "cells", artifact)
     flags = getattr(cells, "cell_flags", None)
     if flags is not None:
         blind = [int(c) for c in (flags & CellFlag.BLIND_SPOT).nonzero()[0]]
@@ -332,6 +332,71 @@ def decompose_command(
     _Quiet.enabled |= quiet
     overrides = dict(bisector_rule=bisector_rule, cbf_apex=cbf_apex, cbf_filter=cbf_filter, n_landmarks=n_landmarks)
     _run_one("decompose", tree_npz, out_path, overrides, force, as_json)
+
+
+@app.command("synthesize")
+@handles_errors
+def synthesize_command(
+    cells_npz: Path = typer.Argument(..., help="cells.npz from `bearnav decompose`."),
+    out_path: Optional[Path] = typer.Option(None, "-o", "--out", help="Output (default plan.npz next to the input)."),
+    u_max: Optional[float] = typer.Option(None, help="Input box |u_k| <= u_max, map units/s (1.0)."),
+    kappa: Optional[float] = typer.Option(None, help="Initial constant scale kappa of c_v and c_h (0.5)."),
+    halvings: Optional[int] = typer.Option(None, help="Halvings of kappa tried before giving up (6)."),
+    gain_structure: Optional[str] = typer.Option(None, help="'full' (default), 'diag' or 'scalar' gain blocks."),
+    lp_form: Optional[str] = typer.Option(None, help="'vertex' (default) or 'dual' form of the robust LP."),
+    goal_tolerance: Optional[float] = typer.Option(None, help="Success radius around the goal (0.01 D)."),
+    force: bool = FORCE,
+    quiet: bool = QUIET,
+    as_json: bool = JSON,
+) -> None:
+    """Synthesise a certified linear controller per cell (one robust LP each, HiGHS).
+
+    Example: bearnav synthesize plans/kitchen/cells.npz --lp-form dual
+    """
+    _Quiet.enabled |= quiet
+    overrides = dict(
+        u_max=u_max, kappa=kappa, halvings=halvings, gain_structure=gain_structure, lp_form=lp_form,
+        goal_tolerance=goal_tolerance,
+    )
+    _run_one("synthesize", cells_npz, out_path, overrides, force, as_json)
+
+
+@app.command("verify")
+@handles_errors
+def verify_command(
+    plan_npz: Path = typer.Argument(..., help="plan.npz from `bearnav synthesize`."),
+    starts: int = typer.Option(200, "--starts", help="Random free starts for the closed-loop check (0 = skip)."),
+    seed: int = typer.Option(0, help="Seed of the random starts."),
+    speed: float = typer.Option(0.1, help="Constant speed of the closed loop, map units/s."),
+    min_success: Optional[float] = typer.Option(None, help="Fail (exit 1) below this success rate, 0..1."),
+    tree: Optional[Path] = typer.Option(None, help="tree.npz whose collision samples the plan must keep."),
+    quiet: bool = QUIET,
+    as_json: bool = JSON,
+) -> None:
+    """Re-check every certificate without a solver, the coverage, and the closed loop.
+
+    Example: bearnav verify plans/kitchen/plan.npz --starts 500 --min-success 0.99
+    """
+    from bearnav_cli import verify  # scipy.sparse and the closed loop: only for this command
+
+    _Quiet.enabled |= quiet
+    loaded = artifacts.load(plan_npz, "plan")
+    samples = artifacts.load(tree, ("tree", "simplified")).artifact.collision_samples if tree else None
+    params = verify.Params(n_starts=starts, seed=seed, speed=speed, min_success=min_success)
+    with _progress_bar() as progress:
+        task = progress.add_task("verify", total=None)
+        report = verify.run(
+            loaded.artifact, params, tree_samples=samples,
+            progress=lambda done, total: progress.update(task, completed=done, total=total),
+        )
+    if as_json:
+        out.print_json(json.dumps(report.to_json()))
+    else:
+        out.print(f"verify    {plan_npz}  {report.summary()}", highlight=False, soft_wrap=True)
+        for reason in report.reasons:
+            out.print(f"  - {reason}", highlight=False, soft_wrap=True)
+    if report.failed:
+        raise typer.Exit(EXIT_OUTCOME)
 
 
 def _run_one(stage: str, source: Path, out_path: Optional[Path], overrides: dict, force: bool, as_json: bool) -> None:

@@ -17,7 +17,7 @@ from typing import Any, Callable
 from bearnav_cli import artifacts
 from bearnav_cli.datatypes import Map
 from bearnav_cli.errors import InvalidMapError, InvalidParamsError
-from bearnav_cli.stages import decompose, map_, rrtstar, simplify
+from bearnav_cli.stages import decompose, map_, rrtstar, simplify, synthesize
 
 #: ``progress(done, total)``, called by long stages.
 Progress = Callable[[int, int], None]
@@ -42,6 +42,7 @@ STAGES: tuple[Stage, ...] = (
     Stage("rrtstar", rrtstar, "map", "tree"),
     Stage("simplify", simplify, "tree", "simplified"),
     Stage("decompose", decompose, "simplified", "cells"),
+    Stage("synthesize", synthesize, "cells", "plan"),
 )
 STAGE_BY_NAME = {stage.name: stage for stage in STAGES}
 

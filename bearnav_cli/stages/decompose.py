@@ -154,14 +154,22 @@ def _bisector_cell(nodes: np.ndarray, i: int, skip: np.ndarray, start: np.ndarra
     delta = nodes - xi
     dist = np.hypot(delta[:, 0], delta[:, 1])
     polygon = start
-    for k in np.argsort(dist, kind="stable"):
-        if k == i or skip[k]:
-            continue
-        reach = np.max(np.hypot(*(polygon - xi).T))
-        if 0.5 * dist[k] >= reach:
+    reach = np.max(np.hypot(*(polygon - xi).T))
+    candidates = np.flatnonzero(~skip & (np.arange(len(nodes)) != i) & (0.5 * dist < reach))
+    candidates = candidates[np.argsort(dist[candidates], kind="stable")]
+    normals = delta[candidates] / dist[candidates, None]
+    offsets = normals @ xi + 0.5 * dist[candidates]
+    # Clip only by half-planes that cut the current polygon, nearest first, re-testing all
+    # remaining ones after each cut: a handful of cuts instead of one pass per candidate.
+    while len(candidates):
+        cuts = np.max(polygon @ normals.T, axis=0) > offsets
+        if not cuts.any():
             break
-        normal = delta[k] / dist[k]
-        polygon = clip(polygon, normal, normal @ xi + 0.5 * dist[k], tol)
+        first = int(np.argmax(cuts))
+        polygon = clip(polygon, normals[first], offsets[first], tol)
+        keep = cuts.copy()
+        keep[first] = False
+        candidates, normals, offsets = candidates[keep], normals[keep], offsets[keep]
     return polygon
 
 

@@ -25,7 +25,6 @@ from typing import Callable
 
 import numpy as np
 import shapely
-from scipy.spatial import cKDTree
 
 from bearnav_cli.datatypes import Tree
 from bearnav_cli.errors import ArtifactError, InvalidParamsError
@@ -175,6 +174,8 @@ class _NearNodes:
 
     def __init__(self, nodes: np.ndarray, tol: float):
         self.tol = tol
+        from scipy.spatial import cKDTree  # scipy.spatial costs 0.5 s to import: only when needed
+
         self.kd = cKDTree(nodes)
         self.cells: dict[tuple[int, int], list[np.ndarray]] = {}
 
@@ -363,6 +364,8 @@ def _reconnectable(before: np.ndarray, after: np.ndarray, space: FreeSpace) -> f
     if len(gone) == 0:
         return 1.0
     k = min(RECONNECT_NEIGHBOURS, len(after))
+    from scipy.spatial import cKDTree
+
     nearest = cKDTree(after).query(gone, k=k)[1].reshape(len(gone), k)
     seen = space.segments_free(gone, after[nearest[:, 0]])
     rest = np.flatnonzero(~seen)

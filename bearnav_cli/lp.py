@@ -1,0 +1,238 @@
+"""The one door to the LP solver (DESIGN §1.7): HiGHS through ``highspy``.
+
+This is the only module that imports ``highspy``. It fixes every solver option
+in one place (:data:`OPTIONS`), maps HiGHS model statuses to :class:`LpStatus`,
+and feeds a single reused ``highspy.Highs`` object with numpy arrays (no
+modelling layer). Problems have the form::
+
+    minimise    costᵀx
+    subject to  row_lower ≤ A x ≤ row_upper,   col_lower ≤ x ≤ col_upper
+
+with ``A`` given row-wise (CSR: ``indptr``, ``indices``, ``values``) and
+``±`` :data:`INF` for missing bounds.
+"""
+
+from __future__ import annotations
+
+import enum
+import logging
+from dataclasses import dataclass
+
+import highspy
+import numpy as np
+
+log = logging.getLogger(__name__)
+
+#: Infinite bound understood by the solver (``highspy.kHighsInf``, i.e. ``math.inf``).
+INF: float = float(highspy.kHighsInf)
+
+#: Every HiGHS option bearnav sets, applied once when a :class:`LpSolver` is built.
+#: Dual simplex, one thread and a fixed seed make results reproducible; the tight
+#: tolerances let certificates be re-checked independently to 1e-7 (ALGORITHMS §8).
+OPTIONS: dict[str, object] = {
+    "output_flag": False,
+    "log_to_console": False,
+    "solver": "simplex",
+    "simplex_strategy": 1,  # dual simplex, serial
+    "threads": 1,
+    "random_seed": 0,
+    "presolve": "off",  # tiny LPs: presolve costs more than it saves (2-3x)
+    "primal_feasibility_tolerance": 1e-9,
+    "dual_feasibility_tolerance": 1e-9,
+}
+
+
+class LpStatus(enum.Enum):
+    """Outcome of one LP solve."""
+
+    OPTIMAL = "optimal"
+    INFEASIBLE = "infeasible"
+    UNBOUNDED = "unbounded"
+    ERROR = "error"
+
+
+@dataclass(frozen=True)
+class LpResult:
+    """The result of :meth:`LpSolver.solve`.
+
+    Attributes
+    ----------
+    status : LpStatus
+        Optimal, infeasible, unbounded, or a solver error.
+    x : ndarray, shape (n,)
+        Primal solution; all NaN unless ``status`` is OPTIMAL.
+    objective : float
+        Optimal objective value; NaN unless ``status`` is OPTIMAL.
+    """
+
+    status: LpStatus
+    x: np.ndarray
+    objective: float
+
+
+_MS = highspy.HighsModelStatus
+_STATUS_MAP = {
+    int(_MS.kOptimal): LpStatus.OPTIMAL,
+    int(_MS.kInfeasible): LpStatus.INFEASIBLE,
+    int(_MS.kUnbounded): LpStatus.UNBOUNDED,
+}
+
+
+_ROWWISE = int(highspy.MatrixFormat.kRowwise)
+_MINIMIZE = int(highspy.ObjSense.kMinimize)
+
+
+def _has_raw_pass_model(highs: highspy.Highs) -> bool:
+    """Whether ``Highs.passModel`` accepts numpy arrays directly (the 15-argument LP form)."""
+    empty = np.zeros(0)
+    try:
+        highs.passModel(0, 0, 0, _ROWWISE, _MINIMIZE, 0.0, empty, empty, empty, empty, empty,
+                        np.zeros(1, np.int32), np.zeros(0, np.int32), empty, np.zeros(0, np.int32))  # fmt: skip
+    except TypeError:
+        return False
+    return True
+
+
+def dense_to_csr(matrix: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Row-wise compressed form of a dense matrix, keeping only the non-zero entries.
+
+    Parameters
+    ----------
+    matrix : ndarray, shape (m, n)
+
+    Returns
+    -------
+    indptr : ndarray of int32, shape (m + 1,)
+        Row ``r`` holds entries ``indptr[r]:indptr[r + 1]``.
+    indices : ndarray of int32, shape (nnz,)
+        Column of each entry, increasing within a row.
+    values : ndarray of float64, shape (nnz,)
+    """
+    matrix = np.asarray(matrix, dtype=float)
+    n_rows, n_cols = matrix.shape
+    if n_cols == 0:
+        return np.zeros(n_rows + 1, np.int32), np.zeros(0, np.int32), np.zeros(0)
+    flat = np.flatnonzero(matrix)  # row-major positions of the non-zeros
+    indptr = np.searchsorted(flat, np.arange(0, n_rows * n_cols + 1, n_cols)).astype(np.int32)
+    return indptr, (flat % n_cols).astype(np.int32), matrix.ravel()[flat]
+
+
+class LpSolver:
+    """One reused HiGHS instance with the options of :data:`OPTIONS`.
+
+    Build one per run and call :meth:`solve` for every LP; the object is not
+    thread-safe. ``solves`` counts the calls to ``Highs.run``.
+    """
+
+    def __init__(self) -> None:
+        self._highs = highspy.Highs()
+        for name, value in OPTIONS.items():
+            self._set(name, value)
+        self.solves = 0
+        self._raw = _has_raw_pass_model(self._highs)
+
+    def _set(self, name: str, value: object) -> None:
+        status = self._highs.setOptionValue(name, value)
+        if status != highspy.HighsStatus.kOk:
+            raise RuntimeError(f"HiGHS rejected option {name}={value!r}")
+
+    def solve(
+        self,
+        cost: np.ndarray,
+        A_indptr: np.ndarray,
+        A_indices: np.ndarray,
+        A_values: np.ndarray,
+        row_lower: np.ndarray,
+        row_upper: np.ndarray,
+        col_lower: np.ndarray,
+        col_upper: np.ndarray,
+    ) -> LpResult:
+        """Minimise ``costᵀx`` subject to row and column bounds.
+
+        Parameters
+        ----------
+        cost : ndarray, shape (n,)
+            Objective coefficients.
+        A_indptr, A_indices, A_values : ndarray, shapes (m + 1,), (nnz,), (nnz,)
+            The constraint matrix, row-wise (see :func:`dense_to_csr`).
+        row_lower, row_upper : ndarray, shape (m,)
+            Row bounds; use ``-INF``/``INF`` for a missing side.
+        col_lower, col_upper : ndarray, shape (n,)
+            Column bounds, same convention.
+
+        Returns
+        -------
+        LpResult
+            Infeasible and unbounded are told apart: when HiGHS answers "unbounded
+            or infeasible" the LP is solved again without presolve and, if still
+            ambiguous, once more with a zero objective (a feasibility test).
+        """
+        n, m = len(cost), len(row_lower)
+        model = (n, m, cost, A_indptr, A_indices, A_values, row_lower, row_upper, col_lower, col_upper)
+        status = self._run(model)
+        if status == _MS.kUnboundedOrInfeasible and OPTIONS["presolve"] != "off":
+            self._set("presolve", "off")
+            try:
+                status = self._run(model)
+            finally:
+                self._set("presolve", OPTIONS["presolve"])
+        if status == _MS.kUnboundedOrInfeasible:  # still ambiguous: is the feasible set empty?
+            feasible = self._run((n, m, np.zeros(n)) + model[3:])
+            status = _MS.kUnbounded if feasible == _MS.kOptimal else feasible
+        outcome = _STATUS_MAP.get(int(status), LpStatus.ERROR)
+        if outcome is not LpStatus.OPTIMAL:
+            if outcome is LpStatus.ERROR:
+                log.warning("HiGHS returned model status %s", self._highs.modelStatusToString(status))
+            return LpResult(outcome, np.full(n, np.nan), float("nan"))
+        x = np.asarray(self._highs.getSolution().col_value, dtype=float)
+        return LpResult(outcome, x, float(self._highs.getObjectiveValue()))
+
+    def _run(self, model: tuple) -> highspy.HighsModelStatus:
+        """Pass the model and run; the model status, or an error status if a call fails."""
+        self.solves += 1
+        if self._highs.passModel(*self._pass_args(model)) == highspy.HighsStatus.kError:
+            return _MS.kModelError
+        if self._highs.run() == highspy.HighsStatus.kError:
+            return _MS.kSolveError
+        return self._highs.getModelStatus()
+
+    def _pass_args(self, model: tuple) -> tuple:
+        """Arguments of ``Highs.passModel``: the raw-array form when this highspy has it, else a ``HighsLp``.
+
+        Both carry the same row-wise matrix; the raw form hands the numpy buffers over
+        without the element-by-element conversion of ``HighsLp`` attributes.
+        """
+        n, m, cost, indptr, indices, values, row_lower, row_upper, col_lower, col_upper = model
+        if self._raw:
+            return (n, m, len(values), _ROWWISE, _MINIMIZE, 0.0, _f64(cost), _f64(col_lower), _f64(col_upper),
+                    _f64(row_lower), _f64(row_upper), _i32(indptr), _i32(indices), _f64(values),
+                    np.zeros(n, np.int32))  # fmt: skip
+        return (highs_lp(*model),)
+
+
+def _f64(a: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(a, dtype=np.float64)
+
+
+def _i32(a: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(a, dtype=np.int32)
+
+
+def highs_lp(n, m, cost, indptr, indices, values, row_lower, row_upper, col_lower, col_upper) -> highspy.HighsLp:
+    """A ``highspy.HighsLp`` holding the LP (matrix row-wise, ``MatrixFormat.kRowwise``)."""
+    lp = highspy.HighsLp()
+    lp.num_col_ = n
+    lp.num_row_ = m
+    lp.col_cost_ = cost
+    lp.col_lower_ = col_lower
+    lp.col_upper_ = col_upper
+    lp.row_lower_ = row_lower
+    lp.row_upper_ = row_upper
+    matrix = lp.a_matrix_
+    matrix.format_ = highspy.MatrixFormat.kRowwise
+    matrix.num_col_ = n
+    matrix.num_row_ = m
+    matrix.start_ = indptr
+    matrix.index_ = indices
+    matrix.value_ = values
+    return lp

@@ -1,0 +1,802 @@
+"""``bearnav synthesize``: one robust LP per cell, giving a gain and its certificate (ALGORITHMS §5).
+
+In cell ``X = {x : A x ≤ b}`` with vertices ``v_1 … v_p`` the controller ``u = K y``,
+``y = stack(l_k − x)``, is the affine field ``u(x) = a − M x`` with ``a = Kℓ`` and
+``M = K𝟙`` (§5.1). The LP (P) of §5.2 maximises the worst-case CBF and CLF margins
+over the cell under the input box ``|u_i| ≤ u_max``.
+
+Every condition of (P) is a *group* ``g`` with a direction ``d_g``, a constant vector
+``ρ_g`` and a scalar ``r_g``: ``d_gᵀu(x) + ρ_gᵀx ≤ S_g + r_g`` for all ``x ∈ X``::
+
+    CBF k:    d = −n_k,  ρ = c_h·d,   r = c_h·q_k          (slack S_h,k)
+    CLF:      d = z,     ρ = c_v·z,   r = c_v·zᵀx_j        (slack S_V)
+    input r:  d = e_r,   ρ = 0,       r = u_max            (no slack)
+
+The vertex form states the group at every vertex; the dual form introduces
+``λ_g ≥ 0`` with ``A_xᵀλ_g + Mᵀd_g = ρ_g`` and ``b_xᵀλ_g + d_gᵀa − S_g ≤ r_g``. The
+variables ``θ`` are either the field ``F = [M, a]`` (field space, 6 numbers) or the
+gain entries allowed by the gain structure; a fixed linear map ``L`` gives
+``F = L θ`` (:func:`field_map`), so one builder serves every combination.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from bearnav_cli.datatypes import CellFlag, Cells, CellStatus, Plan
+from bearnav_cli.errors import ArtifactError, InvalidParamsError
+from bearnav_cli.lp import INF, LpResult, LpSolver, LpStatus, dense_to_csr
+
+VERSION = 1
+log = logging.getLogger(__name__)
+
+GAIN_STRUCTURES = ("full", "diag", "scalar")
+LP_FORMS = ("vertex", "dual")
+#: Variable spaces of the LP builders: the field ``[M, a]`` or a gain structure.
+SPACES = ("field",) + GAIN_STRUCTURES
+#: ``δ = DELTA_FRACTION · diam(X)`` floors the worst barrier violation in ``c_h`` (§5.3).
+DELTA_FRACTION = 0.05
+#: Warn when ``cond(GᵀG)`` exceeds this (nearly coincident landmarks, §5.6).
+COND_WARNING = 1e12
+#: Input-box directions ``e_r``.
+BOX_DIRECTIONS = np.array([[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]])
+#: ``L`` of the field space (:func:`field_map`): ``θ = vec([M, a])`` row-major.
+FIELD_MAP = np.eye(6).reshape(2, 3, 6)
+FIELD_MAP.setflags(write=False)
+BOX_DIRECTIONS.setflags(write=False)
+
+
+@dataclass(frozen=True)
+class Params:
+    """Parameters of the synthesis (ALGORITHMS §5).
+
+    Attributes
+    ----------
+    u_max : float
+        Input box ``|u_1|, |u_2| ≤ u_max`` (map units per second).
+    kappa : float
+        Initial ``κ_h = κ_v`` of the constants ``c_h``, ``c_v`` (§5.3).
+    halvings : int
+        How many times ``κ`` may be halved after an infeasible LP before the
+        least-violation solve (so ``halvings + 1`` feasibility attempts).
+    gain_structure : {"full", "diag", "scalar"}
+        ``K_k`` any 2×2 matrix (solved in field space, minimum-norm gain by Lemma 3),
+        diagonal, or a multiple of the identity (both solved in gain space).
+    lp_form : {"vertex", "dual"}
+        Constraints at the cell's vertices, or through LP duality (§5.2).
+    w_h, w_v : float
+        Objective weights of the CBF and CLF slacks.
+    goal_tolerance : float or None
+        Success radius around the goal (map units); ``None`` means ``0.01·D``.
+    """
+
+    u_max: float = 1.0
+    kappa: float = 0.5
+    halvings: int = 6
+    gain_structure: str = "full"
+    lp_form: str = "vertex"
+    w_h: float = 1.0
+    w_v: float = 1.0
+    goal_tolerance: float | None = None
+
+    def __post_init__(self) -> None:
+        for name in ("u_max", "kappa", "w_h", "w_v", "goal_tolerance"):
+            value = getattr(self, name)
+            if value is None and name == "goal_tolerance":
+                continue
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+                raise InvalidParamsError(f"must be a finite number, got {value!r}", field=name)
+            object.__setattr__(self, name, float(value))
+        for name in ("u_max", "kappa"):
+            if getattr(self, name) <= 0:
+                raise InvalidParamsError(f"must be positive, got {getattr(self, name)}", field=name)
+        for name in ("w_h", "w_v"):
+            if getattr(self, name) < 0:
+                raise InvalidParamsError(f"must be zero or positive, got {getattr(self, name)}", field=name)
+        if self.goal_tolerance is not None and self.goal_tolerance <= 0:
+            raise InvalidParamsError(f"must be positive, got {self.goal_tolerance}", field="goal_tolerance")
+        if isinstance(self.halvings, bool) or not isinstance(self.halvings, int) or self.halvings < 0:
+            raise InvalidParamsError(f"must be an integer of at least 0, got {self.halvings!r}", field="halvings")
+        if self.gain_structure not in GAIN_STRUCTURES:
+            raise InvalidParamsError(
+                f"must be one of {', '.join(GAIN_STRUCTURES)}, got {self.gain_structure!r}", field="gain_structure"
+            )
+        if self.lp_form not in LP_FORMS:
+            raise InvalidParamsError(f"must be one of {', '.join(LP_FORMS)}, got {self.lp_form!r}", field="lp_form")
+
+
+# --------------------------------------------------------------------------- cell data and the field map
+
+
+@dataclass(frozen=True)
+class CellProblem:
+    """The data of one cell's LP, independent of any artifact.
+
+    Attributes
+    ----------
+    vertices : ndarray, shape (p, 2)
+        CCW vertices of the convex cell (map units).
+    A, b : ndarray, shapes (p, 2), (p,)
+        The same cell as ``{x : A x ≤ b}`` (used by the dual form).
+    z : ndarray, shape (2,)
+        Unit exit direction into the cell; ``V(x) = zᵀ(x − x_j)``.
+    x_j : ndarray, shape (2,)
+        Exit point (the parent node).
+    cbf_n, cbf_q : ndarray, shapes (h, 2), (h,)
+        Barrier rows ``h_k(x) = n_kᵀx + q_k``; ``h = 0`` rows allowed.
+    landmarks : ndarray, shape (n, 2)
+        Positions of the landmarks the controller uses, ``n ≥ 2``.
+    """
+
+    vertices: np.ndarray
+    A: np.ndarray
+    b: np.ndarray
+    z: np.ndarray
+    x_j: np.ndarray
+    cbf_n: np.ndarray
+    cbf_q: np.ndarray
+    landmarks: np.ndarray
+
+    def __post_init__(self) -> None:
+        for name, shape in (("vertices", (-1, 2)), ("A", (-1, 2)), ("b", (-1,)), ("z", (2,)), ("x_j", (2,)),
+                            ("cbf_n", (-1, 2)), ("cbf_q", (-1,)), ("landmarks", (-1, 2))):  # fmt: skip
+            object.__setattr__(self, name, np.asarray(getattr(self, name), dtype=float).reshape(shape))
+
+
+def landmark_matrix(landmarks: np.ndarray) -> np.ndarray:
+    """``G = [𝟙, ℓ]`` of Lemma 3, with ``𝟙 = 1_n ⊗ I_2`` and ``ℓ = stack(l_k)``.
+
+    Parameters
+    ----------
+    landmarks : ndarray, shape (n, 2)
+
+    Returns
+    -------
+    ndarray, shape (2n, 3)
+        ``K G = [M, a]`` for any gain ``K`` of shape (2, 2n).
+    """
+    n = len(landmarks)
+    G = np.empty((2 * n, 3))
+    G[:, :2] = np.tile(np.eye(2), (n, 1))
+    G[:, 2] = np.ravel(landmarks)
+    return G
+
+
+def field_map(space: str, landmarks: np.ndarray) -> np.ndarray:
+    """The linear map ``θ ↦ F = [M, a]`` of a variable space, as an array ``L`` with ``F = L @ θ``.
+
+    Parameters
+    ----------
+    space : {"field", "full", "diag", "scalar"}
+        ``field``: ``θ = vec(F)`` row-major (6 numbers). ``full``: ``θ = vec(K)`` row-major
+        (4n). ``diag``: ``θ = (K[0, 2k] for k, K[1, 2k+1] for k)`` (2n). ``scalar``:
+        ``K_k = θ_k I`` (n).
+    landmarks : ndarray, shape (n, 2)
+
+    Returns
+    -------
+    ndarray, shape (2, 3, n_θ)
+        ``F[i, c] = L[i, c] @ θ``.
+    """
+    n = len(landmarks)
+    if space == "field":
+        return FIELD_MAP
+    G = landmark_matrix(landmarks)
+    if space == "full":
+        L = np.zeros((2, 3, 4 * n))
+        L[0, :, : 2 * n] = G.T
+        L[1, :, 2 * n :] = G.T
+    elif space == "diag":
+        L = np.zeros((2, 3, 2 * n))
+        L[0, :, :n] = G[0::2].T
+        L[1, :, n:] = G[1::2].T
+    elif space == "scalar":
+        L = np.stack([G[0::2].T, G[1::2].T])
+    else:
+        raise ValueError(f"unknown variable space {space!r}")
+    return L
+
+
+def gain_from_theta(space: str, theta: np.ndarray, landmarks: np.ndarray) -> np.ndarray:
+    """The gain ``K`` (2, 2n) of the LP variables ``θ`` (see :func:`field_map`); field space uses Lemma 3."""
+    n = len(landmarks)
+    if space == "field":
+        F = theta.reshape(2, 3)
+        return min_norm_gain(F[:, :2], F[:, 2], landmarks)
+    if space == "full":
+        return theta.reshape(2, 2 * n).copy()
+    K = np.zeros((2, 2 * n))
+    if space == "diag":
+        K[0, 0::2], K[1, 1::2] = theta[:n], theta[n:]
+    elif space == "scalar":
+        K[0, 0::2], K[1, 1::2] = theta, theta
+    else:
+        raise ValueError(f"unknown variable space {space!r}")
+    return K
+
+
+def min_norm_gain(M: np.ndarray, a: np.ndarray, landmarks: np.ndarray) -> np.ndarray:
+    """The minimum-Frobenius-norm gain realising the field ``u = a − M x`` (Lemma 3).
+
+    ``K* = [M, a] (GᵀG)⁻¹Gᵀ``, in closed form: with ``l̄`` the landmarks' mean,
+    ``δ_k = l_k − l̄`` and ``σ = Σ‖δ_k‖²``, block ``k`` is ``K_k = M/n + (a − M l̄) δ_kᵀ/σ``
+    (so ``Σ K_k = M`` and ``Σ K_k l_k = a``). Logs a warning when ``cond(GᵀG) > 1e12``
+    (nearly coincident landmarks).
+
+    Parameters
+    ----------
+    M : ndarray, shape (2, 2)
+    a : ndarray, shape (2,)
+    landmarks : ndarray, shape (n, 2)
+
+    Returns
+    -------
+    ndarray, shape (2, 2n)
+    """
+    n = len(landmarks)
+    mean = landmarks.mean(axis=0)
+    delta = landmarks - mean
+    sigma = float((delta * delta).sum())
+    cond = _gram_condition(n, mean, sigma)
+    if not cond <= COND_WARNING:
+        log.warning("nearly coincident landmarks: cond(GᵀG) = %.3g", cond)
+    offset = (a - M @ mean) / sigma if sigma > 0 else np.full(2, np.nan)
+    return (M[:, None, :] / n + offset[:, None, None] * delta[None, :, :]).reshape(2, 2 * n)
+
+
+def gram_condition(landmarks: np.ndarray) -> float:
+    """``cond(GᵀG)`` of :func:`landmark_matrix`'s ``G``, in closed form; ``inf`` if all landmarks coincide."""
+    landmarks = np.asarray(landmarks, float)
+    mean = landmarks.mean(axis=0)
+    delta = landmarks - mean
+    return _gram_condition(len(landmarks), mean, float((delta * delta).sum()))
+
+
+def _gram_condition(n: int, mean: np.ndarray, sigma: float) -> float:
+    """``GᵀG = [[nI, s], [sᵀ, t]]`` (``s = n·mean``, ``t = σ + n‖mean‖²``) has the eigenvalue ``n``
+    and the two of ``[[n, ‖s‖], [‖s‖, t]]``: ``λ₊`` and ``λ₋ = nσ/λ₊``."""
+    norm_s = n * math.hypot(mean[0], mean[1])
+    t = sigma + norm_s * norm_s / n
+    big = 0.5 * (n + t) + math.hypot(0.5 * (n - t), norm_s)
+    small = min(float(n), n * sigma / big)
+    return big / small if small > 0 else math.inf
+
+
+# --------------------------------------------------------------------------- the LPs
+
+
+@dataclass(frozen=True)
+class CellLp:
+    """One LP in solver form plus where its variables are.
+
+    ``x[:n_theta]`` are the variables ``θ``; ``x[n_theta:n_theta + n_h]`` the CBF slacks
+    ``S_h``; ``x[n_theta + n_h]`` the CLF slack ``S_V``; further columns are multipliers
+    (dual form) or the least-violation variables ``t``.
+    """
+
+    cost: np.ndarray
+    A_indptr: np.ndarray
+    A_indices: np.ndarray
+    A_values: np.ndarray
+    row_lower: np.ndarray
+    row_upper: np.ndarray
+    col_lower: np.ndarray
+    col_upper: np.ndarray
+    n_theta: int
+    n_h: int
+
+    def arrays(self) -> tuple[np.ndarray, ...]:
+        """The arguments of :meth:`LpSolver.solve`, in order."""
+        return (self.cost, self.A_indptr, self.A_indices, self.A_values, self.row_lower, self.row_upper,
+                self.col_lower, self.col_upper)  # fmt: skip
+
+    def solve(self, solver: LpSolver) -> LpResult:
+        return solver.solve(*self.arrays())
+
+    def slacks(self, x: np.ndarray) -> tuple[np.ndarray, float]:
+        """``(S_h, S_V)`` from a solution vector."""
+        return x[self.n_theta : self.n_theta + self.n_h], float(x[self.n_theta + self.n_h])
+
+
+@dataclass(frozen=True)
+class LpTemplate:
+    """A cell's LP with the constants left open: only the row bounds depend on ``c_h`` and ``c_v``.
+
+    ``row_upper = base + c_h·per_h + c_v·per_v``; ``row_lower`` equals ``row_upper`` on the
+    equality rows and ``lower`` elsewhere. The matrix, costs and column bounds are shared by
+    every :meth:`instantiate` call, so κ halvings cost only a few vector operations.
+    """
+
+    cost: np.ndarray
+    A_indptr: np.ndarray
+    A_indices: np.ndarray
+    A_values: np.ndarray
+    col_lower: np.ndarray
+    col_upper: np.ndarray
+    lower: np.ndarray
+    equality: np.ndarray | None
+    base: np.ndarray
+    per_h: np.ndarray
+    per_v: np.ndarray
+    n_theta: int
+    n_h: int
+
+    def instantiate(self, c_h: float, c_v: float) -> CellLp:
+        """The LP with the constants ``c_h`` (ignored without barrier rows) and ``c_v``."""
+        upper = self.base + c_v * self.per_v
+        if self.n_h:
+            upper += c_h * self.per_h
+        lower = self.lower if self.equality is None else np.where(self.equality, upper, self.lower)
+        return CellLp(self.cost, self.A_indptr, self.A_indices, self.A_values, lower, upper, self.col_lower,
+                      self.col_upper, self.n_theta, self.n_h)  # fmt: skip
+
+
+def _directions(problem: CellProblem, box: bool) -> np.ndarray:
+    """Group directions ``d``: the ``h`` barrier rows (``−n_k``), the CLF (``z``), then the box sides."""
+    n_h = len(problem.cbf_q)
+    D = np.empty((n_h + (5 if box else 1), 2))
+    np.negative(problem.cbf_n, out=D[:n_h])
+    D[n_h] = problem.z
+    if box:
+        D[n_h + 1 :] = BOX_DIRECTIONS
+    return D
+
+
+def _template(dense, lower, equality, base, per_h, per_v, n_theta, n_h, n_extra, w_h, w_v, least_violation):
+    """Add slack bounds, the objective and (for least violation) the ``t`` variables; compress the matrix."""
+    n_slack = n_h + 1
+    n_rows, n_cols = dense.shape
+    if least_violation:  # slacks free, t ≥ S, t ≥ 0, minimise Σ w t
+        extra = np.zeros((n_rows + n_slack, n_cols + n_slack))
+        extra[:n_rows, :n_cols] = dense
+        extra[n_rows:, n_theta : n_theta + n_slack] = -np.eye(n_slack)
+        extra[n_rows:, n_cols:] = np.eye(n_slack)
+        dense = extra
+        pad = np.zeros(n_slack)
+        lower = np.concatenate([lower, pad])
+        if equality is not None:
+            equality = np.concatenate([equality, np.zeros(n_slack, bool)])
+        base = np.concatenate([base, np.full(n_slack, INF)])
+        per_h, per_v = np.concatenate([per_h, pad]), np.concatenate([per_v, pad])
+        first, n_cols = n_cols, n_cols + n_slack
+        col_lower = np.full(n_cols, -INF)
+        col_upper = np.full(n_cols, INF)
+        col_lower[first:] = 0.0
+    else:
+        first = n_theta
+        col_lower = np.full(n_cols, -INF)
+        col_upper = np.full(n_cols, INF)
+        col_upper[n_theta : n_theta + n_slack] = 0.0
+    cost = np.zeros(n_cols)
+    cost[first : first + n_h] = w_h
+    cost[first + n_h] = w_v
+    col_lower[n_theta + n_slack : n_theta + n_slack + n_extra] = 0.0  # multipliers λ, μ, ν ≥ 0
+    indptr, indices, values = dense_to_csr(dense)
+    return LpTemplate(cost, indptr, indices, values, col_lower, col_upper, lower, equality, base, per_h, per_v,
+                      n_theta, n_h)  # fmt: skip
+
+
+def vertex_template(problem: CellProblem, L: np.ndarray, u_max: float | None, w_h: float = 1.0, w_v: float = 1.0,
+                    least_violation: bool = False) -> LpTemplate:  # fmt: skip
+    """The vertex form of (P) with open constants (see :func:`vertex_lp`)."""
+    V = problem.vertices
+    p, n_theta = len(V), L.shape[2]
+    n_h = len(problem.cbf_q)
+    n_slack = n_h + 1
+    D = _directions(problem, u_max is not None)
+    n_groups = len(D)
+    W = np.empty((p, 3))  # u(v_q) = [M, a] @ W[q]
+    np.negative(V, out=W[:, :2])
+    W[:, 2] = 1.0
+    # the coefficient of θ_j in d_gᵀu(v_q) is Σ_ic d_gi W_qc L_icj
+    P = (W @ L.transpose(1, 0, 2).reshape(3, 2 * n_theta)).reshape(p, 2, n_theta)
+    dense = np.zeros((n_groups, p, n_theta + n_slack))
+    dense[:, :, :n_theta] = (D @ P.transpose(1, 0, 2).reshape(2, p * n_theta)).reshape(n_groups, p, n_theta)
+    dense[range(n_slack), :, range(n_theta, n_theta + n_slack)] = -1.0
+    rows = n_groups * p
+    # right-hand sides r_g − ρ_gᵀv_q: c_h·h_k(v_q), −c_v·V(v_q), u_max
+    per_h = np.zeros(rows)
+    per_h[: n_h * p] = (problem.cbf_n @ V.T + problem.cbf_q[:, None]).ravel()
+    per_v = np.zeros(rows)
+    per_v[n_h * p : n_slack * p] = (problem.x_j - V) @ problem.z
+    base = np.zeros(rows)
+    base[n_slack * p :] = u_max if u_max is not None else 0.0
+    return _template(dense.reshape(rows, -1), np.full(rows, -INF), None, base, per_h, per_v, n_theta, n_h, 0,
+                     w_h, w_v, least_violation)  # fmt: skip
+
+
+def dual_template(problem: CellProblem, L: np.ndarray, u_max: float | None, w_h: float = 1.0, w_v: float = 1.0,
+                  least_violation: bool = False) -> LpTemplate:  # fmt: skip
+    """The dual form of (P) with open constants (see :func:`dual_lp`)."""
+    A, b = problem.A, problem.b
+    m = len(b)
+    n_theta = L.shape[2]
+    n_h = len(problem.cbf_q)
+    n_slack = n_h + 1
+    D = _directions(problem, u_max is not None)
+    n_groups = len(D)
+    n_mult = n_groups * m
+    head = np.zeros((n_groups, 3, n_theta + n_slack))
+    head[:, :2, :n_theta] = np.einsum("gi,icj->gcj", D, L[:, :2, :])  # Mᵀd
+    head[:, 2, :n_theta] = D @ L[:, 2, :]  # dᵀa
+    head[range(n_slack), 2, range(n_theta, n_theta + n_slack)] = -1.0
+    lam = np.zeros((n_groups, 3, n_groups, m))
+    g = np.arange(n_groups)
+    lam[g, :2, g, :] = A.T
+    lam[g, 2, g, :] = b
+    dense = np.concatenate([head, lam.reshape(n_groups, 3, n_mult)], axis=2).reshape(3 * n_groups, -1)
+    # equalities A_xᵀλ_g + Mᵀd_g = ρ_g (ρ = c_h·d for CBF, c_v·z for CLF, 0 for the box);
+    # inequalities b_xᵀλ_g + d_gᵀa − S_g ≤ r_g (c_h·q_k, c_v·zᵀx_j, u_max)
+    per_h = np.zeros((n_groups, 3))
+    per_h[:n_h, :2] = D[:n_h]
+    per_h[:n_h, 2] = problem.cbf_q
+    per_v = np.zeros((n_groups, 3))
+    per_v[n_h, :2] = problem.z
+    per_v[n_h, 2] = problem.z @ problem.x_j
+    base = np.zeros((n_groups, 3))
+    base[n_slack:, 2] = u_max if u_max is not None else 0.0
+    equality = np.ones((n_groups, 3), bool)
+    equality[:, 2] = False
+    return _template(dense, np.full(3 * n_groups, -INF), equality.ravel(), base.ravel(), per_h.ravel(),
+                     per_v.ravel(), n_theta, n_h, n_mult, w_h, w_v, least_violation)  # fmt: skip
+
+
+def vertex_lp(problem: CellProblem, L: np.ndarray, c_h: float, c_v: float, u_max: float | None,
+              w_h: float = 1.0, w_v: float = 1.0, least_violation: bool = False) -> CellLp:  # fmt: skip
+    """The vertex form of (P) in the variables ``θ`` with ``[M, a] = L θ`` (ALGORITHMS §5.2).
+
+    Parameters
+    ----------
+    problem : CellProblem
+    L : ndarray, shape (2, 3, n_θ)
+        From :func:`field_map`.
+    c_h, c_v : float
+        Barrier and Lyapunov constants (1/s); ``c_h`` is unused without barrier rows.
+    u_max : float or None
+        Input box; ``None`` drops the input rows (Appendix A, T1).
+    w_h, w_v : float
+        Objective weights.
+    least_violation : bool
+        Free slacks and minimise ``Σ w·max(S, 0)`` instead (§5.3).
+
+    Returns
+    -------
+    CellLp
+        Rows: for each group (barrier rows, CLF, then the four box sides), one row per
+        vertex ``q``: ``d_gᵀu(v_q) − S_g ≤ r_g − ρ_gᵀv_q``.
+    """
+    return vertex_template(problem, L, u_max, w_h, w_v, least_violation).instantiate(c_h, c_v)
+
+
+def dual_lp(problem: CellProblem, L: np.ndarray, c_h: float, c_v: float, u_max: float | None,
+            w_h: float = 1.0, w_v: float = 1.0, least_violation: bool = False) -> CellLp:  # fmt: skip
+    """The dual form of (P): multipliers ``λ_g ≥ 0`` per group instead of vertex rows (§5.2).
+
+    Same parameters as :func:`vertex_lp`. Rows per group ``g``: ``A_xᵀλ_g + Mᵀd_g = ρ_g``
+    (two equalities) and ``b_xᵀλ_g + d_gᵀa − S_g ≤ r_g``. Columns after the slacks: ``λ_g``
+    (m each, ``m`` = number of cell rows), group by group.
+    """
+    return dual_template(problem, L, u_max, w_h, w_v, least_violation).instantiate(c_h, c_v)
+
+
+def vertex_lp_field(problem: CellProblem, c_h: float, c_v: float, u_max: float | None, **kw) -> CellLp:
+    """Field-space vertex form: ``θ = vec([M, a])`` (row-major), 6 + n_h + 1 variables."""
+    return vertex_lp(problem, FIELD_MAP, c_h, c_v, u_max, **kw)
+
+
+def vertex_lp_gain(problem: CellProblem, c_h: float, c_v: float, u_max: float | None, structure: str = "full",
+                   **kw) -> CellLp:  # fmt: skip
+    """Gain-space vertex form for a gain structure (``full``, ``diag`` or ``scalar``)."""
+    return vertex_lp(problem, field_map(structure, problem.landmarks), c_h, c_v, u_max, **kw)
+
+
+# --------------------------------------------------------------------------- certificates
+
+
+@dataclass(frozen=True)
+class Margins:
+    """Worst-case values of the certificate conditions over a cell's vertices (ALGORITHMS §8).
+
+    Attributes
+    ----------
+    cbf : float
+        ``max_{q,k} −(n_kᵀu_q + c_h h_k(v_q))``; NaN without barrier rows.
+    cbf_rows : ndarray, shape (h,)
+        The same maximum per barrier row (``S_h,k``).
+    clf : float
+        ``max_q zᵀu_q + c_v V(v_q)``.
+    input : float
+        ``max_q ‖u_q‖_∞ − u_max``.
+    """
+
+    cbf: float
+    cbf_rows: np.ndarray
+    clf: float
+    input: float
+
+
+def vertex_margins(K, landmarks, vertices, z, x_j, cbf_n, cbf_q, c_h, c_v, u_max) -> Margins:
+    """Re-check a gain at the vertices, without an LP (ALGORITHMS §8).
+
+    Parameters
+    ----------
+    K : ndarray, shape (2, 2n)
+        Gain over ``landmarks`` (the full ``gain[c]`` with all map landmarks works too).
+    landmarks : ndarray, shape (n, 2)
+    vertices : ndarray, shape (p, 2)
+    z, x_j : ndarray, shape (2,)
+    cbf_n, cbf_q : ndarray, shapes (h, 2), (h,)
+    c_h, c_v, u_max : float
+
+    Returns
+    -------
+    Margins
+    """
+    K = np.asarray(K, float)
+    landmarks = np.asarray(landmarks, float)
+    V = np.asarray(vertices, float)
+    cbf_n = np.asarray(cbf_n, float).reshape(-1, 2)
+    a = K @ landmarks.ravel()
+    M = K.reshape(2, -1, 2).sum(axis=1)
+    U = a - V @ M.T  # u at each vertex, (p, 2)
+    if len(cbf_n):
+        values = -(U @ cbf_n.T + c_h * (V @ cbf_n.T + np.asarray(cbf_q, float)))
+        rows = values.max(axis=0)
+        cbf = float(rows.max())
+    else:
+        rows, cbf = np.zeros(0), math.nan
+    clf = float(np.max(U @ z + c_v * ((V - x_j) @ z)))
+    return Margins(cbf, rows, clf, float(np.abs(U).max() - u_max))
+
+
+# --------------------------------------------------------------------------- one cell
+
+
+@dataclass(frozen=True)
+class CellSolution:
+    """A cell's controller and certificate.
+
+    Attributes
+    ----------
+    status : CellStatus
+    K : ndarray, shape (2, 2n)
+        Gain over the problem's landmarks: ``u(x) = K @ (landmarks − x).ravel()``.
+    c_h, c_v : float
+        Constants of the certificate (1/s); ``c_h`` NaN without barrier rows.
+    margin_h, margin_v : float
+        ``max_k S_h,k`` and ``S_V`` recomputed at the vertices from ``K`` (NaN where no row).
+    attempts : int
+        LPs solved for the cell (feasibility attempts plus the least-violation solve).
+    kappa : float
+        The ``κ`` of the stored constants.
+    objective : float
+        The last LP's optimal value (NaN when it failed or for the goal cell).
+    """
+
+    status: CellStatus
+    K: np.ndarray
+    c_h: float
+    c_v: float
+    margin_h: float
+    margin_v: float
+    attempts: int
+    kappa: float = math.nan
+    objective: float = math.nan
+
+
+def cell_constants(problem: CellProblem, kappa: float, u_max: float) -> tuple[float, float]:
+    """``(c_h, c_v)`` of §5.3: ``c_v = κ u_max / max_q V(v_q)``, ``c_h = κ u_max / max(δ, max −h)``.
+
+    ``δ = 0.05·diam(X)``; ``c_h`` is NaN without barrier rows.
+
+    Raises
+    ------
+    ArtifactError
+        If ``V ≤ 0`` at every vertex (``z`` does not point into the cell).
+    """
+    h_scale, v_scale = _constant_scales(problem)
+    return kappa * u_max / h_scale, kappa * u_max / v_scale
+
+
+def _constant_scales(problem: CellProblem) -> tuple[float, float]:
+    """The denominators ``max(δ, max −h)`` (NaN without barrier rows) and ``max V`` of :func:`cell_constants`."""
+    V = problem.vertices
+    v_max = float(((V - problem.x_j) @ problem.z).max())
+    if not v_max > 0:
+        raise ArtifactError("exit_dir does not point into the cell (V ≤ 0 at every vertex)", field="exit_dir")
+    if len(problem.cbf_q) == 0:
+        return math.nan, v_max
+    diff = V[:, None, :] - V[None, :, :]
+    diam = math.sqrt(float((diff * diff).sum(axis=2).max()))
+    worst = -float((V @ problem.cbf_n.T + problem.cbf_q).min())
+    return max(DELTA_FRACTION * diam, worst), v_max
+
+
+def solve_cell(problem: CellProblem, params: Params, solver: LpSolver) -> CellSolution:
+    """SOLVE_CELL of ALGORITHMS §5.3: halve ``κ`` while infeasible, then least violation.
+
+    Parameters
+    ----------
+    problem : CellProblem
+    params : Params
+        ``u_max``, ``kappa``, ``halvings``, weights, gain structure and LP form.
+    solver : LpSolver
+        The run's reused solver.
+
+    Returns
+    -------
+    CellSolution
+        Status 0 (first attempt), 1 (after halvings), 2 (least violation) or 3 (unbounded
+        or solver error: the gain is then zero). Margins are recomputed from ``K``.
+    """
+    space = "field" if params.gain_structure == "full" else params.gain_structure
+    make = vertex_template if params.lp_form == "vertex" else dual_template
+    L = field_map(space, problem.landmarks)
+    u_max = params.u_max
+    h_scale, v_scale = _constant_scales(problem)
+    template = make(problem, L, u_max, params.w_h, params.w_v)
+    status, attempts = CellStatus.SOLVER_FAILURE, 0
+    for attempt in range(params.halvings + 1):
+        kappa = params.kappa * 0.5**attempt
+        c_h, c_v = kappa * u_max / h_scale, kappa * u_max / v_scale
+        result = template.instantiate(c_h, c_v).solve(solver)
+        attempts += 1
+        if result.status is LpStatus.OPTIMAL:
+            status = CellStatus.CERTIFIED if attempt == 0 else CellStatus.RELAXED
+            break
+        if result.status is not LpStatus.INFEASIBLE:
+            break
+    else:
+        template = make(problem, L, u_max, params.w_h, params.w_v, least_violation=True)
+        result = template.instantiate(c_h, c_v).solve(solver)
+        attempts += 1
+        if result.status is LpStatus.OPTIMAL:
+            status = CellStatus.NOT_CERTIFIED
+    if result.status is LpStatus.OPTIMAL:
+        K = gain_from_theta(space, result.x[: L.shape[2]], problem.landmarks)
+    else:
+        status, K = CellStatus.SOLVER_FAILURE, np.zeros((2, 2 * len(problem.landmarks)))
+    m = vertex_margins(K, problem.landmarks, problem.vertices, problem.z, problem.x_j, problem.cbf_n,
+                       problem.cbf_q, c_h, c_v, u_max)  # fmt: skip
+    return CellSolution(status, K, c_h, c_v, m.cbf, m.clf, attempts, kappa, result.objective)
+
+
+def goal_cell_solution(vertices: np.ndarray, goal: np.ndarray, landmarks: np.ndarray, cbf_n: np.ndarray,
+                       cbf_q: np.ndarray, u_max: float) -> CellSolution:  # fmt: skip
+    """The goal cell's straight-to-goal field ``u = c(g − x)`` (ALGORITHMS §5.6).
+
+    ``c = u_max / max_q ‖g − v_q‖_∞``; ``c_h = c_v = c``; ``K = [cI, cg](GᵀG)⁻¹Gᵀ``;
+    ``margin_h`` from the barrier rows at the vertices (NaN without rows), ``margin_v`` NaN.
+
+    Parameters
+    ----------
+    vertices : ndarray, shape (p, 2)
+    goal : ndarray, shape (2,)
+    landmarks : ndarray, shape (n, 2)
+    cbf_n, cbf_q : ndarray, shapes (h, 2), (h,)
+    u_max : float
+
+    Returns
+    -------
+    CellSolution
+        Status 4.
+    """
+    vertices = np.asarray(vertices, float)
+    goal = np.asarray(goal, float)
+    c = u_max / float(np.max(np.abs(goal - vertices)))
+    K = min_norm_gain(c * np.eye(2), c * goal, landmarks)
+    m = vertex_margins(K, landmarks, vertices, np.zeros(2), goal, cbf_n, cbf_q, c, c, u_max)
+    return CellSolution(CellStatus.GOAL, K, c, c, m.cbf, math.nan, 0)
+
+
+# --------------------------------------------------------------------------- the stage
+
+
+def _json_number(value: float) -> float | None:
+    return float(value) if math.isfinite(value) else None
+
+
+def run(cells: Cells, params: Params = Params(), progress: Callable[[int, int], None] | None = None) -> Plan:
+    """Synthesise and certify one controller per cell.
+
+    Parameters
+    ----------
+    cells : Cells
+        The decomposition; cell ``c`` with ``parent[cell_node[c]] == -1`` is the goal cell.
+    params : Params
+    progress : callable, optional
+        ``progress(done, total)`` every few cells.
+
+    Returns
+    -------
+    Plan
+        Gains (C, 2, 2L), constants, recomputed margins and statuses.
+
+    Raises
+    ------
+    ArtifactError
+        A cell with fewer than two landmarks or an exit direction that does not point into it.
+    """
+    solver = LpSolver()
+    landmarks = cells.map.landmarks
+    C, n_lm = cells.n_cells, len(landmarks)
+    gain = np.zeros((C, 2, 2 * n_lm))
+    c_h, c_v, margin_h, margin_v = (np.full(C, math.nan) for _ in range(4))
+    status = np.zeros(C, np.int8)
+    attempts = np.zeros(C, np.int64)
+    report_every = max(1, C // 100)
+    started = time.perf_counter()
+    for c in range(C):
+        used = np.flatnonzero(cells.cell_landmarks[c])
+        if len(used) < 2:
+            raise ArtifactError(f"cell {c} uses {len(used)} landmark(s); at least 2 needed", field="cell_landmarks")
+        cbf_n, cbf_q = cells.barrier(c)
+        node = cells.cell_node[c]
+        if cells.parent[node] == -1:
+            sol = goal_cell_solution(cells.vertices(c), cells.nodes[node], landmarks[used], cbf_n, cbf_q,
+                                     params.u_max)  # fmt: skip
+        else:
+            A, b = cells.rows(c)
+            problem = CellProblem(cells.vertices(c), A, b, cells.exit_dir[c], cells.exit_point[c], cbf_n, cbf_q,
+                                  landmarks[used])  # fmt: skip
+            try:
+                sol = solve_cell(problem, params, solver)
+            except ArtifactError as exc:
+                raise ArtifactError(f"cell {c}: {exc}", field=exc.field) from exc
+            if sol.status == CellStatus.NOT_CERTIFIED:
+                log.warning("cell %d not certified: least-violation margins h %.3g, V %.3g", c, sol.margin_h,
+                            sol.margin_v)  # fmt: skip
+            elif sol.status == CellStatus.SOLVER_FAILURE:
+                log.warning("cell %d: solver failure (unbounded or error)", c)
+        cols = (2 * used[:, None] + np.arange(2)).ravel()
+        gain[c][:, cols] = sol.K
+        c_h[c], c_v[c], margin_h[c], margin_v[c] = sol.c_h, sol.c_v, sol.margin_h, sol.margin_v
+        status[c], attempts[c] = int(sol.status), sol.attempts
+        if progress is not None and (c % report_every == report_every - 1 or c == C - 1):
+            progress(c + 1, C)
+    elapsed = time.perf_counter() - started
+    stats = _stats(cells, status, attempts, c_h, c_v)
+    stats["solve_ms_per_cell"] = round(1e3 * elapsed / C, 4)
+    tolerance = params.goal_tolerance if params.goal_tolerance is not None else 0.01 * cells.map.diagonal
+    return Plan(cells=cells, gain=gain, c_h=c_h, c_v=c_v, u_max=np.full(C, params.u_max), margin_h=margin_h,
+                margin_v=margin_v, status=status, goal_tolerance=tolerance, stats=stats)  # fmt: skip
+
+
+def _stats(cells: Cells, status, attempts, c_h, c_v) -> dict:
+    """JSON-safe statistics: counts per status, flagged cells, bearing constants, attempts."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        tilde_h = c_h / cells.s_min
+        tilde_v = c_v / cells.s_max
+        h_over_max = c_h / cells.s_max
+    stats: dict = {"cells": int(cells.n_cells)}
+    stats["status_counts"] = {s.name.lower(): int(np.count_nonzero(status == s)) for s in CellStatus}
+    stats["flagged"] = {
+        f.name.lower(): np.flatnonzero(cells.cell_flags & f).tolist() for f in CellFlag if f != CellFlag.NONE
+    }
+    stats["c_tilde_h"] = [_json_number(v) for v in tilde_h]
+    stats["c_tilde_v"] = [_json_number(v) for v in tilde_v]
+    stats["c_h_over_s_max"] = [_json_number(v) for v in h_over_max]
+    stats["attempts"] = attempts.tolist()
+    stats["lp_solves"] = int(attempts.sum())
+    return stats
+
+
+def summary(plan: Plan) -> str:
+    """One line: cells per status and flagged cells (deterministic: no timings)."""
+    counts = {s: int(np.count_nonzero(plan.status == s)) for s in CellStatus}
+    words = {CellStatus.CERTIFIED: "certified", CellStatus.RELAXED: "certified after relaxing",
+             CellStatus.NOT_CERTIFIED: "not certified", CellStatus.SOLVER_FAILURE: "solver failures",
+             CellStatus.GOAL: "goal"}  # fmt: skip
+    text = f"{len(plan.status)} cells: " + ", ".join(f"{counts[s]} {words[s]}" for s in CellStatus)
+    flags = plan.cells.cell_flags
+    flagged = int(np.count_nonzero(flags))
+    if flagged:
+        parts = [f"{f.name.lower()} {np.count_nonzero(flags & f)}" for f in CellFlag if f and np.any(flags & f)]
+        text += f"; {flagged} flagged cells ({', '.join(parts)})"
+    return text

@@ -1,0 +1,719 @@
+"""``bearnav verify plan.npz``: check a plan without trusting the stages that made it (ALGORITHMS §8).
+
+Three independent checks:
+
+1. **Certificates**, recomputed from ``gain``, ``landmarks`` and the stored rows only,
+   with a few lines of numpy (no LP, nothing from ``synthesize``): at every vertex
+   ``v_q`` of a cell, ``u_q = a − M v_q`` with ``a = Σ K_k l_k`` and ``M = Σ K_k``; the CBF,
+   CLF and input values are the worst case over the vertices, which is the worst case
+   over the cell because every condition is affine in ``x``.
+2. **Geometry**: the cells cover the bounds (shapely), lie inside them, contain their
+   edge; barrier rows are unit-norm and positive at the exit point; tree edges are free;
+   the collision samples are those of ``tree.npz`` when it is given.
+3. **Monte Carlo**: ``n_starts`` random starts in the goal's free component, run through
+   :func:`bearnav_cli.stages.simulate.rollout`, compared with the straight distance and
+   with the exact shortest route (:func:`route_lengths`).
+
+:func:`run` returns a :class:`VerifyReport`; :attr:`VerifyReport.failed` is the exit decision.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import shapely
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import dijkstra
+
+from bearnav_cli.datatypes import CellFlag, CellStatus, Plan
+from bearnav_cli.errors import ArtifactError, InvalidParamsError
+from bearnav_cli.geometry import FreeSpace
+from bearnav_cli.runtime import PlanArrays
+from bearnav_cli.stages import simulate
+
+log = logging.getLogger(__name__)
+
+#: Largest violation (and margin mismatch) a certified cell may show (ALGORITHMS §8).
+CERTIFICATE_TOL = 1e-7
+#: Relative tolerance of the goal cell's field ``M = cI``, ``a = cg``.
+GOAL_FIELD_TOL = 1e-9
+#: Uncovered area allowed, as a fraction of ``area(B)``.
+COVERAGE_TOL = 1e-9
+#: Allowed deviation of a barrier normal's norm from 1.
+UNIT_TOL = 1e-9
+#: Candidate vertices tested per start and round when searching the shortest route.
+_ROUTE_BATCH = 8
+
+CERTIFIED = (CellStatus.CERTIFIED, CellStatus.RELAXED, CellStatus.GOAL)
+
+
+@dataclass(frozen=True)
+class Params:
+    """Parameters of ``bearnav verify``.
+
+    Attributes
+    ----------
+    n_starts : int
+        Random starts of the Monte-Carlo check (0 skips it).
+    seed : int
+        Seed of ``numpy.random.default_rng`` for the starts.
+    speed : float
+        ``v_ref`` of the closed loop (map units / s).
+    dt : float or None
+        Euler step (s); ``None`` takes the simulate default.
+    min_success : float or None
+        Fail when the success rate is below this fraction (``None``: never on that ground).
+    """
+
+    n_starts: int = 200
+    seed: int = 0
+    speed: float = 0.1
+    dt: float | None = None
+    min_success: float | None = None
+
+    def __post_init__(self) -> None:
+        if isinstance(self.n_starts, bool) or int(self.n_starts) != self.n_starts or self.n_starts < 0:
+            raise InvalidParamsError(f"must be a non-negative integer, got {self.n_starts}", field="n_starts")
+        if self.min_success is not None and not 0.0 <= self.min_success <= 1.0:
+            raise InvalidParamsError(f"must lie in [0, 1], got {self.min_success}", field="min_success")
+        simulate.Params(speed=self.speed, dt=self.dt)  # same checks as the closed loop
+
+
+# --------------------------------------------------------------------------- certificates
+
+
+@dataclass(frozen=True, eq=False)
+class Certificates:
+    """Worst-case values of every cell's conditions, recomputed at the vertices (C cells).
+
+    Attributes
+    ----------
+    value_h : ndarray, shape (C,)
+        ``max_{q,k} −(n_k·u_q + c_h h_k(v_q))``; NaN without barrier rows.
+    value_v : ndarray, shape (C,)
+        ``max_q z·u_q + c_v V(v_q)``; NaN in the goal cell.
+    value_u : ndarray, shape (C,)
+        ``max_q ‖u_q‖_∞ − u_max``.
+    violation : ndarray, shape (C,)
+        Largest positive part of the three (``inf`` if a needed constant is NaN).
+    margin_error : ndarray, shape (C,)
+        ``max(|value_h − margin_h|, |value_v − margin_v|)`` (0 when both are NaN, ``inf``
+        when only one is).
+    goal_error : ndarray, shape (C,)
+        Goal cells: ``max(‖M − cI‖, ‖a − cg‖) / max(1, ‖a‖)`` with ``c = c_v``; NaN elsewhere.
+    """
+
+    value_h: np.ndarray
+    value_v: np.ndarray
+    value_u: np.ndarray
+    violation: np.ndarray
+    margin_error: np.ndarray
+    goal_error: np.ndarray
+
+
+def _mismatch(value: float, stored: float) -> float:
+    if math.isnan(value) and math.isnan(stored):
+        return 0.0
+    if math.isnan(value) or math.isnan(stored):
+        return math.inf
+    return abs(value - stored)
+
+
+def certificates(plan: Plan) -> Certificates:
+    """Recompute every cell's CBF, CLF and input values from the stored gain and rows (ALGORITHMS §8)."""
+    cells = plan.cells
+    landmarks = plan.landmarks
+    n_lm = len(landmarks)
+    count = cells.n_cells
+    out = {name: np.full(count, np.nan) for name in ("value_h", "value_v", "value_u", "goal_error")}
+    violation = np.zeros(count)
+    margin_error = np.zeros(count)
+    goal = plan.map.goal
+    for c in range(count):
+        K = plan.gain[c]
+        M = K.reshape(2, n_lm, 2).sum(axis=1)  # Σ_k K_k
+        a = K @ landmarks.ravel()  # Σ_k K_k l_k
+        verts = cells.vertices(c)
+        u = a - verts @ M.T  # u_q, shape (p, 2)
+        bad = 0.0
+        normals, offsets = cells.barrier(c)
+        if len(normals):
+            h = verts @ normals.T + offsets  # h_k(v_q), shape (p, h)
+            value = float(np.max(-(u @ normals.T + plan.c_h[c] * h)))
+            out["value_h"][c] = value
+            bad = max(bad, math.inf if math.isnan(value) else value)
+        is_goal = plan.status[c] == CellStatus.GOAL or cells.parent[cells.cell_node[c]] < 0
+        if not is_goal:
+            z, xj = cells.exit_dir[c], cells.exit_point[c]
+            value = float(np.max(u @ z + plan.c_v[c] * ((verts - xj) @ z)))
+            out["value_v"][c] = value
+            bad = max(bad, value)
+        else:
+            gain_c = plan.c_v[c]
+            scale = max(1.0, float(np.linalg.norm(a)))
+            out["goal_error"][c] = (
+                max(float(np.linalg.norm(M - gain_c * np.eye(2))), float(np.linalg.norm(a - gain_c * goal))) / scale
+            )
+        value = float(np.max(np.abs(u)) - plan.u_max[c])
+        out["value_u"][c] = value
+        violation[c] = max(bad, value, 0.0)
+        margin_error[c] = max(
+            _mismatch(out["value_h"][c], float(plan.margin_h[c])), _mismatch(out["value_v"][c], float(plan.margin_v[c]))
+        )
+    return Certificates(violation=violation, margin_error=margin_error, **out)
+
+
+def certificate_problems(plan: Plan, cert: Certificates) -> dict[int, str]:
+    """Cells that claim a certificate (status 0, 1, 4) the recomputation refutes, with the reason."""
+    problems = {}
+    for c in range(plan.cells.n_cells):
+        status = int(plan.status[c])
+        if status not in CERTIFIED:
+            continue
+        why = []
+        if cert.violation[c] > CERTIFICATE_TOL:
+            why.append(f"violation {cert.violation[c]:.3g}")
+        if cert.margin_error[c] > CERTIFICATE_TOL:
+            why.append(f"stored margins off by {cert.margin_error[c]:.3g}")
+        if status == CellStatus.GOAL and not cert.goal_error[c] <= GOAL_FIELD_TOL:
+            why.append(f"field is not c·(g − x) (error {cert.goal_error[c]:.3g})")
+        if why:
+            problems[c] = ", ".join(why)
+    return problems
+
+
+def flagged_cells(plan: Plan) -> dict[str, list[int]]:
+    """Cells flagged by decomposition (ALGORITHMS §5.4–5.5), by flag name.
+
+    Taken from the lists in ``plan.stats`` when present (as the stage wrote them), else
+    from the ``cell_flags`` bits.
+    """
+    out = {}
+    for flag in CellFlag:
+        if flag == CellFlag.NONE:
+            continue
+        name = flag.name.lower()
+        listed = plan.stats.get(name) if isinstance(plan.stats, dict) else None
+        if isinstance(listed, list):
+            out[name] = [int(c) for c in listed]
+        else:
+            out[name] = np.flatnonzero(plan.cells.cell_flags & flag).tolist()
+    return out
+
+
+# --------------------------------------------------------------------------- geometry
+
+
+@dataclass(frozen=True)
+class Geometry:
+    """Geometric checks of a plan (ALGORITHMS §8).
+
+    Attributes
+    ----------
+    uncovered_area : float
+        ``area(B \\ ∪ cells)`` (map units²).
+    coverage_ok : bool
+        ``uncovered_area <= 1e-9·area(B)``.
+    cells_outside_bounds : tuple of int
+        Cells with a vertex outside ``B`` (beyond ``tol``).
+    edges_outside_cell : tuple of int
+        Cells that do not contain their node and exit point (the goal cell: the goal).
+    bad_barriers : tuple of int
+        Cells with a barrier normal not of unit norm, or ``h(x_j) <= 0`` in an edge cell.
+    blocked_edges : tuple of int
+        Child nodes whose tree edge to the parent is not free.
+    samples_unchanged : bool or None
+        Whether the collision samples equal ``tree.npz``'s (None when not given).
+    """
+
+    uncovered_area: float
+    coverage_ok: bool
+    cells_outside_bounds: tuple[int, ...]
+    edges_outside_cell: tuple[int, ...]
+    bad_barriers: tuple[int, ...]
+    blocked_edges: tuple[int, ...]
+    samples_unchanged: bool | None
+
+    @property
+    def ok(self) -> bool:
+        return (
+            self.coverage_ok
+            and not self.cells_outside_bounds
+            and not self.edges_outside_cell
+            and not self.bad_barriers
+            and not self.blocked_edges
+            and self.samples_unchanged is not False
+        )
+
+
+def check_geometry(plan: Plan, space: FreeSpace, tree_samples: np.ndarray | None = None) -> Geometry:
+    """Coverage, containment, barrier rows, free tree edges and unchanged samples."""
+    cells, map_ = plan.cells, plan.map
+    tol = map_.tol
+    box = space.box
+    polygons = [shapely.Polygon(cells.vertices(c)) for c in range(cells.n_cells)]
+    union = shapely.union_all([p.buffer(0) if not p.is_valid else p for p in polygons])
+    uncovered = float(shapely.difference(box, union).area)
+    lo, hi = map_.bounds[:2] - tol, map_.bounds[2:] + tol
+    outside, off_edge, bad_rows = [], [], []
+    for c in range(cells.n_cells):
+        verts = cells.vertices(c)
+        if np.any(verts < lo) or np.any(verts > hi):
+            outside.append(c)
+        A, b = cells.rows(c)
+        node = cells.cell_node[c]
+        j = cells.parent[node]
+        anchors = np.stack([cells.nodes[node], cells.nodes[j]]) if j >= 0 else map_.goal[None, :]
+        if np.any(anchors @ A.T > b + tol):
+            off_edge.append(c)
+        normals, offsets = cells.barrier(c)
+        if len(normals):
+            unit = np.abs(np.hypot(normals[:, 0], normals[:, 1]) - 1.0) <= UNIT_TOL
+            positive = normals @ cells.nodes[j] + offsets > 0 if j >= 0 else np.ones(len(normals), bool)
+            if not (unit.all() and positive.all()):
+                bad_rows.append(c)
+    children = np.flatnonzero(cells.parent >= 0)
+    free = space.segments_free(cells.nodes[children], cells.nodes[cells.parent[children]])
+    unchanged = None
+    if tree_samples is not None:
+        theirs = np.asarray(tree_samples, float).reshape(-1, 2)
+        ours = cells.collision_samples
+        unchanged = bool(theirs.shape == ours.shape and np.array_equal(theirs, ours))
+    return Geometry(
+        uncovered_area=uncovered,
+        coverage_ok=uncovered <= COVERAGE_TOL * box.area,
+        cells_outside_bounds=tuple(outside),
+        edges_outside_cell=tuple(off_edge),
+        bad_barriers=tuple(bad_rows),
+        blocked_edges=tuple(int(i) for i in children[~free]),
+        samples_unchanged=unchanged,
+    )
+
+
+# --------------------------------------------------------------------------- starts and shortest routes
+
+
+def sample_starts(space: FreeSpace, goal: np.ndarray, count: int, rng: np.random.Generator) -> np.ndarray:
+    """``count`` starts drawn uniformly from the strictly free points of the goal's component.
+
+    Rejection sampling in the component's bounding box, in batches; deterministic for a
+    given generator state.
+
+    Returns
+    -------
+    ndarray, shape (count, 2)
+    """
+    region = space.component_of(goal)
+    if count == 0 or region.is_empty:
+        return np.zeros((0, 2))
+    shapely.prepare(region)
+    xmin, ymin, xmax, ymax = region.bounds
+    box_area = (xmax - xmin) * (ymax - ymin)
+    batch = max(64, math.ceil(1.25 * count * box_area / max(region.area, 1e-300)))
+    found: list[np.ndarray] = []
+    total = 0
+    while total < count:
+        p = rng.uniform((xmin, ymin), (xmax, ymax), size=(batch, 2))
+        keep = space.points_strictly_free(p)
+        keep[keep] = shapely.contains_xy(region, p[keep, 0], p[keep, 1])
+        found.append(p[keep])
+        total += int(keep.sum())
+    return np.concatenate(found)[:count]
+
+
+def _ring_vertices(region: shapely.Polygon) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Vertices of every ring of a polygon with their ring neighbours, each shape (V, 2)."""
+    verts, prev, nxt = [], [], []
+    for ring in (region.exterior, *region.interiors):
+        coords = np.asarray(ring.coords)[:-1]
+        if len(coords) < 3:
+            continue
+        verts.append(coords)
+        prev.append(np.roll(coords, 1, axis=0))
+        nxt.append(np.roll(coords, -1, axis=0))
+    if not verts:
+        return np.zeros((0, 2)), np.zeros((0, 2)), np.zeros((0, 2))
+    return np.concatenate(verts), np.concatenate(prev), np.concatenate(nxt)
+
+
+def _tangent(v: np.ndarray, prev: np.ndarray, nxt: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """Whether the line through vertex ``v`` and point ``w`` leaves both ring neighbours of ``v``
+    on one (closed) side; broadcasts. A shortest route only bends at vertices where both of
+    its segments are tangent in this sense (a separating line would let it cut the corner)."""
+    d = w - v
+    s1 = d[..., 0] * (prev[..., 1] - v[..., 1]) - d[..., 1] * (prev[..., 0] - v[..., 0])
+    s2 = d[..., 0] * (nxt[..., 1] - v[..., 1]) - d[..., 1] * (nxt[..., 0] - v[..., 0])
+    return s1 * s2 >= 0.0
+
+
+def _covered(region: shapely.Geometry, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Whether each segment ``[a, b]`` lies in the closed region (boundary allowed)."""
+    if len(a) == 0:
+        return np.zeros(0, bool)
+    return shapely.covers(region, shapely.linestrings(np.stack([a, b], axis=1)))
+
+
+def route_lengths(space: FreeSpace, goal: np.ndarray, starts: np.ndarray) -> np.ndarray:
+    """Length of the shortest collision-free route from each start to the goal (exact for polygons).
+
+    Dijkstra from the goal on the (tangent) visibility graph of the vertices of the goal's
+    free component ``B \\ O``, then, per start, the best visible vertex.
+
+    **Visibility.** A route may run along the boundary of ``O``: the shortest route wraps
+    around obstacle corners and is the limit of strictly free routes, while
+    :meth:`FreeSpace.segments_free` calls any touch a collision. So visibility here is
+    ``covers``: the segment lies in the *closed* free component. One consequence: where
+    two obstacles touch at a single point, a route may pass through that point; the
+    length is then a lower bound.
+
+    Parameters
+    ----------
+    space : FreeSpace
+    goal : ndarray, shape (2,)
+    starts : ndarray, shape (R, 2)
+
+    Returns
+    -------
+    ndarray, shape (R,)
+        Route lengths (map units); ``inf`` for a start outside the goal's component.
+    """
+    starts = np.asarray(starts, float).reshape(-1, 2)
+    goal = np.asarray(goal, float)
+    out = np.full(len(starts), np.inf)
+    region = space.component_of(goal)
+    if region.is_empty or len(starts) == 0:
+        return out
+    shapely.prepare(region)
+    verts, prev, nxt = _ring_vertices(region)
+    n = len(verts)
+    # graph over the vertices plus the goal (index n): tangent at both ends, then visible
+    ii, jj = np.triu_indices(n, k=1)
+    keep = _tangent(verts[ii], prev[ii], nxt[ii], verts[jj]) & _tangent(verts[jj], prev[jj], nxt[jj], verts[ii])
+    ii, jj = ii[keep], jj[keep]
+    seen = _covered(region, verts[ii], verts[jj])
+    ii, jj = ii[seen], jj[seen]
+    to_goal = np.flatnonzero(_tangent(verts, prev, nxt, goal[None, :]))
+    to_goal = to_goal[_covered(region, verts[to_goal], np.broadcast_to(goal, (len(to_goal), 2)))]
+    rows = np.concatenate([ii, to_goal])
+    cols = np.concatenate([jj, np.full(len(to_goal), n)])
+    points = np.vstack([verts, goal])
+    weights = np.hypot(*(points[rows] - points[cols]).T)
+    graph = coo_matrix((weights, (rows, cols)), shape=(n + 1, n + 1)).tocsr()
+    from_goal = dijkstra(graph, directed=False, indices=n)[:n]
+
+    inside = shapely.covers(region, shapely.points(starts))
+    direct = np.zeros(len(starts), bool)
+    direct[inside] = _covered(region, starts[inside], np.broadcast_to(goal, (int(inside.sum()), 2)))
+    out[direct] = np.hypot(*(starts[direct] - goal).T)
+    todo = np.flatnonzero(inside & ~direct)
+    if todo.size == 0 or n == 0:
+        return out
+    # candidates in order of total length; the first visible one gives the shortest route
+    p = starts[todo]
+    total = np.hypot(p[:, None, 0] - verts[None, :, 0], p[:, None, 1] - verts[None, :, 1]) + from_goal[None, :]
+    total[~_tangent(verts[None], prev[None], nxt[None], p[:, None, :])] = np.inf
+    order = np.argsort(total, axis=1, kind="stable")
+    pending = np.arange(len(todo))
+    for first in range(0, n, _ROUTE_BATCH):
+        if pending.size == 0:
+            break
+        cand = order[pending, first : first + _ROUTE_BATCH]  # (P, B)
+        value = np.take_along_axis(total[pending], cand, axis=1)
+        test = np.isfinite(value)
+        rows_p, cols_b = np.nonzero(test)
+        ok = np.zeros(value.shape, bool)
+        ok[rows_p, cols_b] = _covered(region, p[pending[rows_p]], verts[cand[rows_p, cols_b]])
+        hit = ok.any(axis=1)
+        best = np.argmax(ok, axis=1)
+        out[todo[pending[hit]]] = value[hit, best[hit]]
+        exhausted = ~test.all(axis=1)  # later candidates are all infinite
+        pending = pending[~hit & ~exhausted]
+    return out
+
+
+# --------------------------------------------------------------------------- the report
+
+
+def _finite_or_none(values: np.ndarray) -> list:
+    return [float(v) if math.isfinite(v) else None for v in np.asarray(values, float)]
+
+
+def _mean_or_nan(values: np.ndarray) -> float:
+    values = values[np.isfinite(values)]
+    return float(values.mean()) if len(values) else math.nan
+
+
+@dataclass(frozen=True, eq=False)
+class VerifyReport:
+    """Everything ``bearnav verify`` found; :attr:`failed` decides the exit code.
+
+    Attributes
+    ----------
+    status : ndarray of int8, shape (C,)
+        Stored :class:`CellStatus` of each cell.
+    certificates : Certificates
+        Recomputed values per cell.
+    false_certificates : dict of int to str
+        Cells with status 0, 1 or 4 whose certificate the recomputation refutes.
+    c_h_tilde, c_v_tilde, c_h_over_s_max : ndarray, shape (C,)
+        Bearing constants ``c_h/s_min``, ``c_v/s_max`` and ``c_h/s_max`` (ALGORITHMS §5.5).
+    flagged : dict of str to list of int
+        Cells flagged by decomposition, by flag name.
+    geometry : Geometry
+    starts : ndarray, shape (R, 2)
+        Monte-Carlo starts.
+    rollouts : Rollouts or None
+        Their closed-loop runs (None when skipped).
+    straight : ndarray, shape (R,)
+        ``‖x₀ − g‖``. The path ratios (:attr:`ratio_straight`, :attr:`ratio_route`) are means
+        over the successful runs of (path length + ``‖x_end − g‖``) / reference.
+    route : ndarray, shape (R,)
+        Shortest collision-free route length from each start.
+    min_success : float or None
+    skipped : str or None
+        Why the Monte-Carlo check did not run.
+    goal : ndarray, shape (2,)
+    """
+
+    status: np.ndarray
+    certificates: Certificates
+    false_certificates: dict[int, str]
+    c_h_tilde: np.ndarray
+    c_v_tilde: np.ndarray
+    c_h_over_s_max: np.ndarray
+    flagged: dict[str, list[int]]
+    geometry: Geometry
+    starts: np.ndarray
+    rollouts: simulate.Rollouts | None
+    straight: np.ndarray
+    route: np.ndarray
+    min_success: float | None
+    skipped: str | None
+    goal: np.ndarray
+
+    # ------------------------------------------------------------- Monte-Carlo figures
+    @property
+    def success_rate(self) -> float:
+        return self.rollouts.success_rate if self.rollouts is not None else math.nan
+
+    @property
+    def outcome_counts(self) -> dict[str, int]:
+        return self.rollouts.counts() if self.rollouts is not None else {}
+
+    @property
+    def left_cell_total(self) -> int:
+        return int(self.rollouts.left_cell.sum()) if self.rollouts is not None else 0
+
+    @property
+    def left_cell_fraction(self) -> float:
+        """Fraction of runs with at least one relocation."""
+        if self.rollouts is None or not len(self.rollouts):
+            return math.nan
+        return float(np.mean(self.rollouts.left_cell > 0))
+
+    def _ratio(self, reference: np.ndarray) -> float:
+        """Mean of (path length + the last ``‖x_end − g‖``) / reference over the successful runs.
+
+        A run stops within ``goal_tolerance`` of the goal; adding the remaining straight bit
+        makes a straight run score exactly 1 against the straight distance.
+        """
+        if self.rollouts is None:
+            return math.nan
+        r = self.rollouts
+        ok = (r.outcome == simulate.Outcome.SUCCESS) & (reference > 0)
+        rest = np.hypot(*(r.final_position[ok] - self.goal).T)
+        return _mean_or_nan((r.path_length[ok] + rest) / reference[ok])
+
+    @property
+    def ratio_straight(self) -> float:
+        return self._ratio(self.straight)
+
+    @property
+    def ratio_route(self) -> float:
+        return self._ratio(self.route)
+
+    # ------------------------------------------------------------- decision
+    @property
+    def uncertified(self) -> list[int]:
+        """Cells with status 2 (not certified) or 3 (solver failure)."""
+        bad = (CellStatus.NOT_CERTIFIED, CellStatus.SOLVER_FAILURE)
+        return np.flatnonzero(np.isin(self.status, bad)).tolist()
+
+    @property
+    def reasons(self) -> list[str]:
+        """Why the plan fails verification (empty when it passes)."""
+        out = []
+        if self.uncertified:
+            out.append(f"{len(self.uncertified)} cells not certified (status 2 or 3): {_cells(self.uncertified)}")
+        if self.false_certificates:
+            items = [f"{c} ({why})" for c, why in sorted(self.false_certificates.items())]
+            out.append(f"{len(items)} certified cells fail the recomputation: {_cells(items)}")
+        g = self.geometry
+        if not g.coverage_ok:
+            out.append(f"cells leave {g.uncovered_area:.3g} map units² of the bounds uncovered")
+        for cells, what in (
+            (g.cells_outside_bounds, "cells reach outside the bounds"),
+            (g.edges_outside_cell, "cells do not contain their edge"),
+            (g.bad_barriers, "cells have a barrier row that is not unit-norm or not positive at x_j"),
+            (g.blocked_edges, "tree edges (by child node) are not free"),
+        ):
+            if cells:
+                out.append(f"{len(cells)} {what}: {_cells(list(cells))}")
+        if g.samples_unchanged is False:
+            out.append("collision samples differ from tree.npz")
+        if self.skipped is not None and self.skipped.startswith("malformed"):
+            out.append(self.skipped)
+        if self.min_success is not None and not self.success_rate >= self.min_success:
+            out.append(f"success rate {self.success_rate:.1%} below --min-success {self.min_success:.1%}")
+        return out
+
+    @property
+    def failed(self) -> bool:
+        """The exit decision: True means exit code 1."""
+        return bool(self.reasons)
+
+    def summary(self) -> str:
+        """One line for the CLI."""
+        n = len(self.status)
+        certified = int(np.count_nonzero(np.isin(self.status, CERTIFIED))) - len(self.false_certificates)
+        text = f"{certified}/{n} cells certified, coverage {'ok' if self.geometry.coverage_ok else 'FAILS'}"
+        if self.rollouts is not None:
+            counts = self.outcome_counts
+            others = ", ".join(f"{k} {v}" for k, v in counts.items() if k != "success" and v)
+            text += f", {counts['success']}/{len(self.rollouts)} runs reached the goal"
+            text += f" ({others})" if others else ""
+        return text + ("; FAILED" if self.failed else "")
+
+    def to_json(self) -> dict[str, Any]:
+        """A JSON-ready dict (non-finite numbers become ``null``)."""
+        cert = self.certificates
+        status_counts = {s.name.lower(): int(np.count_nonzero(self.status == s)) for s in CellStatus}
+        g = self.geometry
+        out: dict[str, Any] = {
+            "failed": self.failed,
+            "reasons": self.reasons,
+            "summary": self.summary(),
+            "cells": {
+                "count": len(self.status),
+                "status_counts": status_counts,
+                "uncertified": self.uncertified,
+                "false_certificates": {str(c): why for c, why in sorted(self.false_certificates.items())},
+                "max_violation_certified": _finite_or_none(
+                    [np.max(cert.violation[np.isin(self.status, CERTIFIED)], initial=0.0)]
+                )[0],
+                "flagged": self.flagged,
+                "per_cell": {
+                    "status": self.status.tolist(),
+                    "cbf_value": _finite_or_none(cert.value_h),
+                    "clf_value": _finite_or_none(cert.value_v),
+                    "input_value": _finite_or_none(cert.value_u),
+                    "violation": _finite_or_none(cert.violation),
+                    "margin_error": _finite_or_none(cert.margin_error),
+                    "c_h_tilde": _finite_or_none(self.c_h_tilde),
+                    "c_v_tilde": _finite_or_none(self.c_v_tilde),
+                    "c_h_over_s_max": _finite_or_none(self.c_h_over_s_max),
+                },
+            },
+            "geometry": {
+                "uncovered_area": g.uncovered_area,
+                "coverage_ok": g.coverage_ok,
+                "cells_outside_bounds": list(g.cells_outside_bounds),
+                "edges_outside_cell": list(g.edges_outside_cell),
+                "bad_barriers": list(g.bad_barriers),
+                "blocked_edges": list(g.blocked_edges),
+                "samples_unchanged": g.samples_unchanged,
+            },
+        }
+        mc: dict[str, Any] = {"n_starts": len(self.starts), "skipped": self.skipped}
+        if self.rollouts is not None:
+            mc.update(
+                success_rate=_finite_or_none([self.success_rate])[0],
+                outcomes=self.outcome_counts,
+                left_cell_events=self.left_cell_total,
+                left_cell_run_fraction=_finite_or_none([self.left_cell_fraction])[0],
+                path_over_straight=_finite_or_none([self.ratio_straight])[0],
+                path_over_route=_finite_or_none([self.ratio_route])[0],
+                dt=self.rollouts.dt,
+                speed=self.rollouts.speed,
+                min_success=self.min_success,
+            )
+        out["monte_carlo"] = mc
+        return out
+
+
+def _cells(items: list, limit: int = 12) -> str:
+    text = ", ".join(str(c) for c in items[:limit])
+    return text + (f" … ({len(items)} in all)" if len(items) > limit else "")
+
+
+def run(
+    plan: Plan,
+    params: Params = Params(),
+    tree_samples: np.ndarray | None = None,
+    progress: Callable[[int, int], None] | None = None,
+) -> VerifyReport:
+    """Verify a plan: certificates, geometry and the Monte-Carlo closed loop (ALGORITHMS §8).
+
+    Parameters
+    ----------
+    plan : Plan
+    params : Params
+    tree_samples : ndarray, shape (S, 2), optional
+        ``collision_samples`` of the ``tree.npz`` the plan came from, to check they survived.
+    progress : callable, optional
+        ``progress(finished_runs, n_starts)`` during the Monte-Carlo runs.
+
+    Returns
+    -------
+    VerifyReport
+    """
+    cells = plan.cells
+    cert = certificates(plan)
+    problems = certificate_problems(plan, cert)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        c_h_tilde = np.where(cells.s_min > 0, plan.c_h / cells.s_min, np.where(np.isnan(plan.c_h), np.nan, np.inf))
+        c_v_tilde = plan.c_v / cells.s_max
+        c_h_smax = plan.c_h / cells.s_max
+    space = FreeSpace.from_map(plan.map)
+    geometry = check_geometry(plan, space, tree_samples)
+
+    starts = np.zeros((0, 2))
+    rollouts, skipped = None, None
+    if params.n_starts == 0:
+        skipped = "n_starts is 0"
+    else:
+        try:
+            PlanArrays.from_plan(plan)
+        except ArtifactError as exc:
+            skipped = f"malformed plan, no closed loop: {exc}"
+        if skipped is None:
+            rng = np.random.default_rng(params.seed)
+            starts = sample_starts(space, plan.map.goal, params.n_starts, rng)
+            sim = simulate.Params(speed=params.speed, dt=params.dt, record_trajectories=False)
+            rollouts = simulate.rollout(plan, starts, sim, progress=progress)
+    straight = np.hypot(*(starts - plan.map.goal).T) if len(starts) else np.zeros(0)
+    route = route_lengths(space, plan.map.goal, starts) if len(starts) else np.zeros(0)
+    report = VerifyReport(
+        status=np.asarray(plan.status),
+        certificates=cert,
+        false_certificates=problems,
+        c_h_tilde=c_h_tilde,
+        c_v_tilde=c_v_tilde,
+        c_h_over_s_max=c_h_smax,
+        flagged=flagged_cells(plan),
+        geometry=geometry,
+        starts=starts,
+        rollouts=rollouts,
+        straight=straight,
+        route=route,
+        min_success=params.min_success,
+        skipped=skipped,
+        goal=np.asarray(plan.map.goal, float),
+    )
+    log.info("verify: %s", report.summary())
+    return report

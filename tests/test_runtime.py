@@ -1,0 +1,270 @@
+"""The robot-side runtime (cell location, switching, field) and the closed loop built on it (ALGORITHMS §7)."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from bearnav_cli import runtime
+from bearnav_cli.datatypes import Cells, Plan, replace
+from bearnav_cli.errors import ArtifactError
+from bearnav_cli.runtime import PlanArrays
+from bearnav_cli.stages import simulate
+from bearnav_cli.stages.simulate import Outcome
+
+from .conftest import REPO
+from .handmade import CHAIN_NODES, CHAIN_PARENT, cell_polygons, hand_map, hand_plan
+
+#: A field that pushes +x everywhere (it breaks the CLF of a cell whose exit lies at −x).
+RIGHT = (np.zeros((2, 2)), np.array([1.0, 0.0]))
+LEFT = (np.zeros((2, 2)), np.array([-1.0, 0.0]))
+
+
+@pytest.fixture(scope="module")
+def chain() -> Plan:
+    """Root (1, 1) ← node 1 (5, 1) ← node 2 (9, 1); cells x ≤ 3, 1 ≤ x ≤ 7, x ≥ 5 on [0,10]×[0,8]."""
+    return hand_plan(hand_map())
+
+
+@pytest.fixture(scope="module")
+def arrays(chain) -> PlanArrays:
+    return PlanArrays.from_plan(chain)
+
+
+def test_runtime_imports_with_numpy_only():
+    code = (
+        "import bearnav_cli.runtime, sys; "
+        "bad = [m for m in sys.modules if m.split('.')[0] in ('scipy', 'shapely', 'matplotlib', 'yaml', 'typer')]; "
+        "assert not bad, bad; "
+        "assert not [m for m in sys.modules if m.startswith('bearnav_cli.') and m not in "
+        "('bearnav_cli.runtime', 'bearnav_cli.errors')]"
+    )
+    subprocess.run([sys.executable, "-c", code], check=True, cwd=REPO)
+
+
+def test_chain_cells_are_as_designed(chain):
+    cells = chain.cells
+    spans = [(cells.vertices(c)[:, 0].min(), cells.vertices(c)[:, 0].max()) for c in range(3)]
+    assert spans == [(0.0, 3.0), (1.0, 7.0), (5.0, 10.0)]
+    assert chain.status.tolist() == [4, 0, 0]
+
+
+def test_from_npz_equals_from_plan(chain, arrays, tmp_path):
+    path = tmp_path / "plan.npz"
+    np.savez(path, map=np.array(chain.map.to_json_text()), **chain.arrays())
+    loaded = PlanArrays.from_npz(path)
+    for name in runtime.RUNTIME_KEYS + ("bounds", "goal", "node_cell", "parent_cell", "field_a", "field_M"):
+        assert np.array_equal(getattr(loaded, name), getattr(arrays, name)), name
+    assert loaded.tol == arrays.tol and loaded.goal_cell == 0
+
+
+def test_from_npz_names_a_missing_entry(chain, tmp_path):
+    path = tmp_path / "plan.npz"
+    entries = chain.arrays()
+    del entries["gain"]
+    np.savez(path, map=np.array(chain.map.to_json_text()), **entries)
+    with pytest.raises(ArtifactError, match="gain"):
+        PlanArrays.from_npz(path)
+    (tmp_path / "junk.npz").write_bytes(b"not a zip")
+    with pytest.raises(ArtifactError, match="cannot read"):
+        PlanArrays.from_npz(tmp_path / "junk.npz")
+
+
+def test_every_node_needs_a_cell(chain):
+    cells = chain.cells
+    r = cells.cell_row_offsets[2]
+    fewer = replace(
+        cells,
+        cell_node=cells.cell_node[:2], cell_A=cells.cell_A[:r], cell_b=cells.cell_b[:r],
+        cell_row_offsets=cells.cell_row_offsets[:3], cell_vertices=cells.cell_vertices[:r],
+        cell_vertex_offsets=cells.cell_vertex_offsets[:3], exit_point=cells.exit_point[:2],
+        exit_dir=cells.exit_dir[:2], cbf_offsets=cells.cbf_offsets[:3], cell_landmarks=cells.cell_landmarks[:2],
+        fixed_landmark=cells.fixed_landmark[:2], s_min=cells.s_min[:2], s_max=cells.s_max[:2],
+        cell_flags=cells.cell_flags[:2],
+    )  # fmt: skip
+    with pytest.raises(ArtifactError, match="exactly one cell"):
+        PlanArrays.from_plan(
+            Plan(fewer, chain.gain[:2], chain.c_h[:2], chain.c_v[:2], chain.u_max[:2], chain.margin_h[:2],
+                 chain.margin_v[:2], chain.status[:2], chain.goal_tolerance)
+        )  # fmt: skip
+
+
+def test_field_is_the_gain_applied_to_displacements(chain, arrays):
+    rng = np.random.default_rng(1)
+    x = rng.uniform((0, 0), (10, 8), (50, 2))
+    cell = rng.integers(0, 3, 50)
+    u = runtime.field(arrays, cell, x)
+    for r in range(50):
+        assert np.allclose(u[r], chain.gain[cell[r]] @ (chain.landmarks - x[r]).ravel(), atol=1e-12)
+    assert np.allclose(runtime.affine_field(arrays, cell, x), u, atol=1e-12)
+    # the default chain fields point at each cell's exit point
+    assert np.allclose(runtime.field(arrays, [2], [[9.0, 4.0]]), [[-4 / 7, -3 / 7]], atol=1e-12)
+
+
+def test_voronoi_owner_contains_the_point_on_random_trees():
+    """Lemma 2: the nearest node's cell contains the point, on random trees and points."""
+    rng = np.random.default_rng(7)
+    for _ in range(5):
+        nodes = rng.uniform((0.5, 0.5), (9.5, 7.5), (12, 2))
+        parent = np.array([-1] + [int(rng.integers(0, i)) for i in range(1, 12)])
+        map_ = hand_map(goal=nodes[0])
+        plan = hand_plan(map_, nodes, parent, polygons=cell_polygons(nodes, parent, map_.bounds))
+        arr = PlanArrays.from_plan(plan)
+        x = rng.uniform((0, 0), (10, 8), (2000, 2))
+        owner = runtime.voronoi_owner(arr, x)
+        assert np.all(owner == np.argmin(((x[:, None] - nodes[None]) ** 2).sum(-1), axis=1))
+        assert runtime.contains(arr, owner, x).all()
+        # every node lies in its own cell and in its child's cells
+        assert runtime.contains(arr, np.arange(12), nodes).all()
+        assert runtime.contains(arr, np.arange(1, 12), nodes[parent[1:]]).all()
+
+
+def test_contains_uses_the_tolerance(arrays):
+    x = np.array([[7.0 + 0.5e-9, 4.0], [7.0 + 1e-6, 4.0]])
+    assert runtime.contains(arrays, [1, 1], x).tolist() == [True, False]
+    assert runtime.contains(arrays, [1, 1], x, tol=1e-5).tolist() == [True, True]
+
+
+def test_switch_hands_over_at_the_exit_face(arrays):
+    x = np.array([[5.01, 4.0], [4.99, 4.0], [5.0, 4.0], [5.03, 1.0], [5.05, 1.0]])
+    cell, moved = runtime.switch(arrays, np.full(5, 2), x, eps_sw=0.04)
+    # V > 0 far from x_j stays; V < 0 and V = 0 hand over; within eps_sw of x_j hands over
+    assert cell.tolist() == [2, 1, 1, 1, 2]
+    assert not moved.any()
+    # the goal cell never switches; one switch per call, although (1.005, 1) is also within
+    # eps_sw of cell 1's exit point
+    cell, moved = runtime.switch(arrays, [0, 2], [[0.5, 0.5], [1.005, 1.0]], eps_sw=0.04)
+    assert cell.tolist() == [0, 1] and not moved.any()
+
+
+def test_switch_relocates_a_robot_outside_its_cell(arrays):
+    # cell 1 is 1 <= x <= 7: (8, 4) has V > 0 and is far from x_j, but outside the cell
+    cell, moved = runtime.switch(arrays, [1, 1], [[8.0, 4.0], [6.0, 4.0]], eps_sw=0.04)
+    assert cell.tolist() == [2, 1]
+    assert moved.tolist() == [True, False]
+    # after a hand-over the new cell is tested too: cell 2 → 1 at x = 0.5 < 1 is outside cell 1
+    cell, moved = runtime.switch(arrays, [2], [[0.5, 6.0]], eps_sw=0.04)
+    assert cell.tolist() == [0] and moved.tolist() == [True]
+
+
+# --------------------------------------------------------------------------- the closed loop
+
+
+def test_chain_runs_reach_the_goal(chain):
+    starts = np.array([[9.5, 7.5], [6.0, 0.2], [2.0, 7.9], [0.1, 0.1], [1.0, 1.05]])
+    out = simulate.rollout(chain, starts)
+    assert out.outcome.tolist() == [Outcome.SUCCESS] * 5
+    assert out.steps[-1] == 0 and out.path_length[-1] == 0.0  # starts inside the goal tolerance
+    v_dt = out.speed * out.dt
+    assert out.dt == pytest.approx(0.2) and out.eps_sw == pytest.approx(2 * v_dt)
+    assert np.allclose(out.path_length, out.steps * v_dt)
+    assert np.allclose(out.time, out.steps * out.dt)
+    for r in range(5):
+        path = out.trajectory(r)
+        assert len(path) == out.steps[r] + 1 and np.array_equal(path[0], starts[r])
+        assert np.linalg.norm(path[-1] - chain.map.goal) <= out.goal_tolerance
+    # run 0 follows the tree: cell 2, then cell 1 (whose exit point is the goal itself)
+    cells = out.cells_along(0)
+    assert cells[0] == 2 and cells[-1] in (0, 1) and np.all(np.diff(cells) <= 0)
+    assert out.left_cell.sum() == 0
+    assert simulate.summary(out) == "5/5 runs reached the goal"
+
+
+def test_a_crossing_of_the_exit_face_switches_on_that_step():
+    plan = hand_plan(hand_map(), fields={2: LEFT})
+    out = simulate.rollout(plan, [[9.01, 4.0]])
+    path, cells = out.trajectory(0), out.cells_along(0)
+    first_beyond = int(np.argmax(path[:, 0] < 5.0))  # first point past the exit line x = 5
+    assert path[first_beyond - 1, 0] > 5.0
+    assert cells[first_beyond - 1] == 2 and cells[first_beyond] == 1
+    assert out.outcome[0] == Outcome.SUCCESS and out.left_cell[0] == 0
+
+
+def test_a_robot_outside_its_cell_is_relocated():
+    """Cell 1 pushes +x (no certificate): the robot leaves cell 1 through x = 7 and is relocated."""
+    plan = hand_plan(hand_map(), fields={1: RIGHT})
+    out = simulate.rollout(plan, [[6.905, 4.0]], simulate.Params(max_steps=60))
+    path, cells = out.trajectory(0), out.cells_along(0)
+    assert cells[0] == 1
+    out_of_cell = int(np.argmax(path[:, 0] > 7.0))
+    assert cells[out_of_cell - 1] == 1 and cells[out_of_cell] == 2  # Voronoi owner: node 2
+    assert out.left_cell[0] >= 1
+    # the same through the runtime alone, one call
+    cell, moved = runtime.switch(PlanArrays.from_plan(plan), [1], path[out_of_cell][None], out.eps_sw)
+    assert cell.tolist() == [2] and moved.tolist() == [True]
+
+
+def test_a_step_that_grazes_an_obstacle_corner_is_a_collision():
+    """Robot on y = 4 moving −x; a diamond's bottom vertex sits at (6.0031, 4), between two step ends."""
+    diamond = [[6.0031, 4.0], [7.0, 5.0], [6.0031, 6.0], [5.5, 5.0]]
+    plan = hand_plan(hand_map(obstacles=[diamond]), fields={2: LEFT})
+    out = simulate.rollout(plan, [[9.0, 4.0], [9.0, 4.0 - 1e-9]])
+    assert out.outcome.tolist() == [Outcome.COLLISION, Outcome.SUCCESS]
+    path = out.trajectory(0)
+    assert path[-2, 0] > 6.0031 > path[-1, 0]  # the colliding step spans the vertex
+    assert path[-1, 1] == 4.0 and out.steps[0] == len(path) - 1
+    # no step end is in the obstacle: only the exact segment test sees this
+    from bearnav_cli.geometry import FreeSpace
+
+    assert FreeSpace.from_map(plan.map).points_free(path).all()
+
+
+def test_a_start_that_is_not_free_is_a_collision():
+    plan = hand_plan(hand_map(obstacles=[[[6, 3], [7, 3], [7, 4], [6, 4]]]))
+    out = simulate.rollout(plan, [[6.5, 3.5], [10.5, 3.0], [9.0, 7.0]])
+    assert out.outcome.tolist()[:2] == [Outcome.COLLISION, Outcome.COLLISION]
+    assert out.steps[:2].tolist() == [0, 0] and out.final_cell[:2].tolist() == [-1, -1]
+
+
+def test_stalls_timeouts_and_step_limits():
+    # an equilibrium of cell 2's field at e = (8.005, 4): exactly there the field vanishes (stall at
+    # once); from (9, 4) the robot chatters between 8.01 and 7.99 with ‖u‖ = 5e-4, making no net
+    # progress (stall once the window holds only chatter)
+    towards = (np.eye(2) * 0.1, np.array([0.8005, 0.4]))
+    plan = hand_plan(hand_map(), fields={2: towards})
+    out = simulate.rollout(plan, [[8.005, 4.0], [9.0, 4.0]], simulate.Params(max_steps=5000))
+    assert out.outcome.tolist() == [Outcome.STALL, Outcome.STALL]
+    assert out.steps[0] == 0 and simulate.PROGRESS_WINDOW <= out.steps[1] < 2 * simulate.PROGRESS_WINDOW
+    # a step limit below the route length: timeout after max_steps + 1 steps
+    short = simulate.rollout(hand_plan(hand_map()), [[9.5, 7.5]], simulate.Params(max_steps=10))
+    assert short.outcome.tolist() == [Outcome.TIMEOUT] and short.steps.tolist() == [11]
+    # the default limit: ceil(5·L_route/(v·dt)) + 1000 with L_route through the nearest node
+    default = simulate.rollout(hand_plan(hand_map()), [[9.0, 4.0]])
+    assert default.max_steps[0] == int(np.ceil(5 * (3.0 + 8.0) / (0.1 * 0.2))) + 1000
+
+
+def test_tree_costs_by_pointer_doubling():
+    rng = np.random.default_rng(3)
+    nodes = rng.uniform(0, 10, (40, 2))
+    parent = np.array([-1] + [int(rng.integers(0, i)) for i in range(1, 40)])
+    expected = np.zeros(40)
+    for i in range(1, 40):
+        expected[i] = expected[parent[i]] + np.linalg.norm(nodes[i] - nodes[parent[i]])
+    assert np.allclose(simulate.tree_costs(nodes, parent), expected, atol=1e-12)
+    assert np.allclose(simulate.tree_costs(CHAIN_NODES, CHAIN_PARENT), [0.0, 4.0, 8.0])
+
+
+def test_params_are_checked():
+    from bearnav_cli.errors import InvalidParamsError
+
+    for kwargs, name in (({"speed": 0}, "speed"), ({"dt": -1.0}, "dt"), ({"max_steps": 0}, "max_steps"),
+                         ({"goal_tolerance": 0.0}, "goal_tolerance")):  # fmt: skip
+        with pytest.raises(InvalidParamsError) as err:
+            simulate.Params(**kwargs)
+        assert err.value.field == name
+
+
+def test_without_trajectories_the_figures_are_the_same(chain):
+    starts = np.array([[9.5, 7.5], [6.0, 0.2]])
+    full = simulate.rollout(chain, starts)
+    bare = simulate.rollout(chain, starts, simulate.Params(record_trajectories=False))
+    for name in ("outcome", "steps", "path_length", "left_cell", "final_position", "final_cell"):
+        assert np.array_equal(getattr(full, name), getattr(bare, name)), name
+    assert len(bare.trajectory_coords) == 0 and bare.trajectory_offsets.tolist() == [0, 0, 0]
+
+
+def test_cells_type_is_the_datatypes_one(chain):
+    assert isinstance(chain.cells, Cells)

@@ -1,0 +1,267 @@
+"""``bearnav verify`` (ALGORITHMS §8): recomputed certificates, geometry, Monte Carlo, shortest routes."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from bearnav_cli import verify
+from bearnav_cli.datatypes import CellFlag, Plan, replace
+from bearnav_cli.errors import InvalidParamsError
+from bearnav_cli.geometry import FreeSpace
+from bearnav_cli.stages import simulate
+
+from .conftest import REPO
+from .handmade import cell_polygons, hand_map, hand_plan
+
+FAST = verify.Params(n_starts=40, seed=3)
+
+
+@pytest.fixture(scope="module")
+def chain() -> Plan:
+    return hand_plan(hand_map())
+
+
+def random_tree_plan(seed: int, n: int = 10) -> Plan:
+    rng = np.random.default_rng(seed)
+    nodes = rng.uniform((0.5, 0.5), (9.5, 7.5), (n, 2))
+    parent = np.array([-1] + [int(rng.integers(0, i)) for i in range(1, n)])
+    map_ = hand_map(goal=nodes[0])
+    return hand_plan(map_, nodes, parent, polygons=cell_polygons(nodes, parent, map_.bounds))
+
+
+def corrupt(plan: Plan, cell: int, factor: float = 3.0) -> Plan:
+    gain = plan.gain.copy()
+    gain[cell] *= factor
+    return replace(plan, gain=gain)
+
+
+def test_a_sound_plan_passes(chain):
+    report = verify.run(chain, FAST)
+    assert not report.failed, report.reasons
+    assert report.certificates.violation.max() <= 1e-12
+    assert report.geometry.ok and report.geometry.uncovered_area <= 1e-12
+    assert report.success_rate == 1.0 and report.outcome_counts["collision"] == 0
+    assert report.left_cell_total == 0 and report.left_cell_fraction == 0.0
+    # straight lines from the goal's own region score 1; runs through node 1 score more
+    assert 1.0 <= report.ratio_straight < 1.5 and report.ratio_route == pytest.approx(report.ratio_straight)
+    text = json.dumps(report.to_json(), allow_nan=False)
+    assert '"failed": false' in text
+    assert report.summary() == "3/3 cells certified, coverage ok, 40/40 runs reached the goal"
+
+
+def test_a_corrupted_gain_violates_in_that_cell_only():
+    plan = random_tree_plan(11)
+    base = verify.certificates(plan)
+    assert base.violation.max() <= 1e-12 and base.margin_error.max() <= 1e-12
+    for cell in range(plan.cells.n_cells):
+        cert = verify.certificates(corrupt(plan, cell))
+        assert cert.violation[cell] > 1e-3, cell
+        others = np.delete(cert.violation, cell)
+        assert others.max() <= 1e-12, cell
+    report = verify.run(corrupt(plan, 4), verify.Params(n_starts=0))
+    assert report.failed and list(report.false_certificates) == [4]
+    assert any("fail the recomputation: 4 (violation" in r for r in report.reasons)
+
+
+def test_the_recomputed_values_match_the_definitions(chain):
+    cert = verify.certificates(chain)
+    # cell 2 = [5,10]×[0,8], u = (1/7)((5,1) − x), z = (1,0), c_v = 1/14: the CLF value is
+    # max (c_v − 1/7)·V = 0 (on the exit face); the input value max ‖u‖∞ − 1 = 0 at (10, 8)
+    assert cert.value_v[2] == pytest.approx(0.0, abs=1e-12)
+    assert cert.value_u[2] == pytest.approx(0.0, abs=1e-12)
+    assert math.isnan(cert.value_h[2]) and math.isnan(cert.value_v[0])
+    assert cert.goal_error[0] <= 1e-12
+    # a barrier row h(x) = y − 0.5 in cell 2 (safe above y = 0.5): −(n·u + c_h h) at each vertex
+    rows = {2: (np.array([[0.0, 1.0]]), np.array([-0.5]))}
+    plan = hand_plan(hand_map(), barriers=rows)
+    verts = plan.cells.vertices(2)
+    u = (np.array([5.0, 1.0]) - verts) / 7.0
+    expected = np.max(-(u[:, 1] + plan.c_h[2] * (verts[:, 1] - 0.5)))
+    assert verify.certificates(plan).value_h[2] == pytest.approx(expected, abs=1e-12)
+    assert plan.margin_h[2] == pytest.approx(expected)  # the builder's margin, computed the same way
+    assert expected > 0 and verify.run(plan, verify.Params(n_starts=0)).uncertified == [2]
+
+
+def test_false_margins_uncertified_cells_and_goal_fields_fail(chain):
+    wrong_margin = replace(chain, margin_v=np.array([np.nan, -0.5, 0.0]))
+    report = verify.run(wrong_margin, verify.Params(n_starts=0))
+    assert report.failed and "stored margins off by 0.5" in report.false_certificates[1]
+
+    status = chain.status.copy()
+    status[2] = 2
+    report = verify.run(replace(chain, status=status), verify.Params(n_starts=0))
+    assert report.failed and report.uncertified == [2] and not report.false_certificates
+
+    # the goal cell with a certified-looking but wrong field: u = 0.1·(g − x) + (0.01, 0)
+    gain = chain.gain.copy()
+    from .handmade import gain_for
+
+    gain[0] = gain_for(chain.landmarks, chain.c_v[0] * np.eye(2), chain.c_v[0] * chain.map.goal + [0.01, 0.0])
+    report = verify.run(replace(chain, gain=gain), verify.Params(n_starts=0))
+    assert report.failed and "field is not c·(g − x)" in report.false_certificates[0]
+
+
+def test_removing_a_cell_makes_coverage_fail(chain):
+    cells = chain.cells
+    r = cells.cell_row_offsets[2]
+    fewer = replace(
+        cells,
+        cell_node=cells.cell_node[:2], cell_A=cells.cell_A[:r], cell_b=cells.cell_b[:r],
+        cell_row_offsets=cells.cell_row_offsets[:3], cell_vertices=cells.cell_vertices[:r],
+        cell_vertex_offsets=cells.cell_vertex_offsets[:3], exit_point=cells.exit_point[:2],
+        exit_dir=cells.exit_dir[:2], cbf_offsets=cells.cbf_offsets[:3], cell_landmarks=cells.cell_landmarks[:2],
+        fixed_landmark=cells.fixed_landmark[:2], s_min=cells.s_min[:2], s_max=cells.s_max[:2],
+        cell_flags=cells.cell_flags[:2],
+    )  # fmt: skip
+    plan = Plan(fewer, chain.gain[:2], chain.c_h[:2], chain.c_v[:2], chain.u_max[:2], chain.margin_h[:2],
+                chain.margin_v[:2], chain.status[:2], chain.goal_tolerance)  # fmt: skip
+    report = verify.run(plan, FAST)
+    assert report.failed and not report.geometry.coverage_ok
+    assert report.geometry.uncovered_area == pytest.approx(3.0 * 8.0)  # cell 2 alone held 7 ≤ x ≤ 10
+    assert any("uncovered" in r for r in report.reasons)
+    assert report.rollouts is None and report.skipped.startswith("malformed plan")
+
+
+def test_geometry_failures_are_reported():
+    # a wall across the edge 1 → 0 (y = 1 between x = 2 and 3) blocks it
+    map_ = hand_map(obstacles=[[[2.4, 0.5], [2.6, 0.5], [2.6, 1.5], [2.4, 1.5]]])
+    rows = {2: (np.array([[-2.0, 0.0]]), np.array([20.0]))}  # h = 20 − 2x holds, but is not unit-norm
+    plan = hand_plan(map_, barriers=rows)
+    report = verify.run(plan, verify.Params(n_starts=0), tree_samples=np.array([[2.5, 1.0]]))
+    g = report.geometry
+    assert g.blocked_edges == (1,) and g.bad_barriers == (2,) and g.samples_unchanged is False
+    assert g.coverage_ok and not g.cells_outside_bounds and not g.edges_outside_cell
+    assert report.failed and len(report.reasons) == 3
+    same = verify.run(plan, verify.Params(n_starts=0), tree_samples=np.zeros((0, 2)))
+    assert same.geometry.samples_unchanged is True
+
+
+def test_flagged_cells_and_bearing_constants(chain):
+    flags = chain.cells.cell_flags.copy()
+    flags[1] = CellFlag.FEW_LANDMARKS | CellFlag.BLIND_SPOT
+    cells = replace(chain.cells, cell_flags=flags, s_min=np.array([0.0, 2.0, 4.0]))
+    plan = replace(chain, cells=cells)
+    report = verify.run(plan, verify.Params(n_starts=0))
+    assert report.flagged["few_landmarks"] == [1] and report.flagged["blind_spot"] == [1]
+    assert report.flagged["degenerate_risk"] == []
+    listed = replace(plan, stats={"degenerate_risk": [2]})
+    assert verify.flagged_cells(listed)["degenerate_risk"] == [2]
+    # c̃_v = c_v/s_max, c̃_h = c_h/s_min (∞ at s_min = 0, NaN without barrier rows)
+    assert np.allclose(report.c_v_tilde, chain.c_v / 20.0)
+    assert np.isnan(report.c_h_tilde).all() and np.isnan(report.c_h_over_s_max).all()
+    with_rows = hand_plan(hand_map(), barriers={0: (np.array([[1.0, 0.0]]), np.array([1.0])),
+                                                1: (np.array([[0.0, 1.0]]), np.array([0.0]))})  # fmt: skip
+    with_rows = replace(with_rows, cells=replace(with_rows.cells, s_min=np.array([0.0, 2.0, 4.0])))
+    report = verify.run(with_rows, verify.Params(n_starts=0))
+    assert report.c_h_tilde[0] == math.inf and report.c_h_tilde[1] == pytest.approx(with_rows.c_h[1] / 2.0)
+    assert report.c_h_over_s_max[1] == pytest.approx(with_rows.c_h[1] / 20.0)
+    assert json.loads(json.dumps(report.to_json(), allow_nan=False))["cells"]["per_cell"]["c_h_tilde"][0] is None
+
+
+def test_min_success_decides_on_the_monte_carlo():
+    # cell 1 pushes +x: robots bounce between cells 1 and 2 and never arrive
+    plan = hand_plan(hand_map(), fields={1: (np.zeros((2, 2)), np.array([1.0, 0.0]))})
+    status = plan.status.copy()
+    status[1] = 0  # claims a certificate it does not have
+    report = verify.run(replace(plan, status=status), verify.Params(n_starts=30, min_success=0.9))
+    assert report.success_rate < 0.9 and report.left_cell_total > 0
+    assert any("below --min-success" in r for r in report.reasons)
+    assert 1 in report.false_certificates
+
+
+def test_starts_are_seeded_strictly_free_and_in_the_goal_component():
+    walls = [[[4.0, 0.0], [4.5, 0.0], [4.5, 8.0], [4.0, 8.0]], [[6, 3], [7, 3], [7, 4], [6, 4]]]
+    space = FreeSpace.from_map(hand_map(obstacles=walls))
+    a = verify.sample_starts(space, np.array([1.0, 1.0]), 300, np.random.default_rng(5))
+    b = verify.sample_starts(space, np.array([1.0, 1.0]), 300, np.random.default_rng(5))
+    assert a.shape == (300, 2) and np.array_equal(a, b)
+    assert space.points_strictly_free(a).all() and np.all(a[:, 0] < 4.0)  # the wall cuts x > 4.5 off
+    assert verify.sample_starts(space, np.array([1.0, 1.0]), 0, np.random.default_rng(5)).shape == (0, 2)
+
+
+def test_route_around_one_square_matches_the_hand_value():
+    space = FreeSpace.from_map(hand_map(obstacles=[[[4, 3], [6, 3], [6, 5], [4, 5]]]))
+    goal = np.array([8.0, 4.0])
+    starts = np.array([[2.0, 4.0], [2.0, 6.0], [5.0, 1.0], [5.0, 4.0], [2.0, 3.0]])
+    lengths = verify.route_lengths(space, goal, starts)
+    # around a corner each: (2,4) → (4,5) → (6,5) → (8,4); (2,6) sees the goal past (6,5)
+    assert lengths[0] == pytest.approx(2 * math.sqrt(5) + 2, abs=1e-12)
+    assert lengths[1] == pytest.approx(math.hypot(4, 1) + math.hypot(2, 1), abs=1e-12)
+    assert lengths[2] == pytest.approx(math.hypot(3, 3), abs=1e-12)  # in sight: straight
+    assert lengths[3] == math.inf  # inside the obstacle
+    # along the bottom edge y = 3 (touching O is allowed for the route): 2 + 2 + hypot(2, 1)
+    assert lengths[4] == pytest.approx(2 + 2 + math.hypot(2, 1), abs=1e-12)
+
+
+def test_route_through_two_staggered_walls():
+    """Over the first wall's top end, under the second's bottom end: four bends, by hand."""
+    walls = [[[3, 0], [3.5, 0], [3.5, 6], [3, 6]], [[6, 2], [6.5, 2], [6.5, 8], [6, 8]]]
+    space = FreeSpace.from_map(hand_map(obstacles=walls))
+    start, goal = np.array([1.0, 1.0]), np.array([9.0, 7.0])
+    expected = math.hypot(2, 5) + 0.5 + math.hypot(2.5, 4) + 0.5 + math.hypot(2.5, 5)
+    assert verify.route_lengths(space, goal, start[None])[0] == pytest.approx(expected, abs=1e-12)
+
+
+def test_params_are_checked():
+    for kwargs, name in (({"n_starts": -1}, "n_starts"), ({"min_success": 1.5}, "min_success"),
+                         ({"speed": 0.0}, "speed")):  # fmt: skip
+        with pytest.raises(InvalidParamsError) as err:
+            verify.Params(**kwargs)
+        assert err.value.field == name
+
+
+# --------------------------------------------------------------------------- end to end
+
+
+def kitchen_stages():
+    synthesize = pytest.importorskip("bearnav_cli.stages.synthesize")
+    decompose = pytest.importorskip("bearnav_cli.stages.decompose")
+    from bearnav_cli.stages import map_, rrtstar, simplify
+
+    spec = yaml.safe_load(Path(REPO / "maps" / "kitchen.yaml").read_text())
+    source = map_.MapSource(spec=spec, file="kitchen.yaml", sha256="0")
+    map_obj = map_.run(source)
+    tree = rrtstar.run(map_obj, rrtstar.Params(**spec["params"]["rrtstar"]))
+    plan = synthesize.run(decompose.run(simplify.run(tree)))
+    return tree, plan
+
+
+@pytest.fixture(scope="module")
+def kitchen():
+    tree, plan = kitchen_stages()
+    return tree, plan, verify.run(plan, verify.Params(n_starts=200), tree_samples=tree.collision_samples)
+
+
+def test_kitchen_plan_is_certified_and_covers_the_map(kitchen):
+    tree, plan, report = kitchen
+    assert not report.uncertified
+    assert not report.false_certificates
+    certified = np.isin(plan.status, (0, 1, 4))
+    assert certified.all()
+    assert report.certificates.violation.max() <= 1e-7
+    assert report.geometry.ok, report.geometry
+    assert json.dumps(report.to_json(), allow_nan=False)
+    # the Monte-Carlo figures are consistent
+    assert sum(report.outcome_counts.values()) == 200
+    routes, straight = report.route, report.straight
+    assert np.all(routes >= straight - 1e-9)
+    done = report.rollouts.outcome == simulate.Outcome.SUCCESS
+    finish = np.hypot(*(report.rollouts.final_position[done] - plan.map.goal).T)
+    assert np.all(report.rollouts.path_length[done] + finish >= routes[done] - 1e-9)  # routes are shortest
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="the wedge CBF of ALGORITHMS §4.5 does not keep random starts off the obstacles: "
+    "about 72% of 200 uniform starts reach the goal, the rest collide (see the verify report)",
+)
+def test_kitchen_closed_loop_reaches_the_goal_from_random_starts(kitchen):
+    _, _, report = kitchen
+    assert report.outcome_counts["collision"] == 0
+    assert report.success_rate >= 0.99
