@@ -14,8 +14,10 @@ $(STAMP): pyproject.toml
 
 demo: $(STAMP)
 	$(BIN)/bearnav plan maps/kitchen.yaml
+	$(BIN)/bearnav verify plans/kitchen/plan.npz
 	$(BIN)/bearnav plot plans/kitchen/simplified.npz --also plans/kitchen/tree.npz -o plans/kitchen/simplified.png
-	@echo "figure: plans/kitchen/simplified.png"
+	$(BIN)/bearnav plot plans/kitchen/plan.npz -o plans/kitchen/plan.png
+	@echo "figures: plans/kitchen/simplified.png plans/kitchen/plan.png"
 
 test: $(STAMP)
 	$(BIN)/ruff check .
@@ -24,6 +26,7 @@ test: $(STAMP)
 bench: $(STAMP)
 	$(BIN)/python -m pip install --quiet ompl
 	$(BIN)/python bench/rrtstar.py
+	$(BIN)/python bench/synthesize.py
 
 clean:
 	rm -rf plans/*/ .pytest_cache

@@ -147,8 +147,7 @@ def certificates(plan: Plan) -> Certificates:
             value = float(np.max(-(u @ normals.T + plan.c_h[c] * h)))
             out["value_h"][c] = value
             bad = max(bad, math.inf if math.isnan(value) else value)
-        is_goal = plan.status[c] == CellStatus.GOAL or cells.parent[cells.cell_node[c]] < 0
-        if not is_goal:
+        if cells.parent[cells.cell_node[c]] >= 0:  # an edge cell; the root's cell is the goal cell
             z, xj = cells.exit_dir[c], cells.exit_point[c]
             value = float(np.max(u @ z + plan.c_v[c] * ((verts - xj) @ z)))
             out["value_v"][c] = value
@@ -180,8 +179,11 @@ def certificate_problems(plan: Plan, cert: Certificates) -> dict[int, str]:
             why.append(f"violation {cert.violation[c]:.3g}")
         if cert.margin_error[c] > CERTIFICATE_TOL:
             why.append(f"stored margins off by {cert.margin_error[c]:.3g}")
-        if status == CellStatus.GOAL and not cert.goal_error[c] <= GOAL_FIELD_TOL:
+        is_root = plan.cells.parent[plan.cells.cell_node[c]] < 0
+        if is_root and not cert.goal_error[c] <= GOAL_FIELD_TOL:
             why.append(f"field is not c·(g − x) (error {cert.goal_error[c]:.3g})")
+        if status == CellStatus.GOAL and not is_root:
+            why.append("goal status on an edge cell (its CLF was checked)")
         if why:
             problems[c] = ", ".join(why)
     return problems
@@ -190,15 +192,18 @@ def certificate_problems(plan: Plan, cert: Certificates) -> dict[int, str]:
 def flagged_cells(plan: Plan) -> dict[str, list[int]]:
     """Cells flagged by decomposition (ALGORITHMS §5.4–5.5), by flag name.
 
-    Taken from the lists in ``plan.stats`` when present (as the stage wrote them), else
-    from the ``cell_flags`` bits.
+    Taken from the lists the stages wrote into ``plan.stats`` (``stats["flagged"][name]`` as
+    synthesize writes it, or ``stats[name]`` as decompose does) when present, else from the
+    ``cell_flags`` bits.
     """
+    stats = plan.stats if isinstance(plan.stats, dict) else {}
+    nested = stats.get("flagged") if isinstance(stats.get("flagged"), dict) else {}
     out = {}
     for flag in CellFlag:
         if flag == CellFlag.NONE:
             continue
         name = flag.name.lower()
-        listed = plan.stats.get(name) if isinstance(plan.stats, dict) else None
+        listed = nested.get(name, stats.get(name))
         if isinstance(listed, list):
             out[name] = [int(c) for c in listed]
         else:

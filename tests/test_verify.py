@@ -151,7 +151,10 @@ def test_flagged_cells_and_bearing_constants(chain):
     assert report.flagged["few_landmarks"] == [1] and report.flagged["blind_spot"] == [1]
     assert report.flagged["degenerate_risk"] == []
     listed = replace(plan, stats={"degenerate_risk": [2]})
-    assert verify.flagged_cells(listed)["degenerate_risk"] == [2]
+    assert verify.flagged_cells(listed)["degenerate_risk"] == [2]  # decompose's stats
+    nested = replace(plan, stats={"flagged": {"degenerate_risk": [0]}})
+    assert verify.flagged_cells(nested)["degenerate_risk"] == [0]  # synthesize's stats
+    assert verify.flagged_cells(nested)["few_landmarks"] == [1]  # from the bits
     # c̃_v = c_v/s_max, c̃_h = c_h/s_min (∞ at s_min = 0, NaN without barrier rows)
     assert np.allclose(report.c_v_tilde, chain.c_v / 20.0)
     assert np.isnan(report.c_h_tilde).all() and np.isnan(report.c_h_over_s_max).all()
@@ -246,6 +249,9 @@ def test_kitchen_plan_is_certified_and_covers_the_map(kitchen):
     assert certified.all()
     assert report.certificates.violation.max() <= 1e-7
     assert report.geometry.ok, report.geometry
+    for name, cells in report.flagged.items():
+        bits = np.flatnonzero(plan.cells.cell_flags & CellFlag[name.upper()]).tolist()
+        assert cells == bits, name
     assert json.dumps(report.to_json(), allow_nan=False)
     # the Monte-Carlo figures are consistent
     assert sum(report.outcome_counts.values()) == 200

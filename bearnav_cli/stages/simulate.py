@@ -264,6 +264,7 @@ class _Loop:
         self.left[active] += moved_out
         u = runtime.apply_gain(arrays, cell, y)
         idle = np.hypot(*runtime.affine_field(arrays, cell, x_hat).T) < STALL_FIELD * arrays.u_max[cell]
+        idle |= ~(np.hypot(u[:, 0], u[:, 1]) > 0)  # no direction to normalise (rounding, NaN)
         if idle.any():
             self.finish(active[idle], Outcome.STALL)
             active, p, u, cell = active[~idle], p[~idle], u[~idle], cell[~idle]

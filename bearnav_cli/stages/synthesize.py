@@ -49,6 +49,8 @@ BOX_DIRECTIONS = np.array([[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]])
 #: ``L`` of the field space (:func:`field_map`): ``θ = vec([M, a])`` row-major.
 FIELD_MAP = np.eye(6).reshape(2, 3, 6)
 FIELD_MAP.setflags(write=False)
+_EYE2 = np.eye(2)
+_EYE2.setflags(write=False)
 BOX_DIRECTIONS.setflags(write=False)
 
 
@@ -221,6 +223,17 @@ def gain_from_theta(space: str, theta: np.ndarray, landmarks: np.ndarray) -> np.
     return K
 
 
+def theta_from_gain(space: str, K: np.ndarray) -> np.ndarray:
+    """The gain-space variables ``θ`` of a structured gain ``K`` (2, 2n); inverse of :func:`gain_from_theta`."""
+    if space == "full":
+        return K.ravel()
+    if space == "diag":
+        return np.concatenate([K[0, 0::2], K[1, 1::2]])
+    if space == "scalar":
+        return K[0, 0::2].copy()
+    raise ValueError(f"no gain-space variables for {space!r}")
+
+
 def min_norm_gain(M: np.ndarray, a: np.ndarray, landmarks: np.ndarray) -> np.ndarray:
     """The minimum-Frobenius-norm gain realising the field ``u = a − M x`` (Lemma 3).
 
@@ -240,14 +253,16 @@ def min_norm_gain(M: np.ndarray, a: np.ndarray, landmarks: np.ndarray) -> np.nda
     ndarray, shape (2, 2n)
     """
     n = len(landmarks)
-    mean = landmarks.mean(axis=0)
+    mean = landmarks.sum(axis=0) / n
     delta = landmarks - mean
-    sigma = float((delta * delta).sum())
+    sigma = float(np.vdot(delta, delta))
     cond = _gram_condition(n, mean, sigma)
     if not cond <= COND_WARNING:
         log.warning("nearly coincident landmarks: cond(GᵀG) = %.3g", cond)
     offset = (a - M @ mean) / sigma if sigma > 0 else np.full(2, np.nan)
-    return (M[:, None, :] / n + offset[:, None, None] * delta[None, :, :]).reshape(2, 2 * n)
+    K = np.multiply.outer(offset, delta)  # (2, n, 2)
+    K += M[:, None, :] / n
+    return K.reshape(2, 2 * n)
 
 
 def gram_condition(landmarks: np.ndarray) -> float:
@@ -311,6 +326,8 @@ class LpTemplate:
     ``row_upper = base + c_h·per_h + c_v·per_v``; ``row_lower`` equals ``row_upper`` on the
     equality rows and ``lower`` elsewhere. The matrix, costs and column bounds are shared by
     every :meth:`instantiate` call, so κ halvings cost only a few vector operations.
+    ``vertex_rows``, for the vertex form only, is the dense ``θ`` block of the first
+    ``groups × p`` rows (group-major), used to re-check a gain at the vertices.
     """
 
     cost: np.ndarray
@@ -326,29 +343,27 @@ class LpTemplate:
     per_v: np.ndarray
     n_theta: int
     n_h: int
+    vertex_rows: np.ndarray | None = None
 
     def instantiate(self, c_h: float, c_v: float) -> CellLp:
         """The LP with the constants ``c_h`` (ignored without barrier rows) and ``c_v``."""
-        upper = self.base + c_v * self.per_v
+        upper = self.per_v * c_v
+        upper += self.base
         if self.n_h:
-            upper += c_h * self.per_h
+            upper += self.per_h * c_h
         lower = self.lower if self.equality is None else np.where(self.equality, upper, self.lower)
         return CellLp(self.cost, self.A_indptr, self.A_indices, self.A_values, lower, upper, self.col_lower,
                       self.col_upper, self.n_theta, self.n_h)  # fmt: skip
 
 
-def _directions(problem: CellProblem, box: bool) -> np.ndarray:
-    """Group directions ``d``: the ``h`` barrier rows (``−n_k``), the CLF (``z``), then the box sides."""
-    n_h = len(problem.cbf_q)
-    D = np.empty((n_h + (5 if box else 1), 2))
-    np.negative(problem.cbf_n, out=D[:n_h])
-    D[n_h] = problem.z
-    if box:
-        D[n_h + 1 :] = BOX_DIRECTIONS
-    return D
+def _filled(n: int, value: float) -> np.ndarray:
+    out = np.empty(n)
+    out.fill(value)
+    return out
 
 
-def _template(dense, lower, equality, base, per_h, per_v, n_theta, n_h, n_extra, w_h, w_v, least_violation):
+def _template(dense, lower, equality, base, per_h, per_v, n_theta, n_h, n_extra, w_h, w_v, least_violation,
+              vertex_rows=None) -> LpTemplate:  # fmt: skip
     """Add slack bounds, the objective and (for least violation) the ``t`` variables; compress the matrix."""
     n_slack = n_h + 1
     n_rows, n_cols = dense.shape
@@ -362,69 +377,91 @@ def _template(dense, lower, equality, base, per_h, per_v, n_theta, n_h, n_extra,
         lower = np.concatenate([lower, pad])
         if equality is not None:
             equality = np.concatenate([equality, np.zeros(n_slack, bool)])
-        base = np.concatenate([base, np.full(n_slack, INF)])
+        base = np.concatenate([base, _filled(n_slack, INF)])
         per_h, per_v = np.concatenate([per_h, pad]), np.concatenate([per_v, pad])
         first, n_cols = n_cols, n_cols + n_slack
-        col_lower = np.full(n_cols, -INF)
-        col_upper = np.full(n_cols, INF)
+        col_lower = _filled(n_cols, -INF)
         col_lower[first:] = 0.0
+        col_upper = _filled(n_cols, INF)
     else:
         first = n_theta
-        col_lower = np.full(n_cols, -INF)
-        col_upper = np.full(n_cols, INF)
+        col_lower = _filled(n_cols, -INF)
+        col_upper = _filled(n_cols, INF)
         col_upper[n_theta : n_theta + n_slack] = 0.0
     cost = np.zeros(n_cols)
     cost[first : first + n_h] = w_h
     cost[first + n_h] = w_v
-    col_lower[n_theta + n_slack : n_theta + n_slack + n_extra] = 0.0  # multipliers λ, μ, ν ≥ 0
+    if n_extra:
+        col_lower[n_theta + n_slack : n_theta + n_slack + n_extra] = 0.0  # multipliers λ, μ, ν ≥ 0
     indptr, indices, values = dense_to_csr(dense)
     return LpTemplate(cost, indptr, indices, values, col_lower, col_upper, lower, equality, base, per_h, per_v,
-                      n_theta, n_h)  # fmt: skip
+                      n_theta, n_h, vertex_rows)  # fmt: skip
 
 
 def vertex_template(problem: CellProblem, L: np.ndarray, u_max: float | None, w_h: float = 1.0, w_v: float = 1.0,
                     least_violation: bool = False) -> LpTemplate:  # fmt: skip
-    """The vertex form of (P) with open constants (see :func:`vertex_lp`)."""
+    """The vertex form of (P) with open constants (see :func:`vertex_lp`).
+
+    Groups ``g`` in order: the ``h`` barrier rows (``d = −n_k``), the CLF (``d = z``), then
+    the box as two ranged groups ``−u_max ≤ e_iᵀu ≤ u_max`` (``d = e_1, e_2``). Row ``g·p + q``
+    reads ``d_gᵀu(v_q) − S_g ≤ r_g − ρ_gᵀv_q``, that is ``c_h·h_k(v_q)``, ``−c_v·V(v_q)`` or
+    ``u_max``.
+    """
     V = problem.vertices
     p, n_theta = len(V), L.shape[2]
     n_h = len(problem.cbf_q)
     n_slack = n_h + 1
-    D = _directions(problem, u_max is not None)
-    n_groups = len(D)
+    box = 2 if u_max is not None else 0
+    n_groups = n_slack + box
+    D = np.empty((n_groups, 2))
+    np.negative(problem.cbf_n, out=D[:n_h])
+    D[n_h] = problem.z
+    D[n_slack:] = _EYE2[:box]
     W = np.empty((p, 3))  # u(v_q) = [M, a] @ W[q]
     np.negative(V, out=W[:, :2])
     W[:, 2] = 1.0
-    # the coefficient of θ_j in d_gᵀu(v_q) is Σ_ic d_gi W_qc L_icj
-    P = (W @ L.transpose(1, 0, 2).reshape(3, 2 * n_theta)).reshape(p, 2, n_theta)
-    dense = np.zeros((n_groups, p, n_theta + n_slack))
-    dense[:, :, :n_theta] = (D @ P.transpose(1, 0, 2).reshape(2, p * n_theta)).reshape(n_groups, p, n_theta)
-    dense[range(n_slack), :, range(n_theta, n_theta + n_slack)] = -1.0
+    # coefficient of θ_j in d_gᵀu(v_q): Σ_c W_qc (Σ_i d_gi L_icj)
+    DL = (D @ L.reshape(2, 3 * n_theta)).reshape(n_groups, 3, n_theta)
     rows = n_groups * p
-    # right-hand sides r_g − ρ_gᵀv_q: c_h·h_k(v_q), −c_v·V(v_q), u_max
+    coef = (W @ DL).reshape(rows, n_theta)
+    dense = np.zeros((rows, n_theta + n_slack))
+    dense[:, :n_theta] = coef
+    dense[: n_slack * p, n_theta:] = _slack_block(n_slack, p)
     per_h = np.zeros(rows)
-    per_h[: n_h * p] = (problem.cbf_n @ V.T + problem.cbf_q[:, None]).ravel()
+    if n_h:
+        per_h[: n_h * p] = (problem.cbf_n @ V.T + problem.cbf_q[:, None]).ravel()  # h_k(v_q)
     per_v = np.zeros(rows)
-    per_v[n_h * p : n_slack * p] = (problem.x_j - V) @ problem.z
+    per_v[n_h * p : n_slack * p] = (problem.x_j - V) @ problem.z  # −V(v_q)
     base = np.zeros(rows)
-    base[n_slack * p :] = u_max if u_max is not None else 0.0
-    return _template(dense.reshape(rows, -1), np.full(rows, -INF), None, base, per_h, per_v, n_theta, n_h, 0,
-                     w_h, w_v, least_violation)  # fmt: skip
+    lower = _filled(rows, -INF)
+    if box:
+        base[n_slack * p :] = u_max
+        lower[n_slack * p :] = -u_max
+    return _template(dense, lower, None, base, per_h, per_v, n_theta, n_h, 0, w_h, w_v, least_violation, coef)
+
+
+def _slack_block(n_slack: int, p: int) -> np.ndarray:
+    """``−1`` in column ``g`` of the ``p`` rows of group ``g``: shape (n_slack·p, n_slack)."""
+    return np.repeat(-np.eye(n_slack), p, axis=0)
 
 
 def dual_template(problem: CellProblem, L: np.ndarray, u_max: float | None, w_h: float = 1.0, w_v: float = 1.0,
                   least_violation: bool = False) -> LpTemplate:  # fmt: skip
-    """The dual form of (P) with open constants (see :func:`dual_lp`)."""
+    """The dual form of (P) with open constants (see :func:`dual_lp`).
+
+    Groups: the ``h`` barrier rows (``d = −n_k``), the CLF (``d = z``), then the four box
+    sides ``e_r``, each with its own multipliers.
+    """
     A, b = problem.A, problem.b
     m = len(b)
     n_theta = L.shape[2]
     n_h = len(problem.cbf_q)
     n_slack = n_h + 1
-    D = _directions(problem, u_max is not None)
+    D = np.concatenate([-problem.cbf_n, problem.z[None, :]] + ([BOX_DIRECTIONS] if u_max is not None else []))
     n_groups = len(D)
     n_mult = n_groups * m
     head = np.zeros((n_groups, 3, n_theta + n_slack))
-    head[:, :2, :n_theta] = np.einsum("gi,icj->gcj", D, L[:, :2, :])  # Mᵀd
-    head[:, 2, :n_theta] = D @ L[:, 2, :]  # dᵀa
+    head[:, :, :n_theta] = (D @ L.reshape(2, 3 * n_theta)).reshape(n_groups, 3, n_theta)  # Mᵀd and dᵀa
     head[range(n_slack), 2, range(n_theta, n_theta + n_slack)] = -1.0
     lam = np.zeros((n_groups, 3, n_groups, m))
     g = np.arange(n_groups)
@@ -443,7 +480,7 @@ def dual_template(problem: CellProblem, L: np.ndarray, u_max: float | None, w_h:
     base[n_slack:, 2] = u_max if u_max is not None else 0.0
     equality = np.ones((n_groups, 3), bool)
     equality[:, 2] = False
-    return _template(dense, np.full(3 * n_groups, -INF), equality.ravel(), base.ravel(), per_h.ravel(),
+    return _template(dense, _filled(3 * n_groups, -INF), equality.ravel(), base.ravel(), per_h.ravel(),
                      per_v.ravel(), n_theta, n_h, n_mult, w_h, w_v, least_violation)  # fmt: skip
 
 
@@ -468,8 +505,8 @@ def vertex_lp(problem: CellProblem, L: np.ndarray, c_h: float, c_v: float, u_max
     Returns
     -------
     CellLp
-        Rows: for each group (barrier rows, CLF, then the four box sides), one row per
-        vertex ``q``: ``d_gᵀu(v_q) − S_g ≤ r_g − ρ_gᵀv_q``.
+        Rows (see :func:`vertex_template`): per group one row per vertex; the box as
+        ranged rows ``−u_max ≤ u_i(v_q) ≤ u_max``.
     """
     return vertex_template(problem, L, u_max, w_h, w_v, least_violation).instantiate(c_h, c_v)
 
@@ -600,22 +637,22 @@ def cell_constants(problem: CellProblem, kappa: float, u_max: float) -> tuple[fl
     ArtifactError
         If ``V ≤ 0`` at every vertex (``z`` does not point into the cell).
     """
-    h_scale, v_scale = _constant_scales(problem)
+    V = problem.vertices
+    h_values = problem.cbf_n @ V.T + problem.cbf_q[:, None]
+    h_scale, v_scale = _constant_scales(V, h_values, (V - problem.x_j) @ problem.z)
     return kappa * u_max / h_scale, kappa * u_max / v_scale
 
 
-def _constant_scales(problem: CellProblem) -> tuple[float, float]:
-    """The denominators ``max(δ, max −h)`` (NaN without barrier rows) and ``max V`` of :func:`cell_constants`."""
-    V = problem.vertices
-    v_max = float(((V - problem.x_j) @ problem.z).max())
+def _constant_scales(V: np.ndarray, h_values: np.ndarray, v_values: np.ndarray) -> tuple[float, float]:
+    """Denominators ``max(δ, max −h)`` (NaN without barrier rows) and ``max V`` of :func:`cell_constants`."""
+    v_max = float(v_values.max())
     if not v_max > 0:
         raise ArtifactError("exit_dir does not point into the cell (V ≤ 0 at every vertex)", field="exit_dir")
-    if len(problem.cbf_q) == 0:
+    if h_values.size == 0:
         return math.nan, v_max
     diff = V[:, None, :] - V[None, :, :]
     diam = math.sqrt(float((diff * diff).sum(axis=2).max()))
-    worst = -float((V @ problem.cbf_n.T + problem.cbf_q).min())
-    return max(DELTA_FRACTION * diam, worst), v_max
+    return max(DELTA_FRACTION * diam, -float(h_values.min())), v_max
 
 
 def solve_cell(problem: CellProblem, params: Params, solver: LpSolver) -> CellSolution:
@@ -633,14 +670,17 @@ def solve_cell(problem: CellProblem, params: Params, solver: LpSolver) -> CellSo
     -------
     CellSolution
         Status 0 (first attempt), 1 (after halvings), 2 (least violation) or 3 (unbounded
-        or solver error: the gain is then zero). Margins are recomputed from ``K``.
+        or solver error: the gain is then zero). Margins are recomputed at the vertices
+        from ``K`` (equal to :func:`vertex_margins`).
     """
     space = "field" if params.gain_structure == "full" else params.gain_structure
-    make = vertex_template if params.lp_form == "vertex" else dual_template
     L = field_map(space, problem.landmarks)
-    u_max = params.u_max
-    h_scale, v_scale = _constant_scales(problem)
-    template = make(problem, L, u_max, params.w_h, params.w_v)
+    u_max, n_h, p = params.u_max, len(problem.cbf_q), len(problem.vertices)
+    checker = vertex_template(problem, L, u_max, params.w_h, params.w_v)
+    template = checker if params.lp_form == "vertex" else dual_template(problem, L, u_max, params.w_h, params.w_v)
+    h_scale, v_scale = _constant_scales(
+        problem.vertices, checker.per_h[: n_h * p], -checker.per_v[n_h * p : (n_h + 1) * p]
+    )
     status, attempts = CellStatus.SOLVER_FAILURE, 0
     for attempt in range(params.halvings + 1):
         kappa = params.kappa * 0.5**attempt
@@ -653,8 +693,9 @@ def solve_cell(problem: CellProblem, params: Params, solver: LpSolver) -> CellSo
         if result.status is not LpStatus.INFEASIBLE:
             break
     else:
-        template = make(problem, L, u_max, params.w_h, params.w_v, least_violation=True)
-        result = template.instantiate(c_h, c_v).solve(solver)
+        build = vertex_template if params.lp_form == "vertex" else dual_template
+        lv = build(problem, L, u_max, params.w_h, params.w_v, least_violation=True)
+        result = lv.instantiate(c_h, c_v).solve(solver)
         attempts += 1
         if result.status is LpStatus.OPTIMAL:
             status = CellStatus.NOT_CERTIFIED
@@ -662,9 +703,32 @@ def solve_cell(problem: CellProblem, params: Params, solver: LpSolver) -> CellSo
         K = gain_from_theta(space, result.x[: L.shape[2]], problem.landmarks)
     else:
         status, K = CellStatus.SOLVER_FAILURE, np.zeros((2, 2 * len(problem.landmarks)))
-    m = vertex_margins(K, problem.landmarks, problem.vertices, problem.z, problem.x_j, problem.cbf_n,
-                       problem.cbf_q, c_h, c_v, u_max)  # fmt: skip
-    return CellSolution(status, K, c_h, c_v, m.cbf, m.clf, attempts, kappa, result.objective)
+    margin_h, margin_v = _template_margins(checker, space, K, problem.landmarks, c_h, c_v, p)
+    return CellSolution(status, K, c_h, c_v, margin_h, margin_v, attempts, kappa, result.objective)
+
+
+def _template_margins(checker: LpTemplate, space: str, K, landmarks, c_h, c_v, p) -> tuple[float, float]:
+    """``max_k S_h,k`` and ``S_V`` of the gain ``K`` at the vertices, through the vertex rows of ``checker``.
+
+    The field ``[M, a] = [K𝟙, Kℓ]`` (or, in gain space, ``K``'s free entries) is evaluated on
+    the rows ``d_gᵀu(v_q) ≤ r_g − ρ_gᵀv_q`` of the vertex form; the slack of group ``g`` is
+    the largest excess over its ``p`` rows. Same numbers as :func:`vertex_margins`.
+    """
+    if space == "field":
+        theta = np.empty((2, 3))
+        theta[:, :2] = K.reshape(2, -1, 2).sum(axis=1)
+        theta[:, 2] = K @ landmarks.ravel()
+        theta = theta.ravel()
+    else:
+        theta = theta_from_gain(space, K)
+    n_h = checker.n_h
+    rows = (n_h + 1) * p
+    excess = checker.vertex_rows[:rows] @ theta
+    excess -= checker.per_v[:rows] * c_v
+    if n_h:
+        excess -= checker.per_h[:rows] * c_h
+    worst = excess.reshape(n_h + 1, p).max(axis=1)
+    return (float(worst[:n_h].max()) if n_h else math.nan), float(worst[n_h])
 
 
 def goal_cell_solution(vertices: np.ndarray, goal: np.ndarray, landmarks: np.ndarray, cbf_n: np.ndarray,
