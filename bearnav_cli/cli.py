@@ -451,13 +451,13 @@ def inspect_command(artifact: Path = typer.Argument(..., help="Any bearnav artif
         return
     stage = f"stage {manifest['stage']} v{manifest['stage_version']}"
     out.print(f"[bold]{artifact}[/bold]  {manifest['schema']}  ({stage})")
-    out.print(f"summary   {manifest.get('summary', '')}", highlight=False)
-    out.print(f"params    {json.dumps(manifest.get('params', {}), sort_keys=True)}", highlight=False)
+    out.print(f"summary   {manifest.get('summary', '')}", highlight=False, markup=False)
+    out.print(f"params    {json.dumps(manifest.get('params', {}), sort_keys=True)}", highlight=False, markup=False)
     inp = manifest.get("input", {})
     out.print(f"input     {inp.get('path')}  sha256 {str(inp.get('content_sha256'))[:16]}…", highlight=False)
     out.print(f"content   sha256 {manifest['content_sha256'][:16]}…  key {manifest['key'][:16]}…", highlight=False)
     if manifest.get("stats"):
-        out.print(f"stats     {json.dumps(manifest['stats'], sort_keys=True)}", highlight=False)
+        out.print(f"stats     {json.dumps(manifest['stats'], sort_keys=True)}", highlight=False, markup=False)
     software = ", ".join(f"{k} {v}" for k, v in manifest.get("software", {}).items())
     out.print(f"software  {software}  elapsed {manifest.get('elapsed_s', 0):.3f} s", highlight=False)
 

@@ -9,12 +9,16 @@ modelling layer). Problems have the form::
     subject to  row_lower ≤ A x ≤ row_upper,   col_lower ≤ x ≤ col_upper
 
 with ``A`` given row-wise (CSR: ``indptr``, ``indices``, ``values``) and
-``±`` :data:`INF` for missing bounds.
+``±`` :data:`INF` for missing bounds. The model reaches HiGHS in one
+``Highs.passModel`` call: the array form (numpy buffers handed over as they are)
+when this highspy has it, else a ``HighsLp`` with a ``kRowwise`` matrix
+(:func:`highs_lp`), whose attributes are converted element by element.
 """
 
 from __future__ import annotations
 
 import enum
+import functools
 import logging
 from dataclasses import dataclass
 
@@ -27,16 +31,18 @@ log = logging.getLogger(__name__)
 INF: float = float(highspy.kHighsInf)
 
 #: Every HiGHS option bearnav sets, applied once when a :class:`LpSolver` is built.
-#: Dual simplex, one thread and a fixed seed make results reproducible; the tight
+#: The cell LPs are tiny (tens of rows): presolve costs more than it saves, and primal
+#: simplex ran about 25 % faster than dual simplex on the kitchen map's cells
+#: (bench/synthesize.py). One thread and a fixed seed make results reproducible; the tight
 #: tolerances let certificates be re-checked independently to 1e-7 (ALGORITHMS §8).
 OPTIONS: dict[str, object] = {
     "output_flag": False,
     "log_to_console": False,
     "solver": "simplex",
-    "simplex_strategy": 1,  # dual simplex, serial
+    "simplex_strategy": 4,  # primal simplex
+    "presolve": "off",
     "threads": 1,
     "random_seed": 0,
-    "presolve": "off",  # tiny LPs: presolve costs more than it saves (2-3x)
     "primal_feasibility_tolerance": 1e-9,
     "dual_feasibility_tolerance": 1e-9,
 }
@@ -70,12 +76,13 @@ class LpResult:
     objective: float
 
 
+# Enum members looked up once: a pybind11 enum attribute costs microseconds per access.
 _MS = highspy.HighsModelStatus
-_STATUS_MAP = {
-    int(_MS.kOptimal): LpStatus.OPTIMAL,
-    int(_MS.kInfeasible): LpStatus.INFEASIBLE,
-    int(_MS.kUnbounded): LpStatus.UNBOUNDED,
-}
+_OPTIMAL, _INFEASIBLE, _UNBOUNDED = int(_MS.kOptimal), int(_MS.kInfeasible), int(_MS.kUnbounded)
+_AMBIGUOUS = int(_MS.kUnboundedOrInfeasible)
+_MODEL_ERROR, _SOLVE_ERROR = int(_MS.kModelError), int(_MS.kSolveError)
+_ERROR = highspy.HighsStatus.kError
+_STATUS_MAP = {_OPTIMAL: LpStatus.OPTIMAL, _INFEASIBLE: LpStatus.INFEASIBLE, _UNBOUNDED: LpStatus.UNBOUNDED}
 
 
 _ROWWISE = int(highspy.MatrixFormat.kRowwise)
@@ -170,31 +177,31 @@ class LpSolver:
         n, m = len(cost), len(row_lower)
         model = (n, m, cost, A_indptr, A_indices, A_values, row_lower, row_upper, col_lower, col_upper)
         status = self._run(model)
-        if status == _MS.kUnboundedOrInfeasible and OPTIONS["presolve"] != "off":
+        if status == _AMBIGUOUS and OPTIONS["presolve"] != "off":
             self._set("presolve", "off")
             try:
                 status = self._run(model)
             finally:
                 self._set("presolve", OPTIONS["presolve"])
-        if status == _MS.kUnboundedOrInfeasible:  # still ambiguous: is the feasible set empty?
+        if status == _AMBIGUOUS:  # still ambiguous: is the feasible set empty?
             feasible = self._run((n, m, np.zeros(n)) + model[3:])
-            status = _MS.kUnbounded if feasible == _MS.kOptimal else feasible
-        outcome = _STATUS_MAP.get(int(status), LpStatus.ERROR)
+            status = _UNBOUNDED if feasible == _OPTIMAL else feasible
+        outcome = _STATUS_MAP.get(status, LpStatus.ERROR)
         if outcome is not LpStatus.OPTIMAL:
             if outcome is LpStatus.ERROR:
-                log.warning("HiGHS returned model status %s", self._highs.modelStatusToString(status))
+                log.warning("HiGHS returned model status %s", self._highs.modelStatusToString(_MS(status)))
             return LpResult(outcome, np.full(n, np.nan), float("nan"))
-        x = np.asarray(self._highs.getSolution().col_value, dtype=float)
+        x = np.array(self._highs.getSolution().col_value, dtype=float)
         return LpResult(outcome, x, float(self._highs.getObjectiveValue()))
 
-    def _run(self, model: tuple) -> highspy.HighsModelStatus:
-        """Pass the model and run; the model status, or an error status if a call fails."""
+    def _run(self, model: tuple) -> int:
+        """Pass the model and run; the model status as an int, or an error status if a call fails."""
         self.solves += 1
-        if self._highs.passModel(*self._pass_args(model)) == highspy.HighsStatus.kError:
-            return _MS.kModelError
-        if self._highs.run() == highspy.HighsStatus.kError:
-            return _MS.kSolveError
-        return self._highs.getModelStatus()
+        if self._highs.passModel(*self._pass_args(model)) == _ERROR:
+            return _MODEL_ERROR
+        if self._highs.run() == _ERROR:
+            return _SOLVE_ERROR
+        return int(self._highs.getModelStatus())
 
     def _pass_args(self, model: tuple) -> tuple:
         """Arguments of ``Highs.passModel``: the raw-array form when this highspy has it, else a ``HighsLp``.
@@ -206,8 +213,16 @@ class LpSolver:
         if self._raw:
             return (n, m, len(values), _ROWWISE, _MINIMIZE, 0.0, _f64(cost), _f64(col_lower), _f64(col_upper),
                     _f64(row_lower), _f64(row_upper), _i32(indptr), _i32(indices), _f64(values),
-                    np.zeros(n, np.int32))  # fmt: skip
+                    _continuous(n))  # fmt: skip
         return (highs_lp(*model),)
+
+
+@functools.lru_cache(maxsize=64)
+def _continuous(n: int) -> np.ndarray:
+    """Integrality of ``n`` continuous columns (read-only, shared)."""
+    out = np.zeros(n, np.int32)
+    out.setflags(write=False)
+    return out
 
 
 def _f64(a: np.ndarray) -> np.ndarray:

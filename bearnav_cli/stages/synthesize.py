@@ -12,15 +12,25 @@ Every condition of (P) is a *group* ``g`` with a direction ``d_g``, a constant v
     CLF:      d = z,     ρ = c_v·z,   r = c_v·zᵀx_j        (slack S_V)
     input r:  d = e_r,   ρ = 0,       r = u_max            (no slack)
 
-The vertex form states the group at every vertex; the dual form introduces
-``λ_g ≥ 0`` with ``A_xᵀλ_g + Mᵀd_g = ρ_g`` and ``b_xᵀλ_g + d_gᵀa − S_g ≤ r_g``. The
-variables ``θ`` are either the field ``F = [M, a]`` (field space, 6 numbers) or the
-gain entries allowed by the gain structure; a fixed linear map ``L`` gives
-``F = L θ`` (:func:`field_map`), so one builder serves every combination.
+The vertex form states the group at every vertex (the box as two ranged rows per
+vertex); the dual form introduces ``λ_g ≥ 0`` with ``A_xᵀλ_g + Mᵀd_g = ρ_g`` and
+``b_xᵀλ_g + d_gᵀa − S_g ≤ r_g``. The variables ``θ`` are either the field
+``F = [M, a]`` (field space, 6 numbers) or the gain entries allowed by the gain
+structure; a fixed linear map ``L`` gives ``F = L θ`` (:func:`field_map`), so one
+builder serves every combination. Only the row bounds depend on ``c_h`` and ``c_v``
+(:class:`LpTemplate`), so a κ halving re-solves without rebuilding the matrix.
+
+Every stored margin is recomputed at the vertices from the stored gain, and equals the
+independent check :func:`vertex_margins` (ALGORITHMS §8). Per-cell building blocks
+(:func:`solve_cell`, :func:`goal_cell_solution`, the LP builders) are public and need
+no artifact; :func:`run` applies them to :class:`~bearnav_cli.datatypes.Cells` in three
+passes (build every LP, solve them all, recover the gains), which keeps each kind of
+code cache-warm.
 """
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
 import time
@@ -38,8 +48,6 @@ log = logging.getLogger(__name__)
 
 GAIN_STRUCTURES = ("full", "diag", "scalar")
 LP_FORMS = ("vertex", "dual")
-#: Variable spaces of the LP builders: the field ``[M, a]`` or a gain structure.
-SPACES = ("field",) + GAIN_STRUCTURES
 #: ``δ = DELTA_FRACTION · diam(X)`` floors the worst barrier violation in ``c_h`` (§5.3).
 DELTA_FRACTION = 0.05
 #: Warn when ``cond(GᵀG)`` exceeds this (nearly coincident landmarks, §5.6).
@@ -131,7 +139,7 @@ class CellProblem:
     x_j : ndarray, shape (2,)
         Exit point (the parent node).
     cbf_n, cbf_q : ndarray, shapes (h, 2), (h,)
-        Barrier rows ``h_k(x) = n_kᵀx + q_k``; ``h = 0`` rows allowed.
+        Barrier rows ``h_k(x) = n_kᵀx + q_k``, safe where ``h_k ≥ 0``; there may be none.
     landmarks : ndarray, shape (n, 2)
         Positions of the landmarks the controller uses, ``n ≥ 2``.
     """
@@ -146,9 +154,14 @@ class CellProblem:
     landmarks: np.ndarray
 
     def __post_init__(self) -> None:
-        for name, shape in (("vertices", (-1, 2)), ("A", (-1, 2)), ("b", (-1,)), ("z", (2,)), ("x_j", (2,)),
-                            ("cbf_n", (-1, 2)), ("cbf_q", (-1,)), ("landmarks", (-1, 2))):  # fmt: skip
-            object.__setattr__(self, name, np.asarray(getattr(self, name), dtype=float).reshape(shape))
+        for name, shape in _PROBLEM_SHAPES:
+            value = getattr(self, name)
+            if type(value) is not np.ndarray or value.dtype != np.float64 or value.ndim != len(shape):
+                object.__setattr__(self, name, np.asarray(value, dtype=float).reshape(shape))
+
+
+_PROBLEM_SHAPES = (("vertices", (-1, 2)), ("A", (-1, 2)), ("b", (-1,)), ("z", (2,)), ("x_j", (2,)),
+                   ("cbf_n", (-1, 2)), ("cbf_q", (-1,)), ("landmarks", (-1, 2)))  # fmt: skip
 
 
 def landmark_matrix(landmarks: np.ndarray) -> np.ndarray:
@@ -251,18 +264,39 @@ def min_norm_gain(M: np.ndarray, a: np.ndarray, landmarks: np.ndarray) -> np.nda
     Returns
     -------
     ndarray, shape (2, 2n)
+
+    Raises
+    ------
+    ArtifactError
+        If all landmarks coincide (``G`` loses rank; map landmarks are distinct).
     """
-    n = len(landmarks)
-    mean = landmarks.sum(axis=0) / n
-    delta = landmarks - mean
-    sigma = float(np.vdot(delta, delta))
-    cond = _gram_condition(n, mean, sigma)
+    # A handful of numbers per cell: plain floats are several times faster than numpy calls here.
+    points = np.asarray(landmarks, float).tolist()
+    n = len(points)
+    mx = my = 0.0
+    for x, y in points:
+        mx += x
+        my += y
+    mx, my = mx / n, my / n
+    dx, dy, sigma = [], [], 0.0
+    for x, y in points:
+        dx.append(x - mx)
+        dy.append(y - my)
+        sigma += (x - mx) ** 2 + (y - my) ** 2
+    if not sigma > 0:
+        raise ArtifactError("the cell's landmarks coincide: no gain realises a general field", field="landmarks")
+    cond = _gram_condition(n, (mx, my), sigma)
     if not cond <= COND_WARNING:
         log.warning("nearly coincident landmarks: cond(GᵀG) = %.3g", cond)
-    offset = (a - M @ mean) / sigma if sigma > 0 else np.full(2, np.nan)
-    K = np.multiply.outer(offset, delta)  # (2, n, 2)
-    K += M[:, None, :] / n
-    return K.reshape(2, 2 * n)
+    (m00, m01), (m10, m11) = np.asarray(M, float).tolist()
+    a0, a1 = np.asarray(a, float).tolist()
+    o0 = (a0 - m00 * mx - m01 * my) / sigma
+    o1 = (a1 - m10 * mx - m11 * my) / sigma
+    row0, row1 = [], []
+    for ex, ey in zip(dx, dy, strict=True):  # K_k = M/n + (a − M l̄) δ_kᵀ/σ
+        row0 += (m00 / n + o0 * ex, m01 / n + o0 * ey)
+        row1 += (m10 / n + o1 * ex, m11 / n + o1 * ey)
+    return np.array([row0, row1])
 
 
 def gram_condition(landmarks: np.ndarray) -> float:
@@ -273,7 +307,7 @@ def gram_condition(landmarks: np.ndarray) -> float:
     return _gram_condition(len(landmarks), mean, float((delta * delta).sum()))
 
 
-def _gram_condition(n: int, mean: np.ndarray, sigma: float) -> float:
+def _gram_condition(n: int, mean, sigma: float) -> float:
     """``GᵀG = [[nI, s], [sᵀ, t]]`` (``s = n·mean``, ``t = σ + n‖mean‖²``) has the eigenvalue ``n``
     and the two of ``[[n, ‖s‖], [‖s‖, t]]``: ``λ₊`` and ``λ₋ = nσ/λ₊``."""
     norm_s = n * math.hypot(mean[0], mean[1])
@@ -323,11 +357,12 @@ class CellLp:
 class LpTemplate:
     """A cell's LP with the constants left open: only the row bounds depend on ``c_h`` and ``c_v``.
 
-    ``row_upper = base + c_h·per_h + c_v·per_v``; ``row_lower`` equals ``row_upper`` on the
-    equality rows and ``lower`` elsewhere. The matrix, costs and column bounds are shared by
-    every :meth:`instantiate` call, so κ halvings cost only a few vector operations.
-    ``vertex_rows``, for the vertex form only, is the dense ``θ`` block of the first
-    ``groups × p`` rows (group-major), used to re-check a gain at the vertices.
+    Rows come in three blocks: those scaled by ``c_h``, those scaled by ``c_v``, then
+    constant ones, so ``row_upper = [c_h·rhs_h, c_v·rhs_v, rhs_const]``. ``row_lower`` equals
+    ``row_upper`` on the equality rows and ``lower`` elsewhere. The matrix, costs and column
+    bounds are shared by every :meth:`instantiate` call, so κ halvings cost a few vector
+    operations. ``vertex_rows`` (vertex form only) is the dense ``θ`` block of the rows, used
+    to re-check a gain at the vertices.
     """
 
     cost: np.ndarray
@@ -338,19 +373,22 @@ class LpTemplate:
     col_upper: np.ndarray
     lower: np.ndarray
     equality: np.ndarray | None
-    base: np.ndarray
-    per_h: np.ndarray
-    per_v: np.ndarray
+    rhs_h: np.ndarray
+    rhs_v: np.ndarray
+    rhs_const: np.ndarray
     n_theta: int
     n_h: int
     vertex_rows: np.ndarray | None = None
 
-    def instantiate(self, c_h: float, c_v: float) -> CellLp:
-        """The LP with the constants ``c_h`` (ignored without barrier rows) and ``c_v``."""
-        upper = self.per_v * c_v
-        upper += self.base
+    def row_upper(self, c_h: float, c_v: float) -> np.ndarray:
+        """Upper row bounds for the constants ``c_h`` (ignored without barrier rows) and ``c_v``."""
         if self.n_h:
-            upper += self.per_h * c_h
+            return np.concatenate((self.rhs_h * c_h, self.rhs_v * c_v, self.rhs_const))
+        return np.concatenate((self.rhs_v * c_v, self.rhs_const))
+
+    def instantiate(self, c_h: float, c_v: float) -> CellLp:
+        """The LP with the constants ``c_h`` and ``c_v``."""
+        upper = self.row_upper(c_h, c_v)
         lower = self.lower if self.equality is None else np.where(self.equality, upper, self.lower)
         return CellLp(self.cost, self.A_indptr, self.A_indices, self.A_values, lower, upper, self.col_lower,
                       self.col_upper, self.n_theta, self.n_h)  # fmt: skip
@@ -362,40 +400,67 @@ def _filled(n: int, value: float) -> np.ndarray:
     return out
 
 
-def _template(dense, lower, equality, base, per_h, per_v, n_theta, n_h, n_extra, w_h, w_v, least_violation,
-              vertex_rows=None) -> LpTemplate:  # fmt: skip
-    """Add slack bounds, the objective and (for least violation) the ``t`` variables; compress the matrix."""
-    n_slack = n_h + 1
-    n_rows, n_cols = dense.shape
-    if least_violation:  # slacks free, t ≥ S, t ≥ 0, minimise Σ w t
-        extra = np.zeros((n_rows + n_slack, n_cols + n_slack))
-        extra[:n_rows, :n_cols] = dense
-        extra[n_rows:, n_theta : n_theta + n_slack] = -np.eye(n_slack)
-        extra[n_rows:, n_cols:] = np.eye(n_slack)
-        dense = extra
-        pad = np.zeros(n_slack)
-        lower = np.concatenate([lower, pad])
-        if equality is not None:
-            equality = np.concatenate([equality, np.zeros(n_slack, bool)])
-        base = np.concatenate([base, _filled(n_slack, INF)])
-        per_h, per_v = np.concatenate([per_h, pad]), np.concatenate([per_v, pad])
-        first, n_cols = n_cols, n_cols + n_slack
-        col_lower = _filled(n_cols, -INF)
-        col_lower[first:] = 0.0
-        col_upper = _filled(n_cols, INF)
-    else:
-        first = n_theta
-        col_lower = _filled(n_cols, -INF)
-        col_upper = _filled(n_cols, INF)
-        col_upper[n_theta : n_theta + n_slack] = 0.0
+def _frozen(*arrays: np.ndarray) -> tuple[np.ndarray, ...]:
+    for array in arrays:
+        array.setflags(write=False)
+    return arrays
+
+
+@functools.lru_cache(maxsize=256)
+def _slack_columns(n_theta: int, n_h: int, w_h: float, w_v: float) -> tuple[np.ndarray, ...]:
+    """Bounds and costs of the columns ``(θ, S_h, S_V)``: θ free, ``S ≤ 0``, cost ``w`` on the slacks."""
+    n_cols = n_theta + n_h + 1
+    col_upper = _filled(n_cols, INF)
+    col_upper[n_theta:] = 0.0
     cost = np.zeros(n_cols)
-    cost[first : first + n_h] = w_h
-    cost[first + n_h] = w_v
-    if n_extra:
-        col_lower[n_theta + n_slack : n_theta + n_slack + n_extra] = 0.0  # multipliers λ, μ, ν ≥ 0
-    indptr, indices, values = dense_to_csr(dense)
-    return LpTemplate(cost, indptr, indices, values, col_lower, col_upper, lower, equality, base, per_h, per_v,
-                      n_theta, n_h, vertex_rows)  # fmt: skip
+    cost[n_theta:-1] = w_h
+    cost[-1] = w_v
+    return _frozen(_filled(n_cols, -INF), col_upper, cost)
+
+
+@functools.lru_cache(maxsize=256)
+def _vertex_row_bounds(slack_rows: int, box_rows: int, u_max: float) -> tuple[np.ndarray, ...]:
+    """``lower`` of the vertex rows (−∞, then −u_max on the box rows) and the box rows' ``rhs_const``."""
+    lower = _filled(slack_rows + box_rows, -INF)
+    lower[slack_rows:] = -u_max
+    return _frozen(lower, _filled(box_rows, u_max))
+
+
+@functools.lru_cache(maxsize=256)
+def _slack_block(n_slack: int, p: int, rows: int) -> np.ndarray:
+    """``−1`` in column ``g`` of the ``p`` rows of group ``g``, zero below row ``n_slack·p``: shape (rows, n_slack)."""
+    block = np.zeros((rows, n_slack))
+    block[: n_slack * p] = np.repeat(-np.eye(n_slack), p, axis=0)
+    return _frozen(block)[0]
+
+
+def _box_pattern(L: np.ndarray) -> tuple[tuple[int, ...], tuple[int, ...]]:
+    """The θ each field row can move: ``(columns of u_1, columns of u_2)``."""
+    moves = np.any(L != 0, axis=1)  # (2, n_θ)
+    return tuple(np.flatnonzero(moves[0]).tolist()), tuple(np.flatnonzero(moves[1]).tolist())
+
+
+_FIELD_PATTERN = ((0, 1, 2), (3, 4, 5))
+
+
+@functools.lru_cache(maxsize=512)
+def _vertex_sparsity(pattern, n_theta: int, n_h: int, p: int, box: int) -> tuple[np.ndarray, ...]:
+    """CSR ``indptr``, ``indices`` and the positions in the dense ``(rows, n_θ + h + 1)`` block.
+
+    Rows of the barrier and CLF groups hold every θ a field row can move plus their slack;
+    the box rows of ``u_i`` hold the θ of ``pattern[i]`` only.
+    """
+    n_slack = n_h + 1
+    n_cols = n_theta + n_slack
+    both = sorted(set(pattern[0]) | set(pattern[1]))
+    row_cols = [both + [n_theta + g] for g in range(n_slack) for _ in range(p)]
+    row_cols += [list(pattern[i]) for i in range(box) for _ in range(p)]
+    counts = [len(c) for c in row_cols]
+    indptr = np.zeros(len(row_cols) + 1, np.int32)
+    indptr[1:] = np.cumsum(counts)
+    indices = np.array([c for cols in row_cols for c in cols], np.int32)
+    gather = np.repeat(np.arange(len(row_cols)) * n_cols, counts) + indices
+    return _frozen(indptr, indices, gather)
 
 
 def vertex_template(problem: CellProblem, L: np.ndarray, u_max: float | None, w_h: float = 1.0, w_v: float = 1.0,
@@ -403,9 +468,8 @@ def vertex_template(problem: CellProblem, L: np.ndarray, u_max: float | None, w_
     """The vertex form of (P) with open constants (see :func:`vertex_lp`).
 
     Groups ``g`` in order: the ``h`` barrier rows (``d = −n_k``), the CLF (``d = z``), then
-    the box as two ranged groups ``−u_max ≤ e_iᵀu ≤ u_max`` (``d = e_1, e_2``). Row ``g·p + q``
-    reads ``d_gᵀu(v_q) − S_g ≤ r_g − ρ_gᵀv_q``, that is ``c_h·h_k(v_q)``, ``−c_v·V(v_q)`` or
-    ``u_max``.
+    the box as two ranged groups ``−u_max ≤ e_iᵀu ≤ u_max``. Row ``g·p + q`` reads
+    ``d_gᵀu(v_q) − S_g ≤ r_g − ρ_gᵀv_q``, that is ``c_h·h_k(v_q)``, ``−c_v·V(v_q)`` or ``u_max``.
     """
     V = problem.vertices
     p, n_theta = len(V), L.shape[2]
@@ -420,29 +484,25 @@ def vertex_template(problem: CellProblem, L: np.ndarray, u_max: float | None, w_
     W = np.empty((p, 3))  # u(v_q) = [M, a] @ W[q]
     np.negative(V, out=W[:, :2])
     W[:, 2] = 1.0
-    # coefficient of θ_j in d_gᵀu(v_q): Σ_c W_qc (Σ_i d_gi L_icj)
+    # the coefficient of θ_j in d_gᵀu(v_q) is Σ_c W_qc (Σ_i d_gi L_icj)
     DL = (D @ L.reshape(2, 3 * n_theta)).reshape(n_groups, 3, n_theta)
     rows = n_groups * p
     coef = (W @ DL).reshape(rows, n_theta)
-    dense = np.zeros((rows, n_theta + n_slack))
+    rhs_h = (problem.cbf_n @ V.T + problem.cbf_q[:, None]).ravel()  # h_k(v_q), barrier-major
+    rhs_v = (problem.x_j - V) @ problem.z  # −V(v_q)
+    lower, rhs_const = _vertex_row_bounds(n_slack * p, box * p, float(u_max) if box else 0.0)
+    dense = np.empty((rows, n_theta + n_slack))
     dense[:, :n_theta] = coef
-    dense[: n_slack * p, n_theta:] = _slack_block(n_slack, p)
-    per_h = np.zeros(rows)
-    if n_h:
-        per_h[: n_h * p] = (problem.cbf_n @ V.T + problem.cbf_q[:, None]).ravel()  # h_k(v_q)
-    per_v = np.zeros(rows)
-    per_v[n_h * p : n_slack * p] = (problem.x_j - V) @ problem.z  # −V(v_q)
-    base = np.zeros(rows)
-    lower = _filled(rows, -INF)
-    if box:
-        base[n_slack * p :] = u_max
-        lower[n_slack * p :] = -u_max
-    return _template(dense, lower, None, base, per_h, per_v, n_theta, n_h, 0, w_h, w_v, least_violation, coef)
-
-
-def _slack_block(n_slack: int, p: int) -> np.ndarray:
-    """``−1`` in column ``g`` of the ``p`` rows of group ``g``: shape (n_slack·p, n_slack)."""
-    return np.repeat(-np.eye(n_slack), p, axis=0)
+    dense[:, n_theta:] = _slack_block(n_slack, p, rows)
+    if least_violation:
+        return _template(dense, lower, None, rhs_h, rhs_v, rhs_const, n_theta, n_h, 0, w_h, w_v, True, coef)
+    # The sparsity pattern depends only on the sizes and on which θ each box side can move.
+    # Exact zeros inside it (a vertex on x = 0, say) are passed on explicitly; HiGHS drops them.
+    pattern = _FIELD_PATTERN if L is FIELD_MAP else _box_pattern(L)
+    indptr, indices, gather = _vertex_sparsity(pattern, n_theta, n_h, p, box)
+    col_lower, col_upper, cost = _slack_columns(n_theta, n_h, float(w_h), float(w_v))
+    return LpTemplate(cost, indptr, indices, dense.ravel()[gather], col_lower, col_upper, lower, None, rhs_h, rhs_v,
+                      rhs_const, n_theta, n_h, coef)  # fmt: skip
 
 
 def dual_template(problem: CellProblem, L: np.ndarray, u_max: float | None, w_h: float = 1.0, w_v: float = 1.0,
@@ -450,7 +510,7 @@ def dual_template(problem: CellProblem, L: np.ndarray, u_max: float | None, w_h:
     """The dual form of (P) with open constants (see :func:`dual_lp`).
 
     Groups: the ``h`` barrier rows (``d = −n_k``), the CLF (``d = z``), then the four box
-    sides ``e_r``, each with its own multipliers.
+    sides ``e_r``, each with its own multipliers ``λ_g ≥ 0`` (``m`` each).
     """
     A, b = problem.A, problem.b
     m = len(b)
@@ -468,20 +528,49 @@ def dual_template(problem: CellProblem, L: np.ndarray, u_max: float | None, w_h:
     lam[g, :2, g, :] = A.T
     lam[g, 2, g, :] = b
     dense = np.concatenate([head, lam.reshape(n_groups, 3, n_mult)], axis=2).reshape(3 * n_groups, -1)
-    # equalities A_xᵀλ_g + Mᵀd_g = ρ_g (ρ = c_h·d for CBF, c_v·z for CLF, 0 for the box);
-    # inequalities b_xᵀλ_g + d_gᵀa − S_g ≤ r_g (c_h·q_k, c_v·zᵀx_j, u_max)
-    per_h = np.zeros((n_groups, 3))
-    per_h[:n_h, :2] = D[:n_h]
-    per_h[:n_h, 2] = problem.cbf_q
-    per_v = np.zeros((n_groups, 3))
-    per_v[n_h, :2] = problem.z
-    per_v[n_h, 2] = problem.z @ problem.x_j
-    base = np.zeros((n_groups, 3))
-    base[n_slack:, 2] = u_max if u_max is not None else 0.0
+    # per group: equalities A_xᵀλ_g + Mᵀd_g = ρ_g (ρ = c_h·d for CBF, c_v·z for CLF, 0 for the box)
+    # and b_xᵀλ_g + d_gᵀa − S_g ≤ r_g (r = c_h·q_k, c_v·zᵀx_j, u_max)
+    rhs_h = np.column_stack([D[:n_h], problem.cbf_q]).ravel()
+    rhs_v = np.array([problem.z[0], problem.z[1], problem.z @ problem.x_j])
+    rhs_const = np.zeros((n_groups - n_slack, 3))
+    rhs_const[:, 2] = u_max if u_max is not None else 0.0
     equality = np.ones((n_groups, 3), bool)
     equality[:, 2] = False
-    return _template(dense, _filled(3 * n_groups, -INF), equality.ravel(), base.ravel(), per_h.ravel(),
-                     per_v.ravel(), n_theta, n_h, n_mult, w_h, w_v, least_violation)  # fmt: skip
+    return _template(dense, _filled(3 * n_groups, -INF), equality.ravel(), rhs_h, rhs_v, rhs_const.ravel(),
+                     n_theta, n_h, n_mult, w_h, w_v, least_violation)  # fmt: skip
+
+
+def _template(dense, lower, equality, rhs_h, rhs_v, rhs_const, n_theta, n_h, n_extra, w_h, w_v, least_violation,
+              vertex_rows=None) -> LpTemplate:  # fmt: skip
+    """Add column bounds, the objective and (for least violation) the ``t`` variables; compress the matrix."""
+    n_slack = n_h + 1
+    n_rows, n_cols = dense.shape
+    col_lower = _filled(n_cols, -INF)
+    col_upper = _filled(n_cols, INF)
+    col_lower[n_theta + n_slack : n_theta + n_slack + n_extra] = 0.0  # multipliers λ, μ, ν ≥ 0
+    cost = np.zeros(n_cols)
+    if least_violation:  # slacks free, t ≥ S, t ≥ 0, minimise Σ w t
+        extra = np.zeros((n_rows + n_slack, n_cols + n_slack))
+        extra[:n_rows, :n_cols] = dense
+        extra[n_rows:, n_theta : n_theta + n_slack] = -np.eye(n_slack)
+        extra[n_rows:, n_cols:] = np.eye(n_slack)
+        dense = extra
+        lower = np.concatenate([lower, np.zeros(n_slack)])
+        if equality is not None:
+            equality = np.concatenate([equality, np.zeros(n_slack, bool)])
+        rhs_const = np.concatenate([rhs_const, _filled(n_slack, INF)])
+        col_lower = np.concatenate([col_lower, np.zeros(n_slack)])
+        col_upper = np.concatenate([col_upper, _filled(n_slack, INF)])
+        cost = np.concatenate([cost, np.zeros(n_slack)])
+        first = n_cols
+    else:
+        col_upper[n_theta : n_theta + n_slack] = 0.0
+        first = n_theta
+    cost[first : first + n_h] = w_h
+    cost[first + n_h] = w_v
+    indptr, indices, values = dense_to_csr(dense)
+    return LpTemplate(cost, indptr, indices, values, col_lower, col_upper, lower, equality, rhs_h, rhs_v, rhs_const,
+                      n_theta, n_h, vertex_rows)  # fmt: skip
 
 
 def vertex_lp(problem: CellProblem, L: np.ndarray, c_h: float, c_v: float, u_max: float | None,
@@ -655,8 +744,110 @@ def _constant_scales(V: np.ndarray, h_values: np.ndarray, v_values: np.ndarray) 
     return max(DELTA_FRACTION * diam, -float(h_values.min())), v_max
 
 
+@dataclass(frozen=True)
+class PreparedCell:
+    """A cell's LP templates and constant scales, built before any solve (see :func:`prepare_cell`).
+
+    Attributes
+    ----------
+    problem : CellProblem
+    space : str
+        Variable space: ``field`` for the full gain, else the gain structure.
+    L : ndarray, shape (2, 3, n_θ)
+        The field map of ``space``.
+    checker : LpTemplate
+        The vertex-form template: solved when ``lp_form`` is ``vertex``; its rows re-check
+        the gain at the vertices in every case.
+    template : LpTemplate
+        The template that is solved (``checker`` itself, or the dual form).
+    h_scale, v_scale : float
+        ``c_h = κ u_max / h_scale`` (NaN without barrier rows) and ``c_v = κ u_max / v_scale``.
+    """
+
+    problem: CellProblem
+    space: str
+    L: np.ndarray
+    checker: LpTemplate
+    template: LpTemplate
+    h_scale: float
+    v_scale: float
+
+
+@dataclass(frozen=True)
+class SolveOutcome:
+    """What the κ loop of :func:`solve_prepared` ended with."""
+
+    status: CellStatus
+    result: LpResult
+    row_upper: np.ndarray  # of the checker's rows, with the final constants
+    c_h: float
+    c_v: float
+    kappa: float
+    attempts: int
+
+
+def prepare_cell(problem: CellProblem, params: Params) -> PreparedCell:
+    """Build a cell's LP templates and the denominators of its constants (no solve).
+
+    Raises
+    ------
+    ArtifactError
+        If ``z`` does not point into the cell.
+    """
+    space = "field" if params.gain_structure == "full" else params.gain_structure
+    L = field_map(space, problem.landmarks)
+    checker = vertex_template(problem, L, params.u_max, params.w_h, params.w_v)
+    if params.lp_form == "vertex":
+        template = checker
+    else:
+        template = dual_template(problem, L, params.u_max, params.w_h, params.w_v)
+    h_scale, v_scale = _constant_scales(problem.vertices, checker.rhs_h, -checker.rhs_v)
+    return PreparedCell(problem, space, L, checker, template, h_scale, v_scale)
+
+
+def solve_prepared(prepared: PreparedCell, params: Params, solver: LpSolver) -> SolveOutcome:
+    """SOLVE_CELL's loop (§5.3): halve ``κ`` while infeasible, then the least-violation LP."""
+    u_max = params.u_max
+    template = prepared.template
+    status, attempts = CellStatus.SOLVER_FAILURE, 0
+    for attempt in range(params.halvings + 1):
+        kappa = params.kappa * 0.5**attempt
+        c_h, c_v = kappa * u_max / prepared.h_scale, kappa * u_max / prepared.v_scale
+        lp = template.instantiate(c_h, c_v)
+        result = lp.solve(solver)
+        attempts += 1
+        if result.status is LpStatus.OPTIMAL:
+            status = CellStatus.CERTIFIED if attempt == 0 else CellStatus.RELAXED
+            break
+        if result.status is not LpStatus.INFEASIBLE:
+            break
+    else:
+        build = vertex_template if params.lp_form == "vertex" else dual_template
+        lv = build(prepared.problem, prepared.L, u_max, params.w_h, params.w_v, least_violation=True)
+        result = lv.instantiate(c_h, c_v).solve(solver)
+        attempts += 1
+        if result.status is LpStatus.OPTIMAL:
+            status = CellStatus.NOT_CERTIFIED
+    upper = lp.row_upper if template is prepared.checker else prepared.checker.row_upper(c_h, c_v)
+    return SolveOutcome(status, result, upper, c_h, c_v, kappa, attempts)
+
+
+def finish_cell(prepared: PreparedCell, outcome: SolveOutcome) -> CellSolution:
+    """The gain of the solved LP (Lemma 3 in field space; zero after a failure) and its re-checked margins."""
+    problem = prepared.problem
+    status, result = outcome.status, outcome.result
+    if result.status is LpStatus.OPTIMAL:
+        K = gain_from_theta(prepared.space, result.x[: prepared.L.shape[2]], problem.landmarks)
+    else:
+        status, K = CellStatus.SOLVER_FAILURE, np.zeros((2, 2 * len(problem.landmarks)))
+    margin_h, margin_v = _template_margins(prepared.checker, outcome.row_upper, prepared.space, K, problem.landmarks,
+                                           len(problem.vertices))  # fmt: skip
+    return CellSolution(status, K, outcome.c_h, outcome.c_v, margin_h, margin_v, outcome.attempts, outcome.kappa,
+                        result.objective)  # fmt: skip
+
+
 def solve_cell(problem: CellProblem, params: Params, solver: LpSolver) -> CellSolution:
-    """SOLVE_CELL of ALGORITHMS §5.3: halve ``κ`` while infeasible, then least violation.
+    """SOLVE_CELL of ALGORITHMS §5.3 for one cell: prepare, solve, recover the gain, re-check.
 
     Parameters
     ----------
@@ -673,46 +864,16 @@ def solve_cell(problem: CellProblem, params: Params, solver: LpSolver) -> CellSo
         or solver error: the gain is then zero). Margins are recomputed at the vertices
         from ``K`` (equal to :func:`vertex_margins`).
     """
-    space = "field" if params.gain_structure == "full" else params.gain_structure
-    L = field_map(space, problem.landmarks)
-    u_max, n_h, p = params.u_max, len(problem.cbf_q), len(problem.vertices)
-    checker = vertex_template(problem, L, u_max, params.w_h, params.w_v)
-    template = checker if params.lp_form == "vertex" else dual_template(problem, L, u_max, params.w_h, params.w_v)
-    h_scale, v_scale = _constant_scales(
-        problem.vertices, checker.per_h[: n_h * p], -checker.per_v[n_h * p : (n_h + 1) * p]
-    )
-    status, attempts = CellStatus.SOLVER_FAILURE, 0
-    for attempt in range(params.halvings + 1):
-        kappa = params.kappa * 0.5**attempt
-        c_h, c_v = kappa * u_max / h_scale, kappa * u_max / v_scale
-        result = template.instantiate(c_h, c_v).solve(solver)
-        attempts += 1
-        if result.status is LpStatus.OPTIMAL:
-            status = CellStatus.CERTIFIED if attempt == 0 else CellStatus.RELAXED
-            break
-        if result.status is not LpStatus.INFEASIBLE:
-            break
-    else:
-        build = vertex_template if params.lp_form == "vertex" else dual_template
-        lv = build(problem, L, u_max, params.w_h, params.w_v, least_violation=True)
-        result = lv.instantiate(c_h, c_v).solve(solver)
-        attempts += 1
-        if result.status is LpStatus.OPTIMAL:
-            status = CellStatus.NOT_CERTIFIED
-    if result.status is LpStatus.OPTIMAL:
-        K = gain_from_theta(space, result.x[: L.shape[2]], problem.landmarks)
-    else:
-        status, K = CellStatus.SOLVER_FAILURE, np.zeros((2, 2 * len(problem.landmarks)))
-    margin_h, margin_v = _template_margins(checker, space, K, problem.landmarks, c_h, c_v, p)
-    return CellSolution(status, K, c_h, c_v, margin_h, margin_v, attempts, kappa, result.objective)
+    prepared = prepare_cell(problem, params)
+    return finish_cell(prepared, solve_prepared(prepared, params, solver))
 
 
-def _template_margins(checker: LpTemplate, space: str, K, landmarks, c_h, c_v, p) -> tuple[float, float]:
+def _template_margins(checker: LpTemplate, upper: np.ndarray, space: str, K, landmarks, p) -> tuple[float, float]:
     """``max_k S_h,k`` and ``S_V`` of the gain ``K`` at the vertices, through the vertex rows of ``checker``.
 
-    The field ``[M, a] = [K𝟙, Kℓ]`` (or, in gain space, ``K``'s free entries) is evaluated on
-    the rows ``d_gᵀu(v_q) ≤ r_g − ρ_gᵀv_q`` of the vertex form; the slack of group ``g`` is
-    the largest excess over its ``p`` rows. Same numbers as :func:`vertex_margins`.
+    The field ``[M, a] = [K𝟙, Kℓ]`` (in gain space: ``K``'s free entries) is put into the rows
+    ``d_gᵀu(v_q) ≤ r_g − ρ_gᵀv_q`` (right-hand sides ``upper``); the slack of group ``g`` is
+    its largest excess over its ``p`` rows. The same numbers as :func:`vertex_margins`.
     """
     if space == "field":
         theta = np.empty((2, 3))
@@ -724,9 +885,7 @@ def _template_margins(checker: LpTemplate, space: str, K, landmarks, c_h, c_v, p
     n_h = checker.n_h
     rows = (n_h + 1) * p
     excess = checker.vertex_rows[:rows] @ theta
-    excess -= checker.per_v[:rows] * c_v
-    if n_h:
-        excess -= checker.per_h[:rows] * c_h
+    excess -= upper[:rows]
     worst = excess.reshape(n_h + 1, p).max(axis=1)
     return (float(worst[:n_h].max()) if n_h else math.nan), float(worst[n_h])
 
@@ -736,7 +895,8 @@ def goal_cell_solution(vertices: np.ndarray, goal: np.ndarray, landmarks: np.nda
     """The goal cell's straight-to-goal field ``u = c(g − x)`` (ALGORITHMS §5.6).
 
     ``c = u_max / max_q ‖g − v_q‖_∞``; ``c_h = c_v = c``; ``K = [cI, cg](GᵀG)⁻¹Gᵀ``;
-    ``margin_h`` from the barrier rows at the vertices (NaN without rows), ``margin_v`` NaN.
+    ``margin_h`` from the barrier rows at the vertices, ``margin_v`` NaN. Without barrier
+    rows ``c_h`` and ``margin_h`` are NaN, as in every cell (§5.6, edge cases).
 
     Parameters
     ----------
@@ -756,7 +916,8 @@ def goal_cell_solution(vertices: np.ndarray, goal: np.ndarray, landmarks: np.nda
     c = u_max / float(np.max(np.abs(goal - vertices)))
     K = min_norm_gain(c * np.eye(2), c * goal, landmarks)
     m = vertex_margins(K, landmarks, vertices, np.zeros(2), goal, cbf_n, cbf_q, c, c, u_max)
-    return CellSolution(CellStatus.GOAL, K, c, c, m.cbf, math.nan, 0)
+    c_h = c if len(np.asarray(cbf_q)) else math.nan  # like every cell without barrier rows
+    return CellSolution(CellStatus.GOAL, K, c_h, c, m.cbf, math.nan, 0)
 
 
 # --------------------------------------------------------------------------- the stage
@@ -775,7 +936,8 @@ def run(cells: Cells, params: Params = Params(), progress: Callable[[int, int], 
         The decomposition; cell ``c`` with ``parent[cell_node[c]] == -1`` is the goal cell.
     params : Params
     progress : callable, optional
-        ``progress(done, total)`` every few cells.
+        ``progress(done, total)`` about a hundred times while the LPs are solved (``total = C``;
+        goal cells count as done from the start).
 
     Returns
     -------
@@ -794,46 +956,61 @@ def run(cells: Cells, params: Params = Params(), progress: Callable[[int, int], 
     c_h, c_v, margin_h, margin_v = (np.full(C, math.nan) for _ in range(4))
     status = np.zeros(C, np.int8)
     attempts = np.zeros(C, np.int64)
-    report_every = max(1, C // 100)
     started = time.perf_counter()
+    # Three passes (build every LP, solve them all, then recover and re-check): each pass runs
+    # one kind of code, which keeps it cache-warm; interleaving numpy and HiGHS per cell is slower.
+    used, solutions, prepared = [], [None] * C, {}
     for c in range(C):
-        used = np.flatnonzero(cells.cell_landmarks[c])
-        if len(used) < 2:
-            raise ArtifactError(f"cell {c} uses {len(used)} landmark(s); at least 2 needed", field="cell_landmarks")
+        used.append(np.flatnonzero(cells.cell_landmarks[c]))
+        if len(used[c]) < 2:
+            raise ArtifactError(f"cell {c} uses {len(used[c])} landmark(s); at least 2 needed", field="cell_landmarks")
         cbf_n, cbf_q = cells.barrier(c)
         node = cells.cell_node[c]
         if cells.parent[node] == -1:
-            sol = goal_cell_solution(cells.vertices(c), cells.nodes[node], landmarks[used], cbf_n, cbf_q,
-                                     params.u_max)  # fmt: skip
-        else:
-            A, b = cells.rows(c)
-            problem = CellProblem(cells.vertices(c), A, b, cells.exit_dir[c], cells.exit_point[c], cbf_n, cbf_q,
-                                  landmarks[used])  # fmt: skip
-            try:
-                sol = solve_cell(problem, params, solver)
-            except ArtifactError as exc:
-                raise ArtifactError(f"cell {c}: {exc}", field=exc.field) from exc
-            if sol.status == CellStatus.NOT_CERTIFIED:
-                log.warning("cell %d not certified: least-violation margins h %.3g, V %.3g", c, sol.margin_h,
-                            sol.margin_v)  # fmt: skip
-            elif sol.status == CellStatus.SOLVER_FAILURE:
-                log.warning("cell %d: solver failure (unbounded or error)", c)
-        cols = (2 * used[:, None] + np.arange(2)).ravel()
-        gain[c][:, cols] = sol.K
+            solutions[c] = goal_cell_solution(cells.vertices(c), cells.nodes[node], landmarks[used[c]], cbf_n, cbf_q,
+                                              params.u_max)  # fmt: skip
+            continue
+        A, b = cells.rows(c)
+        problem = CellProblem(cells.vertices(c), A, b, cells.exit_dir[c], cells.exit_point[c], cbf_n, cbf_q,
+                              landmarks[used[c]])  # fmt: skip
+        try:
+            prepared[c] = prepare_cell(problem, params)
+        except ArtifactError as exc:
+            raise ArtifactError(f"cell {c}: {exc}", field=exc.field) from exc
+    outcomes = {}
+    report_every = max(1, len(prepared) // 100)
+    for done, c in enumerate(prepared, 1):
+        outcomes[c] = solve_prepared(prepared[c], params, solver)
+        if progress is not None and (done % report_every == 0 or done == len(prepared)):
+            progress(C - len(prepared) + done, C)
+    for c, outcome in outcomes.items():
+        solutions[c] = sol = finish_cell(prepared[c], outcome)
+        if sol.status == CellStatus.NOT_CERTIFIED:
+            log.warning("cell %d not certified: least-violation margins h %.3g, V %.3g", c, sol.margin_h, sol.margin_v)
+        elif sol.status == CellStatus.SOLVER_FAILURE:
+            log.warning("cell %d: solver failure (unbounded or error)", c)
+    blocks = gain.reshape(C, 2, n_lm, 2)  # K_k of landmark k in columns 2k, 2k + 1
+    for c, sol in enumerate(solutions):
+        blocks[c][:, used[c], :] = sol.K.reshape(2, -1, 2)
         c_h[c], c_v[c], margin_h[c], margin_v[c] = sol.c_h, sol.c_v, sol.margin_h, sol.margin_v
         status[c], attempts[c] = int(sol.status), sol.attempts
-        if progress is not None and (c % report_every == report_every - 1 or c == C - 1):
-            progress(c + 1, C)
+    if progress is not None and not prepared:
+        progress(C, C)
     elapsed = time.perf_counter() - started
-    stats = _stats(cells, status, attempts, c_h, c_v)
+    stats = _stats(cells, status, attempts, c_h, c_v, margin_v)
     stats["solve_ms_per_cell"] = round(1e3 * elapsed / C, 4)
     tolerance = params.goal_tolerance if params.goal_tolerance is not None else 0.01 * cells.map.diagonal
     return Plan(cells=cells, gain=gain, c_h=c_h, c_v=c_v, u_max=np.full(C, params.u_max), margin_h=margin_h,
                 margin_v=margin_v, status=status, goal_tolerance=tolerance, stats=stats)  # fmt: skip
 
 
-def _stats(cells: Cells, status, attempts, c_h, c_v) -> dict:
-    """JSON-safe statistics: counts per status, flagged cells, bearing constants, attempts."""
+def _stats(cells: Cells, status, attempts, c_h, c_v, margin_v) -> dict:
+    """JSON-safe statistics: counts per status, flagged cells, bearing constants, attempts.
+
+    ``zero_clf_margin`` lists certified cells whose CLF margin is 0 (to 1e-9): there
+    ``V̇ ≤ −c_v V`` only, so ``V`` decays exponentially but the exit line is not reached in a
+    bounded time (§4.4 needs ``S_V < 0``); the objective traded that margin for CBF margin.
+    """
     with np.errstate(divide="ignore", invalid="ignore"):
         tilde_h = c_h / cells.s_min
         tilde_v = c_v / cells.s_max
@@ -848,6 +1025,8 @@ def _stats(cells: Cells, status, attempts, c_h, c_v) -> dict:
     stats["c_h_over_s_max"] = [_json_number(v) for v in h_over_max]
     stats["attempts"] = attempts.tolist()
     stats["lp_solves"] = int(attempts.sum())
+    certified = (status == CellStatus.CERTIFIED) | (status == CellStatus.RELAXED)
+    stats["zero_clf_margin"] = np.flatnonzero(certified & (margin_v > -1e-9)).tolist()
     return stats
 
 
