@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from bearnav_cli.datatypes import Cells, CellStatus, Map, Plan, Polygon
+from bearnav_cli.datatypes import Cells, CellStatus, Map, Plan, Polygon, replace
 
 LANDMARKS = np.array([[0.0, 8.0], [10.0, 0.0], [10.0, 8.0], [5.0, 0.0]])
 #: A chain along y = 1: root (goal) at (1, 1), node 1 at (5, 1), node 2 at (9, 1).
@@ -35,7 +35,7 @@ def hand_map(obstacles=(), bounds=(0.0, 0.0, 10.0, 8.0), goal=(1.0, 1.0), landma
 
 
 def clip(polygon: np.ndarray, normal: np.ndarray, offset: float) -> np.ndarray:
-    """Convex CCW polygon ∩ {x : normal·x <= offset}."""
+    """Convex CCW polygon ∩ {x : normal·x <= offset}, near-duplicate vertices dropped."""
     side = polygon @ normal - offset
     out = []
     for q in range(len(polygon)):
@@ -44,7 +44,24 @@ def clip(polygon: np.ndarray, normal: np.ndarray, offset: float) -> np.ndarray:
             out.append(polygon[q])
         if (side[q] < 0 < side[r]) or (side[r] < 0 < side[q]):
             out.append(polygon[q] + side[q] / (side[q] - side[r]) * (polygon[r] - polygon[q]))
-    return np.array(out)
+    keep = [p for k, p in enumerate(out) if np.linalg.norm(p - out[k - 1]) > 1e-7]
+    return np.array(keep)
+
+
+def first_cells(cells: Cells, count: int) -> Cells:
+    """The same decomposition with only its first ``count`` cells (a deliberately broken one)."""
+    r = cells.cell_row_offsets[count]
+    h = cells.cbf_offsets[count]
+    return replace(
+        cells,
+        cell_node=cells.cell_node[:count], cell_A=cells.cell_A[:r], cell_b=cells.cell_b[:r],
+        cell_row_offsets=cells.cell_row_offsets[: count + 1], cell_vertices=cells.cell_vertices[:r],
+        cell_vertex_offsets=cells.cell_vertex_offsets[: count + 1], exit_point=cells.exit_point[:count],
+        exit_dir=cells.exit_dir[:count], cbf_A=cells.cbf_A[:h], cbf_b=cells.cbf_b[:h],
+        cbf_offsets=cells.cbf_offsets[: count + 1], cell_landmarks=cells.cell_landmarks[:count],
+        fixed_landmark=cells.fixed_landmark[:count], s_min=cells.s_min[:count], s_max=cells.s_max[:count],
+        cell_flags=cells.cell_flags[:count],
+    )  # fmt: skip
 
 
 def cell_polygons(nodes: np.ndarray, parent: np.ndarray, bounds: np.ndarray) -> list[np.ndarray]:

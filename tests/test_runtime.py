@@ -9,14 +9,14 @@ import numpy as np
 import pytest
 
 from bearnav_cli import runtime
-from bearnav_cli.datatypes import Cells, Plan, replace
+from bearnav_cli.datatypes import Cells, Plan
 from bearnav_cli.errors import ArtifactError
 from bearnav_cli.runtime import PlanArrays
 from bearnav_cli.stages import simulate
 from bearnav_cli.stages.simulate import Outcome
 
 from .conftest import REPO
-from .handmade import CHAIN_NODES, CHAIN_PARENT, cell_polygons, hand_map, hand_plan
+from .handmade import CHAIN_NODES, CHAIN_PARENT, cell_polygons, first_cells, hand_map, hand_plan
 
 #: A field that pushes +x everywhere (it breaks the CLF of a cell whose exit lies at −x).
 RIGHT = (np.zeros((2, 2)), np.array([1.0, 0.0]))
@@ -74,17 +74,7 @@ def test_from_npz_names_a_missing_entry(chain, tmp_path):
 
 
 def test_every_node_needs_a_cell(chain):
-    cells = chain.cells
-    r = cells.cell_row_offsets[2]
-    fewer = replace(
-        cells,
-        cell_node=cells.cell_node[:2], cell_A=cells.cell_A[:r], cell_b=cells.cell_b[:r],
-        cell_row_offsets=cells.cell_row_offsets[:3], cell_vertices=cells.cell_vertices[:r],
-        cell_vertex_offsets=cells.cell_vertex_offsets[:3], exit_point=cells.exit_point[:2],
-        exit_dir=cells.exit_dir[:2], cbf_offsets=cells.cbf_offsets[:3], cell_landmarks=cells.cell_landmarks[:2],
-        fixed_landmark=cells.fixed_landmark[:2], s_min=cells.s_min[:2], s_max=cells.s_max[:2],
-        cell_flags=cells.cell_flags[:2],
-    )  # fmt: skip
+    fewer = first_cells(chain.cells, 2)
     with pytest.raises(ArtifactError, match="exactly one cell"):
         PlanArrays.from_plan(
             Plan(fewer, chain.gain[:2], chain.c_h[:2], chain.c_v[:2], chain.u_max[:2], chain.margin_h[:2],

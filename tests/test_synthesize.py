@@ -15,7 +15,7 @@ from bearnav_cli.datatypes import CellFlag, CellStatus, replace
 from bearnav_cli.errors import ArtifactError, InvalidParamsError
 from bearnav_cli.lp import LpResult, LpSolver, LpStatus, dense_to_csr
 from bearnav_cli.stages import synthesize as sy
-from tests.handmade import hand_map, hand_plan
+from tests.handmade import clip, hand_map, hand_plan
 
 # --------------------------------------------------------------------------- helpers
 
@@ -45,20 +45,6 @@ def hull(points: np.ndarray) -> np.ndarray:
 
     lower, upper = half(pts), half(reversed(pts))
     return np.array(lower[:-1] + upper[:-1], float)
-
-
-def clip(polygon: np.ndarray, normal: np.ndarray, offset: float) -> np.ndarray:
-    """Convex CCW polygon ∩ {x : normal·x ≤ offset}, near-duplicate vertices dropped."""
-    side = polygon @ normal - offset
-    out = []
-    for q in range(len(polygon)):
-        r = (q + 1) % len(polygon)
-        if side[q] <= 0:
-            out.append(polygon[q])
-        if (side[q] < 0 < side[r]) or (side[r] < 0 < side[q]):
-            out.append(polygon[q] + side[q] / (side[q] - side[r]) * (polygon[r] - polygon[q]))
-    keep = [p for k, p in enumerate(out) if np.linalg.norm(p - out[k - 1]) > 1e-7]
-    return np.array(keep)
 
 
 def unit(v: np.ndarray) -> np.ndarray:

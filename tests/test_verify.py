@@ -17,7 +17,7 @@ from bearnav_cli.geometry import FreeSpace
 from bearnav_cli.stages import simulate
 
 from .conftest import REPO
-from .handmade import cell_polygons, hand_map, hand_plan
+from .handmade import cell_polygons, first_cells, hand_map, hand_plan
 
 FAST = verify.Params(n_starts=40, seed=3)
 
@@ -108,17 +108,7 @@ def test_false_margins_uncertified_cells_and_goal_fields_fail(chain):
 
 
 def test_removing_a_cell_makes_coverage_fail(chain):
-    cells = chain.cells
-    r = cells.cell_row_offsets[2]
-    fewer = replace(
-        cells,
-        cell_node=cells.cell_node[:2], cell_A=cells.cell_A[:r], cell_b=cells.cell_b[:r],
-        cell_row_offsets=cells.cell_row_offsets[:3], cell_vertices=cells.cell_vertices[:r],
-        cell_vertex_offsets=cells.cell_vertex_offsets[:3], exit_point=cells.exit_point[:2],
-        exit_dir=cells.exit_dir[:2], cbf_offsets=cells.cbf_offsets[:3], cell_landmarks=cells.cell_landmarks[:2],
-        fixed_landmark=cells.fixed_landmark[:2], s_min=cells.s_min[:2], s_max=cells.s_max[:2],
-        cell_flags=cells.cell_flags[:2],
-    )  # fmt: skip
+    fewer = first_cells(chain.cells, 2)
     plan = Plan(fewer, chain.gain[:2], chain.c_h[:2], chain.c_v[:2], chain.u_max[:2], chain.margin_h[:2],
                 chain.margin_v[:2], chain.status[:2], chain.goal_tolerance)  # fmt: skip
     report = verify.run(plan, FAST)
