@@ -100,6 +100,10 @@ def border_samples(bounds: np.ndarray, spacing: float) -> np.ndarray:
     return np.concatenate(out)
 
 
+#: Below this many nodes, nearest-neighbour queries scan every node instead of the buckets.
+BRUTE_FORCE_NODES = 512
+
+
 class _BucketGrid:
     """Uniform grid of buckets holding node indices, for nearest and radius queries.
 
@@ -117,6 +121,7 @@ class _BucketGrid:
         self.nodes = nodes  # shared, filled by the caller
         self.members: list[np.ndarray] = [np.empty(4, np.int64) for _ in range(self.shape[0] * self.shape[1])]
         self.counts = np.zeros(self.shape[0] * self.shape[1], np.int64)
+        self.size = 0  # nodes inserted so far (indices 0 … size − 1)
 
     def _cell_of(self, p: np.ndarray) -> tuple[int, int]:
         ix = min(max(int((p[0] - self.origin[0]) // self.cell), 0), self.shape[0] - 1)
@@ -133,6 +138,7 @@ class _BucketGrid:
             self.members[flat] = bucket
         bucket[count] = index
         self.counts[flat] = count + 1
+        self.size = max(self.size, index + 1)
 
     def _ring_cells(self, ix: int, iy: int, ring: int) -> list[int]:
         """Flat ids of the buckets at Chebyshev distance exactly ``ring`` from bucket (ix, iy)."""
@@ -159,6 +165,11 @@ class _BucketGrid:
 
     def nearest(self, p: np.ndarray) -> int:
         """Index of the node nearest to ``p`` (ties: lowest index)."""
+        if self.size <= BRUTE_FORCE_NODES:
+            # A young tree in a large map leaves most buckets empty, and the ring scan would
+            # visit thousands of them; one vectorised pass over a few hundred nodes is cheaper.
+            d = self.nodes[: self.size] - p
+            return int(np.argmin(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1]))
         ix, iy = self._cell_of(p)
         best_d2, best = math.inf, -1
         ring = 0
