@@ -1,24 +1,8 @@
 """``bearnav synthesize``: one robust LP per cell, giving a gain and its certificate (ALGORITHMS §5).
 
-In cell ``X = {x : A x ≤ b}`` with vertices ``v_1 … v_p`` the controller ``u = K y``,
-``y = stack(l_k − x)``, is the affine field ``u(x) = a − M x`` with ``a = Kℓ`` and
-``M = K𝟙`` (§5.1). The LP (P) of §5.2 maximises the worst-case CBF and CLF margins
-over the cell under the input box ``|u_i| ≤ u_max``.
-
-Every condition of (P) is a *group* ``g`` with a direction ``d_g``, a constant vector
-``ρ_g`` and a scalar ``r_g``: ``d_gᵀu(x) + ρ_gᵀx ≤ S_g + r_g`` for all ``x ∈ X``::
-
-    CBF k:    d = −n_k,  ρ = c_h·d,   r = c_h·q_k          (slack S_h,k)
-    CLF:      d = z,     ρ = c_v·z,   r = c_v·zᵀx_j        (slack S_V)
-    input r:  d = e_r,   ρ = 0,       r = u_max            (no slack)
-
-The vertex form states the group at every vertex (the box as two ranged rows per
-vertex); the dual form introduces ``λ_g ≥ 0`` with ``A_xᵀλ_g + Mᵀd_g = ρ_g`` and
-``b_xᵀλ_g + d_gᵀa − S_g ≤ r_g``. The variables ``θ`` are either the field
-``F = [M, a]`` (field space, 6 numbers) or the gain entries allowed by the gain
-structure; a fixed linear map ``L`` gives ``F = L θ`` (:func:`field_map`), so one
-builder serves every combination. Only the row bounds depend on ``c_h`` and ``c_v``
-(:class:`LpTemplate`), so a κ halving re-solves without rebuilding the matrix.
+The LP (P) of §5.2 and its builders live in :mod:`bearnav_cli.cell_lp` (re-exported here);
+this module solves it: SOLVE_CELL's κ loop (§5.3), the goal cell (§5.6), the gain recovery
+and the run over all cells.
 
 Every stored margin is recomputed at the vertices from the stored gain, and equals the
 independent check :func:`vertex_margins` (ALGORITHMS §8). Per-cell building blocks
@@ -30,7 +14,6 @@ code cache-warm.
 
 from __future__ import annotations
 
-import functools
 import logging
 import math
 import time
@@ -39,9 +22,38 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from bearnav_cli.cell_lp import (
+    BOX_DIRECTIONS,
+    COND_WARNING,
+    FIELD_MAP,
+    CellLp,
+    CellProblem,
+    LpTemplate,
+    dual_lp,
+    dual_template,
+    field_map,
+    gain_from_theta,
+    gram_condition,
+    landmark_matrix,
+    min_norm_gain,
+    theta_from_gain,
+    vertex_lp,
+    vertex_lp_field,
+    vertex_lp_gain,
+    vertex_template,
+)
 from bearnav_cli.datatypes import CellFlag, Cells, CellStatus, Plan
 from bearnav_cli.errors import ArtifactError, InvalidParamsError
-from bearnav_cli.lp import INF, LpResult, LpSolver, LpStatus, dense_to_csr
+from bearnav_cli.lp import LpResult, LpSolver, LpStatus
+
+__all__ = [
+    "BOX_DIRECTIONS", "COND_WARNING", "DELTA_FRACTION", "FIELD_MAP", "GAIN_STRUCTURES", "LP_FORMS", "VERSION",
+    "CellLp", "CellProblem", "CellSolution", "LpTemplate", "Margins", "Params", "PreparedCell", "SolveOutcome",
+    "cell_constants", "dual_lp", "dual_template", "field_map", "finish_cell", "gain_from_theta", "goal_cell_solution",
+    "gram_condition", "landmark_matrix", "min_norm_gain", "prepare_cell", "run", "solve_cell", "solve_prepared",
+    "summary", "theta_from_gain", "vertex_lp", "vertex_lp_field", "vertex_lp_gain", "vertex_margins",
+    "vertex_template",
+]  # fmt: skip
 
 VERSION = 1
 log = logging.getLogger(__name__)
@@ -50,16 +62,6 @@ GAIN_STRUCTURES = ("full", "diag", "scalar")
 LP_FORMS = ("vertex", "dual")
 #: ``δ = DELTA_FRACTION · diam(X)`` floors the worst barrier violation in ``c_h`` (§5.3).
 DELTA_FRACTION = 0.05
-#: Warn when ``cond(GᵀG)`` exceeds this (nearly coincident landmarks, §5.6).
-COND_WARNING = 1e12
-#: Input-box directions ``e_r``.
-BOX_DIRECTIONS = np.array([[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]])
-#: ``L`` of the field space (:func:`field_map`): ``θ = vec([M, a])`` row-major.
-FIELD_MAP = np.eye(6).reshape(2, 3, 6)
-FIELD_MAP.setflags(write=False)
-_EYE2 = np.eye(2)
-_EYE2.setflags(write=False)
-BOX_DIRECTIONS.setflags(write=False)
 
 
 @dataclass(frozen=True)
@@ -119,507 +121,6 @@ class Params:
             )
         if self.lp_form not in LP_FORMS:
             raise InvalidParamsError(f"must be one of {', '.join(LP_FORMS)}, got {self.lp_form!r}", field="lp_form")
-
-
-# --------------------------------------------------------------------------- cell data and the field map
-
-
-@dataclass(frozen=True)
-class CellProblem:
-    """The data of one cell's LP, independent of any artifact.
-
-    Attributes
-    ----------
-    vertices : ndarray, shape (p, 2)
-        CCW vertices of the convex cell (map units).
-    A, b : ndarray, shapes (p, 2), (p,)
-        The same cell as ``{x : A x ≤ b}`` (used by the dual form).
-    z : ndarray, shape (2,)
-        Unit exit direction into the cell; ``V(x) = zᵀ(x − x_j)``.
-    x_j : ndarray, shape (2,)
-        Exit point (the parent node).
-    cbf_n, cbf_q : ndarray, shapes (h, 2), (h,)
-        Barrier rows ``h_k(x) = n_kᵀx + q_k``, safe where ``h_k ≥ 0``; there may be none.
-    landmarks : ndarray, shape (n, 2)
-        Positions of the landmarks the controller uses, ``n ≥ 2``.
-    """
-
-    vertices: np.ndarray
-    A: np.ndarray
-    b: np.ndarray
-    z: np.ndarray
-    x_j: np.ndarray
-    cbf_n: np.ndarray
-    cbf_q: np.ndarray
-    landmarks: np.ndarray
-
-    def __post_init__(self) -> None:
-        for name, shape in _PROBLEM_SHAPES:
-            value = getattr(self, name)
-            if type(value) is not np.ndarray or value.dtype != np.float64 or value.ndim != len(shape):
-                object.__setattr__(self, name, np.asarray(value, dtype=float).reshape(shape))
-
-
-_PROBLEM_SHAPES = (("vertices", (-1, 2)), ("A", (-1, 2)), ("b", (-1,)), ("z", (2,)), ("x_j", (2,)),
-                   ("cbf_n", (-1, 2)), ("cbf_q", (-1,)), ("landmarks", (-1, 2)))  # fmt: skip
-
-
-def landmark_matrix(landmarks: np.ndarray) -> np.ndarray:
-    """``G = [𝟙, ℓ]`` of Lemma 3, with ``𝟙 = 1_n ⊗ I_2`` and ``ℓ = stack(l_k)``.
-
-    Parameters
-    ----------
-    landmarks : ndarray, shape (n, 2)
-
-    Returns
-    -------
-    ndarray, shape (2n, 3)
-        ``K G = [M, a]`` for any gain ``K`` of shape (2, 2n).
-    """
-    n = len(landmarks)
-    G = np.empty((2 * n, 3))
-    G[:, :2] = np.tile(np.eye(2), (n, 1))
-    G[:, 2] = np.ravel(landmarks)
-    return G
-
-
-def field_map(space: str, landmarks: np.ndarray) -> np.ndarray:
-    """The linear map ``θ ↦ F = [M, a]`` of a variable space, as an array ``L`` with ``F = L @ θ``.
-
-    Parameters
-    ----------
-    space : {"field", "full", "diag", "scalar"}
-        ``field``: ``θ = vec(F)`` row-major (6 numbers). ``full``: ``θ = vec(K)`` row-major
-        (4n). ``diag``: ``θ = (K[0, 2k] for k, K[1, 2k+1] for k)`` (2n). ``scalar``:
-        ``K_k = θ_k I`` (n).
-    landmarks : ndarray, shape (n, 2)
-
-    Returns
-    -------
-    ndarray, shape (2, 3, n_θ)
-        ``F[i, c] = L[i, c] @ θ``.
-    """
-    n = len(landmarks)
-    if space == "field":
-        return FIELD_MAP
-    G = landmark_matrix(landmarks)
-    if space == "full":
-        L = np.zeros((2, 3, 4 * n))
-        L[0, :, : 2 * n] = G.T
-        L[1, :, 2 * n :] = G.T
-    elif space == "diag":
-        L = np.zeros((2, 3, 2 * n))
-        L[0, :, :n] = G[0::2].T
-        L[1, :, n:] = G[1::2].T
-    elif space == "scalar":
-        L = np.stack([G[0::2].T, G[1::2].T])
-    else:
-        raise ValueError(f"unknown variable space {space!r}")
-    return L
-
-
-def gain_from_theta(space: str, theta: np.ndarray, landmarks: np.ndarray) -> np.ndarray:
-    """The gain ``K`` (2, 2n) of the LP variables ``θ`` (see :func:`field_map`); field space uses Lemma 3."""
-    n = len(landmarks)
-    if space == "field":
-        F = theta.reshape(2, 3)
-        return min_norm_gain(F[:, :2], F[:, 2], landmarks)
-    if space == "full":
-        return theta.reshape(2, 2 * n).copy()
-    K = np.zeros((2, 2 * n))
-    if space == "diag":
-        K[0, 0::2], K[1, 1::2] = theta[:n], theta[n:]
-    elif space == "scalar":
-        K[0, 0::2], K[1, 1::2] = theta, theta
-    else:
-        raise ValueError(f"unknown variable space {space!r}")
-    return K
-
-
-def theta_from_gain(space: str, K: np.ndarray) -> np.ndarray:
-    """The gain-space variables ``θ`` of a structured gain ``K`` (2, 2n); inverse of :func:`gain_from_theta`."""
-    if space == "full":
-        return K.ravel()
-    if space == "diag":
-        return np.concatenate([K[0, 0::2], K[1, 1::2]])
-    if space == "scalar":
-        return K[0, 0::2].copy()
-    raise ValueError(f"no gain-space variables for {space!r}")
-
-
-def min_norm_gain(M: np.ndarray, a: np.ndarray, landmarks: np.ndarray) -> np.ndarray:
-    """The minimum-Frobenius-norm gain realising the field ``u = a − M x`` (Lemma 3).
-
-    ``K* = [M, a] (GᵀG)⁻¹Gᵀ``, in closed form: with ``l̄`` the landmarks' mean,
-    ``δ_k = l_k − l̄`` and ``σ = Σ‖δ_k‖²``, block ``k`` is ``K_k = M/n + (a − M l̄) δ_kᵀ/σ``
-    (so ``Σ K_k = M`` and ``Σ K_k l_k = a``). Logs a warning when ``cond(GᵀG) > 1e12``
-    (nearly coincident landmarks).
-
-    Parameters
-    ----------
-    M : ndarray, shape (2, 2)
-    a : ndarray, shape (2,)
-    landmarks : ndarray, shape (n, 2)
-
-    Returns
-    -------
-    ndarray, shape (2, 2n)
-
-    Raises
-    ------
-    ArtifactError
-        If all landmarks coincide (``G`` loses rank; map landmarks are distinct).
-    """
-    # A handful of numbers per cell: plain floats are several times faster than numpy calls here.
-    points = np.asarray(landmarks, float).tolist()
-    n = len(points)
-    mx = my = 0.0
-    for x, y in points:
-        mx += x
-        my += y
-    mx, my = mx / n, my / n
-    dx, dy, sigma = [], [], 0.0
-    for x, y in points:
-        dx.append(x - mx)
-        dy.append(y - my)
-        sigma += (x - mx) ** 2 + (y - my) ** 2
-    if not sigma > 0:
-        raise ArtifactError("the cell's landmarks coincide: no gain realises a general field", field="landmarks")
-    cond = _gram_condition(n, (mx, my), sigma)
-    if not cond <= COND_WARNING:
-        log.warning("nearly coincident landmarks: cond(GᵀG) = %.3g", cond)
-    (m00, m01), (m10, m11) = np.asarray(M, float).tolist()
-    a0, a1 = np.asarray(a, float).tolist()
-    o0 = (a0 - m00 * mx - m01 * my) / sigma
-    o1 = (a1 - m10 * mx - m11 * my) / sigma
-    row0, row1 = [], []
-    for ex, ey in zip(dx, dy, strict=True):  # K_k = M/n + (a − M l̄) δ_kᵀ/σ
-        row0 += (m00 / n + o0 * ex, m01 / n + o0 * ey)
-        row1 += (m10 / n + o1 * ex, m11 / n + o1 * ey)
-    return np.array([row0, row1])
-
-
-def gram_condition(landmarks: np.ndarray) -> float:
-    """``cond(GᵀG)`` of :func:`landmark_matrix`'s ``G``, in closed form; ``inf`` if all landmarks coincide."""
-    landmarks = np.asarray(landmarks, float)
-    mean = landmarks.mean(axis=0)
-    delta = landmarks - mean
-    return _gram_condition(len(landmarks), mean, float((delta * delta).sum()))
-
-
-def _gram_condition(n: int, mean, sigma: float) -> float:
-    """``GᵀG = [[nI, s], [sᵀ, t]]`` (``s = n·mean``, ``t = σ + n‖mean‖²``) has the eigenvalue ``n``
-    and the two of ``[[n, ‖s‖], [‖s‖, t]]``: ``λ₊`` and ``λ₋ = nσ/λ₊``."""
-    norm_s = n * math.hypot(mean[0], mean[1])
-    t = sigma + norm_s * norm_s / n
-    big = 0.5 * (n + t) + math.hypot(0.5 * (n - t), norm_s)
-    small = min(float(n), n * sigma / big)
-    return big / small if small > 0 else math.inf
-
-
-# --------------------------------------------------------------------------- the LPs
-
-
-@dataclass(frozen=True)
-class CellLp:
-    """One LP in solver form plus where its variables are.
-
-    ``x[:n_theta]`` are the variables ``θ``; ``x[n_theta:n_theta + n_h]`` the CBF slacks
-    ``S_h``; ``x[n_theta + n_h]`` the CLF slack ``S_V``; further columns are multipliers
-    (dual form) or the least-violation variables ``t``.
-    """
-
-    cost: np.ndarray
-    A_indptr: np.ndarray
-    A_indices: np.ndarray
-    A_values: np.ndarray
-    row_lower: np.ndarray
-    row_upper: np.ndarray
-    col_lower: np.ndarray
-    col_upper: np.ndarray
-    n_theta: int
-    n_h: int
-
-    def arrays(self) -> tuple[np.ndarray, ...]:
-        """The arguments of :meth:`LpSolver.solve`, in order."""
-        return (self.cost, self.A_indptr, self.A_indices, self.A_values, self.row_lower, self.row_upper,
-                self.col_lower, self.col_upper)  # fmt: skip
-
-    def solve(self, solver: LpSolver) -> LpResult:
-        return solver.solve(*self.arrays())
-
-    def slacks(self, x: np.ndarray) -> tuple[np.ndarray, float]:
-        """``(S_h, S_V)`` from a solution vector."""
-        return x[self.n_theta : self.n_theta + self.n_h], float(x[self.n_theta + self.n_h])
-
-
-@dataclass(frozen=True)
-class LpTemplate:
-    """A cell's LP with the constants left open: only the row bounds depend on ``c_h`` and ``c_v``.
-
-    Rows come in three blocks: those scaled by ``c_h``, those scaled by ``c_v``, then
-    constant ones, so ``row_upper = [c_h·rhs_h, c_v·rhs_v, rhs_const]``. ``row_lower`` equals
-    ``row_upper`` on the equality rows and ``lower`` elsewhere. The matrix, costs and column
-    bounds are shared by every :meth:`instantiate` call, so κ halvings cost a few vector
-    operations. ``vertex_rows`` (vertex form only) is the dense ``θ`` block of the rows, used
-    to re-check a gain at the vertices.
-    """
-
-    cost: np.ndarray
-    A_indptr: np.ndarray
-    A_indices: np.ndarray
-    A_values: np.ndarray
-    col_lower: np.ndarray
-    col_upper: np.ndarray
-    lower: np.ndarray
-    equality: np.ndarray | None
-    rhs_h: np.ndarray
-    rhs_v: np.ndarray
-    rhs_const: np.ndarray
-    n_theta: int
-    n_h: int
-    vertex_rows: np.ndarray | None = None
-
-    def row_upper(self, c_h: float, c_v: float) -> np.ndarray:
-        """Upper row bounds for the constants ``c_h`` (ignored without barrier rows) and ``c_v``."""
-        if self.n_h:
-            return np.concatenate((self.rhs_h * c_h, self.rhs_v * c_v, self.rhs_const))
-        return np.concatenate((self.rhs_v * c_v, self.rhs_const))
-
-    def instantiate(self, c_h: float, c_v: float) -> CellLp:
-        """The LP with the constants ``c_h`` and ``c_v``."""
-        upper = self.row_upper(c_h, c_v)
-        lower = self.lower if self.equality is None else np.where(self.equality, upper, self.lower)
-        return CellLp(self.cost, self.A_indptr, self.A_indices, self.A_values, lower, upper, self.col_lower,
-                      self.col_upper, self.n_theta, self.n_h)  # fmt: skip
-
-
-def _filled(n: int, value: float) -> np.ndarray:
-    out = np.empty(n)
-    out.fill(value)
-    return out
-
-
-def _frozen(*arrays: np.ndarray) -> tuple[np.ndarray, ...]:
-    for array in arrays:
-        array.setflags(write=False)
-    return arrays
-
-
-@functools.lru_cache(maxsize=256)
-def _slack_columns(n_theta: int, n_h: int, w_h: float, w_v: float) -> tuple[np.ndarray, ...]:
-    """Bounds and costs of the columns ``(θ, S_h, S_V)``: θ free, ``S ≤ 0``, cost ``w`` on the slacks."""
-    n_cols = n_theta + n_h + 1
-    col_upper = _filled(n_cols, INF)
-    col_upper[n_theta:] = 0.0
-    cost = np.zeros(n_cols)
-    cost[n_theta:-1] = w_h
-    cost[-1] = w_v
-    return _frozen(_filled(n_cols, -INF), col_upper, cost)
-
-
-@functools.lru_cache(maxsize=256)
-def _vertex_row_bounds(slack_rows: int, box_rows: int, u_max: float) -> tuple[np.ndarray, ...]:
-    """``lower`` of the vertex rows (−∞, then −u_max on the box rows) and the box rows' ``rhs_const``."""
-    lower = _filled(slack_rows + box_rows, -INF)
-    lower[slack_rows:] = -u_max
-    return _frozen(lower, _filled(box_rows, u_max))
-
-
-@functools.lru_cache(maxsize=256)
-def _slack_block(n_slack: int, p: int, rows: int) -> np.ndarray:
-    """``−1`` in column ``g`` of the ``p`` rows of group ``g``, zero below row ``n_slack·p``: shape (rows, n_slack)."""
-    block = np.zeros((rows, n_slack))
-    block[: n_slack * p] = np.repeat(-np.eye(n_slack), p, axis=0)
-    return _frozen(block)[0]
-
-
-def _box_pattern(L: np.ndarray) -> tuple[tuple[int, ...], tuple[int, ...]]:
-    """The θ each field row can move: ``(columns of u_1, columns of u_2)``."""
-    moves = np.any(L != 0, axis=1)  # (2, n_θ)
-    return tuple(np.flatnonzero(moves[0]).tolist()), tuple(np.flatnonzero(moves[1]).tolist())
-
-
-_FIELD_PATTERN = ((0, 1, 2), (3, 4, 5))
-
-
-@functools.lru_cache(maxsize=512)
-def _vertex_sparsity(pattern, n_theta: int, n_h: int, p: int, box: int) -> tuple[np.ndarray, ...]:
-    """CSR ``indptr``, ``indices`` and the positions in the dense ``(rows, n_θ + h + 1)`` block.
-
-    Rows of the barrier and CLF groups hold every θ a field row can move plus their slack;
-    the box rows of ``u_i`` hold the θ of ``pattern[i]`` only.
-    """
-    n_slack = n_h + 1
-    n_cols = n_theta + n_slack
-    both = sorted(set(pattern[0]) | set(pattern[1]))
-    row_cols = [both + [n_theta + g] for g in range(n_slack) for _ in range(p)]
-    row_cols += [list(pattern[i]) for i in range(box) for _ in range(p)]
-    counts = [len(c) for c in row_cols]
-    indptr = np.zeros(len(row_cols) + 1, np.int32)
-    indptr[1:] = np.cumsum(counts)
-    indices = np.array([c for cols in row_cols for c in cols], np.int32)
-    gather = np.repeat(np.arange(len(row_cols)) * n_cols, counts) + indices
-    return _frozen(indptr, indices, gather)
-
-
-def vertex_template(problem: CellProblem, L: np.ndarray, u_max: float | None, w_h: float = 1.0, w_v: float = 1.0,
-                    least_violation: bool = False) -> LpTemplate:  # fmt: skip
-    """The vertex form of (P) with open constants (see :func:`vertex_lp`).
-
-    Groups ``g`` in order: the ``h`` barrier rows (``d = −n_k``), the CLF (``d = z``), then
-    the box as two ranged groups ``−u_max ≤ e_iᵀu ≤ u_max``. Row ``g·p + q`` reads
-    ``d_gᵀu(v_q) − S_g ≤ r_g − ρ_gᵀv_q``, that is ``c_h·h_k(v_q)``, ``−c_v·V(v_q)`` or ``u_max``.
-    """
-    V = problem.vertices
-    p, n_theta = len(V), L.shape[2]
-    n_h = len(problem.cbf_q)
-    n_slack = n_h + 1
-    box = 2 if u_max is not None else 0
-    n_groups = n_slack + box
-    D = np.empty((n_groups, 2))
-    np.negative(problem.cbf_n, out=D[:n_h])
-    D[n_h] = problem.z
-    D[n_slack:] = _EYE2[:box]
-    W = np.empty((p, 3))  # u(v_q) = [M, a] @ W[q]
-    np.negative(V, out=W[:, :2])
-    W[:, 2] = 1.0
-    # the coefficient of θ_j in d_gᵀu(v_q) is Σ_c W_qc (Σ_i d_gi L_icj)
-    DL = (D @ L.reshape(2, 3 * n_theta)).reshape(n_groups, 3, n_theta)
-    rows = n_groups * p
-    coef = (W @ DL).reshape(rows, n_theta)
-    rhs_h = (problem.cbf_n @ V.T + problem.cbf_q[:, None]).ravel()  # h_k(v_q), barrier-major
-    rhs_v = (problem.x_j - V) @ problem.z  # −V(v_q)
-    lower, rhs_const = _vertex_row_bounds(n_slack * p, box * p, float(u_max) if box else 0.0)
-    dense = np.empty((rows, n_theta + n_slack))
-    dense[:, :n_theta] = coef
-    dense[:, n_theta:] = _slack_block(n_slack, p, rows)
-    if least_violation:
-        return _template(dense, lower, None, rhs_h, rhs_v, rhs_const, n_theta, n_h, 0, w_h, w_v, True, coef)
-    # The sparsity pattern depends only on the sizes and on which θ each box side can move.
-    # Exact zeros inside it (a vertex on x = 0, say) are passed on explicitly; HiGHS drops them.
-    pattern = _FIELD_PATTERN if L is FIELD_MAP else _box_pattern(L)
-    indptr, indices, gather = _vertex_sparsity(pattern, n_theta, n_h, p, box)
-    col_lower, col_upper, cost = _slack_columns(n_theta, n_h, float(w_h), float(w_v))
-    return LpTemplate(cost, indptr, indices, dense.ravel()[gather], col_lower, col_upper, lower, None, rhs_h, rhs_v,
-                      rhs_const, n_theta, n_h, coef)  # fmt: skip
-
-
-def dual_template(problem: CellProblem, L: np.ndarray, u_max: float | None, w_h: float = 1.0, w_v: float = 1.0,
-                  least_violation: bool = False) -> LpTemplate:  # fmt: skip
-    """The dual form of (P) with open constants (see :func:`dual_lp`).
-
-    Groups: the ``h`` barrier rows (``d = −n_k``), the CLF (``d = z``), then the four box
-    sides ``e_r``, each with its own multipliers ``λ_g ≥ 0`` (``m`` each).
-    """
-    A, b = problem.A, problem.b
-    m = len(b)
-    n_theta = L.shape[2]
-    n_h = len(problem.cbf_q)
-    n_slack = n_h + 1
-    D = np.concatenate([-problem.cbf_n, problem.z[None, :]] + ([BOX_DIRECTIONS] if u_max is not None else []))
-    n_groups = len(D)
-    n_mult = n_groups * m
-    head = np.zeros((n_groups, 3, n_theta + n_slack))
-    head[:, :, :n_theta] = (D @ L.reshape(2, 3 * n_theta)).reshape(n_groups, 3, n_theta)  # Mᵀd and dᵀa
-    head[range(n_slack), 2, range(n_theta, n_theta + n_slack)] = -1.0
-    lam = np.zeros((n_groups, 3, n_groups, m))
-    g = np.arange(n_groups)
-    lam[g, :2, g, :] = A.T
-    lam[g, 2, g, :] = b
-    dense = np.concatenate([head, lam.reshape(n_groups, 3, n_mult)], axis=2).reshape(3 * n_groups, -1)
-    # per group: equalities A_xᵀλ_g + Mᵀd_g = ρ_g (ρ = c_h·d for CBF, c_v·z for CLF, 0 for the box)
-    # and b_xᵀλ_g + d_gᵀa − S_g ≤ r_g (r = c_h·q_k, c_v·zᵀx_j, u_max)
-    rhs_h = np.column_stack([D[:n_h], problem.cbf_q]).ravel()
-    rhs_v = np.array([problem.z[0], problem.z[1], problem.z @ problem.x_j])
-    rhs_const = np.zeros((n_groups - n_slack, 3))
-    rhs_const[:, 2] = u_max if u_max is not None else 0.0
-    equality = np.ones((n_groups, 3), bool)
-    equality[:, 2] = False
-    return _template(dense, _filled(3 * n_groups, -INF), equality.ravel(), rhs_h, rhs_v, rhs_const.ravel(),
-                     n_theta, n_h, n_mult, w_h, w_v, least_violation)  # fmt: skip
-
-
-def _template(dense, lower, equality, rhs_h, rhs_v, rhs_const, n_theta, n_h, n_extra, w_h, w_v, least_violation,
-              vertex_rows=None) -> LpTemplate:  # fmt: skip
-    """Add column bounds, the objective and (for least violation) the ``t`` variables; compress the matrix."""
-    n_slack = n_h + 1
-    n_rows, n_cols = dense.shape
-    col_lower = _filled(n_cols, -INF)
-    col_upper = _filled(n_cols, INF)
-    col_lower[n_theta + n_slack : n_theta + n_slack + n_extra] = 0.0  # multipliers λ, μ, ν ≥ 0
-    cost = np.zeros(n_cols)
-    if least_violation:  # slacks free, t ≥ S, t ≥ 0, minimise Σ w t
-        extra = np.zeros((n_rows + n_slack, n_cols + n_slack))
-        extra[:n_rows, :n_cols] = dense
-        extra[n_rows:, n_theta : n_theta + n_slack] = -np.eye(n_slack)
-        extra[n_rows:, n_cols:] = np.eye(n_slack)
-        dense = extra
-        lower = np.concatenate([lower, np.zeros(n_slack)])
-        if equality is not None:
-            equality = np.concatenate([equality, np.zeros(n_slack, bool)])
-        rhs_const = np.concatenate([rhs_const, _filled(n_slack, INF)])
-        col_lower = np.concatenate([col_lower, np.zeros(n_slack)])
-        col_upper = np.concatenate([col_upper, _filled(n_slack, INF)])
-        cost = np.concatenate([cost, np.zeros(n_slack)])
-        first = n_cols
-    else:
-        col_upper[n_theta : n_theta + n_slack] = 0.0
-        first = n_theta
-    cost[first : first + n_h] = w_h
-    cost[first + n_h] = w_v
-    indptr, indices, values = dense_to_csr(dense)
-    return LpTemplate(cost, indptr, indices, values, col_lower, col_upper, lower, equality, rhs_h, rhs_v, rhs_const,
-                      n_theta, n_h, vertex_rows)  # fmt: skip
-
-
-def vertex_lp(problem: CellProblem, L: np.ndarray, c_h: float, c_v: float, u_max: float | None,
-              w_h: float = 1.0, w_v: float = 1.0, least_violation: bool = False) -> CellLp:  # fmt: skip
-    """The vertex form of (P) in the variables ``θ`` with ``[M, a] = L θ`` (ALGORITHMS §5.2).
-
-    Parameters
-    ----------
-    problem : CellProblem
-    L : ndarray, shape (2, 3, n_θ)
-        From :func:`field_map`.
-    c_h, c_v : float
-        Barrier and Lyapunov constants (1/s); ``c_h`` is unused without barrier rows.
-    u_max : float or None
-        Input box; ``None`` drops the input rows (Appendix A, T1).
-    w_h, w_v : float
-        Objective weights.
-    least_violation : bool
-        Free slacks and minimise ``Σ w·max(S, 0)`` instead (§5.3).
-
-    Returns
-    -------
-    CellLp
-        Rows (see :func:`vertex_template`): per group one row per vertex; the box as
-        ranged rows ``−u_max ≤ u_i(v_q) ≤ u_max``.
-    """
-    return vertex_template(problem, L, u_max, w_h, w_v, least_violation).instantiate(c_h, c_v)
-
-
-def dual_lp(problem: CellProblem, L: np.ndarray, c_h: float, c_v: float, u_max: float | None,
-            w_h: float = 1.0, w_v: float = 1.0, least_violation: bool = False) -> CellLp:  # fmt: skip
-    """The dual form of (P): multipliers ``λ_g ≥ 0`` per group instead of vertex rows (§5.2).
-
-    Same parameters as :func:`vertex_lp`. Rows per group ``g``: ``A_xᵀλ_g + Mᵀd_g = ρ_g``
-    (two equalities) and ``b_xᵀλ_g + d_gᵀa − S_g ≤ r_g``. Columns after the slacks: ``λ_g``
-    (m each, ``m`` = number of cell rows), group by group.
-    """
-    return dual_template(problem, L, u_max, w_h, w_v, least_violation).instantiate(c_h, c_v)
-
-
-def vertex_lp_field(problem: CellProblem, c_h: float, c_v: float, u_max: float | None, **kw) -> CellLp:
-    """Field-space vertex form: ``θ = vec([M, a])`` (row-major), 6 + n_h + 1 variables."""
-    return vertex_lp(problem, FIELD_MAP, c_h, c_v, u_max, **kw)
-
-
-def vertex_lp_gain(problem: CellProblem, c_h: float, c_v: float, u_max: float | None, structure: str = "full",
-                   **kw) -> CellLp:  # fmt: skip
-    """Gain-space vertex form for a gain structure (``full``, ``diag`` or ``scalar``)."""
-    return vertex_lp(problem, field_map(structure, problem.landmarks), c_h, c_v, u_max, **kw)
 
 
 # --------------------------------------------------------------------------- certificates
