@@ -226,7 +226,7 @@ def _from_entries(kind: str, entries: dict[str, Any], manifest: dict) -> Any:
         return Cells(map=map_, cell_flags=entries["cell_flags"], stats=stats, **cell_arrays)
     flags = stats.get("cell_flags", [0] * len(entries["cell_node"]))
     cells = Cells(map=map_, cell_flags=flags, **cell_arrays)
-    if not np.allclose(entries["landmarks"], map_.landmarks, rtol=0, atol=0):
+    if not np.array_equal(entries["landmarks"], map_.landmarks):
         raise ArtifactError("landmarks differ from the embedded map's", field="landmarks")
     return Plan(cells=cells, stats=stats, **{key: entries[key] for key in PLAN_KEYS if key != "landmarks"})
 

@@ -19,7 +19,7 @@ from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
 from bearnav_cli import __version__, artifacts, pipeline
-from bearnav_cli.datatypes import CellFlag, CellStatus
+from bearnav_cli.datatypes import CellFlag, Cells, CellStatus, cell_list
 from bearnav_cli.errors import BearnavError, InvalidMapError
 from bearnav_cli.stages.map_ import GridSource, MapSource
 
@@ -192,28 +192,21 @@ def _progress_bar() -> Progress:
     )
 
 
-def _cell_list(cells: list[int], limit: int = 20) -> str:
-    text = ", ".join(str(c) for c in cells[:limit])
-    return text + (f" … ({len(cells)} in all)" if len(cells) > limit else "")
-
-
 def _outcome_failure(artifact: Any) -> str | None:
     """Why a finished run's result is not usable (exit 1), or None."""
     cells = getattr(artifact, "cells", artifact)  # a Plan holds its Cells
     nodes = getattr(cells, "nodes", None)
     if nodes is not None and len(nodes) < 2:
         return "no route: the tree has only its root (every sample fell in obstacles?)"
-    flags = getattr(cells, "cell_flags", None)
-    if flags is not None:
-        blind = [int(c) for c in (flags & CellFlag.BLIND_SPOT).nonzero()[0]]
-        if blind:
-            return f"cells {_cell_list(blind)} have free points that see fewer than 2 landmarks (add landmarks there)"
+    blind = cells.flagged(CellFlag.BLIND_SPOT) if isinstance(cells, Cells) else []
+    if blind:
+        return f"cells {cell_list(blind, 20)} have free points that see fewer than 2 landmarks (add landmarks there)"
     status = getattr(artifact, "status", None)
     if status is not None:
         bad = (status == CellStatus.NOT_CERTIFIED) | (status == CellStatus.SOLVER_FAILURE)
         failed = [int(c) for c in bad.nonzero()[0]]
         if failed:
-            return f"cells {_cell_list(failed)} are not certified (status 2 or 3)"
+            return f"cells {cell_list(failed, 20)} are not certified (status 2 or 3)"
     return None
 
 
@@ -384,11 +377,8 @@ def verify_command(
     samples = artifacts.load(tree, ("tree", "simplified")).artifact.collision_samples if tree else None
     params = verify.Params(n_starts=starts, seed=seed, speed=speed, min_success=min_success)
     with _progress_bar() as progress:
-        task = progress.add_task("verify", total=None)
-        report = verify.run(
-            loaded.artifact, params, tree_samples=samples,
-            progress=lambda done, total: progress.update(task, completed=done, total=total),
-        )
+        track = _progress_factory(progress)("verify")
+        report = verify.run(loaded.artifact, params, tree_samples=samples, progress=track)
     if as_json:
         out.print_json(json.dumps(report.to_json()))
     else:

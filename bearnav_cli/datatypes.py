@@ -269,6 +269,13 @@ class CellFlag(enum.IntFlag):
     BLIND_SPOT = 16  # a free point of the coverage grid (spacing D/100) in the cell sees < 2 landmarks
 
 
+def cell_list(cells: Any, limit: int = 12) -> str:
+    """``"3, 7, 12"`` for messages, cut after ``limit`` cells with the total count."""
+    items = [str(int(c)) if isinstance(c, (int, np.integer)) else str(c) for c in cells]
+    text = ", ".join(items[:limit])
+    return text + (f" … ({len(items)} in all)" if len(items) > limit else "")
+
+
 def ragged(coords: Any, offsets: Any, width: int | None, name: str, count: int, dtype: Any = float):
     """Check a coords + offsets pair (DESIGN §3.1) and return both, read-only.
 
@@ -360,6 +367,10 @@ class Cells:
     @property
     def n_cells(self) -> int:
         return len(self.cell_node)
+
+    def flagged(self, flag: CellFlag) -> list[int]:
+        """Indices of the cells carrying ``flag``."""
+        return np.flatnonzero(self.cell_flags & flag).tolist()
 
     def vertices(self, c: int) -> np.ndarray:
         """CCW vertices of cell ``c``, shape (p, 2)."""

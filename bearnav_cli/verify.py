@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 import shapely
 
-from bearnav_cli.datatypes import CellFlag, CellStatus, Plan
+from bearnav_cli.datatypes import CellFlag, CellStatus, Plan, cell_list
 from bearnav_cli.errors import ArtifactError, InvalidParamsError
 from bearnav_cli.geometry import FreeSpace
 from bearnav_cli.routes import route_lengths, sample_starts
@@ -204,7 +204,7 @@ def flagged_cells(plan: Plan) -> dict[str, list[int]]:
         if isinstance(listed, list):
             out[name] = [int(c) for c in listed]
         else:
-            out[name] = np.flatnonzero(plan.cells.cell_flags & flag).tolist()
+            out[name] = plan.cells.flagged(flag)
     return out
 
 
@@ -410,10 +410,10 @@ class VerifyReport:
         """Why the plan fails verification (empty when it passes)."""
         out = []
         if self.uncertified:
-            out.append(f"{len(self.uncertified)} cells not certified (status 2 or 3): {_cells(self.uncertified)}")
+            out.append(f"{len(self.uncertified)} cells not certified (status 2 or 3): {cell_list(self.uncertified)}")
         if self.false_certificates:
             items = [f"{c} ({why})" for c, why in sorted(self.false_certificates.items())]
-            out.append(f"{len(items)} certified cells fail the recomputation: {_cells(items)}")
+            out.append(f"{len(items)} certified cells fail the recomputation: {cell_list(items)}")
         g = self.geometry
         if not g.coverage_ok:
             out.append(f"cells leave {g.uncovered_area:.3g} map units² of the bounds uncovered")
@@ -424,7 +424,7 @@ class VerifyReport:
             (g.blocked_edges, "tree edges (by child node) are not free"),
         ):
             if cells:
-                out.append(f"{len(cells)} {what}: {_cells(list(cells))}")
+                out.append(f"{len(cells)} {what}: {cell_list(cells)}")
         if g.samples_unchanged is False:
             out.append("collision samples differ from tree.npz")
         if self.skipped is not None and self.skipped.startswith("malformed"):
@@ -505,11 +505,6 @@ class VerifyReport:
             )
         out["monte_carlo"] = mc
         return out
-
-
-def _cells(items: list, limit: int = 12) -> str:
-    text = ", ".join(str(c) for c in items[:limit])
-    return text + (f" … ({len(items)} in all)" if len(items) > limit else "")
 
 
 def run(

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 import shapely
 
-from bearnav_cli.datatypes import CellFlag, Cells, Tree
+from bearnav_cli.datatypes import CellFlag, Cells, Tree, cell_list
 from bearnav_cli.errors import ArtifactError, InvalidParamsError
 from bearnav_cli.geometry import FreeSpace, landmark_coverage
 
@@ -453,7 +453,7 @@ def run(tree: Tree, params: Params = Params(), progress: Callable[[int, int], No
     # fewer than 2 landmarks. A cell holding one cannot be driven by bearings everywhere.
     grid, counts = landmark_coverage(map_, space)
     blind = grid[counts < 2]
-    polygons, cbf_n, cbf_q = [], [], []
+    polygons, rows, cbf_n, cbf_q = [], [], [], []
     exit_point = np.zeros((n, 2))
     exit_dir = np.zeros((n, 2))
     used = np.zeros((n, len(landmarks)), bool)
@@ -464,6 +464,7 @@ def run(tree: Tree, params: Params = Params(), progress: Callable[[int, int], No
     for c in range(n):
         if c == 0:
             polygon = goal_cell(nodes, bounds, tol)
+            A, b = polygon_rows(polygon)
             normals, offsets = goal_cbf_rows(map_.goal, samples, polygon, bounds, tol)
             anchors = map_.goal[None, :]
         else:
@@ -482,18 +483,17 @@ def run(tree: Tree, params: Params = Params(), progress: Callable[[int, int], No
         chosen, few = cell_landmarks(space, landmarks, polygon, anchors, params.n_landmarks)
         if few:
             flags[c] |= CellFlag.FEW_LANDMARKS
-        A, b = polygon_rows(polygon)
         if np.any(np.all(blind @ A.T <= b + tol, axis=1)):
             flags[c] |= CellFlag.BLIND_SPOT
         used[c, chosen] = True
         fixed[c], s_min[c], s_max[c], flag = fixed_landmark(landmarks, chosen, polygon, tol)
         flags[c] |= flag
         polygons.append(polygon)
+        rows.append((A, b))
         cbf_n.append(normals)
         cbf_q.append(offsets)
         if progress is not None and (c % 16 == 15 or c == n - 1):
             progress(c + 1, n)
-    rows = [polygon_rows(p) for p in polygons]
     counts = np.array([len(p) for p in polygons])
     cbf_counts = np.array([len(q) for q in cbf_q])
     stats = {
@@ -510,7 +510,7 @@ def run(tree: Tree, params: Params = Params(), progress: Callable[[int, int], No
         (CellFlag.BLIND_SPOT, "free points that see fewer than 2 landmarks: a robot cannot locate itself there"),
     ):
         if stats[flag.name.lower()]:
-            log.warning("%d cells: %s: %s", len(stats[flag.name.lower()]), what, _cell_list(stats[flag.name.lower()]))
+            log.warning("%d cells: %s: %s", len(stats[flag.name.lower()]), what, cell_list(stats[flag.name.lower()]))
     return Cells(
         map=map_,
         nodes=nodes,
@@ -536,16 +536,6 @@ def run(tree: Tree, params: Params = Params(), progress: Callable[[int, int], No
     )
 
 
-def _cell_list(cells: list[int], limit: int = 12) -> str:
-    text = ", ".join(str(c) for c in cells[:limit])
-    return text + (f" … ({len(cells)} in all)" if len(cells) > limit else "")
-
-
-def blind_cells(cells: Cells) -> list[int]:
-    """Cells with a free point that sees fewer than two landmarks (the CLI exits 1 on these)."""
-    return np.flatnonzero(cells.cell_flags & CellFlag.BLIND_SPOT).tolist()
-
-
 def summary(cells: Cells) -> str:
     """One line: cells, barrier rows and flagged cells."""
     text = f"{cells.n_cells} cells, {len(cells.cbf_b)} barrier rows"
@@ -555,7 +545,7 @@ def summary(cells: Cells) -> str:
     few = np.count_nonzero(cells.cell_flags & CellFlag.FEW_LANDMARKS)
     if few:
         text += f"; {few} cells topped up with landmarks not visible everywhere"
-    blind = blind_cells(cells)
+    blind = cells.flagged(CellFlag.BLIND_SPOT)
     if blind:
-        text += f"; blind spots (< 2 landmarks in sight) in cells {_cell_list(blind)}"
+        text += f"; blind spots (< 2 landmarks in sight) in cells {cell_list(blind)}"
     return text
