@@ -269,6 +269,7 @@ def rrtstar_command(
     seed: Optional[int] = typer.Option(None, help="Random seed (0)."),
     collision_policy: Optional[str] = typer.Option(None, help="'skip' (default) or 'extend' after a collision sample."),
     border_spacing: Optional[float] = typer.Option(None, help="Border pseudo-sample spacing (step/10; 0 = off)."),
+    clearance: Optional[float] = typer.Option(None, help="Least distance of edges from obstacles and walls (0.01 D)."),
     force: bool = FORCE,
     quiet: bool = QUIET,
     as_json: bool = JSON,
@@ -279,7 +280,8 @@ def rrtstar_command(
     """
     _Quiet.enabled |= quiet
     overrides = dict(
-        iterations=iterations, step=step, seed=seed, collision_policy=collision_policy, border_spacing=border_spacing
+        iterations=iterations, step=step, seed=seed, collision_policy=collision_policy,
+        border_spacing=border_spacing, clearance=clearance,
     )
     _run_one("rrtstar", map_json, out_path, overrides, force, as_json)
 
@@ -293,6 +295,7 @@ def simplify_command(
     ),
     max_rounds: Optional[int] = typer.Option(None, help="Rounds of PPR, CtL, RC, CtL at most (10)."),
     ctl: Optional[str] = typer.Option(None, help="Leaves kept by cut-the-leaves: 'middle' (default) or 'extremes'."),
+    clearance: Optional[float] = typer.Option(None, help="Least distance of shortcuts from obstacles (0.01 D)."),
     force: bool = FORCE,
     quiet: bool = QUIET,
     as_json: bool = JSON,
@@ -302,7 +305,7 @@ def simplify_command(
     Example: bearnav simplify plans/kitchen/tree.npz
     """
     _Quiet.enabled |= quiet
-    _run_one("simplify", tree_npz, out_path, dict(max_rounds=max_rounds, ctl=ctl), force, as_json)
+    _run_one("simplify", tree_npz, out_path, dict(max_rounds=max_rounds, ctl=ctl, clearance=clearance), force, as_json)
 
 
 @app.command("decompose")
@@ -314,6 +317,8 @@ def decompose_command(
     cbf_apex: Optional[str] = typer.Option(None, help="Barrier wedge apex: 'child' (default) or 'parent'."),
     cbf_filter: Optional[str] = typer.Option(None, help="Samples a barrier may use: 'both', 'projection', 'cell'."),
     n_landmarks: Optional[int] = typer.Option(None, help="Landmarks per cell controller (4)."),
+    barrier: Optional[str] = typer.Option(None, help="'corridor' (default: exact obstacles) or 'wedge' (samples)."),
+    barrier_margin: Optional[float] = typer.Option(None, help="Corridor rows' distance from obstacles (0.01 D)."),
     force: bool = FORCE,
     quiet: bool = QUIET,
     as_json: bool = JSON,
@@ -323,7 +328,10 @@ def decompose_command(
     Example: bearnav decompose plans/kitchen/simplified.npz
     """
     _Quiet.enabled |= quiet
-    overrides = dict(bisector_rule=bisector_rule, cbf_apex=cbf_apex, cbf_filter=cbf_filter, n_landmarks=n_landmarks)
+    overrides = dict(
+        bisector_rule=bisector_rule, cbf_apex=cbf_apex, cbf_filter=cbf_filter, n_landmarks=n_landmarks,
+        barrier=barrier, barrier_margin=barrier_margin,
+    )
     _run_one("decompose", tree_npz, out_path, overrides, force, as_json)
 
 

@@ -71,6 +71,10 @@ def inflate(raw: shapely.Geometry, radius: float) -> shapely.Geometry:
     return shapely.buffer(raw, grown, quad_segs=BUFFER_QUAD_SEGS, join_style="round")
 
 
+#: Default clearance of tree edges and barrier margin, as a fraction of the bounds' diagonal D.
+DEFAULT_CLEARANCE = 0.01
+
+
 @dataclass(frozen=True)
 class FreeSpace:
     """Free space ``B \\ O`` of a map, with exact vectorised queries.
@@ -92,6 +96,39 @@ class FreeSpace:
         shapely.prepare(obstacles)
         shapely.prepare(raw)
         return cls(np.asarray(map_.bounds, float), map_.tol, obstacles, raw)
+
+    def with_clearance(self, clearance: float) -> FreeSpace:
+        """The space a planner keeps ``clearance`` away from: ``O`` grown by it, and a band of that width along ``∂B``.
+
+        Segment tests against the result accept exactly the segments at distance at least
+        ``clearance`` (up to the polygonal buffer, which is rounded outward) from ``O`` and
+        from the walls. Line of sight (raw obstacles) is unchanged.
+
+        Parameters
+        ----------
+        clearance : float
+            Map units; ``0`` returns ``self``.
+        """
+        if clearance <= 0:
+            return self
+        box = shapely.box(*self.bounds)
+        band = shapely.difference(box, shapely.buffer(box, -clearance, join_style="mitre"))
+        grown = shapely.union(inflate(self.obstacles, clearance), band)
+        shapely.prepare(grown)
+        return FreeSpace(self.bounds, self.tol, grown, self.raw_obstacles)
+
+    def wall_clearance(self, point: np.ndarray) -> float:
+        """Distance from a point to ``O`` and to the walls ``∂B`` (map units)."""
+        p = np.asarray(point, float).reshape(2)
+        xmin, ymin, xmax, ymax = self.bounds
+        walls = min(p[0] - xmin, xmax - p[0], p[1] - ymin, ymax - p[1])
+        return float(min(walls, self.clearance(p)[0]))
+
+    def planning_clearance(self, requested: float | None, goal: np.ndarray, diagonal: float) -> float:
+        """The clearance a planner uses: ``requested`` (``None``: ``DEFAULT_CLEARANCE·D``), capped at
+        half the goal's own clearance so that the root can still connect (map units)."""
+        wanted = DEFAULT_CLEARANCE * diagonal if requested is None else float(requested)
+        return max(0.0, min(wanted, 0.5 * self.wall_clearance(goal)))
 
     @cached_property
     def box(self) -> shapely.Polygon:

@@ -12,7 +12,10 @@ cells are ``int64`` arrays of shape ``(R,)``. A single robot is ``R = 1``.
 - :func:`contains` — is ``x`` in cell ``c`` (within a tolerance);
 - :func:`voronoi_owner` — the cell of the nearest tree node, which always contains
   the point (ALGORITHMS §4.1, Lemma 2);
-- :func:`switch` — the switching and relocation rule of ALGORITHMS §7.3;
+- :func:`locate` — the cell to use at a point: one whose safe set holds it, on the
+  shortest route (docs/algorithms.md);
+- :func:`switch` — the switching and relocation rule of ALGORITHMS §7.3, relocating by
+  :func:`locate`;
 - :func:`apply_gain` / :func:`field` — ``u = gain[c] @ y`` for an output ``y``; with the
   displacement output ``y = (landmarks − x).ravel()`` this is the certified affine field.
 
@@ -45,6 +48,7 @@ _CHUNK = 1 << 20
 RUNTIME_KEYS = (
     "landmarks", "nodes", "parent", "cell_node", "cell_A", "cell_b", "cell_row_offsets", "exit_point",
     "exit_dir", "gain", "u_max", "goal_tolerance", "cell_landmarks", "fixed_landmark", "status",
+    "cbf_A", "cbf_b", "cbf_offsets",
 )  # fmt: skip
 
 
@@ -91,12 +95,16 @@ class PlanArrays:
         Landmark that rescales bearings in each cell.
     status : ndarray of int8, shape (C,)
         Synthesis status of each cell (``CellStatus`` values).
+    cbf_A, cbf_b, cbf_offsets : ndarray, shapes (H, 2), (H,), (C + 1,)
+        Barrier rows ``h(x) = A x + b`` of each cell, safe where every ``h >= 0``.
 
     Derived attributes (computed on construction): ``goal`` (2,), ``tol`` (``1e-9·D``),
     ``node_cell`` (N,) the cell of each node, ``parent_cell`` (C,) the cell a cell switches
     to (``-1`` for the goal cell), ``field_a`` (C, 2) and ``field_M`` (C, 2, 2) with
     ``gain[c] @ (landmarks − x).ravel() = field_a[c] − field_M[c] @ x``, and the rows padded
-    to ``row_A`` (C, P, 2), ``row_b`` (C, P) for vectorised membership tests.
+    to ``row_A`` (C, P, 2), ``row_b`` (C, P) for vectorised membership tests, the barrier rows
+    padded the same way to ``bar_A`` (C, Q, 2), ``bar_b`` (C, Q) (padding rows ``0·x + inf``),
+    and ``cost_to_go`` (C,): the tree route length from each cell's exit point to the goal.
     """
 
     landmarks: np.ndarray
@@ -115,6 +123,9 @@ class PlanArrays:
     cell_landmarks: np.ndarray
     fixed_landmark: np.ndarray
     status: np.ndarray
+    cbf_A: np.ndarray
+    cbf_b: np.ndarray
+    cbf_offsets: np.ndarray
     goal: np.ndarray = dataclasses.field(init=False, repr=False)
     tol: float = dataclasses.field(init=False, repr=False)
     node_cell: np.ndarray = dataclasses.field(init=False, repr=False)
@@ -123,6 +134,9 @@ class PlanArrays:
     field_M: np.ndarray = dataclasses.field(init=False, repr=False)
     row_A: np.ndarray = dataclasses.field(init=False, repr=False)
     row_b: np.ndarray = dataclasses.field(init=False, repr=False)
+    bar_A: np.ndarray = dataclasses.field(init=False, repr=False)
+    bar_b: np.ndarray = dataclasses.field(init=False, repr=False)
+    cost_to_go: np.ndarray = dataclasses.field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         put = object.__setattr__
@@ -130,7 +144,8 @@ class PlanArrays:
             ("landmarks", float), ("nodes", float), ("parent", np.int64), ("cell_node", np.int64),
             ("cell_A", float), ("cell_b", float), ("cell_row_offsets", np.int64), ("exit_point", float),
             ("exit_dir", float), ("gain", float), ("u_max", float), ("bounds", float), ("cell_landmarks", bool),
-            ("fixed_landmark", np.int64), ("status", np.int8),
+            ("fixed_landmark", np.int64), ("status", np.int8), ("cbf_A", float), ("cbf_b", float),
+            ("cbf_offsets", np.int64),
         ):  # fmt: skip
             put(self, name, _readonly(getattr(self, name), dtype))
         put(self, "goal_tolerance", float(self.goal_tolerance))
@@ -154,16 +169,14 @@ class PlanArrays:
         blocks = self.gain.reshape(c, 2, n_lm, 2)  # K_k = gain[c][:, 2k:2k+2]
         put(self, "field_M", _readonly(blocks.sum(axis=2), float))
         put(self, "field_a", _readonly(self.gain @ self.landmarks.ravel(), float))
-        counts = np.diff(self.cell_row_offsets)
-        width = int(counts.max()) if c else 0
-        row_A = np.zeros((c, width, 2))
-        row_b = np.zeros((c, width))  # padding rows 0·x <= 0 always hold
-        cell_of_row = np.repeat(np.arange(c), counts)
-        slot = np.arange(len(self.cell_b)) - self.cell_row_offsets[cell_of_row]
-        row_A[cell_of_row, slot] = self.cell_A
-        row_b[cell_of_row, slot] = self.cell_b
+        row_A, row_b = _padded(self.cell_A, self.cell_b, self.cell_row_offsets, 0.0)  # 0·x <= 0 always holds
         put(self, "row_A", _readonly(row_A, float))
         put(self, "row_b", _readonly(row_b, float))
+        bar_A, bar_b = _padded(self.cbf_A, self.cbf_b, self.cbf_offsets, math.inf)  # 0·x + inf >= 0 always holds
+        put(self, "bar_A", _readonly(bar_A, float))
+        put(self, "bar_b", _readonly(bar_b, float))
+        node_cost = tree_costs(self.nodes, self.parent)
+        put(self, "cost_to_go", _readonly(np.where(up >= 0, node_cost[np.maximum(up, 0)], 0.0), float))
 
     def _check_shapes(self, n: int, c: int, n_lm: int) -> None:
         rows = int(self.cell_row_offsets[-1]) if len(self.cell_row_offsets) else -1
@@ -212,6 +225,9 @@ class PlanArrays:
             cell_landmarks=cells.cell_landmarks,
             fixed_landmark=cells.fixed_landmark,
             status=plan.status,
+            cbf_A=cells.cbf_A,
+            cbf_b=cells.cbf_b,
+            cbf_offsets=cells.cbf_offsets,
         )
 
     @classmethod
@@ -243,6 +259,42 @@ class PlanArrays:
             raise ArtifactError("embedded map has no bounds", file=str(path), field="map") from exc
         entries["goal_tolerance"] = float(entries["goal_tolerance"])
         return cls(bounds=bounds, **entries)
+
+
+def _padded(A: np.ndarray, b: np.ndarray, offsets: np.ndarray, fill: float) -> tuple[np.ndarray, np.ndarray]:
+    """Ragged rows (coords + offsets) as arrays (C, P, 2) and (C, P), padded with ``0·x`` and ``fill``."""
+    c = len(offsets) - 1
+    counts = np.diff(offsets)
+    width = int(counts.max()) if c > 0 and len(counts) else 0
+    out_A = np.zeros((c, width, 2))
+    out_b = np.full((c, width), fill)
+    cell_of_row = np.repeat(np.arange(c), counts)
+    slot = np.arange(len(b)) - offsets[cell_of_row]
+    out_A[cell_of_row, slot] = A
+    out_b[cell_of_row, slot] = b
+    return out_A, out_b
+
+
+def tree_costs(nodes: np.ndarray, parent: np.ndarray) -> np.ndarray:
+    """Length of the tree path from every node to the root, shape (N,), by pointer doubling.
+
+    Invariant: ``cost[i]`` is the tree distance from ``i`` to ``up[i]``; each round doubles
+    the jump, so ``O(log depth)`` rounds reach the root (whose ``up`` is itself).
+
+    Raises
+    ------
+    ArtifactError
+        ``parent`` has a cycle.
+    """
+    n = len(nodes)
+    up = np.where(parent >= 0, parent, np.arange(n))
+    cost = np.hypot(*(nodes - nodes[up]).T)
+    for _ in range(n.bit_length() + 1):
+        if np.array_equal(up, up[up]):
+            return cost
+        cost = cost + cost[up]
+        up = up[up]
+    raise ArtifactError("parent does not describe a tree", field="parent")
 
 
 # --------------------------------------------------------------------------- vectorised queries
@@ -305,15 +357,66 @@ def lyapunov(arrays: PlanArrays, cell: np.ndarray, x: np.ndarray) -> np.ndarray:
     return np.einsum("rk,rk->r", arrays.exit_dir[c], p - arrays.exit_point[c])
 
 
+def barrier_values(arrays: PlanArrays, x: np.ndarray) -> np.ndarray:
+    """``min_k h_k(x)`` over every cell's barrier rows, shape (R, C); ``inf`` for a cell without rows.
+
+    ``>= 0`` exactly when ``x`` lies in the cell's safe set.
+    """
+    p = _points(x)
+    return np.min(np.einsum("cqk,rk->rcq", arrays.bar_A, p) + arrays.bar_b[None], axis=2, initial=math.inf)
+
+
+def locate(arrays: PlanArrays, x: np.ndarray, tol: float | None = None) -> np.ndarray:
+    """The cell a robot at ``x`` should use, shape (R,): safety first, then the shortest route.
+
+    Cells overlap, so a point lies in several. Candidates are the cells that contain
+    ``x`` and, for edge cells, have ``V(x) > tol`` (a robot on an exit face would leave at
+    once). Among the candidates whose safe set contains ``x`` (every barrier row
+    ``h(x) >= 0``), take the one with the shortest remaining tree route
+    ``‖x − x_j‖ + cost(x_j)`` (``‖x − g‖`` for the goal cell); if there is none, the one
+    whose barrier rows are least violated (largest ``min_k h_k(x)``): the rows never
+    decrease while negative, so that cell keeps the robot farthest behind its obstacle
+    lines. Without any candidate, the Voronoi owner (which contains ``x``, Lemma 2).
+
+    Parameters
+    ----------
+    arrays : PlanArrays
+    x : ndarray, shape (R, 2)
+        Positions or their estimates (map units).
+    tol : float, optional
+        Membership slack (map units); default ``arrays.tol``.
+    """
+    p = _points(x)
+    tol = arrays.tol if tol is None else tol
+    inside = np.all(np.einsum("cpk,rk->rcp", arrays.row_A, p) <= arrays.row_b[None] + tol, axis=2)
+    gap = p[:, None, :] - arrays.exit_point[None]
+    edge = arrays.parent_cell >= 0
+    leaving = edge[None] & (np.einsum("ck,rck->rc", arrays.exit_dir, gap) <= tol)
+    candidate = inside & ~leaving
+    h = np.where(candidate, barrier_values(arrays, p), -math.inf)
+    route = np.where(edge[None], np.hypot(gap[..., 0], gap[..., 1]) + arrays.cost_to_go[None], 0.0)
+    route = np.where(edge[None], route, np.hypot(*(p - arrays.goal).T)[:, None])
+    safe = candidate & (h >= 0)
+    best_safe = np.argmin(np.where(safe, route, math.inf), axis=1)
+    least_violated = np.argmax(h, axis=1)
+    rows = np.arange(len(p))
+    chosen = np.where(safe.any(axis=1), best_safe, least_violated)
+    if not candidate[rows, chosen].all():
+        lost = ~candidate[rows, chosen]
+        chosen[lost] = voronoi_owner(arrays, p[lost])
+    return chosen
+
+
 def switch(
     arrays: PlanArrays, cell: np.ndarray, x: np.ndarray, eps_sw: float, tol: float | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Switching and relocation (ALGORITHMS §7.3), for every robot at once.
+    """Switching and relocation (ALGORITHMS §7.3 with the safety rule of docs/algorithms.md), for every robot.
 
     An edge cell ``i → j`` hands over to the cell of ``j`` when ``V(x) <= 0`` or
-    ``‖x − x_j‖ <= eps_sw``. Then, if ``x`` is outside the (new) cell by more than ``tol``,
-    the robot is relocated to the Voronoi owner's cell, which contains ``x``. One switch
-    per call: a robot that is also at the next exit switches again on the next call.
+    ``‖x − x_j‖ <= eps_sw``. If ``x`` then lies outside the (new) cell by more than
+    ``tol``, or the hand-over lands outside the parent cell's safe set, the robot is
+    relocated by :func:`locate`. One switch per call: a robot that is also at the next
+    exit switches again on the next call.
 
     Parameters
     ----------
@@ -331,21 +434,30 @@ def switch(
     -------
     new_cell : ndarray of int64, shape (R,)
     relocated : ndarray of bool, shape (R,)
-        Robots relocated to their Voronoi owner (each one is a ``left_cell`` event).
+        Robots found outside their (new) cell and relocated (each one is a ``left_cell``
+        event; a hand-over moved on to a safer cell is not).
     """
     c, p = _cells(arrays, cell).copy(), _points(x)
     up = arrays.parent_cell[c]
     edge = up >= 0
+    handed = np.zeros(len(c), bool)
     if edge.any():
         ce, pe = c[edge], p[edge]
         gap = pe - arrays.exit_point[ce]
         value = np.einsum("rk,rk->r", arrays.exit_dir[ce], gap)
         hand_over = (value <= 0.0) | (gap[:, 0] * gap[:, 0] + gap[:, 1] * gap[:, 1] <= eps_sw * eps_sw)
-        c[np.flatnonzero(edge)[hand_over]] = up[edge][hand_over]
-    relocated = ~contains(arrays, c, p, tol)
-    if relocated.any():
-        c[relocated] = voronoi_owner(arrays, p[relocated])
-    return c, relocated
+        handed[np.flatnonzero(edge)[hand_over]] = True
+        c[handed] = up[edge][hand_over]
+    outside = ~contains(arrays, c, p, tol)
+    unsafe = handed & ~outside
+    if unsafe.any():
+        idx = np.flatnonzero(unsafe)
+        rows = np.einsum("rqk,rk->rq", arrays.bar_A[c[idx]], p[idx]) + arrays.bar_b[c[idx]]
+        unsafe[idx] = np.min(rows, axis=1, initial=math.inf) < 0
+    move = outside | unsafe
+    if move.any():
+        c[move] = locate(arrays, p[move], tol)
+    return c, outside
 
 
 def displacement(arrays: PlanArrays, x: np.ndarray) -> np.ndarray:

@@ -20,9 +20,18 @@ def small_map():
 
 
 @pytest.fixture(scope="module")
-def cells(small_map):
-    tree = rrtstar.run(small_map, rrtstar.Params(iterations=600, step=1.0, seed=2))
-    return decompose.run(simplify.run(tree))
+def simplified(small_map):
+    return simplify.run(rrtstar.run(small_map, rrtstar.Params(iterations=600, step=1.0, seed=2)))
+
+
+@pytest.fixture(scope="module")
+def cells(simplified):
+    return decompose.run(simplified)
+
+
+@pytest.fixture(scope="module")
+def wedge_cells(simplified):
+    return decompose.run(simplified, decompose.Params(barrier="wedge"))
 
 
 def random_tree(small_map, seed: int, n: int = 25) -> Tree:
@@ -89,7 +98,8 @@ def test_cells_cover_the_bounds_and_contain_voronoi_cells(small_map, seed):
         assert np.all(pts @ A.T <= b + 1e-9), f"Voronoi points of node {c} outside its cell"
 
 
-def test_cbf_rows_are_unit_wedges_that_exclude_samples(cells):
+def test_cbf_rows_are_unit_wedges_that_exclude_samples(wedge_cells):
+    cells = wedge_cells
     tol = cells.map.tol
     samples = cells.collision_samples
     for c in range(1, cells.n_cells):
@@ -107,6 +117,68 @@ def test_cbf_rows_are_unit_wedges_that_exclude_samples(cells):
         considered = samples[(t >= 0) & (t <= 1) & np.all(samples @ A.T <= b + tol, axis=1)]
         inside = np.all(considered @ n.T + q > tol, axis=1)
         assert not inside.any()
+
+
+def safe_polygon(cells, c: int) -> shapely.Polygon:
+    """The cell clipped by every barrier row, exactly (shapely)."""
+    n, q = cells.barrier(c)
+    poly = shapely.Polygon(cells.vertices(c))
+    big = 10 * cells.map.diagonal
+    for normal, offset in zip(n, q, strict=True):
+        # {h >= 0} as a huge polygon: the side of the line n·x + q = 0 that n points to
+        foot = -offset * normal
+        along = np.array([-normal[1], normal[0]]) * big
+        half = shapely.Polygon([foot - along, foot + along, foot + along + big * normal, foot - along + big * normal])
+        poly = shapely.intersection(poly, half)
+    return poly
+
+
+def test_corridor_safe_sets_keep_the_margin_from_every_obstacle(cells, small_map):
+    """Every cell's safe set (cell ∩ barrier half-planes) contains its tree edge (or the goal) and
+    stays at least min(margin, d/2) away from the inflated obstacles and the walls (exact check)."""
+    space = FreeSpace.from_map(small_map)
+    margin = 0.01 * small_map.diagonal
+    walls = shapely.difference(shapely.box(*small_map.bounds).buffer(1.0), shapely.box(*small_map.bounds))
+    checked = 0
+    for c in range(cells.n_cells):
+        n, q = cells.barrier(c)
+        np.testing.assert_allclose(np.hypot(n[:, 0], n[:, 1]), 1.0, atol=1e-12)
+        ends = np.array([small_map.goal]) if c == 0 else cells.nodes[[c, cells.parent[c]]]
+        assert np.all(ends @ n.T + q > 0)  # the edge is strictly inside every row
+        safe = safe_polygon(cells, c)
+        assert not safe.is_empty
+        segment = shapely.LineString(ends) if len(ends) == 2 else shapely.Point(ends[0])
+        # the rows may only be moved by half the segment's own distance from an obstacle
+        room = min(margin, 0.5 * shapely.distance(segment, space.obstacles))
+        assert shapely.distance(safe, space.obstacles) >= room - 1e-9
+        if c > 0:
+            assert shapely.distance(safe, walls) >= min(margin, 0.5 * shapely.distance(segment, walls)) - 1e-9
+        checked += len(n) > 0
+    assert checked > cells.n_cells // 2
+
+
+def test_corridor_rows_keep_each_obstacle_piece_behind_its_own_row():
+    """Separating half-planes: a row per convex piece, with the whole piece at h <= level = −m
+    and the segment at h >= d − m, so a robot whose h never decreases cannot reach the piece."""
+    square = shapely.box(4.0, 1.0, 6.0, 3.0)
+    ell = shapely.union(shapely.box(2.0, -4.0, 8.0, -3.0), shapely.box(7.0, -4.0, 8.0, 3.5))  # wraps the edge
+    obstacles = shapely.union(square, ell)
+    polygon = decompose.box_polygon(np.array([0.0, -6.0, 10.0, 6.0]))
+    ends = np.array([[1.0, 0.0], [6.5, 0.0]])
+    n, q, level = decompose.corridor_rows(ends, polygon, obstacles, margin=0.25)
+    assert len(n) >= 3  # the L is not convex around the edge: split into triangles
+    np.testing.assert_allclose(np.hypot(n[:, 0], n[:, 1]), 1.0, atol=1e-12)
+    np.testing.assert_allclose(level, -0.25)
+    assert np.all(ends @ n.T + q >= 0.25)
+    # every obstacle vertex is behind at least one row at its level, and inside no safe point
+    pts = shapely.get_coordinates(obstacles)
+    assert np.all(np.min(pts @ n.T + q - level, axis=1) <= 1e-12)
+    grid = np.stack(np.meshgrid(np.linspace(0, 10, 101), np.linspace(-6, 6, 121)), -1).reshape(-1, 2)
+    safe = np.all(grid @ n.T + q >= 0, axis=1)
+    assert not shapely.intersects_xy(obstacles.buffer(0.25 - 1e-9), grid[safe, 0], grid[safe, 1]).any()
+    # a piece that touches the segment cannot be separated: it gets no row (and a warning)
+    n2, _, _ = decompose.corridor_rows(ends, polygon, shapely.box(3.0, -0.5, 3.5, 0.0), margin=0.25)
+    assert len(n2) == 0
 
 
 def test_smallest_angle_not_smallest_distance():

@@ -233,8 +233,8 @@ def test_tree_costs_by_pointer_doubling():
     expected = np.zeros(40)
     for i in range(1, 40):
         expected[i] = expected[parent[i]] + np.linalg.norm(nodes[i] - nodes[parent[i]])
-    assert np.allclose(simulate.tree_costs(nodes, parent), expected, atol=1e-12)
-    assert np.allclose(simulate.tree_costs(CHAIN_NODES, CHAIN_PARENT), [0.0, 4.0, 8.0])
+    assert np.allclose(runtime.tree_costs(nodes, parent), expected, atol=1e-12)
+    assert np.allclose(runtime.tree_costs(CHAIN_NODES, CHAIN_PARENT), [0.0, 4.0, 8.0])
 
 
 def test_params_are_checked():

@@ -295,7 +295,7 @@ def reference(tree, mode):
 @pytest.mark.parametrize("mode,seed", [("middle", 7), ("extremes", 8)])
 def test_matches_a_literal_transcription_of_the_specification(clutter, mode, seed):
     tree = rrtstar.run(clutter, rrtstar.Params(iterations=350, step=3.0, seed=seed))
-    out = simplify.run(tree, simplify.Params(ctl=mode))
+    out = simplify.run(tree, simplify.Params(ctl=mode, clearance=0.0))
     assert out.stats["crossings_removed"] > 0
     nodes, parent = reference(tree, mode)
     assert np.array_equal(out.nodes, nodes)

@@ -20,11 +20,12 @@ import shapely
 
 from bearnav_cli.datatypes import CellFlag, Cells, Tree, cell_list
 from bearnav_cli.errors import ArtifactError, InvalidParamsError
-from bearnav_cli.geometry import FreeSpace, landmark_coverage
+from bearnav_cli.geometry import DEFAULT_CLEARANCE, FreeSpace, landmark_coverage
 
-VERSION = 1
+VERSION = 2
 log = logging.getLogger(__name__)
 
+BARRIERS = ("corridor", "wedge")
 BISECTOR_RULES = ("crossing", "parent")
 CBF_APEXES = ("child", "parent")
 CBF_FILTERS = ("both", "projection", "cell")
@@ -46,15 +47,30 @@ class Params:
         the edge, inside the cell, or both.
     n_landmarks : int
         Landmarks per cell controller (the nearest visible ones, at least 2).
+    barrier : {"corridor", "wedge"}
+        ``corridor`` (default): one separating half-plane between the tree edge (the goal for
+        the goal cell) and every convex piece of the inflated obstacles near the cell, and one
+        per wall within the margin, so the safe set is obstacle-free (docs/choices.md).
+        ``wedge``: ALGORITHMS §4.5–4.6 as written, lines through collision samples; its safe
+        set overlaps the obstacles between samples.
+    barrier_margin : float or None
+        ``corridor`` only: each row is moved ``min(margin, d/2)`` toward the edge (``d`` the
+        piece's distance from it), so the safe set keeps that distance from the obstacles
+        (map units); ``None`` means ``0.01·D``.
     """
 
     bisector_rule: str = "crossing"
     cbf_apex: str = "child"
     cbf_filter: str = "both"
     n_landmarks: int = 4
+    barrier: str = "corridor"
+    barrier_margin: float | None = None
 
     def __post_init__(self) -> None:
+        if self.barrier_margin is not None and not (self.barrier_margin >= 0 and math.isfinite(self.barrier_margin)):
+            raise InvalidParamsError(f"must be zero or positive, got {self.barrier_margin}", field="barrier_margin")
         for name, allowed in (
+            ("barrier", BARRIERS),
             ("bisector_rule", BISECTOR_RULES),
             ("cbf_apex", CBF_APEXES),
             ("cbf_filter", CBF_FILTERS),
@@ -306,6 +322,107 @@ def goal_cbf_rows(
     return normals[supports], offsets[supports]
 
 
+def _convex_pieces(region: shapely.Geometry, keep_clear: shapely.Geometry) -> list[shapely.Geometry]:
+    """Convex polygons whose union is ``region``: a part's hull when the hull misses ``keep_clear``,
+    else the part's constrained Delaunay triangles (a non-convex part may wrap around the edge)."""
+    pieces: list[shapely.Geometry] = []
+    for part in shapely.get_parts(region):
+        if not isinstance(part, shapely.Polygon) or part.area <= 0:
+            continue
+        hull = shapely.convex_hull(part)
+        if not shapely.intersects(hull, keep_clear):
+            pieces.append(hull)
+        else:
+            pieces.extend(shapely.get_parts(shapely.constrained_delaunay_triangles(part)))
+    return pieces
+
+
+def wall_rows(polygon: np.ndarray, bounds: np.ndarray, reach: float) -> tuple[np.ndarray, np.ndarray]:
+    """One row ``h(x) = n·x + q`` (inward unit normal, ``h`` the distance to the wall) per wall of ``B``
+    within ``reach`` of the cell, shapes (w, 2), (w,)."""
+    xmin, ymin, xmax, ymax = bounds
+    normals, offsets = [], []
+    for axis, value, sign in ((0, xmin, 1.0), (0, xmax, -1.0), (1, ymin, 1.0), (1, ymax, -1.0)):
+        if np.any(np.abs(polygon[:, axis] - value) <= reach):
+            n = np.zeros(2)
+            n[axis] = sign
+            normals.append(n)
+            offsets.append(-sign * value)
+    return np.array(normals, float).reshape(-1, 2), np.array(offsets, float)
+
+
+def corridor_rows(
+    keep_clear: np.ndarray,
+    polygon: np.ndarray,
+    obstacles: shapely.Geometry,
+    margin: float,
+    walls: tuple[np.ndarray, np.ndarray] | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Barrier rows that separate a segment from every obstacle piece near a cell.
+
+    For each convex piece ``T`` of ``O ∩ buffer(X, margin)`` with nearest points ``p ∈ T``
+    and ``s ∈ S`` (``S = [x_i, x_j]``, or the goal), the row is
+    ``h(x) = n·(x − p) − m`` with ``n = unit(s − p)`` and ``m = min(margin, ‖s − p‖/2)``.
+    By the optimality of the nearest pair, ``h ≥ ‖s − p‖ − m > 0`` on all of ``S`` and
+    ``h ≤ −m`` on all of ``T``; the safe set ``{h ≥ 0}`` is therefore free of obstacles
+    by at least ``m``, and contains the segment. Wall rows are moved the same way, by
+    ``min(margin, d/2)`` with ``d`` the segment's distance from the wall.
+
+    Parameters
+    ----------
+    keep_clear : ndarray, shape (2, 2) or (1, 2)
+        The segment ``[x_i, x_j]`` or the single point ``g``.
+    polygon : ndarray, shape (p, 2)
+        The cell (CCW).
+    obstacles : shapely geometry
+        The inflated obstacles ``O``.
+    margin : float
+        Map units.
+    walls : tuple of ndarray, optional
+        Rows of the walls within ``margin`` of the cell (:func:`wall_rows`).
+
+    Returns
+    -------
+    normals : ndarray, shape (h, 2)
+        Unit normals.
+    offsets : ndarray, shape (h,)
+        ``h(x) = normals @ x + offsets``.
+    levels : ndarray, shape (h,)
+        ``−m`` of each row: its obstacle piece (or wall) lies where ``h <= level``.
+    """
+    ends = np.asarray(keep_clear, float).reshape(-1, 2)
+    segment = shapely.LineString(ends) if len(ends) == 2 else shapely.Point(ends[0])
+    region = shapely.Polygon(polygon)
+    if margin > 0:
+        region = shapely.buffer(region, margin, join_style="mitre")
+    near = shapely.intersection(obstacles, region)
+    normals, offsets, levels = [np.zeros((0, 2))], [np.zeros(0)], [np.zeros(0)]
+    pieces = _convex_pieces(near, segment) if not near.is_empty else []
+    if pieces:
+        pair = shapely.get_coordinates(shapely.shortest_line(np.array(pieces, dtype=object), segment)).reshape(-1, 2, 2)
+        gap = pair[:, 1] - pair[:, 0]
+        dist = np.hypot(gap[:, 0], gap[:, 1])
+        apart = dist > 0  # a piece that touches the segment (an edge that is not free) cannot be separated
+        if not apart.all():
+            log.warning("an obstacle touches the tree edge %s: it gets no barrier row", ends.round(6).tolist())
+            pair, gap, dist = pair[apart], gap[apart], dist[apart]
+        n = gap / dist[:, None]
+        shift = np.minimum(margin, 0.5 * dist)
+        normals.append(n)
+        offsets.append(-np.einsum("ij,ij->i", n, pair[:, 0]) - shift)
+        levels.append(-shift)
+    if walls is not None:
+        dist = np.min(ends @ walls[0].T + walls[1], axis=0)  # the segment's distance from each wall
+        shift = np.minimum(margin, 0.5 * dist)
+        normals.append(walls[0])
+        offsets.append(walls[1] - shift)
+        levels.append(-shift)
+    # Every row is kept, also those redundant for the safe polygon: a robot that starts or
+    # lands outside the safe set is kept off piece k by row k alone (h_k never decreases
+    # while negative, and the piece lies at h_k <= level_k).
+    return np.concatenate(normals), np.concatenate(offsets), np.concatenate(levels)
+
+
 # --------------------------------------------------------------------------- landmarks
 
 
@@ -453,6 +570,7 @@ def run(tree: Tree, params: Params = Params(), progress: Callable[[int, int], No
     # fewer than 2 landmarks. A cell holding one cannot be driven by bearings everywhere.
     grid, counts = landmark_coverage(map_, space)
     blind = grid[counts < 2]
+    margin = DEFAULT_CLEARANCE * map_.diagonal if params.barrier_margin is None else params.barrier_margin
     polygons, rows, cbf_n, cbf_q = [], [], [], []
     exit_point = np.zeros((n, 2))
     exit_dir = np.zeros((n, 2))
@@ -465,15 +583,24 @@ def run(tree: Tree, params: Params = Params(), progress: Callable[[int, int], No
         if c == 0:
             polygon = goal_cell(nodes, bounds, tol)
             A, b = polygon_rows(polygon)
-            normals, offsets = goal_cbf_rows(map_.goal, samples, polygon, bounds, tol)
+            if params.barrier == "corridor":
+                normals, offsets, _ = corridor_rows(map_.goal[None, :], polygon, space.obstacles, margin)
+            else:
+                normals, offsets = goal_cbf_rows(map_.goal, samples, polygon, bounds, tol)
             anchors = map_.goal[None, :]
         else:
             j = parent[c]
             polygon = edge_cell(nodes, c, j, bounds, tol, params.bisector_rule)
             A, b = polygon_rows(polygon)
-            normals, offsets, on_edge = cbf_rows(
-                nodes[c], nodes[j], samples, A, b, tol, apex=params.cbf_apex, sample_filter=params.cbf_filter
-            )
+            if params.barrier == "corridor":
+                normals, offsets, _ = corridor_rows(
+                    nodes[[c, j]], polygon, space.obstacles, margin, walls=wall_rows(polygon, bounds, margin + tol)
+                )
+                on_edge = False
+            else:
+                normals, offsets, on_edge = cbf_rows(
+                    nodes[c], nodes[j], samples, A, b, tol, apex=params.cbf_apex, sample_filter=params.cbf_filter
+                )
             if on_edge:
                 flags[c] |= CellFlag.SAMPLE_ON_EDGE
                 log.warning("cell %d: a collision sample on the edge line was skipped", c)

@@ -48,6 +48,11 @@ class Params:
     border_spacing : float or None
         Largest gap between border pseudo-samples (map units); ``None`` means
         ``step / 10``; ``0`` turns them off.
+    clearance : float or None
+        Smallest distance of every tree edge from the inflated obstacles and the walls (map
+        units); ``None`` means ``0.01·D`` (D the bounds' diagonal); ``0`` is the plain
+        RRT* of ALGORITHMS §2. Capped at half the goal's own clearance. The barrier rows of
+        ``decompose`` need it: a node on an obstacle's boundary leaves a robot no room.
     """
 
     iterations: int = 1500
@@ -55,6 +60,7 @@ class Params:
     seed: int = 0
     collision_policy: str = "skip"
     border_spacing: float | None = None
+    clearance: float | None = None
 
     def __post_init__(self) -> None:
         if self.iterations < 1:
@@ -67,6 +73,8 @@ class Params:
             object.__setattr__(self, "border_spacing", self.step / 10.0)
         if not (self.border_spacing >= 0 and math.isfinite(self.border_spacing)):
             raise InvalidParamsError(f"must be zero or positive, got {self.border_spacing}", field="border_spacing")
+        if self.clearance is not None and not (self.clearance >= 0 and math.isfinite(self.clearance)):
+            raise InvalidParamsError(f"must be zero or positive, got {self.clearance}", field="clearance")
 
 
 def rewiring_radius(n: int, free_area: float, step: float) -> float:
@@ -230,6 +238,8 @@ def run(map_: Map, params: Params = Params(), progress: Callable[[int, int], Non
     samples = rng.uniform((xmin, ymin), (xmax, ymax), size=(params.iterations, 2))
     in_obstacle = space.in_obstacle(samples)  # independent of the tree: one vectorised call
     free_area = space.free_area
+    clearance = space.planning_clearance(params.clearance, map_.goal, map_.diagonal)
+    space = space.with_clearance(clearance)  # edges keep their distance; samples are still tested against O
 
     capacity = params.iterations + 1
     nodes = np.empty((capacity, 2))
@@ -305,6 +315,7 @@ def run(map_: Map, params: Params = Params(), progress: Callable[[int, int], Non
     random_hits = samples[in_obstacle]
     stats = {
         "iterations": params.iterations,
+        "clearance": clearance,
         "nodes": n,
         "random_collision_samples": int(len(random_hits)),
         "border_samples": int(len(border)),

@@ -48,16 +48,23 @@ class Params:
     ctl : {"middle", "extremes"}
         Which leaves CtL keeps among the leaf children of one parent, sorted by
         angle from the incoming edge: the middle one, or the first and last.
+    clearance : float or None
+        Smallest distance of every new (shortcut) edge from the inflated obstacles and the
+        walls (map units); ``None`` means ``0.01·D``, capped at half the goal's clearance,
+        as in ``rrtstar``; ``0`` is ALGORITHMS §3 as written.
     """
 
     max_rounds: int = 10
     ctl: str = "middle"
+    clearance: float | None = None
 
     def __post_init__(self) -> None:
         if isinstance(self.max_rounds, bool) or not isinstance(self.max_rounds, int) or self.max_rounds < 1:
             raise InvalidParamsError(f"must be an integer >= 1, got {self.max_rounds!r}", field="max_rounds")
         if self.ctl not in CTL_MODES:
             raise InvalidParamsError(f"must be one of {', '.join(CTL_MODES)}, got {self.ctl!r}", field="ctl")
+        if self.clearance is not None and not (self.clearance >= 0 and math.isfinite(self.clearance)):
+            raise InvalidParamsError(f"must be zero or positive, got {self.clearance}", field="clearance")
 
 
 def bfs_levels(parent: np.ndarray) -> list[np.ndarray]:
@@ -415,7 +422,10 @@ def run(tree: Tree, params: Params = Params(), progress: Callable[[int, int], No
     }
     if len(nodes) == 1:
         return Tree(tree.map, tree.nodes, tree.parent, tree.cost, tree.collision_samples, stats)
-    space = FreeSpace.from_map(tree.map)
+    true_space = FreeSpace.from_map(tree.map)
+    clearance = true_space.planning_clearance(params.clearance, tree.map.goal, tree.map.diagonal)
+    stats["clearance"] = clearance
+    space = true_space.with_clearance(clearance)
     tol = tree.map.tol
 
     def cut(nodes, parent, cost):
@@ -442,7 +452,7 @@ def run(tree: Tree, params: Params = Params(), progress: Callable[[int, int], No
         if not changed:
             break
 
-    stats["discarded_reconnectable"] = _reconnectable(tree.nodes, nodes, space)
+    stats["discarded_reconnectable"] = _reconnectable(tree.nodes, nodes, true_space)
     return Tree(tree.map, nodes, parent, cost, tree.collision_samples, stats)
 
 

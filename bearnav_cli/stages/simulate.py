@@ -199,28 +199,11 @@ class Rollouts:
         return float(np.mean(self.outcome == Outcome.SUCCESS)) if len(self) else math.nan
 
 
-def tree_costs(nodes: np.ndarray, parent: np.ndarray) -> np.ndarray:
-    """Length of the tree path from every node to the root, shape (N,), by pointer doubling.
-
-    Invariant: ``cost[i]`` is the tree distance from ``i`` to ``up[i]``; each round doubles
-    the jump, so ``O(log depth)`` rounds reach the root (whose ``up`` is itself).
-    """
-    n = len(nodes)
-    up = np.where(parent >= 0, parent, np.arange(n))
-    cost = np.hypot(*(nodes - nodes[up]).T)
-    for _ in range(n.bit_length() + 1):
-        if np.array_equal(up, up[up]):
-            return cost
-        cost = cost + cost[up]
-        up = up[up]
-    raise ValueError("parent does not describe a tree")
-
-
 def step_limits(arrays: PlanArrays, starts: np.ndarray, s: Settings, params: Params) -> np.ndarray:
     """``max_steps`` of each run (ALGORITHMS §7.2), shape (R,)."""
     if params.max_steps is not None:
         return np.full(len(starts), int(params.max_steps), np.int64)
-    cost = tree_costs(arrays.nodes, arrays.parent)
+    cost = runtime.tree_costs(arrays.nodes, arrays.parent)
     near = runtime.nearest_node(arrays, starts)
     route = np.hypot(*(starts - arrays.nodes[near]).T) + cost[near]
     return np.ceil(5.0 * route / (s.speed * s.dt)).astype(np.int64) + 1000
@@ -360,7 +343,7 @@ def rollout(
         log.warning("%d starts are not free: counted as collisions", int(np.count_nonzero(blocked)))
         loop.finish(np.flatnonzero(blocked), Outcome.COLLISION)
     active = np.flatnonzero(~blocked)
-    loop.cell[active] = runtime.voronoi_owner(arrays, x0[active])
+    loop.cell[active] = runtime.locate(arrays, x0[active])
     iteration = 0
     while active.size:
         active = loop.step(active)
