@@ -140,6 +140,32 @@ def test_switch_relocates_a_robot_outside_its_cell(arrays):
     assert cell.tolist() == [0] and moved.tolist() == [True]
 
 
+def test_locate_prefers_a_cell_whose_safe_set_holds_the_point():
+    """Safety first, then the shortest route; otherwise the least violated cell; always a cell holding x."""
+    from bearnav_cli.geometry import FreeSpace
+    from bearnav_cli.routes import sample_starts
+    from bearnav_cli.stages import decompose, rrtstar, simplify, synthesize
+
+    from .conftest import SMALL_MAP, build_map
+
+    small = build_map(dict(SMALL_MAP))
+    tree = simplify.run(rrtstar.run(small, rrtstar.Params(iterations=600, step=1.0, seed=2)))
+    plan = synthesize.run(decompose.run(tree))
+    arr = PlanArrays.from_plan(plan)
+    x = sample_starts(FreeSpace.from_map(small), small.goal, 400, np.random.default_rng(3))
+    cell = runtime.locate(arr, x)
+    assert runtime.contains(arr, cell, x).all()
+    h = runtime.barrier_values(arr, x)  # (R, C)
+    inside = np.all(np.einsum("cpk,rk->rcp", arr.row_A, x) <= arr.row_b[None] + arr.tol, axis=2)
+    rows = np.arange(len(x))
+    some_safe = (inside & (h >= 0)).any(axis=1)
+    assert some_safe.mean() > 0.5
+    assert np.all(h[rows, cell][some_safe] >= 0)  # a safe cell whenever one exists
+    # otherwise the chosen cell violates its rows least among the cells holding x
+    worst = np.where(inside, h, -np.inf).max(axis=1)
+    assert np.all(h[rows, cell][~some_safe] >= worst[~some_safe] - 1e-12)
+
+
 # --------------------------------------------------------------------------- the closed loop
 
 

@@ -254,8 +254,9 @@ def test_kitchen_plan_is_certified_and_covers_the_map(kitchen):
 
 @pytest.mark.xfail(
     strict=True,
-    reason="the wedge CBF of ALGORITHMS §4.5 does not keep random starts off the obstacles: "
-    "about 72% of 200 uniform starts reach the goal, the rest collide (see the verify report)",
+    reason="corridor barriers, tree clearance and safety-first location bring the kitchen to 198/200 "
+    "(99.4% of 1000 starts), but starts deep in the margin band next to an obstacle still collide: "
+    "the issue asks for no collision at all (docs/choices.md, 'Safety in the closed loop')",
 )
 def test_kitchen_closed_loop_reaches_the_goal_from_random_starts(kitchen):
     _, _, report = kitchen
