@@ -322,19 +322,46 @@ def goal_cbf_rows(
     return normals[supports], offsets[supports]
 
 
-def _convex_pieces(region: shapely.Geometry, keep_clear: shapely.Geometry) -> list[shapely.Geometry]:
-    """Convex polygons whose union is ``region``: a part's hull when the hull misses ``keep_clear``,
-    else the part's constrained Delaunay triangles (a non-convex part may wrap around the edge)."""
-    pieces: list[shapely.Geometry] = []
+def _convex_pieces(region: shapely.Geometry, keep_clear: shapely.Geometry) -> tuple[list[shapely.Geometry], np.ndarray]:
+    """Convex pieces of ``region`` that a robot must keep off: each convex part itself, and every
+    boundary edge of the other parts.
+
+    Why edges: a convex set that holds a free point and meets a polygon's interior crosses its
+    boundary, so staying off every boundary edge keeps a robot out of the polygon. A hull would
+    also fence off the free pockets of a non-convex part (a storeroom's wall frame encloses the
+    whole room), and triangles would add rows at arbitrary angles through free space.
+
+    Returns
+    -------
+    parts : list of shapely.Polygon
+        Convex parts that miss ``keep_clear``.
+    edges : ndarray, shape (E, 2, 2)
+        Boundary edges ``(a, b)`` of the other parts, oriented so that the part lies on their left.
+    """
+    parts: list[shapely.Geometry] = []
+    edges = [np.zeros((0, 2, 2))]
     for part in shapely.get_parts(region):
         if not isinstance(part, shapely.Polygon) or part.area <= 0:
             continue
         hull = shapely.convex_hull(part)
-        if not shapely.intersects(hull, keep_clear):
-            pieces.append(hull)
-        else:
-            pieces.extend(shapely.get_parts(shapely.constrained_delaunay_triangles(part)))
-    return pieces
+        if hull.area - part.area <= 1e-9 * hull.area and not shapely.intersects(hull, keep_clear):
+            parts.append(hull)
+            continue
+        part = shapely.orient_polygons(part)  # exterior CCW, holes CW: the part is on every ring's left
+        for ring in (part.exterior, *part.interiors):
+            xy = np.asarray(ring.coords)
+            edges.append(np.stack([xy[:-1], xy[1:]], axis=1))
+    return parts, np.concatenate(edges)
+
+
+def _nearest_separators(pieces, segment: shapely.Geometry) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """For each piece, the nearest point ``p`` on it, the unit normal toward the segment and the gap."""
+    pair = shapely.get_coordinates(shapely.shortest_line(np.asarray(pieces, dtype=object), segment)).reshape(-1, 2, 2)
+    gap = pair[:, 1] - pair[:, 0]
+    dist = np.hypot(gap[:, 0], gap[:, 1])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        n = gap / dist[:, None]
+    return pair[:, 0], n, dist
 
 
 def wall_rows(polygon: np.ndarray, bounds: np.ndarray, reach: float) -> tuple[np.ndarray, np.ndarray]:
@@ -397,20 +424,32 @@ def corridor_rows(
         region = shapely.buffer(region, margin, join_style="mitre")
     near = shapely.intersection(obstacles, region)
     normals, offsets, levels = [np.zeros((0, 2))], [np.zeros(0)], [np.zeros(0)]
-    pieces = _convex_pieces(near, segment) if not near.is_empty else []
-    if pieces:
-        pair = shapely.get_coordinates(shapely.shortest_line(np.array(pieces, dtype=object), segment)).reshape(-1, 2, 2)
-        gap = pair[:, 1] - pair[:, 0]
-        dist = np.hypot(gap[:, 0], gap[:, 1])
-        apart = dist > 0  # a piece that touches the segment (an edge that is not free) cannot be separated
-        if not apart.all():
-            log.warning("an obstacle touches the tree edge %s: it gets no barrier row", ends.round(6).tolist())
-            pair, gap, dist = pair[apart], gap[apart], dist[apart]
-        n = gap / dist[:, None]
+    parts, edges = _convex_pieces(near, segment) if not near.is_empty else ([], np.zeros((0, 2, 2)))
+    anchor, n, dist = np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0)
+    if parts:
+        anchor, n, dist = _nearest_separators(parts, segment)
+    if len(edges):
+        # An edge's own line separates it best when the segment lies on its free side (a wall
+        # stays a wall); otherwise the nearest-point separator, as for the convex parts.
+        d = edges[:, 1] - edges[:, 0]
+        own = np.column_stack([d[:, 1], -d[:, 0]]) / np.hypot(d[:, 0], d[:, 1])[:, None]  # right: free side
+        clear = np.min(np.einsum("ek,sk->es", own, ends) - np.einsum("ek,ek->e", own, edges[:, 0])[:, None], axis=1)
+        use_own = clear > 0
+        e_anchor, e_n, e_dist = edges[:, 0].copy(), own, clear
+        if not use_own.all():
+            rest = shapely.linestrings(edges[~use_own])
+            e_anchor[~use_own], e_n[~use_own], e_dist[~use_own] = _nearest_separators(rest, segment)
+        anchor, n, dist = np.concatenate([anchor, e_anchor]), np.concatenate([n, e_n]), np.concatenate([dist, e_dist])
+    apart = dist > 0  # a piece that touches the segment (an edge that is not free) cannot be separated
+    if not apart.all():
+        log.warning("an obstacle touches the tree edge %s: it gets no barrier row", ends.round(6).tolist())
+        anchor, n, dist = anchor[apart], n[apart], dist[apart]
+    if len(dist):
         shift = np.minimum(margin, 0.5 * dist)
-        normals.append(n)
-        offsets.append(-np.einsum("ij,ij->i", n, pair[:, 0]) - shift)
-        levels.append(-shift)
+        rows = np.unique(np.column_stack([n, -np.einsum("ij,ij->i", n, anchor) - shift, -shift]).round(12), axis=0)
+        normals.append(rows[:, :2] / np.hypot(rows[:, 0], rows[:, 1])[:, None])
+        offsets.append(rows[:, 2])
+        levels.append(rows[:, 3])
     if walls is not None:
         dist = np.min(ends @ walls[0].T + walls[1], axis=0)  # the segment's distance from each wall
         shift = np.minimum(margin, 0.5 * dist)
