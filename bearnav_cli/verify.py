@@ -377,6 +377,13 @@ class VerifyReport:
             return math.nan
         return float(np.mean(self.rollouts.left_cell > 0))
 
+    @property
+    def approach_fraction(self) -> float:
+        """Fraction of runs that drove straight to a tree node at least once (outside every safe set)."""
+        if self.rollouts is None or not len(self.rollouts):
+            return math.nan
+        return float(np.mean(self.rollouts.approach_steps > 0))
+
     def _ratio(self, reference: np.ndarray) -> float:
         """Mean of (path length + the last ``‖x_end − g‖``) / reference over the successful runs.
 
@@ -448,6 +455,8 @@ class VerifyReport:
             others = ", ".join(f"{k} {v}" for k, v in counts.items() if k != "success" and v)
             text += f", {counts['success']}/{len(self.rollouts)} runs reached the goal"
             text += f" ({others})" if others else ""
+            if len(self.rollouts) and self.approach_fraction > 0:
+                text += f"; {self.approach_fraction:.0%} started or relocated outside every safe set"
         return text + ("; FAILED" if self.failed else "")
 
     def to_json(self) -> dict[str, Any]:
@@ -497,6 +506,7 @@ class VerifyReport:
                 outcomes=self.outcome_counts,
                 left_cell_events=self.left_cell_total,
                 left_cell_run_fraction=_finite_or_none([self.left_cell_fraction])[0],
+                approach_run_fraction=_finite_or_none([self.approach_fraction])[0],
                 path_over_straight=_finite_or_none([self.ratio_straight])[0],
                 path_over_route=_finite_or_none([self.ratio_route])[0],
                 dt=self.rollouts.dt,

@@ -40,7 +40,7 @@ def test_runtime_imports_with_numpy_only():
         "bad = [m for m in sys.modules if m.split('.')[0] in ('scipy', 'shapely', 'matplotlib', 'yaml', 'typer')]; "
         "assert not bad, bad; "
         "assert not [m for m in sys.modules if m.startswith('bearnav_cli.') and m not in "
-        "('bearnav_cli.runtime', 'bearnav_cli.errors')]"
+        "('bearnav_cli.runtime', 'bearnav_cli.plan_arrays', 'bearnav_cli.bearing', 'bearnav_cli.errors')]"
     )
     subprocess.run([sys.executable, "-c", code], check=True, cwd=REPO)
 
@@ -164,6 +164,52 @@ def test_locate_prefers_a_cell_whose_safe_set_holds_the_point():
     # otherwise the chosen cell violates its rows least among the cells holding x
     worst = np.where(inside, h, -np.inf).max(axis=1)
     assert np.all(h[rows, cell][~some_safe] >= worst[~some_safe] - 1e-12)
+
+
+def test_segments_clear_is_exact_and_counts_touching():
+    square = [[4.0, 3.0], [6.0, 3.0], [6.0, 5.0], [4.0, 5.0]]
+    plan = hand_plan(hand_map(obstacles=[square]))
+    arr = PlanArrays.from_plan(plan)
+    a = np.array([[1.0, 4.0], [1.0, 4.0], [1.0, 5.0], [1.0, 6.0], [1.0, 2.0], [4.0, 1.0], [9.0, 4.0]])
+    b = np.array([[9.0, 4.0], [3.9, 4.0], [9.0, 5.0], [9.0, 6.0], [9.0, 3.6], [4.0, 2.9], [11.0, 4.0]])
+    # through it | short of it | along its top edge (touching) | above it | through the corner (6, 3)
+    # | ending just below | leaving the bounds
+    assert runtime.segments_clear(arr, a, b).tolist() == [False, True, False, True, False, True, False]
+    # the same answers as the exact shapely test of the planning stages
+    from bearnav_cli.geometry import FreeSpace
+
+    rng = np.random.default_rng(4)
+    p, q = rng.uniform(0, 10, (400, 2)), rng.uniform(0, 8, (400, 2))
+    space = FreeSpace.from_map(plan.map)
+    free = space.points_free(p) & space.points_free(q)
+    assert np.array_equal(runtime.segments_clear(arr, p[free], q[free]), space.segments_free(p[free], q[free]))
+
+
+def test_a_robot_outside_every_safe_set_drives_straight_to_a_visible_node():
+    """The approach rule: outside every safe set, the target is a node with a clear segment on the
+    shortest route; arriving there (or entering a safe set) hands back to the certified fields."""
+    from bearnav_cli.geometry import FreeSpace
+    from bearnav_cli.routes import sample_starts
+    from bearnav_cli.stages import decompose, rrtstar, simplify, synthesize
+
+    from .conftest import SMALL_MAP, build_map
+
+    small = build_map(dict(SMALL_MAP))
+    plan = synthesize.run(decompose.run(simplify.run(rrtstar.run(small, rrtstar.Params(iterations=600, seed=2)))))
+    arr = PlanArrays.from_plan(plan)
+    space = FreeSpace.from_map(small)
+    x = sample_starts(space, small.goal, 300, np.random.default_rng(5))
+    cell, target, moved = runtime.update(arr, np.full(len(x), -1), np.full(len(x), -1), x, eps_sw=0.05)
+    assert not moved.any()
+    safe = runtime.in_safe_set(arr, cell, x)
+    going = target >= 0
+    assert not (safe & going).any()  # a certified robot never approaches
+    assert going.any() and safe.any()
+    assert space.segments_free(x[going], arr.nodes[target[going]]).all()  # exact shapely check
+    # a robot at its target node is handed to a cell whose safe set holds it
+    at = arr.nodes[target[going]]
+    cell2, target2, _ = runtime.update(arr, cell[going], target[going], at, eps_sw=0.05)
+    assert (target2 == -1).all() and runtime.in_safe_set(arr, cell2, at).all()
 
 
 # --------------------------------------------------------------------------- the closed loop

@@ -145,7 +145,9 @@ class Rollouts:
     path_length : ndarray, shape (R,)
         Length of the trajectory polyline (map units).
     left_cell : ndarray of int64, shape (R,)
-        Relocations to the Voronoi owner (ALGORITHMS §7.3).
+        Relocations after leaving the cell through a side face (ALGORITHMS §7.3).
+    approach_steps : ndarray of int64, shape (R,)
+        Steps driven straight to a tree node from outside every safe set (docs/choices.md).
     final_position : ndarray, shape (R, 2)
     final_cell : ndarray of int64, shape (R,)
         Active cell at the end (``-1`` if the start was not free).
@@ -165,6 +167,7 @@ class Rollouts:
     time: np.ndarray
     path_length: np.ndarray
     left_cell: np.ndarray
+    approach_steps: np.ndarray
     final_position: np.ndarray
     final_cell: np.ndarray
     max_steps: np.ndarray
@@ -221,7 +224,9 @@ class _Loop:
         self.steps = np.zeros(r, np.int64)
         self.length = np.zeros(r)
         self.left = np.zeros(r, np.int64)
-        self.cell = np.full(r, -1, np.int64)
+        self.cell = np.full(r, -1, np.int64)  # -1: located on the first step
+        self.target = np.full(r, -1, np.int64)  # node approached in a straight line, -1 for none
+        self.approach_steps = np.zeros(r, np.int64)
         self.history = np.empty((PROGRESS_WINDOW + 1, r, 2))  # ring buffer of positions, by step count
         self.history[0] = starts
         self.trace_runs: list[np.ndarray] = []
@@ -242,11 +247,17 @@ class _Loop:
             if not active.size:
                 return active
         x_hat, y = _measure(arrays, p)
-        cell, moved_out = runtime.switch(arrays, self.cell[active], x_hat, s.eps_sw, s.tol)
+        cell, target, moved_out = runtime.update(arrays, self.cell[active], self.target[active], x_hat, s.eps_sw, s.tol)
         self.cell[active] = cell
+        self.target[active] = target
         self.left[active] += moved_out
+        self.approach_steps[active] += target >= 0
         u = runtime.apply_gain(arrays, cell, y)
         idle = np.hypot(*runtime.affine_field(arrays, cell, x_hat).T) < STALL_FIELD * arrays.u_max[cell]
+        going = target >= 0
+        if going.any():
+            u[going] = arrays.nodes[target[going]] - x_hat[going]  # straight to the node (docs/choices.md)
+            idle[going] = False
         idle |= ~(np.hypot(u[:, 0], u[:, 1]) > 0)  # no direction to normalise (rounding, NaN)
         if idle.any():
             self.finish(active[idle], Outcome.STALL)
@@ -343,7 +354,6 @@ def rollout(
         log.warning("%d starts are not free: counted as collisions", int(np.count_nonzero(blocked)))
         loop.finish(np.flatnonzero(blocked), Outcome.COLLISION)
     active = np.flatnonzero(~blocked)
-    loop.cell[active] = runtime.locate(arrays, x0[active])
     iteration = 0
     while active.size:
         active = loop.step(active)
@@ -360,6 +370,7 @@ def rollout(
         time=loop.steps * s.dt,
         path_length=loop.length,
         left_cell=loop.left,
+        approach_steps=loop.approach_steps,
         final_position=loop.x,
         final_cell=loop.cell,
         max_steps=limits,

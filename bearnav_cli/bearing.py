@@ -1,0 +1,482 @@
+"""Bearing measurements, the field of view and the reconstruction of the scaled output (ALGORITHMS §6).
+
+This module needs numpy only (and :mod:`bearnav_cli.errors`): the robot-side
+:mod:`bearnav_cli.runtime` imports it. Everything is vectorised over ``R`` robots:
+positions are arrays of shape ``(R, 2)``, bearings ``(R, L, 2)``, masks ``(R, L)``;
+a single robot is ``R = 1``. Landmarks ``(L, 2)`` are shared by all robots. Positions
+and distances are in map units, angles in radians. Bearings are world-frame unit
+vectors (the compass is assumed, the paper §I).
+
+Measurement (§6.1):
+
+- :func:`directions` — true unit directions ``unit(l_k − x)`` and distances;
+- :func:`in_field_of_view` — rules (a) and (b) of §6.1: not within ``tol`` of the
+  landmark, and ``|wrap(atan2(l_k − x) − φ_c)| ≤ fov/2`` on the true direction;
+- :func:`in_range` — rule (d), ``‖l_k − x‖ ≤ range``;
+- :func:`noisy_bearings` — ``β_k = R(ε_k)·unit(l_k − x)``, ``ε_k ~ N(0, σ²)``.
+
+Line of sight (rule (c)) is not computed here: it needs the obstacles, which a robot
+does not carry. The caller combines the masks, e.g.
+``visible = in_field_of_view(...) & in_range(...) & line_of_sight``.
+
+Reconstruction (§6.2–6.5): :func:`reconstruct` turns the bearings of the visible
+landmarks into the scaled output ``ỹ_k ≈ (l_k − x)/‖l_f − x‖`` of *every* landmark (the
+closed form covers the invisible ones) and a position estimate ``x̂``, by ``lsq`` (the
+default), ``pair`` or ``rescale``. A controller then calls
+``runtime.switch(arrays, cell, rec.x_hat, ...)`` and ``runtime.apply_gain(arrays, cell, rec.y)``
+for the robots with ``rec.usable``, and applies the hold policy (§7.5) to the others.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from bearnav_cli.errors import InvalidParamsError
+
+#: Reconstruction methods of §6.2–6.4 (the first is the default).
+METHODS = ("lsq", "pair", "rescale")
+#: Default ``θ_min = min_bearing_spread`` (§6.2): 2°, in radians.
+DEFAULT_MIN_SPREAD = math.radians(2.0)
+#: Rounding allowance of the field-of-view test (radians): ``atan2`` of a difference of
+#: positions and the subtraction of the heading each round by a few ulps, so without it a
+#: landmark placed exactly on the edge of the field of view would be visible or not at random.
+ANGLE_SLACK = 1e-12
+#: Largest number of robot × landmark-pair entries :func:`reconstruct` (``pair``) builds at once.
+_CHUNK = 1 << 20
+
+
+# --------------------------------------------------------------------------- small helpers
+
+
+def wrap(theta: Any) -> np.ndarray:
+    """Angles mapped to ``(−π, π]`` (§0), same shape as ``theta`` (radians)."""
+    return math.pi - np.mod(math.pi - np.asarray(theta, float), 2.0 * math.pi)
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``a₁b₂ − a₂b₁`` over the last axis (broadcasting)."""
+    return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+
+
+def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1]
+
+
+def _norm(v: np.ndarray) -> np.ndarray:
+    return np.hypot(v[..., 0], v[..., 1])
+
+
+def _safe(den: np.ndarray) -> np.ndarray:
+    """``den`` with its zeros replaced by 1, so a division never produces inf or NaN."""
+    return np.where(den != 0, den, 1.0)
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    """``unit(v)`` over the last axis, and the zero vector where ``v = 0`` (undefined direction)."""
+    return v / _safe(_norm(v))[..., None]
+
+
+def _points(x: Any) -> np.ndarray:
+    return np.asarray(x, float).reshape(-1, 2)
+
+
+def _per_robot(value: Any, r: int, dtype: Any, name: str) -> np.ndarray:
+    """A scalar or an array of shape (R,) as an array of shape (R,)."""
+    array = np.asarray(value, dtype)
+    if array.ndim == 0:
+        return np.full(r, array, dtype)
+    if array.shape != (r,):
+        raise ValueError(f"{name} must be a scalar or have shape ({r},), got {array.shape}")
+    return array
+
+
+# --------------------------------------------------------------------------- measurement (§6.1)
+
+
+def directions(x: Any, landmarks: Any) -> tuple[np.ndarray, np.ndarray]:
+    """True directions and distances from each robot to each landmark (ALGORITHMS §6.1).
+
+    Parameters
+    ----------
+    x : array_like, shape (R, 2)
+        Robot positions (map units).
+    landmarks : array_like, shape (L, 2)
+        Landmark positions (map units).
+
+    Returns
+    -------
+    unit : ndarray, shape (R, L, 2)
+        ``unit(l_k − x)``; the zero vector where the robot sits exactly on the landmark.
+    distance : ndarray, shape (R, L)
+        ``‖l_k − x‖`` (map units).
+    """
+    d = _points(landmarks)[None, :, :] - _points(x)[:, None, :]
+    distance = _norm(d)
+    return d / _safe(distance)[..., None], distance
+
+
+def in_field_of_view(x: Any, heading: Any, landmarks: Any, fov: float, *, tol: float) -> np.ndarray:
+    """Rules (a) and (b) of ALGORITHMS §6.1: a defined bearing inside the camera's field of view.
+
+    Landmark ``k`` passes iff ``‖l_k − x‖ ≥ tol`` (a) and
+    ``|wrap(atan2(l_k − x) − heading)| ≤ fov/2`` (b), tested on the *true* direction (noise
+    does not move a landmark in or out of view). A landmark exactly on the edge of the field
+    of view is inside (up to :data:`ANGLE_SLACK`). Line of sight (c) and range (d) are
+    separate (see the module docstring).
+
+    Parameters
+    ----------
+    x : array_like, shape (R, 2)
+        Robot positions (map units).
+    heading : float or array_like, shape (R,)
+        Camera heading ``φ_c`` of each robot (radians, world frame).
+    landmarks : array_like, shape (L, 2)
+        Landmark positions (map units).
+    fov : float
+        Full horizontal field of view (radians); ``fov ≥ 2π`` (or ``inf``) sees all around.
+    tol : float
+        Rule (a) distance (map units), ``1e-9·D``.
+
+    Returns
+    -------
+    ndarray of bool, shape (R, L)
+
+    Raises
+    ------
+    InvalidParamsError
+        ``fov`` is negative or NaN.
+    """
+    if not fov >= 0:
+        raise InvalidParamsError(f"the field of view must be >= 0, got {fov}", field="fov")
+    p, lm = _points(x), _points(landmarks)
+    d = lm[None, :, :] - p[:, None, :]
+    visible = _norm(d) >= tol
+    if fov >= 2.0 * math.pi:
+        return visible
+    phi = _per_robot(heading, len(p), float, "heading")
+    off = wrap(np.arctan2(d[..., 1], d[..., 0]) - phi[:, None])
+    # A NaN heading compares False: nothing is visible, no NaN leaks out.
+    return visible & (np.abs(off) <= 0.5 * fov + ANGLE_SLACK)
+
+
+def in_range(x: Any, landmarks: Any, max_range: float) -> np.ndarray:
+    """Rule (d) of ALGORITHMS §6.1: ``‖l_k − x‖ ≤ max_range``, shape (R, L) bool.
+
+    Parameters
+    ----------
+    x : array_like, shape (R, 2)
+        Robot positions (map units).
+    landmarks : array_like, shape (L, 2)
+        Landmark positions (map units).
+    max_range : float
+        Sensing range (map units); ``inf`` (the default of §6.1) means unlimited.
+
+    Raises
+    ------
+    InvalidParamsError
+        ``max_range`` is negative or NaN.
+    """
+    if not max_range >= 0:
+        raise InvalidParamsError(f"the range must be >= 0, got {max_range}", field="range")
+    return directions(x, landmarks)[1] <= max_range
+
+
+def noisy_bearings(x: Any, landmarks: Any, sigma: float, rng: np.random.Generator | None) -> np.ndarray:
+    """Measured bearings ``β_k = R(ε_k)·unit(l_k − x)``, ``ε_k ~ N(0, σ²)`` (ALGORITHMS §6.1).
+
+    One angle is drawn for every robot and landmark, visible or not, in C order over
+    ``(R, L)``, so the noise a robot sees does not depend on what the others see.
+
+    Parameters
+    ----------
+    x : array_like, shape (R, 2)
+        Robot positions (map units).
+    landmarks : array_like, shape (L, 2)
+        Landmark positions (map units).
+    sigma : float
+        Standard deviation of the angular noise (radians); ``0`` gives the exact
+        directions and draws nothing from ``rng``.
+    rng : numpy.random.Generator or None
+        Source of the noise; may be ``None`` when ``sigma == 0``.
+
+    Returns
+    -------
+    ndarray, shape (R, L, 2)
+        World-frame unit vectors; the zero vector where the robot sits exactly on the
+        landmark (the bearing is undefined there, rule (a) of §6.1).
+
+    Raises
+    ------
+    InvalidParamsError
+        ``sigma`` is negative or NaN, or ``sigma > 0`` without a generator.
+    """
+    if not sigma >= 0:
+        raise InvalidParamsError(f"the bearing noise must be >= 0, got {sigma}", field="noise")
+    unit = directions(x, landmarks)[0]
+    if sigma == 0:
+        return unit
+    if rng is None:
+        raise InvalidParamsError("bearing noise needs a random generator", field="noise")
+    eps = rng.normal(0.0, sigma, size=unit.shape[:2])
+    c, s = np.cos(eps), np.sin(eps)
+    return np.stack([c * unit[..., 0] - s * unit[..., 1], s * unit[..., 0] + c * unit[..., 1]], axis=-1)
+
+
+# --------------------------------------------------------------------------- reconstruction (§6.2–6.5)
+
+
+@dataclass(frozen=True, eq=False)
+class Reconstruction:
+    """The output of :func:`reconstruct` for ``R`` robots and ``L`` landmarks.
+
+    Attributes
+    ----------
+    y : ndarray, shape (R, 2L)
+        The scaled output ``ỹ``: columns ``2k, 2k+1`` hold ``ỹ_k ≈ (l_k − x)/‖l_f − x‖``
+        (dimensionless) for every landmark, visible or not; zeros where not ``usable``.
+        Ready for ``runtime.apply_gain``.
+    x_hat : ndarray, shape (R, 2)
+        Position estimate ``x̂`` (map units) consistent with ``y``:
+        ``ỹ_k = (l_k − x̂)/max(‖l_f − x̂‖, tol)`` for ``lsq`` and ``pair``; zeros where not
+        ``usable``.
+    usable : ndarray of bool, shape (R,)
+        Whether the reconstruction may be used; otherwise the hold policy (§7.5) applies.
+    """
+
+    y: np.ndarray
+    x_hat: np.ndarray
+    usable: np.ndarray
+
+
+def reconstruct(
+    bearings: Any,
+    visible: Any,
+    landmarks: Any,
+    fixed: Any,
+    *,
+    method: str = "lsq",
+    min_spread: float = DEFAULT_MIN_SPREAD,
+    tol: float,
+) -> Reconstruction:
+    """The scaled output ``ỹ`` and the position estimate ``x̂`` from bearings (ALGORITHMS §6.2–6.5).
+
+    ``ỹ_k`` targets ``(l_k − x)/‖l_f − x‖`` for every landmark ``k``, with ``f`` the fixed
+    landmark of the robot's cell (§5.5); then ``ũ = gain[c] @ ỹ``. The methods:
+
+    - ``lsq`` (§6.2): least-squares intersection of the visible bearing lines,
+      ``(Σ P_k) x̂ = Σ P_k l_k`` with ``P_k = I − β_kβ_kᵀ``; usable iff at least two are
+      visible, ``λ_min(Σ P_k) ≥ 1 − cos θ_min`` and ``β_kᵀ(l_k − x̂) > 0`` for every visible
+      ``k``. Then ``ỹ_k = (l_k − x̂)/max(‖l_f − x̂‖, tol)``.
+    - ``pair`` (§6.4): the visible ordered pair ``(a, b)`` maximising
+      ``κ_ab = min(|cross(β_a, β_b)|, |cross(β_b, β^a_b)|)``; usable iff
+      ``κ_ab ≥ sin θ_min`` and the solve ``β_a + t·β^a_b = r·β_b`` gives ``t, r > 0``. Then
+      ``ρ = t/‖l_b − l_a‖``, ``p_k = β_a + ρ(l_k − l_a)``, ``ỹ_k = p_k/max(‖p_f‖, ρ·tol)``
+      and ``x̂ = l_a − β_a/ρ``.
+    - ``rescale`` (§6.3): needs ``f`` visible; ``p_f = β_f`` and, for each visible
+      ``k ≠ f``, the 2×2 solve ``p_f + a_k β^f_k = b_k β_k``, consistent iff
+      ``|cross(β_k, β^f_k)| ≥ sin θ_min``, ``a_k > 0`` and ``b_k > 0``; then ``ỹ_k = b_k β_k``.
+      The other landmarks get the closed form ``β_f + ρ(l_k − l_f)`` with
+      ``ρ = a_k/‖l_k − l_f‖`` from the consistent ``k`` with the largest ``|det|``, and
+      ``x̂ = l_f − β_f/ρ``. Without ``f`` visible or any consistent ``k``, the robot's
+      result is that of ``pair``.
+
+    Degenerate cases (§6.5) never produce NaN or inf: fewer than two visible, all visible
+    bearings (nearly) parallel, or an inconsistent estimate give ``usable = False``; a
+    ``k`` on the line through ``l_f`` and the robot takes the closed form (``rescale``);
+    ``‖l_f − x̂‖ < tol`` divides by ``tol``. A visible landmark whose bearing is zero or
+    not finite counts as not visible.
+
+    Parameters
+    ----------
+    bearings : array_like, shape (R, L, 2)
+        Measured world-frame unit bearings (entries of invisible landmarks are ignored).
+    visible : array_like of bool, shape (R, L)
+        Landmarks each robot sees (field of view, range and line of sight combined by the
+        caller). Every visible landmark is used; pass ``visible & cell_landmarks[c]`` to
+        restrict the estimate to the cell's landmarks.
+    landmarks : array_like, shape (L, 2)
+        Landmark positions (map units).
+    fixed : int or array_like of int, shape (R,)
+        Fixed landmark ``f`` of each robot's cell (``fixed_landmark[c]``).
+    method : {"lsq", "pair", "rescale"}
+        Reconstruction (§6.5 *Our choice*); default ``lsq``.
+    min_spread : float
+        ``θ_min`` (radians), in ``(0, π/2]``; default 2°.
+    tol : float
+        Geometric tolerance (map units), ``1e-9·D``.
+
+    Returns
+    -------
+    Reconstruction
+
+    Raises
+    ------
+    InvalidParamsError
+        Unknown ``method``, ``min_spread`` outside ``(0, π/2]`` or ``tol ≤ 0``.
+    ValueError
+        Inconsistent shapes, or ``fixed`` not a landmark index.
+    """
+    if method not in METHODS:
+        expected = ", ".join(METHODS)
+        raise InvalidParamsError(f"unknown reconstruction {method!r} (expected {expected})", field="reconstruction")
+    if not 0 < min_spread <= 0.5 * math.pi:
+        message = f"min_bearing_spread must be in (0, π/2] rad, got {min_spread}"
+        raise InvalidParamsError(message, field="min_bearing_spread")
+    if not tol > 0:
+        raise InvalidParamsError(f"tol must be > 0, got {tol}", field="tol")
+    lm = _points(landmarks)
+    n_lm = len(lm)
+    beta = np.asarray(bearings, float)
+    if beta.ndim != 3 or beta.shape[1:] != (n_lm, 2):
+        raise ValueError(f"bearings must have shape (R, {n_lm}, 2), got {beta.shape}")
+    r = len(beta)
+    vis = np.asarray(visible, bool)
+    if vis.shape != (r, n_lm):
+        raise ValueError(f"visible must have shape ({r}, {n_lm}), got {vis.shape}")
+    f = _per_robot(fixed, r, np.int64, "fixed")
+    if np.any((f < 0) | (f >= n_lm)):
+        raise ValueError(f"fixed landmark index out of range 0..{n_lm - 1}")
+    if n_lm == 0 or r == 0:
+        return Reconstruction(np.zeros((r, 2 * n_lm)), np.zeros((r, 2)), np.zeros(r, bool))
+
+    # A zero or non-finite bearing has no direction: drop it rather than let it poison a sum.
+    norm = _norm(beta)
+    vis = vis & np.isfinite(norm) & (norm > 0)
+    beta = np.where(vis[..., None], beta / np.where(vis, norm, 1.0)[..., None], 0.0)
+
+    if method == "lsq":
+        y, x_hat, usable = _lsq(beta, vis, lm, f, 1.0 - math.cos(min_spread), tol)
+    elif method == "pair":
+        y, x_hat, usable = _pair(beta, vis, lm, f, math.sin(min_spread), tol)
+    else:
+        y, x_hat, usable = _rescale(beta, vis, lm, f, math.sin(min_spread), tol)
+    # Unusable rows carry finite garbage from the masked solves; zero them so no caller uses it by accident.
+    usable = usable & np.all(np.isfinite(y), axis=(1, 2)) & np.all(np.isfinite(x_hat), axis=1)
+    y = np.where(usable[:, None, None], y, 0.0).reshape(r, 2 * n_lm)
+    x_hat = np.where(usable[:, None], x_hat, 0.0)
+    return Reconstruction(y=y, x_hat=x_hat, usable=usable)
+
+
+def _scaled(x_hat: np.ndarray, lm: np.ndarray, f: np.ndarray, tol: float) -> np.ndarray:
+    """``(l_k − x̂)/max(‖l_f − x̂‖, tol)``, shape (R, L, 2): near ``l_f`` only the speed changes (§6.2)."""
+    d = lm[None, :, :] - x_hat[:, None, :]
+    s = _norm(d[np.arange(len(f)), f])
+    return d / np.maximum(s, tol)[:, None, None]
+
+
+def _lsq(beta: np.ndarray, vis: np.ndarray, lm: np.ndarray, f: np.ndarray, threshold: float, tol: float):
+    """§6.2. Returns ``(ỹ (R, L, 2), x̂ (R, 2), usable (R,))``; rows not usable hold finite garbage."""
+    w = vis.astype(float)
+    bx, by = beta[..., 0], beta[..., 1]
+    a11 = np.sum(w * (1.0 - bx * bx), axis=1)
+    a22 = np.sum(w * (1.0 - by * by), axis=1)
+    a12 = -np.sum(w * bx * by, axis=1)
+    count = vis.sum(axis=1)
+    # Solve about the centroid of the visible landmarks: far from the map origin, Σ P_k l_k
+    # would cancel most of its digits.
+    centre = (w @ lm) / np.maximum(count, 1)[:, None]
+    rel = lm[None, :, :] - centre[:, None, :]
+    rhs = np.sum(w[..., None] * (rel - beta * _dot(beta, rel)[..., None]), axis=1)
+    lam_min = 0.5 * (a11 + a22) - np.hypot(0.5 * (a11 - a22), a12)
+    det = a11 * a22 - a12 * a12
+    solvable = (count >= 2) & (lam_min >= threshold) & (det > 0)
+    det = np.where(solvable, det, 1.0)
+    adj_rhs = np.stack([a22 * rhs[:, 0] - a12 * rhs[:, 1], a11 * rhs[:, 1] - a12 * rhs[:, 0]], axis=1)
+    x_hat = centre + adj_rhs / det[:, None]
+    # Noise can put the intersection behind a camera: every visible landmark must lie ahead.
+    ahead = _dot(beta, lm[None, :, :] - x_hat[:, None, :]) > 0
+    usable = solvable & np.all(ahead | ~vis, axis=1)
+    return _scaled(x_hat, lm, f, tol), x_hat, usable
+
+
+def _inter(lm: np.ndarray, tol: float) -> tuple[np.ndarray, np.ndarray]:
+    """Inter-landmark bearings ``g[a, b] = β^a_b = unit(l_b − l_a)`` (L, L, 2) and distances (L, L).
+
+    Landmarks closer than ``tol`` count as coincident: ``g = 0`` there, so every solve that
+    needs that line has a zero determinant and is rejected, instead of dividing by a
+    distance that may be as small as a subnormal.
+    """
+    d = lm[None, :, :] - lm[:, None, :]
+    dist = _norm(d)
+    apart = dist >= tol
+    return np.where(apart[..., None], d / np.where(apart, dist, 1.0)[..., None], 0.0), np.where(apart, dist, 0.0)
+
+
+def _best_pairs(beta: np.ndarray, vis: np.ndarray, g: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Flat index ``a·L + b`` of the visible ordered pair maximising ``κ_ab`` (§6.4) and that ``κ``, shapes (R,).
+
+    ``κ = −1`` when no pair of distinct visible landmarks exists. Ties go to the lowest index.
+    """
+    r, n_lm = vis.shape
+    best = np.zeros(r, np.int64)
+    kappa = np.full(r, -1.0)
+    distinct = ~np.eye(n_lm, dtype=bool)
+    step = max(1, _CHUNK // (n_lm * n_lm))
+    for s in range(0, r, step):  # chunks of robots bound the (R, L, L) temporaries, not a loop per robot
+        bt, vt = beta[s : s + step], vis[s : s + step]
+        at_robot = np.abs(_cross(bt[:, :, None, :], bt[:, None, :, :]))  # sin of the angle at x
+        at_b = np.abs(_cross(bt[:, None, :, :], g[None]))  # sin of the angle at l_b
+        pairs = vt[:, :, None] & vt[:, None, :] & distinct[None]
+        k = np.where(pairs, np.minimum(at_robot, at_b), -1.0).reshape(len(bt), -1)
+        best[s : s + step] = np.argmax(k, axis=1)
+        kappa[s : s + step] = k[np.arange(len(bt)), best[s : s + step]]
+    return best, kappa
+
+
+def _pair(beta: np.ndarray, vis: np.ndarray, lm: np.ndarray, f: np.ndarray, sin_min: float, tol: float):
+    """§6.4. Returns ``(ỹ (R, L, 2), x̂ (R, 2), usable (R,))``; rows not usable hold finite garbage."""
+    r, n_lm = vis.shape
+    rows = np.arange(r)
+    g, dist = _inter(lm, tol)
+    best, kappa = _best_pairs(beta, vis, g)
+    a, b = best // n_lm, best % n_lm
+    beta_a, beta_b, g_ab = beta[rows, a], beta[rows, b], g[a, b]
+    # β_a + t·β^a_b = r·β_b, by Cramer's rule on [β^a_b, −β_b]: det = cross(β_b, β^a_b).
+    conditioned = kappa >= sin_min
+    det = np.where(conditioned, _cross(beta_b, g_ab), 1.0)
+    t = _cross(beta_a, beta_b) / det
+    along = _cross(beta_a, g_ab) / det
+    usable = conditioned & (t > 0) & (along > 0)
+    rho = np.where(usable, t / _safe(dist[a, b]), 1.0)  # = 1/‖l_a − x‖
+    p = beta_a[:, None, :] + rho[:, None, None] * (lm[None, :, :] - lm[a][:, None, :])
+    # ỹ_k = p_k/‖p_f‖ = (l_k − x̂)/‖l_f − x̂‖, with ‖l_f − x̂‖ floored at tol as in §6.2.
+    scale = np.maximum(_norm(p[rows, f]), rho * tol)
+    y = p / _safe(scale)[:, None, None]
+    x_hat = lm[a] - beta_a / rho[:, None]
+    return y, x_hat, usable
+
+
+def _rescale(beta: np.ndarray, vis: np.ndarray, lm: np.ndarray, f: np.ndarray, sin_min: float, tol: float):
+    """§6.3, falling back to :func:`_pair` row by row. Returns ``(ỹ, x̂, usable)`` like :func:`_pair`."""
+    r, n_lm = vis.shape
+    rows = np.arange(r)
+    g, dist = _inter(lm, tol)
+    g_f, d_f = g[f], dist[f]  # (R, L, 2), (R, L): β^f_k and ‖l_k − l_f‖
+    beta_f = beta[rows, f]
+    # p_f + a_k β^f_k = b_k β_k, by Cramer's rule on [β^f_k, −β_k]: det = cross(β_k, β^f_k).
+    det = _cross(beta, g_f)
+    conditioned = np.abs(det) >= sin_min
+    det_safe = np.where(conditioned, det, 1.0)
+    a_k = _cross(beta_f[:, None, :], beta) / det_safe
+    b_k = _cross(beta_f[:, None, :], g_f) / det_safe
+    others = vis & (np.arange(n_lm)[None, :] != f[:, None]) & vis[rows, f][:, None]
+    consistent = others & conditioned & (a_k > 0) & (b_k > 0)
+    own = consistent.any(axis=1)
+    k = np.argmax(np.where(consistent, np.abs(det), -1.0), axis=1)
+    rho = np.where(own, a_k[rows, k] / _safe(d_f[rows, k]), 1.0)  # = 1/‖l_f − x‖
+    closed = beta_f[:, None, :] + rho[:, None, None] * (lm[None, :, :] - lm[f][:, None, :])
+    y = np.where(consistent[..., None], b_k[..., None] * beta, closed)
+    # ρ = a_k/‖l_k − l_f‖ has no lower bound (a robot far away, or crafted bearings): 1/ρ may
+    # overflow, and the caller's final finiteness check then marks the robot unusable.
+    with np.errstate(over="ignore"):
+        x_hat = lm[f] - beta_f / rho[:, None]
+    usable = own.copy()
+    if not own.all():
+        back = ~own
+        y_p, x_p, usable_p = _pair(beta[back], vis[back], lm, f[back], sin_min, tol)
+        y[back], x_hat[back], usable[back] = y_p, x_p, usable_p
+    return y, x_hat, usable
