@@ -23,7 +23,7 @@ from typing import Any, Callable
 import numpy as np
 
 from bearnav_cli import __version__
-from bearnav_cli.datatypes import CELL_KEYS, PLAN_KEYS, Cells, Map, Plan, Tree
+from bearnav_cli.datatypes import CELL_KEYS, PLAN_KEYS, SIMULATION_KEYS, Cells, Map, Plan, Simulation, Tree
 from bearnav_cli.errors import ArtifactError, BearnavError
 
 
@@ -89,6 +89,7 @@ KINDS: dict[str, Kind] = {
     "simplified": Kind("simplified", "bearnav.simplified/1", "simplified.npz", _TREE_ENTRIES),
     "cells": Kind("cells", "bearnav.cells/1", "cells.npz", {**_CELL_ENTRIES, "cell_flags": ("i", 1)}),
     "plan": Kind("plan", "bearnav.plan/1", "plan.npz", _PLAN_ENTRIES),
+    "simulation": Kind("simulation", "bearnav.sim/1", "sim.npz", {"map": ("U", 0), **SIMULATION_KEYS}),
 }
 
 
@@ -193,14 +194,16 @@ def make_manifest(
 
 
 #: Which Python type each artifact kind holds.
-_TYPES: dict[str, type] = {"map": Map, "tree": Tree, "simplified": Tree, "cells": Cells, "plan": Plan}
+_TYPES: dict[str, type] = {
+    "map": Map, "tree": Tree, "simplified": Tree, "cells": Cells, "plan": Plan, "simulation": Simulation,
+}
 
 
 def entries_of(artifact: Any) -> dict[str, Any]:
     """The data entries of an artifact (what is hashed and stored besides the manifest)."""
     if isinstance(artifact, Map):
         return {"map": artifact.to_json_text()}
-    if isinstance(artifact, (Tree, Cells, Plan)):
+    if isinstance(artifact, (Tree, Cells, Plan, Simulation)):
         return {"map": artifact.map.to_json_text(), **artifact.arrays()}
     raise TypeError(f"not an artifact: {type(artifact).__name__}")
 
@@ -221,6 +224,10 @@ def _from_entries(kind: str, entries: dict[str, Any], manifest: dict) -> Any:
     if kind in ("tree", "simplified"):
         return Tree(map=map_, stats=stats, **{key: entries[key] for key in ("nodes", "parent", "cost",
                                                                            "collision_samples")})
+    if kind == "simulation":
+        values = {key: entries[key] for key in SIMULATION_KEYS}
+        values["dt"] = float(values["dt"])
+        return Simulation(map=map_, stats=stats, **values)
     cell_arrays = {key: entries[key] for key in CELL_KEYS}
     if kind == "cells":
         return Cells(map=map_, cell_flags=entries["cell_flags"], stats=stats, **cell_arrays)
@@ -268,7 +275,16 @@ def save(path: str | os.PathLike, artifact: Any, manifest: dict) -> Path:
         arrays = {key: (np.array(value) if isinstance(value, str) else value) for key, value in entries.items()}
         arrays["manifest"] = np.array(canonical_json(manifest))
         atomic_write(path, lambda handle: np.savez_compressed(handle, **arrays))
+    if kind == "simulation":
+        # sim.json next to sim.npz: the metrics, for people and scripts that do not read npz
+        text = json.dumps({"manifest": manifest, "metrics": manifest.get("stats", {})}, indent=1, sort_keys=True)
+        atomic_write(metrics_path(path), lambda handle: handle.write((text + "\n").encode()))
     return path
+
+
+def metrics_path(path: str | os.PathLike) -> Path:
+    """``sim.json`` for ``sim.npz``: the same name with ``.json``."""
+    return Path(path).with_suffix(".json")
 
 
 # --------------------------------------------------------------------------- reading

@@ -504,6 +504,104 @@ class Plan:
         return out
 
 
+#: Data keys of ``sim.npz`` besides ``map`` and ``manifest`` (dtype kind, ndim).
+SIMULATION_KEYS: dict[str, tuple[str, int]] = {
+    "starts": ("f", 2), "outcome": ("i", 1), "steps": ("i", 1), "time": ("f", 1), "path_length": ("f", 1),
+    "route_length": ("f", 1), "left_cell": ("i", 1), "approach_steps": ("i", 1), "hold_steps": ("i", 1),
+    "min_clearance": ("f", 1), "final_position": ("f", 2), "trajectory_coords": ("f", 2),
+    "trajectory_cells": ("i", 1), "trajectory_heading": ("f", 1), "trajectory_offsets": ("i", 1),
+    "nodes": ("f", 2), "parent": ("i", 1), "cell_vertices": ("f", 2), "cell_vertex_offsets": ("i", 1),
+    "cell_status": ("i", 1), "dt": ("f", 0),
+}  # fmt: skip
+
+
+@dataclass(frozen=True)
+class Simulation:
+    """The closed-loop runs of ``bearnav simulate`` (``sim.npz``; metrics in ``sim.json``), R runs.
+
+    Attributes
+    ----------
+    map : Map
+    starts, final_position : ndarray, shape (R, 2)
+        Where each run began and ended (map units).
+    outcome : ndarray of int8, shape (R,)
+        0 success, 1 collision, 2 stall, 3 timeout, 4 lost (ALGORITHMS §7.4).
+    steps, left_cell, approach_steps, hold_steps : ndarray of int64, shape (R,)
+        Euler steps; relocations through a side face; steps driven straight to a tree node;
+        steps without a usable reconstruction.
+    time, path_length, route_length, min_clearance : ndarray, shape (R,)
+        Seconds; path length; the tree route from the start (``‖x₀ − x_n‖ + cost(n)``); the
+        smallest distance from the inflated obstacles (map units).
+    trajectory_coords, trajectory_cells, trajectory_heading, trajectory_offsets : ndarray
+        Shapes (P, 2), (P,), (P,), (R + 1,): run ``r`` is ``coords[o[r]:o[r + 1]]`` with the
+        active cell and the camera heading (rad) at each point; empty when not recorded.
+    nodes, parent : ndarray, shapes (N, 2), (N,)
+        The simplified tree the plan was built on.
+    cell_vertices, cell_vertex_offsets, cell_status : ndarray, shapes (V, 2), (C + 1,), (C,)
+        The plan's cells and their synthesis status (for plots).
+    dt : float
+        The Euler step (s).
+    stats : dict
+        The metrics of ``sim.json``.
+    """
+
+    map: Map
+    starts: np.ndarray
+    outcome: np.ndarray
+    steps: np.ndarray
+    time: np.ndarray
+    path_length: np.ndarray
+    route_length: np.ndarray
+    left_cell: np.ndarray
+    approach_steps: np.ndarray
+    hold_steps: np.ndarray
+    min_clearance: np.ndarray
+    final_position: np.ndarray
+    trajectory_coords: np.ndarray
+    trajectory_cells: np.ndarray
+    trajectory_heading: np.ndarray
+    trajectory_offsets: np.ndarray
+    nodes: np.ndarray
+    parent: np.ndarray
+    cell_vertices: np.ndarray
+    cell_vertex_offsets: np.ndarray
+    cell_status: np.ndarray
+    dt: float
+    stats: dict = field(default_factory=dict, compare=False)
+
+    def __post_init__(self) -> None:
+        r = len(np.asarray(self.outcome))
+        dtypes = {"f": float, "i": np.int64}
+        for name, (kind, ndim) in SIMULATION_KEYS.items():
+            if name == "dt":
+                continue
+            shape: tuple[int | None, ...] = (None, 2) if ndim == 2 else (None,)
+            if name in ("starts", "final_position"):
+                shape = (r, 2)
+            elif name in ("steps", "time", "path_length", "route_length", "left_cell", "approach_steps",
+                          "hold_steps", "min_clearance"):  # fmt: skip
+                shape = (r,)
+            elif name == "trajectory_offsets":
+                shape = (r + 1,)
+            dtype = np.int8 if name in ("outcome", "cell_status") else dtypes[kind]
+            object.__setattr__(self, name, frozen_array(getattr(self, name), dtype, shape, name))
+        object.__setattr__(self, "dt", float(self.dt))
+        points = len(self.trajectory_coords)
+        if len(self.trajectory_cells) != points or len(self.trajectory_heading) != points:
+            raise ArtifactError("trajectory arrays differ in length", field="trajectory_cells")
+        if points and (self.trajectory_offsets[0] != 0 or self.trajectory_offsets[-1] != points):
+            raise ArtifactError("offsets do not span the trajectory points", field="trajectory_offsets")
+
+    def trajectory(self, r: int) -> np.ndarray:
+        """Positions of run ``r``, shape (steps + 1, 2) (empty when not recorded)."""
+        o = self.trajectory_offsets
+        return self.trajectory_coords[o[r] : o[r + 1]]
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """The data entries of ``sim.npz`` (without ``manifest`` and ``map``)."""
+        return {name: np.asarray(getattr(self, name)) for name in SIMULATION_KEYS}
+
+
 def replace(artifact: Any, **changes: Any) -> Any:
     """Shorthand for :func:`dataclasses.replace` (artifacts are immutable)."""
     return dataclasses.replace(artifact, **changes)

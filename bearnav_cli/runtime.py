@@ -27,12 +27,15 @@ estimate ``x̂``; a controller then calls ``switch(arrays, cell, x̂, ...)`` and
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from bearnav_cli import bearing
 from bearnav_cli.plan_arrays import CHUNK, RUNTIME_KEYS, PlanArrays, ring_edges, tree_costs
 
 __all__ = ["RUNTIME_KEYS", "PlanArrays", "ring_edges", "tree_costs"]  # re-exported: the runtime's one import
@@ -109,7 +112,7 @@ def barrier_values(arrays: PlanArrays, x: np.ndarray) -> np.ndarray:
     return np.min(np.einsum("cqk,rk->rcq", arrays.bar_A, p) + arrays.bar_b[None], axis=2, initial=math.inf)
 
 
-def locate(arrays: PlanArrays, x: np.ndarray, tol: float | None = None) -> np.ndarray:
+def locate(arrays: PlanArrays, x: np.ndarray, tol: float | None = None, eps_sw: float = 0.0) -> np.ndarray:
     """The cell a robot at ``x`` should use, shape (R,): safety first, then the shortest route.
 
     Cells overlap, so a point lies in several. Candidates are the cells that contain
@@ -134,7 +137,8 @@ def locate(arrays: PlanArrays, x: np.ndarray, tol: float | None = None) -> np.nd
     inside = np.all(np.einsum("cpk,rk->rcp", arrays.row_A, p) <= arrays.row_b[None] + tol, axis=2)
     gap = p[:, None, :] - arrays.exit_point[None]
     edge = arrays.parent_cell >= 0
-    leaving = edge[None] & (np.einsum("ck,rck->rc", arrays.exit_dir, gap) <= tol)
+    near_exit = np.einsum("rck,rck->rc", gap, gap) <= eps_sw * eps_sw
+    leaving = edge[None] & ((np.einsum("ck,rck->rc", arrays.exit_dir, gap) <= tol) | near_exit)
     candidate = inside & ~leaving
     h = np.where(candidate, barrier_values(arrays, p), -math.inf)
     route = np.where(edge[None], np.hypot(gap[..., 0], gap[..., 1]) + arrays.cost_to_go[None], 0.0)
@@ -199,7 +203,7 @@ def switch(
         unsafe[idx] = np.min(rows, axis=1, initial=math.inf) < 0
     move = outside | unsafe
     if move.any():
-        c[move] = locate(arrays, p[move], tol)
+        c[move] = locate(arrays, p[move], tol, eps_sw)
     return c, outside
 
 
@@ -314,11 +318,11 @@ def update(
     relocated = np.zeros(len(c), bool)
     fresh = c < 0
     if fresh.any():
-        c[fresh] = locate(arrays, p[fresh], tol)
+        c[fresh] = locate(arrays, p[fresh], tol, eps_sw)
     going = t >= 0
     if going.any():
         idx = np.flatnonzero(going)
-        here = locate(arrays, p[idx], tol)
+        here = locate(arrays, p[idx], tol, eps_sw)
         gap = p[idx] - arrays.nodes[t[idx]]
         done = (np.einsum("rk,rk->r", gap, gap) <= eps_sw * eps_sw) | in_safe_set(arrays, here, p[idx])
         c[idx[done]] = here[done]
@@ -372,3 +376,356 @@ def affine_field(arrays: PlanArrays, cell: np.ndarray, x: np.ndarray) -> np.ndar
     """
     c, p = _cells(arrays, cell), _points(x)
     return arrays.field_a[c] - np.einsum("rij,rj->ri", arrays.field_M[c], p)
+
+
+# --------------------------------------------------------------------------- the control step
+
+DYNAMICS = ("single", "unicycle")
+MEASUREMENTS = ("bearing", "displacement")
+
+
+@dataclass(frozen=True)
+class ControlSettings:
+    """Constants of the control step shared by :class:`Controller` and ``bearnav simulate`` (ALGORITHMS §7).
+
+    Attributes
+    ----------
+    speed : float
+        ``v_ref`` of the single integrator (map units / s).
+    dt : float
+        Control period (s): the hold timer advances by it on every step without a fix.
+    eps_sw : float
+        Switching and arrival radius (map units).
+    tol : float
+        Membership slack (map units), ``1e-9·D``.
+    dynamics : {"single", "unicycle"}
+    alpha, beta : float
+        Unicycle gains: ``v = α cos e`` (map units / s), ``ω = β sin e`` (rad / s).
+    clamp_reverse : bool
+        Unicycle: clamp ``v`` at 0 (never reverse).
+    measurement : {"bearing", "displacement"}
+        ``bearing``: reconstruct ``ỹ`` and ``x̂`` from bearings (§6); ``displacement``: the
+        true displacements, ``x̂ = x`` (paper B).
+    reconstruction : {"lsq", "pair", "rescale"}
+    min_spread : float
+        ``θ_min`` of §6.2 (radians).
+    hold_time : float
+        Seconds without a usable reconstruction before the robot stops to look around; it
+        is ``lost`` after one more revolution, ``2π/β`` (§7.5).
+    odometry : bool
+        Between fixes, carry ``x̂`` forward with the commanded motion and keep following the
+        fields (for at most ``hold_time``); off: the hold policy of §7.5 as written.
+    filter_gain : float
+        ``k`` in ``x̂ = x̂_pred + k (x̂_meas − x̂_pred)``, ``x̂_pred`` the odometry prediction;
+        ``1`` uses every fix as it is (ALGORITHMS §7.2).
+    """
+
+    speed: float
+    dt: float
+    eps_sw: float
+    tol: float
+    dynamics: str = "single"
+    alpha: float = 0.1
+    beta: float = 0.5
+    clamp_reverse: bool = False
+    measurement: str = "bearing"
+    reconstruction: str = "lsq"
+    min_spread: float = bearing.DEFAULT_MIN_SPREAD
+    hold_time: float = 2.0
+    odometry: bool = True
+    filter_gain: float = 1.0
+    bearing_sigma: float = 0.0
+    max_fix_error: float = math.inf
+
+
+@dataclass(frozen=True)
+class ControlState:
+    """What a controller remembers between steps, for ``R`` robots.
+
+    Attributes
+    ----------
+    cell, target : ndarray of int64, shape (R,)
+        Active cell (``-1`` before the first fix) and approached node (``-1`` for none).
+    last_dir : ndarray, shape (R, 2)
+        Unit direction of the last command (the initial heading before the first).
+    hold : ndarray, shape (R,)
+        Seconds since the last usable reconstruction.
+    x_hat : ndarray, shape (R, 2)
+        The last position estimate, carried forward by odometry between fixes (map units).
+    motion : ndarray, shape (R, 2)
+        World-frame velocity of the last command (map units / s): what odometry integrates.
+    known : ndarray of bool, shape (R,)
+        Whether the robot has had a fix yet.
+    """
+
+    cell: np.ndarray
+    target: np.ndarray
+    last_dir: np.ndarray
+    hold: np.ndarray
+    x_hat: np.ndarray
+    motion: np.ndarray
+    known: np.ndarray
+
+    @classmethod
+    def initial(cls, heading: np.ndarray) -> ControlState:
+        """Robots that have not had a fix yet, facing ``heading`` (rad, shape (R,))."""
+        h = np.asarray(heading, float).reshape(-1)
+        r = len(h)
+        return cls(np.full(r, -1, np.int64), np.full(r, -1, np.int64), np.column_stack([np.cos(h), np.sin(h)]),
+                   np.zeros(r), np.zeros((r, 2)), np.zeros((r, 2)), np.zeros(r, bool))  # fmt: skip
+
+    def take(self, idx: np.ndarray) -> ControlState:
+        """The state of the robots ``idx``."""
+        return ControlState(*(getattr(self, f.name)[idx] for f in dataclasses.fields(self)))
+
+    def put(self, idx: np.ndarray, other: ControlState) -> None:
+        """Write ``other`` (the robots ``idx``) back into this state's arrays."""
+        for f in dataclasses.fields(self):
+            getattr(self, f.name)[idx] = getattr(other, f.name)
+
+
+@dataclass(frozen=True)
+class ControlOutput:
+    """One control step for ``R`` robots.
+
+    Attributes
+    ----------
+    velocity : ndarray, shape (R, 2)
+        Single integrator: the commanded velocity (map units / s), ``v_ref·unit(ũ)``.
+    forward, turn : ndarray, shape (R,)
+        Unicycle: ``v`` (map units / s) and ``ω`` (rad / s). ``turn`` is also the rate at
+        which a single integrator that is looking around turns its camera.
+    scanning : ndarray of bool, shape (R,)
+        Looking around in place: no fix for longer than ``hold_time``.
+    state : ControlState
+        The state after the step.
+    fix : ndarray of bool, shape (R,)
+        A usable reconstruction (or displacement measurement) was available.
+    lost : ndarray of bool, shape (R,)
+        No fix for longer than ``hold_time`` plus one revolution of looking around.
+    stalled : ndarray of bool, shape (R,)
+        The certified field vanishes at ``x̂`` (``‖a − M x̂‖ < 1e-6·u_max``).
+    relocated : ndarray of bool, shape (R,)
+        Left the cell through a side face this step (a ``left_cell`` event).
+    x_hat : ndarray, shape (R, 2)
+        The position estimate used (measured or carried by odometry; zeros before the first fix).
+    """
+
+    velocity: np.ndarray
+    forward: np.ndarray
+    turn: np.ndarray
+    scanning: np.ndarray
+    state: ControlState
+    fix: np.ndarray
+    lost: np.ndarray
+    stalled: np.ndarray
+    relocated: np.ndarray
+    x_hat: np.ndarray
+
+
+#: ``‖a − M x̂‖ < STALL_FIELD · u_max`` is a stall: the field has (almost) an equilibrium there.
+STALL_FIELD = 1e-6
+
+
+def _scaled_output(arrays: PlanArrays, x_hat: np.ndarray, fixed: np.ndarray, tol: float) -> np.ndarray:
+    """``ỹ_k = (l_k − x̂)/max(‖l_f − x̂‖, tol)`` for every landmark, shape (R, 2L) (ALGORITHMS §6.2)."""
+    d = arrays.landmarks[None] - x_hat[:, None, :]
+    scale = np.maximum(np.hypot(*d[np.arange(len(x_hat)), fixed].T), tol)
+    return (d / scale[:, None, None]).reshape(len(x_hat), -1)
+
+
+def fix_error(arrays: PlanArrays, bearings: np.ndarray, visible: np.ndarray, x_hat: np.ndarray,
+              sigma: float) -> np.ndarray:  # fmt: skip
+    """Predicted 3-sigma position error of an ``lsq`` fix (map units), shape (R,).
+
+    A bearing with angle noise ``σ`` places the robot on its line to within ``σ·d`` at
+    distance ``d``, so the information of the fix is ``Σ_k P_k/(σ d_k)²`` (``P_k`` the
+    projector across bearing ``k``); its smallest eigenvalue bounds the worst direction.
+    Two nearly parallel bearings, or landmarks far away, give a large error.
+    """
+    d = arrays.landmarks[None] - x_hat[:, None, :]
+    dist2 = np.maximum(np.einsum("rlk,rlk->rl", d, d), arrays.tol**2)
+    w = np.where(visible, 1.0 / dist2, 0.0)
+    bx, by = bearings[..., 0], bearings[..., 1]
+    a11, a22, a12 = np.sum(w * (1 - bx * bx), 1), np.sum(w * (1 - by * by), 1), -np.sum(w * bx * by, 1)
+    lam = 0.5 * (a11 + a22) - np.hypot(0.5 * (a11 - a22), a12)
+    return 3.0 * sigma / np.sqrt(np.maximum(lam, 1e-300))
+
+
+def control(
+    arrays: PlanArrays,
+    settings: ControlSettings,
+    state: ControlState,
+    bearings: np.ndarray,
+    visible: np.ndarray,
+    heading: np.ndarray,
+    x_true: np.ndarray | None = None,
+) -> ControlOutput:
+    """One step of ALGORITHMS §7.2 for every robot: measurement → cell → command.
+
+    The position estimate ``x̂`` comes from ``lsq`` whatever the reconstruction (§7.2); the
+    cell policy is :func:`update`; the output ``ỹ`` is rebuilt for the (new) cell's fixed
+    landmark and ``ũ = gain[c] @ ỹ``, or ``x_n − x̂`` while approaching node ``n``.
+
+    Without a usable reconstruction (§7.5), for up to ``hold_time`` seconds the robot carries
+    its last estimate forward with its own commanded motion (odometry, ``settings.odometry``)
+    and keeps following the fields; with ``odometry`` off it holds as §7.5 says (the single
+    integrator keeps ``last_dir``, the unicycle turns toward it). After ``hold_time`` it stops
+    and looks around (turns in place at ``β``) for one revolution; then it is lost.
+
+    Parameters
+    ----------
+    arrays : PlanArrays
+    settings : ControlSettings
+    state : ControlState
+    bearings : ndarray, shape (R, L, 2)
+        World-frame unit bearings (ignored in displacement mode).
+    visible : ndarray of bool, shape (R, L)
+    heading : ndarray, shape (R,)
+        Yaw ``φ`` (rad) from the compass: the unicycle's heading, the single integrator's camera.
+    x_true : ndarray, shape (R, 2), optional
+        True positions; required in displacement mode (``x̂ = x``), ignored otherwise.
+
+    Returns
+    -------
+    ControlOutput
+    """
+    s = settings
+    r = len(state.cell)
+    if s.measurement == "displacement":
+        if x_true is None:
+            raise ValueError("displacement measurement needs the true positions")
+        measured, fix = _points(x_true).copy(), np.ones(r, bool)
+    else:
+        estimate = bearing.reconstruct(bearings, visible, arrays.landmarks, 0, method="lsq",
+                                       min_spread=s.min_spread, tol=s.tol)  # fmt: skip
+        measured, fix = estimate.x_hat, estimate.usable.copy()
+        if s.bearing_sigma > 0 and fix.any():
+            fix &= fix_error(arrays, bearings, visible, measured, s.bearing_sigma) <= s.max_fix_error
+    cell, target, last_dir = state.cell.copy(), state.target.copy(), state.last_dir.copy()
+    hold, known = state.hold.copy(), state.known.copy()
+    hold = np.where(fix, 0.0, hold + s.dt)
+    # odometry: the last estimate moved on by the last command, while it is recent enough
+    carried = ~fix & known & (hold <= s.hold_time) & s.odometry
+    predicted = state.x_hat + s.dt * state.motion
+    # a fix corrects the odometry prediction by a fixed gain (a constant-gain observer): with
+    # noisy bearings the estimate, hence the cell and the field, jitters far less
+    blend = fix & known & (hold == 0.0) & (state.hold <= s.hold_time)
+    corrected = np.where(blend[:, None], predicted + s.filter_gain * (measured - predicted), measured)
+    x_hat = np.where(fix[:, None], corrected, predicted)
+    steer = fix | carried  # robots with a position estimate this step
+    known |= fix
+    relocated = np.zeros(r, bool)
+    stalled = np.zeros(r, bool)
+    u = np.zeros((r, 2))
+    if steer.any():
+        idx = np.flatnonzero(steer)
+        c, t, moved = update(arrays, cell[idx], target[idx], x_hat[idx], s.eps_sw, s.tol)
+        cell[idx], target[idx], relocated[idx] = c, t, moved
+        f = arrays.fixed_landmark[c]
+        if s.measurement == "displacement":
+            y = displacement(arrays, x_hat[idx])
+        elif s.reconstruction == "lsq" or not fix[idx].all():
+            y = _scaled_output(arrays, x_hat[idx], f, s.tol)
+        else:
+            rec = bearing.reconstruct(bearings[idx], visible[idx], arrays.landmarks, f, method=s.reconstruction,
+                                      min_spread=s.min_spread, tol=s.tol)  # fmt: skip
+            y = np.where(rec.usable[:, None], rec.y, _scaled_output(arrays, x_hat[idx], f, s.tol))
+        ui = apply_gain(arrays, c, y)
+        stalled[idx] = np.hypot(*affine_field(arrays, c, x_hat[idx]).T) < STALL_FIELD * arrays.u_max[c]
+        going = t >= 0
+        ui[going] = arrays.nodes[t[going]] - x_hat[idx[going]]
+        stalled[idx[going]] = False
+        norm = np.hypot(ui[:, 0], ui[:, 1])
+        stalled[idx[~(norm > 0)]] = True
+        ok = norm > 0
+        u[idx[ok]] = ui[ok] / norm[ok, None]
+        last_dir[idx[ok]] = u[idx[ok]]
+    holding = ~steer
+    scanning = ~fix & (hold > s.hold_time)
+    lost = scanning & (hold > s.hold_time + 2.0 * math.pi / s.beta)
+    direction = np.where(holding[:, None], last_dir, u)
+    velocity = s.speed * direction
+    velocity[scanning] = 0.0
+    phi = np.asarray(heading, float).reshape(r)
+    forward = np.zeros(r)
+    turn = np.where(scanning, s.beta, 0.0)
+    motion = velocity.copy()
+    if s.dynamics == "unicycle":
+        e = bearing.wrap(np.arctan2(direction[:, 1], direction[:, 0]) - phi)
+        forward = np.where(holding | scanning, 0.0, s.alpha * np.cos(e))  # hold: turn in place toward last_dir
+        if s.clamp_reverse:
+            forward = np.maximum(forward, 0.0)
+        turn = np.where(scanning, s.beta, s.beta * np.sin(e))
+        motion = forward[:, None] * np.column_stack([np.cos(phi), np.sin(phi)])
+    new = ControlState(cell, target, last_dir, hold, np.where(steer[:, None], x_hat, state.x_hat), motion, known)
+    return ControlOutput(velocity, forward, turn, scanning, new, fix, lost, stalled, relocated,
+                         np.where(steer[:, None], x_hat, 0.0))  # fmt: skip
+
+
+class Controller:
+    """The controller a robot runs: load ``plan.npz``, feed bearings at camera rate, get a command.
+
+    Numpy only. One robot; the step is :func:`control`, the same function ``bearnav
+    simulate`` advances its robots with.
+
+    Parameters
+    ----------
+    arrays : PlanArrays
+    settings : ControlSettings
+    heading : float
+        Initial heading (rad) standing in for the last command until the first fix.
+    """
+
+    def __init__(self, arrays: PlanArrays, settings: ControlSettings, heading: float = 0.0) -> None:
+        self.arrays = arrays
+        self.settings = settings
+        self.state = ControlState.initial(np.array([heading]))
+        self.last: ControlOutput | None = None
+
+    @classmethod
+    def from_plan(cls, path: str, *, speed: float = 0.1, dt: float = 0.1, dynamics: str = "single",
+                  heading: float = 0.0, **options: Any) -> Controller:  # fmt: skip
+        """Load ``plan.npz``; ``options`` are further :class:`ControlSettings` fields.
+
+        ``eps_sw`` defaults to ``2·speed·dt`` (``2·α·dt`` for the unicycle), as in simulation.
+        """
+        arrays = PlanArrays.from_npz(path)
+        options.setdefault("eps_sw", 2.0 * (options.get("alpha", 0.1) if dynamics == "unicycle" else speed) * dt)
+        return cls(arrays, ControlSettings(speed=speed, dt=dt, tol=arrays.tol, dynamics=dynamics, **options), heading)
+
+    def command(self, bearings: np.ndarray, visible: np.ndarray, heading: float | None = None) -> np.ndarray:
+        """The command for one camera frame.
+
+        Parameters
+        ----------
+        bearings : array_like, shape (L, 2)
+            World-frame unit bearing of each landmark (rows of invisible ones are ignored).
+        visible : array_like of bool, shape (L,)
+        heading : float, optional
+            The robot's yaw (rad), needed by the unicycle.
+
+        Returns
+        -------
+        ndarray
+            Single integrator: the velocity ``(vx, vy)`` (map units / s). Unicycle:
+            ``(v, ω)``. Zero once the robot is lost (``self.lost``).
+        """
+        out = control(self.arrays, self.settings, self.state, np.asarray(bearings, float)[None],
+                      np.asarray(visible, bool)[None], np.array([0.0 if heading is None else heading]))  # fmt: skip
+        self.state, self.last = out.state, out
+        if out.lost[0]:
+            return np.zeros(2)
+        if self.settings.dynamics == "unicycle":
+            return np.array([out.forward[0], out.turn[0]])
+        return out.velocity[0].copy()
+
+    @property
+    def lost(self) -> bool:
+        """No usable reconstruction for longer than ``hold_time``."""
+        return bool(self.last is not None and self.last.lost[0])
+
+    @property
+    def cell(self) -> int:
+        """The active cell (``-1`` before the first fix)."""
+        return int(self.state.cell[0])

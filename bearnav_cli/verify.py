@@ -560,7 +560,9 @@ def run(
         if skipped is None:
             rng = np.random.default_rng(params.seed)
             starts = sample_starts(space, plan.map.goal, params.n_starts, rng)
-            sim = simulate.Params(speed=params.speed, dt=params.dt, record_trajectories=False)
+            # the certificates are stated for the displacement output; bearings are `bearnav simulate`'s job
+            sim = simulate.Params(speed=params.speed, dt=params.dt, measurement="displacement",
+                                  record_trajectories=False)  # fmt: skip
             rollouts = simulate.rollout(plan, starts, sim, progress=progress)
     straight = np.hypot(*(starts - plan.map.goal).T) if len(starts) else np.zeros(0)
     route = route_lengths(space, plan.map.goal, starts) if len(starts) else np.zeros(0)
