@@ -152,8 +152,8 @@ def gain_from_theta(space: str, theta: np.ndarray, landmarks: np.ndarray) -> np.
     """The gain ``K`` (2, 2n) of the LP variables ``θ`` (see :func:`field_map`); field space uses Lemma 3."""
     n = len(landmarks)
     if space == "field":
-        F = theta.reshape(2, 3)
-        return min_norm_gain(F[:, :2], F[:, 2], landmarks)
+        m00, m01, a0, m10, m11, a1 = theta.tolist()
+        return _min_norm_gain((m00, m01, m10, m11), (a0, a1), landmarks)
     if space == "full":
         return theta.reshape(2, 2 * n).copy()
     K = np.zeros((2, 2 * n))
@@ -200,6 +200,12 @@ def min_norm_gain(M: np.ndarray, a: np.ndarray, landmarks: np.ndarray) -> np.nda
     ArtifactError
         If all landmarks coincide (``G`` loses rank; map landmarks are distinct).
     """
+    (m00, m01), (m10, m11) = np.asarray(M, float).tolist()
+    return _min_norm_gain((m00, m01, m10, m11), tuple(np.asarray(a, float).tolist()), landmarks)
+
+
+def _min_norm_gain(M: tuple[float, ...], a: tuple[float, float], landmarks: np.ndarray) -> np.ndarray:
+    """:func:`min_norm_gain` with ``M`` as ``(M₀₀, M₀₁, M₁₀, M₁₁)`` and ``a`` as plain floats."""
     # A handful of numbers per cell: plain floats are several times faster than numpy calls here.
     points = np.asarray(landmarks, float).tolist()
     n = len(points)
@@ -218,8 +224,8 @@ def min_norm_gain(M: np.ndarray, a: np.ndarray, landmarks: np.ndarray) -> np.nda
     cond = _gram_condition(n, (mx, my), sigma)
     if not cond <= COND_WARNING:
         log.warning("nearly coincident landmarks: cond(GᵀG) = %.3g", cond)
-    (m00, m01), (m10, m11) = np.asarray(M, float).tolist()
-    a0, a1 = np.asarray(a, float).tolist()
+    m00, m01, m10, m11 = M
+    a0, a1 = a
     o0 = (a0 - m00 * mx - m01 * my) / sigma
     o1 = (a1 - m10 * mx - m11 * my) / sigma
     row0, row1 = [], []
@@ -291,8 +297,8 @@ class LpTemplate:
     constant ones, so ``row_upper = [c_h·rhs_h, c_v·rhs_v, rhs_const]``. ``row_lower`` equals
     ``row_upper`` on the equality rows and ``lower`` elsewhere. The matrix, costs and column
     bounds are shared by every :meth:`instantiate` call, so κ halvings cost a few vector
-    operations. ``vertex_rows`` (vertex form only) is the dense ``θ`` block of the rows, used
-    to re-check a gain at the vertices.
+    operations. ``vertex_rows`` (vertex form only), shape ``((n_h + 1)·p, n_θ)``, is the dense
+    ``θ`` block of the barrier and CLF rows, used to re-check a gain at the vertices.
     """
 
     cost: np.ndarray
@@ -316,10 +322,14 @@ class LpTemplate:
             return np.concatenate((self.rhs_h * c_h, self.rhs_v * c_v, self.rhs_const))
         return np.concatenate((self.rhs_v * c_v, self.rhs_const))
 
+    def row_bounds(self, c_h: float, c_v: float) -> tuple[np.ndarray, np.ndarray]:
+        """``(row_lower, row_upper)`` for the constants ``c_h`` and ``c_v``, each of shape (m,)."""
+        upper = self.row_upper(c_h, c_v)
+        return (self.lower if self.equality is None else np.where(self.equality, upper, self.lower)), upper
+
     def instantiate(self, c_h: float, c_v: float) -> CellLp:
         """The LP with the constants ``c_h`` and ``c_v``."""
-        upper = self.row_upper(c_h, c_v)
-        lower = self.lower if self.equality is None else np.where(self.equality, upper, self.lower)
+        lower, upper = self.row_bounds(c_h, c_v)
         return CellLp(self.cost, self.A_indptr, self.A_indices, self.A_values, lower, upper, self.col_lower,
                       self.col_upper, self.n_theta, self.n_h)  # fmt: skip
 
@@ -401,6 +411,8 @@ def vertex_template(problem: CellProblem, L: np.ndarray, u_max: float | None, w_
     the box as two ranged groups ``−u_max ≤ e_iᵀu ≤ u_max``. Row ``g·p + q`` reads
     ``d_gᵀu(v_q) − S_g ≤ r_g − ρ_gᵀv_q``, that is ``c_h·h_k(v_q)``, ``−c_v·V(v_q)`` or ``u_max``.
     """
+    if L is FIELD_MAP and not least_violation:
+        return _field_vertex_template(problem, u_max, w_h, w_v)
     V = problem.vertices
     p, n_theta = len(V), L.shape[2]
     n_h = len(problem.cbf_q)
@@ -424,15 +436,173 @@ def vertex_template(problem: CellProblem, L: np.ndarray, u_max: float | None, w_
     dense = np.empty((rows, n_theta + n_slack))
     dense[:, :n_theta] = coef
     dense[:, n_theta:] = _slack_block(n_slack, p, rows)
+    vertex_rows = coef[: n_slack * p]
     if least_violation:
-        return _template(dense, lower, None, rhs_h, rhs_v, rhs_const, n_theta, n_h, 0, w_h, w_v, True, coef)
+        return _template(dense, lower, None, rhs_h, rhs_v, rhs_const, n_theta, n_h, 0, w_h, w_v, True, vertex_rows)
     # The sparsity pattern depends only on the sizes and on which θ each box side can move.
     # Exact zeros inside it (a vertex on x = 0, say) are passed on explicitly; HiGHS drops them.
     pattern = _FIELD_PATTERN if L is FIELD_MAP else _box_pattern(L)
     indptr, indices, gather = _vertex_sparsity(pattern, n_theta, n_h, p, box)
     col_lower, col_upper, cost = _slack_columns(n_theta, n_h, float(w_h), float(w_v))
     return LpTemplate(cost, indptr, indices, dense.ravel()[gather], col_lower, col_upper, lower, None, rhs_h, rhs_v,
-                      rhs_const, n_theta, n_h, coef)  # fmt: skip
+                      rhs_const, n_theta, n_h, vertex_rows)  # fmt: skip
+
+
+def _field_vertex_template(problem: CellProblem, u_max: float | None, w_h: float, w_v: float) -> LpTemplate:
+    """:func:`vertex_template` in field space (``L`` = :data:`FIELD_MAP`), the default LP of every cell.
+
+    With ``θ = (M₀₀, M₀₁, a₀, M₁₀, M₁₁, a₁)``, ``d_gᵀu(v_q) = Σ_i d_gi (a_i − M_i0 v_q0 − M_i1 v_q1)``,
+    so the θ block of row ``(g, q)`` is the outer product ``d_g ⊗ w_q`` with ``w_q = (−v_q, 1)``,
+    and a box row of ``u_i`` holds ``w_q`` on ``(M_i0, M_i1, a_i)``. Each value is a single
+    product (the general path's products with the identity ``L`` only add exact zeros, so the
+    values are the same) written straight into the CSR value array: no dense block, no
+    gather, a handful of numpy calls per cell.
+    """
+    V = problem.vertices
+    p = len(V)
+    n_h = len(problem.cbf_q)
+    n_slack = n_h + 1
+    box = 2 if u_max is not None else 0
+    # Zero entries are +0, as the general path's sums give them: 0 − v and "+= 0" turn −0 into +0
+    # and change nothing else, so the arrays handed to HiGHS are the same bytes either way.
+    W = np.empty((p, 3))  # u(v_q) = [M, a] @ W[q]
+    np.subtract(0.0, V, out=W[:, :2])
+    W[:, 2] = 1.0
+    D = np.empty((n_slack, 1, 2, 1))  # d_g, shaped to broadcast against W into (n_slack, p, 2, 3)
+    np.negative(problem.cbf_n, out=D[:n_h, 0, :, 0])
+    D[n_h, 0, :, 0] = problem.z
+    slack_rows = n_slack * p
+    coef = np.multiply(D, W[:, None, :]).reshape(slack_rows, 6)
+    coef += 0.0
+    # CSR values in row order (see _vertex_sparsity): per slack row θ_0 … θ_5 then −1 on S_g,
+    # then the box rows of u_1 and of u_2, three values each.
+    n_slack_values = 7 * slack_rows
+    values = np.empty(n_slack_values + 3 * box * p)
+    slack_values = values[:n_slack_values].reshape(slack_rows, 7)
+    slack_values[:, :6] = coef
+    slack_values[:, 6] = -1.0
+    values[n_slack_values:].reshape(box, p, 3)[...] = W
+    rhs_h = (problem.cbf_n @ V.T + problem.cbf_q[:, None]).ravel()  # h_k(v_q), barrier-major
+    rhs_v = (problem.x_j - V) @ problem.z  # −V(v_q)
+    lower, rhs_const = _vertex_row_bounds(slack_rows, box * p, float(u_max) if box else 0.0)
+    indptr, indices, _ = _vertex_sparsity(_FIELD_PATTERN, 6, n_h, p, box)
+    col_lower, col_upper, cost = _slack_columns(6, n_h, float(w_h), float(w_v))
+    return LpTemplate(cost, indptr, indices, values, col_lower, col_upper, lower, None, rhs_h, rhs_v, rhs_const, 6,
+                      n_h, coef)  # fmt: skip
+
+
+@dataclass(frozen=True)
+class FieldTemplates:
+    """The field-space vertex templates of many cells, from :func:`field_vertex_templates`.
+
+    Attributes
+    ----------
+    templates : dict of int to LpTemplate
+        One per requested cell, each equal (same bytes) to ``vertex_template(problem, FIELD_MAP, …)``.
+    h_values : ndarray, shape (Σ_c h_c·p_c,)
+        ``h_k(v_q)`` of every cell, cell after cell (barrier-major within a cell); the
+        templates' ``rhs_h`` are views into it. Cells not requested hold ``q_k`` only.
+    h_value_offsets : ndarray of int64, shape (C + 1,)
+        Cell ``c`` owns ``h_values[h_value_offsets[c]:h_value_offsets[c + 1]]``.
+    minus_v : ndarray, shape (P,)
+        ``−V(v_q)`` of every vertex, in vertex order; the templates' ``rhs_v`` are views into it
+        (zero for cells not requested).
+    """
+
+    templates: dict
+    h_values: np.ndarray
+    h_value_offsets: np.ndarray
+    minus_v: np.ndarray
+
+
+def field_vertex_templates(vertices: np.ndarray, vertex_offsets: np.ndarray, cbf_n: np.ndarray, cbf_q: np.ndarray,
+                           cbf_offsets: np.ndarray, z: np.ndarray, x_j: np.ndarray, cells, u_max: float | None,
+                           w_h: float = 1.0, w_v: float = 1.0) -> FieldTemplates:  # fmt: skip
+    """:func:`vertex_template` in field space for many cells at once, from flat arrays (the ``Cells`` layout).
+
+    The coefficients ``d_g ⊗ w_q`` of every row of every cell come from one numpy pass (the
+    same single products as :func:`_field_vertex_template`), as do the ``+ q_k`` of the barrier
+    right-hand sides. What stays per cell is slicing, one concatenation of the CSR values and
+    the two small matrix products ``n @ Vᵀ`` and ``(x_j − V) @ z``: those are the very BLAS calls
+    of the per-cell builder, on the same views, so that the right-hand sides round the same way
+    (a batched product could fuse multiply and add differently).
+
+    Parameters
+    ----------
+    vertices : ndarray, shape (P, 2)
+        Every cell's CCW vertices; cell ``c`` owns rows ``vertex_offsets[c]:vertex_offsets[c + 1]``.
+    vertex_offsets : ndarray of int, shape (C + 1,)
+    cbf_n, cbf_q : ndarray, shapes (H, 2), (H,)
+        Barrier rows ``h = n @ x + q``; cell ``c`` owns rows ``cbf_offsets[c]:cbf_offsets[c + 1]``.
+    cbf_offsets : ndarray of int, shape (C + 1,)
+    z, x_j : ndarray, shape (C, 2)
+        Exit direction and exit point per cell.
+    cells : sequence of int
+        The cells to build templates for (rows of every cell are computed, which is cheaper
+        than gathering a subset; cells not listed may hold any finite or NaN data).
+    u_max, w_h, w_v : float
+        As in :func:`vertex_template` (``u_max`` None drops the box rows).
+
+    Returns
+    -------
+    FieldTemplates
+    """
+    n_cells = len(z)
+    vo, ho = np.asarray(vertex_offsets, np.int64), np.asarray(cbf_offsets, np.int64)
+    p, h = np.diff(vo), np.diff(ho)
+    box = 2 if u_max is not None else 0
+    W = np.empty((len(vertices), 3))  # as in _field_vertex_template, with zeros +0
+    np.subtract(0.0, vertices, out=W[:, :2])
+    W[:, 2] = 1.0
+    # Groups with a slack, cell after cell: the cell's barrier rows (d = −n), then its CLF (d = z).
+    go = ho + np.arange(n_cells + 1)
+    D = np.empty((go[-1], 2))
+    D[go[1:] - 1] = z
+    D[np.arange(len(cbf_q)) + np.repeat(np.arange(n_cells), h)] = -cbf_n
+    # Slack rows: group g of cell c has one row per vertex of c.
+    group_rows = np.repeat(p, h + 1)
+    ro = np.zeros(len(group_rows) + 1, np.int64)
+    np.cumsum(group_rows, out=ro[1:])
+    row_group = np.repeat(np.arange(len(group_rows)), group_rows)
+    row_vertex = np.arange(ro[-1]) + np.repeat(np.repeat(vo[:-1], h + 1) - ro[:-1], group_rows)
+    # Column by column: a broadcast (R, 2, 1) × (R, 1, 3) product runs numpy's slow tiny-inner-loop path.
+    d, w = np.take(D, row_group, axis=0), np.take(W, row_vertex, axis=0)
+    coef = np.empty((len(row_group), 6))
+    for i in range(2):
+        for k in range(3):
+            np.multiply(d[:, i], w[:, k], out=coef[:, 3 * i + k])
+    coef += 0.0
+    slack_values = np.empty((len(coef), 7))
+    slack_values[:, :6] = coef
+    slack_values[:, 6] = -1.0
+    # Right-hand sides: the per-cell products into flat buffers, then the offsets q_k at once.
+    hvo = np.zeros(n_cells + 1, np.int64)
+    np.cumsum(h * p, out=hvo[1:])
+    h_values = np.zeros(hvo[-1])
+    minus_v = np.zeros(len(vertices))
+    exit_minus_vertex = np.repeat(x_j, p, axis=0) - vertices  # x_j − v_q, elementwise as per cell
+    v_off, h_off, hv_off, r_off = vo.tolist(), ho.tolist(), hvo.tolist(), ro[go].tolist()
+    cells = list(cells)
+    for c in cells:
+        v0, v1, h0, h1 = v_off[c], v_off[c + 1], h_off[c], h_off[c + 1]
+        np.matmul(cbf_n[h0:h1], vertices[v0:v1].T, out=h_values[hv_off[c] : hv_off[c + 1]].reshape(h1 - h0, v1 - v0))
+        np.matmul(exit_minus_vertex[v0:v1], z[c], out=minus_v[v0:v1])
+    h_values += np.repeat(cbf_q, np.repeat(p, h))
+    _frozen(h_values, minus_v, coef)
+    templates = {}
+    for c in cells:
+        v0, v1, n_h = v_off[c], v_off[c + 1], h_off[c + 1] - h_off[c]
+        n = v1 - v0
+        r0, r1 = r_off[c], r_off[c + 1]
+        w_cell = W[v0:v1].ravel()  # the box rows of u_1, then of u_2
+        values = np.concatenate((slack_values[r0:r1].ravel(),) + (w_cell,) * box)
+        lower, rhs_const = _vertex_row_bounds(r1 - r0, box * n, float(u_max) if box else 0.0)
+        indptr, indices, _ = _vertex_sparsity(_FIELD_PATTERN, 6, n_h, n, box)
+        col_lower, col_upper, cost = _slack_columns(6, n_h, float(w_h), float(w_v))
+        templates[c] = LpTemplate(cost, indptr, indices, values, col_lower, col_upper, lower, None,
+                                  h_values[hv_off[c] : hv_off[c + 1]], minus_v[v0:v1], rhs_const, 6, n_h,
+                                  coef[r0:r1])  # fmt: skip
+    return FieldTemplates(templates, h_values, hvo, minus_v)
 
 
 def dual_template(problem: CellProblem, L: np.ndarray, u_max: float | None, w_h: float = 1.0, w_v: float = 1.0,

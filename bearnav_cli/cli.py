@@ -17,6 +17,7 @@ import typer
 import yaml
 from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.table import Table
 
 from bearnav_cli import __version__, artifacts, pipeline
 from bearnav_cli.datatypes import CellFlag, Cells, CellStatus, cell_list
@@ -403,6 +404,94 @@ def _run_one(stage: str, source: Path, out_path: Optional[Path], overrides: dict
     if not as_json:
         out.print(_report_line(report), highlight=False, soft_wrap=True)
     _finish([report], as_json)
+
+
+@app.command("simulate")
+@handles_errors
+def simulate_command(
+    plan_npz: Path = typer.Argument(..., help="plan.npz from `bearnav synthesize` or `bearnav plan`."),
+    out_path: Optional[Path] = typer.Option(None, "-o", "--out", help="Output (default sim.npz next to the plan)."),
+    starts: Optional[str] = typer.Option(None, help="'map' (default), 'random:N' or 'x,y;x,y;...'."),
+    dynamics: Optional[str] = typer.Option(None, help="'single' (default) or 'unicycle'."),
+    measurement: Optional[str] = typer.Option(None, help="'bearing' (default) or 'displacement'."),
+    fov: Optional[float] = typer.Option(None, help="Camera field of view, degrees (360)."),
+    noise_deg: Optional[float] = typer.Option(None, help="Bearing noise standard deviation, degrees (0)."),
+    range_: Optional[float] = typer.Option(None, "--range", help="Largest landmark distance seen, map units."),
+    occlusion: Optional[bool] = typer.Option(None, "--occlusion/--no-occlusion", help="Obstacles hide landmarks."),
+    reconstruction: Optional[str] = typer.Option(None, help="'lsq' (default), 'pair' or 'rescale'."),
+    dt: Optional[float] = typer.Option(None, help="Euler step, s (min(0.0025 D / v, 0.2))."),
+    speed: Optional[float] = typer.Option(None, help="Single-integrator speed, map units/s (0.1)."),
+    alpha: Optional[float] = typer.Option(None, help="Unicycle forward gain, map units/s (0.1)."),
+    beta: Optional[float] = typer.Option(None, help="Unicycle turn gain, rad/s (0.5)."),
+    clamp_reverse: Optional[bool] = typer.Option(
+        None, "--clamp-reverse/--allow-reverse", help="Unicycle never drives backwards."
+    ),
+    hold_time: Optional[float] = typer.Option(None, help="Seconds without a fix before looking around (2)."),
+    seed: Optional[int] = typer.Option(None, help="Seed of the noise and of random starts (0)."),
+    min_success: float = typer.Option(1.0, help="Exit 1 when fewer runs than this fraction reach the goal."),
+    gif: Optional[Path] = typer.Option(None, help="Also write an animation of the runs (.gif)."),
+    force: bool = FORCE,
+    quiet: bool = QUIET,
+    as_json: bool = JSON,
+) -> None:
+    """Drive robots with the plan's controllers from bearings: field of view, noise, unicycle.
+
+    Example: bearnav simulate plans/kitchen/plan.npz --fov 60 --dynamics unicycle --starts random:200
+    """
+    _Quiet.enabled |= quiet
+    if not 0.0 <= min_success <= 1.0:
+        raise _fail(f"--min-success: must lie in [0, 1], got {min_success}", EXIT_INVALID)
+    overrides = dict(
+        starts=starts, dynamics=dynamics, measurement=measurement, fov=fov, noise_deg=noise_deg, range=range_,
+        occlusion=occlusion, reconstruction=reconstruction, dt=dt, speed=speed, alpha=alpha, beta=beta,
+        clamp_reverse=clamp_reverse, hold_time=hold_time, seed=seed,
+    )
+    with _progress_bar() as progress:
+        report = pipeline.run_stage("simulate", plan_npz, out_path, overrides, force,
+                                    _progress_factory(progress)("simulate"))  # fmt: skip
+    sim = report.artifact
+    metrics = sim.stats
+    if as_json:
+        out.print_json(json.dumps({"sim": str(report.path), "ran": report.ran, "metrics": metrics}))
+    else:
+        out.print(_report_line(report), highlight=False, soft_wrap=True)
+        table = Table(title=None, box=None, show_header=True, header_style="bold")
+        table.add_column("metric")
+        table.add_column("value", justify="right")
+        for name, value in _metric_rows(metrics):
+            table.add_row(name, value)
+        out.print(table)
+    if gif is not None:
+        from bearnav_cli import plot  # matplotlib only when asked
+
+        plot.save_animation(sim, str(gif))
+        if not as_json:
+            out.print(f"wrote {gif}", highlight=False)
+    rate = metrics.get("success_rate")
+    if rate is None or rate < min_success:
+        raise typer.Exit(EXIT_OUTCOME)
+
+
+def _metric_rows(metrics: dict) -> list[tuple[str, str]]:
+    """The metrics table of ``bearnav simulate``: (name, formatted value) rows."""
+    def num(value: Any, fmt: str) -> str:
+        return "-" if value is None else format(value, fmt)
+
+    rows = [
+        ("runs", str(metrics["runs"])),
+        ("success rate", num(metrics["success_rate"], ".1%")),
+    ]
+    rows += [(f"  {name}", str(n)) for name, n in metrics["outcomes"].items() if n]
+    rows += [
+        ("mean time (s)", num(metrics["time_mean_s"], ".1f")),
+        ("mean path length", num(metrics["path_length_mean"], ".2f")),
+        ("path / tree route", num(metrics["path_over_tree_route_mean"], ".3f")),
+        ("min clearance", num(metrics["min_clearance"], ".3f")),
+        ("left-cell events", str(metrics["left_cell_events"])),
+        ("runs with an approach", str(metrics["runs_with_approach"])),
+        ("hold time total (s)", num(metrics["hold_time_total_s"], ".1f")),
+    ]
+    return rows
 
 
 @app.command("plan")

@@ -17,7 +17,7 @@ from typing import Any, Callable
 from bearnav_cli import artifacts
 from bearnav_cli.datatypes import Map
 from bearnav_cli.errors import InvalidMapError, InvalidParamsError
-from bearnav_cli.stages import decompose, map_, rrtstar, simplify, synthesize
+from bearnav_cli.stages import decompose, map_, rrtstar, simplify, simulate, synthesize
 
 #: ``progress(done, total)``, called by long stages.
 Progress = Callable[[int, int], None]
@@ -44,7 +44,9 @@ STAGES: tuple[Stage, ...] = (
     Stage("decompose", decompose, "simplified", "cells"),
     Stage("synthesize", synthesize, "cells", "plan"),
 )
-STAGE_BY_NAME = {stage.name: stage for stage in STAGES}
+#: Not part of ``plan``: run on a plan by ``bearnav simulate`` (maps may still set its ``params:``).
+SIMULATE = Stage("simulate", simulate, "plan", "simulation")
+STAGE_BY_NAME = {stage.name: stage for stage in (*STAGES, SIMULATE)}
 
 
 @dataclass(frozen=True)

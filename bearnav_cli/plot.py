@@ -19,7 +19,7 @@ from matplotlib.collections import LineCollection  # noqa: E402
 from matplotlib.patches import PathPatch  # noqa: E402
 from matplotlib.path import Path as MplPath  # noqa: E402
 
-from bearnav_cli.datatypes import Cells, CellStatus, Map, Plan, Polygon, Tree  # noqa: E402
+from bearnav_cli.datatypes import Cells, CellStatus, Map, Plan, Polygon, Simulation, Tree  # noqa: E402
 
 RAW_COLOR = "#4d4d4d"
 INFLATED_COLOR = "#c9c9c9"
@@ -162,25 +162,105 @@ def plot_samples(ax: plt.Axes, tree: Tree | Cells, *, color: str = "#ff7f0e") ->
     return ax
 
 
+#: Trajectory colour of each run outcome (``sim.npz`` ``outcome``).
+OUTCOME_COLORS = {0: "#2ca25f", 1: "#de2d26", 2: "#fd8d3c", 3: "#756bb1", 4: "#636363"}
+OUTCOME_NAMES = {0: "success", 1: "collision", 2: "stall", 3: "timeout", 4: "lost"}
+
+
+def plot_sim_background(ax: plt.Axes, sim: Simulation) -> plt.Axes:
+    """The simulation's cells (outlines, filled by status) and tree, faintly."""
+    for c in range(len(sim.cell_vertex_offsets) - 1):
+        v = sim.cell_vertices[sim.cell_vertex_offsets[c] : sim.cell_vertex_offsets[c + 1]]
+        ax.fill(*v.T, color=STATUS_COLORS[CellStatus(int(sim.cell_status[c]))], alpha=0.12, lw=0, zorder=0.5)
+        ax.plot(*np.vstack([v, v[:1]]).T, color="#6a51a3", lw=0.3, alpha=0.35, zorder=0.6)
+    segments = _edges(sim.nodes, sim.parent)
+    ax.add_collection(LineCollection(segments, colors="#1f77b4", linewidths=0.8, alpha=0.6, zorder=2,
+                                     label="tree"))  # fmt: skip
+    return ax
+
+
+def plot_trajectories(ax: plt.Axes, sim: Simulation, *, limit: int = 400) -> plt.Axes:
+    """Every run's path coloured by its outcome, with its start (circle) and end (cross); at most ``limit`` runs."""
+    shown = set()
+    for r in range(min(len(sim.outcome), limit)):
+        path = sim.trajectory(r)
+        if not len(path):
+            continue
+        outcome = int(sim.outcome[r])
+        label = OUTCOME_NAMES[outcome] if outcome not in shown else None
+        shown.add(outcome)
+        color = OUTCOME_COLORS[outcome]
+        ax.plot(*path.T, color=color, lw=0.9, alpha=0.85, zorder=4, label=label)
+        ax.plot(*path[0], "o", ms=3, mfc="white", mec=color, zorder=5)
+        if outcome != 0:
+            ax.plot(*path[-1], "x", ms=5, color=color, zorder=5)
+    return ax
+
+
+def _frame(map_: Map, title: str) -> tuple[plt.Figure, plt.Axes]:
+    xmin, ymin, xmax, ymax = map_.bounds
+    width = 8.0
+    height = max(3.0, width * (ymax - ymin) / (xmax - xmin))
+    fig, ax = plt.subplots(figsize=(width + 1.8, height))  # the extra width holds the legend
+    plot_map(ax, map_)
+    ax.set_title(title)
+    return fig, ax
+
+
+def save_animation(sim: Simulation, path: str, *, frames: int = 80, limit: int = 60) -> None:
+    """Write a GIF of the runs (at most ``limit``) advancing together, ``frames`` frames.
+
+    Each frame shows every run's path so far and its current position; the frames are
+    evenly spaced in time up to the longest run.
+    """
+    from matplotlib.animation import FuncAnimation, PillowWriter
+
+    fig, ax = _frame(sim.map, f"{sim.map.name}: {len(sim.outcome)} runs")
+    plot_sim_background(ax, sim)
+    runs = [r for r in range(min(len(sim.outcome), limit)) if len(sim.trajectory(r))]
+    lines = [ax.plot([], [], color=OUTCOME_COLORS[int(sim.outcome[r])], lw=0.9, zorder=4)[0] for r in runs]
+    heads = ax.scatter(np.zeros(len(runs)), np.zeros(len(runs)), s=12, zorder=5,
+                       c=[OUTCOME_COLORS[int(sim.outcome[r])] for r in runs])  # fmt: skip
+    longest = max((len(sim.trajectory(r)) for r in runs), default=1)
+    fig.tight_layout()
+
+    def draw(k: int) -> list:
+        upto = max(1, int(round((k + 1) / frames * longest)))
+        tips = []
+        for line, r in zip(lines, runs, strict=True):
+            path = sim.trajectory(r)[:upto]
+            line.set_data(path[:, 0], path[:, 1])
+            tips.append(path[-1])
+        if tips:
+            heads.set_offsets(np.array(tips))
+        return [*lines, heads]
+
+    FuncAnimation(fig, draw, frames=frames, blit=False).save(path, writer=PillowWriter(fps=12), dpi=60)
+    plt.close(fig)
+
+
 def figure_for(artifact: Any, *, background: Sequence[Any] = (), title: str | None = None) -> plt.Figure:
     """A figure with the layers that suit ``artifact``.
 
     Parameters
     ----------
-    artifact : Map, Tree, Cells or Plan
+    artifact : Map, Tree, Cells, Plan or Simulation
         The main artifact: a map; a tree with its samples; cells with barrier lines; a
-        plan adds the cells' status colours and its vector field.
+        plan adds the cells' status colours and its vector field; a simulation draws its
+        runs over the tree and cells, coloured by outcome.
     background : sequence of Tree
         Trees drawn faintly underneath (e.g. the RRT* tree under its simplification).
     title : str, optional
         Figure title (default: map name and artifact kind).
     """
     map_ = artifact if isinstance(artifact, Map) else artifact.map
-    xmin, ymin, xmax, ymax = map_.bounds
-    width = 8.0
-    height = max(3.0, width * (ymax - ymin) / (xmax - xmin))
-    fig, ax = plt.subplots(figsize=(width + 1.8, height))  # the extra width holds the legend
-    plot_map(ax, map_)
+    fig, ax = _frame(map_, title or map_.name)
+    if isinstance(artifact, Simulation):
+        plot_sim_background(ax, artifact)
+        plot_trajectories(ax, artifact)
+        rate = artifact.stats.get("success_rate")
+        if title is None and rate is not None:
+            ax.set_title(f"{map_.name}: {rate:.1%} of {len(artifact.outcome)} runs reached the goal")
     for extra in background:
         plot_tree(ax, extra, color="#9ecae1", lw=0.5, alpha=0.8, label="RRT* tree")
     if isinstance(artifact, Tree):
@@ -194,7 +274,6 @@ def figure_for(artifact: Any, *, background: Sequence[Any] = (), title: str | No
         plot_tree(ax, cells, nodes=True, lw=1.0)
         if isinstance(artifact, Plan):
             plot_field(ax, artifact)
-    ax.set_title(title or map_.name)
     ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=7, framealpha=0.85)
     fig.tight_layout()
     return fig

@@ -569,9 +569,11 @@ def control(
 
     Without a usable reconstruction (§7.5), for up to ``hold_time`` seconds the robot carries
     its last estimate forward with its own commanded motion (odometry, ``settings.odometry``)
-    and keeps following the fields; with ``odometry`` off it holds as §7.5 says (the single
-    integrator keeps ``last_dir``, the unicycle turns toward it). After ``hold_time`` it stops
-    and looks around (turns in place at ``β``) for one revolution; then it is lost.
+    and keeps following the fields; without any estimate (before its first fix, or once
+    odometry has expired) it stops and looks around, turning in place at ``β``, for one
+    revolution, and is then lost. With ``odometry`` off it holds as §7.5 says (the single
+    integrator keeps ``last_dir``, the unicycle turns toward it) for ``hold_time``, then looks
+    around the same way.
 
     Parameters
     ----------
@@ -641,9 +643,15 @@ def control(
         ok = norm > 0
         u[idx[ok]] = ui[ok] / norm[ok, None]
         last_dir[idx[ok]] = u[idx[ok]]
-    holding = ~steer
-    scanning = ~fix & (hold > s.hold_time)
-    lost = scanning & (hold > s.hold_time + 2.0 * math.pi / s.beta)
+    holding = ~steer  # no position estimate this step
+    if s.odometry:
+        # never move blind: without an estimate look around at once, for one revolution
+        scanning = holding
+        scan_time = hold - np.where(state.known, s.hold_time, 0.0)
+    else:
+        scanning = holding & (hold > s.hold_time)  # §7.5's hold first, then look around
+        scan_time = hold - s.hold_time
+    lost = scanning & (scan_time > 2.0 * math.pi / s.beta)
     direction = np.where(holding[:, None], last_dir, u)
     velocity = s.speed * direction
     velocity[scanning] = 0.0

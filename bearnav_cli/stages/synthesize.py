@@ -9,7 +9,10 @@ independent check :func:`vertex_margins` (ALGORITHMS §8). Per-cell building blo
 (:func:`solve_cell`, :func:`goal_cell_solution`, the LP builders) are public and need
 no artifact; :func:`run` applies them to :class:`~bearnav_cli.datatypes.Cells` in three
 passes (build every LP, solve them all, recover the gains), which keeps each kind of
-code cache-warm.
+code cache-warm. With the full gain (field space) the build pass makes every cell's vertex
+rows and constant scales in a few numpy passes over the flat ``Cells`` arrays
+(:func:`~bearnav_cli.cell_lp.field_vertex_templates`); the LPs are the same bytes as
+:func:`prepare_cell` builds one cell at a time.
 """
 
 from __future__ import annotations
@@ -28,10 +31,12 @@ from bearnav_cli.cell_lp import (
     FIELD_MAP,
     CellLp,
     CellProblem,
+    FieldTemplates,
     LpTemplate,
     dual_lp,
     dual_template,
     field_map,
+    field_vertex_templates,
     gain_from_theta,
     gram_condition,
     landmark_matrix,
@@ -229,19 +234,28 @@ def cell_constants(problem: CellProblem, kappa: float, u_max: float) -> tuple[fl
     """
     V = problem.vertices
     h_values = problem.cbf_n @ V.T + problem.cbf_q[:, None]
-    h_scale, v_scale = _constant_scales(V, h_values, (V - problem.x_j) @ problem.z)
+    h_scale, v_scale = _constant_scales(V, h_values, (problem.x_j - V) @ problem.z)
     return kappa * u_max / h_scale, kappa * u_max / v_scale
 
 
-def _constant_scales(V: np.ndarray, h_values: np.ndarray, v_values: np.ndarray) -> tuple[float, float]:
-    """Denominators ``max(δ, max −h)`` (NaN without barrier rows) and ``max V`` of :func:`cell_constants`."""
-    v_max = float(v_values.max())
-    if not v_max > 0:
-        raise ArtifactError("exit_dir does not point into the cell (V ≤ 0 at every vertex)", field="exit_dir")
+def _constant_scales(V: np.ndarray, h_values: np.ndarray, minus_v: np.ndarray) -> tuple[float, float]:
+    """Denominators ``max(δ, max −h)`` (NaN without barrier rows) and ``max V`` of :func:`cell_constants`.
+
+    Parameters
+    ----------
+    V : ndarray, shape (p, 2)
+        The cell's vertices.
+    h_values : ndarray, shape (h, p) or (h·p,)
+        ``h_k(v_q)``.
+    minus_v : ndarray, shape (p,)
+        ``−V(v_q)``, as the vertex template's ``rhs_v`` holds it (``max V = −min(−V)`` exactly).
+    """
+    v_max = _checked_v_max(-float(minus_v.min()))
     if h_values.size == 0:
         return math.nan, v_max
-    diff = V[:, None, :] - V[None, :, :]
-    diam = math.sqrt(float((diff * diff).sum(axis=2).max()))
+    diff = V[:, None, :] - V  # (p, p, 2); the squared distances are d₀² + d₁², the order a sum over axis 2 uses
+    diff *= diff
+    diam = math.sqrt(float((diff[..., 0] + diff[..., 1]).max()))
     return max(DELTA_FRACTION * diam, -float(h_values.min())), v_max
 
 
@@ -287,6 +301,44 @@ class SolveOutcome:
     attempts: int
 
 
+def _checked_v_max(v_max: float) -> float:
+    """``max_q V(v_q)``, which must be positive (``c_v`` divides by it)."""
+    if not v_max > 0:
+        raise ArtifactError("exit_dir does not point into the cell (V ≤ 0 at every vertex)", field="exit_dir")
+    return v_max
+
+
+def _batched_scales(cells: Cells, built: FieldTemplates, which: list[int]) -> dict[int, tuple[float, float]]:
+    """``(h_scale, max V)`` of :func:`_constant_scales` for the cells ``which``, in a few numpy passes.
+
+    The same numbers: minima and maxima are exact in any grouping, the squared distances are
+    the same ``d₀² + d₁²`` (cells grouped by vertex count, so no padding), and ``np.sqrt`` rounds
+    as ``math.sqrt`` does. ``max V`` is not checked here (see :func:`_checked_v_max`).
+    """
+    vo = cells.cell_vertex_offsets
+    p = np.diff(vo)
+    n_h = np.diff(cells.cbf_offsets)
+    v_max = (-np.minimum.reduceat(built.minus_v, vo[:-1])).tolist()
+    h_min = np.full(len(p), np.nan)  # stays NaN without barrier rows
+    has_rows = np.flatnonzero(n_h)
+    if len(has_rows):  # empty segments in between reduce to nothing, as they should
+        h_min[has_rows] = np.minimum.reduceat(built.h_values, built.h_value_offsets[has_rows])
+    which_arr = np.asarray(which, np.int64)
+    diam = np.zeros(len(p))
+    for n in np.unique(p[which_arr]).tolist():
+        group = which_arr[p[which_arr] == n]
+        V = cells.cell_vertices[vo[group][:, None] + np.arange(n)]  # (k, n, 2)
+        diff = V[:, :, None, :] - V[:, None, :, :]
+        diff *= diff
+        diam[group] = np.sqrt((diff[..., 0] + diff[..., 1]).max(axis=(1, 2)))
+    diam_list, h_min_list, n_h_list = diam.tolist(), h_min.tolist(), n_h.tolist()
+    out = {}
+    for c in which:  # the Python max of _constant_scales, on the same two floats
+        h_scale = max(DELTA_FRACTION * diam_list[c], -h_min_list[c]) if n_h_list[c] else math.nan
+        out[c] = (h_scale, v_max[c])
+    return out
+
+
 def prepare_cell(problem: CellProblem, params: Params) -> PreparedCell:
     """Build a cell's LP templates and the denominators of its constants (no solve).
 
@@ -298,11 +350,17 @@ def prepare_cell(problem: CellProblem, params: Params) -> PreparedCell:
     space = "field" if params.gain_structure == "full" else params.gain_structure
     L = field_map(space, problem.landmarks)
     checker = vertex_template(problem, L, params.u_max, params.w_h, params.w_v)
+    h_scale, v_scale = _constant_scales(problem.vertices, checker.rhs_h, checker.rhs_v)
+    return _prepared(problem, params, space, L, checker, h_scale, v_scale)
+
+
+def _prepared(problem: CellProblem, params: Params, space: str, L: np.ndarray, checker: LpTemplate, h_scale: float,
+              v_scale: float) -> PreparedCell:  # fmt: skip
+    """The :class:`PreparedCell` of a built checker: the solved template is the checker or the dual form."""
     if params.lp_form == "vertex":
         template = checker
     else:
         template = dual_template(problem, L, params.u_max, params.w_h, params.w_v)
-    h_scale, v_scale = _constant_scales(problem.vertices, checker.rhs_h, -checker.rhs_v)
     return PreparedCell(problem, space, L, checker, template, h_scale, v_scale)
 
 
@@ -310,12 +368,16 @@ def solve_prepared(prepared: PreparedCell, params: Params, solver: LpSolver) -> 
     """SOLVE_CELL's loop (§5.3): halve ``κ`` while infeasible, then the least-violation LP."""
     u_max = params.u_max
     template = prepared.template
+    # Only the row bounds change between attempts: the template's own arrays go to the solver
+    # as they are, without a CellLp per attempt.
+    fixed = (template.cost, template.A_indptr, template.A_indices, template.A_values)
+    columns = (template.col_lower, template.col_upper)
     status, attempts = CellStatus.SOLVER_FAILURE, 0
     for attempt in range(params.halvings + 1):
         kappa = params.kappa * 0.5**attempt
         c_h, c_v = kappa * u_max / prepared.h_scale, kappa * u_max / prepared.v_scale
-        lp = template.instantiate(c_h, c_v)
-        result = lp.solve(solver)
+        lower, upper = template.row_bounds(c_h, c_v)
+        result = solver.solve(*fixed, lower, upper, *columns)
         attempts += 1
         if result.status is LpStatus.OPTIMAL:
             status = CellStatus.CERTIFIED if attempt == 0 else CellStatus.RELAXED
@@ -329,7 +391,8 @@ def solve_prepared(prepared: PreparedCell, params: Params, solver: LpSolver) -> 
         attempts += 1
         if result.status is LpStatus.OPTIMAL:
             status = CellStatus.NOT_CERTIFIED
-    upper = lp.row_upper if template is prepared.checker else prepared.checker.row_upper(c_h, c_v)
+    if template is not prepared.checker:
+        upper = prepared.checker.row_upper(c_h, c_v)
     return SolveOutcome(status, result, upper, c_h, c_v, kappa, attempts)
 
 
@@ -384,11 +447,11 @@ def _template_margins(checker: LpTemplate, upper: np.ndarray, space: str, K, lan
     else:
         theta = theta_from_gain(space, K)
     n_h = checker.n_h
-    rows = (n_h + 1) * p
-    excess = checker.vertex_rows[:rows] @ theta
-    excess -= upper[:rows]
-    worst = excess.reshape(n_h + 1, p).max(axis=1)
-    return (float(worst[:n_h].max()) if n_h else math.nan), float(worst[n_h])
+    excess = checker.vertex_rows @ theta
+    excess -= upper[: len(excess)]
+    # Python's max of the n_h + 1 group maxima: the same numbers (all finite), fewer numpy calls.
+    worst = excess.reshape(n_h + 1, p).max(axis=1).tolist()
+    return (max(worst[:n_h]) if n_h else math.nan), worst[n_h]
 
 
 def goal_cell_solution(vertices: np.ndarray, goal: np.ndarray, landmarks: np.ndarray, cbf_n: np.ndarray,
@@ -453,29 +516,46 @@ def run(cells: Cells, params: Params = Params(), progress: Callable[[int, int], 
     solver = LpSolver()
     landmarks = cells.map.landmarks
     C, n_lm = cells.n_cells, len(landmarks)
-    gain = np.zeros((C, 2, 2 * n_lm))
-    c_h, c_v, margin_h, margin_v = (np.full(C, math.nan) for _ in range(4))
-    status = np.zeros(C, np.int8)
-    attempts = np.zeros(C, np.int64)
     started = time.perf_counter()
     # Three passes (build every LP, solve them all, then recover and re-check): each pass runs
     # one kind of code, which keeps it cache-warm; interleaving numpy and HiGHS per cell is slower.
-    used, solutions, prepared = [], [None] * C, {}
+    solutions, prepared = [None] * C, {}
+    # Per-cell slices of the flat Cells arrays (DESIGN §3.2) from Python offsets: cheaper than
+    # the accessors' numpy-scalar indexing, and the same views.
+    vo, ro, ho = cells.cell_vertex_offsets.tolist(), cells.cell_row_offsets.tolist(), cells.cbf_offsets.tolist()
+    lm_cell, lm_index = np.nonzero(cells.cell_landmarks)  # row-major: each cell's landmarks in increasing order
+    lo = np.zeros(C + 1, np.int64)
+    np.cumsum(np.bincount(lm_cell, minlength=C), out=lo[1:])
+    lo = lo.tolist()
+    cell_landmarks = landmarks[lm_index]  # cell c's landmarks are rows lo[c]:lo[c + 1]
+    goal_mask = cells.parent[cells.cell_node] == -1
+    is_goal = goal_mask.tolist()
+    built = None
+    if params.gain_structure == "full":  # field space: every cell's vertex rows in one numpy pass
+        edge = np.flatnonzero(~goal_mask).tolist()
+        built = field_vertex_templates(cells.cell_vertices, cells.cell_vertex_offsets, cells.cbf_A, cells.cbf_b,
+                                       cells.cbf_offsets, cells.exit_dir, cells.exit_point, edge, params.u_max,
+                                       params.w_h, params.w_v)  # fmt: skip
+        scales = _batched_scales(cells, built, edge)
     for c in range(C):
-        used.append(np.flatnonzero(cells.cell_landmarks[c]))
-        if len(used[c]) < 2:
-            raise ArtifactError(f"cell {c} uses {len(used[c])} landmark(s); at least 2 needed", field="cell_landmarks")
-        cbf_n, cbf_q = cells.barrier(c)
-        node = cells.cell_node[c]
-        if cells.parent[node] == -1:
-            solutions[c] = goal_cell_solution(cells.vertices(c), cells.nodes[node], landmarks[used[c]], cbf_n, cbf_q,
+        if lo[c + 1] - lo[c] < 2:
+            raise ArtifactError(f"cell {c} uses {lo[c + 1] - lo[c]} landmark(s); at least 2 needed",
+                                field="cell_landmarks")  # fmt: skip
+        vertices, used = cells.cell_vertices[vo[c] : vo[c + 1]], cell_landmarks[lo[c] : lo[c + 1]]
+        cbf_n, cbf_q = cells.cbf_A[ho[c] : ho[c + 1]], cells.cbf_b[ho[c] : ho[c + 1]]
+        if is_goal[c]:
+            solutions[c] = goal_cell_solution(vertices, cells.nodes[cells.cell_node[c]], used, cbf_n, cbf_q,
                                               params.u_max)  # fmt: skip
             continue
-        A, b = cells.rows(c)
-        problem = CellProblem(cells.vertices(c), A, b, cells.exit_dir[c], cells.exit_point[c], cbf_n, cbf_q,
-                              landmarks[used[c]])  # fmt: skip
+        problem = CellProblem(vertices, cells.cell_A[ro[c] : ro[c + 1]], cells.cell_b[ro[c] : ro[c + 1]],
+                              cells.exit_dir[c], cells.exit_point[c], cbf_n, cbf_q, used)  # fmt: skip
         try:
-            prepared[c] = prepare_cell(problem, params)
+            if built is None:
+                prepared[c] = prepare_cell(problem, params)
+            else:
+                h_scale, v_max = scales[c]
+                prepared[c] = _prepared(problem, params, "field", FIELD_MAP, built.templates[c], h_scale,
+                                        _checked_v_max(v_max))  # fmt: skip
         except ArtifactError as exc:
             raise ArtifactError(f"cell {c}: {exc}", field=exc.field) from exc
     outcomes = {}
@@ -490,11 +570,14 @@ def run(cells: Cells, params: Params = Params(), progress: Callable[[int, int], 
             log.warning("cell %d not certified: least-violation margins h %.3g, V %.3g", c, sol.margin_h, sol.margin_v)
         elif sol.status == CellStatus.SOLVER_FAILURE:
             log.warning("cell %d: solver failure (unbounded or error)", c)
-    blocks = gain.reshape(C, 2, n_lm, 2)  # K_k of landmark k in columns 2k, 2k + 1
-    for c, sol in enumerate(solutions):
-        blocks[c][:, used[c], :] = sol.K.reshape(2, -1, 2)
-        c_h[c], c_v[c], margin_h[c], margin_v[c] = sol.c_h, sol.c_v, sol.margin_h, sol.margin_v
-        status[c], attempts[c] = int(sol.status), sol.attempts
+    gain = np.zeros((C, 2, 2 * n_lm))
+    if C:  # K_k of landmark k in columns 2k, 2k + 1: every cell's blocks in one scatter
+        blocks = np.concatenate([sol.K.reshape(2, -1, 2) for sol in solutions], axis=1)  # (2, Σ n_c, 2)
+        gain.reshape(C, 2, n_lm, 2)[lm_cell, :, lm_index, :] = blocks.transpose(1, 0, 2)
+    c_h, c_v, margin_h, margin_v = (np.array([getattr(sol, name) for sol in solutions], float)
+                                    for name in ("c_h", "c_v", "margin_h", "margin_v"))  # fmt: skip
+    status = np.array([int(sol.status) for sol in solutions], np.int8)
+    attempts = np.array([sol.attempts for sol in solutions], np.int64)
     if progress is not None and not prepared:
         progress(C, C)
     elapsed = time.perf_counter() - started
