@@ -20,6 +20,8 @@ from __future__ import annotations
 import enum
 import functools
 import logging
+import os
+import sys
 from dataclasses import dataclass
 
 import highspy
@@ -124,6 +126,24 @@ def dense_to_csr(matrix: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray
     return indptr, (flat % n_cols).astype(np.int32), matrix.ravel()[flat]
 
 
+def _quiet_highs() -> highspy.Highs:
+    """``highspy.Highs()`` without its banner: HiGHS prints it from C++ while constructing,
+    before any option (``output_flag``) can be set, so stdout is pointed at /dev/null for
+    the construction only."""
+    try:
+        sys.stdout.flush()
+        saved = os.dup(1)
+    except (OSError, ValueError, AttributeError):  # no real stdout (some embedded interpreters)
+        return highspy.Highs()
+    try:
+        with open(os.devnull, "wb") as sink:
+            os.dup2(sink.fileno(), 1)
+            return highspy.Highs()
+    finally:
+        os.dup2(saved, 1)
+        os.close(saved)
+
+
 class LpSolver:
     """One reused HiGHS instance with the options of :data:`OPTIONS`.
 
@@ -132,7 +152,7 @@ class LpSolver:
     """
 
     def __init__(self) -> None:
-        self._highs = highspy.Highs()
+        self._highs = _quiet_highs()
         for name, value in OPTIONS.items():
             self._set(name, value)
         self.solves = 0

@@ -363,17 +363,30 @@ def test_solve_cell_margins_equal_the_vertex_recheck(solver, random_cells, struc
         c_h, c_v = sy.cell_constants(p, sol.kappa, 1.0)
         assert sol.c_v == pytest.approx(c_v, rel=1e-12)
         if sol.status in (CellStatus.CERTIFIED, CellStatus.RELAXED):
-            assert sol.kappa == kappa * 0.5 ** (sol.attempts - 1)
+            # a first pass with the strict CLF margin, then one with S_V <= 0
+            assert sol.kappa == kappa * 0.5 ** ((sol.attempts - 1) % (params.halvings + 1))
+            if sol.attempts <= params.halvings + 1:
+                assert m.clf <= -params.clf_margin + 1e-7
             assert m.clf <= 1e-7 and m.input <= 1e-7 and (not len(p.cbf_q) or m.cbf <= 1e-7)
             # the recomputed margins are the LP's slacks (every slack is tight at the optimum)
             assert sol.objective == pytest.approx(params.w_v * m.clf + params.w_h * float(np.sum(m.cbf_rows)), abs=1e-7)
         else:
-            assert sol.status == CellStatus.NOT_CERTIFIED and sol.attempts == params.halvings + 2
+            assert sol.status == CellStatus.NOT_CERTIFIED and sol.attempts == 2 * (params.halvings + 1) + 1
             assert max(m.clf, m.cbf if len(p.cbf_q) else -math.inf) > 0 and m.input <= 1e-7
     assert {0, 1} <= seen
 
 
 # --------------------------------------------------------------------------- crafted statuses
+
+
+def test_strict_clf_margin_or_status_one(solver):
+    """Certified cells exit in finite time: S_V <= −clf_margin·u_max; where no κ allows that,
+    the cell is solved with S_V <= 0 and reported relaxed (status 1)."""
+    sol = sy.solve_cell(toy(), sy.Params(), solver)
+    assert sol.status == CellStatus.CERTIFIED and sol.margin_v <= -0.01 + 1e-9
+    demanding = sy.solve_cell(toy(), sy.Params(clf_margin=10.0), solver)  # |zᵀu| <= 1 < 10: never strict
+    assert demanding.status == CellStatus.RELAXED and demanding.attempts == 8
+    assert demanding.margin_v <= 1e-9
 
 
 def test_status_one_after_halving(solver):
@@ -389,8 +402,10 @@ def test_status_two_when_infeasible_at_every_kappa(solver):
     # h = V − 1: the barrier asks zᵀu ≥ c_h(1 − V) > 0 near the exit face, the CLF zᵀu ≤ −c_v V ≤ 0.
     base = toy()
     p = dataclasses.replace(base, cbf_n=base.z[None, :], cbf_q=np.array([-base.z @ base.x_j - 1.0]))
-    sol = sy.solve_cell(p, sy.Params(), solver)
+    sol = sy.solve_cell(p, sy.Params(clf_margin=0.0), solver)  # one pass: §5.3 as written
     assert sol.status == CellStatus.NOT_CERTIFIED and sol.attempts == 8
+    strict = sy.solve_cell(p, sy.Params(), solver)  # 7 strict, 7 with S_V <= 0, then least violation
+    assert strict.status == CellStatus.NOT_CERTIFIED and strict.attempts == 15
     assert sol.kappa == 0.5 * 2.0**-6
     assert sol.c_v == pytest.approx(sy.cell_constants(p, 0.5 * 2.0**-6, 1.0)[1], rel=1e-12)
     m = margins_of(sol, p)

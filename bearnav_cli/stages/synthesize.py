@@ -89,6 +89,10 @@ class Params:
         Constraints at the cell's vertices, or through LP duality (§5.2).
     w_h, w_v : float
         Objective weights of the CBF and CLF slacks.
+    clf_margin : float
+        The CLF slack must satisfy ``S_V <= −clf_margin·u_max`` (a finite-time exit and no
+        equilibrium in the cell); ``0`` is ALGORITHMS §5.2 as written. A cell that cannot
+        meet it at any κ is solved with ``S_V <= 0`` and gets status 1.
     goal_tolerance : float or None
         Success radius around the goal (map units); ``None`` means ``0.01·D``.
     """
@@ -100,10 +104,11 @@ class Params:
     lp_form: str = "vertex"
     w_h: float = 1.0
     w_v: float = 1.0
+    clf_margin: float = 0.01
     goal_tolerance: float | None = None
 
     def __post_init__(self) -> None:
-        for name in ("u_max", "kappa", "w_h", "w_v", "goal_tolerance"):
+        for name in ("u_max", "kappa", "w_h", "w_v", "clf_margin", "goal_tolerance"):
             value = getattr(self, name)
             if value is None and name == "goal_tolerance":
                 continue
@@ -113,7 +118,7 @@ class Params:
         for name in ("u_max", "kappa"):
             if getattr(self, name) <= 0:
                 raise InvalidParamsError(f"must be positive, got {getattr(self, name)}", field=name)
-        for name in ("w_h", "w_v"):
+        for name in ("w_h", "w_v", "clf_margin"):
             if getattr(self, name) < 0:
                 raise InvalidParamsError(f"must be zero or positive, got {getattr(self, name)}", field=name)
         if self.goal_tolerance is not None and self.goal_tolerance <= 0:
@@ -371,20 +376,32 @@ def solve_prepared(prepared: PreparedCell, params: Params, solver: LpSolver) -> 
     # Only the row bounds change between attempts: the template's own arrays go to the solver
     # as they are, without a CellLp per attempt.
     fixed = (template.cost, template.A_indptr, template.A_indices, template.A_values)
-    columns = (template.col_lower, template.col_upper)
-    status, attempts = CellStatus.SOLVER_FAILURE, 0
-    for attempt in range(params.halvings + 1):
-        kappa = params.kappa * 0.5**attempt
-        c_h, c_v = kappa * u_max / prepared.h_scale, kappa * u_max / prepared.v_scale
-        lower, upper = template.row_bounds(c_h, c_v)
-        result = solver.solve(*fixed, lower, upper, *columns)
-        attempts += 1
-        if result.status is LpStatus.OPTIMAL:
-            status = CellStatus.CERTIFIED if attempt == 0 else CellStatus.RELAXED
+    # A strictly negative CLF slack, S_V <= −clf_margin·u_max, leaves the field no equilibrium
+    # in the cell and bounds the time to the exit face; a cell where no κ allows it is solved
+    # again with S_V <= 0 (status 1, listed in stats.zero_clf_margin).
+    strict = template.col_upper.copy()
+    strict[template.n_theta + template.n_h] = -params.clf_margin * u_max  # the S_V column
+    bounds = [(template.col_lower, strict)]
+    if params.clf_margin > 0:
+        bounds.append((template.col_lower, template.col_upper))
+    status, attempts, found = CellStatus.SOLVER_FAILURE, 0, False
+    for relaxed_clf, columns in enumerate(bounds):
+        for attempt in range(params.halvings + 1):
+            kappa = params.kappa * 0.5**attempt
+            c_h, c_v = kappa * u_max / prepared.h_scale, kappa * u_max / prepared.v_scale
+            lower, upper = template.row_bounds(c_h, c_v)
+            result = solver.solve(*fixed, lower, upper, *columns)
+            attempts += 1
+            if result.status is LpStatus.OPTIMAL:
+                status = CellStatus.CERTIFIED if attempt == 0 and not relaxed_clf else CellStatus.RELAXED
+                found = True
+                break
+            if result.status is not LpStatus.INFEASIBLE:
+                found = True  # a solver failure: nothing to relax
+                break
+        if found:
             break
-        if result.status is not LpStatus.INFEASIBLE:
-            break
-    else:
+    if not found:
         build = vertex_template if params.lp_form == "vertex" else dual_template
         lv = build(prepared.problem, prepared.L, u_max, params.w_h, params.w_v, least_violation=True)
         result = lv.instantiate(c_h, c_v).solve(solver)
