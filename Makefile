@@ -15,9 +15,13 @@ $(STAMP): pyproject.toml
 demo: $(STAMP)
 	$(BIN)/bearnav plan maps/kitchen.yaml
 	$(BIN)/bearnav verify plans/kitchen/plan.npz
+	$(BIN)/bearnav simulate plans/kitchen/plan.npz --fov 60
+	$(BIN)/bearnav simulate plans/kitchen/plan.npz --fov 90 --dynamics unicycle -o plans/kitchen/sim_unicycle.npz
+	$(BIN)/bearnav simulate plans/kitchen/plan.npz --fov 60 --starts random:100 -o plans/kitchen/sim_random.npz
 	$(BIN)/bearnav plot plans/kitchen/simplified.npz --also plans/kitchen/tree.npz -o plans/kitchen/simplified.png
 	$(BIN)/bearnav plot plans/kitchen/plan.npz -o plans/kitchen/plan.png
-	@echo "figures: plans/kitchen/simplified.png plans/kitchen/plan.png"
+	$(BIN)/bearnav plot plans/kitchen/sim_random.npz -o plans/kitchen/sim.png
+	@echo "figures: plans/kitchen/simplified.png plans/kitchen/plan.png plans/kitchen/sim.png"
 
 test: $(STAMP)
 	$(BIN)/ruff check .
@@ -26,7 +30,8 @@ test: $(STAMP)
 bench: $(STAMP)
 	$(BIN)/python -m pip install --quiet ompl
 	$(BIN)/python bench/rrtstar.py
-	$(BIN)/python bench/synthesize.py
+	$(BIN)/python bench/synthesize.py --readme
+	$(BIN)/python bench/simulate.py --readme
 
 clean:
 	rm -rf plans/*/ .pytest_cache

@@ -1,0 +1,241 @@
+"""`bearnav simulate` and the robot runtime it shares: bearings, field of view, noise, unicycle (ALGORITHMS §6–§7)."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from bearnav_cli import artifacts, bearing, pipeline, runtime
+from bearnav_cli.cli import app, read_map_source
+from bearnav_cli.errors import InvalidParamsError
+from bearnav_cli.geometry import FreeSpace
+from bearnav_cli.runtime import ControlState, PlanArrays
+from bearnav_cli.stages import simulate
+from bearnav_cli.stages.simulate import Outcome
+
+from .conftest import REPO
+
+EXAMPLE_MAPS = ("kitchen", "storeroom", "paper_sim_circles", "paper_b_circles")
+
+
+@pytest.fixture(scope="module")
+def plans(tmp_path_factory):
+    """Every example map planned once by the pipeline, as `bearnav plan` does."""
+    out = {}
+    for name in EXAMPLE_MAPS:
+        folder = tmp_path_factory.mktemp(name)
+        pipeline.plan(read_map_source(REPO / "maps" / f"{name}.yaml"), folder)
+        out[name] = (artifacts.load(folder / "plan.npz").artifact, folder / "plan.npz")
+    return out
+
+
+def params_for(plan, **changes) -> simulate.Params:
+    """The map's own ``params: simulate`` with ``changes`` on top, as the CLI resolves them."""
+    return dataclasses.replace(pipeline.resolve_params("simulate", plan.map.params, changes), record_trajectories=True)
+
+
+def test_runtime_controller_imports_numpy_only():
+    code = (
+        "from bearnav_cli.runtime import Controller; import sys; "
+        "bad = [m for m in sys.modules if m.split('.')[0] in ('scipy', 'shapely', 'matplotlib', 'yaml', 'typer')]; "
+        "assert not bad, bad"
+    )
+    subprocess.run([sys.executable, "-c", code], check=True, cwd=REPO)
+
+
+def test_bearing_paths_equal_displacement_paths_with_full_visibility(plans):
+    """The paper's Prop. 1 under speed normalisation: noise-free bearings seen all round and
+    unoccluded give the displacement controller's path, step for step."""
+    plan, _ = plans["kitchen"]
+    starts = simulate.resolve_starts(plan, params_for(plan, starts="random:40"))
+    runs = {
+        mode: simulate.rollout(plan, starts, params_for(plan, measurement=mode, occlusion=False))
+        for mode in ("bearing", "displacement")
+    }
+    a, b = runs["bearing"], runs["displacement"]
+    assert np.array_equal(a.outcome, b.outcome) and np.array_equal(a.trajectory_offsets, b.trajectory_offsets)
+    assert np.max(np.abs(a.trajectory_coords - b.trajectory_coords)) <= 1e-9
+    assert (a.outcome == Outcome.SUCCESS).all()
+
+
+def test_runtime_controller_and_simulation_give_the_same_commands(plans):
+    """What is simulated is what runs on the robot: the Controller, fed the simulator's bearings
+    one frame at a time, commands exactly what the vectorised loop applied."""
+    plan, path = plans["kitchen"]
+    params = params_for(plan, starts="4.5,6.6", fov=90.0, noise_deg=1.0, dynamics="unicycle")
+    starts = simulate.resolve_starts(plan, params)
+    frames = []
+    original = runtime.control
+
+    def spy(arrays, settings, state, bearings, visible, heading, x_true=None):
+        out = original(arrays, settings, state, bearings, visible, heading, x_true)
+        frames.append((bearings[0].copy(), visible[0].copy(), float(heading[0]), out.forward[0], out.turn[0]))
+        return out
+
+    runtime.control = spy
+    try:
+        run = simulate.rollout(plan, starts, params)
+    finally:
+        runtime.control = original
+    assert run.outcome[0] == Outcome.SUCCESS and len(frames) > 100
+    s = simulate.settings(plan, params).control
+    robot = runtime.Controller(PlanArrays.from_npz(path), s, heading=frames[0][2])
+    for bearings, visible, heading, v, omega in frames:
+        command = robot.command(bearings, visible, heading)
+        assert command.tolist() == [v, omega]
+
+
+@pytest.mark.parametrize("fov", [90.0, 60.0])
+@pytest.mark.parametrize("name", EXAMPLE_MAPS)
+def test_unicycle_reaches_the_goal_from_the_map_starts(plans, name, fov):
+    plan, _ = plans[name]
+    if fov == 60.0 and name in ("kitchen", "paper_b_circles"):
+        pytest.xfail("60° field of view: some map starts time out (docs/choices.md, 'Limited field of view')")
+    run = simulate.rollout(plan, plan.map.starts, params_for(plan, fov=fov, dynamics="unicycle"))
+    assert (run.outcome == Outcome.SUCCESS).all(), run.counts()
+
+
+def test_no_noise_free_run_collides_on_the_kitchen(plans):
+    plan, _ = plans["kitchen"]
+    for changes in ({}, {"fov": 60.0}, {"fov": 90.0, "dynamics": "unicycle"}):
+        params = params_for(plan, starts="random:200", **changes)
+        run = simulate.rollout(plan, simulate.resolve_starts(plan, params), dataclasses.replace(
+            params, record_trajectories=False))  # fmt: skip
+        assert run.counts()["collision"] == 0, (changes, run.counts())
+    assert run.success_rate >= 0.95
+
+
+@pytest.mark.xfail(strict=True, reason="60° and 1° noise: two-bearing fixes are too coarse for the 0.13 m margin "
+                   "(single integrator about 65%, unicycle about 95% with collisions; docs/choices.md)")
+def test_kitchen_random_starts_with_a_narrow_noisy_camera(plans):
+    plan, _ = plans["kitchen"]
+    params = params_for(plan, starts="random:200", fov=60.0, noise_deg=1.0)
+    run = simulate.rollout(plan, simulate.resolve_starts(plan, params), params)
+    assert run.success_rate >= 0.95
+
+
+def test_the_unicycle_with_clamp_reverse_never_drives_backwards(plans):
+    plan, _ = plans["kitchen"]
+    params = params_for(plan, starts="map", dynamics="unicycle", clamp_reverse=True)
+    forwards = []
+    original = runtime.control
+
+    def spy(*args, **kwargs):
+        out = original(*args, **kwargs)
+        forwards.append(out.forward.copy())
+        return out
+
+    runtime.control = spy
+    try:
+        simulate.rollout(plan, plan.map.starts, params)
+    finally:
+        runtime.control = original
+    assert np.concatenate(forwards).min() >= 0.0
+
+
+def test_lost_after_looking_around_without_two_landmarks(plans):
+    """A camera that never sees two landmarks: the robot holds still, turns one revolution, is lost."""
+    plan, _ = plans["kitchen"]
+    params = params_for(plan, starts="5.3,2.6", range=0.01)  # nothing within 1 cm
+    run = simulate.rollout(plan, simulate.resolve_starts(plan, params), params)
+    assert run.outcome[0] == Outcome.LOST
+    s = simulate.settings(plan, params)
+    assert run.time[0] == pytest.approx(2.0 * math.pi / params.beta + s.dt, abs=2 * s.dt)
+    assert np.allclose(run.trajectory(0), run.starts[0])  # it never moved blind
+
+
+def test_degenerate_bearings_give_no_nan_and_hold():
+    """Landmarks collinear with the robot: no fix and no NaN (the runtime then holds, §7.5)."""
+    lm = np.array([[0.0, 0.0], [2.0, 0.0], [4.0, 0.0]])
+    x = np.array([[6.0, 0.0]])
+    d, _ = bearing.directions(x, lm)
+    rec = bearing.reconstruct(d, np.ones((1, 3), bool), lm, 0, tol=1e-9)
+    assert not rec.usable[0] and np.isfinite(rec.y).all() and np.isfinite(rec.x_hat).all()
+
+
+def test_state_take_and_put_round_trip():
+    state = ControlState.initial(np.array([0.0, 1.0, 2.0]))
+    part = state.take(np.array([2, 0]))
+    part.cell[:] = [7, 9]
+    state.put(np.array([2, 0]), part)
+    assert state.cell.tolist() == [9, -1, 7]
+
+
+def test_sim_artifact_round_trip_and_metrics(plans, tmp_path):
+    plan, path = plans["kitchen"]
+    report = pipeline.run_stage("simulate", path, tmp_path / "sim.npz", {"starts": "random:20", "fov": 90.0})
+    sim = report.artifact
+    loaded = artifacts.load(tmp_path / "sim.npz", "simulation")
+    assert loaded.manifest["content_sha256"] == artifacts.load(tmp_path / "sim.npz").manifest["content_sha256"]
+    assert np.array_equal(loaded.artifact.trajectory_coords, sim.trajectory_coords)
+    metrics = json.loads((tmp_path / "sim.json").read_text())["metrics"]
+    assert metrics["runs"] == 20 and sum(metrics["outcomes"].values()) == 20
+    done = sim.outcome == Outcome.SUCCESS
+    assert metrics["success_rate"] == pytest.approx(done.mean())
+    assert metrics["path_over_tree_route_mean"] > 0.5
+    assert (sim.min_clearance >= 0).all()
+    # the same seed gives the same content
+    again = pipeline.run_stage("simulate", path, tmp_path / "again.npz", {"starts": "random:20", "fov": 90.0})
+    assert again.artifact.arrays().keys() == sim.arrays().keys()
+    assert artifacts.load(tmp_path / "again.npz").manifest["content_sha256"] == loaded.manifest["content_sha256"]
+
+
+@pytest.mark.parametrize(
+    "args, field",
+    [
+        (["--fov", "0"], "fov"), (["--fov", "400"], "fov"), (["--noise-deg", "-1"], "noise_deg"),
+        (["--dt", "0"], "dt"), (["--speed", "-0.1"], "speed"), (["--starts", "20,20"], "outside the bounds"),
+        (["--starts", "3,4"], "inside an obstacle"), (["--starts", "hello"], "starts"),
+    ],
+)  # fmt: skip
+def test_bad_simulate_input_is_one_line_and_exit_3(plans, tmp_path, args, field):
+    _, path = plans["kitchen"]
+    result = CliRunner().invoke(app, ["simulate", str(path), "-o", str(tmp_path / "s.npz"), *args])
+    assert result.exit_code == 3, result.output
+    lines = [line for line in result.output.splitlines() if line.strip()]
+    assert len(lines) == 1 and field in lines[0], result.output
+    assert not (tmp_path / "s.npz").exists()
+
+
+def test_simulate_refuses_a_plan_of_the_wrong_schema(plans, tmp_path):
+    _, path = plans["kitchen"]
+    result = CliRunner().invoke(app, ["simulate", str(path.with_name("tree.npz"))])
+    assert result.exit_code == 3 and "expected bearnav.plan/1" in result.output
+
+
+def test_simulate_cli_table_json_and_exit_code(plans, tmp_path):
+    _, path = plans["kitchen"]
+    runner = CliRunner()
+    ok = runner.invoke(app, ["simulate", str(path), "-o", str(tmp_path / "s.npz"), "--json", "--fov", "90"])
+    assert ok.exit_code == 0, ok.output
+    assert json.loads(ok.output)["metrics"]["success_rate"] == 1.0
+    table = runner.invoke(app, ["simulate", str(path), "-o", str(tmp_path / "s.npz"), "--fov", "90", "--force"])
+    assert "success rate" in table.output and "100.0%" in table.output
+    # a camera that sees nothing: every run is lost, exit 1
+    lost = runner.invoke(app, ["simulate", str(path), "-o", str(tmp_path / "l.npz"), "--range", "0.001"])
+    assert lost.exit_code == 1
+
+
+def test_params_are_checked():
+    for kwargs, name in (({"fov": 0.0}, "fov"), ({"noise_deg": -1.0}, "noise_deg"), ({"dynamics": "car"}, "dynamics"),
+                         ({"starts": "random:0"}, "starts"), ({"hold_time": 0.0}, "hold_time")):  # fmt: skip
+        with pytest.raises(InvalidParamsError) as err:
+            simulate.Params(**kwargs)
+        assert err.value.field == name
+
+
+def test_free_space_is_what_the_robot_is_checked_against(plans):
+    plan, _ = plans["storeroom"]
+    params = params_for(plan, starts="random:30", fov=90.0, dynamics="unicycle")
+    run = simulate.rollout(plan, simulate.resolve_starts(plan, params), params)
+    space = FreeSpace.from_map(plan.map)
+    for r in np.flatnonzero(run.outcome == Outcome.SUCCESS):
+        path = run.trajectory(r)
+        assert space.segments_free(path[:-1], path[1:]).all()
