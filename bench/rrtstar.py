@@ -128,7 +128,7 @@ def best_cost_to(tree: Tree, space: FreeSpace, target: np.ndarray) -> float:
 
 def run_ours(map_: Map, space: FreeSpace, step: float, iterations: int, seed: int) -> tuple[Result, Tree]:
     """Time one call of our ``rrtstar.run`` (the map is built beforehand)."""
-    params = rrtstar.Params(iterations=iterations, step=step, seed=seed)
+    params = rrtstar.Params(iterations=iterations, step=step, seed=seed, clearance=0.0)  # the validity OMPL checks
     seconds, tree = timed(rrtstar.run, map_, params)
     return Result(seconds, len(tree.nodes), best_cost_to(tree, space, map_.starts[0])), tree
 
