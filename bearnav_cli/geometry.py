@@ -252,6 +252,48 @@ class FreeSpace:
         result[ok] = ~shapely.intersects(self.raw_obstacles, lines)
         return result
 
+    def visibility_regions(self, landmarks: np.ndarray) -> list[shapely.Geometry]:
+        """For each landmark, the part of ``B`` from which it is in line of sight (prepared polygons).
+
+        The shadow of a raw obstacle seen from ``l`` is the union, over its boundary edges
+        ``(a, b)``, of the quadrilaterals ``a, b, b + F·unit(b − l), a + F·unit(a − l)`` (``F``
+        beyond the bounds), plus the obstacle; the region is ``B`` minus every shadow. A point
+        test against it is :meth:`visible` with the same tolerance for a tag on a wall (edges
+        through the landmark cast no shadow), except on shadow boundaries, a set of measure
+        zero; it costs one prepared point query instead of a segment test per step.
+
+        Parameters
+        ----------
+        landmarks : ndarray, shape (L, 2)
+
+        Returns
+        -------
+        list of shapely.Geometry, length L
+        """
+        box = shapely.box(*self.bounds)
+        far = 4.0 * float(np.hypot(*(self.bounds[2:] - self.bounds[:2])))
+        rings = []
+        for part in shapely.get_parts(self.raw_obstacles):
+            for ring in (part.exterior, *part.interiors):
+                xy = np.asarray(ring.coords)
+                rings.append(np.stack([xy[:-1], xy[1:]], axis=1))
+        edges = np.concatenate(rings) if rings else np.zeros((0, 2, 2))
+        regions = []
+        for lm in np.asarray(landmarks, float).reshape(-1, 2):
+            if not len(edges):
+                regions.append(box)
+                continue
+            da, db = edges[:, 0] - lm, edges[:, 1] - lm
+            na, nb = np.hypot(*da.T), np.hypot(*db.T)
+            keep = (na > self.tol) & (nb > self.tol)  # an edge ending at the tag casts no shadow
+            quads = np.stack([edges[keep, 0], edges[keep, 1], edges[keep, 1] + far * (db[keep] / nb[keep, None]),
+                              edges[keep, 0] + far * (da[keep] / na[keep, None])], axis=1)  # fmt: skip
+            shadow = shapely.union_all(np.concatenate([shapely.polygons(quads), [self.raw_obstacles]]))
+            region = shapely.difference(box, shadow)
+            shapely.prepare(region)
+            regions.append(region)
+        return regions
+
     def clearance(self, points: np.ndarray) -> np.ndarray:
         """Distance from each point to ``O`` (0 inside), shape (n,); ``inf`` without obstacles."""
         p = np.asarray(points, float).reshape(-1, 2)

@@ -140,7 +140,12 @@ def locate(arrays: PlanArrays, x: np.ndarray, tol: float | None = None, eps_sw: 
     near_exit = np.einsum("rck,rck->rc", gap, gap) <= eps_sw * eps_sw
     leaving = edge[None] & ((np.einsum("ck,rck->rc", arrays.exit_dir, gap) <= tol) | near_exit)
     candidate = inside & ~leaving
-    h = np.where(candidate, barrier_values(arrays, p), -math.inf)
+    # barrier rows only where they matter: a point lies in a handful of the C cells
+    h = np.full(candidate.shape, -math.inf)
+    r_idx, c_idx = np.nonzero(candidate)
+    if len(r_idx):
+        rows_h = np.einsum("nqk,nk->nq", arrays.bar_A[c_idx], p[r_idx]) + arrays.bar_b[c_idx]
+        h[r_idx, c_idx] = np.min(rows_h, axis=1, initial=math.inf)
     route = np.where(edge[None], np.hypot(gap[..., 0], gap[..., 1]) + arrays.cost_to_go[None], 0.0)
     route = np.where(edge[None], route, np.hypot(*(p - arrays.goal).T)[:, None])
     safe = candidate & (h >= 0)
