@@ -697,14 +697,20 @@ class Controller:
         self.last: ControlOutput | None = None
 
     @classmethod
-    def from_plan(cls, path: str, *, speed: float = 0.1, dt: float = 0.1, dynamics: str = "single",
+    def from_plan(cls, path: str, *, speed: float = 0.1, dt: float | None = None, dynamics: str = "single",
                   heading: float = 0.0, **options: Any) -> Controller:  # fmt: skip
         """Load ``plan.npz``; ``options`` are further :class:`ControlSettings` fields.
 
-        ``eps_sw`` defaults to ``2·speed·dt`` (``2·α·dt`` for the unicycle), as in simulation.
+        ``dt`` is the camera period (s); by default the simulation's, ``min(0.0025·D/v, 0.2)``
+        with ``v`` = ``speed`` (``alpha`` for the unicycle), and ``eps_sw`` defaults to
+        ``2·v·dt``, as in ``bearnav simulate``.
         """
         arrays = PlanArrays.from_npz(path)
-        options.setdefault("eps_sw", 2.0 * (options.get("alpha", 0.1) if dynamics == "unicycle" else speed) * dt)
+        v = options.get("alpha", 0.1) if dynamics == "unicycle" else speed
+        if dt is None:
+            xmin, ymin, xmax, ymax = arrays.bounds
+            dt = min(0.0025 * math.hypot(xmax - xmin, ymax - ymin) / v, 0.2)
+        options.setdefault("eps_sw", 2.0 * v * dt)
         return cls(arrays, ControlSettings(speed=speed, dt=dt, tol=arrays.tol, dynamics=dynamics, **options), heading)
 
     def command(self, bearings: np.ndarray, visible: np.ndarray, heading: float | None = None) -> np.ndarray:
@@ -716,14 +722,23 @@ class Controller:
             World-frame unit bearing of each landmark (rows of invisible ones are ignored).
         visible : array_like of bool, shape (L,)
         heading : float, optional
-            The robot's yaw (rad), needed by the unicycle.
+            The robot's yaw (rad) from the compass: required by the unicycle; for the single
+            integrator, the camera's heading (default 0).
 
         Returns
         -------
         ndarray
-            Single integrator: the velocity ``(vx, vy)`` (map units / s). Unicycle:
+            Single integrator: the velocity ``(vx, vy)`` (map units / s); while looking around
+            it is zero and ``self.last.turn`` is the rate to turn the camera. Unicycle:
             ``(v, ω)``. Zero once the robot is lost (``self.lost``).
+
+        Raises
+        ------
+        ValueError
+            A unicycle without ``heading``.
         """
+        if heading is None and self.settings.dynamics == "unicycle":
+            raise ValueError("the unicycle needs its heading (rad) on every frame")
         out = control(self.arrays, self.settings, self.state, np.asarray(bearings, float)[None],
                       np.asarray(visible, bool)[None], np.array([0.0 if heading is None else heading]))  # fmt: skip
         self.state, self.last = out.state, out
@@ -735,8 +750,16 @@ class Controller:
 
     @property
     def lost(self) -> bool:
-        """No usable reconstruction for longer than ``hold_time``."""
+        """No position estimate after looking around for a whole revolution (``2π/β`` s past the
+        odometry's ``hold_time``); a later fix clears it."""
         return bool(self.last is not None and self.last.lost[0])
+
+    @property
+    def arrived(self) -> bool:
+        """The current estimate lies within the plan's goal tolerance of the goal: stop."""
+        if self.last is None or not (self.last.fix[0] or self.state.known[0]):
+            return False
+        return bool(np.hypot(*(self.last.x_hat[0] - self.arrays.goal)) <= self.arrays.goal_tolerance)
 
     @property
     def cell(self) -> int:

@@ -239,3 +239,32 @@ def test_free_space_is_what_the_robot_is_checked_against(plans):
     for r in np.flatnonzero(run.outcome == Outcome.SUCCESS):
         path = run.trajectory(r)
         assert space.segments_free(path[:-1], path[1:]).all()
+
+
+def test_visibility_regions_agree_with_the_segment_test(plans):
+    """Simulation sees landmarks through prepared visibility regions; they must say what the exact
+    line-of-sight test of ALGORITHMS §1 says (away from shadow boundaries, a null set)."""
+    import shapely
+
+    for name in ("kitchen", "storeroom"):
+        plan, _ = plans[name]
+        space = FreeSpace.from_map(plan.map)
+        rng = np.random.default_rng(3)
+        pts = rng.uniform(plan.map.bounds[:2], plan.map.bounds[2:], (3000, 2))
+        pts = pts[space.points_free(pts)]
+        lm = plan.map.landmarks
+        exact = space.visible(np.repeat(pts, len(lm), 0), np.tile(lm, (len(pts), 1))).reshape(-1, len(lm))
+        regions = space.visibility_regions(lm)
+        fast = np.stack([shapely.intersects_xy(r, pts[:, 0], pts[:, 1]) for r in regions], axis=1)
+        assert np.array_equal(exact, fast)
+
+
+def test_controller_reports_arrival_and_needs_a_heading(plans):
+    plan, path = plans["kitchen"]
+    robot = runtime.Controller.from_plan(str(path), dynamics="unicycle")
+    goal = plan.map.goal + np.array([0.01, 0.0])
+    d, _ = bearing.directions(goal[None], plan.map.landmarks)
+    with pytest.raises(ValueError):
+        robot.command(d[0], np.ones(len(plan.map.landmarks), bool))
+    robot.command(d[0], np.ones(len(plan.map.landmarks), bool), heading=0.0)
+    assert robot.arrived and not robot.lost
