@@ -423,6 +423,9 @@ class ControlSettings:
     filter_gain : float
         ``k`` in ``x̂ = x̂_pred + k (x̂_meas − x̂_pred)``, ``x̂_pred`` the odometry prediction;
         ``1`` uses every fix as it is (ALGORITHMS §7.2).
+    smoothing : float
+        Weight of the previous command direction in the running average steered by (0: none;
+        the unicycle's default in ``bearnav simulate`` and :meth:`Controller.from_plan` is 0.5).
     """
 
     speed: float
@@ -439,6 +442,7 @@ class ControlSettings:
     hold_time: float = 2.0
     odometry: bool = True
     filter_gain: float = 1.0
+    smoothing: float = 0.0
     bearing_sigma: float = 0.0
     max_fix_error: float = math.inf
 
@@ -647,6 +651,14 @@ def control(
         stalled[idx[~(norm > 0)]] = True
         ok = norm > 0
         u[idx[ok]] = ui[ok] / norm[ok, None]
+        if s.smoothing > 0:
+            # a unicycle cannot follow a command that flips between two cells' fields at their
+            # shared face; the running average of the unit commands slides along it instead
+            blend = (1.0 - s.smoothing) * u[idx[ok]] + s.smoothing * state.last_dir[idx[ok]]
+            size = np.hypot(blend[:, 0], blend[:, 1])
+            good = size > 1e-9
+            sub = idx[ok][good]
+            u[sub] = blend[good] / size[good, None]
         last_dir[idx[ok]] = u[idx[ok]]
     holding = ~steer  # no position estimate this step
     if s.odometry:
@@ -711,6 +723,7 @@ class Controller:
             xmin, ymin, xmax, ymax = arrays.bounds
             dt = min(0.0025 * math.hypot(xmax - xmin, ymax - ymin) / v, 0.2)
         options.setdefault("eps_sw", 2.0 * v * dt)
+        options.setdefault("smoothing", 0.5 if dynamics == "unicycle" else 0.0)
         return cls(arrays, ControlSettings(speed=speed, dt=dt, tol=arrays.tol, dynamics=dynamics, **options), heading)
 
     def command(self, bearings: np.ndarray, visible: np.ndarray, heading: float | None = None) -> np.ndarray:

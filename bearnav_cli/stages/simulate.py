@@ -41,6 +41,8 @@ PROGRESS_WINDOW = 200
 #: ``dt = min(DT_PER_DIAGONAL · D / v, DT_MAX)`` by default (ALGORITHMS §7.1).
 DT_PER_DIAGONAL = 0.0025
 DT_MAX = 0.2
+#: Default command smoothing of the unicycle (:attr:`Params.smoothing`).
+UNICYCLE_SMOOTHING = 0.5
 #: How often (in steps) ``progress`` is called.
 PROGRESS_EVERY = 25
 #: Outcome of a robot still running (internal).
@@ -106,6 +108,11 @@ class Params:
         simulation has no wheel slip) for at most ``hold_time``; off: §7.5's hold as written.
     filter_gain : float
         ``k`` of the estimate ``x̂ = x̂_pred + k (x̂_meas − x̂_pred)``; 1 uses each fix as it is.
+    smoothing : float or None
+        Weight of the previous command direction in the running average the robot steers by,
+        in [0, 1); ``None``: 0.5 for the unicycle, 0 for the single integrator. A unicycle
+        cannot follow a command that flips between two cells' fields at their shared face;
+        the average slides along the face as the single integrator does.
     max_fix_error : float or None
         Use a noisy fix only if its predicted 3σ position error (from ``noise_deg`` and the
         bearing geometry, :func:`bearnav_cli.runtime.fix_error`) is at most this (map units);
@@ -142,6 +149,7 @@ class Params:
     hold_time: float = 2.0
     odometry: bool = True
     filter_gain: float = 1.0
+    smoothing: float | None = None
     max_fix_error: float | None = None
     starts: str = "map"
     dt: float | None = None
@@ -166,6 +174,8 @@ class Params:
             _positive(getattr(self, name), name, allow_none=False)
         for name in ("range", "dt", "goal_tolerance"):
             _positive(getattr(self, name), name)
+        if self.smoothing is not None and not 0.0 <= self.smoothing < 1.0:
+            raise InvalidParamsError(f"must lie in [0, 1), got {self.smoothing}", field="smoothing")
         if self.initial_heading is not None and not math.isfinite(self.initial_heading):
             raise InvalidParamsError(f"must be finite, got {self.initial_heading}", field="initial_heading")
         if self.max_steps is not None and (
@@ -240,6 +250,8 @@ def settings(plan, params: Params) -> Settings:
         beta=params.beta, clamp_reverse=params.clamp_reverse, measurement=params.measurement,
         reconstruction=params.reconstruction, min_spread=math.radians(params.min_spread_deg),
         hold_time=params.hold_time, odometry=params.odometry, filter_gain=params.filter_gain,
+        smoothing=(UNICYCLE_SMOOTHING if params.dynamics == "unicycle" else 0.0) if params.smoothing is None
+        else params.smoothing,
         bearing_sigma=math.radians(params.noise_deg),
         max_fix_error=math.inf if params.max_fix_error is None else params.max_fix_error,
     )  # fmt: skip
