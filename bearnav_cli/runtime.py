@@ -420,9 +420,9 @@ class ControlSettings:
     odometry : bool
         Between fixes, carry ``x̂`` forward with the commanded motion and keep following the
         fields (for at most ``hold_time``); off: the hold policy of §7.5 as written.
-    filter_gain : float
-        ``k`` in ``x̂ = x̂_pred + k (x̂_meas − x̂_pred)``, ``x̂_pred`` the odometry prediction;
-        ``1`` uses every fix as it is (ALGORITHMS §7.2).
+    odometry_drift : float
+        Standard deviation of the odometry's position error per unit travelled: the filter's
+        process noise (:func:`control`).
     smoothing : float
         Weight of the previous command direction in the running average steered by (0: none;
         the unicycle's default in ``bearnav simulate`` and :meth:`Controller.from_plan` is 0.5).
@@ -441,7 +441,7 @@ class ControlSettings:
     min_spread: float = bearing.DEFAULT_MIN_SPREAD
     hold_time: float = 2.0
     odometry: bool = True
-    filter_gain: float = 1.0
+    odometry_drift: float = 0.05
     smoothing: float = 0.0
     bearing_sigma: float = 0.0
     max_fix_error: float = math.inf
@@ -465,6 +465,8 @@ class ControlState:
         World-frame velocity of the last command (map units / s): what odometry integrates.
     known : ndarray of bool, shape (R,)
         Whether the robot has had a fix yet.
+    var : ndarray, shape (R,)
+        Variance of the estimate (map units²), isotropic; ``inf`` before the first fix.
     """
 
     cell: np.ndarray
@@ -474,6 +476,7 @@ class ControlState:
     x_hat: np.ndarray
     motion: np.ndarray
     known: np.ndarray
+    var: np.ndarray
 
     @classmethod
     def initial(cls, heading: np.ndarray) -> ControlState:
@@ -481,7 +484,7 @@ class ControlState:
         h = np.asarray(heading, float).reshape(-1)
         r = len(h)
         return cls(np.full(r, -1, np.int64), np.full(r, -1, np.int64), np.column_stack([np.cos(h), np.sin(h)]),
-                   np.zeros(r), np.zeros((r, 2)), np.zeros((r, 2)), np.zeros(r, bool))  # fmt: skip
+                   np.zeros(r), np.zeros((r, 2)), np.zeros((r, 2)), np.zeros(r, bool), np.full(r, np.inf))  # fmt: skip
 
     def take(self, idx: np.ndarray) -> ControlState:
         """The state of the robots ``idx``."""
@@ -611,19 +614,33 @@ def control(
         estimate = bearing.reconstruct(bearings, visible, arrays.landmarks, 0, method="lsq",
                                        min_spread=s.min_spread, tol=s.tol)  # fmt: skip
         measured, fix = estimate.x_hat, estimate.usable.copy()
-        if s.bearing_sigma > 0 and fix.any():
-            fix &= fix_error(arrays, bearings, visible, measured, s.bearing_sigma) <= s.max_fix_error
+    # A scalar Kalman filter fuses the fixes with odometry: the prediction moves the last
+    # estimate by the last command (its variance grows with the distance, odometry_drift per
+    # unit), a fix of variance σ_fix² (from σ and the bearing geometry, fix_error/3) corrects it,
+    # and a fix farther than 3 standard deviations from the prediction is rejected. Noise-free
+    # (σ = 0) every fix is taken as it is.
+    sigma_fix2 = np.zeros(r)
+    if s.bearing_sigma > 0 and fix.any():
+        sigma_fix2[fix] = (fix_error(arrays, bearings[fix], visible[fix], measured[fix], s.bearing_sigma) / 3.0) ** 2
+        fix &= sigma_fix2 <= (s.max_fix_error / 3.0) ** 2
     cell, target, last_dir = state.cell.copy(), state.target.copy(), state.last_dir.copy()
-    hold, known = state.hold.copy(), state.known.copy()
-    hold = np.where(fix, 0.0, hold + s.dt)
-    # odometry: the last estimate moved on by the last command, while it is recent enough
-    carried = ~fix & known & (hold <= s.hold_time) & s.odometry
+    known = state.known.copy()
     predicted = state.x_hat + s.dt * state.motion
-    # a fix corrects the odometry prediction by a fixed gain (a constant-gain observer): with
-    # noisy bearings the estimate, hence the cell and the field, jitters far less
-    blend = fix & known & (hold == 0.0) & (state.hold <= s.hold_time)
-    corrected = np.where(blend[:, None], predicted + s.filter_gain * (measured - predicted), measured)
+    recent = known & s.odometry  # a prediction exists; its variance says how far to trust it
+    travelled = s.dt * np.hypot(state.motion[:, 0], state.motion[:, 1])
+    var_pred = state.var + (s.odometry_drift * travelled) ** 2
+    innovation = np.einsum("rk,rk->r", measured - predicted, measured - predicted)
+    fix &= ~(recent & (innovation > 9.0 * (var_pred + sigma_fix2)))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        gain = np.where(recent & (var_pred + sigma_fix2 > 0), var_pred / (var_pred + sigma_fix2), 1.0)
+    gain = np.where(np.isfinite(gain), gain, 1.0)
+    corrected = np.where(recent[:, None], predicted + gain[:, None] * (measured - predicted), measured)
+    hold = np.where(fix, 0.0, state.hold + s.dt)
+    carried = ~fix & recent & (hold <= s.hold_time)  # moving on odometry alone, for hold_time at most
     x_hat = np.where(fix[:, None], corrected, predicted)
+    with np.errstate(invalid="ignore"):
+        posterior = np.where(np.isfinite(var_pred), (1.0 - gain) * var_pred, sigma_fix2)
+    var = np.where(fix, np.where(recent, posterior, sigma_fix2), var_pred)
     steer = fix | carried  # robots with a position estimate this step
     known |= fix
     relocated = np.zeros(r, bool)
@@ -683,7 +700,9 @@ def control(
             forward = np.maximum(forward, 0.0)
         turn = np.where(scanning, s.beta, s.beta * np.sin(e))
         motion = forward[:, None] * np.column_stack([np.cos(phi), np.sin(phi)])
-    new = ControlState(cell, target, last_dir, hold, np.where(steer[:, None], x_hat, state.x_hat), motion, known)
+    # the estimate always moves on with the robot's own motion, steering with it or not
+    new = ControlState(cell, target, last_dir, hold, np.where(known[:, None], x_hat, state.x_hat), motion, known,
+                       var)  # fmt: skip
     return ControlOutput(velocity, forward, turn, scanning, new, fix, lost, stalled, relocated,
                          np.where(steer[:, None], x_hat, 0.0))  # fmt: skip
 

@@ -113,13 +113,15 @@ def test_no_noise_free_run_collides_on_the_kitchen(plans):
     assert run.success_rate >= 0.95
 
 
-@pytest.mark.xfail(strict=True, reason="60° and 1° noise: two-bearing fixes are too coarse for the 0.13 m margin "
-                   "(single integrator about 65%, unicycle about 95% with collisions; docs/choices.md)")
-def test_kitchen_random_starts_with_a_narrow_noisy_camera(plans):
+@pytest.mark.parametrize("dynamics", ["single", "unicycle"])
+def test_kitchen_random_starts_with_a_narrow_noisy_camera(plans, dynamics):
+    """A 60° camera with 1° of bearing noise: at least 95% of 200 random starts reach the goal
+    (the fixes are fused with odometry; 5% wheel slip makes that odometry imperfect)."""
     plan, _ = plans["kitchen"]
-    params = params_for(plan, starts="random:200", fov=60.0, noise_deg=1.0)
+    params = params_for(plan, starts="random:200", fov=60.0, noise_deg=1.0, odometry_noise=0.05, dynamics=dynamics,
+                        record_trajectories=False)  # fmt: skip
     run = simulate.rollout(plan, simulate.resolve_starts(plan, params), params)
-    assert run.success_rate >= 0.95
+    assert run.success_rate >= 0.95, run.counts()
 
 
 def test_the_unicycle_with_clamp_reverse_never_drives_backwards(plans):

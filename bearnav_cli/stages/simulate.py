@@ -106,13 +106,14 @@ class Params:
     odometry : bool
         Between fixes, carry ``x̂`` forward with the commanded motion (exact here: the
         simulation has no wheel slip) for at most ``hold_time``; off: §7.5's hold as written.
-    filter_gain : float
-        ``k`` of the estimate ``x̂ = x̂_pred + k (x̂_meas − x̂_pred)``; 1 uses each fix as it is.
     smoothing : float or None
         Weight of the previous command direction in the running average the robot steers by,
         in [0, 1); ``None``: 0.5 for the unicycle, 0 for the single integrator. A unicycle
         cannot follow a command that flips between two cells' fields at their shared face;
         the average slides along the face as the single integrator does.
+    odometry_noise : float
+        Wheel slip: each step's true displacement is the commanded one scaled by ``1 + ε`` and
+        turned by ``ε'`` (rad), ``ε, ε' ~ N(0, odometry_noise²)``; 0 is the exact dynamics of §7.1.
     max_fix_error : float or None
         Use a noisy fix only if its predicted 3σ position error (from ``noise_deg`` and the
         bearing geometry, :func:`bearnav_cli.runtime.fix_error`) is at most this (map units);
@@ -148,9 +149,9 @@ class Params:
     initial_heading: float | None = None
     hold_time: float = 2.0
     odometry: bool = True
-    filter_gain: float = 1.0
     smoothing: float | None = None
     max_fix_error: float | None = None
+    odometry_noise: float = 0.0
     starts: str = "map"
     dt: float | None = None
     goal_tolerance: float | None = None
@@ -174,6 +175,8 @@ class Params:
             _positive(getattr(self, name), name, allow_none=False)
         for name in ("range", "dt", "goal_tolerance"):
             _positive(getattr(self, name), name)
+        if not (self.odometry_noise >= 0 and math.isfinite(self.odometry_noise)):
+            raise InvalidParamsError(f"must be zero or positive, got {self.odometry_noise}", field="odometry_noise")
         if self.smoothing is not None and not 0.0 <= self.smoothing < 1.0:
             raise InvalidParamsError(f"must lie in [0, 1), got {self.smoothing}", field="smoothing")
         if self.initial_heading is not None and not math.isfinite(self.initial_heading):
@@ -249,7 +252,7 @@ def settings(plan, params: Params) -> Settings:
         speed=params.speed, dt=dt, eps_sw=eps_sw, tol=plan.map.tol, dynamics=params.dynamics, alpha=params.alpha,
         beta=params.beta, clamp_reverse=params.clamp_reverse, measurement=params.measurement,
         reconstruction=params.reconstruction, min_spread=math.radians(params.min_spread_deg),
-        hold_time=params.hold_time, odometry=params.odometry, filter_gain=params.filter_gain,
+        hold_time=params.hold_time, odometry=params.odometry,
         smoothing=(UNICYCLE_SMOOTHING if params.dynamics == "unicycle" else 0.0) if params.smoothing is None
         else params.smoothing,
         bearing_sigma=math.radians(params.noise_deg),
@@ -362,6 +365,7 @@ class _Loop:
         r = len(starts)
         self.arrays, self.space, self.s, self.params, self.limits = arrays, space, s, params, limits
         self.rng = np.random.default_rng([params.seed, 2])
+        self.slip = np.random.default_rng([params.seed, 3])
         self.x = starts.copy()
         self.phi = heading.copy()  # unicycle yaw; the single integrator's camera looks along its last command
         self.state = ControlState.initial(heading)
@@ -448,6 +452,15 @@ class _Loop:
             # the camera looks along the last command, or turns while the robot looks around
             d = self.state.last_dir[active]
             self.phi[active] = np.where(out_scan, bearing.wrap(phi + s.dt * out_t), np.arctan2(d[:, 1], d[:, 0]))
+        if params.odometry_noise > 0:
+            # wheel slip: the robot moves a little farther or shorter and off its command, so the
+            # controller's odometry is only an estimate
+            move = q - p
+            scale = 1.0 + params.odometry_noise * self.slip.standard_normal(len(p))
+            turn = params.odometry_noise * self.slip.standard_normal(len(p))
+            c, s_ = np.cos(turn), np.sin(turn)
+            rotated = np.column_stack([c * move[:, 0] - s_ * move[:, 1], s_ * move[:, 0] + c * move[:, 1]])
+            q = p + scale[:, None] * rotated
         free = self.space.segments_free(p, q)
         if params.record_trajectories:
             self.trace.append((active, p, self.state.cell[active].copy(), heading))
