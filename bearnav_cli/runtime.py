@@ -423,6 +423,10 @@ class ControlSettings:
     odometry_drift : float
         Standard deviation of the odometry's position error per unit travelled: the filter's
         process noise (:func:`control`).
+    blind_error : float
+        Without a fix, the robot keeps following the fields on odometry beyond ``hold_time``
+        while its estimate's 3σ stays below this (map units; the barrier margin in
+        ``bearnav simulate``); 0: ``hold_time`` only.
     smoothing : float
         Weight of the previous command direction in the running average steered by (0: none;
         the unicycle's default in ``bearnav simulate`` and :meth:`Controller.from_plan` is 0.5).
@@ -442,6 +446,7 @@ class ControlSettings:
     hold_time: float = 2.0
     odometry: bool = True
     odometry_drift: float = 0.05
+    blind_error: float = 0.0
     smoothing: float = 0.0
     bearing_sigma: float = 0.0
     max_fix_error: float = math.inf
@@ -467,6 +472,10 @@ class ControlState:
         Whether the robot has had a fix yet.
     var : ndarray, shape (R,)
         Variance of the estimate (map units²), isotropic; ``inf`` before the first fix.
+    scanning : ndarray of bool, shape (R,)
+        Looking around at the last step.
+    spin : ndarray, shape (R,)
+        ``±1``: the direction of the current look-around.
     """
 
     cell: np.ndarray
@@ -477,6 +486,8 @@ class ControlState:
     motion: np.ndarray
     known: np.ndarray
     var: np.ndarray
+    scanning: np.ndarray
+    spin: np.ndarray
 
     @classmethod
     def initial(cls, heading: np.ndarray) -> ControlState:
@@ -484,7 +495,8 @@ class ControlState:
         h = np.asarray(heading, float).reshape(-1)
         r = len(h)
         return cls(np.full(r, -1, np.int64), np.full(r, -1, np.int64), np.column_stack([np.cos(h), np.sin(h)]),
-                   np.zeros(r), np.zeros((r, 2)), np.zeros((r, 2)), np.zeros(r, bool), np.full(r, np.inf))  # fmt: skip
+                   np.zeros(r), np.zeros((r, 2)), np.zeros((r, 2)), np.zeros(r, bool), np.full(r, np.inf),
+                   np.zeros(r, bool), np.ones(r))  # fmt: skip
 
     def take(self, idx: np.ndarray) -> ControlState:
         """The state of the robots ``idx``."""
@@ -636,7 +648,9 @@ def control(
     gain = np.where(np.isfinite(gain), gain, 1.0)
     corrected = np.where(recent[:, None], predicted + gain[:, None] * (measured - predicted), measured)
     hold = np.where(fix, 0.0, state.hold + s.dt)
-    carried = ~fix & recent & (hold <= s.hold_time)  # moving on odometry alone, for hold_time at most
+    # moving on odometry alone: for hold_time, and on as long as the estimate stays within the
+    # barrier margin (3σ <= blind_error; turning in place adds no uncertainty)
+    carried = ~fix & recent & ((hold <= s.hold_time) | (9.0 * var_pred <= s.blind_error**2))
     x_hat = np.where(fix[:, None], corrected, predicted)
     with np.errstate(invalid="ignore"):
         posterior = np.where(np.isfinite(var_pred), (1.0 - gain) * var_pred, sigma_fix2)
@@ -691,18 +705,23 @@ def control(
     velocity[scanning] = 0.0
     phi = np.asarray(heading, float).reshape(r)
     forward = np.zeros(r)
-    turn = np.where(scanning, s.beta, 0.0)
+    # look around starting toward the last command (a scan that always turned one way undid
+    # the unicycle's turn toward its field)
+    toward = bearing.wrap(np.arctan2(last_dir[:, 1], last_dir[:, 0]) - phi)
+    starting = scanning & ~state.scanning  # a scan keeps the direction it started with
+    spin = np.where(starting, np.where(toward < 0, -1.0, 1.0), state.spin)
+    turn = np.where(scanning, spin * s.beta, 0.0)
     motion = velocity.copy()
     if s.dynamics == "unicycle":
         e = bearing.wrap(np.arctan2(direction[:, 1], direction[:, 0]) - phi)
         forward = np.where(holding | scanning, 0.0, s.alpha * np.cos(e))  # hold: turn in place toward last_dir
         if s.clamp_reverse:
             forward = np.maximum(forward, 0.0)
-        turn = np.where(scanning, s.beta, s.beta * np.sin(e))
+        turn = np.where(scanning, turn, s.beta * np.sin(e))
         motion = forward[:, None] * np.column_stack([np.cos(phi), np.sin(phi)])
     # the estimate always moves on with the robot's own motion, steering with it or not
     new = ControlState(cell, target, last_dir, hold, np.where(known[:, None], x_hat, state.x_hat), motion, known,
-                       var)  # fmt: skip
+                       var, scanning, spin)  # fmt: skip
     return ControlOutput(velocity, forward, turn, scanning, new, fix, lost, stalled, relocated,
                          np.where(steer[:, None], x_hat, 0.0))  # fmt: skip
 
@@ -743,6 +762,7 @@ class Controller:
             dt = min(0.0025 * math.hypot(xmax - xmin, ymax - ymin) / v, 0.2)
         options.setdefault("eps_sw", 2.0 * v * dt)
         options.setdefault("smoothing", 0.5 if dynamics == "unicycle" else 0.0)
+        options.setdefault("blind_error", 0.01 * math.hypot(*(arrays.bounds[2:] - arrays.bounds[:2])))
         return cls(arrays, ControlSettings(speed=speed, dt=dt, tol=arrays.tol, dynamics=dynamics, **options), heading)
 
     def command(self, bearings: np.ndarray, visible: np.ndarray, heading: float | None = None) -> np.ndarray:

@@ -96,9 +96,6 @@ def test_runtime_controller_and_simulation_give_the_same_commands(plans):
 @pytest.mark.parametrize("name", EXAMPLE_MAPS)
 def test_unicycle_reaches_the_goal_from_the_map_starts(plans, name, fov):
     plan, _ = plans[name]
-    if fov == 60.0 and name == "paper_b_circles":
-        pytest.xfail("60° on paper_b: two of four starts time out approaching the goal along the bottom wall "
-                     "(docs/choices.md, 'What is not met')")
     run = simulate.rollout(plan, plan.map.starts, params_for(plan, fov=fov, dynamics="unicycle"))
     assert (run.outcome == Outcome.SUCCESS).all(), run.counts()
 

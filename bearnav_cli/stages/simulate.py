@@ -29,7 +29,7 @@ import shapely
 from bearnav_cli import bearing, runtime
 from bearnav_cli.datatypes import Simulation
 from bearnav_cli.errors import InvalidParamsError
-from bearnav_cli.geometry import FreeSpace
+from bearnav_cli.geometry import DEFAULT_CLEARANCE, FreeSpace
 from bearnav_cli.routes import sample_starts
 from bearnav_cli.runtime import ControlSettings, ControlState, PlanArrays
 
@@ -253,6 +253,7 @@ def settings(plan, params: Params) -> Settings:
         beta=params.beta, clamp_reverse=params.clamp_reverse, measurement=params.measurement,
         reconstruction=params.reconstruction, min_spread=math.radians(params.min_spread_deg),
         hold_time=params.hold_time, odometry=params.odometry,
+        blind_error=DEFAULT_CLEARANCE * plan.map.diagonal,
         smoothing=(UNICYCLE_SMOOTHING if params.dynamics == "unicycle" else 0.0) if params.smoothing is None
         else params.smoothing,
         bearing_sigma=math.radians(params.noise_deg),
