@@ -584,6 +584,7 @@ def control(
     visible: np.ndarray,
     heading: np.ndarray,
     x_true: np.ndarray | None = None,
+    displacements: np.ndarray | None = None,
 ) -> ControlOutput:
     """One step of ALGORITHMS §7.2 for every robot: measurement → cell → command.
 
@@ -611,6 +612,10 @@ def control(
         Yaw ``φ`` (rad) from the compass: the unicycle's heading, the single integrator's camera.
     x_true : ndarray, shape (R, 2), optional
         True positions; required in displacement mode (``x̂ = x``), ignored otherwise.
+    displacements : ndarray, shape (R, L, 2), optional
+        Displacement mode in a world that differs from the plan's (deformation tests): the
+        measured ``l_k − x``; the field uses them as they are and ``x̂`` is the position that
+        fits them best against the plan's landmarks, ``mean_k(l_k − d_k)``.
 
     Returns
     -------
@@ -619,9 +624,13 @@ def control(
     s = settings
     r = len(state.cell)
     if s.measurement == "displacement":
-        if x_true is None:
+        if displacements is not None:
+            measured = np.mean(arrays.landmarks[None] - displacements, axis=1)
+        elif x_true is None:
             raise ValueError("displacement measurement needs the true positions")
-        measured, fix = _points(x_true).copy(), np.ones(r, bool)
+        else:
+            measured = _points(x_true).copy()
+        fix = np.ones(r, bool)
     else:
         estimate = bearing.reconstruct(bearings, visible, arrays.landmarks, 0, method="lsq",
                                        min_spread=s.min_spread, tol=s.tol)  # fmt: skip
@@ -666,7 +675,7 @@ def control(
         cell[idx], target[idx], relocated[idx] = c, t, moved
         f = arrays.fixed_landmark[c]
         if s.measurement == "displacement":
-            y = displacement(arrays, x_hat[idx])
+            y = displacement(arrays, x_hat[idx]) if displacements is None else displacements[idx].reshape(len(idx), -1)
         elif s.reconstruction == "lsq" or not fix[idx].all():
             y = _scaled_output(arrays, x_hat[idx], f, s.tol)
         else:

@@ -362,7 +362,7 @@ class _Loop:
     """Mutable state of every robot during :func:`rollout` (arrays indexed by run)."""
 
     def __init__(self, arrays: PlanArrays, space: FreeSpace, starts: np.ndarray, heading: np.ndarray, s: Settings,
-                 params: Params, limits: np.ndarray):  # fmt: skip
+                 params: Params, limits: np.ndarray, world_landmarks: np.ndarray | None = None):  # fmt: skip
         r = len(starts)
         self.arrays, self.space, self.s, self.params, self.limits = arrays, space, s, params, limits
         self.rng = np.random.default_rng([params.seed, 2])
@@ -386,7 +386,8 @@ class _Loop:
         self.fov = math.radians(params.fov)
         self.sigma = math.radians(params.noise_deg)
         self.max_range = math.inf if params.range is None else float(params.range)
-        self.sight = space.visibility_regions(arrays.landmarks) if params.occlusion else []
+        self.world = arrays.landmarks if world_landmarks is None else np.asarray(world_landmarks, float)
+        self.sight = space.visibility_regions(self.world) if params.occlusion else []
 
     def finish(self, runs: np.ndarray, outcome: Outcome) -> None:
         self.outcome[runs] = outcome
@@ -397,20 +398,20 @@ class _Loop:
 
     def measure(self, idx: np.ndarray, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Noisy world-frame bearings (R, L, 2) and what the camera sees (R, L), ALGORITHMS §6.1."""
-        arrays, params = self.arrays, self.params
-        n_lm = len(arrays.landmarks)
+        params = self.params
+        n_lm = len(self.world)
         if params.measurement == "displacement":
             return np.zeros((len(idx), n_lm, 2)), np.ones((len(idx), n_lm), bool)
-        seen = bearing.in_field_of_view(p, self.camera_heading(idx), arrays.landmarks, self.fov, tol=self.s.tol)
+        seen = bearing.in_field_of_view(p, self.camera_heading(idx), self.world, self.fov, tol=self.s.tol)
         if math.isfinite(self.max_range):
-            seen &= bearing.in_range(p, arrays.landmarks, self.max_range)
+            seen &= bearing.in_range(p, self.world, self.max_range)
         if params.occlusion and seen.any():
             # one prepared point query per sight line against each landmark's visibility region
             # (FreeSpace.visibility_regions: the same answers as the segment test, much cheaper)
             for k in np.flatnonzero(seen.any(axis=0)):
                 rows = np.flatnonzero(seen[:, k])
                 seen[rows, k] = shapely.intersects_xy(self.sight[k], p[rows, 0], p[rows, 1])
-        return bearing.noisy_bearings(p, arrays.landmarks, self.sigma, self.rng), seen
+        return bearing.noisy_bearings(p, self.world, self.sigma, self.rng), seen
 
     def step(self, active: np.ndarray) -> np.ndarray:
         """Advance the robots ``active`` by one step (ALGORITHMS §7.2); return those still running."""
@@ -423,7 +424,10 @@ class _Loop:
             if not active.size:
                 return active
         bearings, seen = self.measure(active, p)
-        out = runtime.control(arrays, s.control, self.state.take(active), bearings, seen, self.phi[active], x_true=p)
+        moved_world = self.world is not arrays.landmarks and params.measurement == "displacement"
+        measured = (self.world[None] - p[:, None, :]) if moved_world else None
+        out = runtime.control(arrays, s.control, self.state.take(active), bearings, seen, self.phi[active], x_true=p,
+                              displacements=measured)  # fmt: skip
         heading = self.camera_heading(active)
         self.state.put(active, out.state)
         self.left[active] += out.relocated
@@ -529,6 +533,7 @@ def rollout(
     starts: np.ndarray,
     params: Params = Params(),
     progress: Callable[[int, int], None] | None = None,
+    world=None,
 ) -> Rollouts:
     """Run the closed loop from every start at once.
 
@@ -542,6 +547,11 @@ def rollout(
         Its ``starts`` field is ignored here (see :func:`run`).
     progress : callable, optional
         ``progress(finished_runs, R)`` every few steps.
+    world : Map, optional
+        The world the robots drive in, when it differs from the one the plan was made for
+        (paper B's deformation test): its obstacles stop them and hide landmarks, its
+        landmark positions are what the camera sees. The controllers, cells and goal stay
+        the plan's. Default: the plan's map.
 
     Returns
     -------
@@ -549,7 +559,10 @@ def rollout(
         Outcome, steps, time, path length, relocations and trajectory of every run.
     """
     arrays = PlanArrays.from_plan(plan)
-    space = FreeSpace.from_map(plan.map)
+    world = plan.map if world is None else world
+    if len(world.landmarks) != len(arrays.landmarks):
+        raise InvalidParamsError("the world must have the plan's landmarks (moved, not added)", field="world")
+    space = FreeSpace.from_map(world)
     s = settings(plan, params)
     x0 = np.array(starts, float).reshape(-1, 2)
     limits = step_limits(arrays, x0, s, params)
@@ -557,7 +570,7 @@ def rollout(
     heading = np.zeros(len(x0))
     if (~blocked).any():
         heading[~blocked] = initial_headings(arrays, x0[~blocked], params)
-    loop = _Loop(arrays, space, x0, heading, s, params, limits)
+    loop = _Loop(arrays, space, x0, heading, s, params, limits, world.landmarks)
     if blocked.any():
         log.warning("%d starts are not free: counted as collisions", int(np.count_nonzero(blocked)))
         loop.finish(np.flatnonzero(blocked), Outcome.COLLISION)
