@@ -74,8 +74,8 @@ def test_runtime_controller_and_simulation_give_the_same_commands(plans):
     frames = []
     original = runtime.control
 
-    def spy(arrays, settings, state, bearings, visible, heading, x_true=None):
-        out = original(arrays, settings, state, bearings, visible, heading, x_true)
+    def spy(arrays, settings, state, bearings, visible, heading, x_true=None, displacements=None):
+        out = original(arrays, settings, state, bearings, visible, heading, x_true, displacements)
         frames.append((bearings[0].copy(), visible[0].copy(), float(heading[0]), out.forward[0], out.turn[0]))
         return out
 
