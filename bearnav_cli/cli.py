@@ -427,6 +427,8 @@ def simulate_command(
         None, "--clamp-reverse/--allow-reverse", help="Unicycle never drives backwards."
     ),
     hold_time: Optional[float] = typer.Option(None, help="Seconds without a fix before looking around (2)."),
+    odometry: Optional[bool] = typer.Option(None, "--odometry/--no-odometry", help="Bridge gaps between fixes."),
+    odometry_noise: Optional[float] = typer.Option(None, help="Wheel slip of the simulated robot (0; 0.05 = 5%)."),
     seed: Optional[int] = typer.Option(None, help="Seed of the noise and of random starts (0)."),
     min_success: float = typer.Option(1.0, help="Exit 1 when fewer runs than this fraction reach the goal."),
     gif: Optional[Path] = typer.Option(None, help="Also write an animation of the runs (.gif)."),
@@ -444,7 +446,7 @@ def simulate_command(
     overrides = dict(
         starts=starts, dynamics=dynamics, measurement=measurement, fov=fov, noise_deg=noise_deg, range=range_,
         occlusion=occlusion, reconstruction=reconstruction, dt=dt, speed=speed, alpha=alpha, beta=beta,
-        clamp_reverse=clamp_reverse, hold_time=hold_time, seed=seed,
+        clamp_reverse=clamp_reverse, hold_time=hold_time, odometry=odometry, odometry_noise=odometry_noise, seed=seed,
     )
     with _progress_bar() as progress:
         report = pipeline.run_stage("simulate", plan_npz, out_path, overrides, force,

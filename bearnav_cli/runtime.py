@@ -427,9 +427,6 @@ class ControlSettings:
         Without a fix, the robot keeps following the fields on odometry beyond ``hold_time``
         while its estimate's 3σ stays below this (map units; the barrier margin in
         ``bearnav simulate``); 0: ``hold_time`` only.
-    smoothing : float
-        Weight of the previous command direction in the running average steered by (0: none;
-        the unicycle's default in ``bearnav simulate`` and :meth:`Controller.from_plan` is 0.5).
     """
 
     speed: float
@@ -447,7 +444,6 @@ class ControlSettings:
     odometry: bool = True
     odometry_drift: float = 0.05
     blind_error: float = 0.0
-    smoothing: float = 0.0
     bearing_sigma: float = 0.0
     max_fix_error: float = math.inf
 
@@ -691,14 +687,6 @@ def control(
         stalled[idx[~(norm > 0)]] = True
         ok = norm > 0
         u[idx[ok]] = ui[ok] / norm[ok, None]
-        if s.smoothing > 0:
-            # a unicycle cannot follow a command that flips between two cells' fields at their
-            # shared face; the running average of the unit commands slides along it instead
-            blend = (1.0 - s.smoothing) * u[idx[ok]] + s.smoothing * state.last_dir[idx[ok]]
-            size = np.hypot(blend[:, 0], blend[:, 1])
-            good = size > 1e-9
-            sub = idx[ok][good]
-            u[sub] = blend[good] / size[good, None]
         last_dir[idx[ok]] = u[idx[ok]]
     holding = ~steer  # no position estimate this step
     if s.odometry:
@@ -770,8 +758,10 @@ class Controller:
             xmin, ymin, xmax, ymax = arrays.bounds
             dt = min(0.0025 * math.hypot(xmax - xmin, ymax - ymin) / v, 0.2)
         options.setdefault("eps_sw", 2.0 * v * dt)
-        options.setdefault("smoothing", 0.5 if dynamics == "unicycle" else 0.0)
         options.setdefault("blind_error", 0.01 * math.hypot(*(arrays.bounds[2:] - arrays.bounds[:2])))
+        # a real camera is never exact: with σ = 0 the filter would trust odometry over every
+        # noisy fix (set it to the camera's angular noise)
+        options.setdefault("bearing_sigma", math.radians(1.0))
         return cls(arrays, ControlSettings(speed=speed, dt=dt, tol=arrays.tol, dynamics=dynamics, **options), heading)
 
     def command(self, bearings: np.ndarray, visible: np.ndarray, heading: float | None = None) -> np.ndarray:

@@ -41,8 +41,6 @@ PROGRESS_WINDOW = 200
 #: ``dt = min(DT_PER_DIAGONAL · D / v, DT_MAX)`` by default (ALGORITHMS §7.1).
 DT_PER_DIAGONAL = 0.0025
 DT_MAX = 0.2
-#: Default command smoothing of the unicycle (:attr:`Params.smoothing`).
-UNICYCLE_SMOOTHING = 0.5
 #: How often (in steps) ``progress`` is called.
 PROGRESS_EVERY = 25
 #: Outcome of a robot still running (internal).
@@ -106,11 +104,6 @@ class Params:
     odometry : bool
         Between fixes, carry ``x̂`` forward with the commanded motion (exact here: the
         simulation has no wheel slip) for at most ``hold_time``; off: §7.5's hold as written.
-    smoothing : float or None
-        Weight of the previous command direction in the running average the robot steers by,
-        in [0, 1); ``None``: 0.5 for the unicycle, 0 for the single integrator. A unicycle
-        cannot follow a command that flips between two cells' fields at their shared face;
-        the average slides along the face as the single integrator does.
     odometry_noise : float
         Wheel slip: each step's true displacement is the commanded one scaled by ``1 + ε`` and
         turned by ``ε'`` (rad), ``ε, ε' ~ N(0, odometry_noise²)``; 0 is the exact dynamics of §7.1.
@@ -149,7 +142,6 @@ class Params:
     initial_heading: float | None = None
     hold_time: float = 2.0
     odometry: bool = True
-    smoothing: float | None = None
     max_fix_error: float | None = None
     odometry_noise: float = 0.0
     starts: str = "map"
@@ -177,8 +169,6 @@ class Params:
             _positive(getattr(self, name), name)
         if not (self.odometry_noise >= 0 and math.isfinite(self.odometry_noise)):
             raise InvalidParamsError(f"must be zero or positive, got {self.odometry_noise}", field="odometry_noise")
-        if self.smoothing is not None and not 0.0 <= self.smoothing < 1.0:
-            raise InvalidParamsError(f"must lie in [0, 1), got {self.smoothing}", field="smoothing")
         if self.initial_heading is not None and not math.isfinite(self.initial_heading):
             raise InvalidParamsError(f"must be finite, got {self.initial_heading}", field="initial_heading")
         if self.max_steps is not None and (
@@ -254,8 +244,6 @@ def settings(plan, params: Params) -> Settings:
         reconstruction=params.reconstruction, min_spread=math.radians(params.min_spread_deg),
         hold_time=params.hold_time, odometry=params.odometry,
         blind_error=DEFAULT_CLEARANCE * plan.map.diagonal,
-        smoothing=(UNICYCLE_SMOOTHING if params.dynamics == "unicycle" else 0.0) if params.smoothing is None
-        else params.smoothing,
         bearing_sigma=math.radians(params.noise_deg),
         max_fix_error=math.inf if params.max_fix_error is None else params.max_fix_error,
     )  # fmt: skip
