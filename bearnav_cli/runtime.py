@@ -408,6 +408,8 @@ class ControlSettings:
         Unicycle gains: ``v = α cos e`` (map units / s), ``ω = β sin e`` (rad / s).
     clamp_reverse : bool
         Unicycle: clamp ``v`` at 0 (never reverse).
+    turn_first : bool
+        Unicycle: ``v = α cos³ e`` (slow down to turn) instead of §7.1's ``α cos e``.
     measurement : {"bearing", "displacement"}
         ``bearing``: reconstruct ``ỹ`` and ``x̂`` from bearings (§6); ``displacement``: the
         true displacements, ``x̂ = x`` (paper B).
@@ -437,6 +439,7 @@ class ControlSettings:
     alpha: float = 0.1
     beta: float = 0.5
     clamp_reverse: bool = False
+    turn_first: bool = True
     measurement: str = "bearing"
     reconstruction: str = "lsq"
     min_spread: float = bearing.DEFAULT_MIN_SPREAD
@@ -545,6 +548,8 @@ class ControlOutput:
 
 #: ``‖a − M x̂‖ < STALL_FIELD · u_max`` is a stall: the field has (almost) an equilibrium there.
 STALL_FIELD = 1e-6
+#: A unicycle approaching a node drives only when its heading is this close to the segment (rad).
+APPROACH_ALIGNMENT = math.radians(10.0)
 
 
 def _scaled_output(arrays: PlanArrays, x_hat: np.ndarray, fixed: np.ndarray, tol: float) -> np.ndarray:
@@ -711,7 +716,12 @@ def control(
     motion = velocity.copy()
     if s.dynamics == "unicycle":
         e = bearing.wrap(np.arctan2(direction[:, 1], direction[:, 0]) - phi)
-        forward = np.where(holding | scanning, 0.0, s.alpha * np.cos(e))  # hold: turn in place toward last_dir
+        # §7.1's v = α cos e; turn_first uses α cos³ e: a unicycle that is far off its field slows
+        # down to turn instead of sweeping a wide arc past an obstacle corner (hold: turn in place)
+        gain = np.cos(e) ** 3 if s.turn_first else np.cos(e)
+        forward = np.where(holding | scanning, 0.0, s.alpha * gain)
+        # a straight approach is certified only along its segment: turn on the spot first
+        forward[(target >= 0) & (np.abs(e) > APPROACH_ALIGNMENT)] = 0.0
         if s.clamp_reverse:
             forward = np.maximum(forward, 0.0)
         turn = np.where(scanning, turn, s.beta * np.sin(e))

@@ -95,6 +95,9 @@ class Params:
         Unicycle forward gain (map units / s) and turn gain (rad / s).
     clamp_reverse : bool
         Unicycle never drives backwards (``v >= 0``).
+    turn_first : bool
+        Unicycle forward speed ``α cos³ e`` instead of ALGORITHMS §7.1's ``α cos e``: far off its
+        field it slows down to turn rather than sweep a wide arc past an obstacle corner.
     initial_heading : float or None
         Initial heading (degrees); ``None``: toward the active cell's exit point (the goal
         in the goal cell).
@@ -139,6 +142,7 @@ class Params:
     alpha: float = 0.1
     beta: float = 0.5
     clamp_reverse: bool = False
+    turn_first: bool = True
     initial_heading: float | None = None
     hold_time: float = 2.0
     odometry: bool = True
@@ -240,7 +244,8 @@ def settings(plan, params: Params) -> Settings:
     eps_sw = 2.0 * v * dt
     control = ControlSettings(
         speed=params.speed, dt=dt, eps_sw=eps_sw, tol=plan.map.tol, dynamics=params.dynamics, alpha=params.alpha,
-        beta=params.beta, clamp_reverse=params.clamp_reverse, measurement=params.measurement,
+        beta=params.beta, clamp_reverse=params.clamp_reverse, turn_first=params.turn_first,
+        measurement=params.measurement,
         reconstruction=params.reconstruction, min_spread=math.radians(params.min_spread_deg),
         hold_time=params.hold_time, odometry=params.odometry,
         blind_error=DEFAULT_CLEARANCE * plan.map.diagonal,
