@@ -1,10 +1,11 @@
-# bearnav: `make demo` sets up .venv and plans the kitchen map; `make test` runs ruff and pytest.
+# bearnav: `make demo` sets up .venv and plans the kitchen map; `make test` runs ruff and pytest;
+# `make reproduce` redraws the papers' figures in docs/figures/ (only those whose inputs changed).
 PYTHON ?= python3
 VENV ?= .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.bearnav-installed
 
-.PHONY: demo test lint bench clean
+.PHONY: demo test lint bench clean reproduce
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -35,3 +36,40 @@ bench: $(STAMP)
 
 clean:
 	rm -rf plans/*/ .pytest_cache
+
+# --------------------------------------------------------------------------- reproduce (repro/)
+FIGURES := docs/figures
+REPRO_FIGURES := $(FIGURES)/kitchen_paper.png $(FIGURES)/kitchen_unicycle.png $(FIGURES)/paper_b.png \
+	$(FIGURES)/robustness.png
+PLAN_SRC := $(wildcard bearnav_cli/*.py bearnav_cli/stages/*.py)
+# What every figure script runs besides its own file: a change to the closed loop or the
+# drawing code redraws every figure.
+REPRO_LIB := repro/common.py bearnav_cli/stages/simulate.py bearnav_cli/runtime.py bearnav_cli/bearing.py \
+	bearnav_cli/geometry.py bearnav_cli/plan_arrays.py bearnav_cli/plot.py
+
+reproduce: $(STAMP) $(REPRO_FIGURES)
+	@echo "figures: $(REPRO_FIGURES) (numbers next to each as .json, .csv, .md)"
+
+# `bearnav plan` writes every artifact of plans/NAME/ but rewrites only the stages whose inputs,
+# parameters or versions changed, so an artifact's date changes only with its content; the stamp
+# records that the plan was brought up to date, and each figure below is redrawn only when its
+# script or an artifact it reads changed.
+plans/%/.planned: maps/%.yaml $(STAMP) $(PLAN_SRC)
+	$(BIN)/bearnav plan $<
+	@touch $@
+plans/%/tree.npz plans/%/simplified.npz plans/%/plan.npz: plans/%/.planned ;
+.PRECIOUS: plans/%/.planned
+
+$(FIGURES)/kitchen_paper.png: repro/kitchen_figure.py $(REPRO_LIB) \
+		plans/kitchen/tree.npz plans/kitchen/simplified.npz plans/kitchen/plan.npz
+	$(BIN)/python $< $(filter %.npz,$^) -o $@
+
+$(FIGURES)/kitchen_unicycle.png: repro/kitchen_unicycle.py $(REPRO_LIB) plans/kitchen/plan.npz
+	$(BIN)/python $< $(filter %.npz,$^) -o $@
+
+$(FIGURES)/paper_b.png: repro/paper_b.py $(REPRO_LIB) plans/paper_b_circles/plan.npz
+	$(BIN)/python $< $(filter %.npz,$^) -o $@
+
+$(FIGURES)/robustness.png: repro/robustness.py $(REPRO_LIB) plans/kitchen/plan.npz \
+		plans/paper_b_circles/plan.npz
+	$(BIN)/python $< $(filter %.npz,$^) -o $@
