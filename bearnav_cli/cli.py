@@ -144,6 +144,8 @@ def read_map_source(
         spec["starts"] = [_pair(text, "--start") for text in starts or []]
         if robot_radius is not None:
             spec["robot_radius"] = robot_radius
+        # the options are part of the input: other options must make the map stage rerun
+        blobs.append(json.dumps(spec, sort_keys=True).encode())
     else:
         spec.setdefault("name", path.stem)
         if "occupancy" in spec:

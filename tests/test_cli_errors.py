@@ -93,6 +93,14 @@ def test_bare_ros_yaml_needs_a_goal(cli, tmp_path):
     result = cli("map", tmp_path / "grid.yaml", "--goal", "0.5,0.5", "--landmark", "0,0", "--landmark", "4,3",
                  "-o", tmp_path / "bare.json")
     assert result.exit_code == 0, result.output
+    # other options are another input: the map stage reruns (it used to report "fresh")
+    again = cli("map", tmp_path / "grid.yaml", "--goal", "0.5,0.5", "--landmark", "0,0", "--landmark", "3,3",
+                "-o", tmp_path / "bare.json")
+    assert again.exit_code == 0 and "fresh" not in again.output, again.output
+    import json
+
+    landmarks = [lm["position"] for lm in json.loads((tmp_path / "bare.json").read_text())["landmarks"]]
+    assert landmarks == [[0.0, 0.0], [3.0, 3.0]]
 
 
 def test_bad_stage_option_value(cli, write_map, small_spec, tmp_path):
