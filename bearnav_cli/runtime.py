@@ -1,29 +1,15 @@
-"""The robot-side part of a plan: cell location, switching and the field (DESIGN §6, ALGORITHMS §7.3).
+"""The controller a robot runs: bearings of one camera frame in, a velocity command out (DESIGN §6, ALGORITHMS §7).
 
-This module needs numpy only (and :mod:`bearnav_cli.errors`, which needs nothing), so it
-can be copied onto a robot next to ``plan.npz``. ``bearnav simulate`` and ``bearnav
-verify`` call exactly these functions, so what is simulated is what runs on the robot.
+This module needs numpy only (with :mod:`bearnav_cli.bearing`, :mod:`bearnav_cli.cell_policy`
+and :mod:`bearnav_cli.plan_arrays`, which need nothing else), so it can be copied onto a
+robot next to ``plan.npz``. ``bearnav simulate`` advances its robots with :func:`control`,
+the same step :class:`Controller` takes, so what is simulated is what runs on the robot.
 
-Everything is vectorised over ``R`` robots: positions are arrays of shape ``(R, 2)``,
-cells are ``int64`` arrays of shape ``(R,)``. A single robot is ``R = 1``.
-
-:class:`PlanArrays` holds the arrays a controller needs at run time. On top of it:
-
-- :func:`contains` — is ``x`` in cell ``c`` (within a tolerance);
-- :func:`voronoi_owner` — the cell of the nearest tree node, which always contains
-  the point (ALGORITHMS §4.1, Lemma 2);
-- :func:`locate` — the cell to use at a point: one whose safe set holds it, on the
-  shortest route (docs/algorithms.md);
-- :func:`switch` — the switching and relocation rule of ALGORITHMS §7.3, relocating by
-  :func:`locate`;
-- :func:`apply_gain` / :func:`field` — ``u = gain[c] @ y`` for an output ``y``; with the
-  displacement output ``y = (landmarks − x).ravel()`` this is the certified affine field.
-
-The bearing reconstruction (``bearing`` module) produces the scaled output ``ỹ`` and an
-estimate ``x̂``; a controller then calls ``switch(arrays, cell, x̂, ...)`` and
-``apply_gain(arrays, cell, ỹ)``.
+:func:`control` is one step for ``R`` robots: the ``lsq`` fix from the bearings (§6.2), its
+fusion with odometry, the cell policy of :mod:`bearnav_cli.cell_policy`, the gain, speed
+normalisation, the hold and look-around behaviour and the unicycle mapping.
+The cell policy's functions are re-exported here (``runtime.locate``, ``runtime.switch``, ...).
 """
-
 
 from __future__ import annotations
 
@@ -36,351 +22,45 @@ from typing import Any
 import numpy as np
 
 from bearnav_cli import bearing
-from bearnav_cli.plan_arrays import CHUNK, RUNTIME_KEYS, PlanArrays, ring_edges, tree_costs
+from bearnav_cli.cell_policy import (
+    affine_field,
+    apply_gain,
+    approach_target,
+    barrier_values,
+    contains,
+    displacement,
+    field,
+    in_safe_set,
+    locate,
+    lyapunov,
+    nearest_node,
+    segments_clear,
+    switch,
+    update,
+    voronoi_owner,
+)
+from bearnav_cli.plan_arrays import RUNTIME_KEYS, PlanArrays, ring_edges, tree_costs
 
-__all__ = ["RUNTIME_KEYS", "PlanArrays", "ring_edges", "tree_costs"]  # re-exported: the runtime's one import
+__all__ = [  # re-exported: a robot's one import
+    "RUNTIME_KEYS", "PlanArrays", "ring_edges", "tree_costs",
+    "contains",
+    "nearest_node",
+    "voronoi_owner",
+    "lyapunov",
+    "barrier_values",
+    "locate",
+    "switch",
+    "in_safe_set",
+    "segments_clear",
+    "approach_target",
+    "update",
+    "displacement",
+    "apply_gain",
+    "field",
+    "affine_field",
+]  # fmt: skip
 
 log = logging.getLogger(__name__)
-
-
-# --------------------------------------------------------------------------- vectorised queries
-
-
-def _cells(arrays: PlanArrays, cell: Any) -> np.ndarray:
-    return np.asarray(cell, np.int64).reshape(-1)
-
-
-def _points(x: Any) -> np.ndarray:
-    return np.asarray(x, float).reshape(-1, 2)
-
-
-def contains(arrays: PlanArrays, cell: np.ndarray, x: np.ndarray, tol: float | None = None) -> np.ndarray:
-    """Whether each robot lies in its cell: ``A_c x <= b_c + tol`` for every row.
-
-    Parameters
-    ----------
-    arrays : PlanArrays
-    cell : ndarray of int, shape (R,)
-    x : ndarray, shape (R, 2)
-        Positions (map units).
-    tol : float, optional
-        Slack on every row (map units); default ``arrays.tol`` (``1e-9·D``).
-
-    Returns
-    -------
-    ndarray of bool, shape (R,)
-    """
-    c, p = _cells(arrays, cell), _points(x)
-    tol = arrays.tol if tol is None else tol
-    lhs = np.einsum("rpk,rk->rp", arrays.row_A[c], p)
-    return np.all(lhs <= arrays.row_b[c] + tol, axis=1)
-
-
-def nearest_node(arrays: PlanArrays, x: np.ndarray) -> np.ndarray:
-    """Index of the tree node nearest to each point (ties: lowest index), shape (R,).
-
-    Distances are computed in chunks of robots × nodes, as differences (not through
-    ``‖p‖² − 2p·x + ‖x‖²``, which loses the ties on Voronoi boundaries).
-    """
-    p = _points(x)
-    nodes = arrays.nodes
-    out = np.empty(len(p), np.int64)
-    step = max(1, CHUNK // max(1, len(nodes)))
-    for s in range(0, len(p), step):
-        d = p[s : s + step, None, :] - nodes[None, :, :]
-        out[s : s + step] = np.argmin(d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1], axis=1)
-    return out
-
-
-def voronoi_owner(arrays: PlanArrays, x: np.ndarray) -> np.ndarray:
-    """The cell of the nearest tree node, which contains the point (Lemma 2), shape (R,)."""
-    return arrays.node_cell[nearest_node(arrays, x)]
-
-
-def lyapunov(arrays: PlanArrays, cell: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """``V_c(x) = z_c·(x − x_j)``, shape (R,); identically 0 in the goal cell."""
-    c, p = _cells(arrays, cell), _points(x)
-    return np.einsum("rk,rk->r", arrays.exit_dir[c], p - arrays.exit_point[c])
-
-
-def barrier_values(arrays: PlanArrays, x: np.ndarray) -> np.ndarray:
-    """``min_k h_k(x)`` over every cell's barrier rows, shape (R, C); ``inf`` for a cell without rows.
-
-    ``>= 0`` exactly when ``x`` lies in the cell's safe set.
-    """
-    p = _points(x)
-    return np.min(np.einsum("cqk,rk->rcq", arrays.bar_A, p) + arrays.bar_b[None], axis=2, initial=math.inf)
-
-
-def locate(arrays: PlanArrays, x: np.ndarray, tol: float | None = None, eps_sw: float = 0.0) -> np.ndarray:
-    """The cell a robot at ``x`` should use, shape (R,): safety first, then the shortest route.
-
-    Cells overlap, so a point lies in several. Candidates are the cells that contain
-    ``x`` and, for edge cells, have ``V(x) > tol`` (a robot on an exit face would leave at
-    once). Among the candidates whose safe set contains ``x`` (every barrier row
-    ``h(x) >= 0``), take the one with the shortest remaining tree route
-    ``‖x − x_j‖ + cost(x_j)`` (``‖x − g‖`` for the goal cell); if there is none, the one
-    whose barrier rows are least violated (largest ``min_k h_k(x)``): the rows never
-    decrease while negative, so that cell keeps the robot farthest behind its obstacle
-    lines. Without any candidate, the Voronoi owner (which contains ``x``, Lemma 2).
-
-    Parameters
-    ----------
-    arrays : PlanArrays
-    x : ndarray, shape (R, 2)
-        Positions or their estimates (map units).
-    tol : float, optional
-        Membership slack (map units); default ``arrays.tol``.
-    """
-    p = _points(x)
-    tol = arrays.tol if tol is None else tol
-    inside = np.all(np.einsum("cpk,rk->rcp", arrays.row_A, p) <= arrays.row_b[None] + tol, axis=2)
-    gap = p[:, None, :] - arrays.exit_point[None]
-    edge = arrays.parent_cell >= 0
-    near_exit = np.einsum("rck,rck->rc", gap, gap) <= eps_sw * eps_sw
-    leaving = edge[None] & ((np.einsum("ck,rck->rc", arrays.exit_dir, gap) <= tol) | near_exit)
-    candidate = inside & ~leaving
-    # barrier rows only where they matter: a point lies in a handful of the C cells
-    h = np.full(candidate.shape, -math.inf)
-    r_idx, c_idx = np.nonzero(candidate)
-    if len(r_idx):
-        rows_h = np.einsum("nqk,nk->nq", arrays.bar_A[c_idx], p[r_idx]) + arrays.bar_b[c_idx]
-        h[r_idx, c_idx] = np.min(rows_h, axis=1, initial=math.inf)
-    route = np.where(edge[None], np.hypot(gap[..., 0], gap[..., 1]) + arrays.cost_to_go[None], 0.0)
-    route = np.where(edge[None], route, np.hypot(*(p - arrays.goal).T)[:, None])
-    safe = candidate & (h >= 0)
-    best_safe = np.argmin(np.where(safe, route, math.inf), axis=1)
-    least_violated = np.argmax(h, axis=1)
-    rows = np.arange(len(p))
-    chosen = np.where(safe.any(axis=1), best_safe, least_violated)
-    if not candidate[rows, chosen].all():
-        lost = ~candidate[rows, chosen]
-        chosen[lost] = voronoi_owner(arrays, p[lost])
-    return chosen
-
-
-def switch(
-    arrays: PlanArrays, cell: np.ndarray, x: np.ndarray, eps_sw: float, tol: float | None = None
-) -> tuple[np.ndarray, np.ndarray]:
-    """Switching and relocation (ALGORITHMS §7.3 with the safety rule of docs/algorithms.md), for every robot.
-
-    An edge cell ``i → j`` hands over to the cell of ``j`` when ``V(x) <= 0`` or
-    ``‖x − x_j‖ <= eps_sw``. If ``x`` then lies outside the (new) cell by more than
-    ``tol``, or the hand-over lands outside the parent cell's safe set, the robot is
-    relocated by :func:`locate`. One switch per call: a robot that is also at the next
-    exit switches again on the next call.
-
-    Parameters
-    ----------
-    arrays : PlanArrays
-    cell : ndarray of int, shape (R,)
-        Active cell of each robot.
-    x : ndarray, shape (R, 2)
-        Position, or its estimate ``x̂`` (map units).
-    eps_sw : float
-        Switching radius around ``x_j`` (map units; ``2·v·dt`` in ``simulate``).
-    tol : float, optional
-        Membership slack (map units); default ``arrays.tol``.
-
-    Returns
-    -------
-    new_cell : ndarray of int64, shape (R,)
-    relocated : ndarray of bool, shape (R,)
-        Robots found outside their (new) cell and relocated (each one is a ``left_cell``
-        event; a hand-over moved on to a safer cell is not).
-    """
-    c, p = _cells(arrays, cell).copy(), _points(x)
-    up = arrays.parent_cell[c]
-    edge = up >= 0
-    handed = np.zeros(len(c), bool)
-    if edge.any():
-        ce, pe = c[edge], p[edge]
-        gap = pe - arrays.exit_point[ce]
-        value = np.einsum("rk,rk->r", arrays.exit_dir[ce], gap)
-        hand_over = (value <= 0.0) | (gap[:, 0] * gap[:, 0] + gap[:, 1] * gap[:, 1] <= eps_sw * eps_sw)
-        handed[np.flatnonzero(edge)[hand_over]] = True
-        c[handed] = up[edge][hand_over]
-    outside = ~contains(arrays, c, p, tol)
-    unsafe = handed & ~outside
-    if unsafe.any():
-        idx = np.flatnonzero(unsafe)
-        rows = np.einsum("rqk,rk->rq", arrays.bar_A[c[idx]], p[idx]) + arrays.bar_b[c[idx]]
-        unsafe[idx] = np.min(rows, axis=1, initial=math.inf) < 0
-    move = outside | unsafe
-    if move.any():
-        c[move] = locate(arrays, p[move], tol, eps_sw)
-    return c, outside
-
-
-def in_safe_set(arrays: PlanArrays, cell: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """Whether each robot lies in its cell's safe set (every barrier row ``h(x) >= 0``), shape (R,)."""
-    c, p = _cells(arrays, cell), _points(x)
-    rows = np.einsum("rqk,rk->rq", arrays.bar_A[c], p) + arrays.bar_b[c]
-    return np.min(rows, axis=1, initial=math.inf) >= 0
-
-
-def _on_segment(orientation: np.ndarray, point: np.ndarray, s0: np.ndarray, s1: np.ndarray) -> np.ndarray:
-    """Collinear (``orientation == 0``) and inside the bounding box of ``[s0, s1]`` (broadcast arrays)."""
-    inside = orientation == 0
-    for k in (0, 1):
-        low, high = np.minimum(s0[..., k], s1[..., k]), np.maximum(s0[..., k], s1[..., k])
-        inside &= (low <= point[..., k]) & (point[..., k] <= high)
-    return inside
-
-
-def segments_clear(arrays: PlanArrays, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Exact test that each segment ``[a_r, b_r]`` stays in the bounds and touches no obstacle edge, shape (R,).
-
-    Both endpoints are assumed free, so a segment meets the (closed) obstacles exactly when it
-    crosses or touches one of their ring edges.
-    """
-    a, b = _points(a), _points(b)
-    lo, hi = arrays.bounds[:2], arrays.bounds[2:]
-    ok = np.all((a >= lo) & (a <= hi) & (b >= lo) & (b <= hi), axis=1)
-    edges = arrays.obstacle_edges
-    if not len(edges) or not ok.any():
-        return ok
-    p, q = edges[:, 0], edges[:, 1]
-    step = max(1, CHUNK // len(edges))
-    for s in range(0, len(a), step):
-        A, Bp = a[s : s + step, None, :], b[s : s + step, None, :]
-        d = Bp - A
-        o1 = d[..., 0] * (p[None, :, 1] - A[..., 1]) - d[..., 1] * (p[None, :, 0] - A[..., 0])
-        o2 = d[..., 0] * (q[None, :, 1] - A[..., 1]) - d[..., 1] * (q[None, :, 0] - A[..., 0])
-        e = q - p
-        o3 = e[None, :, 0] * (A[..., 1] - p[None, :, 1]) - e[None, :, 1] * (A[..., 0] - p[None, :, 0])
-        o4 = e[None, :, 0] * (Bp[..., 1] - p[None, :, 1]) - e[None, :, 1] * (Bp[..., 0] - p[None, :, 0])
-        proper = (o1 * o2 < 0) & (o3 * o4 < 0)
-        # touching counts as a collision: an endpoint of one segment on the other (orientation 0
-        # and inside the other's bounding box)
-        touch = (
-            _on_segment(o1, p[None], A, Bp) | _on_segment(o2, q[None], A, Bp)
-            | _on_segment(o3, A, p[None], q[None]) | _on_segment(o4, Bp, p[None], q[None])
-        )  # fmt: skip
-        ok[s : s + step] &= ~np.any(proper | touch, axis=1)
-    return ok
-
-
-def approach_target(arrays: PlanArrays, x: np.ndarray, nearest: int = 8) -> np.ndarray:
-    """The tree node a robot outside every safe set drives to in a straight line, shape (R,); ``-1`` if none.
-
-    Among the ``nearest`` closest nodes (all nodes if none of those qualifies), the one with a
-    clear straight segment from ``x`` and the shortest route ``‖x − x_n‖ + cost(n)``. The node
-    lies strictly inside its own cell's safe set, so the robot is certified once it arrives.
-    """
-    p = _points(x)
-    out = np.full(len(p), -1, np.int64)
-    if not len(p):
-        return out
-    nodes = arrays.nodes
-    cost = tree_costs(nodes, arrays.parent)
-    dist = np.hypot(*(p[:, None, :] - nodes[None]).transpose(2, 0, 1))
-    order = np.argsort(dist, axis=1, kind="stable")
-    for width in (min(nearest, len(nodes)), len(nodes)):
-        todo = np.flatnonzero(out < 0)
-        if not len(todo):
-            break
-        cand = order[todo, :width]
-        clear = segments_clear(arrays, np.repeat(p[todo], width, axis=0), nodes[cand.ravel()]).reshape(-1, width)
-        route = np.where(clear, dist[todo[:, None], cand] + cost[cand], math.inf)
-        best = np.argmin(route, axis=1)
-        found = np.isfinite(route[np.arange(len(todo)), best])
-        out[todo[found]] = cand[found, best[found]]
-    return out
-
-
-def update(
-    arrays: PlanArrays, cell: np.ndarray, target: np.ndarray, x: np.ndarray, eps_sw: float, tol: float | None = None
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """One control update of the cell policy for every robot (ALGORITHMS §7.3 with docs/choices.md).
-
-    A robot is either in a cell (``target == -1``), following its certified field, or
-    approaching a tree node in a straight line (``target >= 0``). In a cell it switches and
-    relocates by :func:`switch`; whenever its cell changes (or at the start, ``cell == -1``)
-    and it is not inside the new cell's safe set, it approaches the node of
-    :func:`approach_target` instead, if one exists. An approach ends within ``eps_sw`` of the
-    node or as soon as some cell's safe set holds the robot; the robot is then located again.
-
-    Parameters
-    ----------
-    arrays : PlanArrays
-    cell, target : ndarray of int, shape (R,)
-        Current cell (``-1`` before the first update) and approach node (``-1`` for none).
-    x : ndarray, shape (R, 2)
-        Positions or their estimates (map units).
-    eps_sw : float
-        Switching and arrival radius (map units).
-    tol : float, optional
-        Membership slack; default ``arrays.tol``.
-
-    Returns
-    -------
-    cell, target : ndarray of int64, shape (R,)
-    relocated : ndarray of bool, shape (R,)
-        Robots found outside their cell and relocated (``left_cell`` events).
-    """
-    c, t, p = _cells(arrays, cell).copy(), _cells(arrays, target).copy(), _points(x)
-    relocated = np.zeros(len(c), bool)
-    fresh = c < 0
-    if fresh.any():
-        c[fresh] = locate(arrays, p[fresh], tol, eps_sw)
-    going = t >= 0
-    if going.any():
-        idx = np.flatnonzero(going)
-        here = locate(arrays, p[idx], tol, eps_sw)
-        gap = p[idx] - arrays.nodes[t[idx]]
-        done = (np.einsum("rk,rk->r", gap, gap) <= eps_sw * eps_sw) | in_safe_set(arrays, here, p[idx])
-        c[idx[done]] = here[done]
-        t[idx[done]] = -1
-    steady = (t < 0) & ~fresh & ~going
-    if steady.any():
-        idx = np.flatnonzero(steady)
-        new, moved = switch(arrays, c[idx], p[idx], eps_sw, tol)
-        fresh[idx] = new != c[idx]
-        c[idx], relocated[idx] = new, moved
-    check = fresh & (t < 0)
-    if check.any():
-        idx = np.flatnonzero(check)
-        unsafe = idx[~in_safe_set(arrays, c[idx], p[idx])]
-        if len(unsafe):
-            t[unsafe] = approach_target(arrays, p[unsafe])
-    return c, t, relocated
-
-
-def displacement(arrays: PlanArrays, x: np.ndarray) -> np.ndarray:
-    """The displacement output ``y = (landmarks − x).ravel()`` of each robot, shape (R, 2L)."""
-    p = _points(x)
-    return (arrays.landmarks[None, :, :] - p[:, None, :]).reshape(len(p), 2 * len(arrays.landmarks))
-
-
-def apply_gain(arrays: PlanArrays, cell: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """``u = gain[c] @ y`` for each robot, shape (R, 2).
-
-    Parameters
-    ----------
-    cell : ndarray of int, shape (R,)
-    y : ndarray, shape (R, 2L)
-        The output: displacements to every landmark, or their bearing reconstruction
-        scaled by the fixed landmark's distance (columns of unused landmarks are ignored,
-        their gain is zero).
-    """
-    c = _cells(arrays, cell)
-    return np.einsum("rij,rj->ri", arrays.gain[c], np.asarray(y, float).reshape(len(c), arrays.gain.shape[2]))
-
-
-def field(arrays: PlanArrays, cell: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """The certified field ``u = gain[c] @ (landmarks − x).ravel()``, shape (R, 2), map units / s."""
-    return apply_gain(arrays, cell, displacement(arrays, x))
-
-
-def affine_field(arrays: PlanArrays, cell: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """The same field through its affine form ``a_c − M_c x``, shape (R, 2).
-
-    Equal to :func:`field` up to rounding; the stall test (ALGORITHMS §7.2) uses it
-    with the position estimate ``x̂`` whatever the output mode.
-    """
-    c, p = _cells(arrays, cell), _points(x)
-    return arrays.field_a[c] - np.einsum("rij,rj->ri", arrays.field_M[c], p)
 
 
 # --------------------------------------------------------------------------- the control step
@@ -630,7 +310,7 @@ def control(
         elif x_true is None:
             raise ValueError("displacement measurement needs the true positions")
         else:
-            measured = _points(x_true).copy()
+            measured = np.array(x_true, float).reshape(-1, 2)
         fix = np.ones(r, bool)
     else:
         estimate = bearing.reconstruct(bearings, visible, arrays.landmarks, 0, method="lsq",

@@ -13,7 +13,7 @@ LAYERS = {
     "errors": 0,
     "datatypes": 1,
     "geometry": 2, "lp": 2, "bearing": 2, "occupancy": 2,
-    "plan_arrays": 2, "runtime": 2.2,  # runtime builds on plan_arrays and bearing
+    "plan_arrays": 2, "cell_policy": 2.1, "runtime": 2.2,  # runtime builds on cell_policy, plan_arrays and bearing
     "cell_lp": 2.5, "routes": 2.5,  # build on lp and geometry respectively
     "stages": 3, "verify": 3,
     "artifacts": 4, "pipeline": 5,
