@@ -339,3 +339,78 @@ def landmark_coverage(map_: Map, space: FreeSpace, cells: int = 100) -> tuple[np
     pairs_l = np.tile(map_.landmarks, (len(points), 1))
     counts = space.visible(pairs_p, pairs_l).reshape(-1, n_landmarks).sum(axis=1)
     return points, counts
+
+
+# --------------------------------------------------------------------------- convex polygons
+
+
+def box_polygon(bounds: np.ndarray) -> np.ndarray:
+    """The bounds ``[xmin, ymin, xmax, ymax]`` as a CCW polygon, shape (4, 2)."""
+    xmin, ymin, xmax, ymax = bounds
+    return np.array([[xmin, ymin], [xmax, ymin], [xmax, ymax], [xmin, ymax]], float)
+
+
+def clip(polygon: np.ndarray, normal: np.ndarray, offset: float, tol: float) -> np.ndarray:
+    """Clip a convex CCW polygon by the half-plane ``normal · x <= offset`` (exact, Sutherland–Hodgman).
+
+    Vertices closer than ``tol`` to the previous kept vertex are dropped (ALGORITHMS §4.2).
+
+    Parameters
+    ----------
+    polygon : ndarray, shape (p, 2)
+    normal : ndarray, shape (2,)
+    offset : float
+    tol : float
+        Map tolerance (map units).
+
+    Returns
+    -------
+    ndarray, shape (p', 2)
+        The clipped polygon, CCW; possibly with fewer than 3 vertices when the half-plane
+        misses the polygon.
+    """
+    side = polygon @ normal - offset
+    if np.all(side <= 0):
+        return polygon
+    nxt = np.roll(np.arange(len(polygon)), -1)
+    out = []
+    for q in range(len(polygon)):
+        r = nxt[q]
+        if side[q] <= 0:
+            out.append(polygon[q])
+        if (side[q] < 0 < side[r]) or (side[r] < 0 < side[q]):
+            t = side[q] / (side[q] - side[r])
+            out.append(polygon[q] + t * (polygon[r] - polygon[q]))
+    kept: list[np.ndarray] = []
+    for v in out:
+        if not kept or np.hypot(*(v - kept[-1])) > tol:
+            kept.append(v)
+    if len(kept) > 1 and np.hypot(*(kept[0] - kept[-1])) <= tol:
+        kept.pop()
+    return np.array(kept, float).reshape(-1, 2)
+
+
+def polygon_rows(polygon: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Outward unit normals and offsets of a CCW polygon's edges, row ``q`` for ``v_q → v_{q+1}``.
+
+    Returns
+    -------
+    A : ndarray, shape (p, 2)
+    b : ndarray, shape (p,)
+        The polygon is ``{x : A x <= b}``.
+    """
+    edge = np.roll(polygon, -1, axis=0) - polygon
+    normal = np.column_stack([edge[:, 1], -edge[:, 0]])
+    normal /= np.hypot(normal[:, 0], normal[:, 1])[:, None]
+    return normal, np.einsum("ij,ij->i", normal, polygon)
+
+
+def point_polygon_distance(point: np.ndarray, polygon: np.ndarray, A: np.ndarray, b: np.ndarray) -> float:
+    """Exact distance from a point to a convex polygon (0 inside), map units."""
+    if np.all(A @ point <= b):
+        return 0.0
+    start = polygon
+    edge = np.roll(polygon, -1, axis=0) - start
+    t = np.clip(np.einsum("ij,ij->i", point - start, edge) / np.einsum("ij,ij->i", edge, edge), 0.0, 1.0)
+    nearest = start + t[:, None] * edge
+    return float(np.min(np.hypot(*(nearest - point).T)))
