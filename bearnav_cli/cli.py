@@ -371,7 +371,9 @@ def verify_command(
     plan_npz: Path = typer.Argument(..., help="plan.npz from `bearnav synthesize`."),
     starts: int = typer.Option(200, "--starts", help="Random free starts for the closed-loop check (0 = skip)."),
     seed: int = typer.Option(0, help="Seed of the random starts."),
-    speed: float = typer.Option(0.1, help="Constant speed of the closed loop, map units/s."),
+    speed: Optional[float] = typer.Option(
+        None, help="Constant speed of the closed loop, map units/s (the map's params: simulate, else 0.1)."
+    ),
     min_success: Optional[float] = typer.Option(None, help="Fail (exit 1) below this success rate, 0..1."),
     tree: Optional[Path] = typer.Option(None, help="tree.npz whose collision samples the plan must keep."),
     quiet: bool = QUIET,
@@ -386,6 +388,8 @@ def verify_command(
     _Quiet.enabled |= quiet
     loaded = artifacts.load(plan_npz, "plan")
     samples = artifacts.load(tree, ("tree", "simplified")).artifact.collision_samples if tree else None
+    if speed is None:  # the speed the map simulates at (the paper maps' units are not metres)
+        speed = pipeline.resolve_params("simulate", loaded.artifact.map.params).speed
     params = verify.Params(n_starts=starts, seed=seed, speed=speed, min_success=min_success)
     with _progress_bar() as progress:
         track = _progress_factory(progress)("verify")
