@@ -44,6 +44,17 @@ def load_map(path: Path) -> Map:
     return map_.run(map_.MapSource(spec=spec, file=path.name, sha256="bench"))
 
 
+def run_stages(map_obj: Map, stages: Sequence[str]) -> Any:
+    """Run ``stages`` (names after ``map``, in order) in-process with the map's own parameters."""
+    from bearnav_cli import pipeline
+
+    artifact: Any = map_obj
+    for name in stages:
+        stage = pipeline.STAGE_BY_NAME[name]
+        artifact = stage.module.run(artifact, pipeline.resolve_params(name, map_obj.params))
+    return artifact
+
+
 def timed(fn: Callable[..., Any], *args: Any, **kwargs: Any) -> tuple[float, Any]:
     """Call ``fn(*args, **kwargs)`` once.
 

@@ -38,13 +38,12 @@ import sys
 import time
 
 import numpy as np
-from common import README, REPO_DIR, load_map, machine_line, markdown_table, replace_section
+from common import README, REPO_DIR, load_map, machine_line, markdown_table, replace_section, run_stages
 
-from bearnav_cli import pipeline
 from bearnav_cli.datatypes import Plan
 from bearnav_cli.geometry import FreeSpace
 from bearnav_cli.runtime import PlanArrays
-from bearnav_cli.stages import decompose, rrtstar, simplify, simulate, synthesize
+from bearnav_cli.stages import simulate
 
 SECTION = "simulate"
 MAP = REPO_DIR / "maps" / "kitchen.yaml"
@@ -63,11 +62,7 @@ BUDGET_ROBOTS = 1000
 
 def kitchen_plan() -> Plan:
     """The kitchen map's plan, built in-process with the map's stage parameters."""
-    map_ = load_map(MAP)
-    tree = rrtstar.run(map_, pipeline.resolve_params("rrtstar", map_.params))
-    simplified = simplify.run(tree, pipeline.resolve_params("simplify", map_.params))
-    cells = decompose.run(simplified, pipeline.resolve_params("decompose", map_.params))
-    return synthesize.run(cells, pipeline.resolve_params("synthesize", map_.params))
+    return run_stages(load_map(MAP), ("rrtstar", "simplify", "decompose", "synthesize"))
 
 
 def per_robot_loop(plan: Plan, starts: np.ndarray, params: simulate.Params) -> tuple[np.ndarray, np.ndarray]:

@@ -33,12 +33,11 @@ import time
 
 import highspy
 import numpy as np
-from common import README, REPO_DIR, load_map, machine_line, markdown_table, replace_section
+from common import README, REPO_DIR, load_map, machine_line, markdown_table, replace_section, run_stages
 
 from bearnav_cli import lp as lp_module
-from bearnav_cli import pipeline
 from bearnav_cli.datatypes import Cells
-from bearnav_cli.stages import decompose, rrtstar, simplify, synthesize
+from bearnav_cli.stages import synthesize
 
 SECTION = "synthesize"
 MAP = REPO_DIR / "maps" / "kitchen.yaml"
@@ -63,10 +62,7 @@ class RecordingSolver(lp_module.LpSolver):
 
 def kitchen_cells() -> Cells:
     """The kitchen map's cells, built in-process with the map's stage parameters."""
-    map_ = load_map(MAP)
-    tree = rrtstar.run(map_, pipeline.resolve_params("rrtstar", map_.params))
-    simplified = simplify.run(tree, pipeline.resolve_params("simplify", map_.params))
-    return decompose.run(simplified, pipeline.resolve_params("decompose", map_.params))
+    return run_stages(load_map(MAP), ("rrtstar", "simplify", "decompose"))
 
 
 def edge_problems(cells: Cells) -> list[synthesize.CellProblem]:
