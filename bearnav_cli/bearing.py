@@ -368,20 +368,46 @@ def _scaled(x_hat: np.ndarray, lm: np.ndarray, f: np.ndarray, tol: float) -> np.
     return d / np.maximum(s, tol)[:, None, None]
 
 
-def _lsq(beta: np.ndarray, vis: np.ndarray, lm: np.ndarray, f: np.ndarray, threshold: float, tol: float):
-    """§6.2. Returns ``(ỹ (R, L, 2), x̂ (R, 2), usable (R,))``; rows not usable hold finite garbage."""
-    w = vis.astype(float)
+def _projector_sum(beta: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, ...]:
+    """``Σ_k w_k P_k`` with ``P_k = I − β_kβ_kᵀ`` as ``(a11, a22, a12)``, and its smallest eigenvalue, each (R,)."""
     bx, by = beta[..., 0], beta[..., 1]
     a11 = np.sum(w * (1.0 - bx * bx), axis=1)
     a22 = np.sum(w * (1.0 - by * by), axis=1)
     a12 = -np.sum(w * bx * by, axis=1)
+    return a11, a22, a12, 0.5 * (a11 + a22) - np.hypot(0.5 * (a11 - a22), a12)
+
+
+def fix_variance(bearings: Any, visible: Any, landmarks: Any, x_hat: Any, sigma: float, tol: float) -> np.ndarray:
+    """Variance of an ``lsq`` fix in its worst direction (map units²), shape (R,).
+
+    A bearing with angle noise ``σ`` (radians) places the robot on its line to within
+    ``σ·d`` at distance ``d``, so the information of the fix is ``Σ_k P_k/(σ d_k)²``; the
+    inverse of its smallest eigenvalue bounds the variance. Two nearly parallel bearings,
+    or landmarks far away, give a large one.
+    """
+    beta, vis = np.asarray(bearings, float), np.asarray(visible, bool)
+    d = _points(landmarks)[None] - _points(x_hat)[:, None, :]
+    dist2 = np.maximum(np.einsum("rlk,rlk->rl", d, d), tol * tol)
+    lam = _projector_sum(beta, np.where(vis, 1.0 / dist2, 0.0))[3]
+    return sigma * sigma / np.maximum(lam, 1e-300)
+
+
+def scaled_output(x_hat: Any, landmarks: Any, fixed: Any, tol: float) -> np.ndarray:
+    """``ỹ_k = (l_k − x̂)/max(‖l_f − x̂‖, tol)`` for every landmark, shape (R, 2L) (§6.2)."""
+    x = _points(x_hat)
+    return _scaled(x, _points(landmarks), _per_robot(fixed, len(x), np.int64, "fixed"), tol).reshape(len(x), -1)
+
+
+def _lsq(beta: np.ndarray, vis: np.ndarray, lm: np.ndarray, f: np.ndarray, threshold: float, tol: float):
+    """§6.2. Returns ``(ỹ (R, L, 2), x̂ (R, 2), usable (R,))``; rows not usable hold finite garbage."""
+    w = vis.astype(float)
+    a11, a22, a12, lam_min = _projector_sum(beta, w)
     count = vis.sum(axis=1)
     # Solve about the centroid of the visible landmarks: far from the map origin, Σ P_k l_k
     # would cancel most of its digits.
     centre = (w @ lm) / np.maximum(count, 1)[:, None]
     rel = lm[None, :, :] - centre[:, None, :]
     rhs = np.sum(w[..., None] * (rel - beta * _dot(beta, rel)[..., None]), axis=1)
-    lam_min = 0.5 * (a11 + a22) - np.hypot(0.5 * (a11 - a22), a12)
     det = a11 * a22 - a12 * a12
     solvable = (count >= 2) & (lam_min >= threshold) & (det > 0)
     det = np.where(solvable, det, 1.0)

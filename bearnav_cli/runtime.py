@@ -232,31 +232,6 @@ STALL_FIELD = 1e-6
 APPROACH_ALIGNMENT = math.radians(10.0)
 
 
-def _scaled_output(arrays: PlanArrays, x_hat: np.ndarray, fixed: np.ndarray, tol: float) -> np.ndarray:
-    """``ỹ_k = (l_k − x̂)/max(‖l_f − x̂‖, tol)`` for every landmark, shape (R, 2L) (ALGORITHMS §6.2)."""
-    d = arrays.landmarks[None] - x_hat[:, None, :]
-    scale = np.maximum(np.hypot(*d[np.arange(len(x_hat)), fixed].T), tol)
-    return (d / scale[:, None, None]).reshape(len(x_hat), -1)
-
-
-def fix_error(arrays: PlanArrays, bearings: np.ndarray, visible: np.ndarray, x_hat: np.ndarray,
-              sigma: float) -> np.ndarray:  # fmt: skip
-    """Predicted 3-sigma position error of an ``lsq`` fix (map units), shape (R,).
-
-    A bearing with angle noise ``σ`` places the robot on its line to within ``σ·d`` at
-    distance ``d``, so the information of the fix is ``Σ_k P_k/(σ d_k)²`` (``P_k`` the
-    projector across bearing ``k``); its smallest eigenvalue bounds the worst direction.
-    Two nearly parallel bearings, or landmarks far away, give a large error.
-    """
-    d = arrays.landmarks[None] - x_hat[:, None, :]
-    dist2 = np.maximum(np.einsum("rlk,rlk->rl", d, d), arrays.tol**2)
-    w = np.where(visible, 1.0 / dist2, 0.0)
-    bx, by = bearings[..., 0], bearings[..., 1]
-    a11, a22, a12 = np.sum(w * (1 - bx * bx), 1), np.sum(w * (1 - by * by), 1), -np.sum(w * bx * by, 1)
-    lam = 0.5 * (a11 + a22) - np.hypot(0.5 * (a11 - a22), a12)
-    return 3.0 * sigma / np.sqrt(np.maximum(lam, 1e-300))
-
-
 def control(
     arrays: PlanArrays,
     settings: ControlSettings,
@@ -318,12 +293,13 @@ def control(
         measured, fix = estimate.x_hat, estimate.usable.copy()
     # A scalar Kalman filter fuses the fixes with odometry: the prediction moves the last
     # estimate by the last command (its variance grows with the distance, odometry_drift per
-    # unit), a fix of variance σ_fix² (from σ and the bearing geometry, fix_error/3) corrects it,
+    # unit), a fix of variance σ_fix² (from σ and the bearing geometry, bearing.fix_variance) corrects it,
     # and a fix farther than 3 standard deviations from the prediction is rejected. Noise-free
     # (σ = 0) every fix is taken as it is.
     sigma_fix2 = np.zeros(r)
     if s.bearing_sigma > 0 and fix.any():
-        sigma_fix2[fix] = (fix_error(arrays, bearings[fix], visible[fix], measured[fix], s.bearing_sigma) / 3.0) ** 2
+        sigma_fix2[fix] = bearing.fix_variance(bearings[fix], visible[fix], arrays.landmarks, measured[fix],
+                                               s.bearing_sigma, arrays.tol)  # fmt: skip
         fix &= sigma_fix2 <= (s.max_fix_error / 3.0) ** 2
     cell, target, last_dir = state.cell.copy(), state.target.copy(), state.last_dir.copy()
     known = state.known.copy()
@@ -358,11 +334,11 @@ def control(
         if s.measurement == "displacement":
             y = displacement(arrays, x_hat[idx]) if displacements is None else displacements[idx].reshape(len(idx), -1)
         elif s.reconstruction == "lsq" or not fix[idx].all():
-            y = _scaled_output(arrays, x_hat[idx], f, s.tol)
+            y = bearing.scaled_output(x_hat[idx], arrays.landmarks, f, s.tol)
         else:
             rec = bearing.reconstruct(bearings[idx], visible[idx], arrays.landmarks, f, method=s.reconstruction,
                                       min_spread=s.min_spread, tol=s.tol)  # fmt: skip
-            y = np.where(rec.usable[:, None], rec.y, _scaled_output(arrays, x_hat[idx], f, s.tol))
+            y = np.where(rec.usable[:, None], rec.y, bearing.scaled_output(x_hat[idx], arrays.landmarks, f, s.tol))
         ui = apply_gain(arrays, c, y)
         stalled[idx] = np.hypot(*affine_field(arrays, c, x_hat[idx]).T) < STALL_FIELD * arrays.u_max[c]
         going = t >= 0

@@ -112,7 +112,7 @@ class Params:
         turned by ``ε'`` (rad), ``ε, ε' ~ N(0, odometry_noise²)``; 0 is the exact dynamics of §7.1.
     max_fix_error : float or None
         Use a noisy fix only if its predicted 3σ position error (from ``noise_deg`` and the
-        bearing geometry, :func:`bearnav_cli.runtime.fix_error`) is at most this (map units);
+        bearing geometry, :func:`bearnav_cli.bearing.fix_variance`) is at most this (map units);
         ``None``: every usable fix.
     starts : str
         ``map`` (the map's starts), ``random:N`` (N uniform free starts in the goal's
