@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from bearnav_cli.plan_arrays import CHUNK, PlanArrays, tree_costs
+from bearnav_cli.plan_arrays import CHUNK, PlanArrays
 
 # --------------------------------------------------------------------------- vectorised queries
 
@@ -186,8 +186,7 @@ def switch(
     unsafe = handed & ~outside
     if unsafe.any():
         idx = np.flatnonzero(unsafe)
-        rows = np.einsum("rqk,rk->rq", arrays.bar_A[c[idx]], p[idx]) + arrays.bar_b[c[idx]]
-        unsafe[idx] = np.min(rows, axis=1, initial=math.inf) < 0
+        unsafe[idx] = ~in_safe_set(arrays, c[idx], p[idx])
     move = outside | unsafe
     if move.any():
         c[move] = locate(arrays, p[move], tol, eps_sw)
@@ -255,7 +254,7 @@ def approach_target(arrays: PlanArrays, x: np.ndarray, nearest: int = 8) -> np.n
     if not len(p):
         return out
     nodes = arrays.nodes
-    cost = tree_costs(nodes, arrays.parent)
+    cost = arrays.node_cost
     dist = np.hypot(*(p[:, None, :] - nodes[None]).transpose(2, 0, 1))
     order = np.argsort(dist, axis=1, kind="stable")
     for width in (min(nearest, len(nodes)), len(nodes)):

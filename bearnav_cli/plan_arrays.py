@@ -89,7 +89,8 @@ class PlanArrays:
     ``gain[c] @ (landmarks − x).ravel() = field_a[c] − field_M[c] @ x``, and the rows padded
     to ``row_A`` (C, P, 2), ``row_b`` (C, P) for vectorised membership tests, the barrier rows
     padded the same way to ``bar_A`` (C, Q, 2), ``bar_b`` (C, Q) (padding rows ``0·x + inf``),
-    and ``cost_to_go`` (C,): the tree route length from each cell's exit point to the goal.
+    ``node_cost`` (N,): the tree route length from each node to the goal, and ``cost_to_go``
+    (C,): the same from each cell's exit point.
     """
 
     landmarks: np.ndarray
@@ -122,6 +123,7 @@ class PlanArrays:
     row_b: np.ndarray = dataclasses.field(init=False, repr=False)
     bar_A: np.ndarray = dataclasses.field(init=False, repr=False)
     bar_b: np.ndarray = dataclasses.field(init=False, repr=False)
+    node_cost: np.ndarray = dataclasses.field(init=False, repr=False)
     cost_to_go: np.ndarray = dataclasses.field(init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -162,6 +164,7 @@ class PlanArrays:
         put(self, "bar_A", _readonly(bar_A, float))
         put(self, "bar_b", _readonly(bar_b, float))
         node_cost = tree_costs(self.nodes, self.parent)
+        put(self, "node_cost", _readonly(node_cost, float))
         put(self, "cost_to_go", _readonly(np.where(up >= 0, node_cost[np.maximum(up, 0)], 0.0), float))
 
     def _check_shapes(self, n: int, c: int, n_lm: int) -> None:

@@ -389,6 +389,29 @@ def control(
                          np.where(steer[:, None], x_hat, 0.0))  # fmt: skip
 
 
+#: ``dt = min(DT_PER_DIAGONAL · D / v, DT_MAX)`` by default (ALGORITHMS §7.1).
+DT_PER_DIAGONAL = 0.0025
+DT_MAX = 0.2
+#: Blind travel on odometry lasts while 3σ stays below this fraction of D (the default barrier margin).
+BLIND_ERROR_PER_DIAGONAL = 0.01
+
+
+def timing(diagonal: float, speed: float, dt: float | None = None) -> tuple[float, float, float]:
+    """The loop constants of a map of diagonal ``D`` driven at ``speed`` (``α`` for the unicycle).
+
+    Returns
+    -------
+    dt : float
+        ``dt`` if given, else ``min(0.0025·D/speed, 0.2)`` (s).
+    eps_sw : float
+        Switching radius ``2·speed·dt`` (map units).
+    blind_error : float
+        ``0.01·D`` (map units), the default barrier margin.
+    """
+    dt = min(DT_PER_DIAGONAL * diagonal / speed, DT_MAX) if dt is None else dt
+    return dt, 2.0 * speed * dt, BLIND_ERROR_PER_DIAGONAL * diagonal
+
+
 class Controller:
     """The controller a robot runs: load ``plan.npz``, feed bearings at camera rate, get a command.
 
@@ -420,11 +443,10 @@ class Controller:
         """
         arrays = PlanArrays.from_npz(path)
         v = options.get("alpha", 0.1) if dynamics == "unicycle" else speed
-        if dt is None:
-            xmin, ymin, xmax, ymax = arrays.bounds
-            dt = min(0.0025 * math.hypot(xmax - xmin, ymax - ymin) / v, 0.2)
-        options.setdefault("eps_sw", 2.0 * v * dt)
-        options.setdefault("blind_error", 0.01 * math.hypot(*(arrays.bounds[2:] - arrays.bounds[:2])))
+        diagonal = math.hypot(*(arrays.bounds[2:] - arrays.bounds[:2]))
+        dt, eps_sw, blind_error = timing(diagonal, v, dt)
+        options.setdefault("eps_sw", eps_sw)
+        options.setdefault("blind_error", blind_error)
         # a real camera is never exact: with σ = 0 the filter would trust odometry over every
         # noisy fix (set it to the camera's angular noise)
         options.setdefault("bearing_sigma", math.radians(1.0))

@@ -29,7 +29,7 @@ import shapely
 from bearnav_cli import bearing, runtime
 from bearnav_cli.datatypes import Simulation
 from bearnav_cli.errors import InvalidParamsError
-from bearnav_cli.geometry import DEFAULT_CLEARANCE, FreeSpace
+from bearnav_cli.geometry import FreeSpace
 from bearnav_cli.routes import sample_starts
 from bearnav_cli.runtime import ControlSettings, ControlState, PlanArrays
 
@@ -38,9 +38,6 @@ log = logging.getLogger(__name__)
 
 #: A robot must move ``2·v·dt`` net over this many steps with a fix, or it stalls (ALGORITHMS §7.2).
 PROGRESS_WINDOW = 200
-#: ``dt = min(DT_PER_DIAGONAL · D / v, DT_MAX)`` by default (ALGORITHMS §7.1).
-DT_PER_DIAGONAL = 0.0025
-DT_MAX = 0.2
 #: How often (in steps) ``progress`` is called.
 PROGRESS_EVERY = 25
 #: Outcome of a robot still running (internal).
@@ -239,16 +236,15 @@ class Settings:
 def settings(plan, params: Params) -> Settings:
     """Resolve :class:`Params` against a plan (``dt`` from the map's diagonal, the plan's tolerance)."""
     v = params.alpha if params.dynamics == "unicycle" else params.speed
-    dt = params.dt if params.dt is not None else min(DT_PER_DIAGONAL * plan.map.diagonal / v, DT_MAX)
+    dt, eps_sw, blind_error = runtime.timing(plan.map.diagonal, v, params.dt)
     goal_tolerance = params.goal_tolerance if params.goal_tolerance is not None else float(plan.goal_tolerance)
-    eps_sw = 2.0 * v * dt
     control = ControlSettings(
         speed=params.speed, dt=dt, eps_sw=eps_sw, tol=plan.map.tol, dynamics=params.dynamics, alpha=params.alpha,
         beta=params.beta, clamp_reverse=params.clamp_reverse, turn_first=params.turn_first,
         measurement=params.measurement,
         reconstruction=params.reconstruction, min_spread=math.radians(params.min_spread_deg),
         hold_time=params.hold_time, odometry=params.odometry,
-        blind_error=DEFAULT_CLEARANCE * plan.map.diagonal,
+        blind_error=blind_error,
         bearing_sigma=math.radians(params.noise_deg),
         max_fix_error=math.inf if params.max_fix_error is None else params.max_fix_error,
     )  # fmt: skip
@@ -346,9 +342,8 @@ def step_limits(arrays: PlanArrays, starts: np.ndarray, s: Settings, params: Par
 
 def tree_routes(arrays: PlanArrays, starts: np.ndarray) -> np.ndarray:
     """``L_route = ‖x₀ − x_n‖ + cost(n)`` with ``n`` the start's nearest node (map units), shape (R,)."""
-    cost = runtime.tree_costs(arrays.nodes, arrays.parent)
     near = runtime.nearest_node(arrays, starts)
-    return np.hypot(*(starts - arrays.nodes[near]).T) + cost[near]
+    return np.hypot(*(starts - arrays.nodes[near]).T) + arrays.node_cost[near]
 
 
 class _Loop:
