@@ -496,9 +496,11 @@ class Controller:
     @property
     def arrived(self) -> bool:
         """The current estimate lies within the plan's goal tolerance of the goal: stop."""
-        if self.last is None or not (self.last.fix[0] or self.state.known[0]):
+        # the state's estimate, which odometry keeps current; the step's output is zero while the
+        # robot looks around, and (0, 0) may well lie within the tolerance of a goal near the origin
+        if not self.state.known[0]:
             return False
-        return bool(np.hypot(*(self.last.x_hat[0] - self.arrays.goal)) <= self.arrays.goal_tolerance)
+        return bool(np.hypot(*(self.state.x_hat[0] - self.arrays.goal)) <= self.arrays.goal_tolerance)
 
     @property
     def cell(self) -> int:
