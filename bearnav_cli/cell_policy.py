@@ -85,13 +85,21 @@ def lyapunov(arrays: PlanArrays, cell: np.ndarray, x: np.ndarray) -> np.ndarray:
     return np.einsum("rk,rk->r", arrays.exit_dir[c], p - arrays.exit_point[c])
 
 
-def barrier_values(arrays: PlanArrays, x: np.ndarray) -> np.ndarray:
+def barrier_values(arrays: PlanArrays, x: np.ndarray, where: np.ndarray | None = None) -> np.ndarray:
     """``min_k h_k(x)`` over every cell's barrier rows, shape (R, C); ``inf`` for a cell without rows.
 
-    ``>= 0`` exactly when ``x`` lies in the cell's safe set.
+    ``>= 0`` exactly when ``x`` lies in the cell's safe set. With ``where`` (bool, (R, C)) only
+    those pairs are evaluated (a point lies in a handful of the C cells) and the rest are ``-inf``.
     """
     p = _points(x)
-    return np.min(np.einsum("cqk,rk->rcq", arrays.bar_A, p) + arrays.bar_b[None], axis=2, initial=math.inf)
+    if where is None:
+        return np.min(np.einsum("cqk,rk->rcq", arrays.bar_A, p) + arrays.bar_b[None], axis=2, initial=math.inf)
+    h = np.full(where.shape, -math.inf)
+    r_idx, c_idx = np.nonzero(where)
+    if len(r_idx):
+        rows = np.einsum("nqk,nk->nq", arrays.bar_A[c_idx], p[r_idx]) + arrays.bar_b[c_idx]
+        h[r_idx, c_idx] = np.min(rows, axis=1, initial=math.inf)
+    return h
 
 
 def locate(arrays: PlanArrays, x: np.ndarray, tol: float | None = None, eps_sw: float = 0.0) -> np.ndarray:
@@ -122,12 +130,7 @@ def locate(arrays: PlanArrays, x: np.ndarray, tol: float | None = None, eps_sw: 
     near_exit = np.einsum("rck,rck->rc", gap, gap) <= eps_sw * eps_sw
     leaving = edge[None] & ((np.einsum("ck,rck->rc", arrays.exit_dir, gap) <= tol) | near_exit)
     candidate = inside & ~leaving
-    # barrier rows only where they matter: a point lies in a handful of the C cells
-    h = np.full(candidate.shape, -math.inf)
-    r_idx, c_idx = np.nonzero(candidate)
-    if len(r_idx):
-        rows_h = np.einsum("nqk,nk->nq", arrays.bar_A[c_idx], p[r_idx]) + arrays.bar_b[c_idx]
-        h[r_idx, c_idx] = np.min(rows_h, axis=1, initial=math.inf)
+    h = barrier_values(arrays, p, candidate)
     route = np.where(edge[None], np.hypot(gap[..., 0], gap[..., 1]) + arrays.cost_to_go[None], 0.0)
     route = np.where(edge[None], route, np.hypot(*(p - arrays.goal).T)[:, None])
     safe = candidate & (h >= 0)
