@@ -369,6 +369,22 @@ def _prepared(problem: CellProblem, params: Params, space: str, L: np.ndarray, c
     return PreparedCell(problem, space, L, checker, template, h_scale, v_scale)
 
 
+def _kappa_sweep(prepared: PreparedCell, params: Params, solver: LpSolver, fixed: tuple, columns: tuple) -> tuple:
+    """Solve with ``κ, κ/2, …`` (``halvings`` times) until the LP is not infeasible.
+
+    Returns the last result, its ``κ``, ``c_h``, ``c_v``, row upper bounds and the number of solves.
+    """
+    template = prepared.template
+    for attempt in range(params.halvings + 1):
+        kappa = params.kappa * 0.5**attempt
+        c_h, c_v = kappa * params.u_max / prepared.h_scale, kappa * params.u_max / prepared.v_scale
+        lower, upper = template.row_bounds(c_h, c_v)
+        result = solver.solve(*fixed, lower, upper, *columns)
+        if result.status is not LpStatus.INFEASIBLE:
+            break
+    return result, kappa, c_h, c_v, upper, attempt + 1
+
+
 def solve_prepared(prepared: PreparedCell, params: Params, solver: LpSolver) -> SolveOutcome:
     """SOLVE_CELL's loop (§5.3): halve ``κ`` while infeasible, then the least-violation LP."""
     u_max = params.u_max
@@ -384,24 +400,17 @@ def solve_prepared(prepared: PreparedCell, params: Params, solver: LpSolver) -> 
     bounds = [(template.col_lower, strict)]
     if params.clf_margin > 0:
         bounds.append((template.col_lower, template.col_upper))
-    status, attempts, found = CellStatus.SOLVER_FAILURE, 0, False
-    for relaxed_clf, columns in enumerate(bounds):
-        for attempt in range(params.halvings + 1):
-            kappa = params.kappa * 0.5**attempt
-            c_h, c_v = kappa * u_max / prepared.h_scale, kappa * u_max / prepared.v_scale
-            lower, upper = template.row_bounds(c_h, c_v)
-            result = solver.solve(*fixed, lower, upper, *columns)
-            attempts += 1
-            if result.status is LpStatus.OPTIMAL:
-                status = CellStatus.CERTIFIED if attempt == 0 and not relaxed_clf else CellStatus.RELAXED
-                found = True
-                break
-            if result.status is not LpStatus.INFEASIBLE:
-                found = True  # a solver failure: nothing to relax
-                break
-        if found:
+    attempts = 0
+    for columns in bounds:
+        result, kappa, c_h, c_v, upper, tries = _kappa_sweep(prepared, params, solver, fixed, columns)
+        attempts += tries
+        if result.status is not LpStatus.INFEASIBLE:  # optimal, or a failure relaxing cannot mend
             break
-    if not found:
+    if result.status is LpStatus.OPTIMAL:
+        status = CellStatus.CERTIFIED if attempts == 1 else CellStatus.RELAXED
+    else:
+        status = CellStatus.SOLVER_FAILURE
+    if result.status is LpStatus.INFEASIBLE:  # at every κ with either CLF bound: the least violation
         build = vertex_template if params.lp_form == "vertex" else dual_template
         lv = build(prepared.problem, prepared.L, u_max, params.w_h, params.w_v, least_violation=True)
         result = lv.instantiate(c_h, c_v).solve(solver)
