@@ -76,13 +76,18 @@ def _edges(nodes: np.ndarray, parent: np.ndarray) -> np.ndarray:
 
 def plot_cells(ax: plt.Axes, cells: Cells, status: np.ndarray | None = None) -> plt.Axes:
     """Cell outlines; filled by synthesis status when ``status`` (shape (C,)) is given."""
-    for c in range(cells.n_cells):
-        v = cells.vertices(c)
-        closed = np.vstack([v, v[:1]])
+    return _draw_cells(ax, cells.cell_vertices, cells.cell_vertex_offsets, status)
+
+
+def _draw_cells(ax: plt.Axes, vertices: np.ndarray, offsets: np.ndarray, status: np.ndarray | None, *,
+                fill: float = 0.25, line: float = 0.6, lw: float = 0.4, legend: bool = True) -> plt.Axes:  # fmt: skip
+    """Cells given as coords + offsets: outlines, and fills by status when given."""
+    for c in range(len(offsets) - 1):
+        v = vertices[offsets[c] : offsets[c + 1]]
         if status is not None:
-            ax.fill(*v.T, color=STATUS_COLORS[CellStatus(int(status[c]))], alpha=0.25, lw=0, zorder=0.5)
-        ax.plot(*closed.T, color="#6a51a3", lw=0.4, alpha=0.6, zorder=0.6)
-    if status is not None:
+            ax.fill(*v.T, color=STATUS_COLORS[CellStatus(int(status[c]))], alpha=fill, lw=0, zorder=0.5)
+        ax.plot(*np.vstack([v, v[:1]]).T, color="#6a51a3", lw=lw, alpha=line, zorder=0.6)
+    if status is not None and legend:
         for value in sorted({int(s) for s in status}):
             name = CellStatus(value).name.lower().replace("_", " ")
             ax.fill([], [], color=STATUS_COLORS[CellStatus(value)], alpha=0.5, label=f"cells: {name}")
@@ -143,8 +148,8 @@ def plot_field(ax: plt.Axes, plan: Plan, *, arrows: int = 40) -> plt.Axes:
     return ax
 
 
-def plot_tree(ax: plt.Axes, tree: Tree | Cells, *, color: str = "#1f77b4", lw: float = 0.8, alpha: float = 1.0,
-              nodes: bool = False, label: str | None = "tree") -> plt.Axes:
+def plot_tree(ax: plt.Axes, tree: Tree | Cells | Simulation, *, color: str = "#1f77b4", lw: float = 0.8,
+              alpha: float = 1.0, nodes: bool = False, label: str | None = "tree") -> plt.Axes:
     """Tree edges (child → parent) and, optionally, its nodes."""
     if len(tree.nodes) > 1:
         segments = _edges(tree.nodes, tree.parent)
@@ -169,14 +174,9 @@ OUTCOME_NAMES = {0: "success", 1: "collision", 2: "stall", 3: "timeout", 4: "los
 
 def plot_sim_background(ax: plt.Axes, sim: Simulation) -> plt.Axes:
     """The simulation's cells (outlines, filled by status) and tree, faintly."""
-    for c in range(len(sim.cell_vertex_offsets) - 1):
-        v = sim.cell_vertices[sim.cell_vertex_offsets[c] : sim.cell_vertex_offsets[c + 1]]
-        ax.fill(*v.T, color=STATUS_COLORS[CellStatus(int(sim.cell_status[c]))], alpha=0.12, lw=0, zorder=0.5)
-        ax.plot(*np.vstack([v, v[:1]]).T, color="#6a51a3", lw=0.3, alpha=0.35, zorder=0.6)
-    segments = _edges(sim.nodes, sim.parent)
-    ax.add_collection(LineCollection(segments, colors="#1f77b4", linewidths=0.8, alpha=0.6, zorder=2,
-                                     label="tree"))  # fmt: skip
-    return ax
+    _draw_cells(ax, sim.cell_vertices, sim.cell_vertex_offsets, sim.cell_status, fill=0.12, line=0.35, lw=0.3,
+                legend=False)  # fmt: skip
+    return plot_tree(ax, sim, lw=0.8, alpha=0.6)
 
 
 def plot_trajectories(ax: plt.Axes, sim: Simulation, *, limit: int = 400) -> plt.Axes:
