@@ -68,6 +68,13 @@ _CELL_ENTRIES = {
     "fixed_landmark": ("i", 1),
     "s_min": ("f", 1),
     "s_max": ("f", 1),
+    "cell_flags": ("i", 1),
+    "certificate": ("U", 0),
+    "cell_exit_row": ("i", 1),
+    "cell_rank": ("f", 1),
+    "exit_inset": ("f", 0),
+    "node_added": ("b", 1),
+    "free_coverage": ("f", 0),
 }
 
 _PLAN_ENTRIES = {
@@ -81,15 +88,24 @@ _PLAN_ENTRIES = {
     "margin_v": ("f", 1),
     "status": ("i", 1),
     "goal_tolerance": ("f", 0),
+    "tolerance": ("f", 1),
+    "plan_tolerance": ("f", 0),
 }
 
 KINDS: dict[str, Kind] = {
     "map": Kind("map", "bearnav.map/1", "map.json", {}),
     "tree": Kind("tree", "bearnav.tree/1", "tree.npz", _TREE_ENTRIES),
     "simplified": Kind("simplified", "bearnav.simplified/1", "simplified.npz", _TREE_ENTRIES),
-    "cells": Kind("cells", "bearnav.cells/1", "cells.npz", {**_CELL_ENTRIES, "cell_flags": ("i", 1)}),
-    "plan": Kind("plan", "bearnav.plan/1", "plan.npz", _PLAN_ENTRIES),
+    "cells": Kind("cells", "bearnav.cells/2", "cells.npz", _CELL_ENTRIES),
+    "plan": Kind("plan", "bearnav.plan/2", "plan.npz", _PLAN_ENTRIES),
     "simulation": Kind("simulation", "bearnav.sim/1", "sim.npz", {"map": ("U", 0), **SIMULATION_KEYS}),
+}
+
+
+#: Schemas of earlier versions, with what to do about a file that has one.
+RETIRED_SCHEMAS = {
+    "bearnav.cells/1": "cells without composable certificates; re-run `bearnav plan MAP.yaml --force`",
+    "bearnav.plan/1": "per-cell certificates only; re-run `bearnav plan MAP.yaml --force` to get bearnav.plan/2",
 }
 
 
@@ -209,11 +225,8 @@ def entries_of(artifact: Any) -> dict[str, Any]:
 
 
 def _stats_of(artifact: Any, stats: dict | None) -> dict:
-    """Manifest statistics; a plan also keeps its cells' flags there (plan.npz has no key for them)."""
-    stats = dict(stats or {})
-    if isinstance(artifact, Plan):
-        stats["cell_flags"] = artifact.cells.cell_flags.tolist()
-    return stats
+    """Manifest statistics (a copy)."""
+    return dict(stats or {})
 
 
 def _from_entries(kind: str, entries: dict[str, Any], manifest: dict) -> Any:
@@ -230,9 +243,8 @@ def _from_entries(kind: str, entries: dict[str, Any], manifest: dict) -> Any:
         return Simulation(map=map_, stats=stats, **values)
     cell_arrays = {key: entries[key] for key in CELL_KEYS}
     if kind == "cells":
-        return Cells(map=map_, cell_flags=entries["cell_flags"], stats=stats, **cell_arrays)
-    flags = stats.get("cell_flags", [0] * len(entries["cell_node"]))
-    cells = Cells(map=map_, cell_flags=flags, **cell_arrays)
+        return Cells(map=map_, stats=stats, **cell_arrays)
+    cells = Cells(map=map_, **cell_arrays)
     if not np.array_equal(entries["landmarks"], map_.landmarks):
         raise ArtifactError("landmarks differ from the embedded map's", field="landmarks")
     return Plan(cells=cells, stats=stats, **{key: entries[key] for key in PLAN_KEYS if key != "landmarks"})
@@ -356,6 +368,9 @@ def load(path: str | os.PathLike, expect: str | tuple[str, ...] | None = None) -
     schema = manifest.get("schema")
     kind = kind_of_schema(schema) if isinstance(schema, str) else None
     if kind is None:
+        if schema in RETIRED_SCHEMAS:
+            raise ArtifactError(f"is a {schema} artifact, which this version no longer reads ({RETIRED_SCHEMAS[schema]})",
+                                file=str(path), field="manifest.schema")  # fmt: skip
         raise ArtifactError(f"unknown schema {schema!r}", file=str(path), field="manifest.schema")
     wanted = (expect,) if isinstance(expect, str) else expect
     if wanted and kind not in wanted:

@@ -143,6 +143,16 @@ class Map:
         """Geometric tolerance ``1e-9·D`` of every predicate (ALGORITHMS §0)."""
         return 1e-9 * self.diagonal
 
+    @property
+    def free_bounds(self) -> np.ndarray:
+        """``B_r``: the bounds shrunk by the robot radius, where the robot's centre may go (ALGORITHMS §11.1).
+
+        The bounds are walls: a robot of radius ρ touches ``∂B`` with its centre on ``∂B_r``.
+        Shape (4,), ``[xmin + ρ, ymin + ρ, xmax − ρ, ymax − ρ]``.
+        """
+        r = max(0.0, float(self.robot_radius))
+        return self.bounds + np.array([r, r, -r, -r])
+
     def to_json(self) -> dict:
         """The ``map.json`` document without its manifest."""
         return {
@@ -331,8 +341,21 @@ class Cells:
         Landmark ``f`` that rescales bearings in each cell (ALGORITHMS §5.5).
     s_min, s_max : ndarray, shape (C,)
         Exact smallest and largest distance from ``l_f`` to the cell (map units).
-    cell_flags : ndarray of int8, shape (C,)
+    cell_flags : ndarray of int64, shape (C,)
         :class:`CellFlag` bits.
+    certificate : {"funnel", "paper"}
+        ``funnel``: every cell is obstacle-free and its exit face lies in its parent cell, so the
+        certificates compose (ALGORITHMS §11); ``paper``: the §4 cells, per-cell certificates only.
+    cell_exit_row : ndarray of int64, shape (C,)
+        Index of the exit row among each cell's own rows (local, 0-based); ``-1`` for the goal cell.
+    cell_rank : ndarray, shape (C,)
+        Rank of the switching policy: the cost-to-go of the cell's node (0 for the goal cell).
+    exit_inset : float
+        ``δ_e``: every exit face lies in its parent cell eroded by this (map units; 0 for ``paper``).
+    node_added : ndarray of bool, shape (N,)
+        Nodes added by densification (ALGORITHMS §11.5), not by the tree stages.
+    free_coverage : float
+        ``area(D ∩ F_m) / area(F_m)`` as built (NaN for ``paper``: its cells are not a certified domain).
     stats : dict
         Statistics for the manifest.
     """
@@ -357,12 +380,50 @@ class Cells:
     s_min: np.ndarray
     s_max: np.ndarray
     cell_flags: np.ndarray
+    certificate: str
+    cell_exit_row: np.ndarray
+    cell_rank: np.ndarray
+    exit_inset: float
+    node_added: np.ndarray
+    free_coverage: float
     stats: dict = field(default_factory=dict, compare=False)
 
     def __post_init__(self) -> None:
         _check_cell_arrays(self)
-        c = len(self.cell_node)
-        object.__setattr__(self, "cell_flags", frozen_array(self.cell_flags, np.int8, (c,), "cell_flags"))
+        c, n = len(self.cell_node), len(self.nodes)
+        put = object.__setattr__
+        put(self, "cell_flags", frozen_array(self.cell_flags, np.int64, (c,), "cell_flags"))
+        put(self, "certificate", str(self.certificate))
+        if self.certificate not in CERTIFICATES:
+            raise ArtifactError(f"must be one of {', '.join(CERTIFICATES)}, got {self.certificate!r}",
+                                field="certificate")  # fmt: skip
+        put(self, "cell_exit_row", frozen_array(self.cell_exit_row, np.int64, (c,), "cell_exit_row"))
+        put(self, "cell_rank", frozen_array(self.cell_rank, float, (c,), "cell_rank"))
+        put(self, "node_added", frozen_array(self.node_added, bool, (n,), "node_added"))
+        put(self, "exit_inset", float(self.exit_inset))
+        put(self, "free_coverage", float(self.free_coverage))
+        counts = np.diff(self.cell_row_offsets)
+        goal = self.parent[self.cell_node] == -1
+        if np.any(self.cell_exit_row[goal] != -1) or np.any(
+            (self.cell_exit_row[~goal] < 0) | (self.cell_exit_row[~goal] >= counts[~goal])
+        ):
+            raise ArtifactError("must index one of the cell's rows (-1 exactly for the goal cell)",
+                                field="cell_exit_row")  # fmt: skip
+        if not (np.all(np.isfinite(self.cell_rank)) and math.isfinite(self.exit_inset) and self.exit_inset >= 0):
+            raise ArtifactError("contains NaN, infinity or a negative inset", field="exit_inset")
+
+    @property
+    def is_funnel(self) -> bool:
+        """Whether the cells compose (ALGORITHMS §11)."""
+        return self.certificate == "funnel"
+
+    def exit_row(self, c: int) -> tuple[np.ndarray, float] | None:
+        """``(A_k, b_k)`` of cell ``c``'s exit row, or ``None`` for the goal cell."""
+        k = int(self.cell_exit_row[c])
+        if k < 0:
+            return None
+        r = self.cell_row_offsets[c] + k
+        return self.cell_A[r], float(self.cell_b[r])
 
     @property
     def n_cells(self) -> int:
@@ -388,14 +449,23 @@ class Cells:
 
     def arrays(self) -> dict[str, np.ndarray]:
         """The data entries of ``cells.npz`` (without ``manifest`` and ``map``)."""
-        return {name: getattr(self, name) for name in CELL_KEYS + ("cell_flags",)}
+        return {name: _entry(getattr(self, name)) for name in CELL_KEYS}
 
 
-#: Data keys common to ``cells.npz`` and ``plan.npz`` (DESIGN §3.2).
+def _entry(value: Any) -> Any:
+    """A data entry as artifacts store it: texts stay ``str`` (a 0-d text entry), the rest arrays."""
+    return value if isinstance(value, str) else np.asarray(value)
+
+
+#: ``Cells.certificate`` values (DESIGN §3.3).
+CERTIFICATES = ("funnel", "paper")
+
+#: Data keys common to ``cells.npz`` and ``plan.npz`` (DESIGN §3.2–3.3).
 CELL_KEYS = (
     "nodes", "parent", "collision_samples", "cell_node", "cell_A", "cell_b", "cell_row_offsets",
     "cell_vertices", "cell_vertex_offsets", "exit_point", "exit_dir", "cbf_A", "cbf_b", "cbf_offsets",
-    "cell_landmarks", "fixed_landmark", "s_min", "s_max",
+    "cell_landmarks", "fixed_landmark", "s_min", "s_max", "cell_flags", "certificate", "cell_exit_row",
+    "cell_rank", "exit_inset", "node_added", "free_coverage",
 )  # fmt: skip
 
 
@@ -438,8 +508,9 @@ def _check_cell_arrays(obj: Any) -> None:
             raise ArtifactError("contains NaN or infinity", field=name)
 
 
-#: Data keys that ``plan.npz`` adds to the cell keys (DESIGN §3.2).
-PLAN_KEYS = ("landmarks", "gain", "c_h", "c_v", "u_max", "margin_h", "margin_v", "status", "goal_tolerance")
+#: Data keys that ``plan.npz`` adds to the cell keys (DESIGN §3.2–3.3).
+PLAN_KEYS = ("landmarks", "gain", "c_h", "c_v", "u_max", "margin_h", "margin_v", "status", "goal_tolerance",
+             "tolerance", "plan_tolerance")  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -460,6 +531,11 @@ class Plan:
         :class:`CellStatus` of each cell.
     goal_tolerance : float
         Success radius around the goal (map units).
+    tolerance : ndarray, shape (C,)
+        ``δ_c``, the position error each cell's certificate tolerates (ALGORITHMS §11.4, map
+        units); NaN where none (``paper`` cells).
+    plan_tolerance : float
+        ``δ* = min(min_c δ_c, δ_e / 2)`` (NaN for ``paper``).
     stats : dict
         Statistics for the manifest.
     """
@@ -473,6 +549,8 @@ class Plan:
     margin_v: np.ndarray
     status: np.ndarray
     goal_tolerance: float
+    tolerance: np.ndarray
+    plan_tolerance: float
     stats: dict = field(default_factory=dict, compare=False)
 
     def __post_init__(self) -> None:
@@ -482,6 +560,8 @@ class Plan:
             object.__setattr__(self, name, frozen_array(getattr(self, name), float, (c,), name))
         object.__setattr__(self, "status", frozen_array(self.status, np.int8, (c,), "status"))
         object.__setattr__(self, "goal_tolerance", float(self.goal_tolerance))
+        object.__setattr__(self, "tolerance", frozen_array(self.tolerance, float, (c,), "tolerance"))
+        object.__setattr__(self, "plan_tolerance", float(self.plan_tolerance))
         for name in ("gain", "c_v", "u_max"):
             if not np.all(np.isfinite(getattr(self, name))):
                 raise ArtifactError("contains NaN or infinity", field=name)
@@ -498,7 +578,7 @@ class Plan:
 
     def arrays(self) -> dict[str, np.ndarray]:
         """The data entries of ``plan.npz`` (without ``manifest`` and ``map``): exactly DESIGN §3.2."""
-        out = {name: getattr(self.cells, name) for name in CELL_KEYS}
+        out = self.cells.arrays()
         out.update({name: np.asarray(getattr(self, name)) for name in PLAN_KEYS if name != "landmarks"})
         out["landmarks"] = self.landmarks
         return out

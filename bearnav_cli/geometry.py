@@ -87,15 +87,26 @@ class FreeSpace:
     tol: float
     obstacles: shapely.Geometry
     raw_obstacles: shapely.Geometry
+    sight_bounds: np.ndarray | None = None
 
     @classmethod
     def from_map(cls, map_: Map) -> FreeSpace:
-        """Prepare the union of the map's inflated and raw obstacles."""
+        """Prepare the union of the map's inflated and raw obstacles.
+
+        ``bounds`` is ``B_r``, the map's bounds shrunk by the robot radius (the bounds are walls,
+        ALGORITHMS §11.1): every robot query (free points, segments, clearance, starts) uses it.
+        ``sight_bounds`` keeps the map's own ``B``, where landmarks live and sight lines run.
+        """
         obstacles = shapely.union_all([to_shapely(p) for p in map_.obstacles])
         raw = shapely.union_all([to_shapely(p) for p in map_.raw_obstacles])
         shapely.prepare(obstacles)
         shapely.prepare(raw)
-        return cls(np.asarray(map_.bounds, float), map_.tol, obstacles, raw)
+        return cls(map_.free_bounds, map_.tol, obstacles, raw, np.asarray(map_.bounds, float))
+
+    @property
+    def outer_bounds(self) -> np.ndarray:
+        """The map's bounds ``B`` (landmarks, line of sight, sampling), shape (4,)."""
+        return self.bounds if self.sight_bounds is None else self.sight_bounds
 
     def with_clearance(self, clearance: float) -> FreeSpace:
         """The space a planner keeps ``clearance`` away from: ``O`` grown by it, and a band of that width along ``∂B``.
@@ -111,18 +122,17 @@ class FreeSpace:
         """
         if clearance <= 0:
             return self
-        box = shapely.box(*self.bounds)
-        band = shapely.difference(box, shapely.buffer(box, -clearance, join_style="mitre"))
+        # the band covers B \ B_r too, so a segment leaving B_r meets it even when the caller
+        # skips the box test (samples are drawn in B)
+        inner = shapely.buffer(shapely.box(*self.bounds), -clearance, join_style="mitre")
+        band = shapely.difference(shapely.box(*self.outer_bounds), inner)
         grown = shapely.union(inflate(self.obstacles, clearance), band)
         shapely.prepare(grown)
-        return FreeSpace(self.bounds, self.tol, grown, self.raw_obstacles)
+        return FreeSpace(self.bounds, self.tol, grown, self.raw_obstacles, self.sight_bounds)
 
     def wall_clearance(self, point: np.ndarray) -> float:
         """Distance from a point to ``O`` and to the walls ``∂B`` (map units)."""
-        p = np.asarray(point, float).reshape(2)
-        xmin, ymin, xmax, ymax = self.bounds
-        walls = min(p[0] - xmin, xmax - p[0], p[1] - ymin, ymax - p[1])
-        return float(min(walls, self.clearance(p)[0]))
+        return float(self.clearance(np.asarray(point, float).reshape(1, 2))[0])
 
     def planning_clearance(self, requested: float | None, goal: np.ndarray, diagonal: float) -> float:
         """The clearance a planner uses: ``requested`` (``None``: ``DEFAULT_CLEARANCE·D``), capped at
@@ -151,7 +161,7 @@ class FreeSpace:
         return np.tile(self.bounds[:2], 2), np.tile(self.bounds[2:], 2)
 
     def in_bounds(self, points: np.ndarray) -> np.ndarray:
-        """Whether each point lies in the closed box ``B``; shape (n,) bool."""
+        """Whether each point lies in the closed box ``B_r`` (the bounds less the robot radius); shape (n,) bool."""
         p = np.asarray(points, float).reshape(-1, 2)
         return ((p >= self.bounds[:2]) & (p <= self.bounds[2:])).all(axis=1)
 
@@ -270,8 +280,9 @@ class FreeSpace:
         -------
         list of shapely.Geometry, length L
         """
-        box = shapely.box(*self.bounds)
-        far = 4.0 * float(np.hypot(*(self.bounds[2:] - self.bounds[:2])))
+        outer = self.outer_bounds
+        box = shapely.box(*outer)
+        far = 4.0 * float(np.hypot(*(outer[2:] - outer[:2])))
         rings = []
         for part in shapely.get_parts(self.raw_obstacles):
             for ring in (part.exterior, *part.interiors):
@@ -295,11 +306,13 @@ class FreeSpace:
         return regions
 
     def clearance(self, points: np.ndarray) -> np.ndarray:
-        """Distance from each point to ``O`` (0 inside), shape (n,); ``inf`` without obstacles."""
+        """Distance from each point to ``O`` and to the walls ``∂B_r`` (0 inside ``O``), shape (n,)."""
         p = np.asarray(points, float).reshape(-1, 2)
+        xmin, ymin, xmax, ymax = self.bounds
+        walls = np.min(np.column_stack([p[:, 0] - xmin, xmax - p[:, 0], p[:, 1] - ymin, ymax - p[:, 1]]), axis=1)
         if self.obstacles.is_empty:
-            return np.full(len(p), np.inf)
-        return shapely.distance(self.obstacles, shapely.points(p))
+            return walls
+        return np.minimum(walls, shapely.distance(self.obstacles, shapely.points(p)))
 
     def component_of(self, point: np.ndarray) -> shapely.Geometry:
         """The connected component of ``B \\ O`` that contains ``point`` (empty if none)."""

@@ -17,10 +17,12 @@ from dataclasses import dataclass
 
 import numpy as np
 import shapely
+import shapely.ops
 
 from bearnav_cli.barriers import cbf_rows, corridor_rows, goal_cbf_rows, wall_rows
 from bearnav_cli.datatypes import CellFlag, Cells, Tree, cell_list
 from bearnav_cli.errors import ArtifactError, InvalidParamsError
+from bearnav_cli.funnel import ObstaclePieces, Region, coverage_domain, depth, exit_interval, funnel_region, neck_rows
 from bearnav_cli.geometry import (
     DEFAULT_CLEARANCE,
     FreeSpace,
@@ -31,13 +33,14 @@ from bearnav_cli.geometry import (
     polygon_rows,
 )
 
-VERSION = 2
+VERSION = 3
 log = logging.getLogger(__name__)
 
 #: Re-exported: the cell and barrier helpers are part of this stage's interface.
 __all__ = ["box_polygon", "cbf_rows", "clip", "corridor_rows", "goal_cbf_rows", "point_polygon_distance",
            "polygon_rows", "wall_rows", "Params", "run", "summary"]  # fmt: skip
 
+CELL_MODES = ("funnel", "funnel-local", "paper")
 BARRIERS = ("corridor", "wedge")
 BISECTOR_RULES = ("crossing", "parent")
 CBF_APEXES = ("child", "parent")
@@ -46,12 +49,26 @@ CBF_FILTERS = ("both", "projection", "cell")
 
 @dataclass(frozen=True)
 class Params:
-    """Parameters of the decomposition (ALGORITHMS §4, §5.4).
+    """Parameters of the decomposition (ALGORITHMS §4, §5.4, §11).
 
     Attributes
     ----------
+    cells : {"funnel", "funnel-local", "paper"}
+        ``funnel`` (default): obstacle-free convex cells that compose (ALGORITHMS §11.5): the
+        corridor region of each edge, necked where its exit face would leave the parent cell,
+        and densified until the cells cover ``coverage_target`` of ``F_m``. ``funnel-local``
+        starts each region from the §4.1 cell (bisector rows). ``paper``: the §4 cells with
+        per-cell barrier rows, to reproduce the papers (the options below marked *paper* apply).
+    exit_inset : float or None
+        ``δ_e`` (funnel): every exit face lies in its parent cell eroded by this (map units);
+        ``None`` means half the barrier margin, capped at half the smallest depth of a node in
+        its own cell.
+    coverage_target : float
+        Funnel: densify until the cells cover this fraction of ``F_m`` (ALGORITHMS §11.5 step 3).
+    max_added_nodes : int
+        Funnel: at most this many leaf nodes are added by densification.
     bisector_rule : {"crossing", "parent"}
-        ``crossing`` drops every bisector that crosses the edge (the authors' code);
+        *paper* and ``funnel-local``. ``crossing`` drops every bisector that crosses the edge (the authors' code);
         ``parent`` drops only the parent's (paper B's text; can cut the edge, warns).
     cbf_apex : {"child", "parent"}
         Apex of the barrier wedge; ``parent`` reproduces the paper's degenerate LP (warns).
@@ -72,6 +89,10 @@ class Params:
         (map units); ``None`` means ``0.01·D``.
     """
 
+    cells: str = "funnel"
+    exit_inset: float | None = None
+    coverage_target: float = 0.99
+    max_added_nodes: int = 200
     bisector_rule: str = "crossing"
     cbf_apex: str = "child"
     cbf_filter: str = "both"
@@ -82,7 +103,17 @@ class Params:
     def __post_init__(self) -> None:
         if self.barrier_margin is not None and not (self.barrier_margin >= 0 and math.isfinite(self.barrier_margin)):
             raise InvalidParamsError(f"must be zero or positive, got {self.barrier_margin}", field="barrier_margin")
+        if self.exit_inset is not None and not (self.exit_inset >= 0 and math.isfinite(self.exit_inset)):
+            raise InvalidParamsError(f"must be zero or positive, got {self.exit_inset}", field="exit_inset")
+        if isinstance(self.coverage_target, bool) or not 0.0 <= self.coverage_target <= 1.0:
+            raise InvalidParamsError(f"must lie in [0, 1], got {self.coverage_target}", field="coverage_target")
+        if isinstance(self.max_added_nodes, bool) or not isinstance(self.max_added_nodes, int) or not (
+            0 <= self.max_added_nodes <= 100_000
+        ):
+            raise InvalidParamsError(f"must be an integer in [0, 100000], got {self.max_added_nodes!r}",
+                                     field="max_added_nodes")  # fmt: skip
         for name, allowed in (
+            ("cells", CELL_MODES),
             ("barrier", BARRIERS),
             ("bisector_rule", BISECTOR_RULES),
             ("cbf_apex", CBF_APEXES),
@@ -254,59 +285,171 @@ def fixed_landmark(
     return int(chosen[best]), 0.0, float(s_max[best]), CellFlag.LANDMARK_INSIDE
 
 
-# --------------------------------------------------------------------------- the stage
+# --------------------------------------------------------------------------- funnel cells (ALGORITHMS §11.5)
 
 
-def run(tree: Tree, params: Params = Params(), progress: Callable[[int, int], None] | None = None) -> Cells:
-    """Cut the bounds into one convex cell per node of a (simplified) tree.
+@dataclass
+class _Layout:
+    """The cells of one decomposition before landmarks: per cell a region, exit data and barrier rows."""
 
-    Parameters
-    ----------
-    tree : Tree
-        The simplified tree (node 0 at the goal) with its collision samples.
-    params : Params
-    progress : callable, optional
-        ``progress(done, total)`` every few cells.
+    nodes: np.ndarray
+    parent: np.ndarray
+    cost: np.ndarray
+    regions: list  # (polygon, A, b, exit_row)
+    cbf: list  # (normals, offsets): h = n·x + q >= 0
+    flags: np.ndarray
+    node_added: np.ndarray
+    exit_inset: float = 0.0
+    free_coverage: float = math.nan
+    stats: dict | None = None
 
-    Returns
-    -------
-    Cells
-        ``C = N`` cells; cell ``c`` belongs to node ``c`` (ALGORITHMS §4).
 
-    Raises
-    ------
-    ArtifactError
-        Coincident nodes (the tree stages keep them distinct).
-    """
+def _necked(region: Region, x_i: np.ndarray, x_j: np.ndarray, parent: Region, inset: float, tol: float) -> Region:
+    """The region with neck rows when its exit face is not inside ``parent ⊖ inset`` (§11.5 step 2)."""
+    z = (x_i - x_j) / math.hypot(*(x_i - x_j))
+    w = np.array([-z[1], z[0]])
+    t_a, t_b = exit_interval(parent.A, parent.b, x_j, w, inset)
+    if not t_a < 0.0 < t_b:
+        raise ArtifactError(f"the exit point {x_j.round(6).tolist()} lies within the exit inset of its parent cell "
+                            "(the inset is capped below every node's depth: a bug)", field="exit_inset")  # fmt: skip
+    k, p = region.exit_row, len(region.polygon)
+    ends = sorted(((region.polygon[k] - x_j) @ w, (region.polygon[(k + 1) % p] - x_j) @ w))
+    if t_a <= ends[0] and ends[1] <= t_b:
+        return region
+    # a hair inside [a, b], so that rounding cannot put the face's ends outside the eroded parent
+    pad = 100.0 * tol
+    A_n, b_n = neck_rows(x_j, z, t_a + pad, t_b - pad)
+    polygon = clip(clip(region.polygon, A_n[0], b_n[0], tol), A_n[1], b_n[1], tol)
+    A, b = polygon_rows(polygon)
+    score = A @ -z
+    on_line = np.abs(A @ x_j - b) <= 1e3 * tol
+    exit_row = int(np.flatnonzero(on_line & (score > 1.0 - 1e-9))[0])
+    return Region(polygon, A, b, exit_row, True)
+
+
+def _funnel_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) -> _Layout:
+    """Funnel cells of every edge, the goal cell, necks and densification (ALGORITHMS §11.5)."""
+    map_ = tree.map
+    tol, free_bounds, goal = map_.tol, space.bounds, map_.goal
+    pieces = ObstaclePieces.from_obstacles(space.obstacles)
+    nodes, parent = tree.nodes.copy(), tree.parent.copy()
+    cost = np.array(tree.cost, float)
+    local = params.cells == "funnel-local"
+
+    def region_of(i: int, j: int, all_nodes: np.ndarray) -> Region:
+        start = edge_cell(all_nodes, i, j, free_bounds, tol, params.bisector_rule) if local else None
+        try:
+            return funnel_region(pieces, free_bounds, all_nodes[[i, j]], margin, tol, start)
+        except ValueError as exc:
+            raise ArtifactError(f"cell of node {i}: {exc}", field="nodes") from exc
+
+    goal_start = goal_cell(nodes, free_bounds, tol) if local else None
+    regions = [funnel_region(pieces, free_bounds, goal[None, :], margin, tol, goal_start)]
+    regions += [region_of(i, int(parent[i]), nodes) for i in range(1, len(nodes))]
+    # δ_e: at most half the smallest depth of a node in its own (un-necked) cell; necks keep that depth
+    depths = np.array([depth(r.A, r.b, nodes[i]) for i, r in enumerate(regions)])
+    cap = 0.5 * float(depths.min())
+    inset = min(0.5 * margin if params.exit_inset is None else params.exit_inset, cap)
+    if params.exit_inset is not None and params.exit_inset > cap:
+        log.warning("exit_inset %.4g capped at %.4g (half the smallest depth of a node in its cell)",
+                    params.exit_inset, cap)  # fmt: skip
+    for i in np.argsort(cost, kind="stable")[1:]:  # parents before children: their final cells exist
+        regions[i] = _necked(regions[i], nodes[i], nodes[parent[i]], regions[parent[i]], inset, tol)
+
+    # coverage of F_m, and densification (§11.5 step 3)
+    free = space.component_of(goal)
+    domain = coverage_domain(free, free_bounds, space.obstacles, margin)
+    domain_area = float(domain.area)
+    uncovered = shapely.difference(domain, shapely.union_all([shapely.Polygon(r.polygon) for r in regions]))
+    before = 1.0 - float(uncovered.area) / domain_area if domain_area > 0 else 1.0
+    clearance = space.planning_clearance(None, goal, map_.diagonal)
+    reach = space.with_clearance(clearance)
+    added, unreachable = [], []
+    allowed = (1.0 - params.coverage_target) * domain_area
+    while float(uncovered.area) > allowed and len(added) < params.max_added_nodes:
+        pockets = sorted((g for g in shapely.get_parts(uncovered) if g.area > 0), key=lambda g: -g.area)
+        grown = False
+        for pocket in pockets:
+            if any(shapely.intersects(pocket, u) for u in unreachable):
+                continue
+            leaf = _densify_leaf(pocket, nodes, cost, reach, tol)
+            if leaf is None:
+                unreachable.append(pocket)
+                continue
+            p, n = leaf
+            nodes = np.vstack([nodes, p])
+            parent = np.append(parent, n)
+            cost = np.append(cost, cost[n] + math.hypot(*(p - nodes[n])))
+            i = len(nodes) - 1
+            region = region_of(i, n, nodes)
+            regions.append(_necked(region, nodes[i], nodes[n], regions[n], inset, tol))
+            uncovered = shapely.difference(uncovered, shapely.Polygon(regions[-1].polygon))
+            added.append(i)
+            grown = True
+            break
+        if not grown:
+            break
+    after = 1.0 - float(uncovered.area) / domain_area if domain_area > 0 else 1.0
+    if after < params.coverage_target:
+        log.warning("the cells cover %.1f%% of F_m (target %.1f%%): %d pockets no node reaches with clearance%s",
+                    100 * after, 100 * params.coverage_target, len(unreachable),
+                    " and the max_added_nodes limit was reached" if len(added) >= params.max_added_nodes else "")
+    cbf = []
+    for r in regions:
+        keep = np.arange(len(r.b)) != r.exit_row
+        cbf.append((-r.A[keep], r.b[keep]))  # h_k = b_k − A_k·x >= 0 inside the cell
+    node_added = np.zeros(len(nodes), bool)
+    node_added[len(tree.nodes):] = True
+    stats = {
+        "exit_inset": inset,
+        "necked_cells": [i for i, r in enumerate(regions) if r.necked],
+        "free_coverage_before": before,
+        "free_coverage": after,
+        "added_nodes": len(added),
+        "unreachable_pockets": len(unreachable),
+        "uncovered_area": float(uncovered.area),
+        "coverage_domain_area": domain_area,
+        "obstacle_pieces": len(pieces),
+    }
+    return _Layout(nodes, parent, cost, [(r.polygon, r.A, r.b, r.exit_row) for r in regions], cbf,
+                   np.zeros(len(nodes), np.int64), node_added, inset, after, stats)  # fmt: skip
+
+
+def _densify_leaf(pocket: shapely.Geometry, nodes: np.ndarray, cost: np.ndarray, reach: FreeSpace,
+                  tol: float) -> tuple[np.ndarray, int] | None:  # fmt: skip
+    """A leaf for an uncovered pocket: its point of largest clearance (the pole of inaccessibility, then
+    a point on its surface) and the node with the least ``‖p − x_n‖ + cost(n)`` over the nodes it sees
+    along a segment free with clearance; ``None`` when no node is reachable."""
+    candidates = [shapely.ops.polylabel(pocket, tolerance=max(tol, 1e-3 * math.sqrt(pocket.area))),
+                  shapely.point_on_surface(pocket)]  # fmt: skip
+    for point in candidates:
+        p = np.array([point.x, point.y])
+        if not reach.points_free(p)[0]:
+            continue
+        route = np.hypot(*(nodes - p).T) + cost
+        order = np.argsort(route, kind="stable")
+        free = reach.segments_free(p[None, :], nodes[order])
+        hit = np.flatnonzero(free)
+        if len(hit) and np.hypot(*(nodes[order[hit[0]]] - p)) > 1e3 * tol:
+            return p, int(order[hit[0]])
+    return None
+
+
+# --------------------------------------------------------------------------- paper cells (ALGORITHMS §4)
+
+
+def _paper_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) -> _Layout:
+    """The §4 cells (bisectors, exit half-plane, the bounds) with their barrier rows."""
     map_ = tree.map
     nodes, parent, samples = tree.nodes, tree.parent, tree.collision_samples
-    tol, bounds = map_.tol, map_.bounds
+    tol, bounds = map_.tol, space.bounds
     n = len(nodes)
-    if n > 1:
-        order = np.lexsort((nodes[:, 1], nodes[:, 0]))
-        gaps = np.hypot(*np.diff(nodes[order], axis=0).T)
-        if np.any(gaps <= tol):
-            k = order[int(np.argmax(gaps <= tol))]
-            raise ArtifactError(f"coincident tree nodes near {nodes[k].tolist()}", field="nodes")
     if params.bisector_rule == "parent":
         log.warning("bisector_rule=parent: a third node's bisector can cut an edge out of its cell")
     if params.cbf_apex == "parent":
         log.warning("cbf_apex=parent: the barrier and Lyapunov rows force a zero-margin LP (ALGORITHMS §4.5)")
-    space = FreeSpace.from_map(map_)
-    landmarks = map_.landmarks
-    # Blind spots: the free points of the map stage's coverage grid (spacing D/100) that see
-    # fewer than 2 landmarks. A cell holding one cannot be driven by bearings everywhere.
-    grid, counts = landmark_coverage(map_, space)
-    blind = grid[counts < 2]
-    margin = DEFAULT_CLEARANCE * map_.diagonal if params.barrier_margin is None else params.barrier_margin
-    polygons, rows, cbf_n, cbf_q = [], [], [], []
-    exit_point = np.zeros((n, 2))
-    exit_dir = np.zeros((n, 2))
-    used = np.zeros((n, len(landmarks)), bool)
-    fixed = np.zeros(n, np.int64)
-    s_min = np.zeros(n)
-    s_max = np.zeros(n)
-    flags = np.zeros(n, np.int8)
+    flags = np.zeros(n, np.int64)
+    regions, cbf = [], []
     for c in range(n):
         if c == 0:
             polygon = goal_cell(nodes, bounds, tol)
@@ -315,7 +458,7 @@ def run(tree: Tree, params: Params = Params(), progress: Callable[[int, int], No
                 normals, offsets, _ = corridor_rows(map_.goal[None, :], polygon, space.obstacles, margin)
             else:
                 normals, offsets = goal_cbf_rows(map_.goal, samples, polygon, bounds, tol)
-            anchors = map_.goal[None, :]
+            exit_row = -1
         else:
             j = parent[c]
             polygon = edge_cell(nodes, c, j, bounds, tol, params.bisector_rule)
@@ -332,6 +475,70 @@ def run(tree: Tree, params: Params = Params(), progress: Callable[[int, int], No
             if on_edge:
                 flags[c] |= CellFlag.SAMPLE_ON_EDGE
                 log.warning("cell %d: a collision sample on the edge line was skipped", c)
+            z = (nodes[c] - nodes[j]) / np.hypot(*(nodes[c] - nodes[j]))
+            exit_row = int(np.argmax(A @ -z - np.abs(A @ nodes[j] - b)))
+        regions.append((polygon, A, b, exit_row))
+        cbf.append((normals, offsets))
+    return _Layout(nodes, parent, np.array(tree.cost, float), regions, cbf, flags, np.zeros(n, bool),
+                   stats={})  # fmt: skip
+
+
+# --------------------------------------------------------------------------- the stage
+
+
+def run(tree: Tree, params: Params = Params(), progress: Callable[[int, int], None] | None = None) -> Cells:
+    """Cut the free space into one convex cell per node of a (simplified) tree.
+
+    Parameters
+    ----------
+    tree : Tree
+        The simplified tree (node 0 at the goal) with its collision samples.
+    params : Params
+    progress : callable, optional
+        ``progress(done, total)`` every few cells.
+
+    Returns
+    -------
+    Cells
+        ``C = N`` cells (N including the nodes densification added); cell ``c`` belongs to
+        node ``c`` (ALGORITHMS §4, §11).
+
+    Raises
+    ------
+    ArtifactError
+        Coincident nodes (the tree stages keep them distinct).
+    """
+    map_ = tree.map
+    tol = map_.tol
+    nodes = tree.nodes
+    if len(nodes) > 1:
+        order = np.lexsort((nodes[:, 1], nodes[:, 0]))
+        gaps = np.hypot(*np.diff(nodes[order], axis=0).T)
+        if np.any(gaps <= tol):
+            k = order[int(np.argmax(gaps <= tol))]
+            raise ArtifactError(f"coincident tree nodes near {nodes[k].tolist()}", field="nodes")
+    space = FreeSpace.from_map(map_)
+    margin = DEFAULT_CLEARANCE * map_.diagonal if params.barrier_margin is None else params.barrier_margin
+    funnel = params.cells != "paper"
+    layout = (_funnel_layout if funnel else _paper_layout)(tree, params, space, margin)
+    nodes, parent, flags = layout.nodes, layout.parent, layout.flags
+    n = len(nodes)
+    landmarks = map_.landmarks
+    # Blind spots: the free points of the map stage's coverage grid (spacing D/100) that see
+    # fewer than 2 landmarks. A cell holding one cannot be driven by bearings everywhere.
+    grid, counts = landmark_coverage(map_, space)
+    blind = grid[counts < 2]
+    exit_point = np.zeros((n, 2))
+    exit_dir = np.zeros((n, 2))
+    used = np.zeros((n, len(landmarks)), bool)
+    fixed = np.zeros(n, np.int64)
+    s_min = np.zeros(n)
+    s_max = np.zeros(n)
+    for c, (polygon, A, b, _) in enumerate(layout.regions):
+        if c == 0:
+            anchors = map_.goal[None, :]
+        else:
+            j = parent[c]
             exit_point[c] = nodes[j]
             exit_dir[c] = (nodes[c] - nodes[j]) / np.hypot(*(nodes[c] - nodes[j]))
             anchors = np.stack([nodes[c], nodes[j]])
@@ -343,19 +550,18 @@ def run(tree: Tree, params: Params = Params(), progress: Callable[[int, int], No
         used[c, chosen] = True
         fixed[c], s_min[c], s_max[c], flag = fixed_landmark(landmarks, chosen, polygon, tol)
         flags[c] |= flag
-        polygons.append(polygon)
-        rows.append((A, b))
-        cbf_n.append(normals)
-        cbf_q.append(offsets)
         if progress is not None and (c % 16 == 15 or c == n - 1):
             progress(c + 1, n)
+    polygons = [r[0] for r in layout.regions]
     counts = np.array([len(p) for p in polygons])
-    cbf_counts = np.array([len(q) for q in cbf_q])
+    cbf_counts = np.array([len(q) for _, q in layout.cbf])
     stats = {
         "cells": n,
+        "certificate": "funnel" if funnel else "paper",
         "vertices": int(counts.sum()),
         "cbf_rows": int(cbf_counts.sum()),
         "cells_without_cbf": int(np.count_nonzero(cbf_counts[1:] == 0)),
+        **(layout.stats or {}),
     }
     for flag in CellFlag:
         if flag != CellFlag.NONE:
@@ -370,23 +576,29 @@ def run(tree: Tree, params: Params = Params(), progress: Callable[[int, int], No
         map=map_,
         nodes=nodes,
         parent=parent,
-        collision_samples=samples,
+        collision_samples=tree.collision_samples,
         cell_node=np.arange(n),
-        cell_A=np.concatenate([r[0] for r in rows]),
-        cell_b=np.concatenate([r[1] for r in rows]),
+        cell_A=np.concatenate([r[1] for r in layout.regions]),
+        cell_b=np.concatenate([r[2] for r in layout.regions]),
         cell_row_offsets=np.concatenate([[0], np.cumsum(counts)]),
         cell_vertices=np.concatenate(polygons),
         cell_vertex_offsets=np.concatenate([[0], np.cumsum(counts)]),
         exit_point=exit_point,
         exit_dir=exit_dir,
-        cbf_A=np.concatenate(cbf_n) if cbf_n else np.zeros((0, 2)),
-        cbf_b=np.concatenate(cbf_q) if cbf_q else np.zeros(0),
+        cbf_A=np.concatenate([r[0] for r in layout.cbf]) if layout.cbf else np.zeros((0, 2)),
+        cbf_b=np.concatenate([r[1] for r in layout.cbf]) if layout.cbf else np.zeros(0),
         cbf_offsets=np.concatenate([[0], np.cumsum(cbf_counts)]),
         cell_landmarks=used,
         fixed_landmark=fixed,
         s_min=s_min,
         s_max=s_max,
         cell_flags=flags,
+        certificate="funnel" if funnel else "paper",
+        cell_exit_row=np.array([r[3] for r in layout.regions], np.int64),
+        cell_rank=layout.cost,
+        exit_inset=layout.exit_inset,
+        node_added=layout.node_added,
+        free_coverage=layout.free_coverage,
         stats=stats,
     )
 

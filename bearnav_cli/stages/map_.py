@@ -302,7 +302,8 @@ def _validate(reader: _Reader, map_: Map, params: Params) -> None:
         raise reader.fail("landmarks", f"at least 2 landmarks are needed, got {L}")
     for k, lm in enumerate(map_.landmarks):
         where = f"landmarks[{k}]"
-        if not space.in_bounds(lm)[0]:
+        lo, hi = map_.bounds[:2], map_.bounds[2:]
+        if not np.all((lm >= lo) & (lm <= hi)):
             raise reader.fail(where, f"{lm.tolist()} is outside the bounds")
         dup = np.flatnonzero(np.all(map_.landmarks[:k] == lm, axis=1))
         if dup.size:

@@ -236,7 +236,8 @@ def run(map_: Map, params: Params = Params(), progress: Callable[[int, int], Non
     rng = np.random.default_rng(params.seed)
     xmin, ymin, xmax, ymax = map_.bounds
     samples = rng.uniform((xmin, ymin), (xmax, ymax), size=(params.iterations, 2))
-    in_obstacle = space.in_obstacle(samples)  # independent of the tree: one vectorised call
+    # independent of the tree: one vectorised call; a sample in the band B \ B_r lies in a wall
+    in_obstacle = space.in_obstacle(samples) | ~space.in_bounds(samples)
     free_area = space.free_area
     clearance = space.planning_clearance(params.clearance, map_.goal, map_.diagonal)
     space = space.with_clearance(clearance)  # edges keep their distance; samples are still tested against O

@@ -49,6 +49,7 @@ from bearnav_cli.cell_lp import (
 )
 from bearnav_cli.datatypes import CellFlag, Cells, CellStatus, Plan
 from bearnav_cli.errors import ArtifactError, InvalidParamsError
+from bearnav_cli.funnel import cell_tolerance, plan_tolerance_of
 from bearnav_cli.lp import LpResult, LpSolver, LpStatus
 
 __all__ = [
@@ -60,7 +61,7 @@ __all__ = [
     "vertex_template",
 ]  # fmt: skip
 
-VERSION = 1
+VERSION = 2
 log = logging.getLogger(__name__)
 
 GAIN_STRUCTURES = ("full", "diag", "scalar")
@@ -385,13 +386,77 @@ def _kappa_sweep(prepared: PreparedCell, params: Params, solver: LpSolver, fixed
     return result, kappa, c_h, c_v, upper, attempt + 1
 
 
-def solve_prepared(prepared: PreparedCell, params: Params, solver: LpSolver) -> SolveOutcome:
-    """SOLVE_CELL's loop (§5.3): halve ``κ`` while infeasible, then the least-violation LP."""
+#: A funnel cell halves ``κ`` at most this often looking for constants Lemma 4 covers (``κ·2⁻⁶⁰``).
+FUNNEL_HALVINGS = 60
+
+
+def lemma4_margin(problem: CellProblem, c_v: float, u_max: float) -> float:
+    """``ε_max = min(c·min_k h_k(x_j), u_max − c·diam(P))`` of ALGORITHMS §11.2 (Lemma 4) with ``c = c_v``.
+
+    When positive, the field ``c(x_j − x) − εz`` with ``0 < ε < ε_max`` meets (L1)–(L3) with
+    margins of at least ``min(ε, ε_max − ε)``; the LP's strict margin bounds are set from it.
+    """
+    V = problem.vertices
+    diff = V[:, None, :] - V
+    diam = math.sqrt(float((diff * diff).sum(axis=2).max()))
+    h_min = float(np.min(problem.cbf_n @ problem.x_j + problem.cbf_q)) if len(problem.cbf_q) else math.inf
+    return min(c_v * h_min, u_max - c_v * diam)
+
+
+def _funnel_sweep(prepared: PreparedCell, params: Params, solver: LpSolver, fixed: tuple) -> SolveOutcome:
+    """ALGORITHMS §11.2 for a funnel cell: ``c_h ≥ c_v`` enforced and ``κ`` halved until Lemma 4 holds.
+
+    The LP is then feasible with strict margins ``S_h,k ≤ −ε/4`` (every barrier row) and
+    ``S_V ≤ −min(clf_margin·u_max, ε/4)`` (``ε = ε_max``), and maximises them as §5.2 weighs them.
+    """
+    template, u_max = prepared.template, params.u_max
+    n_theta, n_h = template.n_theta, template.n_h
+    result, upper, c_h, c_v, kappa, attempts = None, None, math.nan, math.nan, params.kappa, 0
+    halving = 0
+    for halving in range(FUNNEL_HALVINGS + 1):
+        kappa = params.kappa * 0.5**halving
+        c_v = kappa * u_max / prepared.v_scale
+        c_h = max(kappa * u_max / prepared.h_scale, c_v)
+        eps = lemma4_margin(prepared.problem, c_v, u_max)
+        if not eps > 0:
+            continue
+        columns = template.col_upper.copy()
+        columns[n_theta : n_theta + n_h] = -0.25 * eps
+        strict = min(params.clf_margin * u_max, 0.25 * eps) if params.clf_margin > 0 else 0.25 * eps
+        columns[n_theta + n_h] = -strict
+        lower, upper = template.row_bounds(c_h, c_v)
+        result = solver.solve(*fixed, lower, upper, template.col_lower, columns)
+        attempts += 1
+        if result.status is LpStatus.OPTIMAL:
+            break
+    if result is not None and result.status is LpStatus.OPTIMAL:
+        status = CellStatus.CERTIFIED if halving == 0 else CellStatus.RELAXED
+        if template is not prepared.checker:
+            upper = prepared.checker.row_upper(c_h, c_v)
+        return SolveOutcome(status, result, upper, c_h, c_v, kappa, attempts)
+    # Lemma 4 rules this out for a cell that meets (C2): a bug, or a cell whose exit point is not
+    # strictly inside its rows. Store the least violation so verify can name the cell.
+    log.error("funnel cell not certifiable (Lemma 4 says this cannot happen): %s", "no κ gives ε > 0"
+              if result is None else f"LP {result.status.name.lower()}")  # fmt: skip
+    build = vertex_template if params.lp_form == "vertex" else dual_template
+    lv = build(prepared.problem, prepared.L, u_max, params.w_h, params.w_v, least_violation=True)
+    result = lv.instantiate(c_h, c_v).solve(solver)
+    status = CellStatus.NOT_CERTIFIED if result.status is LpStatus.OPTIMAL else CellStatus.SOLVER_FAILURE
+    return SolveOutcome(status, result, prepared.checker.row_upper(c_h, c_v), c_h, c_v, kappa, attempts + 1)
+
+
+def solve_prepared(prepared: PreparedCell, params: Params, solver: LpSolver, funnel: bool = False) -> SolveOutcome:
+    """SOLVE_CELL's loop (§5.3): halve ``κ`` while infeasible, then the least-violation LP.
+
+    ``funnel``: the cell is a funnel cell (ALGORITHMS §11.2), solved by :func:`_funnel_sweep`.
+    """
     u_max = params.u_max
     template = prepared.template
     # Only the row bounds change between attempts: the template's own arrays go to the solver
     # as they are, without a CellLp per attempt.
     fixed = (template.cost, template.A_indptr, template.A_indices, template.A_values)
+    if funnel:
+        return _funnel_sweep(prepared, params, solver, fixed)
     # A strictly negative CLF slack, S_V <= −clf_margin·u_max, leaves the field no equilibrium
     # in the cell and bounds the time to the exit face; a cell where no κ allows it is solved
     # again with S_V <= 0 (status 1, listed in stats.zero_clf_margin).
@@ -587,7 +652,7 @@ def run(cells: Cells, params: Params = Params(), progress: Callable[[int, int], 
     outcomes = {}
     report_every = max(1, len(prepared) // 100)
     for done, c in enumerate(prepared, 1):
-        outcomes[c] = solve_prepared(prepared[c], params, solver)
+        outcomes[c] = solve_prepared(prepared[c], params, solver, funnel=cells.is_funnel)
         if progress is not None and (done % report_every == 0 or done == len(prepared)):
             progress(C - len(prepared) + done, C)
     for c, outcome in outcomes.items():
@@ -609,9 +674,35 @@ def run(cells: Cells, params: Params = Params(), progress: Callable[[int, int], 
     elapsed = time.perf_counter() - started
     stats = _stats(cells, status, attempts, c_h, c_v, margin_v)
     stats["solve_ms_per_cell"] = round(1e3 * elapsed / C, 4)
-    tolerance = params.goal_tolerance if params.goal_tolerance is not None else 0.01 * cells.map.diagonal
+    goal_tolerance = params.goal_tolerance if params.goal_tolerance is not None else 0.01 * cells.map.diagonal
+    delta = np.full(C, np.nan)
+    plan_tolerance = math.nan
+    if cells.is_funnel:
+        delta = cell_tolerances(cells, gain, c_h, c_v, params.u_max)
+        plan_tolerance = plan_tolerance_of(delta, cells.exit_inset)
+        stats["plan_tolerance"] = _json_number(plan_tolerance)
+        stats["tolerance_limited_by"] = int(np.nanargmin(delta)) if np.isfinite(delta).any() else None
     return Plan(cells=cells, gain=gain, c_h=c_h, c_v=c_v, u_max=np.full(C, params.u_max), margin_h=margin_h,
-                margin_v=margin_v, status=status, goal_tolerance=tolerance, stats=stats)  # fmt: skip
+                margin_v=margin_v, status=status, goal_tolerance=goal_tolerance, tolerance=delta,
+                plan_tolerance=plan_tolerance, stats=stats)  # fmt: skip
+
+
+def cell_tolerances(cells: Cells, gain: np.ndarray, c_h: np.ndarray, c_v: np.ndarray, u_max: float) -> np.ndarray:
+    """``δ_c`` of every funnel cell from its gain and rows (ALGORITHMS §11.4), shape (C,), map units.
+
+    The margins are recomputed at the vertices (:func:`vertex_margins`); a cell whose margins are
+    not all positive tolerates no error (``δ_c = 0``).
+    """
+    landmarks = cells.map.landmarks
+    out = np.zeros(cells.n_cells)
+    for c in range(cells.n_cells):
+        normals, offsets = cells.barrier(c)
+        goal = cells.parent[cells.cell_node[c]] == -1
+        z, x_j = cells.exit_dir[c], cells.exit_point[c]
+        m = vertex_margins(gain[c], landmarks, cells.vertices(c), z, x_j, normals, offsets, c_h[c], c_v[c], u_max)
+        M = gain[c].reshape(2, -1, 2).sum(axis=1)
+        out[c] = cell_tolerance(M, normals, -m.cbf_rows, None if goal else z, None if goal else -m.clf)
+    return out
 
 
 def _stats(cells: Cells, status, attempts, c_h, c_v, margin_v) -> dict:
@@ -641,12 +732,15 @@ def _stats(cells: Cells, status, attempts, c_h, c_v, margin_v) -> dict:
 
 
 def summary(plan: Plan) -> str:
-    """One line: cells per status and flagged cells (deterministic: no timings)."""
+    """One line: cells per status, the certified tolerance and flagged cells (deterministic: no timings)."""
     counts = {s: int(np.count_nonzero(plan.status == s)) for s in CellStatus}
     words = {CellStatus.CERTIFIED: "certified", CellStatus.RELAXED: "certified after relaxing",
              CellStatus.NOT_CERTIFIED: "not certified", CellStatus.SOLVER_FAILURE: "solver failures",
              CellStatus.GOAL: "goal"}  # fmt: skip
     text = f"{len(plan.status)} cells: " + ", ".join(f"{counts[s]} {words[s]}" for s in CellStatus)
+    if plan.cells.is_funnel:
+        text += f"; funnel certificate, tolerance δ* = {plan.plan_tolerance:.3g}"
+        text += f", {100 * plan.cells.free_coverage:.1f}% of F_m covered"
     flags = plan.cells.cell_flags
     flagged = int(np.count_nonzero(flags))
     if flagged:

@@ -1,0 +1,342 @@
+"""Funnel cells: obstacle-free convex cells whose exits land in their parents (ALGORITHMS §11.1, §11.5).
+
+A funnel cell of the tree edge ``[x_i, x_j]`` is the largest convex region around the edge that
+the corridor rows allow: one row per convex obstacle piece (a convex part of ``O``, or a boundary
+edge of a non-convex part) that a spatial index says can reach it, one per wall of ``B_r``, and
+the exit row ``z·(x − x_j) ≥ 0``. When its exit face is not inside the parent cell eroded by the
+exit inset ``δ_e``, two neck rows through the ends of ``(P_j ⊖ δ_e) ∩ {V = 0}`` narrow it (§11.5
+step 2). Where the cells leave part of ``F_m`` uncovered, :func:`densify` adds leaf nodes there.
+
+Everything here is geometry on numpy arrays and shapely 2; :mod:`bearnav_cli.stages.decompose`
+assembles the cells.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import shapely
+
+from bearnav_cli.geometry import box_polygon, clip, polygon_rows
+
+__all__ = [
+    "NECK_ANGLE", "ObstaclePieces", "Region", "cell_tolerance", "coverage_domain", "depth", "exit_interval",
+    "funnel_region", "neck_rows", "plan_tolerance_of", "wall_rows",
+]  # fmt: skip
+
+#: ψ of the neck rows: the angle their lines make with the exit direction ``z`` (radians).
+NECK_ANGLE = math.radians(45.0)
+
+
+@dataclass(frozen=True, eq=False)
+class ObstaclePieces:
+    """The convex pieces of ``O`` a cell must keep off, with a spatial index (ALGORITHMS §11.5 step 1).
+
+    A convex part of ``O`` is one piece; every boundary edge of a non-convex part is one piece (a
+    convex set that holds a free point and meets no boundary edge of a polygon misses its interior).
+
+    Attributes
+    ----------
+    geoms : ndarray of shapely geometries, shape (P,)
+        Convex polygons, then edges as line strings.
+    edges : ndarray, shape (P, 2, 2)
+        For an edge piece its endpoints ``(a, b)``, oriented with the obstacle on the left; NaN
+        for a convex part.
+    tree : shapely.STRtree
+        Over ``geoms``.
+    """
+
+    geoms: np.ndarray
+    edges: np.ndarray
+    tree: shapely.STRtree
+
+    @classmethod
+    def from_obstacles(cls, obstacles: shapely.Geometry) -> ObstaclePieces:
+        """Split the (inflated) obstacles into convex pieces."""
+        parts, edges = [], [np.zeros((0, 2, 2))]
+        for part in shapely.get_parts(obstacles):
+            if not isinstance(part, shapely.Polygon) or part.area <= 0:
+                continue
+            hull = shapely.convex_hull(part)
+            if hull.area - part.area <= 1e-9 * hull.area and not part.interiors:
+                parts.append(hull)
+                continue
+            part = shapely.orient_polygons(part)  # exterior CCW, holes CW: the part is on every ring's left
+            for ring in (part.exterior, *part.interiors):
+                xy = np.asarray(ring.coords)
+                edges.append(np.stack([xy[:-1], xy[1:]], axis=1))
+        edge_array = np.concatenate(edges)
+        geoms = np.concatenate([np.array(parts, dtype=object), shapely.linestrings(edge_array)])
+        all_edges = np.concatenate([np.full((len(parts), 2, 2), np.nan), edge_array])
+        return cls(geoms, all_edges, shapely.STRtree(geoms))
+
+    def __len__(self) -> int:
+        return len(self.geoms)
+
+    def separating_rows(self, ends: np.ndarray, which: np.ndarray, margin: float) -> tuple[np.ndarray, np.ndarray]:
+        """One row ``A x ≤ b`` (unit ``A``) per piece in ``which`` that keeps the segment ``ends`` off it.
+
+        For a piece with nearest points ``p`` (on the piece) and ``s`` (on the segment),
+        ``n = unit(s − p)`` and ``d = ‖s − p‖``; an edge whose own line leaves the whole segment
+        on its free side uses that line instead (a wall stays a wall). The row
+        ``n·x ≥ n·p + min(margin, d/2)`` holds on the whole segment with slack at least
+        ``d − min(margin, d/2) > 0`` and fails on the whole piece by at least ``min(margin, d/2)``.
+
+        Parameters
+        ----------
+        ends : ndarray, shape (2, 2) or (1, 2)
+            ``[x_i, x_j]``, or the goal alone.
+        which : ndarray of int, shape (k,)
+        margin : float
+            Map units.
+
+        Returns
+        -------
+        A, b : ndarray, shapes (k', 2), (k',)
+            Rows of the pieces at positive distance (a piece touching the segment has none).
+        """
+        ends = np.asarray(ends, float).reshape(-1, 2)
+        which = np.asarray(which, np.int64)
+        if not len(which):
+            return np.zeros((0, 2)), np.zeros(0)
+        segment = shapely.LineString(ends) if len(ends) == 2 else shapely.Point(ends[0])
+        anchor = np.zeros((len(which), 2))
+        normal = np.zeros((len(which), 2))
+        dist = np.zeros(len(which))
+        edges = self.edges[which]
+        is_edge = ~np.isnan(edges[:, 0, 0])
+        use_own = np.zeros(len(which), bool)
+        if is_edge.any():
+            e = edges[is_edge]
+            d = e[:, 1] - e[:, 0]
+            own = np.column_stack([d[:, 1], -d[:, 0]]) / np.hypot(d[:, 0], d[:, 1])[:, None]  # right: the free side
+            clear = np.min(own @ ends.T - np.einsum("ek,ek->e", own, e[:, 0])[:, None], axis=1)
+            # The own line only when it leaves the segment about as much room as the edge itself
+            # does: a line through a far edge can pass right by the segment and squeeze the cell.
+            apart = shapely.distance(self.geoms[which[is_edge]], segment)
+            good = (clear > 0) & (clear >= np.minimum(2.0 * margin, 0.5 * apart))
+            idx = np.flatnonzero(is_edge)[good]
+            use_own[idx] = True
+            anchor[idx], normal[idx], dist[idx] = e[good, 0], own[good], clear[good]
+        rest = np.flatnonzero(~use_own)
+        if len(rest):
+            pair = shapely.get_coordinates(shapely.shortest_line(self.geoms[which[rest]], segment)).reshape(-1, 2, 2)
+            gap = pair[:, 1] - pair[:, 0]
+            length = np.hypot(gap[:, 0], gap[:, 1])
+            with np.errstate(invalid="ignore", divide="ignore"):
+                normal[rest] = gap / length[:, None]
+            anchor[rest], dist[rest] = pair[:, 0], length
+        apart = dist > 0
+        shift = np.minimum(margin, 0.5 * dist[apart])
+        n = normal[apart]
+        return -n, -np.einsum("ij,ij->i", n, anchor[apart]) - shift
+
+
+def wall_rows(free_bounds: np.ndarray, ends: np.ndarray, margin: float) -> tuple[np.ndarray, np.ndarray]:
+    """The four walls of ``B_r`` as rows ``A x ≤ b``, each moved ``min(margin, d/2)`` inward (``d`` the
+    segment's distance from that wall), shapes (4, 2), (4,)."""
+    xmin, ymin, xmax, ymax = free_bounds
+    ends = np.asarray(ends, float).reshape(-1, 2)
+    A = np.array([[-1.0, 0.0], [1.0, 0.0], [0.0, -1.0], [0.0, 1.0]])
+    limit = np.array([-xmin, xmax, -ymin, ymax])
+    dist = np.min(limit[None, :] - ends @ A.T, axis=0)
+    return A, limit - np.minimum(margin, 0.5 * dist)
+
+
+def _clip_rows(polygon: np.ndarray, A: np.ndarray, b: np.ndarray, inside: np.ndarray, tol: float) -> np.ndarray:
+    """Clip a convex polygon by every row ``A x ≤ b`` that cuts it, the tightest at ``inside`` first.
+
+    Rows that never cut the shrinking polygon fall away without a clip.
+    """
+    slack = b - A @ inside
+    order = np.argsort(slack, kind="stable")
+    A, b = A[order], b[order]
+    while len(b):
+        cuts = np.max(polygon @ A.T, axis=0) > b + tol
+        if not cuts.any():
+            break
+        k = int(np.argmax(cuts))  # the tightest row that still cuts
+        polygon = clip(polygon, A[k], b[k], tol)
+        keep = cuts.copy()
+        keep[k] = False
+        A, b = A[keep], b[keep]
+    return polygon
+
+
+@dataclass(frozen=True)
+class Region:
+    """A funnel cell as a CCW polygon and its rows.
+
+    Attributes
+    ----------
+    polygon : ndarray, shape (p, 2)
+    A, b : ndarray, shapes (p, 2), (p,)
+        ``A[q]`` is the outward unit normal of the edge ``v_q → v_{q+1}``.
+    exit_row : int
+        Index of the exit row among them, ``-1`` for the goal cell.
+    necked : bool
+        Whether neck rows were added.
+    """
+
+    polygon: np.ndarray
+    A: np.ndarray
+    b: np.ndarray
+    exit_row: int
+    necked: bool = False
+
+
+def _exit_row_index(A: np.ndarray, b: np.ndarray, z: np.ndarray, x_j: np.ndarray, tol: float) -> int:
+    """The row of the exit line ``−z·x ≤ −z·x_j``: normal ``−z`` and through ``x_j``."""
+    score = A @ -z
+    on_line = np.abs(A @ x_j - b) <= 1e3 * tol
+    candidates = np.flatnonzero(on_line & (score > 1.0 - 1e-9))
+    if not len(candidates):
+        raise ValueError("the exit row was cut away (the edge's exit face is empty)")
+    return int(candidates[np.argmax(score[candidates])])
+
+
+def funnel_region(
+    pieces: ObstaclePieces,
+    free_bounds: np.ndarray,
+    ends: np.ndarray,
+    margin: float,
+    tol: float,
+    start: np.ndarray | None = None,
+    extra: tuple[np.ndarray, np.ndarray] | None = None,
+) -> Region:
+    """The corridor region of an edge (or of the goal): ALGORITHMS §11.5 step 1.
+
+    Parameters
+    ----------
+    pieces : ObstaclePieces
+    free_bounds : ndarray, shape (4,)
+        ``B_r``.
+    ends : ndarray, shape (2, 2) or (1, 2)
+        ``[x_i, x_j]`` (child, parent) for an edge cell; ``[g]`` for the goal cell.
+    margin : float
+        The barrier margin ``m`` (map units).
+    tol : float
+        Map tolerance.
+    start : ndarray, shape (p, 2), optional
+        A convex polygon to start from instead of ``B_r`` (``funnel-local``: the §4.1 cell).
+    extra : tuple of ndarray, optional
+        More rows ``(A, b)`` to clip by (the neck rows).
+
+    Returns
+    -------
+    Region
+    """
+    ends = np.asarray(ends, float).reshape(-1, 2)
+    polygon = box_polygon(free_bounds) if start is None else np.asarray(start, float)
+    z = x_j = None
+    if len(ends) == 2:
+        x_i, x_j = ends
+        z = (x_i - x_j) / math.hypot(*(x_i - x_j))
+        polygon = clip(polygon, -z, -(z @ x_j), tol)
+    A_w, b_w = wall_rows(free_bounds, ends, margin)
+    polygon = _clip_rows(polygon, A_w, b_w, ends.mean(axis=0), tol)
+    # every piece the current region can meet (the region only shrinks, so one query suffices)
+    which = pieces.tree.query(shapely.Polygon(polygon), predicate="intersects") if len(pieces) else np.zeros(0, int)
+    A_o, b_o = pieces.separating_rows(ends, np.sort(which), margin)
+    if extra is not None:
+        A_o, b_o = np.concatenate([A_o, extra[0]]), np.concatenate([b_o, extra[1]])
+    polygon = _clip_rows(polygon, A_o, b_o, ends.mean(axis=0), tol)
+    if len(polygon) < 3:
+        raise ValueError(f"the cell of {ends.round(6).tolist()} degenerated (an obstacle touches the edge)")
+    A, b = polygon_rows(polygon)
+    exit_row = -1 if z is None else _exit_row_index(A, b, z, x_j, tol)
+    return Region(polygon, A, b, exit_row, extra is not None)
+
+
+def depth(A: np.ndarray, b: np.ndarray, point: np.ndarray) -> float:
+    """``min_k (b_k − A_k·point)``: how deep a point lies in ``{A x ≤ b}`` (map units; < 0 outside)."""
+    return float(np.min(b - A @ np.asarray(point, float)))
+
+
+def exit_interval(A: np.ndarray, b: np.ndarray, x_j: np.ndarray, w: np.ndarray, inset: float) -> tuple[float, float]:
+    """``[t_a, t_b]`` with ``(P ⊖ inset) ∩ {x_j + t·w} = {x_j + t·w : t_a ≤ t ≤ t_b}`` (empty: ``t_a > t_b``)."""
+    slope = A @ w
+    room = b - inset - A @ x_j
+    lo, hi = -math.inf, math.inf
+    up, down = slope > 1e-15, slope < -1e-15
+    if up.any():
+        hi = float(np.min(room[up] / slope[up]))
+    if down.any():
+        lo = float(np.max(room[down] / slope[down]))
+    if np.any(~(up | down) & (room < 0)):
+        return math.inf, -math.inf
+    return lo, hi
+
+
+def neck_rows(x_j: np.ndarray, z: np.ndarray, t_a: float, t_b: float, angle: float = NECK_ANGLE) -> tuple[np.ndarray,
+                                                                                                              np.ndarray]:
+    """The two neck rows through ``a = x_j + t_a·w`` and ``b = x_j + t_b·w`` (ALGORITHMS §11.5 step 2).
+
+    ``w`` is ``z`` turned by +90°. Their lines make the angle ψ with ``z`` and open away from the
+    exit, so the exit face becomes ``[a, b]``, and ``x_j`` and the whole edge stay strictly inside
+    when ``t_a < 0 < t_b``. Returns ``A`` (2, 2) and ``b`` (2,).
+    """
+    w = np.array([-z[1], z[0]])
+    c, s = math.cos(angle), math.sin(angle)
+    n_b = c * w - s * z  # outward at the +w side
+    n_a = -c * w - s * z
+    a_pt, b_pt = x_j + t_a * w, x_j + t_b * w
+    return np.stack([n_a, n_b]), np.array([n_a @ a_pt, n_b @ b_pt])
+
+
+def coverage_domain(free_region: shapely.Geometry, free_bounds: np.ndarray, obstacles: shapely.Geometry,
+                    margin: float) -> shapely.Geometry:  # fmt: skip
+    """``F_m``: the free points at distance at least ``m`` from ``O`` and from the walls of ``B_r`` (§11.1).
+
+    ``free_region`` is the part of ``B_r \\ O`` to cover (the goal's component).
+    """
+    inner = shapely.buffer(shapely.box(*free_bounds), -margin, join_style="mitre")
+    grown = shapely.buffer(obstacles, margin) if not obstacles.is_empty else obstacles
+    domain = shapely.intersection(free_region, inner)
+    return shapely.difference(domain, grown) if not grown.is_empty else domain
+
+
+def cell_tolerance(M: np.ndarray, normals: np.ndarray, sigma_h: np.ndarray, z: np.ndarray | None,
+                   sigma_v: float | None) -> float:  # fmt: skip
+    """``δ_c = min(min_k σ_h,k / ‖Mᵀn_k‖, σ_v / ‖Mᵀz‖)`` of ALGORITHMS §11.4 (map units).
+
+    A robot acting on ``x̂`` with ``‖x̂ − x‖ ≤ δ`` applies ``u(x) − M(x̂ − x)``, which changes
+    ``n_k·u`` by at most ``‖Mᵀn_k‖δ``; the margins absorb that while ``δ ≤ δ_c``.
+
+    Parameters
+    ----------
+    M : ndarray, shape (2, 2)
+        The field is ``a − M x``.
+    normals : ndarray, shape (h, 2)
+        Unit normals of the barrier rows (either sign: only norms enter).
+    sigma_h : ndarray, shape (h,)
+        Margin of (L1) of each row (``−S_h,k``), map units / s.
+    z : ndarray, shape (2,) or None
+        Exit direction; ``None`` for the goal cell (no (L2)).
+    sigma_v : float or None
+        Margin of (L2) (``−S_V``).
+
+    Returns
+    -------
+    float
+        ``0`` when a margin is not positive; ``inf`` when ``M = 0`` and every margin is positive.
+    """
+    ratios = [np.asarray(sigma_h, float)]
+    gains = [np.hypot(*(np.asarray(normals, float).reshape(-1, 2) @ M).T)]
+    if z is not None:
+        ratios.append(np.array([float(sigma_v)]))
+        gains.append(np.array([float(np.hypot(*(np.asarray(z, float) @ M)))]))
+    sigma, gain = np.concatenate(ratios), np.concatenate(gains)
+    if not len(sigma) or np.any(~(sigma > 0)):
+        return 0.0
+    with np.errstate(divide="ignore"):
+        return float(np.min(np.where(gain > 0, sigma / gain, math.inf)))
+
+
+def plan_tolerance_of(tolerance: np.ndarray, exit_inset: float) -> float:
+    """``δ* = min(min_c δ_c, δ_e / 2)`` (ALGORITHMS §11.4), map units."""
+    finite = np.asarray(tolerance, float)
+    finite = finite[~np.isnan(finite)]
+    return float(min(finite.min(initial=math.inf), 0.5 * exit_inset))
