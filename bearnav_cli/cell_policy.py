@@ -103,7 +103,10 @@ def barrier_values(arrays: PlanArrays, x: np.ndarray, where: np.ndarray | None =
 
 
 def locate(arrays: PlanArrays, x: np.ndarray, tol: float | None = None, eps_sw: float = 0.0) -> np.ndarray:
-    """The cell a robot at ``x`` should use, shape (R,): safety first, then the shortest route.
+    """The cell a robot at ``x`` should use, shape (R,).
+
+    Funnel plans: the containing cell of least rank (ALGORITHMS §11.3), the Voronoi owner
+    outside every cell. Paper plans: safety first, then the shortest route, as follows.
 
     Cells overlap, so a point lies in several. Candidates are the cells that contain
     ``x`` and, for edge cells, have ``V(x) > tol`` (a robot on an exit face would leave at
@@ -123,6 +126,12 @@ def locate(arrays: PlanArrays, x: np.ndarray, tol: float | None = None, eps_sw: 
         Membership slack (map units); default ``arrays.tol``.
     """
     p = _points(x)
+    if arrays.funnel:  # ALGORITHMS §11.3: the containing cell of least rank (the Voronoi owner outside D)
+        best = least_rank_cell(arrays, p)
+        outside = best < 0
+        if outside.any():
+            best[outside] = voronoi_owner(arrays, p[outside])
+        return best
     tol = arrays.tol if tol is None else tol
     inside = np.all(np.einsum("cpk,rk->rcp", arrays.row_A, p) <= arrays.row_b[None] + tol, axis=2)
     gap = p[:, None, :] - arrays.exit_point[None]
@@ -142,6 +151,89 @@ def locate(arrays: PlanArrays, x: np.ndarray, tol: float | None = None, eps_sw: 
         lost = ~candidate[rows, chosen]
         chosen[lost] = voronoi_owner(arrays, p[lost])
     return chosen
+
+
+def least_rank_cell(arrays: PlanArrays, x: np.ndarray, erosion: np.ndarray | float = 0.0) -> np.ndarray:
+    """The containing cell of least rank (ties: lower index), ALGORITHMS §11.3, shape (R,); ``-1`` outside ``D``.
+
+    Membership is tested on the cells eroded by ``erosion`` (``x ∈ P_c ⊖ δ``: every row with
+    slack ``δ``), so a robot that acts on an estimate within ``δ`` of its position switches only
+    where the certificate of §11.4 holds.
+
+    Parameters
+    ----------
+    arrays : PlanArrays
+    x : ndarray, shape (R, 2)
+        Positions or their estimates (map units).
+    erosion : float or ndarray, shape (R,)
+        ``δ`` of each robot (map units).
+    """
+    p = _points(x)
+    delta = np.broadcast_to(np.asarray(erosion, float), (len(p),))
+    slack = arrays.row_b[None] - np.einsum("cpk,rk->rcp", arrays.row_A, p)  # (R, C, P); padding rows: 0
+    real = np.arange(arrays.row_A.shape[1])[None, :] < np.diff(arrays.cell_row_offsets)[:, None]  # (C, P)
+    inside = np.all(~real[None] | (slack >= delta[:, None, None] - arrays.tol), axis=2)
+    rank = np.where(inside, arrays.cell_rank[None], math.inf)
+    best = np.argmin(rank, axis=1)  # the first of equal ranks: the lower index
+    return np.where(inside[np.arange(len(p)), best], best, -1)
+
+
+def funnel_update(arrays: PlanArrays, cell: np.ndarray, target: np.ndarray, x: np.ndarray, eps_sw: float,
+                  erosion: np.ndarray | float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
+    """The composition policy of ALGORITHMS §11.3 for every robot (funnel plans).
+
+    The active cell is kept while the robot is in it; whenever it lies in a cell of smaller rank
+    it switches to the containing cell of least rank (at the start, the containing cell of least
+    rank). A robot outside every cell (a start outside the certified domain ``D``, §11.5 step 4)
+    approaches a tree node in a straight line until some cell holds it; a robot found outside its
+    cell with no cell of smaller rank holding it (which the theorem rules out in continuous time)
+    is relocated to the least-rank cell that holds it, or approaches a node.
+
+    Parameters
+    ----------
+    arrays : PlanArrays
+    cell, target : ndarray of int, shape (R,)
+        Current cell (``-1`` before the first update) and approach node (``-1`` for none).
+    x : ndarray, shape (R, 2)
+        Positions or their estimates (map units).
+    eps_sw : float
+        Arrival radius of a straight approach (map units).
+    erosion : float or ndarray, shape (R,)
+        ``δ`` of each robot's estimate (map units): membership is tested on ``P ⊖ δ``.
+
+    Returns
+    -------
+    cell, target : ndarray of int64, shape (R,)
+    relocated : ndarray of bool, shape (R,)
+        Robots found outside their cell with no cell of smaller rank holding them.
+    """
+    c, t, p = _cells(arrays, cell).copy(), _cells(arrays, target).copy(), _points(x)
+    delta = np.broadcast_to(np.asarray(erosion, float), (len(p),))
+    best = least_rank_cell(arrays, p, delta)
+    relocated = np.zeros(len(c), bool)
+    in_cell = c >= 0
+    if in_cell.any():
+        idx = np.flatnonzero(in_cell & (t < 0))
+        here = contains(arrays, c[idx], p[idx], arrays.tol)
+        lower = (best[idx] >= 0) & (arrays.cell_rank[np.maximum(best[idx], 0)] < arrays.cell_rank[c[idx]])
+        relocated[idx] = ~here & ~lower
+        move = lower | ~here
+        c[idx[move]] = best[idx[move]]
+    fresh = (c < 0) | ((t >= 0) & (best >= 0))
+    c[fresh] = best[fresh]
+    t[fresh & (best >= 0)] = -1
+    lost = (c < 0) & (t < 0)
+    if lost.any():  # outside D: a straight approach to a node (uncertified)
+        t[lost] = approach_target(arrays, p[lost])
+    going = t >= 0
+    if going.any():
+        gap = p[going] - arrays.nodes[t[going]]
+        near = np.einsum("rk,rk->r", gap, gap) <= eps_sw * eps_sw
+        idx = np.flatnonzero(going)[near]
+        c[idx] = arrays.node_cell[t[idx]]  # the node lies strictly inside its own cell
+        t[idx] = -1
+    c[(c < 0) & (t >= 0)] = arrays.node_cell[t[(c < 0) & (t >= 0)]]  # the cell it drives to, for the record
+    return c, t, relocated
 
 
 def switch(
@@ -219,7 +311,7 @@ def segments_clear(arrays: PlanArrays, a: np.ndarray, b: np.ndarray) -> np.ndarr
     crosses or touches one of their ring edges.
     """
     a, b = _points(a), _points(b)
-    lo, hi = arrays.bounds[:2], arrays.bounds[2:]
+    lo, hi = arrays.free_bounds[:2], arrays.free_bounds[2:]
     ok = np.all((a >= lo) & (a <= hi) & (b >= lo) & (b <= hi), axis=1)
     edges = arrays.obstacle_edges
     if not len(edges) or not ok.any():
@@ -274,9 +366,13 @@ def approach_target(arrays: PlanArrays, x: np.ndarray, nearest: int = 8) -> np.n
 
 
 def update(
-    arrays: PlanArrays, cell: np.ndarray, target: np.ndarray, x: np.ndarray, eps_sw: float, tol: float | None = None
+    arrays: PlanArrays, cell: np.ndarray, target: np.ndarray, x: np.ndarray, eps_sw: float, tol: float | None = None,
+    erosion: np.ndarray | float | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """One control update of the cell policy for every robot (ALGORITHMS §7.3 with docs/choices.md).
+    """One control update of the cell policy for every robot.
+
+    Funnel plans: :func:`funnel_update` (ALGORITHMS §11.3; ``erosion`` is the estimate's error
+    bound). Paper plans: ALGORITHMS §7.3 with docs/choices.md, as follows.
 
     A robot is either in a cell (``target == -1``), following its certified field, or
     approaching a tree node in a straight line (``target >= 0``). In a cell it switches and
@@ -303,6 +399,8 @@ def update(
     relocated : ndarray of bool, shape (R,)
         Robots found outside their cell and relocated (``left_cell`` events).
     """
+    if arrays.funnel:
+        return funnel_update(arrays, cell, target, x, eps_sw, 0.0 if erosion is None else erosion)
     c, t, p = _cells(arrays, cell).copy(), _cells(arrays, target).copy(), _points(x)
     relocated = np.zeros(len(c), bool)
     fresh = c < 0

@@ -30,7 +30,7 @@ CHUNK = 1 << 20
 RUNTIME_KEYS = (
     "landmarks", "nodes", "parent", "cell_node", "cell_A", "cell_b", "cell_row_offsets", "exit_point",
     "exit_dir", "gain", "u_max", "goal_tolerance", "cell_landmarks", "fixed_landmark", "status",
-    "cbf_A", "cbf_b", "cbf_offsets",
+    "cbf_A", "cbf_b", "cbf_offsets", "certificate", "cell_rank", "tolerance", "plan_tolerance", "exit_inset",
 )  # fmt: skip
 
 
@@ -82,6 +82,18 @@ class PlanArrays:
     obstacle_edges : ndarray, shape (E, 2, 2)
         Every ring edge of the inflated obstacles (from the embedded map), for the exact
         straight-line checks of :func:`approach_target`.
+    certificate : {"funnel", "paper"}
+        ``funnel``: the cells compose and the policy is ALGORITHMS §11.3's (least rank).
+    cell_rank : ndarray, shape (C,)
+        Rank of each cell (cost-to-go of its node).
+    tolerance : ndarray, shape (C,)
+        ``δ_c`` of each cell (NaN for ``paper``).
+    plan_tolerance : float
+        ``δ*``: a step whose position error bound is at most this is certified (NaN for ``paper``).
+    exit_inset : float
+        ``δ_e`` (map units).
+    free_bounds : ndarray, shape (4,)
+        ``B_r``, the bounds less the robot radius: the walls of the straight-line checks.
 
     Derived attributes (computed on construction): ``goal`` (2,), ``tol`` (``1e-9·D``),
     ``node_cell`` (N,) the cell of each node, ``parent_cell`` (C,) the cell a cell switches
@@ -113,6 +125,12 @@ class PlanArrays:
     cbf_b: np.ndarray
     cbf_offsets: np.ndarray
     obstacle_edges: np.ndarray
+    certificate: str
+    cell_rank: np.ndarray
+    tolerance: np.ndarray
+    plan_tolerance: float
+    exit_inset: float
+    free_bounds: np.ndarray
     goal: np.ndarray = dataclasses.field(init=False, repr=False)
     tol: float = dataclasses.field(init=False, repr=False)
     node_cell: np.ndarray = dataclasses.field(init=False, repr=False)
@@ -133,10 +151,13 @@ class PlanArrays:
             ("cell_A", float), ("cell_b", float), ("cell_row_offsets", np.int64), ("exit_point", float),
             ("exit_dir", float), ("gain", float), ("u_max", float), ("bounds", float), ("cell_landmarks", bool),
             ("fixed_landmark", np.int64), ("status", np.int8), ("cbf_A", float), ("cbf_b", float),
-            ("cbf_offsets", np.int64), ("obstacle_edges", float),
+            ("cbf_offsets", np.int64), ("obstacle_edges", float), ("cell_rank", float), ("tolerance", float),
+            ("free_bounds", float),
         ):  # fmt: skip
             put(self, name, _readonly(getattr(self, name), dtype))
-        put(self, "goal_tolerance", float(self.goal_tolerance))
+        for name in ("goal_tolerance", "plan_tolerance", "exit_inset"):
+            put(self, name, float(getattr(self, name)))
+        put(self, "certificate", str(self.certificate))
         n, c, n_lm = len(self.nodes), len(self.cell_node), len(self.landmarks)
         self._check_shapes(n, c, n_lm)
         roots = np.flatnonzero(self.parent == -1)
@@ -189,6 +210,11 @@ class PlanArrays:
         return len(self.cell_node)
 
     @property
+    def funnel(self) -> bool:
+        """Whether the plan's cells compose (ALGORITHMS §11): the least-rank policy applies."""
+        return self.certificate == "funnel"
+
+    @property
     def goal_cell(self) -> int:
         """The root's cell (no exit; the run ends on success there)."""
         return int(self.node_cell[np.flatnonzero(self.parent == -1)[0]])
@@ -218,6 +244,12 @@ class PlanArrays:
             cbf_b=cells.cbf_b,
             cbf_offsets=cells.cbf_offsets,
             obstacle_edges=ring_edges([(p.exterior, *p.holes) for p in cells.map.obstacles]),
+            certificate=cells.certificate,
+            cell_rank=cells.cell_rank,
+            tolerance=plan.tolerance,
+            plan_tolerance=plan.plan_tolerance,
+            exit_inset=cells.exit_inset,
+            free_bounds=cells.map.free_bounds,
         )
 
     @classmethod
@@ -234,6 +266,10 @@ class PlanArrays:
         """
         try:
             with np.load(path, allow_pickle=False) as data:
+                manifest = json.loads(str(data["manifest"][()])) if "manifest" in data.files else {}
+                if isinstance(manifest, dict) and manifest.get("schema") == "bearnav.plan/1":
+                    raise ArtifactError("is a bearnav.plan/1 plan, which this version no longer reads; re-run "
+                                        "`bearnav plan MAP.yaml --force`", file=str(path))  # fmt: skip
                 missing = [key for key in (*RUNTIME_KEYS, "map") if key not in data.files]
                 if missing:
                     raise ArtifactError(f"missing entries {', '.join(missing)}", file=str(path))
@@ -245,14 +281,18 @@ class PlanArrays:
             raise ArtifactError(f"cannot read plan ({type(exc).__name__}: {exc})", file=str(path)) from exc
         try:
             bounds = np.asarray(map_json["bounds"], float)
+            radius = max(0.0, float(map_json.get("robot_radius", 0.0)))
             rings = [
                 (np.asarray(o["exterior"], float), *(np.asarray(h, float) for h in o.get("holes", ())))
                 for o in map_json["obstacles"]
             ]
         except (KeyError, TypeError, ValueError) as exc:
             raise ArtifactError("embedded map has no bounds or obstacles", file=str(path), field="map") from exc
-        entries["goal_tolerance"] = float(entries["goal_tolerance"])
-        return cls(bounds=bounds, obstacle_edges=ring_edges(rings), **entries)
+        for key in ("goal_tolerance", "plan_tolerance", "exit_inset"):
+            entries[key] = float(entries[key])
+        entries["certificate"] = str(entries["certificate"])
+        return cls(bounds=bounds, obstacle_edges=ring_edges(rings), free_bounds=bounds + np.array([1, 1, -1, -1]) * radius,
+                   **entries)  # fmt: skip
 
 
 def ring_edges(polygons: list[tuple[np.ndarray, ...]]) -> np.ndarray:

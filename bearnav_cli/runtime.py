@@ -31,6 +31,8 @@ from bearnav_cli.cell_policy import (
     displacement,
     field,
     in_safe_set,
+    funnel_update,
+    least_rank_cell,
     locate,
     lyapunov,
     nearest_node,
@@ -49,6 +51,8 @@ __all__ = [  # re-exported: a robot's one import
     "lyapunov",
     "barrier_values",
     "locate",
+    "least_rank_cell",
+    "funnel_update",
     "switch",
     "in_safe_set",
     "segments_clear",
@@ -212,6 +216,9 @@ class ControlOutput:
         Left the cell through a side face this step (a ``left_cell`` event).
     x_hat : ndarray, shape (R, 2)
         The position estimate used (measured or carried by odometry; zeros before the first fix).
+    certified : ndarray of bool, shape (R,)
+        The step is covered by the composed certificate (ALGORITHMS §11.4): a funnel plan, a cell's
+        field (not a straight approach), and an estimate whose error bound (3σ) is at most ``δ*``.
     """
 
     velocity: np.ndarray
@@ -224,6 +231,7 @@ class ControlOutput:
     stalled: np.ndarray
     relocated: np.ndarray
     x_hat: np.ndarray
+    certified: np.ndarray
 
 
 #: ``‖a − M x̂‖ < STALL_FIELD · u_max`` is a stall: the field has (almost) an equilibrium there.
@@ -326,9 +334,13 @@ def control(
     relocated = np.zeros(r, bool)
     stalled = np.zeros(r, bool)
     u = np.zeros((r, 2))
+    # the estimate's error bound (3σ; 0 for exact fixes); funnel cells are tested eroded by it (§11.4)
+    with np.errstate(invalid="ignore"):
+        error_bound = np.where(np.isfinite(var), 3.0 * np.sqrt(np.maximum(var, 0.0)), np.inf)
     if steer.any():
         idx = np.flatnonzero(steer)
-        c, t, moved = update(arrays, cell[idx], target[idx], x_hat[idx], s.eps_sw, s.tol)
+        erosion = np.minimum(error_bound[idx], arrays.plan_tolerance) if arrays.funnel else None
+        c, t, moved = update(arrays, cell[idx], target[idx], x_hat[idx], s.eps_sw, s.tol, erosion)
         cell[idx], target[idx], relocated[idx] = c, t, moved
         f = arrays.fixed_landmark[c]
         if s.measurement == "displacement":
@@ -385,8 +397,13 @@ def control(
     # the estimate always moves on with the robot's own motion, steering with it or not
     new = ControlState(cell, target, last_dir, hold, np.where(known[:, None], x_hat, state.x_hat), motion, known,
                        var, scanning, spin)  # fmt: skip
+    # certified (§11.4): a funnel plan, driven by a certified cell's field (not a straight approach),
+    # on an estimate whose error bound is within the plan's tolerance δ*
+    certified = steer & (target < 0) & (cell >= 0) & (error_bound <= arrays.plan_tolerance + s.tol)
+    if not arrays.funnel:
+        certified[:] = False
     return ControlOutput(velocity, forward, turn, scanning, new, fix, lost, stalled, relocated,
-                         np.where(steer[:, None], x_hat, 0.0))  # fmt: skip
+                         np.where(steer[:, None], x_hat, 0.0), certified)  # fmt: skip
 
 
 #: ``dt = min(DT_PER_DIAGONAL · D / v, DT_MAX)`` by default (ALGORITHMS §7.1).

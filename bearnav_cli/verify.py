@@ -28,7 +28,9 @@ from typing import Any
 import numpy as np
 import shapely
 
-from bearnav_cli.datatypes import CellFlag, CellStatus, Plan, cell_list
+from bearnav_cli import composition
+from bearnav_cli.composition import Composition
+from bearnav_cli.datatypes import CellFlag, CellStatus, Map, Plan, cell_list
 from bearnav_cli.errors import ArtifactError, InvalidParamsError
 from bearnav_cli.geometry import FreeSpace
 from bearnav_cli.routes import route_lengths, sample_starts
@@ -288,7 +290,8 @@ def check_geometry(plan: Plan, space: FreeSpace, tree_samples: np.ndarray | None
         unchanged = bool(theirs.shape == ours.shape and np.array_equal(theirs, ours))
     return Geometry(
         uncovered_area=uncovered,
-        coverage_ok=uncovered <= COVERAGE_TOL * box.area,
+        # funnel cells cover F_m, not the bounds: composition.check measures that coverage
+        coverage_ok=cells.is_funnel or uncovered <= COVERAGE_TOL * box.area,
         cells_outside_bounds=tuple(outside),
         edges_outside_cell=tuple(off_edge),
         bad_barriers=tuple(bad_rows),
@@ -356,6 +359,31 @@ class VerifyReport:
     min_success: float | None
     skipped: str | None
     goal: np.ndarray
+    composition: Composition | None = None
+    world_cells: list[int] | None = None
+
+    # ------------------------------------------------------------- the composed certificate (§11)
+    @property
+    def in_domain(self) -> np.ndarray:
+        """Runs that started in the certified domain ``D``, shape (R,)."""
+        if self.rollouts is None:
+            return np.zeros(0, bool)
+        return self.rollouts.start_in_domain
+
+    def _success_where(self, mask: np.ndarray) -> float:
+        if self.rollouts is None or not mask.any():
+            return math.nan
+        return float(np.mean(self.rollouts.outcome[mask] == simulate.Outcome.SUCCESS))
+
+    @property
+    def success_in_domain(self) -> float:
+        """Success rate of the runs from ``D`` (the theorem says 1)."""
+        return self._success_where(self.in_domain)
+
+    @property
+    def success_outside_domain(self) -> float:
+        """Success rate of the runs from ``F \ D`` (uncertified: straight approach first)."""
+        return self._success_where(~self.in_domain)
 
     # ------------------------------------------------------------- Monte-Carlo figures
     @property
@@ -436,6 +464,15 @@ class VerifyReport:
             out.append("collision samples differ from tree.npz")
         if self.skipped is not None and self.skipped.startswith("malformed"):
             out.append(self.skipped)
+        if self.composition is not None:
+            out.extend(self.composition.problems)
+            if self.rollouts is not None and self.in_domain.any() and self.success_in_domain < 1.0:
+                bad = np.flatnonzero(self.in_domain & (self.rollouts.outcome != simulate.Outcome.SUCCESS))
+                out.append(f"{len(bad)} runs from the certified domain did not reach the goal (the theorem says "
+                           f"every one does: a bug): starts {cell_list(bad)}")  # fmt: skip
+        if self.world_cells:
+            out.append(f"{len(self.world_cells)} cells no longer hold in the world (C1: they leave B_r or meet an "
+                       f"obstacle): {cell_list(self.world_cells)}")  # fmt: skip
         if self.min_success is not None and not self.success_rate >= self.min_success:
             out.append(f"success rate {self.success_rate:.1%} below --min-success {self.min_success:.1%}")
         return out
@@ -449,6 +486,17 @@ class VerifyReport:
         """One line for the CLI."""
         n = len(self.status)
         certified = int(np.count_nonzero(np.isin(self.status, CERTIFIED))) - len(self.false_certificates)
+        comp = self.composition
+        if comp is not None:
+            text = (f"{certified}/{n} funnel cells certified, composition {'proved' if comp.ok else 'FAILS'}, "
+                    f"{100 * comp.coverage:.1f}% of F_m covered, tolerance δ* = {comp.plan_tolerance:.3g}, "
+                    f"time to goal ≤ {comp.time_bound:.4g} s")  # fmt: skip
+            if self.rollouts is not None and len(self.rollouts):
+                d = self.in_domain
+                ok = self.rollouts.outcome == simulate.Outcome.SUCCESS
+                text += f"; from D {int(ok[d].sum())}/{int(d.sum())} reached the goal"
+                text += f", from outside D (uncertified) {int(ok[~d].sum())}/{int((~d).sum())}"
+            return text + ("; FAILED" if self.failed else "")
         text = f"{certified}/{n} cells certified, coverage {'ok' if self.geometry.coverage_ok else 'FAILS'}"
         if self.rollouts is not None:
             counts = self.outcome_counts
@@ -513,7 +561,23 @@ class VerifyReport:
                 speed=self.rollouts.speed,
                 min_success=self.min_success,
             )
+        if self.rollouts is not None:
+            mc.update(runs_from_domain=int(self.in_domain.sum()),
+                      success_rate_in_domain=_finite_or_none([self.success_in_domain])[0],
+                      success_rate_outside_domain=_finite_or_none([self.success_outside_domain])[0],
+                      certified_step_fraction=float(self.rollouts.certified_steps.sum()
+                                                    / max(1, self.rollouts.steps.sum())))  # fmt: skip
         out["monte_carlo"] = mc
+        if self.composition is not None:
+            comp = self.composition
+            out["composition"] = {
+                "proved": comp.ok, "failures": comp.failures, "problems": comp.problems,
+                "coverage": comp.coverage, "stored_coverage": comp.stored_coverage,
+                "plan_tolerance": _finite_or_none([comp.plan_tolerance])[0],
+                "time_bound_s": _finite_or_none([comp.time_bound])[0], "speed": comp.speed,
+            }  # fmt: skip
+        if self.world_cells is not None:
+            out["world_cells"] = self.world_cells
         return out
 
 
@@ -522,6 +586,7 @@ def run(
     params: Params = Params(),
     tree_samples: np.ndarray | None = None,
     progress: Callable[[int, int], None] | None = None,
+    world: Map | None = None,
 ) -> VerifyReport:
     """Verify a plan: certificates, geometry and the Monte-Carlo closed loop (ALGORITHMS §8).
 
@@ -531,6 +596,9 @@ def run(
     params : Params
     tree_samples : ndarray, shape (S, 2), optional
         ``collision_samples`` of the ``tree.npz`` the plan came from, to check they survived.
+    world : Map, optional
+        Another map in the same frame: (C1) is re-checked against its obstacles and the cells
+        that no longer hold are listed (paper B's deformation question, answered exactly).
     progress : callable, optional
         ``progress(finished_runs, n_starts)`` during the Monte-Carlo runs.
 
@@ -547,6 +615,13 @@ def run(
         c_h_smax = plan.c_h / cells.s_max
     space = FreeSpace.from_map(plan.map)
     geometry = check_geometry(plan, space, tree_samples)
+    comp = composition.check(plan, params.speed, space) if plan.cells.is_funnel else None
+    world_cells = None
+    if world is not None:
+        problem = composition.map_frame_problem(plan.map, world)
+        if problem is not None:
+            raise InvalidParamsError(problem, field="world")
+        world_cells = composition.world_violations(plan, FreeSpace.from_map(world))
 
     starts = np.zeros((0, 2))
     rollouts, skipped = None, None
@@ -582,6 +657,8 @@ def run(
         min_success=params.min_success,
         skipped=skipped,
         goal=np.asarray(plan.map.goal, float),
+        composition=comp,
+        world_cells=world_cells,
     )
     log.info("verify: %s", report.summary())
     return report

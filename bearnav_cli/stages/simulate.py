@@ -272,8 +272,12 @@ class Rollouts:
         Steps driven straight to a tree node from outside every safe set (docs/choices.md).
     hold_steps : ndarray of int64, shape (R,)
         Steps without a usable reconstruction (hold policy, §7.5).
+    certified_steps : ndarray of int64, shape (R,)
+        Steps covered by the composed certificate (ALGORITHMS §11.4; 0 for ``paper`` plans).
+    start_in_domain : ndarray of bool, shape (R,)
+        The start lies in the certified domain ``D`` (a funnel plan's cells, ALGORITHMS §11.3).
     min_clearance : ndarray, shape (R,)
-        Smallest distance from the inflated obstacles along the run (map units).
+        Smallest distance from the inflated obstacles and the walls of ``B_r`` along the run (map units).
     final_position : ndarray, shape (R, 2)
     final_cell : ndarray of int64, shape (R,)
         Active cell at the end (``-1`` if the start was not free or never had a fix).
@@ -297,6 +301,8 @@ class Rollouts:
     left_cell: np.ndarray
     approach_steps: np.ndarray
     hold_steps: np.ndarray
+    certified_steps: np.ndarray
+    start_in_domain: np.ndarray
     min_clearance: np.ndarray
     final_position: np.ndarray
     final_cell: np.ndarray
@@ -365,6 +371,7 @@ class _Loop:
         self.left = np.zeros(r, np.int64)
         self.approach = np.zeros(r, np.int64)
         self.held = np.zeros(r, np.int64)
+        self.certified = np.zeros(r, np.int64)
         self.clearance = space.clearance(starts) if r else np.zeros(0)
         self.last_clearance = self.clearance.copy()  # at the last query, and the path length since
         self.since = np.zeros(r)
@@ -421,6 +428,7 @@ class _Loop:
         self.left[active] += out.relocated
         self.approach[active] += out.state.target >= 0
         self.held[active] += ~out.fix
+        self.certified[active] += out.certified
         ended = np.zeros(len(active), bool)
         for mask, outcome in ((out.lost, Outcome.LOST), (out.stalled, Outcome.STALL)):
             hit = mask & ~ended
@@ -581,6 +589,8 @@ def rollout(
         left_cell=loop.left,
         approach_steps=loop.approach,
         hold_steps=loop.held,
+        certified_steps=loop.certified,
+        start_in_domain=in_domain(arrays, x0),
         min_clearance=loop.clearance,
         final_position=loop.x,
         final_cell=loop.state.cell,
@@ -594,6 +604,16 @@ def rollout(
         eps_sw=s.eps_sw,
         goal_tolerance=s.goal_tolerance,
     )
+
+
+def in_domain(arrays: PlanArrays, starts: np.ndarray) -> np.ndarray:
+    """Whether each start lies in the certified domain ``D`` (some funnel cell holds it), shape (R,).
+
+    Always False for ``paper`` plans, whose cells certify nothing beyond themselves.
+    """
+    if not arrays.funnel or not len(starts):
+        return np.zeros(len(starts), bool)
+    return runtime.least_rank_cell(arrays, starts) >= 0
 
 
 def resolve_starts(plan, params: Params) -> np.ndarray:
@@ -650,8 +670,16 @@ def metrics(rollouts: Rollouts, routes: np.ndarray, goal: np.ndarray) -> dict:
         "runs_with_left_cell": int(np.count_nonzero(rollouts.left_cell > 0)),
         "runs_with_approach": int(np.count_nonzero(rollouts.approach_steps > 0)),
         "hold_time_total_s": float(rollouts.hold_steps.sum() * rollouts.dt),
+        "certified_step_fraction": float(rollouts.certified_steps.sum() / max(1, rollouts.steps.sum())),
+        "runs_from_certified_domain": int(np.count_nonzero(rollouts.start_in_domain)),
+        "success_rate_in_domain": _rate(done[rollouts.start_in_domain]),
+        "success_rate_outside_domain": _rate(done[~rollouts.start_in_domain]),
         "dt": rollouts.dt,
     }
+
+
+def _rate(done: np.ndarray) -> float | None:
+    return float(np.mean(done)) if len(done) else None
 
 
 def run(plan, params: Params = Params(), progress: Callable[[int, int], None] | None = None) -> Simulation:

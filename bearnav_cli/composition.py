@@ -1,0 +1,254 @@
+"""The composition proof of a funnel plan, re-checked from ``plan.npz`` alone (ALGORITHMS §11.6).
+
+Every check is finite and exact (shapely polygons, numpy at the vertices, no LP):
+
+- (C1) each cell lies in ``B_r`` and meets no obstacle;
+- (C2) each cell holds its edge, and ``x_j`` lies strictly inside every row but the exit row;
+- (C3) the exit row is ``−z·x ≤ −z·x_j``;
+- (C4) both ends of the exit face satisfy the parent cell's rows with slack ``≥ δ_e − tol``;
+- the barrier rows are exactly the cell's non-exit rows (so (L1) is about the cell itself), and
+  (L1)–(L3) hold at every vertex with ``σ_h ≥ 0`` and ``σ_v > 0`` (:mod:`bearnav_cli.verify`
+  recomputes the values; this module checks the signs and the strictness);
+- ranks decrease along every exit; ``δ_c`` and ``δ*`` are recomputed;
+- the coverage ``area(F_m \\ D) / area(F_m)``, and the worst-case time to the goal.
+
+:func:`check` returns a :class:`Composition`; its :attr:`Composition.problems` name each failing
+cell and check.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import shapely
+
+from bearnav_cli.datatypes import Map, Plan, cell_list
+from bearnav_cli.funnel import cell_tolerance, coverage_domain, plan_tolerance_of
+from bearnav_cli.geometry import FreeSpace, DEFAULT_CLEARANCE
+
+__all__ = ["Composition", "check", "time_bound", "world_violations"]
+
+#: Relative agreement of a recomputed tolerance with the stored one.
+TOLERANCE_RTOL = 1e-6
+
+
+@dataclass(frozen=True, eq=False)
+class Composition:
+    """The §11.6 checks of a funnel plan (C cells).
+
+    Attributes
+    ----------
+    failures : dict of str to list of int
+        For each check that fails somewhere, the cells where it fails (``c1_free``, ``c2_edge``,
+        ``c3_exit_row``, ``c4_exit_contained``, ``barrier_rows``, ``l1_barrier``, ``l2_progress``,
+        ``rank``, ``tolerance``).
+    tolerance : ndarray, shape (C,)
+        ``δ_c`` recomputed.
+    plan_tolerance : float
+        ``δ*`` recomputed.
+    coverage : float
+        ``area(D ∩ F_m) / area(F_m)`` recomputed (exact polygon areas).
+    stored_coverage : float
+    time_bound : float
+        The worst-case time to the goal at ``speed`` (s), :func:`time_bound`.
+    speed : float
+    """
+
+    failures: dict[str, list[int]]
+    tolerance: np.ndarray
+    plan_tolerance: float
+    coverage: float
+    stored_coverage: float
+    time_bound: float
+    speed: float
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def ok(self) -> bool:
+        return not any(self.failures.values())
+
+    @property
+    def problems(self) -> list[str]:
+        """One line per failing check, naming the cells."""
+        words = {
+            "c1_free": "(C1) cells not inside B_r or meeting an obstacle",
+            "c2_edge": "(C2) cells that do not hold their edge strictly",
+            "c3_exit_row": "(C3) cells whose exit row is not −z·x ≤ −z·x_j",
+            "c4_exit_contained": "(C4) cells whose exit face leaves the parent cell eroded by δ_e",
+            "barrier_rows": "cells whose barrier rows are not their own non-exit rows",
+            "l1_barrier": "(L1) cells with a negative barrier margin",
+            "l2_progress": "(L2) cells without a strictly positive progress margin",
+            "rank": "cells whose exit does not lead to a smaller rank",
+            "tolerance": "cells whose stored tolerance δ_c differs from the recomputed one",
+        }
+        return [f"{len(v)} {words[k]}: {cell_list(v)}" for k, v in self.failures.items() if v] + self.notes
+
+
+def cell_polygons(cells) -> np.ndarray:
+    """Every cell as a shapely polygon, object array of shape (C,)."""
+    out = np.empty(cells.n_cells, dtype=object)
+    out[:] = [shapely.Polygon(cells.vertices(c)) for c in range(cells.n_cells)]
+    return out
+
+
+def _parent_cells(plan: Plan) -> np.ndarray:
+    cells = plan.cells
+    node_cell = np.full(len(cells.nodes), -1, np.int64)
+    node_cell[cells.cell_node] = np.arange(cells.n_cells)
+    up = cells.parent[cells.cell_node]
+    return np.where(up >= 0, node_cell[np.maximum(up, 0)], -1)
+
+
+def _field(plan: Plan, c: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(a, M)`` with ``u(x) = a − M x`` from the stored gain."""
+    K = plan.gain[c]
+    return K @ plan.landmarks.ravel(), K.reshape(2, -1, 2).sum(axis=1)
+
+
+def check(plan: Plan, speed: float, space: FreeSpace | None = None) -> Composition:
+    """Run every §11.6 check on a funnel plan.
+
+    Parameters
+    ----------
+    plan : Plan
+        With ``cells.certificate == "funnel"``.
+    speed : float
+        Closed-loop speed for the time bound (map units / s).
+    space : FreeSpace, optional
+        The world to check (C1) against; default the plan's own map.
+    """
+    cells, map_ = plan.cells, plan.map
+    tol = map_.tol
+    space = FreeSpace.from_map(map_) if space is None else space
+    up = _parent_cells(plan)
+    failures: dict[str, list[int]] = {k: [] for k in ("c1_free", "c2_edge", "c3_exit_row", "c4_exit_contained",
+                                                      "barrier_rows", "l1_barrier", "l2_progress", "rank",
+                                                      "tolerance")}  # fmt: skip
+    failures["c1_free"] = world_violations(plan, space)
+    tolerance = np.zeros(cells.n_cells)
+    inset = cells.exit_inset
+    for c in range(cells.n_cells):
+        A, b = cells.rows(c)
+        verts = cells.vertices(c)
+        k = int(cells.cell_exit_row[c])
+        node = cells.cell_node[c]
+        j = up[c]
+        keep = np.arange(len(b)) != k
+        normals, offsets = cells.barrier(c)
+        if normals.shape != (int(keep.sum()), 2) or not (
+            np.allclose(normals, -A[keep], rtol=0, atol=1e-12) and np.allclose(offsets, b[keep], rtol=0, atol=1e-12)
+        ):
+            failures["barrier_rows"].append(c)
+        a, M = _field(plan, c)
+        u = a - verts @ M.T
+        h = b[keep][None, :] - verts @ A[keep].T  # h_k(v_q) >= 0 on the cell
+        l1 = u @ A[keep].T - plan.c_h[c] * h  # (L1): <= −σ_h
+        sigma_h = -np.max(l1, axis=0) if len(h) else np.zeros(0)
+        if np.any(sigma_h < -1e-9):
+            failures["l1_barrier"].append(c)
+        if j < 0:  # the goal cell: g strictly inside every row
+            if not np.all(b - A @ map_.goal > tol):
+                failures["c2_edge"].append(c)
+            tolerance[c] = cell_tolerance(M, A[keep], sigma_h, None, None)
+            continue
+        x_i, x_j = cells.nodes[node], cells.exit_point[c]
+        z = cells.exit_dir[c]
+        if not (np.all(A @ x_i <= b + tol) and np.all(A @ x_j <= b + tol) and np.all(b[keep] - A[keep] @ x_j > tol)):
+            failures["c2_edge"].append(c)
+        if k < 0 or not (np.allclose(A[k], -z, atol=1e-9) and abs(b[k] + z @ x_j) <= 1e3 * tol):
+            failures["c3_exit_row"].append(c)
+            tolerance[c] = 0.0
+            continue
+        face = verts[[k, (k + 1) % len(verts)]]
+        A_j, b_j = cells.rows(j)
+        if np.min(b_j[None, :] - face @ A_j.T) < inset - 1e3 * tol:
+            failures["c4_exit_contained"].append(c)
+        sigma_v = -float(np.max(u @ z + plan.c_v[c] * ((verts - x_j) @ z)))
+        if not sigma_v > 0:
+            failures["l2_progress"].append(c)
+        if not cells.cell_rank[j] < cells.cell_rank[c]:
+            failures["rank"].append(c)
+        tolerance[c] = cell_tolerance(M, A[keep], sigma_h, z, sigma_v)
+    stored = np.asarray(plan.tolerance, float)
+    off = ~np.isclose(tolerance, stored, rtol=TOLERANCE_RTOL, atol=1e-12)
+    failures["tolerance"] = np.flatnonzero(off).tolist()
+    plan_tolerance = plan_tolerance_of(tolerance, inset)
+    notes = []
+    if not math.isclose(plan_tolerance, plan.plan_tolerance, rel_tol=TOLERANCE_RTOL, abs_tol=1e-12):
+        notes.append(f"stored δ* {plan.plan_tolerance:.6g} differs from the recomputed {plan_tolerance:.6g}")
+    return Composition(failures, tolerance, plan_tolerance, coverage(plan, space), float(cells.free_coverage),
+                       time_bound(plan, speed), speed, notes)  # fmt: skip
+
+
+def world_violations(plan: Plan, space: FreeSpace) -> list[int]:
+    """(C1) against a world: the cells that leave its ``B_r`` or meet one of its obstacles (exact)."""
+    cells = plan.cells
+    tol = plan.map.tol
+    lo, hi = space.bounds[:2] - tol, space.bounds[2:] + tol
+    polygons = cell_polygons(cells)
+    hits = shapely.intersects(space.obstacles, polygons) if not space.obstacles.is_empty else np.zeros(len(polygons),
+                                                                                                         bool)
+    out = []
+    for c in range(cells.n_cells):
+        v = cells.vertices(c)
+        if hits[c] or np.any(v < lo) or np.any(v > hi):
+            out.append(c)
+    return out
+
+
+def coverage(plan: Plan, space: FreeSpace) -> float:
+    """``area(D ∩ F_m) / area(F_m)`` with ``F_m`` the goal's free component less the margin (§11.1)."""
+    map_ = plan.map
+    margin = map_.params.get("decompose", {}).get("barrier_margin") if isinstance(map_.params, dict) else None
+    margin = DEFAULT_CLEARANCE * map_.diagonal if margin is None else float(margin)
+    domain = coverage_domain(space.component_of(map_.goal), space.bounds, space.obstacles, margin)
+    if domain.area <= 0:
+        return 1.0
+    union = shapely.union_all(cell_polygons(plan.cells))
+    return float(shapely.intersection(domain, union).area / domain.area)
+
+
+def time_bound(plan: Plan, speed: float) -> float:
+    """Worst-case time to the goal from anywhere in ``D`` at constant ``speed`` (ALGORITHMS §11.3), s.
+
+    ``T_c = max_{P_c} V · max_{P_c} ‖u‖ / (s·σ_v)`` bounds the time in an edge cell (vertex
+    maxima: both are convex in ``x``); a robot leaving ``P_c`` lands on its exit face and switches
+    to a containing cell of smaller rank, which must meet that face. ``W(c) = T_c + max W(k)``
+    over those cells, in rank order; the goal cell takes at most ``max ‖v − g‖ / s``. Returns
+    ``max_c W(c)`` (``inf`` if a cell has no positive progress margin).
+    """
+    cells = plan.cells
+    n = cells.n_cells
+    order = np.argsort(cells.cell_rank, kind="stable")
+    polygons = cell_polygons(cells)
+    tree = shapely.STRtree(polygons)
+    worst = np.zeros(n)
+    for c in order:
+        verts = cells.vertices(c)
+        a, M = _field(plan, c)
+        u = a - verts @ M.T
+        k = int(cells.cell_exit_row[c])
+        if k < 0:
+            worst[c] = float(np.max(np.hypot(*(verts - plan.map.goal).T))) / speed
+            continue
+        z, x_j = cells.exit_dir[c], cells.exit_point[c]
+        sigma_v = -float(np.max(u @ z + plan.c_v[c] * ((verts - x_j) @ z)))
+        if not sigma_v > 0:
+            worst[c] = math.inf
+            continue
+        t_c = float(np.max((verts - x_j) @ z)) * float(np.max(np.hypot(u[:, 0], u[:, 1]))) / (speed * sigma_v)
+        face = shapely.LineString(verts[[k, (k + 1) % len(verts)]])
+        landing = [int(m) for m in tree.query(face, predicate="intersects") if cells.cell_rank[m] < cells.cell_rank[c]]
+        worst[c] = t_c + (max(worst[m] for m in landing) if landing else math.inf)
+    return float(worst.max()) if n else 0.0
+
+
+def map_frame_problem(plan_map: Map, world: Map) -> str | None:
+    """Why ``world`` cannot be checked against the plan's map (another frame), or ``None``."""
+    if not np.allclose(plan_map.bounds, world.bounds):
+        return f"bounds {world.bounds.tolist()} differ from the plan's {plan_map.bounds.tolist()} (another frame)"
+    if not math.isclose(plan_map.robot_radius, world.robot_radius):
+        return f"robot_radius {world.robot_radius} differs from the plan's {plan_map.robot_radius}"
+    return None
