@@ -369,8 +369,8 @@ def load(path: str | os.PathLike, expect: str | tuple[str, ...] | None = None) -
     kind = kind_of_schema(schema) if isinstance(schema, str) else None
     if kind is None:
         if schema in RETIRED_SCHEMAS:
-            raise ArtifactError(f"is a {schema} artifact, which this version no longer reads ({RETIRED_SCHEMAS[schema]})",
-                                file=str(path), field="manifest.schema")  # fmt: skip
+            raise ArtifactError(f"is a {schema} artifact, which this version no longer reads "
+                                f"({RETIRED_SCHEMAS[schema]})", file=str(path), field="manifest.schema")  # fmt: skip
         raise ArtifactError(f"unknown schema {schema!r}", file=str(path), field="manifest.schema")
     wanted = (expect,) if isinstance(expect, str) else expect
     if wanted and kind not in wanted:

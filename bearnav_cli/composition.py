@@ -26,7 +26,7 @@ import shapely
 
 from bearnav_cli.datatypes import Map, Plan, cell_list
 from bearnav_cli.funnel import cell_tolerance, coverage_domain, plan_tolerance_of
-from bearnav_cli.geometry import FreeSpace, DEFAULT_CLEARANCE
+from bearnav_cli.geometry import DEFAULT_CLEARANCE, FreeSpace
 
 __all__ = ["Composition", "check", "time_bound", "world_violations"]
 

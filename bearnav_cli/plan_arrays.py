@@ -291,8 +291,8 @@ class PlanArrays:
         for key in ("goal_tolerance", "plan_tolerance", "exit_inset"):
             entries[key] = float(entries[key])
         entries["certificate"] = str(entries["certificate"])
-        return cls(bounds=bounds, obstacle_edges=ring_edges(rings), free_bounds=bounds + np.array([1, 1, -1, -1]) * radius,
-                   **entries)  # fmt: skip
+        free_bounds = bounds + np.array([1.0, 1.0, -1.0, -1.0]) * radius
+        return cls(bounds=bounds, obstacle_edges=ring_edges(rings), free_bounds=free_bounds, **entries)
 
 
 def ring_edges(polygons: list[tuple[np.ndarray, ...]]) -> np.ndarray:

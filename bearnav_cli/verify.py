@@ -382,7 +382,7 @@ class VerifyReport:
 
     @property
     def success_outside_domain(self) -> float:
-        """Success rate of the runs from ``F \ D`` (uncertified: straight approach first)."""
+        """Success rate of the runs from ``F \\ D`` (uncertified: straight approach first)."""
         return self._success_where(~self.in_domain)
 
     # ------------------------------------------------------------- Monte-Carlo figures

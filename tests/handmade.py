@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from bearnav_cli.datatypes import Cells, CellStatus, Map, Plan, Polygon, replace
+from bearnav_cli.plan_arrays import tree_costs
 
 LANDMARKS = np.array([[0.0, 8.0], [10.0, 0.0], [10.0, 8.0], [5.0, 0.0]])
 #: A chain along y = 1: root (goal) at (1, 1), node 1 at (5, 1), node 2 at (9, 1).
@@ -60,7 +61,8 @@ def first_cells(cells: Cells, count: int) -> Cells:
         exit_dir=cells.exit_dir[:count], cbf_A=cells.cbf_A[:h], cbf_b=cells.cbf_b[:h],
         cbf_offsets=cells.cbf_offsets[: count + 1], cell_landmarks=cells.cell_landmarks[:count],
         fixed_landmark=cells.fixed_landmark[:count], s_min=cells.s_min[:count], s_max=cells.s_max[:count],
-        cell_flags=cells.cell_flags[:count],
+        cell_flags=cells.cell_flags[:count], cell_exit_row=cells.cell_exit_row[:count],
+        cell_rank=cells.cell_rank[:count],
     )  # fmt: skip
 
 
@@ -172,7 +174,14 @@ def hand_plan(
         fixed_landmark=np.zeros(n, np.int64),
         s_min=np.ones(n),
         s_max=np.full(n, 20.0),
-        cell_flags=np.zeros(n, np.int8),
+        cell_flags=np.zeros(n, np.int64),
+        certificate="paper",
+        cell_exit_row=np.array([-1 if parent[c] < 0 else paper_exit_row(*rows[c], exit_dir[c], exit_point[c])
+                                for c in range(n)], np.int64),  # fmt: skip
+        cell_rank=tree_costs(nodes, parent),
+        exit_inset=0.0,
+        node_added=np.zeros(n, bool),
+        free_coverage=np.nan,
     )
     return Plan(
         cells=cells,
@@ -184,4 +193,11 @@ def hand_plan(
         margin_v=m_v,
         status=status,
         goal_tolerance=0.01 * map_.diagonal,
+        tolerance=np.full(n, np.nan),
+        plan_tolerance=np.nan,
     )
+
+
+def paper_exit_row(A: np.ndarray, b: np.ndarray, z: np.ndarray, x_j: np.ndarray) -> int:
+    """The row of a §4 cell on the exit line: normal ``−z`` through ``x_j``."""
+    return int(np.argmax(A @ -z - np.abs(A @ x_j - b)))

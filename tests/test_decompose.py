@@ -19,6 +19,9 @@ def small_map():
     return build_map(dict(SMALL_MAP))
 
 
+PAPER = decompose.Params(cells="paper")
+
+
 @pytest.fixture(scope="module")
 def simplified(small_map):
     return simplify.run(rrtstar.run(small_map, rrtstar.Params(iterations=600, step=1.0, seed=2)))
@@ -31,7 +34,7 @@ def cells(simplified):
 
 @pytest.fixture(scope="module")
 def wedge_cells(simplified):
-    return decompose.run(simplified, decompose.Params(barrier="wedge"))
+    return decompose.run(simplified, decompose.Params(cells="paper", barrier="wedge"))
 
 
 def random_tree(small_map, seed: int, n: int = 25) -> Tree:
@@ -83,13 +86,13 @@ def test_edge_in_its_cell_and_exit_face_has_length(cells):
 @pytest.mark.parametrize("seed", range(4))
 def test_cells_cover_the_bounds_and_contain_voronoi_cells(small_map, seed):
     tree = random_tree(small_map, seed)
-    cells = decompose.run(tree)
-    box = shapely.box(*small_map.bounds)
+    cells = decompose.run(tree, PAPER)
+    box = shapely.box(*small_map.free_bounds)  # the robot radius applies to the bounds (ALGORITHMS §11.1)
     union = shapely.union_all([shapely.Polygon(cells.vertices(c)) for c in range(cells.n_cells)])
     assert shapely.difference(box, union).area <= 1e-9 * box.area
     assert shapely.difference(union, box).area <= 1e-9 * box.area
     # every point of a fine grid lies in the cell of its nearest node (Lemma 2)
-    xs, ys = np.meshgrid(np.linspace(0, 10, 81), np.linspace(0, 8, 65))
+    xs, ys = np.meshgrid(np.linspace(0.2, 9.8, 81), np.linspace(0.2, 7.8, 65))
     grid = np.column_stack([xs.ravel(), ys.ravel()])
     owner = np.argmin(np.hypot(*(grid[:, None, :] - tree.nodes[None]).transpose(2, 0, 1)), axis=1)
     for c in np.unique(owner):
@@ -293,13 +296,19 @@ def test_coincident_nodes_and_bad_params(small_map):
 
 def test_single_node_tree_gives_the_goal_cell_over_the_bounds(small_map):
     tree = Tree(small_map, small_map.goal[None], [-1], [0.0], np.zeros((0, 2)))
-    cells = decompose.run(tree)
+    cells = decompose.run(tree, PAPER)
     assert cells.n_cells == 1
-    assert shapely.Polygon(cells.vertices(0)).area == pytest.approx(80.0)
+    assert shapely.Polygon(cells.vertices(0)).area == pytest.approx(9.6 * 7.6)  # B_r
+
+
+def test_a_tree_edge_that_is_not_free_is_refused_by_funnel_cells(small_map):
+    tree = random_tree(small_map, 0)  # random edges cross the obstacles
+    with pytest.raises(ArtifactError, match="not free"):
+        decompose.run(tree)
 
 
 def test_same_tree_same_cells(small_map):
     tree = random_tree(small_map, 3)
-    a, b = decompose.run(tree), decompose.run(tree)
+    a, b = decompose.run(tree, PAPER), decompose.run(tree, PAPER)
     for key, value in a.arrays().items():
         np.testing.assert_array_equal(value, b.arrays()[key])

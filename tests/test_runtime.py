@@ -58,7 +58,8 @@ def test_from_npz_equals_from_plan(chain, arrays, tmp_path):
     np.savez(path, map=np.array(chain.map.to_json_text()), **chain.arrays())
     loaded = PlanArrays.from_npz(path)
     for name in runtime.RUNTIME_KEYS + ("bounds", "goal", "node_cell", "parent_cell", "field_a", "field_M"):
-        assert np.array_equal(getattr(loaded, name), getattr(arrays, name)), name
+        ours, theirs = np.asarray(getattr(loaded, name)), np.asarray(getattr(arrays, name))
+        assert np.array_equal(ours, theirs, equal_nan=ours.dtype.kind == "f"), name
     assert loaded.tol == arrays.tol and loaded.goal_cell == 0
 
 
@@ -79,7 +80,7 @@ def test_every_node_needs_a_cell(chain):
     with pytest.raises(ArtifactError, match="exactly one cell"):
         PlanArrays.from_plan(
             Plan(fewer, chain.gain[:2], chain.c_h[:2], chain.c_v[:2], chain.u_max[:2], chain.margin_h[:2],
-                 chain.margin_v[:2], chain.status[:2], chain.goal_tolerance)
+                 chain.margin_v[:2], chain.status[:2], chain.goal_tolerance, chain.tolerance[:2], chain.plan_tolerance)
         )  # fmt: skip
 
 
@@ -151,7 +152,7 @@ def test_locate_prefers_a_cell_whose_safe_set_holds_the_point():
 
     small = build_map(dict(SMALL_MAP))
     tree = simplify.run(rrtstar.run(small, rrtstar.Params(iterations=600, step=1.0, seed=2)))
-    plan = synthesize.run(decompose.run(tree))
+    plan = synthesize.run(decompose.run(tree, decompose.Params(cells="paper")))  # safe sets are a paper notion
     arr = PlanArrays.from_plan(plan)
     x = sample_starts(FreeSpace.from_map(small), small.goal, 400, np.random.default_rng(3))
     cell = runtime.locate(arr, x)

@@ -110,7 +110,8 @@ def test_false_margins_uncertified_cells_and_goal_fields_fail(chain):
 def test_removing_a_cell_makes_coverage_fail(chain):
     fewer = first_cells(chain.cells, 2)
     plan = Plan(fewer, chain.gain[:2], chain.c_h[:2], chain.c_v[:2], chain.u_max[:2], chain.margin_h[:2],
-                chain.margin_v[:2], chain.status[:2], chain.goal_tolerance)  # fmt: skip
+                chain.margin_v[:2], chain.status[:2], chain.goal_tolerance, chain.tolerance[:2],
+                chain.plan_tolerance)  # fmt: skip
     report = verify.run(plan, FAST)
     assert report.failed and not report.geometry.coverage_ok
     assert report.geometry.uncovered_area == pytest.approx(3.0 * 8.0)  # cell 2 alone held 7 ≤ x ≤ 10

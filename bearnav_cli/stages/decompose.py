@@ -335,6 +335,11 @@ def _funnel_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) 
     nodes, parent = tree.nodes.copy(), tree.parent.copy()
     cost = np.array(tree.cost, float)
     local = params.cells == "funnel-local"
+    children = np.flatnonzero(parent >= 0)
+    blocked = children[~space.segments_free(nodes[children], nodes[parent[children]])]
+    if len(blocked):  # (C1) rests on free edges: a corridor cannot be cut around an edge through an obstacle
+        raise ArtifactError(f"tree edges are not free (child nodes {cell_list(blocked)}): funnel cells need "
+                            "collision-free edges; re-run rrtstar and simplify", field="nodes")  # fmt: skip
 
     def region_of(i: int, j: int, all_nodes: np.ndarray) -> Region:
         start = edge_cell(all_nodes, i, j, free_bounds, tol, params.bisector_rule) if local else None

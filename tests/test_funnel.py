@@ -1,0 +1,583 @@
+"""Property tests of the composable funnel cells (ALGORITHMS §11).
+
+1. Lemma 4 on random convex cells: the lemma's explicit field meets (L1)–(L3) with positive
+   margins, and synthesize's funnel LP never ends with status 2 or 3 on such a cell.
+2. End to end on random maps (tests/funnel_maps.py) × RRT* seeds: every cell certified, the
+   §11.6 composition holds and is re-checked here independently (obstacles, walls, exit
+   containment, ranks), verify passes with 100% success from D, and plans are deterministic.
+3. Tampered plans (an exit moved out of its parent, a gain perturbed beyond its margin, a cell
+   pushed into an obstacle) fail in that cell.
+4. The theorem's time bound holds in simulation.
+5. Densification adds leaves only where the tree's cells leave F_m uncovered.
+
+Nothing here is copied from a run: maps, cells and landmarks come from seeded generators, and
+every expectation is a property the construction must have.
+"""
+
+from __future__ import annotations
+
+import functools
+import logging
+import math
+
+import numpy as np
+import pytest
+import shapely
+
+from bearnav_cli import artifacts, cell_policy, composition, verify
+from bearnav_cli.cell_lp import CellProblem, min_norm_gain
+from bearnav_cli.datatypes import CellStatus, replace
+from bearnav_cli.errors import InvalidMapError
+from bearnav_cli.geometry import DEFAULT_CLEARANCE, FreeSpace
+from bearnav_cli.lp import LpSolver
+from bearnav_cli.plan_arrays import PlanArrays
+from bearnav_cli.stages import decompose, simulate, synthesize
+from bench.common import run_stages
+from tests.conftest import build_map
+from tests.funnel_maps import random_spec
+
+SPEED = 0.5
+PIPELINE = ["rrtstar", "simplify", "decompose", "synthesize"]
+#: The random maps and RRT* seeds of the end-to-end test.
+MAP_SEEDS = range(20)
+RRT_SEEDS = range(3)
+ITERATIONS = 300
+
+
+@pytest.fixture(autouse=True)
+def _quiet(caplog):
+    # the random maps have blind spots and cells topped up with landmarks: those warnings are expected
+    caplog.set_level(logging.ERROR)
+
+
+# --------------------------------------------------------------------------- helpers
+
+
+@functools.cache
+def make_plan(map_seed: int, rrt_seed: int = 0, iterations: int = ITERATIONS):
+    """The plan of a random map (cached: several tests share a plan; artifacts are immutable)."""
+    return run_stages(build_map(random_spec(map_seed, iterations, rrt_seed)), PIPELINE)
+
+
+def unit_rows(vertices: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Outward unit normals and offsets of a CCW polygon, row q for the edge v_q → v_{q+1} (own code)."""
+    edge = np.roll(vertices, -1, axis=0) - vertices
+    normal = np.column_stack([edge[:, 1], -edge[:, 0]])
+    normal /= np.linalg.norm(normal, axis=1)[:, None]
+    return normal, np.sum(normal * vertices, axis=1)
+
+
+def parent_cell(cells) -> np.ndarray:
+    """For every cell the cell of its node's parent (-1 for the goal cell)."""
+    of_node = {int(n): c for c, n in enumerate(cells.cell_node)}
+    return np.array([of_node.get(int(cells.parent[n]), -1) for n in cells.cell_node], np.int64)
+
+
+def exit_face(vertices: np.ndarray, z: np.ndarray, x_j: np.ndarray, tol: float) -> np.ndarray:
+    """The two ends of ``P ∩ {z·(x − x_j) = 0}``, found from the vertices on that line (not the stored row)."""
+    w = np.array([-z[1], z[0]])
+    on_line = np.abs((vertices - x_j) @ z) <= tol
+    assert on_line.sum() >= 2, "the exit face is not an edge of the cell"
+    t = (vertices[on_line] - x_j) @ w
+    pts = vertices[on_line]
+    return np.stack([pts[np.argmin(t)], pts[np.argmax(t)]])
+
+
+def raw_obstacles_of(spec: dict) -> tuple[list, list]:
+    """The spec's obstacles exactly: rectangles as shapely boxes, discs as (centre, radius)."""
+    boxes, discs = [], []
+    for o in spec["obstacles"]:
+        if "rectangle" in o:
+            boxes.append(shapely.box(*o["rectangle"]))
+        else:
+            discs.append((np.array(o["circle"]["center"], float), float(o["circle"]["radius"])))
+    return boxes, discs
+
+
+def sample_in_cells(cells, n: int, rng: np.random.Generator) -> np.ndarray:
+    """``n`` points of ``D`` (area-weighted over the cells, uniform in each), plus points near every vertex."""
+    polys = [shapely.Polygon(cells.vertices(c)) for c in range(cells.n_cells)]
+    area = np.array([p.area for p in polys])
+    pick = rng.choice(len(polys), size=n, p=area / area.sum())
+    out = []
+    for c in pick:
+        v = cells.vertices(int(c))
+        lo, hi = v.min(axis=0), v.max(axis=0)
+        A, b = cells.rows(int(c))
+        while True:
+            p = rng.uniform(lo, hi)
+            if np.all(A @ p <= b):
+                out.append(p)
+                break
+    return np.array(out)
+
+
+# --------------------------------------------------------------------------- 1. Lemma 4 on random convex cells
+
+
+def random_funnel_cell(rng: np.random.Generator):
+    """A random convex cell around an edge ``[x_i, x_j]`` with (C2) and (C3) of ALGORITHMS §11.1.
+
+    The exit face is ``[x_j − s_a·w, x_j + s_b·w]`` (``s_a, s_b > 0``, so ``x_j`` is strictly inside
+    every other row); every other hull point lies strictly on the cell's side of the exit line.
+    Sizes, aspect ratios, the depth of ``x_j`` and the position in the plane vary over orders of
+    magnitude. Returns ``vertices, A, b, exit_row, x_i, x_j, z``.
+    """
+    x_j = rng.uniform(-50.0, 50.0, 2)
+    angle = rng.uniform(0.0, 2.0 * math.pi)
+    z = np.array([math.cos(angle), math.sin(angle)])
+    w = np.array([-z[1], z[0]])
+    length = 10.0 ** rng.uniform(-1.0, 1.0)
+    x_i = x_j + length * z
+    width = length * 10.0 ** rng.uniform(-1.0, 0.7)
+    s_a, s_b = width * 10.0 ** rng.uniform(-3.0, 0.0, 2)
+    points = [x_j - s_a * w, x_j + s_b * w, x_i]
+    for _ in range(int(rng.integers(1, 12))):
+        along = rng.uniform(0.01, 1.5) * (length + width)
+        points.append(x_j + along * z + rng.uniform(-width, width) * w)
+    hull = shapely.convex_hull(shapely.MultiPoint(points))
+    hull = shapely.orient_polygons(hull)  # exterior counter-clockwise
+    vertices = np.asarray(hull.exterior.coords)[:-1]
+    A, b = unit_rows(vertices)
+    exit_rows = np.flatnonzero(A @ -z > 1.0 - 1e-12)
+    assert len(exit_rows) == 1
+    k = int(exit_rows[0])
+    keep = np.arange(len(b)) != k
+    scale = max(1.0, float(np.abs(vertices).max()))
+    # the preconditions of Lemma 4, checked rather than trusted
+    assert np.all(A @ x_i <= b + 1e-12 * scale) and abs(A[k] @ x_j - b[k]) <= 1e-12 * scale
+    assert np.all(b[keep] - A[keep] @ x_j > 0)
+    return vertices, A, b, k, x_i, x_j, z
+
+
+def random_landmarks(rng: np.random.Generator, around: np.ndarray) -> np.ndarray:
+    n = int(rng.integers(2, 7))
+    return around + rng.uniform(-60.0, 60.0, (n, 2))
+
+
+def diameter(vertices: np.ndarray) -> float:
+    d = vertices[:, None, :] - vertices[None, :, :]
+    return float(np.sqrt((d**2).sum(axis=2)).max())
+
+
+@pytest.mark.parametrize("seed", range(50))
+def test_lemma4_explicit_field(seed):
+    """(a) ``u = c(x_j − x) − εz`` meets (L1)–(L3) at every vertex with the margins of the proof."""
+    rng = np.random.default_rng(1000 + seed)
+    vertices, A, b, k, x_i, x_j, z = random_funnel_cell(rng)
+    keep = np.arange(len(b)) != k
+    u_max = 10.0 ** rng.uniform(-1.0, 1.0)
+    diam = diameter(vertices)
+    c_v = rng.uniform(0.05, 0.95) * u_max / diam
+    c_h = c_v * rng.uniform(1.0, 10.0)
+    c = rng.uniform(c_v, min(c_h, 0.999 * u_max / diam))  # c_v ≤ c ≤ c_h, c·diam < u_max
+    h_xj = b[keep] - A[keep] @ x_j
+    eps_max = min(c * h_xj.min(), u_max - c * diam)
+    assert eps_max > 0
+    eps = rng.uniform(0.01, 0.99) * eps_max
+    u = c * (x_j - vertices) - eps * z  # (p, 2)
+    h = b[keep][None, :] - vertices @ A[keep].T  # h_k(v_q) ≥ 0 on the cell
+    V = (vertices - x_j) @ z
+    assert h.min() >= -1e-12 * max(1.0, np.abs(vertices).max()) and V.min() >= -1e-12 * max(1.0, np.abs(x_j).max())
+    rounding = 1e-9 * (c * max(1.0, float(np.abs(vertices).max())) + u_max)
+    l1 = u @ A[keep].T - c_h * h  # (L1): ≤ −σ_h with σ_h ≥ c·min h(x_j) − ε > 0
+    assert l1.max() < 0 and l1.max() <= -(c * h_xj.min() - eps) + rounding
+    l2 = u @ z + c_v * V  # (L2): ≤ −ε
+    assert l2.max() < 0 and l2.max() <= -eps + rounding
+    assert np.abs(u).max() < u_max and np.abs(u).max() <= c * diam + eps + rounding  # (L3)
+    # the same field as a gain over random landmarks, re-checked by synthesize's own checker
+    landmarks = random_landmarks(rng, x_j)
+    K = min_norm_gain(c * np.eye(2), c * x_j - eps * z, landmarks)
+    m = synthesize.vertex_margins(K, landmarks, vertices, z, x_j, -A[keep], b[keep], c_h, c_v, u_max)
+    field_scale = 1e-8 * (c * float(np.abs(landmarks).max()) + u_max)
+    assert m.cbf < 0 and abs(m.cbf - l1.max()) <= field_scale
+    assert m.clf < 0 and abs(m.clf - l2.max()) <= field_scale
+    assert m.input < 0
+    # synthesize's ε_max (with c = c_v) is the lemma's bound for c = c_v
+    problem = CellProblem(vertices, A, b, z, x_j, -A[keep], b[keep], landmarks)
+    expect = min(c_v * h_xj.min(), u_max - c_v * diam)
+    assert synthesize.lemma4_margin(problem, c_v, u_max) == pytest.approx(expect, rel=1e-9, abs=1e-15)
+
+
+LP_VARIANTS = [
+    dict(),
+    dict(kappa=4.0),
+    dict(kappa=50.0, lp_form="dual"),
+    dict(w_h=10.0, w_v=0.1, clf_margin=0.0),
+    dict(w_h=0.1, w_v=10.0, clf_margin=0.2, lp_form="dual"),
+]
+
+
+@pytest.mark.parametrize("seed", range(50))
+def test_lemma4_lp_never_fails(seed):
+    """(b) synthesize's funnel LP on a random (C2) cell: never status 2 or 3, and the gain re-checks."""
+    rng = np.random.default_rng(2000 + seed)
+    vertices, A, b, k, x_i, x_j, z = random_funnel_cell(rng)
+    keep = np.arange(len(b)) != k
+    landmarks = random_landmarks(rng, x_j)
+    u_max = float(10.0 ** rng.uniform(-1.0, 1.0))
+    params = synthesize.Params(u_max=u_max, **LP_VARIANTS[seed % len(LP_VARIANTS)])
+    problem = CellProblem(vertices, A, b, z, x_j, -A[keep], b[keep], landmarks)
+    prepared = synthesize.prepare_cell(problem, params)
+    outcome = synthesize.solve_prepared(prepared, params, LpSolver(), funnel=True)
+    sol = synthesize.finish_cell(prepared, outcome)
+    assert sol.status not in (CellStatus.NOT_CERTIFIED, CellStatus.SOLVER_FAILURE)
+    assert sol.c_h >= sol.c_v > 0
+    assert sol.c_v * diameter(vertices) < u_max  # the constants Lemma 4 covers
+    m = synthesize.vertex_margins(sol.K, landmarks, vertices, z, x_j, -A[keep], b[keep], sol.c_h, sol.c_v, u_max)
+    assert m.cbf <= 0.0 and m.clf < 0.0
+    assert m.input <= verify.CERTIFICATE_TOL  # the box has no margin: solver rounding only (dual form)
+    assert sol.margin_h == pytest.approx(m.cbf, abs=1e-9 * u_max)
+    assert sol.margin_v == pytest.approx(m.clf, abs=1e-9 * u_max)
+
+
+# --------------------------------------------------------------------------- 2. end to end on random maps
+
+
+def check_free_and_inside(plan, spec: dict) -> None:
+    """(C1) by hand: every cell misses the inflated obstacles and the exact raw obstacles grown by ρ,
+    and lies in ``B_r``."""
+    map_ = plan.map
+    cells = plan.cells
+    tol = map_.tol
+    rho = float(map_.robot_radius)
+    inflated = shapely.union_all([shapely.Polygon(o.exterior, o.holes) for o in map_.obstacles])
+    boxes, discs = raw_obstacles_of(spec)
+    raw_boxes = shapely.union_all(boxes) if boxes else None
+    lo, hi = map_.free_bounds[:2], map_.free_bounds[2:]
+    for c in range(cells.n_cells):
+        v = cells.vertices(c)
+        poly = shapely.Polygon(v)
+        assert poly.is_valid and poly.area > 0, f"cell {c} is not a proper polygon"
+        assert shapely.intersection(poly, inflated).area == 0.0, f"cell {c} overlaps an obstacle"
+        assert not shapely.intersects(poly, inflated), f"cell {c} touches an obstacle"
+        if raw_boxes is not None:
+            assert shapely.distance(poly, raw_boxes) >= rho - tol, f"cell {c} within ρ of a rectangle"
+        for centre, radius in discs:
+            assert shapely.distance(poly, shapely.Point(centre)) >= radius + rho - tol, f"cell {c} within ρ of a disc"
+        assert np.all(v >= lo - tol) and np.all(v <= hi + tol), f"cell {c} leaves B_r"
+
+
+def check_exits_and_ranks(plan) -> None:
+    """(C2)–(C4) and the ranks, recomputed from the stored polygons (exit faces found geometrically)."""
+    cells = plan.cells
+    D = plan.map.diagonal
+    inset = cells.exit_inset
+    up = parent_cell(cells)
+    assert np.count_nonzero(up < 0) == 1 and cells.cell_rank[up < 0][0] == 0.0
+    for c in np.flatnonzero(up >= 0):
+        j = up[c]
+        v = cells.vertices(c)
+        z, x_j = cells.exit_dir[c], cells.exit_point[c]
+        x_i = cells.nodes[cells.cell_node[c]]
+        assert np.allclose(x_j, cells.nodes[cells.parent[cells.cell_node[c]]])
+        assert np.allclose(z, (x_i - x_j) / np.linalg.norm(x_i - x_j))
+        A, b = unit_rows(v)
+        exit_rows = np.flatnonzero((A @ -z > 1 - 1e-9) & (np.abs(A @ x_j - b) <= 1e-6 * D))
+        assert len(exit_rows) == 1, f"cell {c} has no exit row through x_j"
+        others = np.arange(len(b)) != exit_rows[0]
+        assert np.all(A @ x_i <= b + 1e-9 * D), f"cell {c} does not hold its node"
+        assert np.all(b[others] - A[others] @ x_j > 0), f"x_j not strictly inside cell {c}"
+        face = exit_face(v, z, x_j, 1e-9 * D)
+        A_j, b_j = unit_rows(cells.vertices(j))
+        slack = np.min(b_j[None, :] - face @ A_j.T)
+        assert slack >= inset - 1e-9 * D, f"cell {c}: exit face {slack:.3g} deep in its parent {j}, inset {inset:.3g}"
+        assert cells.cell_rank[j] < cells.cell_rank[c], f"rank does not decrease from cell {c} to {j}"
+
+
+@pytest.mark.parametrize("rrt_seed", RRT_SEEDS)
+@pytest.mark.parametrize("map_seed", MAP_SEEDS)
+def test_random_map_end_to_end(map_seed, rrt_seed):
+    spec = random_spec(map_seed, ITERATIONS, rrt_seed)
+    plan = make_plan(map_seed, rrt_seed)
+    cells = plan.cells
+    assert cells.certificate == "funnel"
+    bad = np.flatnonzero(np.isin(plan.status, [CellStatus.NOT_CERTIFIED, CellStatus.SOLVER_FAILURE]))
+    assert not len(bad), f"funnel cells with status 2 or 3 (Lemma 4 says never): {bad.tolist()}"
+    comp = composition.check(plan, SPEED)
+    assert comp.ok, comp.problems
+    assert math.isfinite(comp.time_bound) and comp.time_bound > 0
+    assert plan.plan_tolerance > 0
+    assert comp.plan_tolerance == pytest.approx(plan.plan_tolerance, rel=1e-6)
+    check_free_and_inside(plan, spec)
+    check_exits_and_ranks(plan)
+    report = verify.run(plan, verify.Params(n_starts=30, speed=SPEED))
+    assert not report.failed, report.reasons
+    assert report.in_domain.any()
+    assert report.success_in_domain == 1.0
+
+
+def test_same_seed_same_plan():
+    first = make_plan(5, 1)
+    again = run_stages(build_map(random_spec(5, ITERATIONS, 1)), PIPELINE)
+    assert first is not again
+    h1 = artifacts.content_hash(artifacts.entries_of(first), "plan")
+    h2 = artifacts.content_hash(artifacts.entries_of(again), "plan")
+    assert h1 == h2
+    other = make_plan(5, 2)
+    assert artifacts.content_hash(artifacts.entries_of(other), "plan") != h1  # the hash does see the seed
+
+
+def load_random_map_tool():
+    import importlib.util
+    from pathlib import Path
+
+    path = Path("/work/shared/tools/random_map.py")
+    if not path.exists():
+        pytest.skip("shared random_map tool not available")
+    module_spec = importlib.util.spec_from_file_location("random_map", path)
+    random_map = importlib.util.module_from_spec(module_spec)
+    module_spec.loader.exec_module(random_map)
+    return random_map
+
+
+@pytest.mark.parametrize("kind", ["clutter", "rooms"])
+def test_random_map_tool(kind):
+    """One map of the shared generator through the same checks (clutter: starts dropped)."""
+    spec, grid = load_random_map_tool().generate(0, kind)
+    assert grid is None
+    if kind == "clutter":
+        spec["starts"] = []  # a random start may lie in another component; the test needs none
+    spec["params"] = {"rrtstar": {"iterations": 300, "seed": 0}}
+    try:
+        map_ = build_map(spec)
+    except InvalidMapError as exc:  # some rooms maps put a start in a room the goal cannot reach
+        if "start" in str(exc):
+            pytest.skip(f"invalid random map (start): {exc}")
+        raise
+    plan = run_stages(map_, PIPELINE)
+    assert not np.isin(plan.status, [2, 3]).any()
+    assert composition.check(plan, SPEED).ok
+    check_free_and_inside(plan, spec)
+    check_exits_and_ranks(plan)
+
+
+@pytest.mark.parametrize("map_seed", [2, 9])
+def test_funnel_local_cells(map_seed):
+    """``cells = funnel-local`` (the regions start from the §4.1 cells) composes as well."""
+    spec = random_spec(map_seed, ITERATIONS, 0)
+    spec["params"]["decompose"] = {"cells": "funnel-local"}
+    plan = run_stages(build_map(spec), PIPELINE)
+    assert plan.cells.certificate == "funnel"
+    assert not np.isin(plan.status, [2, 3]).any()
+    assert composition.check(plan, SPEED).ok
+    check_free_and_inside(plan, spec)
+    check_exits_and_ranks(plan)
+    report = verify.run(plan, verify.Params(n_starts=20, speed=SPEED))
+    assert not report.failed and report.success_in_domain == 1.0
+
+
+# --------------------------------------------------------------------------- the switching policy
+
+
+def test_least_rank_cell_and_funnel_update():
+    plan = make_plan(2, 0)
+    cells = plan.cells
+    arrays = PlanArrays.from_plan(plan)
+    rng = np.random.default_rng(3)
+    lo, hi = plan.map.free_bounds[:2], plan.map.free_bounds[2:]
+    x = np.concatenate([rng.uniform(lo, hi, (300, 2)), sample_in_cells(cells, 300, rng)])
+    holds = np.zeros((len(x), cells.n_cells), bool)
+    for c in range(cells.n_cells):
+        A, b = unit_rows(cells.vertices(c))
+        holds[:, c] = np.all(x @ A.T <= b + plan.map.tol, axis=1)
+    rank = np.where(holds, cells.cell_rank[None, :], np.inf)
+    expect = np.where(holds.any(axis=1), np.argmin(rank, axis=1), -1)
+    got = cell_policy.least_rank_cell(arrays, x)
+    assert np.array_equal(got, expect)
+    # funnel_update from a containing cell: keep it unless a cell of smaller rank holds the point
+    inside = np.flatnonzero(holds.any(axis=1))
+    current = np.array([rng.choice(np.flatnonzero(holds[r])) for r in inside])
+    cell, target, relocated = cell_policy.funnel_update(arrays, current, np.full(len(inside), -1), x[inside], 1e-6)
+    lower = cells.cell_rank[expect[inside]] < cells.cell_rank[current]
+    assert np.array_equal(cell, np.where(lower, expect[inside], current))
+    assert not relocated.any() and np.all(target == -1)
+
+
+# --------------------------------------------------------------------------- 3. tampered plans
+
+
+def translated(cells, c: int, shift: np.ndarray):
+    """Cells with cell ``c`` (vertices, rows and its barrier rows) translated by ``shift``."""
+    v = np.array(cells.cell_vertices)
+    b = np.array(cells.cell_b)
+    q = np.array(cells.cbf_b)
+    v0, v1 = cells.cell_vertex_offsets[c], cells.cell_vertex_offsets[c + 1]
+    r0, r1 = cells.cell_row_offsets[c], cells.cell_row_offsets[c + 1]
+    h0, h1 = cells.cbf_offsets[c], cells.cbf_offsets[c + 1]
+    v[v0:v1] += shift
+    b[r0:r1] += cells.cell_A[r0:r1] @ shift
+    q[h0:h1] -= cells.cbf_A[h0:h1] @ shift  # h = n·x + q with n = −A_k: q = b_k
+    return replace(cells, cell_vertices=v, cell_b=b, cbf_b=q)
+
+
+def small_plan():
+    return make_plan(0, 0)
+
+
+def test_tamper_exit_moved_outside_parent():
+    plan = small_plan()
+    cells = plan.cells
+    up = parent_cell(cells)
+    D = plan.map.diagonal
+    for c in np.flatnonzero(up >= 0):
+        j = up[c]
+        z, x_j = cells.exit_dir[c], cells.exit_point[c]
+        w = np.array([-z[1], z[0]])
+        face = exit_face(cells.vertices(c), z, x_j, 1e-9 * D)
+        A_j, b_j = cells.rows(j)
+        # where the exit line leaves the parent: t ≤ t_hi on x_j + t·w
+        slope = A_j @ w
+        t_hi = np.min((b_j - A_j @ x_j)[slope > 1e-12] / slope[slope > 1e-12])
+        t_face = ((face - x_j) @ w).min()
+        shift = (t_hi - t_face + 0.01 * D) * w  # the whole face beyond the parent, along the exit line
+        bad = replace(plan, cells=translated(cells, int(c), shift))
+        comp = composition.check(bad, SPEED)
+        assert int(c) in comp.failures["c4_exit_contained"], (int(c), comp.failures)
+        assert not comp.ok
+        report = verify.run(bad, verify.Params(n_starts=0, speed=SPEED))
+        assert report.failed and any("(C4)" in r for r in report.reasons)
+
+
+@pytest.mark.parametrize("which", ["l1", "l2"])
+def test_tamper_gain_beyond_margin(which):
+    plan = small_plan()
+    cells = plan.cells
+    up = parent_cell(cells)
+    landmarks = plan.landmarks
+    assert verify.run(plan, verify.Params(n_starts=0, speed=SPEED)).reasons == []
+    for c in np.flatnonzero(up >= 0):
+        c = int(c)
+        used = np.flatnonzero(cells.cell_landmarks[c])
+        if which == "l2":  # push u along z by twice the progress margin: (L2) fails by |σ_v|
+            direction, margin = cells.exit_dir[c], plan.margin_v[c]
+        else:  # push u out through the barrier row of least margin by twice that margin
+            normals, offsets = cells.barrier(c)
+            m = synthesize.vertex_margins(plan.gain[c], landmarks, cells.vertices(c), cells.exit_dir[c],
+                                          cells.exit_point[c], normals, offsets, plan.c_h[c], plan.c_v[c],
+                                          plan.u_max[c])  # fmt: skip
+            k = int(np.argmax(m.cbf_rows))
+            direction, margin = -normals[k], m.cbf_rows[k]
+        assert margin < 0
+        delta = min_norm_gain(np.zeros((2, 2)), 2.0 * abs(margin) * direction, landmarks[used])
+        gain = np.array(plan.gain)
+        cols = np.stack([2 * used, 2 * used + 1], axis=1).ravel()
+        gain[c][:, cols] += delta
+        bad = replace(plan, gain=gain)
+        report = verify.run(bad, verify.Params(n_starts=0, speed=SPEED))
+        assert report.failed
+        assert set(report.false_certificates) == {c}, report.false_certificates
+        failing = {k: v for k, v in report.composition.failures.items() if v}
+        assert failing.get("l1_barrier" if which == "l1" else "l2_progress") == [c], failing
+        assert all(v == [c] for v in failing.values()), failing
+
+
+def test_tamper_cell_pushed_into_obstacle():
+    plan = small_plan()
+    cells = plan.cells
+    obstacles = shapely.union_all([shapely.Polygon(o.exterior, o.holes) for o in plan.map.obstacles])
+    inside = shapely.point_on_surface(obstacles)
+    target = np.array([inside.x, inside.y])
+    for c in range(cells.n_cells):
+        centroid = shapely.Polygon(cells.vertices(c)).centroid
+        shift = target - np.array([centroid.x, centroid.y])
+        bad = replace(plan, cells=translated(cells, c, shift))
+        assert shapely.intersects(shapely.Polygon(bad.cells.vertices(c)), obstacles)
+        comp = composition.check(bad, SPEED)
+        assert comp.failures["c1_free"] == [c], comp.failures["c1_free"]
+    report = verify.run(bad, verify.Params(n_starts=0, speed=SPEED))
+    assert report.failed and any("(C1)" in r for r in report.reasons)
+
+
+# --------------------------------------------------------------------------- 4. the time bound
+
+
+@pytest.mark.parametrize("map_seed", [0, 7])
+def test_time_bound_holds_in_simulation(map_seed):
+    plan = make_plan(map_seed, 0)
+    rng = np.random.default_rng(map_seed)
+    starts = sample_in_cells(plan.cells, 40, rng)
+    params = simulate.Params(measurement="displacement", record_trajectories=False, speed=SPEED)
+    runs = simulate.rollout(plan, starts, params)
+    assert runs.start_in_domain.all()
+    bound = composition.time_bound(plan, SPEED)
+    assert math.isfinite(bound)
+    assert np.all(runs.outcome == simulate.Outcome.SUCCESS), runs.counts()
+    assert np.all(runs.time <= bound), (runs.time.max(), bound)
+
+
+# --------------------------------------------------------------------------- 5. densification
+
+
+def own_coverage(cells, map_) -> float:
+    """``area(D ∩ F_m) / area(F_m)`` with shapely, ``F_m`` built here from the map."""
+    space = FreeSpace.from_map(map_)
+    m = DEFAULT_CLEARANCE * map_.diagonal
+    box = shapely.box(*map_.free_bounds)
+    free = shapely.difference(box, space.obstacles)
+    goal = shapely.Point(map_.goal)
+    component = next(p for p in shapely.get_parts(free) if p.intersects(goal))
+    domain = shapely.difference(shapely.intersection(component, shapely.buffer(box, -m, join_style="mitre")),
+                                shapely.buffer(space.obstacles, m))  # fmt: skip
+    union = shapely.union_all([shapely.Polygon(cells.vertices(c)) for c in range(cells.n_cells)])
+    return float(shapely.intersection(domain, union).area / domain.area)
+
+
+def test_densification():
+    map_ = build_map(random_spec(1, ITERATIONS, 0))
+    tree = run_stages(map_, ["rrtstar", "simplify"])
+    n = len(tree.nodes)
+    bare = decompose.run(tree, decompose.Params(max_added_nodes=0))
+    dense = decompose.run(tree)
+    assert bare.n_cells == n and not bare.node_added.any()
+    added = np.flatnonzero(dense.node_added)
+    assert len(added) == dense.stats["added_nodes"] > 0
+    assert np.array_equal(added, np.arange(n, len(dense.nodes)))  # exactly the appended nodes
+    assert np.array_equal(dense.nodes[:n], tree.nodes) and np.array_equal(dense.parent[:n], tree.parent)
+    assert np.all(dense.parent[added] < added)  # each leaf hangs from an earlier node
+    before, after = own_coverage(bare, map_), own_coverage(dense, map_)
+    assert after >= before
+    assert before == pytest.approx(bare.free_coverage, abs=1e-9)
+    assert before == pytest.approx(dense.stats["free_coverage_before"], abs=1e-9)
+    assert after == pytest.approx(dense.free_coverage, abs=1e-9)
+    assert after >= decompose.Params().coverage_target or len(added) == decompose.Params().max_added_nodes
+    space = FreeSpace.from_map(map_)
+    assert space.segments_free(dense.nodes[added], dense.nodes[dense.parent[added]]).all()
+    capped = decompose.run(tree, decompose.Params(max_added_nodes=3))
+    assert np.count_nonzero(capped.node_added) == min(3, len(added))
+    assert bare.free_coverage <= capped.free_coverage <= dense.free_coverage
+    clear = space.with_clearance(space.planning_clearance(None, map_.goal, map_.diagonal))
+    assert clear.segments_free(dense.nodes[added], dense.nodes[dense.parent[added]]).all()
+    # ranks of the new leaves are their route lengths
+    step = np.linalg.norm(dense.nodes[added] - dense.nodes[dense.parent[added]], axis=1)
+    assert np.allclose(dense.cell_rank[added], dense.cell_rank[dense.parent[added]] + step)
+    # the tree's own cells are the same with and without densification
+    for c in range(n):
+        assert np.array_equal(bare.vertices(c), dense.vertices(c))
+
+
+@pytest.mark.xfail(strict=True, reason="densification gives up on an uncovered pocket when its pole and "
+                   "point_on_surface see no node, though other points of the pocket do: 57% of F_m covered "
+                   "instead of the 99% target (ALGORITHMS §11.5 step 3)")  # fmt: skip
+def test_densification_reaches_target_when_pocket_is_reachable():
+    map_ = build_map(random_spec(3, ITERATIONS, 0))
+    tree = run_stages(map_, ["rrtstar", "simplify"])
+    cells = decompose.run(tree)
+    space = FreeSpace.from_map(map_)
+    clear = space.with_clearance(space.planning_clearance(None, map_.goal, map_.diagonal))
+    m = DEFAULT_CLEARANCE * map_.diagonal
+    box = shapely.box(*map_.free_bounds)
+    domain = shapely.difference(shapely.intersection(space.component_of(map_.goal),
+                                                     shapely.buffer(box, -m, join_style="mitre")),
+                                shapely.buffer(space.obstacles, m))  # fmt: skip
+    union = shapely.union_all([shapely.Polygon(cells.vertices(c)) for c in range(cells.n_cells)])
+    uncovered = shapely.difference(domain, union)
+    # precondition of the claim: part of the uncovered set does see a node along a clear segment
+    rng = np.random.default_rng(0)
+    lo, hi = np.array(uncovered.bounds[:2]), np.array(uncovered.bounds[2:])
+    pts = rng.uniform(lo, hi, (2000, 2))
+    pts = pts[shapely.contains_xy(uncovered, pts[:, 0], pts[:, 1])][:200]
+    seen = [p for p in pts if clear.points_free(p)[0] and clear.segments_free(p[None, :], cells.nodes).any()]
+    assert seen, "no uncovered point reaches a node: the map itself would be at fault"
+    assert len(np.flatnonzero(cells.node_added)) < decompose.Params().max_added_nodes
+    assert cells.free_coverage >= decompose.Params().coverage_target
