@@ -556,28 +556,14 @@ def test_densification():
         assert np.array_equal(bare.vertices(c), dense.vertices(c))
 
 
-@pytest.mark.xfail(strict=True, reason="densification gives up on an uncovered pocket when its pole and "
-                   "point_on_surface see no node, though other points of the pocket do: 57% of F_m covered "
-                   "instead of the 99% target (ALGORITHMS §11.5 step 3)")  # fmt: skip
+@pytest.mark.xfail(strict=True, reason="known gap: on this small map (5 tree nodes) densification adds 58 leaves "
+                   "from grid points of the big pocket but stalls at 70% of F_m (target 99%, ALGORITHMS §11.5 "
+                   "step 3); the certificate stays sound, only the coverage target is missed")  # fmt: skip
 def test_densification_reaches_target_when_pocket_is_reachable():
+    """A pocket whose pole sees no node is densified from other points of it (it stopped at 57%)."""
     map_ = build_map(random_spec(3, ITERATIONS, 0))
     tree = run_stages(map_, ["rrtstar", "simplify"])
     cells = decompose.run(tree)
-    space = FreeSpace.from_map(map_)
-    clear = space.with_clearance(space.planning_clearance(None, map_.goal, map_.diagonal))
-    m = DEFAULT_CLEARANCE * map_.diagonal
-    box = shapely.box(*map_.free_bounds)
-    domain = shapely.difference(shapely.intersection(space.component_of(map_.goal),
-                                                     shapely.buffer(box, -m, join_style="mitre")),
-                                shapely.buffer(space.obstacles, m))  # fmt: skip
-    union = shapely.union_all([shapely.Polygon(cells.vertices(c)) for c in range(cells.n_cells)])
-    uncovered = shapely.difference(domain, union)
-    # precondition of the claim: part of the uncovered set does see a node along a clear segment
-    rng = np.random.default_rng(0)
-    lo, hi = np.array(uncovered.bounds[:2]), np.array(uncovered.bounds[2:])
-    pts = rng.uniform(lo, hi, (2000, 2))
-    pts = pts[shapely.contains_xy(uncovered, pts[:, 0], pts[:, 1])][:200]
-    seen = [p for p in pts if clear.points_free(p)[0] and clear.segments_free(p[None, :], cells.nodes).any()]
-    assert seen, "no uncovered point reaches a node: the map itself would be at fault"
+    # this map's big pocket is reached from points other than its pole (ALGORITHMS §11.5 step 3)
     assert len(np.flatnonzero(cells.node_added)) < decompose.Params().max_added_nodes
     assert cells.free_coverage >= decompose.Params().coverage_target

@@ -287,6 +287,9 @@ def fixed_landmark(
 
 # --------------------------------------------------------------------------- funnel cells (ALGORITHMS §11.5)
 
+#: Densification tries a pocket's pole, a point on it, then up to ``DENSIFY_GRID²`` grid points in it.
+DENSIFY_GRID = 16
+
 
 @dataclass
 class _Layout:
@@ -391,6 +394,7 @@ def _funnel_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) 
             uncovered = shapely.difference(uncovered, shapely.Polygon(regions[-1].polygon))
             added.append(i)
             grown = True
+            unreachable = []  # the new node may see pockets no node saw before
             break
         if not grown:
             break
@@ -425,18 +429,31 @@ def _densify_leaf(pocket: shapely.Geometry, nodes: np.ndarray, cost: np.ndarray,
     """A leaf for an uncovered pocket: its point of largest clearance (the pole of inaccessibility, then
     a point on its surface) and the node with the least ``‖p − x_n‖ + cost(n)`` over the nodes it sees
     along a segment free with clearance; ``None`` when no node is reachable."""
-    candidates = [shapely.ops.polylabel(pocket, tolerance=max(tol, 1e-3 * math.sqrt(pocket.area))),
-                  shapely.point_on_surface(pocket)]  # fmt: skip
-    for point in candidates:
-        p = np.array([point.x, point.y])
-        if not reach.points_free(p)[0]:
+    pole = shapely.ops.polylabel(pocket, tolerance=max(tol, 1e-3 * math.sqrt(pocket.area)))
+    surface = shapely.point_on_surface(pocket)
+    # then a grid over the pocket, farthest from its boundary first: a large pocket whose pole sees
+    # no node may still be reached from elsewhere in it
+    x0, y0, x1, y1 = pocket.bounds
+    xs, ys = np.meshgrid(np.linspace(x0, x1, DENSIFY_GRID + 2)[1:-1], np.linspace(y0, y1, DENSIFY_GRID + 2)[1:-1])
+    grid = np.column_stack([xs.ravel(), ys.ravel()])
+    grid = grid[shapely.contains_xy(pocket, grid[:, 0], grid[:, 1])]
+    depth_in = shapely.distance(pocket.boundary, shapely.points(grid)) if len(grid) else np.zeros(0)
+    grid = grid[np.argsort(-depth_in, kind="stable")]
+    for group in (np.array([[pole.x, pole.y], [surface.x, surface.y]]), grid):
+        group = group[reach.points_free(group)] if len(group) else group
+        if not len(group):
             continue
-        route = np.hypot(*(nodes - p).T) + cost
-        order = np.argsort(route, kind="stable")
-        free = reach.segments_free(p[None, :], nodes[order])
-        hit = np.flatnonzero(free)
-        if len(hit) and np.hypot(*(nodes[order[hit[0]]] - p)) > 1e3 * tol:
-            return p, int(order[hit[0]])
+        # every candidate against every node at once; the first candidate (deepest) that sees a node wins
+        route = np.hypot(*(group[:, None, :] - nodes[None]).transpose(2, 0, 1)) + cost[None]
+        order = np.argsort(route, axis=1, kind="stable")
+        starts = np.repeat(group, len(nodes), axis=0)
+        free = reach.segments_free(starts, nodes[order.ravel()]).reshape(len(group), len(nodes))
+        far = np.hypot(*(nodes[order] - group[:, None, :]).transpose(2, 0, 1)) > 1e3 * tol
+        free &= far
+        hit = np.flatnonzero(free.any(axis=1))
+        if len(hit):
+            k = int(hit[0])
+            return group[k], int(order[k, int(np.argmax(free[k]))])
     return None
 
 
