@@ -316,6 +316,12 @@ def simplify_command(
 def decompose_command(
     tree_npz: Path = typer.Argument(..., help="simplified.npz from `bearnav simplify`."),
     out_path: Optional[Path] = typer.Option(None, "-o", "--out", help="Output (default cells.npz next to the input)."),
+    cells: Optional[str] = typer.Option(
+        None, help="'funnel' (default: composable, ALGORITHMS §11), 'funnel-local' (+ bisectors) or 'paper' (§4)."
+    ),
+    exit_inset: Optional[float] = typer.Option(None, help="δ_e, exit faces inside the parent eroded by it (0.005 D)."),
+    coverage_target: Optional[float] = typer.Option(None, help="Densify until the cells cover this of F_m (0.99)."),
+    max_added_nodes: Optional[int] = typer.Option(None, help="At most this many leaves added by densification (200)."),
     bisector_rule: Optional[str] = typer.Option(None, help="'crossing' (default) or 'parent' bisector rule."),
     cbf_apex: Optional[str] = typer.Option(None, help="Barrier wedge apex: 'child' (default) or 'parent'."),
     cbf_filter: Optional[str] = typer.Option(None, help="Samples a barrier may use: 'both', 'projection', 'cell'."),
@@ -326,12 +332,13 @@ def decompose_command(
     quiet: bool = QUIET,
     as_json: bool = JSON,
 ) -> None:
-    """Cut the bounds into one convex cell per tree node, with CLF and barrier rows.
+    """Cut the free space into one convex cell per tree node: funnel cells that compose (default).
 
-    Example: bearnav decompose plans/kitchen/simplified.npz
+    Example: bearnav decompose plans/kitchen/simplified.npz --cells paper
     """
     _Quiet.enabled |= quiet
     overrides = dict(
+        cells=cells, exit_inset=exit_inset, coverage_target=coverage_target, max_added_nodes=max_added_nodes,
         bisector_rule=bisector_rule, cbf_apex=cbf_apex, cbf_filter=cbf_filter, n_landmarks=n_landmarks,
         barrier=barrier, barrier_margin=barrier_margin,
     )
@@ -376,10 +383,13 @@ def verify_command(
     ),
     min_success: Optional[float] = typer.Option(None, help="Fail (exit 1) below this success rate, 0..1."),
     tree: Optional[Path] = typer.Option(None, help="tree.npz whose collision samples the plan must keep."),
+    world: Optional[Path] = typer.Option(
+        None, help="Another map YAML in the same frame: list the cells whose (C1) no longer holds there."
+    ),
     quiet: bool = QUIET,
     as_json: bool = JSON,
 ) -> None:
-    """Re-check every certificate without a solver, the coverage, and the closed loop.
+    """Prove the composed certificate from the plan alone (no solver): every cell, coverage, δ*, the loop.
 
     Example: bearnav verify plans/kitchen/plan.npz --starts 500 --min-success 0.99
     """
@@ -393,7 +403,8 @@ def verify_command(
     params = verify.Params(n_starts=starts, seed=seed, speed=speed, min_success=min_success)
     with _progress_bar() as progress:
         track = _progress_factory(progress)("verify")
-        report = verify.run(loaded.artifact, params, tree_samples=samples, progress=track)
+        world_map = _load_world(world) if world is not None else None
+        report = verify.run(loaded.artifact, params, tree_samples=samples, progress=track, world=world_map)
     if as_json:
         out.print_json(json.dumps(report.to_json()))
     else:
@@ -402,6 +413,13 @@ def verify_command(
             out.print(f"  - {reason}", highlight=False, soft_wrap=True)
     if report.failed:
         raise typer.Exit(EXIT_OUTCOME)
+
+
+def _load_world(path: Path):
+    """The normalised map of a ``--world`` YAML (validated like any map)."""
+    from bearnav_cli.stages import map_
+
+    return map_.run(read_map_source(path))
 
 
 def _run_one(stage: str, source: Path, out_path: Optional[Path], overrides: dict, force: bool, as_json: bool) -> None:
