@@ -196,12 +196,41 @@ def test_stats_and_renumbering(case):
     assert s["nodes_per_round"][-1] == len(out.nodes)
     assert s["nodes_before"] - s["leaves_cut"] + s["crossings_removed"] == len(out.nodes)
     assert s["ppr_rewires"] > 0 and 0.0 <= s["discarded_reconnectable"] <= 1.0
+    assert s["rounds"] < 10 and s["finish_passes"] == 0 and s["finish_crossings_removed"] == 0  # a fixed point
+    assert s["crossings_remaining"] == 0
     # surviving input nodes first, in ascending old index; then the RC nodes
     index = {tuple(p): i for i, p in enumerate(tree.nodes.tolist())}
     old = [index.get(tuple(p), -1) for p in out.nodes.tolist()]
     n_old = sum(o >= 0 for o in old)
     assert old[:n_old] == sorted(old[:n_old]) and all(o == -1 for o in old[n_old:])
     assert simplify.summary(out).startswith(f"{len(out.nodes)} nodes")
+
+
+def test_count_crossings_matches_the_brute_force_scan(clutter):
+    tree = rrtstar.run(clutter, rrtstar.Params(iterations=400, step=2.0, seed=3))
+    nodes, parent = np.array(tree.nodes), np.array(tree.parent)
+    simplify._shortcut(nodes, parent, FreeSpace.from_map(clutter), simplify.bfs_levels(parent))
+    expected = len(proper_crossings(nodes, parent, clutter.tol))
+    assert expected > 50  # PPR's shortcuts cross a lot before RC
+    assert simplify.count_crossings(nodes, parent, clutter.tol)[0] == expected
+    assert simplify.count_crossings(tree.nodes[:3], tree.parent[:3], clutter.tol) == (0, 0)
+
+
+def test_summary_names_finishing_passes_and_crossings_left(case):
+    _, out = case
+    assert "finishing" not in simplify.summary(out) and "remain" not in simplify.summary(out)
+    stats = dict(out.stats, finish_passes=3, crossings_remaining=2)
+    text = simplify.summary(Tree(out.map, out.nodes, out.parent, out.cost, out.collision_samples, stats))
+    assert " rounds and 3 finishing RC/CtL passes: " in text
+    assert "; 2 proper crossings remain (missed by RC); " in text
+    stats = dict(stats, finish_passes=simplify.MAX_FINISH_PASSES, crossings_remaining=1)
+    text = simplify.summary(Tree(out.map, out.nodes, out.parent, out.cost, out.collision_samples, stats))
+    assert f"1 proper crossing remains (finishing passes stopped at their bound of {simplify.MAX_FINISH_PASSES})" in (
+        text
+    )
+    stats = dict(out.stats, crossings_at_nodes=7)
+    text = simplify.summary(Tree(out.map, out.nodes, out.parent, out.cost, out.collision_samples, stats))
+    assert "; 7 edge pairs cross at a node (RC skips those, §3); " in text
 
 
 def test_extremes_keeps_at_most_two_leaves(clutter):

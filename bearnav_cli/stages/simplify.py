@@ -5,6 +5,20 @@ leaf per parent), RC (split properly crossing edges at their crossing point)
 and CtL again; rounds repeat until nothing changes or ``max_rounds`` is reached.
 Collision samples are passed through untouched.
 
+Fixed point of RC. A round ends with CtL, and CtL can *expose* crossings: RC skips a
+crossing whose point lies within ``tol`` of a node (ALGORITHMS §3, edge cases), and
+that node is an earlier RC node (in every case we traced) whose children have left
+it, hopped over by PPR along the very edges that cross there or re-hung by a later
+RC split; once it is a leaf, CtL deletes it and the crossing becomes proper. RC
+removes it in the next round, where the same can happen to the next edge through
+that point, one round at a time. When
+``max_rounds`` stops the loop during such a cascade, the rounds are followed by
+*finishing passes* of RC | CtL only (:func:`_finish`), which never lengthen a route
+and never add an edge that is not a piece of an existing one, until RC finds nothing
+and CtL cuts nothing. ``stats["crossings_remaining"]`` is then counted by a fresh scan
+of all edges (:func:`count_crossings`); it is 0 unless the pass bound was reached. The
+same scan counts ``stats["crossings_at_nodes"]``, the crossings RC leaves by definition.
+
 Indices: deleted leaves are dropped by an order-preserving compaction and RC
 appends its new node after all others, so every "ascending index" rule sees the
 same order as with stable indices, and the final renumbering (root → 0, then
@@ -30,10 +44,13 @@ from bearnav_cli.datatypes import Tree
 from bearnav_cli.errors import ArtifactError, InvalidParamsError
 from bearnav_cli.geometry import FreeSpace
 
-VERSION = 1
+VERSION = 2  # 2: finishing RC | CtL passes when max_rounds stops the loop; crossings_remaining
 CTL_MODES = ("middle", "extremes")
 #: Output nodes tried per discarded node for the ``discarded_reconnectable`` statistic.
 RECONNECT_NEIGHBOURS = 8
+#: Bound on the finishing RC | CtL passes (each strictly shortens the total edge length, so they end;
+#: a cascade ends in a handful of passes in practice, see :func:`_finish`).
+MAX_FINISH_PASSES = 100
 log = logging.getLogger(__name__)
 
 
@@ -210,13 +227,14 @@ class _NearNodes:
         return ok
 
 
-def _crossing(nodes, parent, e, f, near: _NearNodes, tol: float) -> tuple[np.ndarray, np.ndarray]:
+def _crossing(nodes, parent, e, f, near: _NearNodes | None, tol: float) -> tuple[np.ndarray, np.ndarray]:
     """Proper crossings of edges ``(e, parent[e])`` and ``(f, parent[f])``, pairwise.
 
     A pair crosses properly when the edges share no endpoint, are not parallel
     (``|cross(r, s)| > tol·max(|r|, |s|)``: the shorter edge turns by more than
     ``tol`` over its length), meet at ``k`` inside both, and ``k`` lies farther than
-    ``tol`` from the four endpoints and from every node.
+    ``tol`` from the four endpoints and from every node (``near``; ``None`` leaves
+    out this last test).
 
     Returns
     -------
@@ -238,7 +256,7 @@ def _crossing(nodes, parent, e, f, near: _NearNodes, tol: float) -> tuple[np.nda
     k = a + t[:, None] * r
     for end in (a, b, c, d):
         ok &= np.hypot(k[:, 0] - end[:, 0], k[:, 1] - end[:, 1]) > tol
-    if ok.any():
+    if near is not None and ok.any():
         ok[ok] = near.clear_of(k[ok])
     return ok, k
 
@@ -250,6 +268,47 @@ def _in_subtree(v: int, parent: np.ndarray, roots: tuple[int, int]) -> bool:
             return True
         v = int(parent[v])
     return False
+
+
+def _box_pairs(nodes, parent, tol: float) -> tuple[np.ndarray, np.ndarray]:
+    """Ordered pairs ``(e, f)``, ``e != f``, of edges (named by their child) whose boxes, grown by ``tol``, meet."""
+    kids = np.arange(1, len(nodes))
+    a, b = nodes[kids], nodes[parent[kids]]
+    lo, hi = np.minimum(a, b) - tol, np.maximum(a, b) + tol
+    boxes = shapely.box(lo[:, 0], lo[:, 1], hi[:, 0], hi[:, 1])
+    qa, qb = shapely.STRtree(boxes).query(boxes)
+    return kids[qa[qa != qb]], kids[qb[qa != qb]]
+
+
+def count_crossings(nodes: np.ndarray, parent: np.ndarray, tol: float) -> tuple[int, int]:
+    """Edge pairs that cross, by a fresh scan of all pairs: properly, and at a node.
+
+    Parameters
+    ----------
+    nodes : ndarray, shape (N, 2)
+    parent : ndarray of int, shape (N,)
+        ``-1`` at node 0 only.
+    tol : float
+        The map's tolerance.
+
+    Returns
+    -------
+    proper : int
+        Unordered pairs ``{e, f}`` that cross properly (:func:`_crossing`), the pairs RC
+        splits; 0 at RC's fixed point.
+    at_nodes : int
+        Pairs that would cross properly but for a node within ``tol`` of the crossing
+        point (not one of their four endpoints): RC skips them by definition (ALGORITHMS
+        §3, edge cases). Typically a bundle of collinear edges that PPR laid through an
+        RC node, met by the edge that node was made to split.
+    """
+    if len(nodes) < 4:
+        return 0, 0
+    qa, qb = _box_pairs(nodes, parent, tol)
+    upper = qa < qb
+    ok, k = _crossing(nodes, parent, qa[upper], qb[upper], None, tol)
+    proper = _NearNodes(nodes, tol).clear_of(k[ok]) if ok.any() else np.zeros(0, bool)
+    return int(proper.sum()), int((~proper).sum())
 
 
 def _remove_crossings(nodes, parent, cost, tol: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
@@ -272,12 +331,7 @@ def _remove_crossings(nodes, parent, cost, tol: float) -> tuple[np.ndarray, np.n
     n0 = len(nodes)
     if n0 < 4:  # two edges without a common endpoint need four nodes
         return nodes, parent, cost, 0
-    kids = np.arange(1, n0)
-    a, b = nodes[kids], nodes[parent[kids]]
-    lo, hi = np.minimum(a, b) - tol, np.maximum(a, b) + tol
-    boxes = shapely.box(lo[:, 0], lo[:, 1], hi[:, 0], hi[:, 1])
-    qa, qb = shapely.STRtree(boxes).query(boxes)
-    qa, qb = kids[qa[qa != qb]], kids[qb[qa != qb]]
+    qa, qb = _box_pairs(nodes, parent, tol)
     order = np.argsort(qa, kind="stable")
     nb_list, nb_start = qb[order], np.searchsorted(qa[order], np.arange(n0 + 1))
     near = _NearNodes(nodes, tol)
@@ -357,6 +411,44 @@ def _remove_crossings(nodes, parent, cost, tol: float) -> tuple[np.ndarray, np.n
     return nodes[:n], parent[:n], cost[:n], n - n0
 
 
+def _finish(nodes, parent, cost, tol: float, cut) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, int, bool]:
+    """RC | CtL until RC finds no crossing (or CtL cuts nothing after it): the fixed point of both.
+
+    Run after the rounds when ``max_rounds`` stopped them while something still changed:
+    the closing CtL of the last round may have deleted a node that hid crossings
+    (see the module docstring). CtL never turns a node with children into a leaf
+    (it keeps one leaf of each parent), so once it cuts nothing after an RC, RC's
+    result (no proper crossing) stands and CtL's (one leaf per parent) too. Each RC
+    insertion shortens the total edge length by more than ``tol`` and each cut by a
+    leaf edge, so the passes end; ``MAX_FINISH_PASSES`` is a guard.
+
+    Parameters
+    ----------
+    nodes, parent, cost
+        The tree after the last round (``cost`` consistent, as RC trusts it).
+    tol : float
+    cut : callable
+        ``cut(nodes, parent, cost) -> (nodes, cost, parent)``: CtL and compaction.
+
+    Returns
+    -------
+    nodes, parent, cost, passes, insertions, done
+        ``done`` is False only if the guard stopped the passes.
+    """
+    passes = insertions = 0
+    while passes < MAX_FINISH_PASSES:
+        passes += 1
+        nodes, parent, cost, added = _remove_crossings(nodes, parent, cost, tol)
+        insertions += added
+        if added == 0:  # the tree is the previous CtL's output: CtL would cut nothing either
+            return nodes, parent, cost, passes, insertions, True
+        size = len(nodes)
+        nodes, cost, parent = cut(nodes, parent, cost)
+        if len(nodes) == size:
+            return nodes, parent, cost, passes, insertions, True
+    return nodes, parent, cost, passes, insertions, False
+
+
 def _reconnectable(before: np.ndarray, after: np.ndarray, space: FreeSpace) -> float:
     """Share of the input nodes missing from the output that see one of their nearest output nodes.
 
@@ -400,8 +492,14 @@ def run(tree: Tree, params: Params = Params(), progress: Callable[[int, int], No
         Same map and collision samples; nodes (M, 2), parent (M,), cost (M,).
         ``stats``: ``nodes_before``; ``nodes_per_round`` (count after each round);
         ``rounds`` run (the last one changed nothing unless ``max_rounds`` stopped
-        it); ``crossings_removed`` (RC insertions); ``ppr_rewires`` (accepted
-        grandparent hops); ``leaves_cut``; ``discarded_reconnectable`` (see
+        it); ``finish_passes`` (RC | CtL passes after the rounds, see :func:`_finish`;
+        0 when the last round changed nothing) and ``finish_crossings_removed`` (their
+        RC insertions); ``crossings_removed`` (RC insertions, finishing passes included);
+        ``ppr_rewires`` (accepted grandparent hops); ``leaves_cut``;
+        ``crossings_remaining`` (properly crossing edge pairs left, by a fresh scan:
+        0 unless ``MAX_FINISH_PASSES`` was reached); ``crossings_at_nodes`` (pairs that
+        cross at a point within ``tol`` of a third node, which RC skips by definition;
+        see :func:`count_crossings`); ``discarded_reconnectable`` (see
         :func:`_reconnectable`; reported, not enforced).
 
     Raises
@@ -415,9 +513,13 @@ def run(tree: Tree, params: Params = Params(), progress: Callable[[int, int], No
         "nodes_before": len(nodes),
         "nodes_per_round": [],
         "rounds": 0,
+        "finish_passes": 0,
+        "finish_crossings_removed": 0,
         "crossings_removed": 0,
         "ppr_rewires": 0,
         "leaves_cut": 0,
+        "crossings_remaining": 0,
+        "crossings_at_nodes": 0,
         "discarded_reconnectable": 1.0,
     }
     if len(nodes) == 1:
@@ -433,6 +535,7 @@ def run(tree: Tree, params: Params = Params(), progress: Callable[[int, int], No
         stats["leaves_cut"] += int(len(keep) - keep.sum())
         return _compact(keep, nodes, cost, parent=parent)
 
+    changed = True
     for rnd in range(1, params.max_rounds + 1):
         size_before = len(nodes)
         hops = _shortcut(nodes, parent, space, bfs_levels(parent))
@@ -451,6 +554,15 @@ def run(tree: Tree, params: Params = Params(), progress: Callable[[int, int], No
         changed = hops > 0 or added > 0 or len(nodes) != after_first_cut or after_first_cut != size_before
         if not changed:
             break
+    if changed:  # max_rounds stopped the loop: bring RC and CtL to their fixed point
+        nodes, parent, cost, passes, added, done = _finish(nodes, parent, cost, tol, cut)
+        stats["finish_passes"] = passes
+        stats["finish_crossings_removed"] = added
+        stats["crossings_removed"] += added
+        log.info("simplify: %d finishing RC | CtL passes, %d crossings removed: %d nodes", passes, added, len(nodes))
+        if not done:
+            log.warning("simplify: finishing passes stopped after %d (MAX_FINISH_PASSES)", passes)
+    stats["crossings_remaining"], stats["crossings_at_nodes"] = count_crossings(nodes, parent, tol)
 
     stats["discarded_reconnectable"] = _reconnectable(tree.nodes, nodes, true_space)
     return Tree(tree.map, nodes, parent, cost, tree.collision_samples, stats)
@@ -461,8 +573,18 @@ def summary(tree: Tree) -> str:
     s = tree.stats
     share = s.get("discarded_reconnectable")
     share_text = f"{100 * share:.0f}%" if isinstance(share, (int, float)) else "?"
+    passes = s.get("finish_passes") or 0
+    finish = f" and {passes} finishing RC/CtL pass{'es' if passes != 1 else ''}" if passes else ""
+    left = s.get("crossings_remaining") or 0
+    bound = passes >= MAX_FINISH_PASSES
+    why = f"finishing passes stopped at their bound of {MAX_FINISH_PASSES}" if bound else "missed by RC"
+    left_text = f"; {left} proper crossing{'s remain' if left != 1 else ' remains'} ({why})" if left else ""
+    at = s.get("crossings_at_nodes") or 0
+    if at:
+        left_text += f"; {at} edge pair{'s cross' if at != 1 else ' crosses'} at a node (RC skips those, §3)"
     return (
-        f"{len(tree.nodes)} nodes (from {s.get('nodes_before', '?')}) after {s.get('rounds', '?')} rounds: "
+        f"{len(tree.nodes)} nodes (from {s.get('nodes_before', '?')}) after {s.get('rounds', '?')} rounds{finish}: "
         f"{s.get('ppr_rewires', '?')} shortcuts, {s.get('leaves_cut', '?')} leaves cut, "
-        f"{s.get('crossings_removed', '?')} crossings removed; {share_text} of discarded nodes reconnectable"
+        f"{s.get('crossings_removed', '?')} crossings removed{left_text}; "
+        f"{share_text} of discarded nodes reconnectable"
     )

@@ -1,0 +1,200 @@
+"""Simplify reaches RC's fixed point on maps nobody tuned (ALGORITHMS §3: no proper crossing after the last round).
+
+The maps come from the shared generator ``random_map.py`` (all three kinds; grids with ragged
+edges). Each round ends with CtL, which can delete a node that hid a crossing (RC skips crossings
+within ``tol`` of a node); ``max_rounds`` used to stop such a cascade with crossings left. The cases
+below are ones where the stage before the fix left proper crossings: ``grid`` 416 with the default
+10 rounds (4 pairs), the others with fewer rounds (3 to 19 pairs). Every check here is independent
+of the stage: a brute-force pair scan, the exact segment test, costs walked edge by edge.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bearnav_cli import pipeline
+from bearnav_cli.geometry import FreeSpace
+from bearnav_cli.stages import map_, rrtstar, simplify
+
+TOOL = Path("/work/shared/tools/random_map.py")
+#: (kind, seed, max_rounds); None is the default (10)
+CASES = [
+    ("grid", 416, None),
+    ("clutter", 0, None),
+    ("rooms", 0, None),
+    ("clutter", 146, 3),
+    ("grid", 112, 3),
+    ("rooms", 131, 5),
+    ("grid", 60, 4),
+    ("rooms", 87, 3),
+]
+
+
+def random_map_tool():
+    if not TOOL.exists():
+        pytest.skip("shared random_map tool not available")
+    spec = importlib.util.spec_from_file_location("random_map", TOOL)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def random_map(kind: str, seed: int):
+    """The generator's map, built in memory (the grid as a map_server YAML + PGM would give it)."""
+    doc, grid = random_map_tool().generate(seed, kind)
+    doc["starts"] = []  # a random start may sit in a room the goal cannot reach; the tree needs none
+    source = None
+    if grid is not None:
+        name = doc["name"]
+        meta = {
+            "image": f"{name}.pgm",
+            "resolution": 0.05,
+            "origin": [0.0, 0.0, 0.0],
+            "negate": 0,
+            "occupied_thresh": 0.65,
+            "free_thresh": 0.196,
+        }
+        image = f"P5\n{grid.shape[1]} {grid.shape[0]}\n255\n".encode() + grid.tobytes()
+        source = map_.GridSource(meta, image, f"{name}_grid.yaml", f"{name}.pgm")
+    src = map_.MapSource(spec=doc, file=f"{kind}_{seed}.yaml", sha256="0", grid=source)
+    return map_.run(src, pipeline.resolve_params("map", doc.get("params")))
+
+
+def crossing_pairs(nodes: np.ndarray, parent: np.ndarray, tol: float, at_nodes: bool = False) -> list[tuple[int, int]]:
+    """Every pair of edges that crosses properly, by brute force over all pairs, in plain floats.
+
+    Edges ``(e, parent[e])`` and ``(f, parent[f])`` sharing no endpoint, not parallel
+    (``|cross(r, s)| > tol·max(|r|, |s|)``), meeting at ``k`` strictly inside both, with ``k``
+    farther than ``tol`` from the four endpoints and from every node. ``at_nodes``: the pairs
+    that pass every test but the last one instead (a third node within ``tol`` of ``k``).
+    """
+    out = []
+    kids = range(1, len(nodes))
+    seg = {e: (nodes[e].tolist(), nodes[parent[e]].tolist()) for e in kids}
+    for e in kids:
+        (ax, ay), (bx, by) = seg[e]
+        rx, ry = bx - ax, by - ay
+        for f in range(e + 1, len(nodes)):
+            if len({e, int(parent[e]), f, int(parent[f])}) < 4:
+                continue
+            (cx, cy), (dx, dy) = seg[f]
+            if max(cx, dx) < min(ax, bx) or min(cx, dx) > max(ax, bx):
+                continue
+            if max(cy, dy) < min(ay, by) or min(cy, dy) > max(ay, by):
+                continue
+            sx, sy = dx - cx, dy - cy
+            den = rx * sy - ry * sx
+            if abs(den) <= tol * max(math.hypot(rx, ry), math.hypot(sx, sy)):
+                continue
+            t = ((cx - ax) * sy - (cy - ay) * sx) / den
+            u = ((cx - ax) * ry - (cy - ay) * rx) / den
+            if not (0 < t < 1 and 0 < u < 1):
+                continue
+            k = (ax + t * rx, ay + t * ry)
+            if min(math.dist(k, p) for p in (seg[e][0], seg[e][1], seg[f][0], seg[f][1])) <= tol:
+                continue
+            out.append((e, f, k))
+    if not out:
+        return []
+    near = np.array([np.hypot(*(nodes - k).T).min() for _, _, k in out])
+    return [(e, f) for (e, f, _), d in zip(out, near, strict=True) if (d <= tol) == at_nodes]
+
+
+@pytest.fixture(scope="module")
+def runs():
+    """(map, tree, simplified) per case; RRT* with each map's defaults."""
+    out = {}
+    for kind, seed, rounds in CASES:
+        m = random_map(kind, seed)
+        tree = rrtstar.run(m, pipeline.resolve_params("rrtstar", m.params))
+        params = simplify.Params() if rounds is None else simplify.Params(max_rounds=rounds)
+        out[kind, seed, rounds] = (m, tree, simplify.run(tree, params))
+    return out
+
+
+@pytest.mark.parametrize("case", CASES, ids=lambda c: f"{c[0]}{c[1]}-r{c[2] or 10}")
+def test_no_proper_crossing_remains_and_stats_count_them(runs, case):
+    m, _, out = runs[case]
+    left = crossing_pairs(out.nodes, out.parent, m.tol)
+    assert left == []
+    assert out.stats["crossings_remaining"] == len(left)
+    assert "remain" not in simplify.summary(out)
+    # what RC leaves by definition is counted too, and named in the summary
+    at_nodes = crossing_pairs(out.nodes, out.parent, m.tol, at_nodes=True)
+    assert out.stats["crossings_at_nodes"] == len(at_nodes)
+    assert (f"; {len(at_nodes)} edge pair" in simplify.summary(out)) == bool(at_nodes)
+
+
+@pytest.mark.parametrize("case", CASES, ids=lambda c: f"{c[0]}{c[1]}-r{c[2] or 10}")
+def test_edges_free_routes_not_longer_samples_untouched(runs, case):
+    m, tree, out = runs[case]
+    assert FreeSpace.from_map(m).segments_free(out.nodes[1:], out.nodes[out.parent[1:]]).all()
+    # costs: walked edge by edge, consistent with the stored ones, never above the input's
+    walked = np.zeros(len(out.nodes))
+    for i in range(1, len(out.nodes)):
+        v, steps = i, 0
+        while v != 0:
+            walked[i] += math.dist(out.nodes[v], out.nodes[out.parent[v]])
+            v, steps = out.parent[v], steps + 1
+            assert steps <= len(out.nodes), "cycle"
+    assert np.allclose(walked, out.cost, rtol=0, atol=m.tol)
+    before = {tuple(p): c for p, c in zip(tree.nodes.tolist(), tree.cost, strict=True)}
+    matched = [(before[tuple(p)], c) for p, c in zip(out.nodes.tolist(), out.cost, strict=True) if tuple(p) in before]
+    old, new = np.array(matched).T
+    assert np.all(new <= old + m.tol)
+    assert out.collision_samples.tobytes() == tree.collision_samples.tobytes()
+    # CtL's fixed point holds too: one leaf per parent at most (middle), positions distinct
+    has_child = np.zeros(len(out.nodes), bool)
+    has_child[out.parent[1:]] = True
+    leaves = np.flatnonzero(~has_child)
+    assert np.bincount(out.parent[leaves], minlength=len(out.nodes)).max() <= 1
+    assert len(np.unique(out.nodes, axis=0)) == len(out.nodes)
+    s = out.stats
+    assert s["nodes_before"] - s["leaves_cut"] + s["crossings_removed"] == len(out.nodes)
+
+
+def test_the_cases_do_exercise_the_finishing_passes(runs):
+    """Without the finishing passes these runs end with crossings exposed by the last CtL."""
+    finishing = {case: out.stats["finish_crossings_removed"] for case, (_, _, out) in runs.items()}
+    assert sum(finishing.values()) > 0, finishing
+    for case, (_, _, out) in runs.items():
+        s = out.stats
+        if s["finish_passes"]:  # only when max_rounds stopped rounds that still changed something
+            assert s["rounds"] == (case[2] or 10)
+            assert f"{s['finish_passes']} finishing RC/CtL pass" in simplify.summary(out)
+        else:
+            assert s["finish_crossings_removed"] == 0 and s["nodes_per_round"][-1] == len(out.nodes)
+
+
+def test_deterministic_with_finishing_passes(runs):
+    case = ("grid", 112, 3)
+    _, tree, out = runs[case]
+    again = simplify.run(tree, simplify.Params(max_rounds=3))
+    for name in ("nodes", "parent", "cost"):
+        assert getattr(again, name).tobytes() == getattr(out, name).tobytes()
+    assert again.stats == out.stats
+
+
+def test_crossings_left_at_the_pass_bound_are_counted_exactly(runs, monkeypatch):
+    """With the finishing passes cut to one, the stats and the summary count what is left, exactly."""
+    monkeypatch.setattr(simplify, "MAX_FINISH_PASSES", 1)
+    tried = []
+    for (kind, seed, _), (m, tree, _) in runs.items():
+        for rounds in (3, 4, 5, 6):
+            out = simplify.run(tree, simplify.Params(max_rounds=rounds))
+            left = crossing_pairs(out.nodes, out.parent, m.tol)
+            assert out.stats["crossings_remaining"] == len(left)
+            tried.append((kind, seed, rounds, len(left)))
+            if left:
+                assert out.stats["finish_passes"] == 1
+                word = "crossings remain" if len(left) > 1 else "crossing remains"
+                assert f"; {len(left)} proper {word} (finishing passes stopped at their bound of 1)" in (
+                    simplify.summary(out)
+                )
+                return
+    pytest.fail(f"no case stopped at the bound with crossings left: {tried}")
