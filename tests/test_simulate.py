@@ -268,3 +268,22 @@ def test_controller_reports_arrival_and_needs_a_heading(plans):
         robot.command(d[0], np.ones(len(plan.map.landmarks), bool))
     robot.command(d[0], np.ones(len(plan.map.landmarks), bool), heading=0.0)
     assert robot.arrived and not robot.lost
+
+
+def test_a_plan1_file_and_a_world_in_another_frame_are_refused_in_one_line(plans, tmp_path):
+    """plan/1 files get exit 3 with what to do; ``verify --world`` with other bounds is exit 3 naming the field."""
+    _, path = plans["kitchen"]
+    with np.load(path, allow_pickle=False) as data:
+        entries = {key: data[key] for key in data.files}
+    manifest = json.loads(str(entries.pop("manifest")))
+    manifest["schema"] = "bearnav.plan/1"
+    old = tmp_path / "old.npz"
+    np.savez(old, manifest=np.array(json.dumps(manifest)), **entries)
+    runner = CliRunner()
+    for args in (["verify", str(old), "--starts", "0"], ["simulate", str(old)]):
+        result = runner.invoke(app, args)
+        assert result.exit_code == 3 and "no longer reads" in result.output and "bearnav plan" in result.output
+        assert len(result.output.strip().splitlines()) == 1
+    other = str(REPO / "maps" / "storeroom.yaml")
+    result = runner.invoke(app, ["verify", str(path), "--starts", "0", "--world", other])
+    assert result.exit_code == 3 and "world" in result.output and "another frame" in result.output
