@@ -289,6 +289,8 @@ def fixed_landmark(
 
 #: Densification tries a pocket's pole, a point on it, then up to ``DENSIFY_GRID²`` grid points in it.
 DENSIFY_GRID = 16
+#: Candidate points tested against the nodes in one vectorised call.
+DENSIFY_BATCH = 8
 
 
 @dataclass
@@ -369,20 +371,20 @@ def _funnel_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) 
     domain = coverage_domain(free, free_bounds, space.obstacles, margin)
     domain_area = float(domain.area)
     uncovered = shapely.difference(domain, shapely.union_all([shapely.Polygon(r.polygon) for r in regions]))
-    before = 1.0 - float(uncovered.area) / domain_area if domain_area > 0 else 1.0
+    # the uncovered part as separate pockets: a new cell only cuts the pockets it meets
+    pockets = [[g, float(g.area), False] for g in shapely.get_parts(uncovered) if g.area > 0]
+    before = 1.0 - sum(p[1] for p in pockets) / domain_area if domain_area > 0 else 1.0
     clearance = space.planning_clearance(None, goal, map_.diagonal)
     reach = space.with_clearance(clearance)
-    added, unreachable = [], []
+    added = []
+    marks_current = True  # no node was added since the unreachable pockets were marked
     allowed = (1.0 - params.coverage_target) * domain_area
-    while float(uncovered.area) > allowed and len(added) < params.max_added_nodes:
-        pockets = sorted((g for g in shapely.get_parts(uncovered) if g.area > 0), key=lambda g: -g.area)
+    while sum(p[1] for p in pockets) > allowed and len(added) < params.max_added_nodes:
         grown = False
-        for pocket in pockets:
-            if any(shapely.intersects(pocket, u) for u in unreachable):
-                continue
-            leaf = _densify_leaf(pocket, nodes, cost, reach, tol)
+        for pocket in sorted((p for p in pockets if not p[2]), key=lambda p: -p[1]):
+            leaf = _densify_leaf(pocket[0], nodes, cost, reach, tol)
             if leaf is None:
-                unreachable.append(pocket)
+                pocket[2] = True
                 continue
             p, n = leaf
             nodes = np.vstack([nodes, p])
@@ -391,14 +393,29 @@ def _funnel_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) 
             i = len(nodes) - 1
             region = region_of(i, n, nodes)
             regions.append(_necked(region, nodes[i], nodes[n], regions[n], inset, tol))
-            uncovered = shapely.difference(uncovered, shapely.Polygon(regions[-1].polygon))
+            cell = shapely.Polygon(regions[-1].polygon)
+            kept = []
+            for q in pockets:
+                if not shapely.intersects(q[0], cell):
+                    kept.append(q)
+                    continue
+                kept += [[g, float(g.area), q[2]] for g in shapely.get_parts(shapely.difference(q[0], cell))
+                         if g.area > 0]  # fmt: skip
+            pockets = kept
             added.append(i)
             grown = True
-            unreachable = []  # the new node may see pockets no node saw before
+            marks_current = False
             break
         if not grown:
-            break
-    after = 1.0 - float(uncovered.area) / domain_area if domain_area > 0 else 1.0
+            if marks_current or not any(p[2] for p in pockets):
+                break
+            # nodes were added since the pockets were marked: they may see them now, so retry once
+            for q in pockets:
+                q[2] = False
+            marks_current = True
+    uncovered_area = sum(p[1] for p in pockets)
+    unreachable = [p for p in pockets if p[2]]
+    after = 1.0 - uncovered_area / domain_area if domain_area > 0 else 1.0
     if after < params.coverage_target:
         log.warning("the cells cover %.1f%% of F_m (target %.1f%%): %d pockets no node reaches with clearance%s",
                     100 * after, 100 * params.coverage_target, len(unreachable),
@@ -416,7 +433,7 @@ def _funnel_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) 
         "free_coverage": after,
         "added_nodes": len(added),
         "unreachable_pockets": len(unreachable),
-        "uncovered_area": float(uncovered.area),
+        "uncovered_area": uncovered_area,
         "coverage_domain_area": domain_area,
         "obstacle_pieces": len(pieces),
     }
@@ -439,10 +456,12 @@ def _densify_leaf(pocket: shapely.Geometry, nodes: np.ndarray, cost: np.ndarray,
     grid = grid[shapely.contains_xy(pocket, grid[:, 0], grid[:, 1])]
     depth_in = shapely.distance(pocket.boundary, shapely.points(grid)) if len(grid) else np.zeros(0)
     grid = grid[np.argsort(-depth_in, kind="stable")]
-    for group in (np.array([[pole.x, pole.y], [surface.x, surface.y]]), grid):
-        group = group[reach.points_free(group)] if len(group) else group
-        if not len(group):
-            continue
+    candidates = np.vstack([[pole.x, pole.y], [surface.x, surface.y], grid])
+    candidates = candidates[reach.points_free(candidates)]
+    # a few candidates at a time, deepest first, each against every node: most pockets are reached
+    # from their pole, and a pocket no node sees costs one pass over its grid
+    for start in range(0, len(candidates), DENSIFY_BATCH):
+        group = candidates[start : start + DENSIFY_BATCH]
         # every candidate against every node at once; the first candidate (deepest) that sees a node wins
         route = np.hypot(*(group[:, None, :] - nodes[None]).transpose(2, 0, 1)) + cost[None]
         order = np.argsort(route, axis=1, kind="stable")
