@@ -23,7 +23,7 @@ from bearnav_cli.geometry import box_polygon, clip, polygon_rows
 
 __all__ = [
     "NECK_ANGLE", "ObstaclePieces", "Region", "cell_tolerance", "coverage_domain", "depth", "exit_interval",
-    "funnel_region", "neck_rows", "plan_tolerance_of", "wall_rows",
+    "exit_row_index", "funnel_region", "neck_rows", "necked", "plan_tolerance_of", "wall_rows",
 ]  # fmt: skip
 
 #: ψ of the neck rows: the angle their lines make with the exit direction ``z`` (radians).
@@ -187,8 +187,8 @@ class Region:
     necked: bool = False
 
 
-def _exit_row_index(A: np.ndarray, b: np.ndarray, z: np.ndarray, x_j: np.ndarray, tol: float) -> int:
-    """The row of the exit line ``−z·x ≤ −z·x_j``: normal ``−z`` and through ``x_j``."""
+def exit_row_index(A: np.ndarray, b: np.ndarray, z: np.ndarray, x_j: np.ndarray, tol: float) -> int:
+    """Index of the exit row ``−z·x ≤ −z·x_j`` among a cell's rows: normal ``−z``, through ``x_j``."""
     score = A @ -z
     on_line = np.abs(A @ x_j - b) <= 1e3 * tol
     candidates = np.flatnonzero(on_line & (score > 1.0 - 1e-9))
@@ -204,7 +204,6 @@ def funnel_region(
     margin: float,
     tol: float,
     start: np.ndarray | None = None,
-    extra: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> Region:
     """The corridor region of an edge (or of the goal): ALGORITHMS §11.5 step 1.
 
@@ -221,8 +220,6 @@ def funnel_region(
         Map tolerance.
     start : ndarray, shape (p, 2), optional
         A convex polygon to start from instead of ``B_r`` (``funnel-local``: the §4.1 cell).
-    extra : tuple of ndarray, optional
-        More rows ``(A, b)`` to clip by (the neck rows).
 
     Returns
     -------
@@ -240,14 +237,38 @@ def funnel_region(
     # every piece the current region can meet (the region only shrinks, so one query suffices)
     which = pieces.tree.query(shapely.Polygon(polygon), predicate="intersects") if len(pieces) else np.zeros(0, int)
     A_o, b_o = pieces.separating_rows(ends, np.sort(which), margin)
-    if extra is not None:
-        A_o, b_o = np.concatenate([A_o, extra[0]]), np.concatenate([b_o, extra[1]])
     polygon = _clip_rows(polygon, A_o, b_o, ends.mean(axis=0), tol)
     if len(polygon) < 3:
         raise ValueError(f"the cell of {ends.round(6).tolist()} degenerated (an obstacle touches the edge)")
     A, b = polygon_rows(polygon)
-    exit_row = -1 if z is None else _exit_row_index(A, b, z, x_j, tol)
-    return Region(polygon, A, b, exit_row, extra is not None)
+    exit_row = -1 if z is None else exit_row_index(A, b, z, x_j, tol)
+    return Region(polygon, A, b, exit_row)
+
+
+def necked(region: Region, x_i: np.ndarray, x_j: np.ndarray, parent: Region, inset: float, tol: float) -> Region:
+    """``region`` with neck rows when its exit face is not inside ``parent ⊖ inset`` (§11.5 step 2).
+
+    Raises
+    ------
+    ValueError
+        ``x_j`` lies within ``inset`` of the parent's boundary (the caller caps the inset below
+        every node's depth, so this is a bug).
+    """
+    z = (x_i - x_j) / math.hypot(*(x_i - x_j))
+    w = np.array([-z[1], z[0]])
+    t_a, t_b = exit_interval(parent.A, parent.b, x_j, w, inset)
+    if not t_a < 0.0 < t_b:
+        raise ValueError(f"the exit point {x_j.round(6).tolist()} lies within the exit inset of its parent cell")
+    k, p = region.exit_row, len(region.polygon)
+    ends = sorted(((region.polygon[k] - x_j) @ w, (region.polygon[(k + 1) % p] - x_j) @ w))
+    if t_a <= ends[0] and ends[1] <= t_b:
+        return region
+    # a hair inside [a, b], so that rounding cannot put the face's ends outside the eroded parent
+    pad = 100.0 * tol
+    A_n, b_n = neck_rows(x_j, z, t_a + pad, t_b - pad)
+    polygon = clip(clip(region.polygon, A_n[0], b_n[0], tol), A_n[1], b_n[1], tol)
+    A, b = polygon_rows(polygon)
+    return Region(polygon, A, b, exit_row_index(A, b, z, x_j, tol), True)
 
 
 def depth(A: np.ndarray, b: np.ndarray, point: np.ndarray) -> float:

@@ -22,7 +22,7 @@ import shapely.ops
 from bearnav_cli.barriers import cbf_rows, corridor_rows, goal_cbf_rows, wall_rows
 from bearnav_cli.datatypes import CellFlag, Cells, Tree, cell_list
 from bearnav_cli.errors import ArtifactError, InvalidParamsError
-from bearnav_cli.funnel import ObstaclePieces, Region, coverage_domain, depth, exit_interval, funnel_region, neck_rows
+from bearnav_cli.funnel import ObstaclePieces, Region, coverage_domain, depth, exit_row_index, funnel_region, necked
 from bearnav_cli.geometry import (
     DEFAULT_CLEARANCE,
     FreeSpace,
@@ -309,29 +309,6 @@ class _Layout:
     stats: dict | None = None
 
 
-def _necked(region: Region, x_i: np.ndarray, x_j: np.ndarray, parent: Region, inset: float, tol: float) -> Region:
-    """The region with neck rows when its exit face is not inside ``parent ⊖ inset`` (§11.5 step 2)."""
-    z = (x_i - x_j) / math.hypot(*(x_i - x_j))
-    w = np.array([-z[1], z[0]])
-    t_a, t_b = exit_interval(parent.A, parent.b, x_j, w, inset)
-    if not t_a < 0.0 < t_b:
-        raise ArtifactError(f"the exit point {x_j.round(6).tolist()} lies within the exit inset of its parent cell "
-                            "(the inset is capped below every node's depth: a bug)", field="exit_inset")  # fmt: skip
-    k, p = region.exit_row, len(region.polygon)
-    ends = sorted(((region.polygon[k] - x_j) @ w, (region.polygon[(k + 1) % p] - x_j) @ w))
-    if t_a <= ends[0] and ends[1] <= t_b:
-        return region
-    # a hair inside [a, b], so that rounding cannot put the face's ends outside the eroded parent
-    pad = 100.0 * tol
-    A_n, b_n = neck_rows(x_j, z, t_a + pad, t_b - pad)
-    polygon = clip(clip(region.polygon, A_n[0], b_n[0], tol), A_n[1], b_n[1], tol)
-    A, b = polygon_rows(polygon)
-    score = A @ -z
-    on_line = np.abs(A @ x_j - b) <= 1e3 * tol
-    exit_row = int(np.flatnonzero(on_line & (score > 1.0 - 1e-9))[0])
-    return Region(polygon, A, b, exit_row, True)
-
-
 def _funnel_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) -> _Layout:
     """Funnel cells of every edge, the goal cell, necks and densification (ALGORITHMS §11.5)."""
     map_ = tree.map
@@ -353,6 +330,12 @@ def _funnel_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) 
         except ValueError as exc:
             raise ArtifactError(f"cell of node {i}: {exc}", field="nodes") from exc
 
+    def neck(region: Region, i: int, j: int) -> Region:
+        try:
+            return necked(region, nodes[i], nodes[j], regions[j], inset, tol)
+        except ValueError as exc:  # the inset is capped below every node's depth: a bug
+            raise ArtifactError(f"cell of node {i}: {exc}", field="exit_inset") from exc
+
     goal_start = goal_cell(nodes, free_bounds, tol) if local else None
     regions = [funnel_region(pieces, free_bounds, goal[None, :], margin, tol, goal_start)]
     regions += [region_of(i, int(parent[i]), nodes) for i in range(1, len(nodes))]
@@ -364,7 +347,7 @@ def _funnel_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) 
         log.warning("exit_inset %.4g capped at %.4g (half the smallest depth of a node in its cell)",
                     params.exit_inset, cap)  # fmt: skip
     for i in np.argsort(cost, kind="stable")[1:]:  # parents before children: their final cells exist
-        regions[i] = _necked(regions[i], nodes[i], nodes[parent[i]], regions[parent[i]], inset, tol)
+        regions[i] = neck(regions[i], i, parent[i])
 
     # coverage of F_m, and densification (§11.5 step 3)
     free = space.component_of(goal)
@@ -391,8 +374,7 @@ def _funnel_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) 
             parent = np.append(parent, n)
             cost = np.append(cost, cost[n] + math.hypot(*(p - nodes[n])))
             i = len(nodes) - 1
-            region = region_of(i, n, nodes)
-            regions.append(_necked(region, nodes[i], nodes[n], regions[n], inset, tol))
+            regions.append(neck(region_of(i, n, nodes), i, n))
             cell = shapely.Polygon(regions[-1].polygon)
             kept = []
             for q in pockets:
@@ -517,7 +499,7 @@ def _paper_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) -
                 flags[c] |= CellFlag.SAMPLE_ON_EDGE
                 log.warning("cell %d: a collision sample on the edge line was skipped", c)
             z = (nodes[c] - nodes[j]) / np.hypot(*(nodes[c] - nodes[j]))
-            exit_row = int(np.argmax(A @ -z - np.abs(A @ nodes[j] - b)))
+            exit_row = exit_row_index(A, b, z, nodes[j], tol)
         regions.append((polygon, A, b, exit_row))
         cbf.append((normals, offsets))
     return _Layout(nodes, parent, np.array(tree.cost, float), regions, cbf, flags, np.zeros(n, bool),
