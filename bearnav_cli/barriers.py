@@ -15,7 +15,7 @@ import math
 import numpy as np
 import shapely
 
-from bearnav_cli.geometry import clip, polygon_rows
+from bearnav_cli.geometry import clip, convex_pieces, polygon_rows
 
 log = logging.getLogger(__name__)
 
@@ -126,38 +126,6 @@ def goal_cbf_rows(
     return normals[supports], offsets[supports]
 
 
-def _convex_pieces(region: shapely.Geometry, keep_clear: shapely.Geometry) -> tuple[list[shapely.Geometry], np.ndarray]:
-    """Convex pieces of ``region`` that a robot must keep off: each convex part itself, and every
-    boundary edge of the other parts.
-
-    Why edges: a convex set that holds a free point and meets a polygon's interior crosses its
-    boundary, so staying off every boundary edge keeps a robot out of the polygon. A hull would
-    also fence off the free pockets of a non-convex part (a storeroom's wall frame encloses the
-    whole room), and triangles would add rows at arbitrary angles through free space.
-
-    Returns
-    -------
-    parts : list of shapely.Polygon
-        Convex parts that miss ``keep_clear``.
-    edges : ndarray, shape (E, 2, 2)
-        Boundary edges ``(a, b)`` of the other parts, oriented so that the part lies on their left.
-    """
-    parts: list[shapely.Geometry] = []
-    edges = [np.zeros((0, 2, 2))]
-    for part in shapely.get_parts(region):
-        if not isinstance(part, shapely.Polygon) or part.area <= 0:
-            continue
-        hull = shapely.convex_hull(part)
-        if hull.area - part.area <= 1e-9 * hull.area and not shapely.intersects(hull, keep_clear):
-            parts.append(hull)
-            continue
-        part = shapely.orient_polygons(part)  # exterior CCW, holes CW: the part is on every ring's left
-        for ring in (part.exterior, *part.interiors):
-            xy = np.asarray(ring.coords)
-            edges.append(np.stack([xy[:-1], xy[1:]], axis=1))
-    return parts, np.concatenate(edges)
-
-
 def _nearest_separators(pieces, segment: shapely.Geometry) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """For each piece, the nearest point ``p`` on it, the unit normal toward the segment and the gap."""
     pair = shapely.get_coordinates(shapely.shortest_line(np.asarray(pieces, dtype=object), segment)).reshape(-1, 2, 2)
@@ -228,7 +196,7 @@ def corridor_rows(
         region = shapely.buffer(region, margin, join_style="mitre")
     near = shapely.intersection(obstacles, region)
     normals, offsets, levels = [np.zeros((0, 2))], [np.zeros(0)], [np.zeros(0)]
-    parts, edges = _convex_pieces(near, segment) if not near.is_empty else ([], np.zeros((0, 2, 2)))
+    parts, edges = convex_pieces(near, segment) if not near.is_empty else ([], np.zeros((0, 2, 2)))
     anchor, n, dist = np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0)
     if parts:
         anchor, n, dist = _nearest_separators(parts, segment)

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 import shapely
 
-from bearnav_cli.geometry import box_polygon, clip, polygon_rows
+from bearnav_cli.geometry import box_polygon, clip, convex_pieces, polygon_rows
 
 __all__ = [
     "NECK_ANGLE", "ObstaclePieces", "Region", "cell_tolerance", "coverage_domain", "depth", "exit_interval",
@@ -55,19 +55,7 @@ class ObstaclePieces:
     @classmethod
     def from_obstacles(cls, obstacles: shapely.Geometry) -> ObstaclePieces:
         """Split the (inflated) obstacles into convex pieces."""
-        parts, edges = [], [np.zeros((0, 2, 2))]
-        for part in shapely.get_parts(obstacles):
-            if not isinstance(part, shapely.Polygon) or part.area <= 0:
-                continue
-            hull = shapely.convex_hull(part)
-            if hull.area - part.area <= 1e-9 * hull.area and not part.interiors:
-                parts.append(hull)
-                continue
-            part = shapely.orient_polygons(part)  # exterior CCW, holes CW: the part is on every ring's left
-            for ring in (part.exterior, *part.interiors):
-                xy = np.asarray(ring.coords)
-                edges.append(np.stack([xy[:-1], xy[1:]], axis=1))
-        edge_array = np.concatenate(edges)
+        parts, edge_array = convex_pieces(obstacles)
         geoms = np.concatenate([np.array(parts, dtype=object), shapely.linestrings(edge_array)])
         all_edges = np.concatenate([np.full((len(parts), 2, 2), np.nan), edge_array])
         return cls(geoms, all_edges, shapely.STRtree(geoms))

@@ -87,7 +87,7 @@ class FreeSpace:
     tol: float
     obstacles: shapely.Geometry
     raw_obstacles: shapely.Geometry
-    sight_bounds: np.ndarray | None = None
+    sight_bounds: np.ndarray
 
     @classmethod
     def from_map(cls, map_: Map) -> FreeSpace:
@@ -102,11 +102,6 @@ class FreeSpace:
         shapely.prepare(obstacles)
         shapely.prepare(raw)
         return cls(map_.free_bounds, map_.tol, obstacles, raw, np.asarray(map_.bounds, float))
-
-    @property
-    def outer_bounds(self) -> np.ndarray:
-        """The map's bounds ``B`` (landmarks, line of sight, sampling), shape (4,)."""
-        return self.bounds if self.sight_bounds is None else self.sight_bounds
 
     def with_clearance(self, clearance: float) -> FreeSpace:
         """The space a planner keeps ``clearance`` away from: ``O`` grown by it, and a band of that width along ``∂B``.
@@ -125,7 +120,7 @@ class FreeSpace:
         # the band covers B \ B_r too, so a segment leaving B_r meets it even when the caller
         # skips the box test (samples are drawn in B)
         inner = shapely.buffer(shapely.box(*self.bounds), -clearance, join_style="mitre")
-        band = shapely.difference(shapely.box(*self.outer_bounds), inner)
+        band = shapely.difference(shapely.box(*self.sight_bounds), inner)
         grown = shapely.union(inflate(self.obstacles, clearance), band)
         shapely.prepare(grown)
         return FreeSpace(self.bounds, self.tol, grown, self.raw_obstacles, self.sight_bounds)
@@ -280,7 +275,7 @@ class FreeSpace:
         -------
         list of shapely.Geometry, length L
         """
-        outer = self.outer_bounds
+        outer = self.sight_bounds
         box = shapely.box(*outer)
         far = 4.0 * float(np.hypot(*(outer[2:] - outer[:2])))
         rings = []
@@ -355,6 +350,46 @@ def landmark_coverage(map_: Map, space: FreeSpace, cells: int = 100) -> tuple[np
 
 
 # --------------------------------------------------------------------------- convex polygons
+
+
+def convex_pieces(region: shapely.Geometry, keep_clear: shapely.Geometry | None = None) -> tuple[list, np.ndarray]:
+    """Convex pieces of ``region`` that a robot must keep off: each convex part itself, and every
+    boundary edge of the other parts.
+
+    Why edges: a convex set that holds a free point and meets a polygon's interior crosses its
+    boundary, so staying off every boundary edge keeps a robot out of the polygon. A hull would
+    also fence off the free pockets of a non-convex part (a storeroom's wall frame encloses the
+    whole room), and triangles would add rows at arbitrary angles through free space.
+
+    Parameters
+    ----------
+    region : shapely geometry
+        (Multi)polygons.
+    keep_clear : shapely geometry, optional
+        A convex part that meets it is split into edges instead (it cannot be separated whole).
+
+    Returns
+    -------
+    parts : list of shapely.Polygon
+        The convex parts.
+    edges : ndarray, shape (E, 2, 2)
+        Boundary edges ``(a, b)`` of the other parts, oriented so that the part lies on their left.
+    """
+    parts: list = []
+    edges = [np.zeros((0, 2, 2))]
+    for part in shapely.get_parts(region):
+        if not isinstance(part, shapely.Polygon) or part.area <= 0:
+            continue
+        hull = shapely.convex_hull(part)
+        convex = hull.area - part.area <= 1e-9 * hull.area and not part.interiors
+        if convex and (keep_clear is None or not shapely.intersects(hull, keep_clear)):
+            parts.append(hull)
+            continue
+        part = shapely.orient_polygons(part)  # exterior CCW, holes CW: the part is on every ring's left
+        for ring in (part.exterior, *part.interiors):
+            xy = np.asarray(ring.coords)
+            edges.append(np.stack([xy[:-1], xy[1:]], axis=1))
+    return parts, np.concatenate(edges)
 
 
 def box_polygon(bounds: np.ndarray) -> np.ndarray:
