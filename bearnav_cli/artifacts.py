@@ -202,7 +202,7 @@ def make_manifest(
         "software": software_versions(),
         "summary": summary,
         "elapsed_s": round(float(elapsed_s), 6),
-        "stats": _stats_of(artifact, stats),
+        "stats": dict(stats or {}),
     }
 
 
@@ -222,11 +222,6 @@ def entries_of(artifact: Any) -> dict[str, Any]:
     if isinstance(artifact, (Tree, Cells, Plan, Simulation)):
         return {"map": artifact.map.to_json_text(), **artifact.arrays()}
     raise TypeError(f"not an artifact: {type(artifact).__name__}")
-
-
-def _stats_of(artifact: Any, stats: dict | None) -> dict:
-    """Manifest statistics (a copy)."""
-    return dict(stats or {})
 
 
 def _from_entries(kind: str, entries: dict[str, Any], manifest: dict) -> Any:

@@ -417,14 +417,6 @@ class Cells:
         """Whether the cells compose (ALGORITHMS §11)."""
         return self.certificate == "funnel"
 
-    def exit_row(self, c: int) -> tuple[np.ndarray, float] | None:
-        """``(A_k, b_k)`` of cell ``c``'s exit row, or ``None`` for the goal cell."""
-        k = int(self.cell_exit_row[c])
-        if k < 0:
-            return None
-        r = self.cell_row_offsets[c] + k
-        return self.cell_A[r], float(self.cell_b[r])
-
     @property
     def n_cells(self) -> int:
         return len(self.cell_node)
