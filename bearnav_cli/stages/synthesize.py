@@ -396,11 +396,17 @@ def lemma4_margin(problem: CellProblem, c_v: float, u_max: float) -> float:
     When positive, the field ``c(x_j − x) − εz`` with ``0 < ε < ε_max`` meets (L1)–(L3) with
     margins of at least ``min(ε, ε_max − ε)``; the LP's strict margin bounds are set from it.
     """
+    h_min, diam = _lemma4_terms(problem)
+    return min(c_v * h_min, u_max - c_v * diam)
+
+
+def _lemma4_terms(problem: CellProblem) -> tuple[float, float]:
+    """``min_k h_k(x_j)`` and ``diam(P)`` of a cell (map units), the two geometric terms of Lemma 4."""
     V = problem.vertices
     diff = V[:, None, :] - V
     diam = math.sqrt(float((diff * diff).sum(axis=2).max()))
     h_min = float(np.min(problem.cbf_n @ problem.x_j + problem.cbf_q)) if len(problem.cbf_q) else math.inf
-    return min(c_v * h_min, u_max - c_v * diam)
+    return h_min, diam
 
 
 def _funnel_sweep(prepared: PreparedCell, params: Params, solver: LpSolver, fixed: tuple) -> SolveOutcome:
@@ -413,11 +419,12 @@ def _funnel_sweep(prepared: PreparedCell, params: Params, solver: LpSolver, fixe
     n_theta, n_h = template.n_theta, template.n_h
     result, upper, c_h, c_v, kappa, attempts = None, None, math.nan, math.nan, params.kappa, 0
     halving = 0
+    h_min, diam = _lemma4_terms(prepared.problem)  # geometry: the same at every κ
     for halving in range(FUNNEL_HALVINGS + 1):
         kappa = params.kappa * 0.5**halving
         c_v = kappa * u_max / prepared.v_scale
         c_h = max(kappa * u_max / prepared.h_scale, c_v)
-        eps = lemma4_margin(prepared.problem, c_v, u_max)
+        eps = min(c_v * h_min, u_max - c_v * diam)  # lemma4_margin
         if not eps > 0:
             continue
         columns = template.col_upper.copy()
