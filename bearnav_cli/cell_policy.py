@@ -232,7 +232,8 @@ def funnel_update(arrays: PlanArrays, cell: np.ndarray, target: np.ndarray, x: n
         idx = np.flatnonzero(going)[near]
         c[idx] = arrays.node_cell[t[idx]]  # the node lies strictly inside its own cell
         t[idx] = -1
-    c[(c < 0) & (t >= 0)] = arrays.node_cell[t[(c < 0) & (t >= 0)]]  # the cell it drives to, for the record
+    driving = (c < 0) & (t >= 0)
+    c[driving] = arrays.node_cell[t[driving]]  # the cell it drives to, for the record
     return c, t, relocated
 
 

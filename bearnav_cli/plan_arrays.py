@@ -92,10 +92,11 @@ class PlanArrays:
         ``δ*``: a step whose position error bound is at most this is certified (NaN for ``paper``).
     exit_inset : float
         ``δ_e`` (map units).
-    free_bounds : ndarray, shape (4,)
-        ``B_r``, the bounds less the robot radius: the walls of the straight-line checks.
+    robot_radius : float
+        ρ (map units): the walls of the straight-line checks are ``B_r``, the bounds less ρ.
 
-    Derived attributes (computed on construction): ``goal`` (2,), ``tol`` (``1e-9·D``),
+    Derived attributes (computed on construction): ``goal`` (2,), ``free_bounds`` (4,) ``B_r``,
+    ``tol`` (``1e-9·D``),
     ``node_cell`` (N,) the cell of each node, ``parent_cell`` (C,) the cell a cell switches
     to (``-1`` for the goal cell), ``field_a`` (C, 2) and ``field_M`` (C, 2, 2) with
     ``gain[c] @ (landmarks − x).ravel() = field_a[c] − field_M[c] @ x``, and the rows padded
@@ -130,8 +131,9 @@ class PlanArrays:
     tolerance: np.ndarray
     plan_tolerance: float
     exit_inset: float
-    free_bounds: np.ndarray
+    robot_radius: float
     goal: np.ndarray = dataclasses.field(init=False, repr=False)
+    free_bounds: np.ndarray = dataclasses.field(init=False, repr=False)
     tol: float = dataclasses.field(init=False, repr=False)
     node_cell: np.ndarray = dataclasses.field(init=False, repr=False)
     parent_cell: np.ndarray = dataclasses.field(init=False, repr=False)
@@ -152,12 +154,13 @@ class PlanArrays:
             ("exit_dir", float), ("gain", float), ("u_max", float), ("bounds", float), ("cell_landmarks", bool),
             ("fixed_landmark", np.int64), ("status", np.int8), ("cbf_A", float), ("cbf_b", float),
             ("cbf_offsets", np.int64), ("obstacle_edges", float), ("cell_rank", float), ("tolerance", float),
-            ("free_bounds", float),
         ):  # fmt: skip
             put(self, name, _readonly(getattr(self, name), dtype))
-        for name in ("goal_tolerance", "plan_tolerance", "exit_inset"):
+        for name in ("goal_tolerance", "plan_tolerance", "exit_inset", "robot_radius"):
             put(self, name, float(getattr(self, name)))
         put(self, "certificate", str(self.certificate))
+        r = max(0.0, self.robot_radius)
+        put(self, "free_bounds", _readonly(self.bounds + np.array([r, r, -r, -r]), float))  # B_r (Map.free_bounds)
         n, c, n_lm = len(self.nodes), len(self.cell_node), len(self.landmarks)
         self._check_shapes(n, c, n_lm)
         roots = np.flatnonzero(self.parent == -1)
@@ -249,7 +252,7 @@ class PlanArrays:
             tolerance=plan.tolerance,
             plan_tolerance=plan.plan_tolerance,
             exit_inset=cells.exit_inset,
-            free_bounds=cells.map.free_bounds,
+            robot_radius=cells.map.robot_radius,
         )
 
     @classmethod
@@ -281,7 +284,7 @@ class PlanArrays:
             raise ArtifactError(f"cannot read plan ({type(exc).__name__}: {exc})", file=str(path)) from exc
         try:
             bounds = np.asarray(map_json["bounds"], float)
-            radius = max(0.0, float(map_json.get("robot_radius", 0.0)))
+            radius = float(map_json.get("robot_radius", 0.0))
             rings = [
                 (np.asarray(o["exterior"], float), *(np.asarray(h, float) for h in o.get("holes", ())))
                 for o in map_json["obstacles"]
@@ -291,8 +294,7 @@ class PlanArrays:
         for key in ("goal_tolerance", "plan_tolerance", "exit_inset"):
             entries[key] = float(entries[key])
         entries["certificate"] = str(entries["certificate"])
-        free_bounds = bounds + np.array([1.0, 1.0, -1.0, -1.0]) * radius
-        return cls(bounds=bounds, obstacle_edges=ring_edges(rings), free_bounds=free_bounds, **entries)
+        return cls(bounds=bounds, obstacle_edges=ring_edges(rings), robot_radius=radius, **entries)
 
 
 def ring_edges(polygons: list[tuple[np.ndarray, ...]]) -> np.ndarray:

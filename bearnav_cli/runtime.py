@@ -399,9 +399,7 @@ def control(
                        var, scanning, spin)  # fmt: skip
     # certified (§11.4): a funnel plan, driven by a certified cell's field (not a straight approach),
     # on an estimate whose error bound is within the plan's tolerance δ*
-    certified = steer & (target < 0) & (cell >= 0) & (error_bound <= arrays.plan_tolerance + s.tol)
-    if not arrays.funnel:
-        certified[:] = False
+    certified = arrays.funnel & steer & (target < 0) & (cell >= 0) & (error_bound <= arrays.plan_tolerance + s.tol)
     return ControlOutput(velocity, forward, turn, scanning, new, fix, lost, stalled, relocated,
                          np.where(steer[:, None], x_hat, 0.0), certified)  # fmt: skip
 
