@@ -22,6 +22,7 @@ from rich.table import Table
 from bearnav_cli import __version__, artifacts, pipeline
 from bearnav_cli.datatypes import CellFlag, Cells, CellStatus, cell_list
 from bearnav_cli.errors import BearnavError, InvalidMapError
+from bearnav_cli.stages import map_
 from bearnav_cli.stages.map_ import GridSource, MapSource
 
 app = typer.Typer(
@@ -417,8 +418,6 @@ def verify_command(
 
 def _load_world(path: Path):
     """The normalised map of a ``--world`` YAML (validated like any map)."""
-    from bearnav_cli.stages import map_
-
     return map_.run(read_map_source(path))
 
 

@@ -370,20 +370,15 @@ class VerifyReport:
             return np.zeros(0, bool)
         return self.rollouts.start_in_domain
 
-    def _success_where(self, mask: np.ndarray) -> float:
-        if self.rollouts is None or not mask.any():
-            return math.nan
-        return float(np.mean(self.rollouts.outcome[mask] == simulate.Outcome.SUCCESS))
-
     @property
     def success_in_domain(self) -> float:
-        """Success rate of the runs from ``D`` (the theorem says 1)."""
-        return self._success_where(self.in_domain)
+        """Success rate of the runs from ``D`` (the theorem says 1); NaN without such runs."""
+        return self.rollouts.success_rate_of(self.in_domain) if self.rollouts is not None else math.nan
 
     @property
     def success_outside_domain(self) -> float:
         """Success rate of the runs from ``F \\ D`` (uncertified: straight approach first)."""
-        return self._success_where(~self.in_domain)
+        return self.rollouts.success_rate_of(~self.in_domain) if self.rollouts is not None else math.nan
 
     # ------------------------------------------------------------- Monte-Carlo figures
     @property
@@ -565,8 +560,7 @@ class VerifyReport:
             mc.update(runs_from_domain=int(self.in_domain.sum()),
                       success_rate_in_domain=_finite_or_none([self.success_in_domain])[0],
                       success_rate_outside_domain=_finite_or_none([self.success_outside_domain])[0],
-                      certified_step_fraction=float(self.rollouts.certified_steps.sum()
-                                                    / max(1, self.rollouts.steps.sum())))  # fmt: skip
+                      certified_step_fraction=self.rollouts.certified_fraction)  # fmt: skip
         out["monte_carlo"] = mc
         if self.composition is not None:
             comp = self.composition

@@ -338,6 +338,16 @@ class Rollouts:
         """Fraction of successful runs (NaN without runs)."""
         return float(np.mean(self.outcome == Outcome.SUCCESS)) if len(self) else math.nan
 
+    def success_rate_of(self, runs: np.ndarray) -> float:
+        """Fraction of successful runs among ``runs`` (bool mask, shape (R,)); NaN when it selects none."""
+        done = self.outcome[runs] == Outcome.SUCCESS
+        return float(np.mean(done)) if len(done) else math.nan
+
+    @property
+    def certified_fraction(self) -> float:
+        """Steps covered by the composed certificate over all steps (ALGORITHMS §11.4; 0 without steps)."""
+        return float(self.certified_steps.sum() / max(1, self.steps.sum()))
+
 
 def step_limits(arrays: PlanArrays, starts: np.ndarray, s: Settings, params: Params) -> np.ndarray:
     """``max_steps`` of each run (ALGORITHMS §7.2), shape (R,)."""
@@ -670,16 +680,16 @@ def metrics(rollouts: Rollouts, routes: np.ndarray, goal: np.ndarray) -> dict:
         "runs_with_left_cell": int(np.count_nonzero(rollouts.left_cell > 0)),
         "runs_with_approach": int(np.count_nonzero(rollouts.approach_steps > 0)),
         "hold_time_total_s": float(rollouts.hold_steps.sum() * rollouts.dt),
-        "certified_step_fraction": float(rollouts.certified_steps.sum() / max(1, rollouts.steps.sum())),
+        "certified_step_fraction": rollouts.certified_fraction,
         "runs_from_certified_domain": int(np.count_nonzero(rollouts.start_in_domain)),
-        "success_rate_in_domain": _rate(done[rollouts.start_in_domain]),
-        "success_rate_outside_domain": _rate(done[~rollouts.start_in_domain]),
+        "success_rate_in_domain": _finite_or_none(rollouts.success_rate_of(rollouts.start_in_domain)),
+        "success_rate_outside_domain": _finite_or_none(rollouts.success_rate_of(~rollouts.start_in_domain)),
         "dt": rollouts.dt,
     }
 
 
-def _rate(done: np.ndarray) -> float | None:
-    return float(np.mean(done)) if len(done) else None
+def _finite_or_none(value: float) -> float | None:
+    return value if math.isfinite(value) else None
 
 
 def run(plan, params: Params = Params(), progress: Callable[[int, int], None] | None = None) -> Simulation:
