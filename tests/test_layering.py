@@ -14,7 +14,8 @@ LAYERS = {
     "datatypes": 1,
     "geometry": 2, "lp": 2, "bearing": 2, "occupancy": 2,
     "plan_arrays": 2, "cell_policy": 2.1, "runtime": 2.2,  # runtime builds on cell_policy, plan_arrays and bearing
-    "cell_lp": 2.5, "routes": 2.5, "barriers": 2.5,  # build on lp and geometry
+    "cell_lp": 2.5, "routes": 2.5, "barriers": 2.5, "funnel": 2.5,  # build on lp and geometry
+    "composition": 2.7,  # the §11.6 checks, on funnel and geometry; verify builds on it
     "stages": 3, "verify": 3,
     "artifacts": 4, "pipeline": 5,
     "cli": 6,
