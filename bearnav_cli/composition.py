@@ -26,7 +26,7 @@ import shapely
 
 from bearnav_cli.datatypes import Map, Plan, cell_list
 from bearnav_cli.funnel import cell_tolerance, coverage_domain, plan_tolerance_of
-from bearnav_cli.geometry import DEFAULT_CLEARANCE, FreeSpace
+from bearnav_cli.geometry import FreeSpace, barrier_margin
 
 __all__ = ["Composition", "check", "time_bound", "world_violations"]
 
@@ -201,8 +201,10 @@ def world_violations(plan: Plan, space: FreeSpace) -> list[int]:
 def coverage(plan: Plan, space: FreeSpace) -> float:
     """``area(D ∩ F_m) / area(F_m)`` with ``F_m`` the goal's free component less the margin (§11.1)."""
     map_ = plan.map
-    margin = map_.params.get("decompose", {}).get("barrier_margin") if isinstance(map_.params, dict) else None
-    margin = DEFAULT_CLEARANCE * map_.diagonal if margin is None else float(margin)
+    # the margin decompose used: the map's own decompose parameter, else the default (a margin given
+    # only on the command line is not in plan.npz; DESIGN §3.3 has no key for it)
+    requested = map_.params.get("decompose", {}).get("barrier_margin") if isinstance(map_.params, dict) else None
+    margin = barrier_margin(requested, map_.diagonal)
     domain = coverage_domain(space.component_of(map_.goal), space.bounds, space.obstacles, margin)
     if domain.area <= 0:
         return 1.0

@@ -75,6 +75,15 @@ def inflate(raw: shapely.Geometry, radius: float) -> shapely.Geometry:
 DEFAULT_CLEARANCE = 0.01
 
 
+def barrier_margin(requested: float | None, diagonal: float) -> float:
+    """The barrier margin ``m`` (map units): ``requested``, or ``DEFAULT_CLEARANCE·D`` when ``None``.
+
+    Decomposition keeps every cell this far from the obstacles where it can, and ``F_m`` (the part
+    of the free space the funnel cells must cover, ALGORITHMS §11.1) is the free space less it.
+    """
+    return DEFAULT_CLEARANCE * diagonal if requested is None else float(requested)
+
+
 @dataclass(frozen=True)
 class FreeSpace:
     """Free space ``B \\ O`` of a map, with exact vectorised queries.

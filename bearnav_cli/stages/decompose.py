@@ -24,8 +24,8 @@ from bearnav_cli.datatypes import CellFlag, Cells, Tree, cell_list
 from bearnav_cli.errors import ArtifactError, InvalidParamsError
 from bearnav_cli.funnel import ObstaclePieces, Region, coverage_domain, depth, exit_row_index, funnel_region, necked
 from bearnav_cli.geometry import (
-    DEFAULT_CLEARANCE,
     FreeSpace,
+    barrier_margin,
     box_polygon,
     clip,
     landmark_coverage,
@@ -541,7 +541,7 @@ def run(tree: Tree, params: Params = Params(), progress: Callable[[int, int], No
             k = order[int(np.argmax(gaps <= tol))]
             raise ArtifactError(f"coincident tree nodes near {nodes[k].tolist()}", field="nodes")
     space = FreeSpace.from_map(map_)
-    margin = DEFAULT_CLEARANCE * map_.diagonal if params.barrier_margin is None else params.barrier_margin
+    margin = barrier_margin(params.barrier_margin, map_.diagonal)
     funnel = params.cells != "paper"
     layout = (_funnel_layout if funnel else _paper_layout)(tree, params, space, margin)
     nodes, parent, flags = layout.nodes, layout.parent, layout.flags
