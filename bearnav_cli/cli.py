@@ -357,6 +357,9 @@ def synthesize_command(
     gain_structure: Optional[str] = typer.Option(None, help="'full' (default), 'diag' or 'scalar' gain blocks."),
     lp_form: Optional[str] = typer.Option(None, help="'vertex' (default) or 'dual' form of the robust LP."),
     goal_tolerance: Optional[float] = typer.Option(None, help="Success radius around the goal (0.01 D)."),
+    tolerant: Optional[bool] = typer.Option(
+        None, "--tolerant/--lp-field", help="Funnel cells: keep the field that tolerates more position error (on)."
+    ),
     force: bool = FORCE,
     quiet: bool = QUIET,
     as_json: bool = JSON,
@@ -368,7 +371,7 @@ def synthesize_command(
     _Quiet.enabled |= quiet
     overrides = dict(
         u_max=u_max, kappa=kappa, halvings=halvings, gain_structure=gain_structure, lp_form=lp_form,
-        goal_tolerance=goal_tolerance,
+        goal_tolerance=goal_tolerance, tolerant=tolerant,
     )
     _run_one("synthesize", cells_npz, out_path, overrides, force, as_json)
 

@@ -567,3 +567,15 @@ def test_densification_reaches_target_when_pocket_is_reachable():
     # this map's big pocket is reached from points other than its pole (ALGORITHMS §11.5 step 3)
     assert len(np.flatnonzero(cells.node_added)) < decompose.Params().max_added_nodes
     assert cells.free_coverage >= decompose.Params().coverage_target
+
+
+@pytest.mark.parametrize("map_seed", [1, 6, 11])
+def test_the_tolerant_field_never_lowers_a_cells_tolerance(map_seed):
+    """synthesize(tolerant=True) keeps, per cell, whichever of the LP's and Lemma 4's fields tolerates more."""
+    cells = run_stages(build_map(random_spec(map_seed, ITERATIONS, 0)), ["rrtstar", "simplify", "decompose"])
+    lp_only = synthesize.run(cells, synthesize.Params(tolerant=False))
+    tolerant = synthesize.run(cells, synthesize.Params())
+    assert np.all(tolerant.tolerance >= lp_only.tolerance - 1e-12)
+    assert tolerant.plan_tolerance >= lp_only.plan_tolerance
+    assert np.array_equal(tolerant.status, lp_only.status)
+    assert composition.check(tolerant, 1.0).ok  # the chosen fields are certified like the LP's

@@ -17,6 +17,7 @@ rows and constant scales in a few numpy passes over the flat ``Cells`` arrays
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 import time
@@ -61,7 +62,7 @@ __all__ = [
     "vertex_template",
 ]  # fmt: skip
 
-VERSION = 2
+VERSION = 3
 log = logging.getLogger(__name__)
 
 GAIN_STRUCTURES = ("full", "diag", "scalar")
@@ -96,6 +97,12 @@ class Params:
         meet it at any κ is solved with ``S_V <= 0`` and gets status 1.
     goal_tolerance : float or None
         Success radius around the goal (map units); ``None`` means ``0.01·D``.
+    tolerant : bool
+        Funnel cells: keep, of the LP's field and Lemma 4's field ``c_v(x_j − x) − εz`` (``ε`` chosen
+        for the largest tolerance), the one whose certificate tolerates the larger position error
+        ``δ_c`` (ALGORITHMS §11.4). The LP maximises the sum of its margins, which leaves ``δ_c`` at
+        a fraction of a millimetre on the example maps; Lemma 4's field tolerates half the depth of
+        ``x_j`` in the cell. ``False``: the LP's field always.
     """
 
     u_max: float = 1.0
@@ -107,6 +114,7 @@ class Params:
     w_v: float = 1.0
     clf_margin: float = 0.01
     goal_tolerance: float | None = None
+    tolerant: bool = True
 
     def __post_init__(self) -> None:
         for name in ("u_max", "kappa", "w_h", "w_v", "clf_margin", "goal_tolerance"):
@@ -130,6 +138,8 @@ class Params:
             raise InvalidParamsError(
                 f"must be one of {', '.join(GAIN_STRUCTURES)}, got {self.gain_structure!r}", field="gain_structure"
             )
+        if not isinstance(self.tolerant, bool):
+            raise InvalidParamsError(f"must be true or false, got {self.tolerant!r}", field="tolerant")
         if self.lp_form not in LP_FORMS:
             raise InvalidParamsError(f"must be one of {', '.join(LP_FORMS)}, got {self.lp_form!r}", field="lp_form")
 
@@ -668,6 +678,8 @@ def run(cells: Cells, params: Params = Params(), progress: Callable[[int, int], 
             log.warning("cell %d not certified: least-violation margins h %.3g, V %.3g", c, sol.margin_h, sol.margin_v)
         elif sol.status == CellStatus.SOLVER_FAILURE:
             log.warning("cell %d: solver failure (unbounded or error)", c)
+        elif cells.is_funnel and params.tolerant:
+            solutions[c] = more_tolerant(sol, prepared[c].problem, params.u_max)
     gain = np.zeros((C, 2, 2 * n_lm))
     if C:  # K_k of landmark k in columns 2k, 2k + 1: every cell's blocks in one scatter
         blocks = np.concatenate([sol.K.reshape(2, -1, 2) for sol in solutions], axis=1)  # (2, Σ n_c, 2)
@@ -692,6 +704,37 @@ def run(cells: Cells, params: Params = Params(), progress: Callable[[int, int], 
     return Plan(cells=cells, gain=gain, c_h=c_h, c_v=c_v, u_max=np.full(C, params.u_max), margin_h=margin_h,
                 margin_v=margin_v, status=status, goal_tolerance=goal_tolerance, tolerance=delta,
                 plan_tolerance=plan_tolerance, stats=stats)  # fmt: skip
+
+
+def more_tolerant(solution: CellSolution, problem: CellProblem, u_max: float) -> CellSolution:
+    """Of a certified funnel cell's LP field and Lemma 4's field, the one with the larger ``δ_c`` (§11.4).
+
+    Lemma 4's field ``u = c(x_j − x) − εz`` with ``c = c_v`` has ``M = cI``, barrier margins at least
+    ``c·h_k(x_j) − ε`` and progress margin ``ε``, so it tolerates ``min(h_min − ε/c, ε/c)``; the best
+    ``ε = c·h_min/2`` (``h_min = min_k h_k(x_j)``), lowered to keep ``|u|_∞ ≤ c·diam + ε ≤ u_max``.
+    Both fields are re-checked at the vertices (:func:`vertex_margins`); the returned solution
+    carries the chosen gain and its margins, with the same status and constants.
+    """
+    h_min, diam = _lemma4_terms(problem)
+    c = solution.c_v
+    eps = min(0.5 * c * h_min, 0.5 * (u_max - c * diam))
+    if not eps > 0:
+        return solution
+    z, x_j, landmarks = problem.z, problem.x_j, problem.landmarks
+
+    def tolerance(K: np.ndarray) -> tuple[float, Margins]:
+        m = vertex_margins(K, landmarks, problem.vertices, z, x_j, problem.cbf_n, problem.cbf_q, solution.c_h, c,
+                           u_max)  # fmt: skip
+        # the LP's own solution sits on its bounds up to the solver's rounding
+        if not (m.cbf <= 1e-9 * u_max and m.clf < 0 and m.input <= 1e-9 * u_max):
+            return 0.0, m
+        return cell_tolerance(K.reshape(2, -1, 2).sum(axis=1), problem.cbf_n, -m.cbf_rows, z, -m.clf), m
+
+    K = min_norm_gain(c * np.eye(2), c * x_j - eps * z, landmarks)
+    ours, margins = tolerance(K)
+    if ours <= tolerance(solution.K)[0]:
+        return solution
+    return dataclasses.replace(solution, K=K, margin_h=margins.cbf, margin_v=margins.clf)
 
 
 def cell_tolerances(cells: Cells, gain: np.ndarray, c_h: np.ndarray, c_v: np.ndarray, u_max: float) -> np.ndarray:
