@@ -287,3 +287,22 @@ def test_a_plan1_file_and_a_world_in_another_frame_are_refused_in_one_line(plans
     other = str(REPO / "maps" / "storeroom.yaml")
     result = runner.invoke(app, ["verify", str(path), "--starts", "0", "--world", other])
     assert result.exit_code == 3 and "world" in result.output and "another frame" in result.output
+
+
+def test_verify_world_names_the_cells_a_moved_chair_breaks(plans):
+    """--world re-checks (C1) against maps/kitchen_moved.yaml: exactly the cells meeting its new obstacles fail."""
+    import shapely
+
+    from bearnav_cli.geometry import FreeSpace
+    from bearnav_cli.stages import map_
+
+    plan, path = plans["kitchen"]
+    result = CliRunner().invoke(app, ["verify", str(path), "--starts", "0", "--world",
+                                      str(REPO / "maps" / "kitchen_moved.yaml"), "--json"])  # fmt: skip
+    assert result.exit_code == 1
+    listed = json.loads(result.output)["world_cells"]
+    world = FreeSpace.from_map(artifacts.load(path).artifact.map)  # the plan's own world: no cell meets it
+    moved = FreeSpace.from_map(map_.run(read_map_source(REPO / "maps" / "kitchen_moved.yaml")))
+    hits = [c for c in range(plan.cells.n_cells) if shapely.Polygon(plan.cells.vertices(c)).intersects(moved.obstacles)]
+    assert listed == hits and hits
+    assert not any(shapely.Polygon(plan.cells.vertices(c)).intersects(world.obstacles) for c in hits)
