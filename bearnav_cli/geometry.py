@@ -429,19 +429,24 @@ def clip(polygon: np.ndarray, normal: np.ndarray, offset: float, tol: float) -> 
     side = polygon @ normal - offset
     if np.all(side <= 0):
         return polygon
-    nxt = np.roll(np.arange(len(polygon)), -1)
-    out = []
-    for q in range(len(polygon)):
-        r = nxt[q]
-        if side[q] <= 0:
-            out.append(polygon[q])
-        if (side[q] < 0 < side[r]) or (side[r] < 0 < side[q]):
-            t = side[q] / (side[q] - side[r])
-            out.append(polygon[q] + t * (polygon[r] - polygon[q]))
-    kept: list[np.ndarray] = []
-    for v in out:
-        if not kept or np.hypot(*(v - kept[-1])) > tol:
-            kept.append(v)
+    # Vertex q contributes itself when kept, then the crossing of its edge q → q+1 when the edge
+    # crosses the line: both in one pass, in that order.
+    side_next = np.concatenate([side[1:], side[:1]])
+    step = np.concatenate([polygon[1:], polygon[:1]]) - polygon
+    cross = ((side < 0) & (side_next > 0)) | ((side_next < 0) & (side > 0))
+    with np.errstate(invalid="ignore", divide="ignore"):  # t is used only where the edge crosses
+        t = side / (side - side_next)
+        candidates = np.stack([polygon, polygon + t[:, None] * step], axis=1).reshape(-1, 2)
+    out = candidates[np.stack([side <= 0, cross], axis=1).ravel()]
+    # drop points within tol of the previous kept one (sequential only where a gap is that small)
+    gap = np.diff(out, axis=0)
+    if np.all(np.hypot(gap[:, 0], gap[:, 1]) > tol):
+        kept = list(out)
+    else:
+        kept = []
+        for v in out:
+            if not kept or np.hypot(*(v - kept[-1])) > tol:
+                kept.append(v)
     if len(kept) > 1 and np.hypot(*(kept[0] - kept[-1])) <= tol:
         kept.pop()
     return np.array(kept, float).reshape(-1, 2)

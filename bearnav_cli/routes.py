@@ -15,8 +15,6 @@ import math
 
 import numpy as np
 import shapely
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import dijkstra
 
 from bearnav_cli.geometry import FreeSpace
 
@@ -129,6 +127,10 @@ def route_lengths(space: FreeSpace, goal: np.ndarray, starts: np.ndarray) -> np.
     cols = np.concatenate([jj, np.full(len(to_goal), n)])
     points = np.vstack([verts, goal])
     weights = np.hypot(*(points[rows] - points[cols]).T)
+    # scipy.sparse takes a quarter second to import: only the routes need it, not every command
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import dijkstra
+
     graph = coo_matrix((weights, (rows, cols)), shape=(n + 1, n + 1)).tocsr()
     from_goal = dijkstra(graph, directed=False, indices=n)[:n]
 

@@ -291,6 +291,8 @@ def fixed_landmark(
 DENSIFY_GRID = 16
 #: Candidate points tested against the nodes in one vectorised call.
 DENSIFY_BATCH = 8
+#: Nodes (by route length) each candidate tries before all of them.
+DENSIFY_NEAREST = 16
 
 
 @dataclass
@@ -376,11 +378,9 @@ def _funnel_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) 
             i = len(nodes) - 1
             regions.append(neck(region_of(i, n, nodes), i, n))
             cell = shapely.Polygon(regions[-1].polygon)
-            kept = []
-            for q in pockets:
-                if not shapely.intersects(q[0], cell):
-                    kept.append(q)
-                    continue
+            hit = shapely.intersects(np.array([q[0] for q in pockets], dtype=object), cell)
+            kept = [q for q, h in zip(pockets, hit, strict=True) if not h]
+            for q in (q for q, h in zip(pockets, hit, strict=True) if h):
                 kept += [[g, float(g.area), q[2]] for g in shapely.get_parts(shapely.difference(q[0], cell))
                          if g.area > 0]  # fmt: skip
             pockets = kept
@@ -423,6 +423,13 @@ def _funnel_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) 
                    np.zeros(len(nodes), np.int64), node_added, inset, after, stats)  # fmt: skip
 
 
+def _seen(points: np.ndarray, cand: np.ndarray, nodes: np.ndarray, reach: FreeSpace, tol: float) -> np.ndarray:
+    """``seen[i, k]``: node ``cand[i, k]`` is reached from ``points[i]`` by a segment free with clearance."""
+    width = cand.shape[1]
+    free = reach.segments_free(np.repeat(points, width, axis=0), nodes[cand.ravel()]).reshape(len(points), width)
+    return free & (np.hypot(*(nodes[cand] - points[:, None, :]).transpose(2, 0, 1)) > 1e3 * tol)
+
+
 def _densify_leaf(pocket: shapely.Geometry, nodes: np.ndarray, cost: np.ndarray, reach: FreeSpace,
                   tol: float) -> tuple[np.ndarray, int] | None:  # fmt: skip
     """A leaf for an uncovered pocket: its point of largest clearance (the pole of inaccessibility, then
@@ -444,17 +451,20 @@ def _densify_leaf(pocket: shapely.Geometry, nodes: np.ndarray, cost: np.ndarray,
     # from their pole, and a pocket no node sees costs one pass over its grid
     for start in range(0, len(candidates), DENSIFY_BATCH):
         group = candidates[start : start + DENSIFY_BATCH]
-        # every candidate against every node at once; the first candidate (deepest) that sees a node wins
+        # each candidate against its nodes in route order: the DENSIFY_NEAREST cheapest first, and all
+        # of them only for the candidates ahead of the first that sees one of those (the result is
+        # the first candidate, deepest first, that sees any node, joined to its cheapest seen node)
         route = np.hypot(*(group[:, None, :] - nodes[None]).transpose(2, 0, 1)) + cost[None]
         order = np.argsort(route, axis=1, kind="stable")
-        starts = np.repeat(group, len(nodes), axis=0)
-        free = reach.segments_free(starts, nodes[order.ravel()]).reshape(len(group), len(nodes))
-        far = np.hypot(*(nodes[order] - group[:, None, :]).transpose(2, 0, 1)) > 1e3 * tol
-        free &= far
-        hit = np.flatnonzero(free.any(axis=1))
-        if len(hit):
-            k = int(hit[0])
-            return group[k], int(order[k, int(np.argmax(free[k]))])
+        near = _seen(group, order[:, :DENSIFY_NEAREST], nodes, reach, tol)
+        first = int(np.argmax(near.any(axis=1))) if near.any() else len(group)
+        if first > 0 and len(nodes) > DENSIFY_NEAREST:
+            ahead = _seen(group[:first], order[:first], nodes, reach, tol)
+            if ahead.any():
+                k = int(np.argmax(ahead.any(axis=1)))
+                return group[k], int(order[k, int(np.argmax(ahead[k]))])
+        if first < len(group):
+            return group[first], int(order[first, int(np.argmax(near[first]))])
     return None
 
 

@@ -189,8 +189,31 @@ def _compact(keep: np.ndarray, *arrays: np.ndarray, parent: np.ndarray) -> tuple
     return (*(a[keep] for a in arrays), remapped)
 
 
+#: Largest number of point × node distances computed at once by :func:`_nearest_distances`.
+_CHUNK = 1 << 20
+
+
+def _nearest_distances(points: np.ndarray, nodes: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """The ``k`` nearest nodes of each point by brute force: distances and indices, shapes (n, k).
+
+    Node sets here have hundreds to a few thousand points, where chunked numpy beats building a
+    k-d tree, and it spares every command the import of scipy.spatial (a fifth of a second).
+    """
+    points = np.asarray(points, float).reshape(-1, 2)
+    dist = np.empty((len(points), k))
+    index = np.empty((len(points), k), np.int64)
+    step = max(1, _CHUNK // max(1, len(nodes)))
+    for s in range(0, len(points), step):
+        d = points[s : s + step, None, :] - nodes[None, :, :]
+        d = np.sqrt(d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1])
+        order = np.argsort(d, axis=1, kind="stable")[:, :k]
+        index[s : s + step] = order
+        dist[s : s + step] = np.take_along_axis(d, order, axis=1)
+    return dist, index
+
+
 class _NearNodes:
-    """Is any node within ``tol`` of a point? A k-d tree of the starting nodes plus a hash of added ones.
+    """Is any node within ``tol`` of a point? The starting nodes by brute force plus a hash of added ones.
 
     An added node is filed under its grid cell (side ``tol``) and the eight around
     it, so a query looks up one cell per point.
@@ -198,9 +221,7 @@ class _NearNodes:
 
     def __init__(self, nodes: np.ndarray, tol: float):
         self.tol = tol
-        from scipy.spatial import cKDTree  # scipy.spatial costs 0.5 s to import: only when needed
-
-        self.kd = cKDTree(nodes)
+        self.nodes = np.asarray(nodes, float)
         self.cells: dict[tuple[int, int], list[np.ndarray]] = {}
 
     def _keys(self, pts: np.ndarray):
@@ -222,7 +243,7 @@ class _NearNodes:
 
     def clear_of(self, pts: np.ndarray) -> np.ndarray:
         """Whether every node lies farther than ``tol`` from each point; shape (n,) bool."""
-        ok = self.kd.query(pts, k=1)[0] > self.tol
+        ok = _nearest_distances(pts, self.nodes, 1)[0][:, 0] > self.tol
         ok[ok] = self.clear_of_added(pts[ok])
         return ok
 
@@ -453,7 +474,7 @@ def _reconnectable(before: np.ndarray, after: np.ndarray, space: FreeSpace) -> f
     """Share of the input nodes missing from the output that see one of their nearest output nodes.
 
     Nodes match by exact position; each discarded node tries its ``RECONNECT_NEIGHBOURS``
-    nearest output nodes (cKDTree). Two batched segment tests: the nearest for all,
+    nearest output nodes. Two batched segment tests: the nearest for all,
     then the others only for the nodes still unresolved (the answer is the same as
     testing all at once, for a fraction of the work). ``1.0`` if none was discarded.
     """
@@ -463,9 +484,7 @@ def _reconnectable(before: np.ndarray, after: np.ndarray, space: FreeSpace) -> f
     if len(gone) == 0:
         return 1.0
     k = min(RECONNECT_NEIGHBOURS, len(after))
-    from scipy.spatial import cKDTree
-
-    nearest = cKDTree(after).query(gone, k=k)[1].reshape(len(gone), k)
+    nearest = _nearest_distances(gone, after, k)[1]
     seen = space.segments_free(gone, after[nearest[:, 0]])
     rest = np.flatnonzero(~seen)
     if k > 1 and rest.size:
