@@ -518,8 +518,8 @@ def finish_cell(prepared: PreparedCell, outcome: SolveOutcome) -> CellSolution:
                         result.objective)  # fmt: skip
 
 
-def solve_cell(problem: CellProblem, params: Params, solver: LpSolver) -> CellSolution:
-    """SOLVE_CELL of ALGORITHMS §5.3 for one cell: prepare, solve, recover the gain, re-check.
+def solve_cell(problem: CellProblem, params: Params, solver: LpSolver, funnel: bool = False) -> CellSolution:
+    """SOLVE_CELL of ALGORITHMS §5.3 (``funnel``: §11.2) for one cell: prepare, solve, recover the gain, re-check.
 
     Parameters
     ----------
@@ -528,6 +528,10 @@ def solve_cell(problem: CellProblem, params: Params, solver: LpSolver) -> CellSo
         ``u_max``, ``kappa``, ``halvings``, weights, gain structure and LP form.
     solver : LpSolver
         The run's reused solver.
+    funnel : bool
+        A funnel cell (its barrier rows are its own non-exit rows): Lemma 4's κ sweep and strict
+        margins, then (``params.tolerant``) the more tolerant of the LP's and Lemma 4's fields, as
+        :func:`run` does.
 
     Returns
     -------
@@ -537,7 +541,11 @@ def solve_cell(problem: CellProblem, params: Params, solver: LpSolver) -> CellSo
         from ``K`` (equal to :func:`vertex_margins`).
     """
     prepared = prepare_cell(problem, params)
-    return finish_cell(prepared, solve_prepared(prepared, params, solver))
+    solution = finish_cell(prepared, solve_prepared(prepared, params, solver, funnel=funnel))
+    certified = solution.status in (CellStatus.CERTIFIED, CellStatus.RELAXED)
+    if funnel and params.tolerant and certified:
+        return more_tolerant(solution, problem, params.u_max)
+    return solution
 
 
 def _template_margins(checker: LpTemplate, upper: np.ndarray, space: str, K, landmarks, p) -> tuple[float, float]:
