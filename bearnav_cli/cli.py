@@ -584,15 +584,27 @@ def plot_command(
     out_path: Path = typer.Option(..., "-o", "--out", help="Figure file (.png, .pdf, .svg)."),
     also: Optional[List[Path]] = typer.Option(None, "--also", help="Tree artifact drawn faintly underneath."),
     title: Optional[str] = typer.Option(None, help="Figure title."),
+    color_by: Optional[str] = typer.Option(
+        None, "--color-by", help="Cell fill: rank, tolerance (δ_c) or status (default: rank; status for paper plans)."
+    ),
+    barriers: bool = typer.Option(False, "--barriers", help="Also draw every barrier line h = 0."),
+    labels: Optional[bool] = typer.Option(
+        None, "--labels/--no-labels", help="Landmark ids: all, or none (default: those that do not collide)."
+    ),
+    cell_numbers: bool = typer.Option(False, "--cell-numbers", help="Write each cell's index where it is active."),
 ) -> None:
-    """Draw an artifact: map, tree, collision samples, simplified tree.
+    """Draw an artifact: map, tree, collision samples, cells, the plan's field, simulated runs.
 
-    Example: bearnav plot plans/kitchen/simplified.npz --also plans/kitchen/tree.npz -o simplified.png
+    Example: bearnav plot plans/kitchen/plan.npz -o plan.png --color-by tolerance --cell-numbers
     """
     from bearnav_cli import plot  # matplotlib is slow to import: only here
 
+    if color_by is not None and color_by not in plot.COLOR_BY:
+        raise _fail(f"--color-by: must be one of {', '.join(plot.COLOR_BY)}, got {color_by!r}", EXIT_INVALID)
+
     loaded = artifacts.load(artifact)
     background = [artifacts.load(p, ("tree", "simplified")).artifact for p in also or []]
-    fig = plot.figure_for(loaded.artifact, background=background, title=title)
+    fig = plot.figure_for(loaded.artifact, background=background, title=title, color_by=color_by,
+                          barriers=barriers, labels=labels, cell_numbers=cell_numbers)  # fmt: skip
     plot.save_figure(fig, str(out_path))
     out.print(f"wrote {out_path}", highlight=False)

@@ -3,10 +3,13 @@
 Each ``plot_<layer>(ax, artifact, ...)`` draws one layer on an existing axes and
 returns it, in the manner of python-control's ``*_plot`` functions: compute
 elsewhere, draw here. :func:`figure_for` composes the layers that suit an artifact.
+The vector field is the runtime's own (:func:`bearnav_cli.runtime.locate` and
+:func:`bearnav_cli.runtime.field` on a grid), so the figure shows what a robot runs.
 """
 
 from __future__ import annotations
 
+import math
 from typing import Any, Sequence
 
 import matplotlib
@@ -15,14 +18,31 @@ matplotlib.use("Agg")  # files only: bearnav never opens windows
 
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+import shapely  # noqa: E402
+from matplotlib import colors as mcolors  # noqa: E402
+from matplotlib import patheffects  # noqa: E402
+from matplotlib.cm import ScalarMappable  # noqa: E402
 from matplotlib.collections import LineCollection  # noqa: E402
-from matplotlib.patches import PathPatch  # noqa: E402
+from matplotlib.patches import Patch, PathPatch  # noqa: E402
 from matplotlib.path import Path as MplPath  # noqa: E402
+from shapely.geometry.polygon import orient  # noqa: E402
 
+from bearnav_cli import runtime  # noqa: E402
 from bearnav_cli.datatypes import Cells, CellStatus, Map, Plan, Polygon, Simulation, Tree  # noqa: E402
+from bearnav_cli.errors import InvalidParamsError  # noqa: E402
 
 RAW_COLOR = "#4d4d4d"
 INFLATED_COLOR = "#c9c9c9"
+OUTLINE_COLOR = "#525252"
+EXIT_COLOR = "#08306b"
+UNCERTIFIED_COLOR = "#d62728"
+UNCOVERED_COLOR = "#e6550d"
+ADDED_COLOR = "#e7298a"
+#: ``--color-by`` choices: the cell's rank (cost-to-go), its tolerance ``δ_c`` or its synthesis status.
+COLOR_BY = ("rank", "tolerance", "status")
+#: ``m = MARGIN_FRACTION·D`` when the map sets no ``decompose.barrier_margin`` (geometry.DEFAULT_CLEARANCE).
+MARGIN_FRACTION = 0.01
+AXIS_UNITS = "map units"
 
 
 def _polygon_patch(polygon: Polygon, **style: Any) -> PathPatch:
@@ -34,28 +54,90 @@ def _polygon_patch(polygon: Polygon, **style: Any) -> PathPatch:
     return PathPatch(MplPath(vertices, codes), **style)
 
 
-def plot_map(ax: plt.Axes, map_: Map, *, landmarks: bool = True, starts: bool = True) -> plt.Axes:
-    """Bounds, inflated and raw obstacles, landmarks with ids, goal and starts."""
+def _geometry_path(geom: shapely.Geometry) -> MplPath | None:
+    """The polygons of a shapely geometry as one matplotlib path (holes cut out), or None if empty."""
+    vertices, codes = [], []
+    for part in shapely.get_parts(geom):
+        if not isinstance(part, shapely.Polygon) or part.is_empty:
+            continue
+        part = orient(part, 1.0)
+        for ring in (part.exterior, *part.interiors):
+            xy = np.asarray(ring.coords)
+            vertices.append(xy)
+            codes.append([MplPath.MOVETO] + [MplPath.LINETO] * (len(xy) - 2) + [MplPath.CLOSEPOLY])
+    return MplPath(np.concatenate(vertices), np.concatenate(codes)) if vertices else None
+
+
+def _add_geometry(ax: plt.Axes, geom: shapely.Geometry, **style: Any) -> PathPatch | None:
+    path = _geometry_path(geom)
+    return None if path is None else ax.add_patch(PathPatch(path, **style))
+
+
+def plot_map(ax: plt.Axes, map_: Map, *, landmarks: bool = True, starts: bool = True, labels: bool | None = None,
+             walls: bool = True) -> plt.Axes:  # fmt: skip
+    """Bounds, inflated and raw obstacles, landmarks, goal and starts.
+
+    ``labels``: landmark ids for every landmark (True), none (False) or only those that fit
+    without covering another label or landmark (None). ``walls`` shades the band within the
+    robot radius of the bounds, which the centre of the robot cannot enter either.
+    """
     xmin, ymin, xmax, ymax = map_.bounds
     ax.plot([xmin, xmax, xmax, xmin, xmin], [ymin, ymin, ymax, ymax, ymin], color="black", lw=1.2)
+    if walls and map_.robot_radius > 0:
+        band = shapely.difference(shapely.box(*map_.bounds), shapely.box(*map_.free_bounds))
+        _add_geometry(ax, band, facecolor=INFLATED_COLOR, edgecolor="none", zorder=1)
     for poly in map_.obstacles:
         ax.add_patch(_polygon_patch(poly, facecolor=INFLATED_COLOR, edgecolor="none", zorder=1))
     for poly in map_.raw_obstacles:
         ax.add_patch(_polygon_patch(poly, facecolor=RAW_COLOR, edgecolor="none", zorder=2))
     if landmarks and len(map_.landmarks):
-        ax.scatter(*map_.landmarks.T, marker="^", s=40, color="#d62728", zorder=6, label="landmarks")
-        offset = 0.008 * map_.diagonal
-        for name, (x, y) in zip(map_.landmark_ids, map_.landmarks, strict=True):
-            ax.annotate(name, (x, y), (x + offset, y + offset), fontsize=7, color="#d62728", zorder=6)
+        ax.scatter(*map_.landmarks.T, marker="^", s=40, color="#d62728", edgecolor="white", linewidths=0.5,
+                   zorder=6, label="landmarks")  # fmt: skip
     if starts and len(map_.starts):
         ax.scatter(*map_.starts.T, marker="o", s=36, facecolor="white", edgecolor="#1f77b4", zorder=6,
                    label="starts")
-    ax.scatter(*map_.goal, marker="*", s=160, color="#2ca02c", zorder=7, label="goal")
+    ax.scatter(*map_.goal, marker="*", s=180, color="#2ca02c", edgecolor="white", linewidths=0.5, zorder=7,
+               label="goal")  # fmt: skip
     pad = 0.02 * map_.diagonal
     ax.set_xlim(xmin - pad, xmax + pad)
     ax.set_ylim(ymin - pad, ymax + pad)
     ax.set_aspect("equal")
+    if landmarks and labels is not False:
+        label_landmarks(ax, map_, every=bool(labels))
     return ax
+
+
+def label_landmarks(ax: plt.Axes, map_: Map, *, every: bool = False) -> list:
+    """Write landmark ids beside their markers; unless ``every``, skip those that would collide.
+
+    Each label tries the four corners around its landmark and takes the first whose text box
+    meets no earlier label and no landmark marker (in display space, as the axes stand now: call
+    it after the layout is settled). Returns the text artists.
+    """
+    for text in [t for t in ax.texts if t.get_gid() == "landmark-label"]:
+        text.remove()
+    fig = ax.figure
+    renderer = fig.canvas.get_renderer()
+    ax.apply_aspect()
+    marks = ax.transData.transform(map_.landmarks) if len(map_.landmarks) else np.zeros((0, 2))
+    r = 5.0 * fig.dpi / 72  # marker half-size, pixels
+    taken = [np.array([x - r, y - r, x + r, y + r]) for x, y in marks]
+    corners = [(3, 3, "left", "bottom"), (-3, 3, "right", "bottom"), (3, -3, "left", "top"), (-3, -3, "right", "top")]
+    placed: list[np.ndarray] = []
+    for i, (name, point) in enumerate(zip(map_.landmark_ids, map_.landmarks, strict=True)):
+        others = taken[:i] + taken[i + 1 :] + placed
+        for dx, dy, ha, va in corners:
+            text = ax.annotate(name, point, xytext=(dx, dy), textcoords="offset points", ha=ha, va=va, fontsize=6.5,
+                               color="#a50f15", zorder=8, gid="landmark-label",
+                               path_effects=[patheffects.withStroke(linewidth=2, foreground="white")])  # fmt: skip
+            box = text.get_window_extent(renderer)
+            box = np.array([box.x0, box.y0, box.x1, box.y1])
+            clash = any(box[0] < t[2] and t[0] < box[2] and box[1] < t[3] and t[1] < box[3] for t in others)
+            if every or not clash:
+                placed.append(box)
+                break
+            text.remove()
+    return [t for t in ax.texts if t.get_gid() == "landmark-label"]
 
 
 #: Fill colour of each cell status (``plan.npz`` ``status``).
@@ -74,9 +156,168 @@ def _edges(nodes: np.ndarray, parent: np.ndarray) -> np.ndarray:
     return np.stack([nodes[child], nodes[parent[child]]], axis=1)
 
 
-def plot_cells(ax: plt.Axes, cells: Cells, status: np.ndarray | None = None) -> plt.Axes:
-    """Cell outlines; filled by synthesis status when ``status`` (shape (C,)) is given."""
-    return _draw_cells(ax, cells.cell_vertices, cells.cell_vertex_offsets, status)
+# --------------------------------------------------------------------------- cells
+
+
+def cell_polygons(cells: Cells) -> list[shapely.Polygon]:
+    """Every cell as a shapely polygon."""
+    return [shapely.Polygon(cells.vertices(c)) for c in range(cells.n_cells)]
+
+
+def active_regions(cells: Cells) -> list[shapely.Geometry]:
+    """Where each cell drives the robot under the funnel policy (ALGORITHMS §11.3).
+
+    Cell ``c``'s region is ``P_c`` less every cell of smaller rank (ties: lower index), i.e. the
+    points where :func:`bearnav_cli.runtime.least_rank_cell` returns ``c``. The regions do not
+    overlap and their union is ``D``; a cell whose region is empty is never used.
+    """
+    polys = cell_polygons(cells)
+    regions: list[shapely.Geometry] = [shapely.Polygon()] * cells.n_cells
+    taken: shapely.Geometry = shapely.Polygon()
+    for c in np.lexsort((np.arange(cells.n_cells), cells.cell_rank)):
+        regions[c] = shapely.difference(polys[c], taken)
+        taken = shapely.union(taken, polys[c])
+    return regions
+
+
+def uncovered_region(cells: Cells) -> shapely.Geometry:
+    """``F_m \\ D``: the part of the free space the cells must cover but do not (ALGORITHMS §11.1, §11.5).
+
+    ``F_m`` is the goal's component of ``B_r \\ O`` at distance at least ``m`` from ``O`` and from
+    the walls of ``B_r``; ``m`` is the map's ``decompose.barrier_margin``, else ``0.01·D``.
+    """
+    map_ = cells.map
+    box = shapely.box(*map_.free_bounds)
+    obstacles = shapely.union_all([shapely.Polygon(p.exterior, p.holes) for p in map_.obstacles])
+    goal = shapely.Point(map_.goal)
+    free = [p for p in shapely.get_parts(shapely.difference(box, obstacles)) if p.intersects(goal)]
+    if not free:
+        return shapely.Polygon()
+    requested = map_.params.get("decompose", {}).get("barrier_margin") if isinstance(map_.params, dict) else None
+    margin = MARGIN_FRACTION * map_.diagonal if requested is None else float(requested)
+    domain = shapely.intersection(free[0], shapely.buffer(box, -margin, join_style="mitre"))
+    if not obstacles.is_empty:
+        domain = shapely.difference(domain, shapely.buffer(obstacles, margin))
+    return shapely.difference(domain, shapely.union_all(cell_polygons(cells)))
+
+
+def _cell_colors(cells: Cells, color_by: str, status: np.ndarray | None, tolerance: np.ndarray | None):
+    """``(face colours (C, 4), mappable or None, colour-bar label)`` of the cells."""
+    if color_by == "status":
+        if status is None:
+            raise InvalidParamsError("status needs a plan (cells.npz has no synthesis status)", field="color_by")
+        faces = [mcolors.to_rgba(STATUS_COLORS[CellStatus(int(s))]) for s in status]
+        return np.array(faces), None, ""
+    if color_by == "rank":
+        values, label = np.asarray(cells.cell_rank, float), f"rank: cost-to-go of the cell's node ({AXIS_UNITS})"
+        norm = mcolors.Normalize(0.0, max(float(values.max()), 1e-12))
+        cmap = plt.get_cmap("viridis")
+    elif color_by == "tolerance":
+        if tolerance is None:
+            raise InvalidParamsError("tolerance needs a plan (cells.npz has no δ_c)", field="color_by")
+        values = np.asarray(tolerance, float)
+        if not np.any(np.isfinite(values) & (values > 0)):
+            raise InvalidParamsError("tolerance needs a funnel plan (δ_c is NaN for paper cells)", field="color_by")
+        finite = values[np.isfinite(values) & (values > 0)]
+        values = np.clip(np.where(np.isnan(values), finite.min(), values), finite.min(), finite.max())
+        lo, hi = float(finite.min()), float(finite.max())
+        norm = mcolors.LogNorm(lo, hi) if hi > 3 * lo else mcolors.Normalize(lo, max(hi, lo * (1 + 1e-9)))
+        cmap = mcolors.ListedColormap(plt.get_cmap("plasma")(np.linspace(0.08, 0.92, 256)))  # no near-black end
+        label = f"δ_c: position error the cell tolerates ({AXIS_UNITS})"
+    else:
+        raise InvalidParamsError(f"must be one of {', '.join(COLOR_BY)}, got {color_by!r}", field="color_by")
+    return cmap(norm(values)), ScalarMappable(norm=norm, cmap=cmap), label
+
+
+def plot_cells(ax: plt.Axes, cells: Cells, status: np.ndarray | None = None, *, color_by: str | None = None,
+               tolerance: np.ndarray | None = None, fill: float = 0.45, exit_faces: bool = True,
+               numbers: bool = False, colorbar: bool = True, legend: bool = True) -> plt.Axes:  # fmt: skip
+    """Cells: thin outlines, exit faces, a fill by ``color_by`` and uncertified cells hatched red.
+
+    Parameters
+    ----------
+    cells : Cells
+    status : ndarray, shape (C,), optional
+        Synthesis status of each cell (a plan's ``status``); status 2 or 3 is always highlighted.
+    color_by : {"rank", "tolerance", "status"}, optional
+        Fill colour; default ``rank`` for funnel cells, else ``status`` when given (else outlines only).
+        Each point is filled once, with the colour of its least-rank cell (:func:`active_regions`, where
+        the funnel policy drives with that cell); paper cells by status fill each status's union, the
+        worst on top.
+    tolerance : ndarray, shape (C,), optional
+        ``δ_c`` of each cell, for ``color_by="tolerance"``.
+    fill : float
+        Opacity of the fill.
+    exit_faces : bool
+        Draw each cell's exit face (its edge on the exit row) as a dark line.
+    numbers : bool
+        Write each cell's index inside its active region (funnel) or at its centroid (paper).
+    colorbar, legend : bool
+        Add a colour bar (rank, tolerance) and legend entries.
+    """
+    if color_by is None:
+        color_by = "rank" if cells.is_funnel else ("status" if status is not None else "")
+    regions = active_regions(cells) if cells.is_funnel else None
+    if color_by:
+        faces, mappable, label = _cell_colors(cells, color_by, status, tolerance)
+        if regions is not None or color_by != "status":
+            for c, region in enumerate(regions if regions is not None else active_regions(cells)):
+                _add_geometry(ax, region, facecolor=faces[c], alpha=fill, edgecolor="white", lw=0.5, zorder=0.5)
+        else:  # paper cells by status: each status's union once, the worst on top
+            polys = cell_polygons(cells)
+            for value in (CellStatus.CERTIFIED, CellStatus.GOAL, CellStatus.RELAXED, CellStatus.NOT_CERTIFIED,
+                          CellStatus.SOLVER_FAILURE):  # fmt: skip
+                chosen = [polys[c] for c in np.flatnonzero(np.asarray(status) == value)]
+                if chosen:
+                    _add_geometry(ax, shapely.union_all(chosen), facecolor=STATUS_COLORS[value], alpha=fill,
+                                  edgecolor="none", zorder=0.5)  # fmt: skip
+        if color_by == "status" and legend:
+            for value in sorted({int(s) for s in status}):
+                name = CellStatus(value).name.lower().replace("_", " ")
+                ax.fill([], [], color=STATUS_COLORS[CellStatus(value)], alpha=fill, label=f"cells: {name}")
+        if mappable is not None and colorbar:
+            bar = ax.figure.colorbar(mappable, ax=ax, fraction=0.04, pad=0.015, shrink=0.9)
+            bar.set_label(label, fontsize=8)
+            bar.ax.tick_params(labelsize=7)
+            bar.solids.set_alpha(fill)
+    rings = [np.vstack([cells.vertices(c), cells.vertices(c)[:1]]) for c in range(cells.n_cells)]
+    ax.add_collection(LineCollection(rings, colors=OUTLINE_COLOR, linewidths=0.3, alpha=0.55, zorder=0.8,
+                                     label="cell outlines", gid="cell-outlines"))  # fmt: skip
+    if exit_faces:
+        faces_xy = []
+        for c in np.flatnonzero(cells.cell_exit_row >= 0):
+            v, k = cells.vertices(c), int(cells.cell_exit_row[c])
+            faces_xy.append(np.stack([v[k], v[(k + 1) % len(v)]]))
+        if faces_xy:
+            ax.add_collection(LineCollection(faces_xy, colors=EXIT_COLOR, linewidths=1.1, zorder=0.9,
+                                             label="exit faces", gid="exit-faces"))  # fmt: skip
+    if status is not None:
+        bad = np.flatnonzero(np.isin(status, [CellStatus.NOT_CERTIFIED, CellStatus.SOLVER_FAILURE]))
+        for i, c in enumerate(bad):
+            label = "uncertified cell (status 2/3)" if i == 0 else None
+            ring = np.vstack([cells.vertices(c), cells.vertices(c)[:1]])
+            ax.add_patch(PathPatch(MplPath(ring, closed=True), facecolor="none", edgecolor=UNCERTIFIED_COLOR,
+                                   hatch="xxx", lw=1.6, zorder=3.3, gid=f"uncertified-cell-{c}", label=label))
+    if numbers:
+        for c in range(cells.n_cells):
+            region = regions[c] if regions is not None else None
+            dim = region is not None and region.area <= 1e-12 * cells.map.diagonal**2
+            if region is None or dim:
+                where = shapely.centroid(shapely.Polygon(cells.vertices(c)))
+            else:
+                where = shapely.point_on_surface(max(shapely.get_parts(region), key=lambda g: g.area))
+            ax.text(where.x, where.y, str(c), fontsize=5, ha="center", va="center", zorder=8.5, gid="cell-number",
+                    color="#7f7f7f" if dim else "black", fontstyle="italic" if dim else "normal",
+                    path_effects=[patheffects.withStroke(linewidth=1.5, foreground="white")])  # fmt: skip
+    return ax
+
+
+def plot_uncovered(ax: plt.Axes, cells: Cells) -> plt.Axes:
+    """Hatch ``F_m \\ D`` (:func:`uncovered_region`), the free space no certificate covers."""
+    _add_geometry(ax, uncovered_region(cells), facecolor="none", edgecolor=UNCOVERED_COLOR, hatch="////", lw=0.6,
+                  zorder=2.7, gid="uncovered", label=f"uncovered part of F_m ({1 - cells.free_coverage:.1%})"
+                  if math.isfinite(cells.free_coverage) else "uncovered part of F_m")  # fmt: skip
+    return ax
 
 
 def _draw_cells(ax: plt.Axes, vertices: np.ndarray, offsets: np.ndarray, status: np.ndarray | None, *,
@@ -124,38 +365,62 @@ def plot_barriers(ax: plt.Axes, cells: Cells, *, color: str = "#e6550d") -> plt.
             if seg is not None:
                 segments.append(seg)
     if segments:
-        ax.add_collection(LineCollection(segments, colors=color, linewidths=0.7, linestyles="--", zorder=3.5,
-                                         label="barrier lines"))
+        ax.add_collection(LineCollection(segments, colors=color, linewidths=0.5, linestyles="--", alpha=0.7,
+                                         zorder=3.5, label="barrier lines", gid="barrier-lines"))  # fmt: skip
     return ax
 
 
-def plot_field(ax: plt.Axes, plan: Plan, *, arrows: int = 40) -> plt.Axes:
-    """Unit arrows of the controller a robot would run at each point: its Voronoi owner's cell."""
+# --------------------------------------------------------------------------- field, tree, samples
+
+
+def field_samples(plan: Plan, *, arrows: int = 28) -> tuple[np.ndarray, np.ndarray]:
+    """Grid points in the free space and in some cell, and the unit direction the runtime drives there.
+
+    The grid has ``arrows`` points along the longer side of ``B_r``; a point is kept when it is
+    free (in ``B_r``, not in ``O``) and :func:`runtime.least_rank_cell` finds a cell containing it.
+    The direction is :func:`runtime.field` of the cell :func:`runtime.locate` picks, normalised
+    (points where the field vanishes are dropped). Returns ``(points (K, 2), directions (K, 2))``.
+    """
     map_ = plan.map
-    xmin, ymin, xmax, ymax = map_.bounds
+    xmin, ymin, xmax, ymax = map_.free_bounds
     step = max(xmax - xmin, ymax - ymin) / arrows
-    xs, ys = np.meshgrid(np.arange(xmin + step / 2, xmax, step), np.arange(ymin + step / 2, ymax, step))
-    points = np.column_stack([xs.ravel(), ys.ravel()])
-    nodes = plan.cells.nodes
-    owner = np.argmin(((points[:, None, :] - nodes[None, :, :]) ** 2).sum(axis=2), axis=1)
-    y = (map_.landmarks[None, :, :] - points[:, None, :]).reshape(len(points), -1)
-    u = np.einsum("pij,pj->pi", plan.gain[owner], y)
+    xs = np.arange(xmin + step / 2, xmax, step)
+    ys = np.arange(ymin + step / 2, ymax, step)
+    points = np.stack(np.meshgrid(xs, ys), axis=-1).reshape(-1, 2)
+    obstacles = shapely.union_all([shapely.Polygon(p.exterior, p.holes) for p in map_.obstacles])
+    free = ~shapely.intersects_xy(obstacles, points[:, 0], points[:, 1]) if not obstacles.is_empty else True
+    arrays = runtime.PlanArrays.from_plan(plan)
+    points = points[free & (runtime.least_rank_cell(arrays, points) >= 0)]
+    u = runtime.field(arrays, runtime.locate(arrays, points), points)
     norm = np.hypot(u[:, 0], u[:, 1])
     keep = norm > 0
-    u = u[keep] / norm[keep, None]
-    ax.quiver(*points[keep].T, *u.T, angles="xy", scale_units="xy", scale=1.6 / step, width=0.0018,
-              color="#3f007d", alpha=0.7, zorder=3.8, label="vector field (direction)")
+    return points[keep], u[keep] / norm[keep, None]
+
+
+def plot_field(ax: plt.Axes, plan: Plan, *, arrows: int = 28) -> plt.Axes:
+    """Unit arrows of the field a robot runs (:func:`field_samples`), based at free points in the cells."""
+    points, directions = field_samples(plan, arrows=arrows)
+    if len(points):
+        fb = plan.map.free_bounds
+        step = max(fb[2] - fb[0], fb[3] - fb[1]) / arrows
+        ax.quiver(*points.T, *directions.T, angles="xy", scale_units="xy", scale=1.0 / (0.6 * step), pivot="tail",
+                  width=0.0022, headwidth=4, headlength=4.5, color="#252525", alpha=0.8, zorder=3.8,
+                  label="field direction (runtime policy)", gid="field")  # fmt: skip
     return ax
 
 
 def plot_tree(ax: plt.Axes, tree: Tree | Cells | Simulation, *, color: str = "#1f77b4", lw: float = 0.8,
               alpha: float = 1.0, nodes: bool = False, label: str | None = "tree") -> plt.Axes:
-    """Tree edges (child → parent) and, optionally, its nodes."""
+    """Tree edges (child → parent) and, optionally, its nodes (nodes added by densification in orange)."""
     if len(tree.nodes) > 1:
         segments = _edges(tree.nodes, tree.parent)
         ax.add_collection(LineCollection(segments, colors=color, linewidths=lw, alpha=alpha, zorder=4, label=label))
     if nodes:
-        ax.scatter(*tree.nodes.T, s=6, color=color, alpha=alpha, zorder=5)
+        added = np.asarray(getattr(tree, "node_added", np.zeros(len(tree.nodes), bool)), bool)
+        ax.scatter(*tree.nodes[~added].T, s=6, color=color, alpha=alpha, zorder=5)
+        if added.any():
+            ax.scatter(*tree.nodes[added].T, s=14, marker="D", color=ADDED_COLOR, edgecolor="white", linewidths=0.4,
+                       alpha=alpha, zorder=5, label=f"added nodes ({int(added.sum())}, densification)")  # fmt: skip
     return ax
 
 
@@ -197,13 +462,24 @@ def plot_trajectories(ax: plt.Axes, sim: Simulation, *, limit: int = 400) -> plt
     return ax
 
 
-def _frame(map_: Map, title: str) -> tuple[plt.Figure, plt.Axes]:
+# --------------------------------------------------------------------------- figures
+
+
+def map_handles(map_: Map) -> list:
+    """Legend proxies for the raw obstacles and their inflation by the robot radius."""
+    return [Patch(color=RAW_COLOR, label="obstacles"),
+            Patch(color=INFLATED_COLOR, label=f"inflated by the robot radius ({map_.robot_radius:g})")]  # fmt: skip
+
+
+def _frame(map_: Map, title: str, *, legend_rows: int = 0) -> tuple[plt.Figure, plt.Axes]:
     xmin, ymin, xmax, ymax = map_.bounds
     width = 8.0
-    height = max(3.0, width * (ymax - ymin) / (xmax - xmin))
-    fig, ax = plt.subplots(figsize=(width + 1.8, height))  # the extra width holds the legend
-    plot_map(ax, map_)
+    height = max(3.0, width * (ymax - ymin) / (xmax - xmin)) + 0.25 * legend_rows
+    fig, ax = plt.subplots(figsize=(width + 1.8, height))  # the extra width holds the legend or colour bar
+    plot_map(ax, map_, labels=False)
     ax.set_title(title)
+    ax.set_xlabel(f"x ({AXIS_UNITS})")
+    ax.set_ylabel(f"y ({AXIS_UNITS})")
     return fig, ax
 
 
@@ -239,22 +515,53 @@ def save_animation(sim: Simulation, path: str, *, frames: int = 80, limit: int =
     plt.close(fig)
 
 
-def figure_for(artifact: Any, *, background: Sequence[Any] = (), title: str | None = None) -> plt.Figure:
+def _plan_title(map_: Map, cells: Cells, plan: Plan | None) -> str:
+    kind = "funnel" if cells.is_funnel else "paper"
+    text = f"{map_.name}: {cells.n_cells} {kind} cells"
+    if cells.is_funnel:
+        text += f" ({int(np.sum(cells.node_added))} added), cover {cells.free_coverage:.1%} of F_m"
+    if plan is not None and math.isfinite(plan.plan_tolerance):
+        text += f", δ* = {plan.plan_tolerance:.3g}"
+    if plan is not None:
+        bad = int(np.isin(plan.status, [CellStatus.NOT_CERTIFIED, CellStatus.SOLVER_FAILURE]).sum())
+        text += f", {bad} uncertified" if bad else ", all certified"
+    return text
+
+
+def figure_for(artifact: Any, *, background: Sequence[Any] = (), title: str | None = None,
+               color_by: str | None = None, barriers: bool = False, labels: bool | None = None,
+               cell_numbers: bool = False, arrows: int = 28) -> plt.Figure:  # fmt: skip
     """A figure with the layers that suit ``artifact``.
 
     Parameters
     ----------
     artifact : Map, Tree, Cells, Plan or Simulation
-        The main artifact: a map; a tree with its samples; cells with barrier lines; a
-        plan adds the cells' status colours and its vector field; a simulation draws its
-        runs over the tree and cells, coloured by outcome.
+        The main artifact: a map; a tree with its samples; cells (outlines, exit faces, fill by
+        rank, uncovered free space hatched); a plan adds the synthesis status (uncertified cells
+        hatched red) and the field the runtime drives; a simulation draws its runs over the tree
+        and cells, coloured by outcome.
     background : sequence of Tree
         Trees drawn faintly underneath (e.g. the RRT* tree under its simplification).
     title : str, optional
-        Figure title (default: map name and artifact kind).
+        Figure title (default: map name and a one-line summary).
+    color_by : {"rank", "tolerance", "status"}, optional
+        Cell fill (:func:`plot_cells`); default rank for funnel cells, status for paper plans.
+    barriers : bool
+        Also draw every barrier line ``h = 0`` (for funnel cells these are the cell edges).
+    labels : bool, optional
+        Landmark ids: all (True), none (False), or those that do not collide (None).
+    cell_numbers : bool
+        Write each cell's index (funnel cells: inside the region where the cell is active).
+    arrows : int
+        Field arrows along the longer side of the map.
     """
+    if color_by is not None and color_by not in COLOR_BY:
+        raise InvalidParamsError(f"must be one of {', '.join(COLOR_BY)}, got {color_by!r}", field="color_by")
     map_ = artifact if isinstance(artifact, Map) else artifact.map
-    fig, ax = _frame(map_, title or map_.name)
+    plan = artifact if isinstance(artifact, Plan) else None
+    cells = plan.cells if plan is not None else artifact if isinstance(artifact, Cells) else None
+    default_title = _plan_title(map_, cells, plan) if cells is not None else map_.name
+    fig, ax = _frame(map_, title or default_title, legend_rows=4 if cells is not None else 0)
     if isinstance(artifact, Simulation):
         plot_sim_background(ax, artifact)
         plot_trajectories(ax, artifact)
@@ -266,16 +573,26 @@ def figure_for(artifact: Any, *, background: Sequence[Any] = (), title: str | No
     if isinstance(artifact, Tree):
         plot_samples(ax, artifact)
         plot_tree(ax, artifact, nodes=len(artifact.nodes) < 400, lw=1.0 if background else 0.7)
-    cells = artifact.cells if isinstance(artifact, Plan) else artifact if isinstance(artifact, Cells) else None
     if cells is not None:
-        plot_cells(ax, cells, artifact.status if isinstance(artifact, Plan) else None)
-        plot_samples(ax, cells)
-        plot_barriers(ax, cells)
-        plot_tree(ax, cells, nodes=True, lw=1.0)
-        if isinstance(artifact, Plan):
-            plot_field(ax, artifact)
-    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=7, framealpha=0.85)
+        plot_cells(ax, cells, plan.status if plan is not None else None, color_by=color_by,
+                   tolerance=plan.tolerance if plan is not None else None, numbers=cell_numbers)  # fmt: skip
+        if cells.is_funnel:
+            plot_uncovered(ax, cells)
+        if barriers:
+            plot_barriers(ax, cells)
+        plot_tree(ax, cells, nodes=True, lw=0.5, alpha=0.75, color="#2171b5")
+        if plan is not None:
+            plot_field(ax, plan, arrows=arrows)
+    handles, _ = ax.get_legend_handles_labels()
+    handles += map_handles(map_)
+    if cells is not None:
+        ax.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.07), ncol=4, fontsize=7,
+                  frameon=False)  # fmt: skip
+    else:
+        ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=7, framealpha=0.85)
     fig.tight_layout()
+    if labels is not False:
+        label_landmarks(ax, map_, every=bool(labels))
     return fig
 
 

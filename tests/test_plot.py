@@ -1,0 +1,232 @@
+"""Figures draw what the runtime computes, and a person can read them (issue 10 item 6, issue 13 item 3).
+
+Properties of the drawn artists, not pixels: arrows are based at free points of the certified
+domain and point where ``runtime.field`` points, cells are coloured without stacking, uncertified
+cells and the uncovered free space stand out, barrier lines and labels only on request.
+"""
+
+from __future__ import annotations
+
+import matplotlib
+
+matplotlib.use("Agg")
+
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+import shapely  # noqa: E402
+from matplotlib import colors as mcolors  # noqa: E402
+from matplotlib.quiver import Quiver  # noqa: E402
+
+from bearnav_cli import composition, plot, runtime  # noqa: E402
+from bearnav_cli.datatypes import CellStatus, replace  # noqa: E402
+from bearnav_cli.errors import InvalidParamsError  # noqa: E402
+from bearnav_cli.funnel import coverage_domain  # noqa: E402
+from bearnav_cli.geometry import DEFAULT_CLEARANCE, FreeSpace  # noqa: E402
+from bearnav_cli.stages import decompose, synthesize  # noqa: E402
+from bench.common import run_stages  # noqa: E402
+
+from .conftest import SMALL_MAP, build_map  # noqa: E402
+from .test_cli_errors import assert_one_line_error  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def small_plan():
+    """A funnel plan of the small test map, built in-process."""
+    return run_stages(build_map(SMALL_MAP), ["rrtstar", "simplify", "decompose", "synthesize"])
+
+
+@pytest.fixture(scope="module")
+def paper_plan():
+    simplified = run_stages(build_map(SMALL_MAP), ["rrtstar", "simplify"])
+    return synthesize.run(decompose.run(simplified, decompose.Params(cells="paper")))
+
+
+@pytest.fixture
+def draw():
+    """``draw(artifact, **options)`` -> the figure's main axes; closes every figure afterwards."""
+    figures = []
+
+    def make(artifact, **options):
+        figures.append(plot.figure_for(artifact, **options))
+        return figures[-1].axes[0]
+
+    yield make
+    for fig in figures:
+        plt.close(fig)
+
+
+def the_quiver(ax) -> Quiver:
+    quivers = [c for c in ax.collections if isinstance(c, Quiver)]
+    assert len(quivers) == 1
+    return quivers[0]
+
+
+def by_gid(ax, gid: str) -> list:
+    return [a for a in (*ax.collections, *ax.patches, *ax.texts) if a.get_gid() == gid]
+
+
+def legend_texts(ax) -> list[str]:
+    return [t.get_text() for t in ax.get_legend().get_texts()]
+
+
+def test_small_plan_is_a_funnel_plan(small_plan):
+    assert small_plan.cells.is_funnel and small_plan.cells.node_added.any()
+
+
+def test_arrows_are_based_at_free_points_of_the_certified_domain(small_plan, draw):
+    base = np.asarray(the_quiver(draw(small_plan)).get_offsets())
+    assert len(base) > 50
+    assert FreeSpace.from_map(small_plan.map).points_free(base).all()
+    arrays = runtime.PlanArrays.from_plan(small_plan)
+    assert (runtime.least_rank_cell(arrays, base) >= 0).all()
+
+
+def test_arrows_point_along_the_runtime_field(small_plan, draw):
+    q = the_quiver(draw(small_plan))
+    base = np.asarray(q.get_offsets())
+    arrays = runtime.PlanArrays.from_plan(small_plan)
+    u = runtime.field(arrays, runtime.locate(arrays, base), base)
+    u /= np.hypot(u[:, 0], u[:, 1])[:, None]
+    np.testing.assert_allclose(np.column_stack([q.U, q.V]), u, atol=1e-12)
+    assert q.pivot == "tail"  # the offsets are the bases of the arrows
+
+
+def test_arrows_cover_the_certified_domain(small_plan):
+    """Every grid point that is free and in a cell gets its arrow (none is dropped silently)."""
+    points, _ = plot.field_samples(small_plan, arrows=20)
+    fb = small_plan.map.free_bounds
+    step = max(fb[2] - fb[0], fb[3] - fb[1]) / 20
+    grid = np.stack(np.meshgrid(np.arange(fb[0] + step / 2, fb[2], step), np.arange(fb[1] + step / 2, fb[3], step)),
+                    axis=-1).reshape(-1, 2)  # fmt: skip
+    arrays = runtime.PlanArrays.from_plan(small_plan)
+    inside = FreeSpace.from_map(small_plan.map).points_free(grid) & (runtime.least_rank_cell(arrays, grid) >= 0)
+    assert len(points) == inside.sum()
+
+
+def test_axes_are_labelled_with_units(small_plan, draw):
+    for artifact in (small_plan, small_plan.map, small_plan.cells):
+        ax = draw(artifact)
+        assert ax.get_xlabel() == "x (map units)" and ax.get_ylabel() == "y (map units)"
+
+
+def test_barrier_lines_only_on_request(small_plan, draw):
+    assert not by_gid(draw(small_plan), "barrier-lines")
+    (lines,) = by_gid(draw(small_plan, barriers=True), "barrier-lines")
+    assert len(lines.get_segments()) > small_plan.cells.n_cells
+
+
+def test_exit_faces_are_the_exit_rows_edges(small_plan, draw):
+    cells = small_plan.cells
+    (faces,) = by_gid(draw(small_plan), "exit-faces")
+    edge = [c for c in range(cells.n_cells) if cells.cell_exit_row[c] >= 0]
+    assert len(faces.get_segments()) == len(edge)
+    for seg, c in zip(faces.get_segments(), edge, strict=True):
+        mid = seg.mean(axis=0)  # on the exit line z·(x − x_j) = 0
+        assert abs(cells.exit_dir[c] @ (mid - cells.exit_point[c])) < 1e-9 * cells.map.diagonal
+
+
+@pytest.mark.parametrize("bad", [CellStatus.NOT_CERTIFIED, CellStatus.SOLVER_FAILURE])
+def test_an_uncertified_cell_is_hatched_red(small_plan, draw, bad):
+    status = np.array(small_plan.status)
+    status[7] = bad
+    ax = draw(replace(small_plan, status=status))
+    highlighted = [a for a in ax.patches if str(a.get_gid()).startswith("uncertified-cell-")]
+    assert [a.get_gid() for a in highlighted] == ["uncertified-cell-7"]
+    patch = highlighted[0]
+    assert patch.get_hatch() and patch.get_zorder() > 3  # above fills, outlines and obstacles
+    assert mcolors.to_hex(patch.get_edgecolor()) == mcolors.to_hex(plot.UNCERTIFIED_COLOR)
+    np.testing.assert_allclose(patch.get_path().vertices[:-1], small_plan.cells.vertices(7))  # closed ring
+    assert "uncertified cell (status 2/3)" in legend_texts(ax)
+    assert not [a for a in draw(small_plan).patches if str(a.get_gid()).startswith("uncertified-cell-")]
+
+
+def test_active_regions_are_where_the_runtime_uses_each_cell(small_plan):
+    cells = small_plan.cells
+    regions = plot.active_regions(cells)
+    total = shapely.union_all(plot.cell_polygons(cells)).area
+    assert sum(r.area for r in regions) == pytest.approx(total, rel=1e-9)  # a partition of D: no stacking
+    rng = np.random.default_rng(0)
+    points = rng.uniform(cells.map.bounds[:2], cells.map.bounds[2:], (3000, 2))
+    chosen = runtime.least_rank_cell(runtime.PlanArrays.from_plan(small_plan), points)
+    edges = shapely.union_all([r.boundary for r in regions])
+    clear = shapely.distance(edges, shapely.points(points)) > 1e-6 * cells.map.diagonal
+    found = np.full(len(points), -1)
+    for c, region in enumerate(regions):
+        found[shapely.contains_xy(region, points[:, 0], points[:, 1])] = c
+    assert clear.sum() > 2500
+    np.testing.assert_array_equal(found[clear], chosen[clear])
+
+
+def test_uncovered_region_is_F_m_less_the_cells(small_plan, draw):
+    assert plot.MARGIN_FRACTION == DEFAULT_CLEARANCE
+    space = FreeSpace.from_map(small_plan.map)
+    margin = DEFAULT_CLEARANCE * small_plan.map.diagonal
+    domain = coverage_domain(space.component_of(small_plan.map.goal), space.bounds, space.obstacles, margin)
+    uncovered = plot.uncovered_region(small_plan.cells)
+    expected = (1 - composition.coverage(small_plan, space)) * domain.area
+    assert uncovered.area == pytest.approx(expected, rel=1e-6, abs=1e-9 * domain.area)
+    assert uncovered.area > 0
+    (patch,) = by_gid(draw(small_plan), "uncovered")
+    assert patch.get_hatch()
+
+
+def test_colour_by_rank_tolerance_and_status(small_plan, draw):
+    ax = draw(small_plan)
+    assert len(ax.figure.axes) == 2 and "rank" in ax.figure.axes[1].get_ylabel()
+    ax = draw(small_plan, color_by="tolerance")
+    assert "δ_c" in ax.figure.axes[1].get_ylabel()
+    lo, hi = ax.figure.axes[1].get_ylim()
+    assert lo == pytest.approx(small_plan.tolerance.min()) and hi == pytest.approx(small_plan.tolerance.max())
+    ax = draw(small_plan, color_by="status")
+    assert len(ax.figure.axes) == 1 and "cells: certified" in legend_texts(ax)
+    with pytest.raises(InvalidParamsError, match="color_by"):
+        plot.figure_for(small_plan, color_by="colour")
+    with pytest.raises(InvalidParamsError, match="plan"):
+        plot.figure_for(small_plan.cells, color_by="tolerance")
+
+
+def test_legend_names_every_layer(small_plan, draw):
+    texts = " | ".join(legend_texts(draw(small_plan)))
+    for word in ("obstacles", "inflated by the robot radius", "tree", "added nodes", "landmarks", "goal",
+                 "uncovered", "exit faces", "field direction"):  # fmt: skip
+        assert word in texts, word
+
+
+def test_landmark_labels_never_collide_unless_asked(small_plan, draw):
+    ids = set(small_plan.map.landmark_ids)
+    assert {t.get_text() for t in by_gid(draw(small_plan, labels=True), "landmark-label")} == ids
+    assert not by_gid(draw(small_plan, labels=False), "landmark-label")
+    ax = draw(small_plan)
+    renderer = ax.figure.canvas.get_renderer()
+    boxes = [t.get_window_extent(renderer) for t in by_gid(ax, "landmark-label")]
+    assert boxes and {t.get_text() for t in by_gid(ax, "landmark-label")} <= ids
+    assert not any(a.overlaps(b) for i, a in enumerate(boxes) for b in boxes[i + 1 :])
+
+
+def test_cell_numbers_on_request(small_plan, draw):
+    assert not by_gid(draw(small_plan), "cell-number")
+    numbers = by_gid(draw(small_plan, cell_numbers=True), "cell-number")
+    assert sorted(int(t.get_text()) for t in numbers) == list(range(small_plan.cells.n_cells))
+
+
+def test_paper_plans_are_coloured_by_status(paper_plan, draw):
+    assert not paper_plan.cells.is_funnel
+    ax = draw(paper_plan)
+    assert len(ax.figure.axes) == 1 and "cells: certified" in legend_texts(ax)
+    assert len(the_quiver(ax).get_offsets()) > 50
+    with pytest.raises(InvalidParamsError, match="funnel"):
+        plot.figure_for(paper_plan, color_by="tolerance")
+
+
+def test_cli_plot_writes_a_png_and_rejects_a_bad_colour(cli, write_map, small_spec, tmp_path):
+    assert cli("plan", write_map(small_spec)).exit_code == 0
+    plan = tmp_path / "plans" / "small" / "plan.npz"
+    result = cli("plot", plan, "-o", "x.png", "--color-by", "tolerance", "--cell-numbers")
+    assert result.exit_code == 0, result.output
+    assert (tmp_path / "x.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert cli("plot", plan, "-o", "y.png", "--barriers", "--labels").exit_code == 0
+    assert_one_line_error(cli("plot", plan, "-o", "z.png", "--color-by", "colour"), "--color-by", "rank")
+    assert not (tmp_path / "z.png").exists()
+    assert_one_line_error(cli("plot", tmp_path / "plans" / "small" / "cells.npz", "-o", "z.png", "--color-by",
+                              "tolerance"), "color_by")  # fmt: skip
