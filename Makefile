@@ -33,6 +33,7 @@ bench: $(STAMP)
 	$(BIN)/python bench/rrtstar.py
 	$(BIN)/python bench/synthesize.py --readme
 	$(BIN)/python bench/simulate.py --readme
+	$(BIN)/python bench/plan.py --readme
 
 clean:
 	rm -rf plans/*/ .pytest_cache

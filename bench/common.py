@@ -89,6 +89,55 @@ def machine_line(packages: Sequence[str] = ("numpy", "shapely", "ompl")) -> str:
     return f"Machine: {', '.join(parts)}; run on {datetime.date.today().isoformat()}."
 
 
+def _busy_cpu_seconds() -> float | None:
+    """CPU seconds all processes have used since boot (``/proc/stat``), or None where it is missing."""
+    try:
+        fields = Path("/proc/stat").read_text().split("\n", 1)[0].split()
+    except OSError:
+        return None
+    if not fields or fields[0] != "cpu":
+        return None
+    user, nice, system, _idle, _iowait, irq, softirq, steal = (int(x) for x in fields[1:9])
+    return (user + nice + system + irq + softirq + steal) / os.sysconf("SC_CLK_TCK")
+
+
+def load_snapshot() -> dict[str, Any]:
+    """What :func:`load_line` compares: load averages, busy CPU time of the machine and of this process."""
+    t = os.times()
+    return {
+        "loadavg": os.getloadavg(),
+        "busy": _busy_cpu_seconds(),
+        "own": t.user + t.system + t.children_user + t.children_system,
+        "wall": time.monotonic(),
+    }
+
+
+def load_line(before: dict[str, Any], after: dict[str, Any]) -> str:
+    """One line on how loaded the machine was between two :func:`load_snapshot` calls.
+
+    The load averages (1, 5, 15 min) before and after, and the CPU time that other processes
+    used meanwhile: all busy CPU time (``/proc/stat``) minus this process's and its waited-for
+    children's, per second of wall time (1.0 = one whole CPU busy with other work). The machine
+    is shared: side-by-side ratios are meant to absorb such load, absolute times are not.
+    """
+
+    def fmt(load: Sequence[float]) -> str:
+        return " / ".join(f"{x:.2f}" for x in load)
+
+    text = (
+        f"Load average (1 / 5 / 15 min, {os.cpu_count()} CPUs): {fmt(before['loadavg'])} before the run, "
+        f"{fmt(after['loadavg'])} after"
+    )
+    wall = after["wall"] - before["wall"]
+    if before["busy"] is not None and after["busy"] is not None and wall > 0:
+        others = max(0.0, (after["busy"] - before["busy"]) - (after["own"] - before["own"])) / wall
+        text += (
+            f"; other processes used {others:.2f} CPUs on average during the {wall:.0f} s run "
+            f"(of {os.cpu_count()}; busy time from /proc/stat minus the benchmark's own)"
+        )
+    return text + "."
+
+
 def markdown_table(headers: Sequence[str], rows: Sequence[Sequence[Any]]) -> str:
     """A GitHub markdown table; cells are converted with ``str``."""
     lines = ["| " + " | ".join(headers) + " |", "|" + "|".join("---" for _ in headers) + "|"]
