@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from bearnav_cli.plan_arrays import CHUNK, PlanArrays
+from bearnav_cli.runtime.plan_arrays import CHUNK, PlanArrays
 
 # --------------------------------------------------------------------------- vectorised queries
 
