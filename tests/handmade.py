@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from bearnav_cli.datatypes import Cells, CellStatus, Map, Plan, Polygon, replace
-from bearnav_cli.plan_arrays import tree_costs
+from bearnav_cli.runtime.plan_arrays import tree_costs
 
 LANDMARKS = np.array([[0.0, 8.0], [10.0, 0.0], [10.0, 8.0], [5.0, 0.0]])
 #: A chain along y = 1: root (goal) at (1, 1), node 1 at (5, 1), node 2 at (9, 1).

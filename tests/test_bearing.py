@@ -11,9 +11,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from bearnav_cli import bearing
-from bearnav_cli.bearing import METHODS, in_field_of_view, in_range, noisy_bearings, reconstruct
 from bearnav_cli.errors import InvalidParamsError
+from bearnav_cli.runtime import bearing
+from bearnav_cli.runtime.bearing import METHODS, in_field_of_view, in_range, noisy_bearings, reconstruct
 
 from .conftest import REPO
 
@@ -64,7 +64,7 @@ def rotate(v: np.ndarray, angle: float) -> np.ndarray:
 
 def test_imports_numpy_only():
     code = (
-        "import bearnav_cli.bearing, sys; "
+        "import bearnav_cli.runtime.bearing, sys; "
         "bad = [m for m in sys.modules if m.split('.')[0] in ('scipy', 'shapely', 'matplotlib', 'yaml', 'typer')]; "
         "sys.exit(1 if bad else 0)"
     )

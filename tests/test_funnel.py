@@ -30,7 +30,7 @@ from bearnav_cli.datatypes import CellStatus, replace
 from bearnav_cli.errors import InvalidMapError
 from bearnav_cli.geometry import DEFAULT_CLEARANCE, FreeSpace
 from bearnav_cli.lp import LpSolver
-from bearnav_cli.plan_arrays import PlanArrays
+from bearnav_cli.runtime.plan_arrays import PlanArrays
 from bearnav_cli.stages import decompose, simulate, synthesize
 from bench.common import run_stages
 from tests.conftest import build_map

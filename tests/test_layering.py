@@ -12,8 +12,8 @@ PACKAGE = Path(__file__).resolve().parents[1] / "bearnav_cli"
 LAYERS = {
     "errors": 0,
     "datatypes": 1,
-    "geometry": 2, "lp": 2, "bearing": 2, "occupancy": 2,
-    "plan_arrays": 2, "cell_policy": 2.1, "runtime": 2.2,  # runtime builds on cell_policy, plan_arrays and bearing
+    "geometry": 2, "lp": 2, "occupancy": 2,
+    "runtime": 2,  # the numpy-only package a robot installs: its modules import each other and errors only
     "cell_lp": 2.5, "routes": 2.5, "barriers": 2.5, "funnel": 2.5,  # build on lp and geometry
     "composition": 2.7,  # the §11.6 checks, on funnel and geometry; verify builds on it
     "stages": 3, "verify": 3,
@@ -29,7 +29,7 @@ def _modules():
         parts = rel.parts
         if parts[-1] == "__init__":
             continue
-        name = "stages" if parts[0] == "stages" else parts[0]
+        name = parts[0]  # stages/* and runtime/* are one layer each
         yield name, ".".join(parts), ast.parse(path.read_text())
 
 
@@ -65,6 +65,10 @@ def test_imports_flow_one_way():
             if layer_name == "plot":
                 if dep not in ("datatypes", "errors", "runtime"):  # DESIGN §2: fields come from runtime
                     problems.append(f"plot imports {target} (plot depends on datatypes and runtime only)")
+                continue
+            if layer_name == "runtime":
+                if dep not in ("runtime", "errors"):
+                    problems.append(f"{dotted} imports {target} (runtime depends on numpy and errors only)")
                 continue
             if dep == "plot" and layer_name != "cli":
                 problems.append(f"{dotted} imports plot")

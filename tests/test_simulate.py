@@ -12,11 +12,11 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from bearnav_cli import artifacts, bearing, pipeline, runtime
+from bearnav_cli import artifacts, pipeline, runtime
 from bearnav_cli.cli import app, read_map_source
 from bearnav_cli.errors import InvalidParamsError
 from bearnav_cli.geometry import FreeSpace
-from bearnav_cli.runtime import ControlState, PlanArrays
+from bearnav_cli.runtime import ControlState, PlanArrays, bearing
 from bearnav_cli.stages import simulate
 from bearnav_cli.stages.simulate import Outcome
 

@@ -26,12 +26,12 @@ from dataclasses import dataclass
 import numpy as np
 import shapely
 
-from bearnav_cli import bearing, runtime
+from bearnav_cli import runtime
 from bearnav_cli.datatypes import Simulation
 from bearnav_cli.errors import InvalidParamsError
 from bearnav_cli.geometry import FreeSpace
 from bearnav_cli.routes import sample_starts
-from bearnav_cli.runtime import ControlSettings, ControlState, PlanArrays
+from bearnav_cli.runtime import ControlSettings, ControlState, PlanArrays, bearing
 
 VERSION = 1
 log = logging.getLogger(__name__)
@@ -109,7 +109,7 @@ class Params:
         turned by ``ε'`` (rad), ``ε, ε' ~ N(0, odometry_noise²)``; 0 is the exact dynamics of §7.1.
     max_fix_error : float or None
         Use a noisy fix only if its predicted 3σ position error (from ``noise_deg`` and the
-        bearing geometry, :func:`bearnav_cli.bearing.fix_variance`) is at most this (map units);
+        bearing geometry, :func:`bearnav_cli.runtime.bearing.fix_variance`) is at most this (map units);
         ``None``: every usable fix.
     starts : str
         ``map`` (the map's starts), ``random:N`` (N uniform free starts in the goal's

@@ -31,7 +31,11 @@ RUNTIME_KEYS = (
     "landmarks", "nodes", "parent", "cell_node", "cell_A", "cell_b", "cell_row_offsets", "exit_point",
     "exit_dir", "gain", "u_max", "goal_tolerance", "cell_landmarks", "fixed_landmark", "status",
     "cbf_A", "cbf_b", "cbf_offsets", "certificate", "cell_rank", "tolerance", "plan_tolerance", "exit_inset",
+    "cell_vertices", "cell_vertex_offsets",
 )  # fmt: skip
+
+#: The cell index of :class:`PlanArrays`: at most this many bins along each side of the bounds.
+INDEX_BINS = 32
 
 
 def _readonly(value: Any, dtype: Any) -> np.ndarray:
@@ -94,6 +98,8 @@ class PlanArrays:
         ``δ_e`` (map units).
     robot_radius : float
         ρ (map units): the walls of the straight-line checks are ``B_r``, the bounds less ρ.
+    cell_vertices, cell_vertex_offsets : ndarray, shapes (V, 2), (C + 1,)
+        The cells as polygons (their bounding boxes index them, see ``bin_cells``).
 
     Derived attributes (computed on construction): ``goal`` (2,), ``free_bounds`` (4,) ``B_r``,
     ``tol`` (``1e-9·D``),
@@ -132,7 +138,13 @@ class PlanArrays:
     plan_tolerance: float
     exit_inset: float
     robot_radius: float
+    cell_vertices: np.ndarray
+    cell_vertex_offsets: np.ndarray
     goal: np.ndarray = dataclasses.field(init=False, repr=False)
+    bin_cells: np.ndarray = dataclasses.field(init=False, repr=False)
+    bin_origin: np.ndarray = dataclasses.field(init=False, repr=False)
+    bin_size: np.ndarray = dataclasses.field(init=False, repr=False)
+    bin_shape: tuple = dataclasses.field(init=False, repr=False)
     free_bounds: np.ndarray = dataclasses.field(init=False, repr=False)
     tol: float = dataclasses.field(init=False, repr=False)
     node_cell: np.ndarray = dataclasses.field(init=False, repr=False)
@@ -154,6 +166,7 @@ class PlanArrays:
             ("exit_dir", float), ("gain", float), ("u_max", float), ("bounds", float), ("cell_landmarks", bool),
             ("fixed_landmark", np.int64), ("status", np.int8), ("cbf_A", float), ("cbf_b", float),
             ("cbf_offsets", np.int64), ("obstacle_edges", float), ("cell_rank", float), ("tolerance", float),
+            ("cell_vertices", float), ("cell_vertex_offsets", np.int64),
         ):  # fmt: skip
             put(self, name, _readonly(getattr(self, name), dtype))
         for name in ("goal_tolerance", "plan_tolerance", "exit_inset", "robot_radius"):
@@ -190,6 +203,44 @@ class PlanArrays:
         node_cost = tree_costs(self.nodes, self.parent)
         put(self, "node_cost", _readonly(node_cost, float))
         put(self, "cost_to_go", _readonly(np.where(up >= 0, node_cost[np.maximum(up, 0)], 0.0), float))
+        self._index_cells()
+
+    def _index_cells(self) -> None:
+        """A uniform grid over the bounds listing, per bin, the cells whose bounding box meets it, in
+        (rank, index) order: the first of a bin's cells that holds a point is its least-rank cell."""
+        put = object.__setattr__
+        c = self.n_cells
+        shape = (INDEX_BINS, INDEX_BINS)
+        origin = self.bounds[:2]
+        size = np.maximum((self.bounds[2:] - origin) / np.array(shape), 1e-300)
+        members = np.zeros((shape[0], shape[1], c), bool)
+        if c and len(self.cell_vertices):
+            vo = self.cell_vertex_offsets
+            lo = np.minimum.reduceat(self.cell_vertices, vo[:-1], axis=0)
+            hi = np.maximum.reduceat(self.cell_vertices, vo[:-1], axis=0)
+            first = np.clip(np.floor((lo - origin) / size).astype(np.int64), 0, np.array(shape) - 1)
+            last = np.clip(np.floor((hi - origin) / size).astype(np.int64), 0, np.array(shape) - 1)
+            for k in range(c):
+                members[first[k, 0] : last[k, 0] + 1, first[k, 1] : last[k, 1] + 1, k] = True
+        order = np.lexsort((np.arange(c), self.cell_rank))  # by rank, then index
+        members = members.reshape(-1, c)[:, order]
+        width = max(1, int(members.sum(axis=1).max(initial=0)))
+        # each bin's cells in (rank, index) order, padded with -1
+        slot = np.cumsum(members, axis=1) - 1
+        bins = np.full((members.shape[0], width), -1, np.int64)
+        b_idx, m_idx = np.nonzero(members)
+        bins[b_idx, slot[b_idx, m_idx]] = order[m_idx]
+        put(self, "bin_cells", _readonly(bins, np.int64))
+        put(self, "bin_origin", _readonly(origin, float))
+        put(self, "bin_size", _readonly(size, float))
+        put(self, "bin_shape", shape)
+
+    def cells_near(self, x: np.ndarray) -> np.ndarray:
+        """Candidate cells of each point (those whose bounding box meets its bin), shape (R, K), padded with ``-1``,
+        in (rank, index) order."""
+        p = np.asarray(x, float).reshape(-1, 2)
+        ij = np.clip(np.floor((p - self.bin_origin) / self.bin_size).astype(np.int64), 0, np.array(self.bin_shape) - 1)
+        return self.bin_cells[ij[:, 0] * self.bin_shape[1] + ij[:, 1]]
 
     def _check_shapes(self, n: int, c: int, n_lm: int) -> None:
         rows = int(self.cell_row_offsets[-1]) if len(self.cell_row_offsets) else -1
@@ -253,6 +304,8 @@ class PlanArrays:
             plan_tolerance=plan.plan_tolerance,
             exit_inset=cells.exit_inset,
             robot_radius=cells.map.robot_radius,
+            cell_vertices=cells.cell_vertices,
+            cell_vertex_offsets=cells.cell_vertex_offsets,
         )
 
     @classmethod

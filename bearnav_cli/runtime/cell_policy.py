@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from bearnav_cli.plan_arrays import CHUNK, PlanArrays
+from bearnav_cli.runtime.plan_arrays import CHUNK, PlanArrays
 
 # --------------------------------------------------------------------------- vectorised queries
 
@@ -153,7 +153,8 @@ def locate(arrays: PlanArrays, x: np.ndarray, tol: float | None = None, eps_sw: 
     return chosen
 
 
-def least_rank_cell(arrays: PlanArrays, x: np.ndarray, erosion: np.ndarray | float = 0.0) -> np.ndarray:
+def least_rank_cell(arrays: PlanArrays, x: np.ndarray, erosion: np.ndarray | float = 0.0,
+                    below: np.ndarray | None = None) -> np.ndarray:  # fmt: skip
     """The containing cell of least rank (ties: lower index), ALGORITHMS §11.3, shape (R,); ``-1`` outside ``D``.
 
     Membership is tested on the cells eroded by ``erosion`` (``x ∈ P_c ⊖ δ``: every row with
@@ -167,15 +168,29 @@ def least_rank_cell(arrays: PlanArrays, x: np.ndarray, erosion: np.ndarray | flo
         Positions or their estimates (map units).
     erosion : float or ndarray, shape (R,)
         ``δ`` of each robot (map units).
+    below : ndarray, shape (R,), optional
+        Only cells of rank strictly below this count (the active cell's rank: is there a cell to
+        switch to?); default all.
     """
     p = _points(x)
     delta = np.broadcast_to(np.asarray(erosion, float), (len(p),))
-    slack = arrays.row_b[None] - np.einsum("cpk,rk->rcp", arrays.row_A, p)  # (R, C, P); padding rows: 0
-    real = np.arange(arrays.row_A.shape[1])[None, :] < np.diff(arrays.cell_row_offsets)[:, None]  # (C, P)
-    inside = np.all(~real[None] | (slack >= delta[:, None, None] - arrays.tol), axis=2)
-    rank = np.where(inside, arrays.cell_rank[None], math.inf)
-    best = np.argmin(rank, axis=1)  # the first of equal ranks: the lower index
-    return np.where(inside[np.arange(len(p)), best], best, -1)
+    cand = arrays.cells_near(p)  # (R, K) in (rank, index) order, -1 padding
+    wanted = cand >= 0
+    if below is not None:
+        wanted &= arrays.cell_rank[np.maximum(cand, 0)] < np.asarray(below, float)[:, None]
+    # only the real (robot, candidate) pairs: bins hold 16 cells on average but up to 75 (kitchen)
+    r_idx, k_idx = np.nonzero(wanted)
+    c = cand[r_idx, k_idx]
+    slack = arrays.row_b[c] - np.einsum("npk,nk->np", arrays.row_A[c], p[r_idx])  # (n, P); padding rows: 0
+    real = np.arange(arrays.row_A.shape[1]) < np.diff(arrays.cell_row_offsets)[c][:, None]
+    inside = np.all(~real | (slack >= delta[r_idx, None] - arrays.tol), axis=1)
+    # the first candidate that holds x: the least rank, then the lower index
+    first = np.full(len(p), cand.shape[1], np.int64)
+    np.minimum.at(first, r_idx[inside], k_idx[inside])
+    found = first < cand.shape[1]
+    out = np.full(len(p), -1, np.int64)
+    out[found] = cand[np.flatnonzero(found), first[found]]
+    return out
 
 
 def funnel_update(arrays: PlanArrays, cell: np.ndarray, target: np.ndarray, x: np.ndarray, eps_sw: float,
@@ -208,14 +223,19 @@ def funnel_update(arrays: PlanArrays, cell: np.ndarray, target: np.ndarray, x: n
         Robots found outside their cell with no cell of smaller rank holding them.
     """
     c, t, p = _cells(arrays, cell).copy(), _cells(arrays, target).copy(), _points(x)
-    delta = np.broadcast_to(np.asarray(erosion, float), (len(p),))
-    best = least_rank_cell(arrays, p, delta)
+    delta = np.broadcast_to(np.asarray(erosion, float), (len(p),)).copy()
+    # for a robot in a cell only the cells of smaller rank matter (is there one to switch to?)
+    following = (c >= 0) & (t < 0)
+    below = np.where(following, arrays.cell_rank[np.maximum(c, 0)], np.inf)
+    best = least_rank_cell(arrays, p, delta, below)
     relocated = np.zeros(len(c), bool)
-    in_cell = c >= 0
-    if in_cell.any():
-        idx = np.flatnonzero(in_cell & (t < 0))
+    if following.any():
+        idx = np.flatnonzero(following)
         here = contains(arrays, c[idx], p[idx], arrays.tol)
-        lower = (best[idx] >= 0) & (arrays.cell_rank[np.maximum(best[idx], 0)] < arrays.cell_rank[c[idx]])
+        lower = best[idx] >= 0
+        out = idx[~here & ~lower]  # left its cell with no smaller rank holding it: any cell that does
+        if len(out):
+            best[out] = least_rank_cell(arrays, p[out], delta[out])
         relocated[idx] = ~here & ~lower
         move = lower | ~here
         c[idx[move]] = best[idx[move]]

@@ -1,0 +1,114 @@
+"""The controller a robot runs: one camera frame's bearings in, a velocity command out (DESIGN §6).
+
+Numpy only. :class:`Controller` holds one robot's :class:`~bearnav_cli.runtime.step.ControlState`
+and calls :func:`~bearnav_cli.runtime.step.control`, the same step ``bearnav simulate`` advances its
+robots with, so what is simulated is what runs on the robot.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from bearnav_cli.runtime.plan_arrays import PlanArrays
+from bearnav_cli.runtime.step import ControlOutput, ControlSettings, ControlState, control, timing
+
+__all__ = ["Controller"]
+
+
+class Controller:
+    """The controller a robot runs: load ``plan.npz``, feed bearings at camera rate, get a command.
+
+    Numpy only. One robot; the step is :func:`control`, the same function ``bearnav
+    simulate`` advances its robots with.
+
+    Parameters
+    ----------
+    arrays : PlanArrays
+    settings : ControlSettings
+    heading : float
+        Initial heading (rad) standing in for the last command until the first fix.
+    """
+
+    def __init__(self, arrays: PlanArrays, settings: ControlSettings, heading: float = 0.0) -> None:
+        self.arrays = arrays
+        self.settings = settings
+        self.state = ControlState.initial(np.array([heading]))
+        self.last: ControlOutput | None = None
+
+    @classmethod
+    def from_plan(cls, path: str, *, speed: float = 0.1, dt: float | None = None, dynamics: str = "single",
+                  heading: float = 0.0, **options: Any) -> Controller:  # fmt: skip
+        """Load ``plan.npz``; ``options`` are further :class:`ControlSettings` fields.
+
+        ``dt`` is the camera period (s); by default the simulation's, ``min(0.0025·D/v, 0.2)``
+        with ``v`` = ``speed`` (``alpha`` for the unicycle), and ``eps_sw`` defaults to
+        ``2·v·dt``, as in ``bearnav simulate``.
+        """
+        arrays = PlanArrays.from_npz(path)
+        v = options.get("alpha", 0.1) if dynamics == "unicycle" else speed
+        diagonal = math.hypot(*(arrays.bounds[2:] - arrays.bounds[:2]))
+        dt, eps_sw, blind_error = timing(diagonal, v, dt)
+        options.setdefault("eps_sw", eps_sw)
+        options.setdefault("blind_error", blind_error)
+        # a real camera is never exact: with σ = 0 the filter would trust odometry over every
+        # noisy fix (set it to the camera's angular noise)
+        options.setdefault("bearing_sigma", math.radians(1.0))
+        return cls(arrays, ControlSettings(speed=speed, dt=dt, tol=arrays.tol, dynamics=dynamics, **options), heading)
+
+    def command(self, bearings: np.ndarray, visible: np.ndarray, heading: float | None = None) -> np.ndarray:
+        """The command for one camera frame.
+
+        Parameters
+        ----------
+        bearings : array_like, shape (L, 2)
+            World-frame unit bearing of each landmark (rows of invisible ones are ignored).
+        visible : array_like of bool, shape (L,)
+        heading : float, optional
+            The robot's yaw (rad) from the compass: required by the unicycle; for the single
+            integrator, the camera's heading (default 0).
+
+        Returns
+        -------
+        ndarray
+            Single integrator: the velocity ``(vx, vy)`` (map units / s); while looking around
+            it is zero and ``self.last.turn`` is the rate to turn the camera. Unicycle:
+            ``(v, ω)``. Zero once the robot is lost (``self.lost``).
+
+        Raises
+        ------
+        ValueError
+            A unicycle without ``heading``.
+        """
+        if heading is None and self.settings.dynamics == "unicycle":
+            raise ValueError("the unicycle needs its heading (rad) on every frame")
+        out = control(self.arrays, self.settings, self.state, np.asarray(bearings, float)[None],
+                      np.asarray(visible, bool)[None], np.array([0.0 if heading is None else heading]))  # fmt: skip
+        self.state, self.last = out.state, out
+        if out.lost[0]:
+            return np.zeros(2)
+        if self.settings.dynamics == "unicycle":
+            return np.array([out.forward[0], out.turn[0]])
+        return out.velocity[0].copy()
+
+    @property
+    def lost(self) -> bool:
+        """No position estimate after looking around for a whole revolution (``2π/β`` s past the
+        odometry's ``hold_time``); a later fix clears it."""
+        return bool(self.last is not None and self.last.lost[0])
+
+    @property
+    def arrived(self) -> bool:
+        """The current estimate lies within the plan's goal tolerance of the goal: stop."""
+        # the state's estimate, which odometry keeps current; the step's output is zero while the
+        # robot looks around, and (0, 0) may well lie within the tolerance of a goal near the origin
+        if not self.state.known[0]:
+            return False
+        return bool(np.hypot(*(self.state.x_hat[0] - self.arrays.goal)) <= self.arrays.goal_tolerance)
+
+    @property
+    def cell(self) -> int:
+        """The active cell (``-1`` before the first fix)."""
+        return int(self.state.cell[0])

@@ -1,0 +1,134 @@
+"""Where the robot is: the bearing fix and its fusion with odometry (ALGORITHMS §6.2, §7.2, §11.4).
+
+Numpy only. :func:`measure` turns one frame's bearings (or displacements) into a position fix
+and its variance; :func:`fuse` runs the scalar Kalman filter that carries the estimate on the
+robot's own motion between fixes, rejects outliers, and says whether the robot has an estimate
+to steer by this step. The error bound ``3σ`` it returns is what the funnel policy erodes cells
+by and what a certified step is measured against (§11.4).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from bearnav_cli.runtime import bearing
+
+if TYPE_CHECKING:
+    from bearnav_cli.runtime.plan_arrays import PlanArrays
+    from bearnav_cli.runtime.step import ControlSettings, ControlState
+
+__all__ = ["Estimate", "Fix", "fuse", "measure"]
+
+
+@dataclass(frozen=True)
+class Fix:
+    """One frame's position fix for ``R`` robots.
+
+    Attributes
+    ----------
+    position : ndarray, shape (R, 2)
+        ``lsq`` fix from the bearings (§6.2), or the displacement measurement (map units).
+    usable : ndarray of bool, shape (R,)
+        A fix was made (two or more well-spread bearings) and its predicted error is acceptable.
+    variance : ndarray, shape (R,)
+        Its variance (map units²), from the bearing noise and geometry; 0 noise-free.
+    """
+
+    position: np.ndarray
+    usable: np.ndarray
+    variance: np.ndarray
+
+
+def measure(arrays: PlanArrays, s: ControlSettings, bearings: np.ndarray, visible: np.ndarray,
+            x_true: np.ndarray | None = None, displacements: np.ndarray | None = None) -> Fix:  # fmt: skip
+    """The position fix of one frame (see :func:`bearnav_cli.runtime.step.control` for the arguments)."""
+    r = len(visible)
+    if s.measurement == "displacement":
+        if displacements is not None:
+            measured = np.mean(arrays.landmarks[None] - displacements, axis=1)
+        elif x_true is None:
+            raise ValueError("displacement measurement needs the true positions")
+        else:
+            measured = np.array(x_true, float).reshape(-1, 2)
+        fix = np.ones(r, bool)
+    else:
+        estimate = bearing.reconstruct(bearings, visible, arrays.landmarks, 0, method="lsq",
+                                       min_spread=s.min_spread, tol=s.tol)  # fmt: skip
+        measured, fix = estimate.x_hat, estimate.usable.copy()
+    sigma_fix2 = np.zeros(r)
+    if s.bearing_sigma > 0 and fix.any():
+        sigma_fix2[fix] = bearing.fix_variance(bearings[fix], visible[fix], arrays.landmarks, measured[fix],
+                                               s.bearing_sigma, arrays.tol)  # fmt: skip
+        fix &= sigma_fix2 <= (s.max_fix_error / 3.0) ** 2
+    return Fix(measured, fix, sigma_fix2)
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """The fused estimate after one step, ``R`` robots.
+
+    Attributes
+    ----------
+    x_hat : ndarray, shape (R, 2)
+        The estimate (the fix where one was taken, else odometry's prediction), map units.
+    var : ndarray, shape (R,)
+        Its variance (map units²), ``inf`` before the first fix.
+    fix : ndarray of bool, shape (R,)
+        A fix was taken (usable and within 3σ of the prediction).
+    steer : ndarray of bool, shape (R,)
+        The robot has an estimate to steer by: a fix, or odometry still trusted (``hold_time``, or
+        3σ within ``blind_error``).
+    known : ndarray of bool, shape (R,)
+        The robot has had a fix.
+    hold : ndarray, shape (R,)
+        Seconds since the last fix.
+    error_bound : ndarray, shape (R,)
+        ``3σ`` of the estimate (map units; 0 for exact fixes, ``inf`` before the first).
+    """
+
+    x_hat: np.ndarray
+    var: np.ndarray
+    fix: np.ndarray
+    steer: np.ndarray
+    known: np.ndarray
+    hold: np.ndarray
+    error_bound: np.ndarray
+
+
+def fuse(s: ControlSettings, state: ControlState, fix: Fix) -> Estimate:
+    """One step of the scalar Kalman filter that fuses fixes with odometry.
+
+    The prediction moves the last estimate by the last command (its variance grows with the
+    distance, ``odometry_drift`` per unit); a fix of variance σ_fix² corrects it, and a fix farther
+    than 3 standard deviations from the prediction is rejected. Noise-free (σ = 0) every fix is
+    taken as it is.
+    """
+    measured, sigma_fix2 = fix.position, fix.variance
+    fix = fix.usable.copy()
+    known = state.known.copy()
+    predicted = state.x_hat + s.dt * state.motion
+    recent = known & s.odometry  # a prediction exists; its variance says how far to trust it
+    travelled = s.dt * np.hypot(state.motion[:, 0], state.motion[:, 1])
+    var_pred = state.var + (s.odometry_drift * travelled) ** 2
+    innovation = np.einsum("rk,rk->r", measured - predicted, measured - predicted)
+    fix &= ~(recent & (innovation > 9.0 * (var_pred + sigma_fix2)))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        gain = np.where(recent & (var_pred + sigma_fix2 > 0), var_pred / (var_pred + sigma_fix2), 1.0)
+    gain = np.where(np.isfinite(gain), gain, 1.0)
+    corrected = np.where(recent[:, None], predicted + gain[:, None] * (measured - predicted), measured)
+    hold = np.where(fix, 0.0, state.hold + s.dt)
+    # moving on odometry alone: for hold_time, and on as long as the estimate stays within the
+    # barrier margin (3σ <= blind_error; turning in place adds no uncertainty)
+    carried = ~fix & recent & ((hold <= s.hold_time) | (9.0 * var_pred <= s.blind_error**2))
+    x_hat = np.where(fix[:, None], corrected, predicted)
+    with np.errstate(invalid="ignore"):
+        posterior = np.where(np.isfinite(var_pred), (1.0 - gain) * var_pred, sigma_fix2)
+    var = np.where(fix, np.where(recent, posterior, sigma_fix2), var_pred)
+    steer = fix | carried  # robots with a position estimate this step
+    known |= fix
+    with np.errstate(invalid="ignore"):  # 3σ; 0 for exact fixes, inf before the first
+        error_bound = np.where(np.isfinite(var), 3.0 * np.sqrt(np.maximum(var, 0.0)), np.inf)
+    return Estimate(x_hat, var, fix, steer, known, hold, error_bound)

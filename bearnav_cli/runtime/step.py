@@ -1,0 +1,403 @@
+"""The control step: one camera frame in, one command out, for ``R`` robots (ALGORITHMS §7, §11.3–11.4).
+
+Numpy only. :func:`control` composes small steps that can be tested alone: the fix and its
+fusion with odometry (:mod:`bearnav_cli.runtime.estimate`), the cell policy and the field
+(:func:`follow_fields`), looking around without an estimate (:func:`look_around`) and the
+unicycle mapping (:func:`unicycle_command`). ``bearnav simulate`` advances its robots with
+:func:`control`, and :class:`~bearnav_cli.runtime.controller.Controller` takes the same step on a
+robot, so what is simulated is what runs on the robot.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from bearnav_cli.runtime import bearing
+from bearnav_cli.runtime.cell_policy import affine_field, apply_gain, displacement, update
+from bearnav_cli.runtime.estimate import Estimate, fuse, measure
+from bearnav_cli.runtime.plan_arrays import PlanArrays
+
+__all__ = [
+    "APPROACH_ALIGNMENT", "DYNAMICS", "MEASUREMENTS", "STALL_FIELD", "ControlOutput", "ControlSettings", "ControlState",
+    "control", "follow_fields", "look_around", "timing", "unicycle_command",
+]  # fmt: skip
+
+log = logging.getLogger(__name__)
+
+
+# --------------------------------------------------------------------------- the control step
+
+DYNAMICS = ("single", "unicycle")
+MEASUREMENTS = ("bearing", "displacement")
+
+
+@dataclass(frozen=True)
+class ControlSettings:
+    """Constants of the control step shared by :class:`Controller` and ``bearnav simulate`` (ALGORITHMS §7).
+
+    Attributes
+    ----------
+    speed : float
+        ``v_ref`` of the single integrator (map units / s).
+    dt : float
+        Control period (s): the hold timer advances by it on every step without a fix.
+    eps_sw : float
+        Switching and arrival radius (map units).
+    tol : float
+        Membership slack (map units), ``1e-9·D``.
+    dynamics : {"single", "unicycle"}
+    alpha, beta : float
+        Unicycle gains: ``v = α cos e`` (map units / s), ``ω = β sin e`` (rad / s).
+    clamp_reverse : bool
+        Unicycle: clamp ``v`` at 0 (never reverse).
+    turn_first : bool
+        Unicycle: ``v = α cos³ e`` (slow down to turn) instead of §7.1's ``α cos e``.
+    measurement : {"bearing", "displacement"}
+        ``bearing``: reconstruct ``ỹ`` and ``x̂`` from bearings (§6); ``displacement``: the
+        true displacements, ``x̂ = x`` (paper B).
+    reconstruction : {"lsq", "pair", "rescale"}
+    min_spread : float
+        ``θ_min`` of §6.2 (radians).
+    hold_time : float
+        Seconds without a usable reconstruction before the robot stops to look around; it
+        is ``lost`` after one more revolution, ``2π/β`` (§7.5).
+    odometry : bool
+        Between fixes, carry ``x̂`` forward with the commanded motion and keep following the
+        fields (for at most ``hold_time``); off: the hold policy of §7.5 as written.
+    odometry_drift : float
+        Standard deviation of the odometry's position error per unit travelled: the filter's
+        process noise (:func:`control`).
+    blind_error : float
+        Without a fix, the robot keeps following the fields on odometry beyond ``hold_time``
+        while its estimate's 3σ stays below this (map units; the barrier margin in
+        ``bearnav simulate``); 0: ``hold_time`` only.
+    """
+
+    speed: float
+    dt: float
+    eps_sw: float
+    tol: float
+    dynamics: str = "single"
+    alpha: float = 0.1
+    beta: float = 0.5
+    clamp_reverse: bool = False
+    turn_first: bool = True
+    measurement: str = "bearing"
+    reconstruction: str = "lsq"
+    min_spread: float = bearing.DEFAULT_MIN_SPREAD
+    hold_time: float = 2.0
+    odometry: bool = True
+    odometry_drift: float = 0.05
+    blind_error: float = 0.0
+    bearing_sigma: float = 0.0
+    max_fix_error: float = math.inf
+
+
+@dataclass(frozen=True)
+class ControlState:
+    """What a controller remembers between steps, for ``R`` robots.
+
+    Attributes
+    ----------
+    cell, target : ndarray of int64, shape (R,)
+        Active cell (``-1`` before the first fix) and approached node (``-1`` for none).
+    last_dir : ndarray, shape (R, 2)
+        Unit direction of the last command (the initial heading before the first).
+    hold : ndarray, shape (R,)
+        Seconds since the last usable reconstruction.
+    x_hat : ndarray, shape (R, 2)
+        The last position estimate, carried forward by odometry between fixes (map units).
+    motion : ndarray, shape (R, 2)
+        World-frame velocity of the last command (map units / s): what odometry integrates.
+    known : ndarray of bool, shape (R,)
+        Whether the robot has had a fix yet.
+    var : ndarray, shape (R,)
+        Variance of the estimate (map units²), isotropic; ``inf`` before the first fix.
+    scanning : ndarray of bool, shape (R,)
+        Looking around at the last step.
+    spin : ndarray, shape (R,)
+        ``±1``: the direction of the current look-around.
+    """
+
+    cell: np.ndarray
+    target: np.ndarray
+    last_dir: np.ndarray
+    hold: np.ndarray
+    x_hat: np.ndarray
+    motion: np.ndarray
+    known: np.ndarray
+    var: np.ndarray
+    scanning: np.ndarray
+    spin: np.ndarray
+
+    @classmethod
+    def initial(cls, heading: np.ndarray) -> ControlState:
+        """Robots that have not had a fix yet, facing ``heading`` (rad, shape (R,))."""
+        h = np.asarray(heading, float).reshape(-1)
+        r = len(h)
+        return cls(np.full(r, -1, np.int64), np.full(r, -1, np.int64), np.column_stack([np.cos(h), np.sin(h)]),
+                   np.zeros(r), np.zeros((r, 2)), np.zeros((r, 2)), np.zeros(r, bool), np.full(r, np.inf),
+                   np.zeros(r, bool), np.ones(r))  # fmt: skip
+
+    def take(self, idx: np.ndarray) -> ControlState:
+        """The state of the robots ``idx``."""
+        return ControlState(*(getattr(self, f.name)[idx] for f in dataclasses.fields(self)))
+
+    def put(self, idx: np.ndarray, other: ControlState) -> None:
+        """Write ``other`` (the robots ``idx``) back into this state's arrays."""
+        for f in dataclasses.fields(self):
+            getattr(self, f.name)[idx] = getattr(other, f.name)
+
+
+@dataclass(frozen=True)
+class ControlOutput:
+    """One control step for ``R`` robots.
+
+    Attributes
+    ----------
+    velocity : ndarray, shape (R, 2)
+        Single integrator: the commanded velocity (map units / s), ``v_ref·unit(ũ)``.
+    forward, turn : ndarray, shape (R,)
+        Unicycle: ``v`` (map units / s) and ``ω`` (rad / s). ``turn`` is also the rate at
+        which a single integrator that is looking around turns its camera.
+    scanning : ndarray of bool, shape (R,)
+        Looking around in place: no fix for longer than ``hold_time``.
+    state : ControlState
+        The state after the step.
+    fix : ndarray of bool, shape (R,)
+        A usable reconstruction (or displacement measurement) was available.
+    lost : ndarray of bool, shape (R,)
+        No fix for longer than ``hold_time`` plus one revolution of looking around.
+    stalled : ndarray of bool, shape (R,)
+        The certified field vanishes at ``x̂`` (``‖a − M x̂‖ < 1e-6·u_max``).
+    relocated : ndarray of bool, shape (R,)
+        Left the cell through a side face this step (a ``left_cell`` event).
+    x_hat : ndarray, shape (R, 2)
+        The position estimate used (measured or carried by odometry; zeros before the first fix).
+    certified : ndarray of bool, shape (R,)
+        The step is covered by the composed certificate (ALGORITHMS §11.4): a funnel plan, a cell's
+        field (not a straight approach), and an estimate whose error bound (3σ) is at most ``δ*``.
+    """
+
+    velocity: np.ndarray
+    forward: np.ndarray
+    turn: np.ndarray
+    scanning: np.ndarray
+    state: ControlState
+    fix: np.ndarray
+    lost: np.ndarray
+    stalled: np.ndarray
+    relocated: np.ndarray
+    x_hat: np.ndarray
+    certified: np.ndarray
+
+
+#: ``‖a − M x̂‖ < STALL_FIELD · u_max`` is a stall: the field has (almost) an equilibrium there.
+STALL_FIELD = 1e-6
+#: A unicycle approaching a node drives only when its heading is this close to the segment (rad).
+APPROACH_ALIGNMENT = math.radians(10.0)
+
+
+def control(
+    arrays: PlanArrays,
+    settings: ControlSettings,
+    state: ControlState,
+    bearings: np.ndarray,
+    visible: np.ndarray,
+    heading: np.ndarray,
+    x_true: np.ndarray | None = None,
+    displacements: np.ndarray | None = None,
+) -> ControlOutput:
+    """One step of ALGORITHMS §7.2 for every robot: measurement → cell → command.
+
+    The position estimate ``x̂`` comes from ``lsq`` whatever the reconstruction (§7.2); the
+    cell policy is :func:`update`; the output ``ỹ`` is rebuilt for the (new) cell's fixed
+    landmark and ``ũ = gain[c] @ ỹ``, or ``x_n − x̂`` while approaching node ``n``.
+
+    Without a usable reconstruction (§7.5), for up to ``hold_time`` seconds the robot carries
+    its last estimate forward with its own commanded motion (odometry, ``settings.odometry``)
+    and keeps following the fields; without any estimate (before its first fix, or once
+    odometry has expired) it stops and looks around, turning in place at ``β``, for one
+    revolution, and is then lost. With ``odometry`` off it holds as §7.5 says (the single
+    integrator keeps ``last_dir``, the unicycle turns toward it) for ``hold_time``, then looks
+    around the same way.
+
+    Parameters
+    ----------
+    arrays : PlanArrays
+    settings : ControlSettings
+    state : ControlState
+    bearings : ndarray, shape (R, L, 2)
+        World-frame unit bearings (ignored in displacement mode).
+    visible : ndarray of bool, shape (R, L)
+    heading : ndarray, shape (R,)
+        Yaw ``φ`` (rad) from the compass: the unicycle's heading, the single integrator's camera.
+    x_true : ndarray, shape (R, 2), optional
+        True positions; required in displacement mode (``x̂ = x``), ignored otherwise.
+    displacements : ndarray, shape (R, L, 2), optional
+        Displacement mode in a world that differs from the plan's (deformation tests): the
+        measured ``l_k − x``; the field uses them as they are and ``x̂`` is the position that
+        fits them best against the plan's landmarks, ``mean_k(l_k − d_k)``.
+
+    Returns
+    -------
+    ControlOutput
+    """
+    s = settings
+    est = fuse(s, state, measure(arrays, s, bearings, visible, x_true, displacements))
+    cell, target, last_dir, u, stalled, relocated = follow_fields(arrays, s, state, est, bearings, visible,
+                                                                  displacements)  # fmt: skip
+    holding = ~est.steer  # no position estimate this step
+    scanning, lost, spin, turn = look_around(s, state, est, last_dir, heading)
+    direction = np.where(holding[:, None], last_dir, u)
+    velocity = s.speed * direction
+    velocity[scanning] = 0.0
+    forward, motion = np.zeros(len(cell)), velocity.copy()
+    if s.dynamics == "unicycle":
+        forward, turn, motion = unicycle_command(s, direction, heading, holding, scanning, target, turn)
+    # the estimate always moves on with the robot's own motion, steering with it or not
+    new = ControlState(cell, target, last_dir, est.hold, np.where(est.known[:, None], est.x_hat, state.x_hat), motion,
+                       est.known, est.var, scanning, spin)  # fmt: skip
+    # certified (§11.4): a funnel plan, driven by a certified cell's field (not a straight approach),
+    # on an estimate whose error bound is within the plan's tolerance δ*
+    certified = (arrays.funnel & est.steer & (target < 0) & (cell >= 0)
+                 & (est.error_bound <= arrays.plan_tolerance + s.tol))  # fmt: skip
+    return ControlOutput(velocity, forward, turn, scanning, new, est.fix, lost, stalled, relocated,
+                         np.where(est.steer[:, None], est.x_hat, 0.0), certified)  # fmt: skip
+
+
+def follow_fields(arrays: PlanArrays, s: ControlSettings, state: ControlState, est: Estimate, bearings: np.ndarray,
+                  visible: np.ndarray, displacements: np.ndarray | None = None) -> tuple[np.ndarray, ...]:  # fmt: skip
+    """The cell policy and the unit command of every robot that has an estimate (ALGORITHMS §7.2, §11.3).
+
+    The policy is :func:`~bearnav_cli.runtime.cell_policy.update` (funnel cells eroded by the
+    estimate's error bound, capped at δ*); the output ``ỹ`` is rebuilt for the cell's fixed
+    landmark and ``ũ = gain[c] @ ỹ``, or ``x_n − x̂`` while approaching node ``n``.
+
+    Returns
+    -------
+    cell, target : ndarray of int64, shape (R,)
+    last_dir, u : ndarray, shape (R, 2)
+        The last command's direction (updated where a command was made) and this step's unit
+        command (zero for robots without an estimate).
+    stalled, relocated : ndarray of bool, shape (R,)
+    """
+    r = len(state.cell)
+    x_hat, fix = est.x_hat, est.fix
+    cell, target, last_dir = state.cell.copy(), state.target.copy(), state.last_dir.copy()
+    relocated = np.zeros(r, bool)
+    stalled = np.zeros(r, bool)
+    u = np.zeros((r, 2))
+    if not est.steer.any():
+        return cell, target, last_dir, u, stalled, relocated
+    idx = np.flatnonzero(est.steer)
+    erosion = np.minimum(est.error_bound[idx], arrays.plan_tolerance) if arrays.funnel else None
+    c, t, moved = update(arrays, cell[idx], target[idx], x_hat[idx], s.eps_sw, s.tol, erosion)
+    cell[idx], target[idx], relocated[idx] = c, t, moved
+    f = arrays.fixed_landmark[c]
+    if s.measurement == "displacement":
+        y = displacement(arrays, x_hat[idx]) if displacements is None else displacements[idx].reshape(len(idx), -1)
+    elif s.reconstruction == "lsq" or not fix[idx].all():
+        y = bearing.scaled_output(x_hat[idx], arrays.landmarks, f, s.tol)
+    else:
+        rec = bearing.reconstruct(bearings[idx], visible[idx], arrays.landmarks, f, method=s.reconstruction,
+                                  min_spread=s.min_spread, tol=s.tol)  # fmt: skip
+        y = np.where(rec.usable[:, None], rec.y, bearing.scaled_output(x_hat[idx], arrays.landmarks, f, s.tol))
+    ui = apply_gain(arrays, c, y)
+    stalled[idx] = np.hypot(*affine_field(arrays, c, x_hat[idx]).T) < STALL_FIELD * arrays.u_max[c]
+    going = t >= 0
+    ui[going] = arrays.nodes[t[going]] - x_hat[idx[going]]
+    stalled[idx[going]] = False
+    norm = np.hypot(ui[:, 0], ui[:, 1])
+    stalled[idx[~(norm > 0)]] = True
+    ok = norm > 0
+    u[idx[ok]] = ui[ok] / norm[ok, None]
+    last_dir[idx[ok]] = u[idx[ok]]
+    return cell, target, last_dir, u, stalled, relocated
+
+
+def look_around(s: ControlSettings, state: ControlState, est: Estimate, last_dir: np.ndarray,
+                heading: np.ndarray) -> tuple[np.ndarray, ...]:  # fmt: skip
+    """Who looks around in place, who is lost, and how they turn (ALGORITHMS §7.5 with docs/choices.md).
+
+    With odometry, a robot without an estimate never moves blind: it looks around at once, for
+    one revolution at ``β``, then it is lost; without odometry §7.5's hold comes first. A
+    look-around starts toward the last command and keeps its direction.
+
+    Returns
+    -------
+    scanning, lost : ndarray of bool, shape (R,)
+    spin : ndarray, shape (R,)
+        ``±1``, the direction of each look-around.
+    turn : ndarray, shape (R,)
+        The turn rate of the robots looking around (rad / s; 0 for the others).
+    """
+    holding = ~est.steer
+    if s.odometry:
+        scanning = holding
+        scan_time = est.hold - np.where(state.known, s.hold_time, 0.0)
+    else:
+        scanning = holding & (est.hold > s.hold_time)
+        scan_time = est.hold - s.hold_time
+    lost = scanning & (scan_time > 2.0 * math.pi / s.beta)
+    phi = np.asarray(heading, float).reshape(len(holding))
+    # a scan that always turned one way undid the unicycle's turn toward its field
+    toward = bearing.wrap(np.arctan2(last_dir[:, 1], last_dir[:, 0]) - phi)
+    starting = scanning & ~state.scanning  # a scan keeps the direction it started with
+    spin = np.where(starting, np.where(toward < 0, -1.0, 1.0), state.spin)
+    return scanning, lost, spin, np.where(scanning, spin * s.beta, 0.0)
+
+
+def unicycle_command(s: ControlSettings, direction: np.ndarray, heading: np.ndarray, holding: np.ndarray,
+                     scanning: np.ndarray, target: np.ndarray, turn: np.ndarray) -> tuple[np.ndarray, ...]:  # fmt: skip
+    """``(v, ω)`` of the unicycle toward the unit command ``direction`` (ALGORITHMS §7.1).
+
+    §7.1's ``v = α cos e``; ``turn_first`` uses ``α cos³ e``: a unicycle far off its field slows
+    down to turn instead of sweeping a wide arc past an obstacle corner. Holding or looking
+    around, it turns in place; a straight approach drives only when aligned within
+    ``APPROACH_ALIGNMENT``.
+
+    Returns
+    -------
+    forward, turn : ndarray, shape (R,)
+        ``v`` (map units / s) and ``ω`` (rad / s).
+    motion : ndarray, shape (R, 2)
+        The world-frame velocity odometry integrates.
+    """
+    phi = np.asarray(heading, float).reshape(len(direction))
+    e = bearing.wrap(np.arctan2(direction[:, 1], direction[:, 0]) - phi)
+    gain = np.cos(e) ** 3 if s.turn_first else np.cos(e)
+    forward = np.where(holding | scanning, 0.0, s.alpha * gain)
+    forward[(target >= 0) & (np.abs(e) > APPROACH_ALIGNMENT)] = 0.0
+    if s.clamp_reverse:
+        forward = np.maximum(forward, 0.0)
+    turn = np.where(scanning, turn, s.beta * np.sin(e))
+    return forward, turn, forward[:, None] * np.column_stack([np.cos(phi), np.sin(phi)])
+
+
+#: ``dt = min(DT_PER_DIAGONAL · D / v, DT_MAX)`` by default (ALGORITHMS §7.1).
+DT_PER_DIAGONAL = 0.0025
+DT_MAX = 0.2
+#: Blind travel on odometry lasts while 3σ stays below this fraction of D (the default barrier margin).
+BLIND_ERROR_PER_DIAGONAL = 0.01
+
+
+def timing(diagonal: float, speed: float, dt: float | None = None) -> tuple[float, float, float]:
+    """The loop constants of a map of diagonal ``D`` driven at ``speed`` (``α`` for the unicycle).
+
+    Returns
+    -------
+    dt : float
+        ``dt`` if given, else ``min(0.0025·D/speed, 0.2)`` (s).
+    eps_sw : float
+        Switching radius ``2·speed·dt`` (map units).
+    blind_error : float
+        ``0.01·D`` (map units), the default barrier margin.
+    """
+    dt = min(DT_PER_DIAGONAL * diagonal / speed, DT_MAX) if dt is None else dt
+    return dt, 2.0 * speed * dt, BLIND_ERROR_PER_DIAGONAL * diagonal
