@@ -206,45 +206,49 @@ def _nearest_distances(points: np.ndarray, nodes: np.ndarray, k: int) -> tuple[n
     for s in range(0, len(points), step):
         d = points[s : s + step, None, :] - nodes[None, :, :]
         d = np.sqrt(d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1])
-        order = np.argsort(d, axis=1, kind="stable")[:, :k]
+        # the k smallest by partition, then those k in order (ties: the lower index)
+        part = np.argpartition(d, k - 1, axis=1)[:, :k] if k < d.shape[1] else np.tile(np.arange(d.shape[1]),
+                                                                                        (len(d), 1))  # fmt: skip
+        part.sort(axis=1)
+        near = np.take_along_axis(d, part, axis=1)
+        order = np.take_along_axis(part, np.argsort(near, axis=1, kind="stable"), axis=1)
         index[s : s + step] = order
         dist[s : s + step] = np.take_along_axis(d, order, axis=1)
     return dist, index
 
 
 class _NearNodes:
-    """Is any node within ``tol`` of a point? The starting nodes by brute force plus a hash of added ones.
+    """Is any node within ``tol`` of a point? Every node filed under its grid cell (side ``tol``).
 
-    An added node is filed under its grid cell (side ``tol``) and the eight around
-    it, so a query looks up one cell per point.
+    A node within ``tol`` of a point lies in the point's cell or one of the eight around it, so a
+    query looks up nine cells and measures only the nodes it finds there (almost always none).
     """
 
     def __init__(self, nodes: np.ndarray, tol: float):
         self.tol = tol
-        self.nodes = np.asarray(nodes, float)
         self.cells: dict[tuple[int, int], list[np.ndarray]] = {}
+        for p in np.asarray(nodes, float).reshape(-1, 2):
+            self.add(p)
 
     def _keys(self, pts: np.ndarray):
         cell = np.floor(pts / self.tol).astype(np.int64)
         return zip(cell[:, 0].tolist(), cell[:, 1].tolist(), strict=True)
 
     def add(self, p: np.ndarray) -> None:
-        for bx, by in self._keys(p[None]):
-            for key in ((bx + dx, by + dy) for dx in (-1, 0, 1) for dy in (-1, 0, 1)):
-                self.cells.setdefault(key, []).append(p)
-
-    def clear_of_added(self, pts: np.ndarray) -> np.ndarray:
-        """Whether every added node lies farther than ``tol`` from each point; shape (n,) bool."""
-        ok = np.ones(len(pts), bool)
-        if self.cells:
-            for row, key in enumerate(self._keys(pts)):
-                ok[row] = all(math.dist(q, pts[row]) > self.tol for q in self.cells.get(key, ()))
-        return ok
+        for key in self._keys(p[None]):
+            self.cells.setdefault(key, []).append(p)
 
     def clear_of(self, pts: np.ndarray) -> np.ndarray:
         """Whether every node lies farther than ``tol`` from each point; shape (n,) bool."""
-        ok = _nearest_distances(pts, self.nodes, 1)[0][:, 0] > self.tol
-        ok[ok] = self.clear_of_added(pts[ok])
+        pts = np.asarray(pts, float).reshape(-1, 2)
+        ok = np.ones(len(pts), bool)
+        cells = self.cells
+        for row, (bx, by) in enumerate(self._keys(pts)):
+            for key in ((bx + dx, by + dy) for dx in (-1, 0, 1) for dy in (-1, 0, 1)):
+                near = cells.get(key)
+                if near and any(math.dist(q, pts[row]) <= self.tol for q in near):
+                    ok[row] = False
+                    break
         return ok
 
 
@@ -382,7 +386,7 @@ def _remove_crossings(nodes, parent, cost, tol: float) -> tuple[np.ndarray, np.n
         if version[i] != vi or version[j] != vj:
             continue  # an edge changed since the pair was found; its new pieces were re-tested
         k = np.array([kx, ky])
-        if not near.clear_of_added(k[None])[0]:  # a node added since lies within tol: never valid again
+        if not near.clear_of(k[None])[0]:  # a node added since lies within tol: never valid again
             continue
         if n == len(nodes):  # the bound above holds in exact arithmetic; stay safe under rounding
             nodes, parent = np.concatenate([nodes, nodes]), np.concatenate([parent, parent])
