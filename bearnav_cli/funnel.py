@@ -332,14 +332,15 @@ def cell_tolerance(M: np.ndarray, normals: np.ndarray, sigma_h: np.ndarray, z: n
     float
         ``0`` when a margin is not positive; ``inf`` when ``M = 0`` and every margin is positive.
     """
-    ratios = [np.asarray(sigma_h, float)]
-    gains = [np.hypot(*(np.asarray(normals, float).reshape(-1, 2) @ M).T)]
-    if z is not None:
-        ratios.append(np.array([float(sigma_v)]))
-        gains.append(np.array([float(np.hypot(*(np.asarray(z, float) @ M)))]))
-    sigma, gain = np.concatenate(ratios), np.concatenate(gains)
-    if not len(sigma) or np.any(~(sigma > 0)):
+    rows = np.asarray(normals, float).reshape(-1, 2)
+    sigma = np.asarray(sigma_h, float)
+    if z is not None:  # (L2) is one more row: direction z, margin σ_v
+        rows = np.vstack([rows, np.asarray(z, float).reshape(1, 2)])
+        sigma = np.append(sigma, float(sigma_v))
+    if not len(sigma) or not np.all(sigma > 0):
         return 0.0
+    gain = rows @ M  # ‖Mᵀn‖ of each row
+    gain = np.sqrt(gain[:, 0] * gain[:, 0] + gain[:, 1] * gain[:, 1])
     with np.errstate(divide="ignore"):
         return float(np.min(np.where(gain > 0, sigma / gain, math.inf)))
 

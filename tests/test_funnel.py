@@ -24,12 +24,13 @@ import numpy as np
 import pytest
 import shapely
 
-from bearnav_cli import artifacts, cell_policy, composition, verify
+from bearnav_cli import artifacts, composition, verify
 from bearnav_cli.cell_lp import CellProblem, min_norm_gain
 from bearnav_cli.datatypes import CellStatus, replace
 from bearnav_cli.errors import InvalidMapError
 from bearnav_cli.geometry import DEFAULT_CLEARANCE, FreeSpace
 from bearnav_cli.lp import LpSolver
+from bearnav_cli.runtime import cell_policy
 from bearnav_cli.runtime.plan_arrays import PlanArrays
 from bearnav_cli.stages import decompose, simulate, synthesize
 from bench.common import run_stages

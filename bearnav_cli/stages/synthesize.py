@@ -56,7 +56,8 @@ from bearnav_cli.lp import LpResult, LpSolver, LpStatus
 __all__ = [
     "BOX_DIRECTIONS", "COND_WARNING", "DELTA_FRACTION", "FIELD_MAP", "GAIN_STRUCTURES", "LP_FORMS", "VERSION",
     "CellLp", "CellProblem", "CellSolution", "LpTemplate", "Margins", "Params", "PreparedCell", "SolveOutcome",
-    "cell_constants", "dual_lp", "dual_template", "field_map", "finish_cell", "gain_from_theta", "goal_cell_solution",
+    "cell_constants", "dual_lp", "dual_template", "field_map", "field_margins", "finish_cell", "gain_from_theta",
+    "goal_cell_solution",
     "gram_condition", "landmark_matrix", "min_norm_gain", "prepare_cell", "run", "solve_cell", "solve_prepared",
     "summary", "theta_from_gain", "vertex_lp", "vertex_lp_field", "vertex_lp_gain", "vertex_margins",
     "vertex_template",
@@ -188,10 +189,14 @@ def vertex_margins(K, landmarks, vertices, z, x_j, cbf_n, cbf_q, c_h, c_v, u_max
     """
     K = np.asarray(K, float)
     landmarks = np.asarray(landmarks, float)
+    return field_margins(K.reshape(2, -1, 2).sum(axis=1), K @ landmarks.ravel(), vertices, z, x_j, cbf_n, cbf_q,
+                         c_h, c_v, u_max)  # fmt: skip
+
+
+def field_margins(M, a, vertices, z, x_j, cbf_n, cbf_q, c_h, c_v, u_max) -> Margins:
+    """:func:`vertex_margins` of the affine field ``u(x) = a − M x`` itself (shapes (2, 2), (2,))."""
     V = np.asarray(vertices, float)
     cbf_n = np.asarray(cbf_n, float).reshape(-1, 2)
-    a = K @ landmarks.ravel()
-    M = K.reshape(2, -1, 2).sum(axis=1)
     U = a - V @ M.T  # u at each vertex, (p, 2)
     if len(cbf_n):
         values = -(U @ cbf_n.T + c_h * (V @ cbf_n.T + np.asarray(cbf_q, float)))
@@ -225,6 +230,8 @@ class CellSolution:
         The ``κ`` of the stored constants.
     objective : float
         The last LP's optimal value (NaN when it failed or for the goal cell).
+    tolerance : float
+        ``δ_c`` of the stored field when :func:`more_tolerant` chose it (NaN otherwise).
     """
 
     status: CellStatus
@@ -236,6 +243,7 @@ class CellSolution:
     attempts: int
     kappa: float = math.nan
     objective: float = math.nan
+    tolerance: float = math.nan
 
 
 def cell_constants(problem: CellProblem, kappa: float, u_max: float) -> tuple[float, float]:
@@ -315,6 +323,7 @@ class SolveOutcome:
     c_v: float
     kappa: float
     attempts: int
+    lemma4_terms: tuple[float, float] | None = None  # funnel cells: (min_k h_k(x_j), diam)
 
 
 def _checked_v_max(v_max: float) -> float:
@@ -450,7 +459,7 @@ def _funnel_sweep(prepared: PreparedCell, params: Params, solver: LpSolver, fixe
         status = CellStatus.CERTIFIED if halving == 0 else CellStatus.RELAXED
         if template is not prepared.checker:
             upper = prepared.checker.row_upper(c_h, c_v)
-        return SolveOutcome(status, result, upper, c_h, c_v, kappa, attempts)
+        return SolveOutcome(status, result, upper, c_h, c_v, kappa, attempts, (h_min, diam))
     # Lemma 4 rules this out for a cell that meets (C2): a bug, or a cell whose exit point is not
     # strictly inside its rows. Store the least violation so verify can name the cell.
     log.error("funnel cell not certifiable (Lemma 4 says this cannot happen): %s", "no κ gives ε > 0"
@@ -687,7 +696,7 @@ def run(cells: Cells, params: Params = Params(), progress: Callable[[int, int], 
         elif sol.status == CellStatus.SOLVER_FAILURE:
             log.warning("cell %d: solver failure (unbounded or error)", c)
         elif cells.is_funnel and params.tolerant:
-            solutions[c] = more_tolerant(sol, prepared[c].problem, params.u_max)
+            solutions[c] = more_tolerant(sol, prepared[c].problem, params.u_max, outcome.lemma4_terms)
     gain = np.zeros((C, 2, 2 * n_lm))
     if C:  # K_k of landmark k in columns 2k, 2k + 1: every cell's blocks in one scatter
         blocks = np.concatenate([sol.K.reshape(2, -1, 2) for sol in solutions], axis=1)  # (2, Σ n_c, 2)
@@ -705,7 +714,8 @@ def run(cells: Cells, params: Params = Params(), progress: Callable[[int, int], 
     delta = np.full(C, np.nan)
     plan_tolerance = math.nan
     if cells.is_funnel:
-        delta = cell_tolerances(cells, gain, c_h, c_v, params.u_max)
+        known = np.array([sol.tolerance for sol in solutions], float)
+        delta = cell_tolerances(cells, gain, c_h, c_v, params.u_max, known)
         plan_tolerance = plan_tolerance_of(delta, cells.exit_inset)
         stats["plan_tolerance"] = _json_number(plan_tolerance)
         stats["tolerance_limited_by"] = int(np.nanargmin(delta)) if np.isfinite(delta).any() else None
@@ -714,46 +724,53 @@ def run(cells: Cells, params: Params = Params(), progress: Callable[[int, int], 
                 plan_tolerance=plan_tolerance, stats=stats)  # fmt: skip
 
 
-def more_tolerant(solution: CellSolution, problem: CellProblem, u_max: float) -> CellSolution:
+def more_tolerant(solution: CellSolution, problem: CellProblem, u_max: float,
+                  terms: tuple[float, float] | None = None) -> CellSolution:  # fmt: skip
     """Of a certified funnel cell's LP field and Lemma 4's field, the one with the larger ``δ_c`` (§11.4).
 
     Lemma 4's field ``u = c(x_j − x) − εz`` with ``c = c_v`` has ``M = cI``, barrier margins at least
     ``c·h_k(x_j) − ε`` and progress margin ``ε``, so it tolerates ``min(h_min − ε/c, ε/c)``; the best
     ``ε = c·h_min/2`` (``h_min = min_k h_k(x_j)``), lowered to keep ``|u|_∞ ≤ c·diam + ε ≤ u_max``.
-    Both fields are re-checked at the vertices (:func:`vertex_margins`); the returned solution
-    carries the chosen gain and its margins, with the same status and constants.
+    Both fields are re-checked at the vertices (:func:`field_margins`); the returned solution
+    carries the chosen gain, its margins and its ``δ_c``, with the same status and constants.
     """
-    h_min, diam = _lemma4_terms(problem)
+    h_min, diam = _lemma4_terms(problem) if terms is None else terms  # ``terms``: already computed
     c = solution.c_v
     eps = min(0.5 * c * h_min, 0.5 * (u_max - c * diam))
-    if not eps > 0:
-        return solution
     z, x_j, landmarks = problem.z, problem.x_j, problem.landmarks
 
-    def tolerance(K: np.ndarray) -> tuple[float, Margins]:
-        m = vertex_margins(K, landmarks, problem.vertices, z, x_j, problem.cbf_n, problem.cbf_q, solution.c_h, c,
-                           u_max)  # fmt: skip
+    def tolerance(M: np.ndarray, a: np.ndarray) -> tuple[float, Margins]:
+        m = field_margins(M, a, problem.vertices, z, x_j, problem.cbf_n, problem.cbf_q, solution.c_h, c, u_max)
         # the LP's own solution sits on its bounds up to the solver's rounding
         if not (m.cbf <= 1e-9 * u_max and m.clf < 0 and m.input <= 1e-9 * u_max):
             return 0.0, m
-        return cell_tolerance(K.reshape(2, -1, 2).sum(axis=1), problem.cbf_n, -m.cbf_rows, z, -m.clf), m
+        return cell_tolerance(M, problem.cbf_n, -m.cbf_rows, z, -m.clf), m
 
-    K = min_norm_gain(c * np.eye(2), c * x_j - eps * z, landmarks)
-    ours, margins = tolerance(K)
-    if ours <= tolerance(solution.K)[0]:
-        return solution
-    return dataclasses.replace(solution, K=K, margin_h=margins.cbf, margin_v=margins.clf)
+    K = solution.K
+    lp, _ = tolerance(K.reshape(2, -1, 2).sum(axis=1), K @ landmarks.ravel())
+    if not eps > 0:
+        return dataclasses.replace(solution, tolerance=lp)
+    M, a = c * np.eye(2), c * x_j - eps * z
+    ours, margins = tolerance(M, a)
+    if ours <= lp:
+        return dataclasses.replace(solution, tolerance=lp)
+    return dataclasses.replace(solution, K=min_norm_gain(M, a, landmarks), margin_h=margins.cbf, margin_v=margins.clf,
+                               tolerance=ours)  # fmt: skip
 
 
-def cell_tolerances(cells: Cells, gain: np.ndarray, c_h: np.ndarray, c_v: np.ndarray, u_max: float) -> np.ndarray:
+def cell_tolerances(cells: Cells, gain: np.ndarray, c_h: np.ndarray, c_v: np.ndarray, u_max: float,
+                    known: np.ndarray | None = None) -> np.ndarray:  # fmt: skip
     """``δ_c`` of every funnel cell from its gain and rows (ALGORITHMS §11.4), shape (C,), map units.
 
     The margins are recomputed at the vertices (:func:`vertex_margins`); a cell whose margins are
-    not all positive tolerates no error (``δ_c = 0``).
+    not all positive tolerates no error (``δ_c = 0``). ``known`` (C,) gives the cells whose ``δ_c``
+    is already known (NaN elsewhere, and all are computed without it).
     """
     landmarks = cells.map.landmarks
-    out = np.zeros(cells.n_cells)
+    out = np.zeros(cells.n_cells) if known is None else np.array(known, float)
     for c in range(cells.n_cells):
+        if not math.isnan(out[c]):
+            continue  # computed with the field that was chosen (more_tolerant)
         normals, offsets = cells.barrier(c)
         goal = cells.parent[cells.cell_node[c]] == -1
         z, x_j = cells.exit_dir[c], cells.exit_point[c]
