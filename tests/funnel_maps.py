@@ -10,6 +10,7 @@ the map stage uses (so that a tag put on a disc lies exactly on its boundary).
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import shapely
@@ -103,3 +104,25 @@ def random_spec(seed: int, iterations: int = 300, rrt_seed: int = 0) -> dict:
         "landmarks": landmarks,
         "params": {"rrtstar": {"iterations": int(iterations), "seed": int(rrt_seed)}},
     }
+
+
+#: The shared generator of maps nobody tuned: next to the repository (``../shared``), or at the
+#: workplace's own location for a clone made elsewhere; absent on some machines.
+RANDOM_MAP_TOOL = next((p for p in (Path(__file__).resolve().parents[2] / "shared" / "tools" / "random_map.py",
+                                    Path("/work/shared/tools/random_map.py")) if p.exists()),
+                       Path("/work/shared/tools/random_map.py"))  # fmt: skip
+
+
+def load_random_map_tool():
+    """The module ``shared/tools/random_map.py`` (its ``generate(seed, kind)``); the test is skipped without it."""
+    import importlib.util
+
+    import pytest
+
+    if not RANDOM_MAP_TOOL.exists():
+        pytest.skip("shared random_map tool not available")
+    spec = importlib.util.spec_from_file_location("random_map", RANDOM_MAP_TOOL)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+

@@ -35,7 +35,7 @@ from bearnav_cli.runtime.plan_arrays import PlanArrays
 from bearnav_cli.stages import decompose, simulate, synthesize
 from bench.common import run_stages
 from tests.conftest import build_map
-from tests.funnel_maps import random_spec
+from tests.funnel_maps import load_random_map_tool, random_spec
 
 SPEED = 0.5
 PIPELINE = ["rrtstar", "simplify", "decompose", "synthesize"]
@@ -317,19 +317,6 @@ def test_same_seed_same_plan():
     assert h1 == h2
     other = make_plan(5, 2)
     assert artifacts.content_hash(artifacts.entries_of(other), "plan") != h1  # the hash does see the seed
-
-
-def load_random_map_tool():
-    import importlib.util
-    from pathlib import Path
-
-    path = Path("/work/shared/tools/random_map.py")
-    if not path.exists():
-        pytest.skip("shared random_map tool not available")
-    module_spec = importlib.util.spec_from_file_location("random_map", path)
-    random_map = importlib.util.module_from_spec(module_spec)
-    module_spec.loader.exec_module(random_map)
-    return random_map
 
 
 @pytest.mark.parametrize("kind", ["clutter", "rooms"])

@@ -10,9 +10,7 @@ of the stage: a brute-force pair scan, the exact segment test, costs walked edge
 
 from __future__ import annotations
 
-import importlib.util
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -21,7 +19,8 @@ from bearnav_cli import pipeline
 from bearnav_cli.geometry import FreeSpace
 from bearnav_cli.stages import map_, rrtstar, simplify
 
-TOOL = Path("/work/shared/tools/random_map.py")
+from .funnel_maps import load_random_map_tool
+
 #: (kind, seed, max_rounds); None is the default (10)
 CASES = [
     ("grid", 416, None),
@@ -35,18 +34,9 @@ CASES = [
 ]
 
 
-def random_map_tool():
-    if not TOOL.exists():
-        pytest.skip("shared random_map tool not available")
-    spec = importlib.util.spec_from_file_location("random_map", TOOL)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
 def random_map(kind: str, seed: int):
     """The generator's map, built in memory (the grid as a map_server YAML + PGM would give it)."""
-    doc, grid = random_map_tool().generate(seed, kind)
+    doc, grid = load_random_map_tool().generate(seed, kind)
     doc["starts"] = []  # a random start may sit in a room the goal cannot reach; the tree needs none
     source = None
     if grid is not None:
