@@ -275,38 +275,10 @@ class PlanArrays:
 
     @classmethod
     def from_plan(cls, plan: Any) -> PlanArrays:
-        """Take the run-time arrays from a :class:`~bearnav_cli.datatypes.Plan` (duck-typed)."""
-        cells = plan.cells
-        return cls(
-            landmarks=plan.cells.map.landmarks,
-            nodes=cells.nodes,
-            parent=cells.parent,
-            cell_node=cells.cell_node,
-            cell_A=cells.cell_A,
-            cell_b=cells.cell_b,
-            cell_row_offsets=cells.cell_row_offsets,
-            exit_point=cells.exit_point,
-            exit_dir=cells.exit_dir,
-            gain=plan.gain,
-            u_max=plan.u_max,
-            goal_tolerance=plan.goal_tolerance,
-            bounds=cells.map.bounds,
-            cell_landmarks=cells.cell_landmarks,
-            fixed_landmark=cells.fixed_landmark,
-            status=plan.status,
-            cbf_A=cells.cbf_A,
-            cbf_b=cells.cbf_b,
-            cbf_offsets=cells.cbf_offsets,
-            obstacle_edges=ring_edges([(p.exterior, *p.holes) for p in cells.map.obstacles]),
-            certificate=cells.certificate,
-            cell_rank=cells.cell_rank,
-            tolerance=plan.tolerance,
-            plan_tolerance=plan.plan_tolerance,
-            exit_inset=cells.exit_inset,
-            robot_radius=cells.map.robot_radius,
-            cell_vertices=cells.cell_vertices,
-            cell_vertex_offsets=cells.cell_vertex_offsets,
-        )
+        """Take the run-time arrays from a :class:`~bearnav_cli.datatypes.Plan` (duck-typed): the same
+        entries ``plan.npz`` stores, read as :meth:`from_npz` reads them."""
+        data = plan.arrays()
+        return cls._from_entries({key: data[key] for key in RUNTIME_KEYS}, plan.map.to_json())
 
     @classmethod
     def from_npz(cls, path: str | Path) -> PlanArrays:
@@ -335,6 +307,12 @@ class PlanArrays:
             if isinstance(exc, ArtifactError):
                 raise
             raise ArtifactError(f"cannot read plan ({type(exc).__name__}: {exc})", file=str(path)) from exc
+        return cls._from_entries(entries, map_json, str(path))
+
+    @classmethod
+    def _from_entries(cls, entries: dict[str, Any], map_json: dict, file: str | None = None) -> PlanArrays:
+        """Build from the ``RUNTIME_KEYS`` entries and the embedded map (bounds, radius, obstacle rings)."""
+        entries = dict(entries)
         try:
             bounds = np.asarray(map_json["bounds"], float)
             radius = float(map_json.get("robot_radius", 0.0))
@@ -343,7 +321,7 @@ class PlanArrays:
                 for o in map_json["obstacles"]
             ]
         except (KeyError, TypeError, ValueError) as exc:
-            raise ArtifactError("embedded map has no bounds or obstacles", file=str(path), field="map") from exc
+            raise ArtifactError("embedded map has no bounds or obstacles", file=file, field="map") from exc
         for key in ("goal_tolerance", "plan_tolerance", "exit_inset"):
             entries[key] = float(entries[key])
         entries["certificate"] = str(entries["certificate"])
