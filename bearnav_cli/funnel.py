@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 import shapely
 
-from bearnav_cli.geometry import box_polygon, clip, convex_pieces, polygon_rows
+from bearnav_cli.geometry import box_polygon, clip, convex_pieces, drop_collinear, polygon_rows
 
 __all__ = [
     "NECK_ANGLE", "ObstaclePieces", "Region", "cell_tolerance", "coverage_domain", "depth", "exit_interval",
@@ -153,6 +153,36 @@ def _clip_rows(polygon: np.ndarray, A: np.ndarray, b: np.ndarray, inside: np.nda
     return polygon
 
 
+#: Pieces whose rows are built and applied at a time, nearest the edge first (see :func:`_keep_off_pieces`).
+PIECE_BATCH = 24
+
+
+def _keep_off_pieces(pieces: ObstaclePieces, polygon: np.ndarray, ends: np.ndarray, margin: float,
+                     tol: float) -> np.ndarray:  # fmt: skip
+    """Clip ``polygon`` by the separating rows of the pieces that meet it, nearest the segment first.
+
+    A piece gets its row only while it still meets the shrinking polygon: one hidden behind a
+    nearer piece's row needs none. Every piece that meets the result had its row applied, so the
+    result meets no piece (C1); it is the same or larger than the polygon cut by the rows of every
+    piece that met the starting one, with fewer rows to build.
+    """
+    if not len(pieces):
+        return polygon
+    remaining = pieces.tree.query(shapely.Polygon(polygon), predicate="intersects")
+    if not len(remaining):
+        return polygon
+    segment = shapely.LineString(ends) if len(ends) == 2 else shapely.Point(ends[0])
+    remaining = remaining[np.lexsort((remaining, shapely.distance(pieces.geoms[remaining], segment)))]
+    inside = ends.mean(axis=0)
+    while len(remaining):
+        batch, remaining = remaining[:PIECE_BATCH], remaining[PIECE_BATCH:]
+        A_o, b_o = pieces.separating_rows(ends, batch, margin)
+        polygon = _clip_rows(polygon, A_o, b_o, inside, tol)
+        if len(remaining) and len(polygon) >= 3:
+            remaining = remaining[shapely.intersects(pieces.geoms[remaining], shapely.Polygon(polygon))]
+    return polygon
+
+
 @dataclass(frozen=True)
 class Region:
     """A funnel cell as a CCW polygon and its rows.
@@ -214,20 +244,20 @@ def funnel_region(
     Region
     """
     ends = np.asarray(ends, float).reshape(-1, 2)
-    polygon = box_polygon(free_bounds) if start is None else np.asarray(start, float)
+    A_w, b_w = wall_rows(free_bounds, ends, margin)
+    if start is None:  # the wall rows are the sides of a box: B_r moved inward, no clipping needed
+        polygon = box_polygon(np.array([-b_w[0], -b_w[2], b_w[1], b_w[3]]))
+    else:
+        polygon = _clip_rows(np.asarray(start, float), A_w, b_w, ends.mean(axis=0), tol)
     z = x_j = None
     if len(ends) == 2:
         x_i, x_j = ends
         z = (x_i - x_j) / math.hypot(*(x_i - x_j))
         polygon = clip(polygon, -z, -(z @ x_j), tol)
-    A_w, b_w = wall_rows(free_bounds, ends, margin)
-    polygon = _clip_rows(polygon, A_w, b_w, ends.mean(axis=0), tol)
-    # every piece the current region can meet (the region only shrinks, so one query suffices)
-    which = pieces.tree.query(shapely.Polygon(polygon), predicate="intersects") if len(pieces) else np.zeros(0, int)
-    A_o, b_o = pieces.separating_rows(ends, np.sort(which), margin)
-    polygon = _clip_rows(polygon, A_o, b_o, ends.mean(axis=0), tol)
+    polygon = _keep_off_pieces(pieces, polygon, ends, margin, tol)
     if len(polygon) < 3:
         raise ValueError(f"the cell of {ends.round(6).tolist()} degenerated (an obstacle touches the edge)")
+    polygon = drop_collinear(polygon, tol)
     A, b = polygon_rows(polygon)
     exit_row = -1 if z is None else exit_row_index(A, b, z, x_j, tol)
     return Region(polygon, A, b, exit_row)
