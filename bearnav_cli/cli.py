@@ -20,7 +20,7 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
 from bearnav_cli import __version__, artifacts, pipeline
-from bearnav_cli.datatypes import CellFlag, Cells, CellStatus, cell_list
+from bearnav_cli.datatypes import CellFlag, Cells, CellStatus, Plan, cell_list
 from bearnav_cli.errors import BearnavError, InvalidMapError
 from bearnav_cli.stages import map_
 from bearnav_cli.stages.map_ import GridSource, MapSource
@@ -597,14 +597,18 @@ def plot_command(
 
     Example: bearnav plot plans/kitchen/plan.npz -o plan.png --color-by tolerance --cell-numbers
     """
-    from bearnav_cli import plot  # matplotlib is slow to import: only here
+    # matplotlib is slow to import: only here
+    from bearnav_cli import composition, plot
 
     if color_by is not None and color_by not in plot.COLOR_BY:
         raise _fail(f"--color-by: must be one of {', '.join(plot.COLOR_BY)}, got {color_by!r}", EXIT_INVALID)
 
     loaded = artifacts.load(artifact)
     background = [artifacts.load(p, ("tree", "simplified")).artifact for p in also or []]
-    fig = plot.figure_for(loaded.artifact, background=background, title=title, color_by=color_by,
-                          barriers=barriers, labels=labels, cell_numbers=cell_numbers)  # fmt: skip
+    shown = loaded.artifact
+    cells = shown.cells if isinstance(shown, Plan) else shown if isinstance(shown, Cells) else None
+    coverage = composition.coverage_regions(cells) if cells is not None and cells.is_funnel else None
+    fig = plot.figure_for(shown, background=background, title=title, color_by=color_by, barriers=barriers,
+                          labels=labels, cell_numbers=cell_numbers, coverage=coverage)  # fmt: skip
     plot.save_figure(fig, str(out_path))
     out.print(f"wrote {out_path}", highlight=False)

@@ -20,15 +20,16 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 import shapely
 
-from bearnav_cli.datatypes import Map, Plan, cell_list
-from bearnav_cli.funnel import cell_tolerance, coverage_domain, plan_tolerance_of
+from bearnav_cli.datatypes import Cells, Map, Plan, cell_list
+from bearnav_cli.funnel import cell_tolerance, coverage_domain, plan_tolerance_of, reached_parts
 from bearnav_cli.geometry import FreeSpace, barrier_margin
 
-__all__ = ["Composition", "check", "time_bound", "world_violations"]
+__all__ = ["Composition", "CoverageRegions", "check", "coverage", "coverage_regions", "time_bound", "world_violations"]
 
 #: Relative agreement of a recomputed tolerance with the stored one.
 TOLERANCE_RTOL = 1e-6
@@ -198,18 +199,37 @@ def world_violations(plan: Plan, space: FreeSpace) -> list[int]:
     return out
 
 
-def coverage(plan: Plan, space: FreeSpace) -> float:
-    """``area(D ∩ F_m) / area(F_m)`` with ``F_m`` the goal's free component less the margin (§11.1)."""
-    map_ = plan.map
+class CoverageRegions(NamedTuple):
+    """The free space the cells must cover, split (ALGORITHMS §11.1, §11.5; :func:`coverage_regions`)."""
+
+    #: ``F_m`` less its parts that no cell meets (:func:`bearnav_cli.funnel.reached_parts`).
+    domain: shapely.Geometry
+    #: ``domain \ D``: free space no certificate covers.
+    uncovered: shapely.Geometry
+    #: The parts of ``F_m`` cut off from every cell by passages narrower than ``2m``.
+    unreached: shapely.Geometry
+
+
+def coverage_regions(cells: Cells, space: FreeSpace | None = None) -> CoverageRegions:
+    """``F_m`` of the goal's free component, what of it the cells reach, and what they leave uncovered."""
+    map_ = cells.map
+    space = FreeSpace.from_map(map_) if space is None else space
     # the margin decompose used: the map's own decompose parameter, else the default (a margin given
     # only on the command line is not in plan.npz; DESIGN §3.3 has no key for it)
     requested = map_.params.get("decompose", {}).get("barrier_margin") if isinstance(map_.params, dict) else None
     margin = barrier_margin(requested, map_.diagonal)
-    domain = coverage_domain(space.component_of(map_.goal), space.bounds, space.obstacles, margin)
-    if domain.area <= 0:
+    full = coverage_domain(space.component_of(map_.goal), space.bounds, space.obstacles, margin)
+    union = shapely.union_all(cell_polygons(cells))
+    domain, unreached = reached_parts(full, union)
+    return CoverageRegions(domain, shapely.difference(domain, union), unreached)
+
+
+def coverage(plan: Plan, space: FreeSpace) -> float:
+    """``area(D ∩ F_m) / area(F_m)`` over the parts of ``F_m`` the cells reach (§11.1, :func:`coverage_regions`)."""
+    regions = coverage_regions(plan.cells, space)
+    if regions.domain.area <= 0:
         return 1.0
-    union = shapely.union_all(cell_polygons(plan.cells))
-    return float(shapely.intersection(domain, union).area / domain.area)
+    return float(1.0 - regions.uncovered.area / regions.domain.area)
 
 
 def time_bound(plan: Plan, speed: float) -> float:

@@ -23,7 +23,7 @@ from bearnav_cli.geometry import box_polygon, clip, convex_pieces, drop_collinea
 
 __all__ = [
     "NECK_ANGLE", "ObstaclePieces", "Region", "cell_tolerance", "coverage_domain", "depth", "exit_interval",
-    "exit_row_index", "funnel_region", "neck_rows", "necked", "plan_tolerance_of", "wall_rows",
+    "exit_row_index", "funnel_region", "neck_rows", "necked", "plan_tolerance_of", "reached_parts", "wall_rows",
 ]  # fmt: skip
 
 #: ψ of the neck rows: the angle their lines make with the exit direction ``z`` (radians).
@@ -335,6 +335,33 @@ def coverage_domain(free_region: shapely.Geometry, free_bounds: np.ndarray, obst
     grown = shapely.buffer(obstacles, margin) if not obstacles.is_empty else obstacles
     domain = shapely.intersection(free_region, inner)
     return shapely.difference(domain, grown) if not grown.is_empty else domain
+
+
+def reached_parts(domain: shapely.Geometry, covered: shapely.Geometry) -> tuple[shapely.Geometry, shapely.Geometry]:
+    """Split ``F_m`` into the connected parts that the cells ``D`` meet and those they do not.
+
+    A part of ``F_m`` that no cell meets is cut off from every cell, the goal's included, by
+    passages narrower than ``2m``: a robot keeping the margin cannot get there from the goal's side,
+    and densification, whose leaves join the tree by segments with clearance, does not reach it.
+    The coverage target of §11.5 is of the reached parts; the rest is reported apart.
+
+    Parameters
+    ----------
+    domain : shapely geometry
+        ``F_m`` (:func:`coverage_domain`).
+    covered : shapely geometry
+        The union of the cells.
+
+    Returns
+    -------
+    reached, unreached : shapely geometries
+    """
+    parts = shapely.get_parts(domain)
+    parts = parts[shapely.area(parts) > 0] if len(parts) else parts
+    if not len(parts):
+        return shapely.Polygon(), shapely.Polygon()
+    met = shapely.intersects(parts, covered)
+    return shapely.union_all(parts[met]), shapely.union_all(parts[~met])
 
 
 def cell_tolerance(M: np.ndarray, normals: np.ndarray, sigma_h: np.ndarray, z: np.ndarray | None,

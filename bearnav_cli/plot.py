@@ -40,8 +40,8 @@ UNCOVERED_COLOR = "#e6550d"
 ADDED_COLOR = "#e7298a"
 #: ``--color-by`` choices: the cell's rank (cost-to-go), its tolerance ``δ_c`` or its synthesis status.
 COLOR_BY = ("rank", "tolerance", "status")
-#: ``m = MARGIN_FRACTION·D`` when the map sets no ``decompose.barrier_margin`` (geometry.DEFAULT_CLEARANCE).
-MARGIN_FRACTION = 0.01
+#: Parts of ``F_m`` that no cell reaches (cut off by passages narrower than ``2m``).
+UNREACHED_COLOR = "#969696"
 AXIS_UNITS = "map units"
 
 
@@ -180,27 +180,6 @@ def active_regions(cells: Cells) -> list[shapely.Geometry]:
     return regions
 
 
-def uncovered_region(cells: Cells) -> shapely.Geometry:
-    """``F_m \\ D``: the part of the free space the cells must cover but do not (ALGORITHMS §11.1, §11.5).
-
-    ``F_m`` is the goal's component of ``B_r \\ O`` at distance at least ``m`` from ``O`` and from
-    the walls of ``B_r``; ``m`` is the map's ``decompose.barrier_margin``, else ``0.01·D``.
-    """
-    map_ = cells.map
-    box = shapely.box(*map_.free_bounds)
-    obstacles = shapely.union_all([shapely.Polygon(p.exterior, p.holes) for p in map_.obstacles])
-    goal = shapely.Point(map_.goal)
-    free = [p for p in shapely.get_parts(shapely.difference(box, obstacles)) if p.intersects(goal)]
-    if not free:
-        return shapely.Polygon()
-    requested = map_.params.get("decompose", {}).get("barrier_margin") if isinstance(map_.params, dict) else None
-    margin = MARGIN_FRACTION * map_.diagonal if requested is None else float(requested)
-    domain = shapely.intersection(free[0], shapely.buffer(box, -margin, join_style="mitre"))
-    if not obstacles.is_empty:
-        domain = shapely.difference(domain, shapely.buffer(obstacles, margin))
-    return shapely.difference(domain, shapely.union_all(cell_polygons(cells)))
-
-
 def _cell_colors(cells: Cells, color_by: str, status: np.ndarray | None, tolerance: np.ndarray | None):
     """``(face colours (C, 4), mappable or None, colour-bar label)`` of the cells."""
     if color_by == "status":
@@ -312,11 +291,25 @@ def plot_cells(ax: plt.Axes, cells: Cells, status: np.ndarray | None = None, *, 
     return ax
 
 
-def plot_uncovered(ax: plt.Axes, cells: Cells) -> plt.Axes:
-    """Hatch ``F_m \\ D`` (:func:`uncovered_region`), the free space no certificate covers."""
-    _add_geometry(ax, uncovered_region(cells), facecolor="none", edgecolor=UNCOVERED_COLOR, hatch="////", lw=0.6,
+def plot_uncovered(ax: plt.Axes, cells: Cells, uncovered: shapely.Geometry,
+                   unreached: shapely.Geometry | None = None) -> plt.Axes:  # fmt: skip
+    """Hatch the free space no certificate covers, as :func:`bearnav_cli.composition.coverage_regions` splits it.
+
+    Parameters
+    ----------
+    ax : Axes
+    cells : Cells
+    uncovered : shapely geometry
+        The reached part of ``F_m`` less the cells.
+    unreached : shapely geometry, optional
+        The parts of ``F_m`` no cell reaches (drawn in grey).
+    """
+    _add_geometry(ax, uncovered, facecolor="none", edgecolor=UNCOVERED_COLOR, hatch="////", lw=0.6,
                   zorder=2.7, gid="uncovered", label=f"uncovered part of F_m ({1 - cells.free_coverage:.1%})"
                   if math.isfinite(cells.free_coverage) else "uncovered part of F_m")  # fmt: skip
+    if unreached is not None and not unreached.is_empty:
+        _add_geometry(ax, unreached, facecolor="none", edgecolor=UNREACHED_COLOR, hatch="\\\\", lw=0.6,
+                      zorder=2.7, gid="unreached", label="F_m cut off by passages narrower than 2m")  # fmt: skip
     return ax
 
 
@@ -530,7 +523,7 @@ def _plan_title(map_: Map, cells: Cells, plan: Plan | None) -> str:
 
 def figure_for(artifact: Any, *, background: Sequence[Any] = (), title: str | None = None,
                color_by: str | None = None, barriers: bool = False, labels: bool | None = None,
-               cell_numbers: bool = False, arrows: int = 28) -> plt.Figure:  # fmt: skip
+               cell_numbers: bool = False, arrows: int = 28, coverage: Any = None) -> plt.Figure:  # fmt: skip
     """A figure with the layers that suit ``artifact``.
 
     Parameters
@@ -554,6 +547,9 @@ def figure_for(artifact: Any, *, background: Sequence[Any] = (), title: str | No
         Write each cell's index (funnel cells: inside the region where the cell is active).
     arrows : int
         Field arrows along the longer side of the map.
+    coverage : CoverageRegions, optional
+        :func:`bearnav_cli.composition.coverage_regions` of funnel cells: the uncovered free space
+        is hatched (none without it).
     """
     if color_by is not None and color_by not in COLOR_BY:
         raise InvalidParamsError(f"must be one of {', '.join(COLOR_BY)}, got {color_by!r}", field="color_by")
@@ -576,8 +572,8 @@ def figure_for(artifact: Any, *, background: Sequence[Any] = (), title: str | No
     if cells is not None:
         plot_cells(ax, cells, plan.status if plan is not None else None, color_by=color_by,
                    tolerance=plan.tolerance if plan is not None else None, numbers=cell_numbers)  # fmt: skip
-        if cells.is_funnel:
-            plot_uncovered(ax, cells)
+        if cells.is_funnel and coverage is not None:
+            plot_uncovered(ax, cells, coverage.uncovered, coverage.unreached)
         if barriers:
             plot_barriers(ax, cells)
         plot_tree(ax, cells, nodes=True, lw=0.5, alpha=0.75, color="#2171b5")

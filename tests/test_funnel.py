@@ -567,3 +567,42 @@ def test_the_tolerant_field_never_lowers_a_cells_tolerance(map_seed):
     assert tolerant.plan_tolerance >= lp_only.plan_tolerance
     assert np.array_equal(tolerant.status, lp_only.status)
     assert composition.check(tolerant, 1.0).ok  # the chosen fields are certified like the LP's
+
+
+def test_free_space_behind_a_passage_narrower_than_2m_is_reported_not_covered(caplog):
+    """F_m behind a door narrower than ``2m`` (but open in F) is no part of the coverage target.
+
+    A robot keeping the barrier margin cannot get through, so no cell reaches the far room; the
+    parts of F_m that no cell meets are reported apart (``unreached_area``) and the target holds on
+    the rest. verify recomputes the same split from the plan alone.
+    """
+    radius, half_gap = 0.1, 0.125  # door 0.25 wide: 0.05 in F, below 2m = 0.134 (m = 0.01·D)
+    spec = {
+        "name": "narrow_door", "bounds": [0, 0, 6, 3], "robot_radius": radius, "goal": [1.0, 1.5],
+        "obstacles": [{"rectangle": [2.95, 0.0, 3.05, 1.525 - half_gap]},
+                      {"rectangle": [2.95, 1.525 + half_gap, 3.05, 3.0]}],
+        "landmarks": [[0.0, 0.5], [0.0, 2.5], [1.5, 3.0], [1.5, 0.0], [2.95, 0.7], [2.95, 2.3],
+                      [6.0, 0.5], [6.0, 2.5], [4.5, 3.0], [4.5, 0.0]],
+        "params": {"rrtstar": {"iterations": ITERATIONS, "seed": 0}},
+    }  # fmt: skip
+    map_ = build_map(spec)
+    space = FreeSpace.from_map(map_)
+    margin = DEFAULT_CLEARANCE * map_.diagonal
+    assert 2 * (half_gap - radius) < 2 * margin  # the premise: F is open at the door, F_m is not
+    assert len(shapely.get_parts(space.free_region)) == 1
+    full = composition.coverage_domain(space.component_of(map_.goal), space.bounds, space.obstacles, margin)
+    far = shapely.box(3.5, 0.5, 5.5, 2.5)  # the middle of the far room
+    with caplog.at_level(logging.WARNING):
+        plan = run_stages(map_, PIPELINE)
+    cells = plan.cells
+    # no cell reaches the far room's F_m; the report counts it, and coverage is of the rest
+    assert not any(shapely.Polygon(cells.vertices(c)).intersects(far) for c in range(cells.n_cells))
+    assert cells.stats["unreached_area"] == pytest.approx(full.area - cells.stats["coverage_domain_area"], rel=1e-9)
+    assert cells.stats["unreached_area"] >= far.area
+    assert cells.free_coverage >= decompose.Params().coverage_target
+    assert "cut off from every cell by passages narrower than 2m" in caplog.text
+    regions = composition.coverage_regions(cells, space)
+    assert regions.unreached.area == pytest.approx(cells.stats["unreached_area"], rel=1e-9)
+    assert shapely.difference(far, regions.unreached).area <= 1e-9 * far.area
+    report = composition.check(plan, SPEED)
+    assert report.ok and report.coverage == pytest.approx(cells.free_coverage, rel=1e-9)

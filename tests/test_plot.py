@@ -158,17 +158,22 @@ def test_active_regions_are_where_the_runtime_uses_each_cell(small_plan):
     np.testing.assert_array_equal(found[clear], chosen[clear])
 
 
-def test_uncovered_region_is_F_m_less_the_cells(small_plan, draw):
-    assert plot.MARGIN_FRACTION == DEFAULT_CLEARANCE
+def test_the_figure_hatches_the_uncovered_free_space_it_is_given(small_plan, draw):
+    """The plot draws composition's split of F_m (it does not recompute it), and only when given it."""
     space = FreeSpace.from_map(small_plan.map)
     margin = DEFAULT_CLEARANCE * small_plan.map.diagonal
-    domain = coverage_domain(space.component_of(small_plan.map.goal), space.bounds, space.obstacles, margin)
-    uncovered = plot.uncovered_region(small_plan.cells)
-    expected = (1 - composition.coverage(small_plan, space)) * domain.area
-    assert uncovered.area == pytest.approx(expected, rel=1e-6, abs=1e-9 * domain.area)
-    assert uncovered.area > 0
-    (patch,) = by_gid(draw(small_plan), "uncovered")
+    full = coverage_domain(space.component_of(small_plan.map.goal), space.bounds, space.obstacles, margin)
+    regions = composition.coverage_regions(small_plan.cells, space)
+    # the split is a partition of F_m: reached ∪ unreached, and uncovered is the reached part less D
+    assert regions.domain.area + regions.unreached.area == pytest.approx(full.area, rel=1e-9)
+    expected = (1 - composition.coverage(small_plan, space)) * regions.domain.area
+    assert regions.uncovered.area == pytest.approx(expected, rel=1e-6, abs=1e-9 * full.area)
+    assert regions.uncovered.area > 0
+    (patch,) = by_gid(draw(small_plan, coverage=regions), "uncovered")
     assert patch.get_hatch()
+    drawn = sum(abs(shapely.Polygon(poly).area) for poly in patch.get_path().to_polygons())
+    assert drawn >= regions.uncovered.area * (1 - 1e-6)
+    assert not by_gid(draw(small_plan), "uncovered")
 
 
 def test_colour_by_rank_tolerance_and_status(small_plan, draw):
@@ -187,7 +192,7 @@ def test_colour_by_rank_tolerance_and_status(small_plan, draw):
 
 
 def test_legend_names_every_layer(small_plan, draw):
-    texts = " | ".join(legend_texts(draw(small_plan)))
+    texts = " | ".join(legend_texts(draw(small_plan, coverage=composition.coverage_regions(small_plan.cells))))
     for word in ("obstacles", "inflated by the robot radius", "tree", "added nodes", "landmarks", "goal",
                  "uncovered", "exit faces", "field direction"):  # fmt: skip
         assert word in texts, word

@@ -22,7 +22,16 @@ import shapely.ops
 from bearnav_cli.barriers import cbf_rows, corridor_rows, goal_cbf_rows, wall_rows
 from bearnav_cli.datatypes import CellFlag, Cells, Tree, cell_list
 from bearnav_cli.errors import ArtifactError, InvalidParamsError
-from bearnav_cli.funnel import ObstaclePieces, Region, coverage_domain, depth, exit_row_index, funnel_region, necked
+from bearnav_cli.funnel import (
+    ObstaclePieces,
+    Region,
+    coverage_domain,
+    depth,
+    exit_row_index,
+    funnel_region,
+    necked,
+    reached_parts,
+)
 from bearnav_cli.geometry import (
     FreeSpace,
     barrier_margin,
@@ -353,9 +362,11 @@ def _funnel_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) 
 
     # coverage of F_m, and densification (§11.5 step 3)
     free = space.component_of(goal)
-    domain = coverage_domain(free, free_bounds, space.obstacles, margin)
+    full_domain = coverage_domain(free, free_bounds, space.obstacles, margin)
+    covered = shapely.union_all([shapely.Polygon(r.polygon) for r in regions])
+    domain, _ = reached_parts(full_domain, covered)  # the parts of F_m the tree's cells can reach
     domain_area = float(domain.area)
-    uncovered = shapely.difference(domain, shapely.union_all([shapely.Polygon(r.polygon) for r in regions]))
+    uncovered = shapely.difference(domain, covered)
     # the uncovered part as separate pockets: a new cell only cuts the pockets it meets
     pockets = [[g, float(g.area), False] for g in shapely.get_parts(uncovered) if g.area > 0]
     before = 1.0 - sum(p[1] for p in pockets) / domain_area if domain_area > 0 else 1.0
@@ -397,6 +408,18 @@ def _funnel_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) 
             marks_current = True
     uncovered_area = sum(p[1] for p in pockets)
     unreachable = [p for p in pockets if p[2]]
+    if added:  # an added cell may reach into a part of F_m that no tree cell met: count that part too
+        covered = shapely.union_all([shapely.Polygon(r.polygon) for r in regions])
+        final, _ = reached_parts(full_domain, covered)
+        if final.area > domain_area * (1.0 + 1e-12):
+            domain, domain_area = final, float(final.area)
+            uncovered_area = float(shapely.difference(domain, covered).area)
+    unreached_area = max(float(full_domain.area) - domain_area, 0.0)
+    if unreached_area > 1e-9 * max(float(full_domain.area), 1e-300):
+        log.warning("%.1f%% of F_m (%.3g map units²) is cut off from every cell by passages narrower than "
+                    "2m = %.3g (a robot keeping the barrier margin cannot get there): coverage is of the rest; "
+                    "a smaller decompose.barrier_margin or a wider passage would join it",
+                    100 * unreached_area / full_domain.area, unreached_area, 2 * margin)  # fmt: skip
     after = 1.0 - uncovered_area / domain_area if domain_area > 0 else 1.0
     if after < params.coverage_target:
         log.warning("the cells cover %.1f%% of F_m (target %.1f%%): %d pockets no node reaches with clearance%s",
@@ -417,6 +440,7 @@ def _funnel_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) 
         "unreachable_pockets": len(unreachable),
         "uncovered_area": uncovered_area,
         "coverage_domain_area": domain_area,
+        "unreached_area": unreached_area,
         "obstacle_pieces": len(pieces),
     }
     return _Layout(nodes, parent, cost, [(r.polygon, r.A, r.b, r.exit_row) for r in regions], cbf,

@@ -21,7 +21,7 @@ import dataclasses
 import logging
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -695,8 +695,12 @@ def run(cells: Cells, params: Params = Params(), progress: Callable[[int, int], 
             log.warning("cell %d not certified: least-violation margins h %.3g, V %.3g", c, sol.margin_h, sol.margin_v)
         elif sol.status == CellStatus.SOLVER_FAILURE:
             log.warning("cell %d: solver failure (unbounded or error)", c)
-        elif cells.is_funnel and params.tolerant:
-            solutions[c] = more_tolerant(sol, prepared[c].problem, params.u_max, outcome.lemma4_terms)
+    if cells.is_funnel and params.tolerant:
+        chosen = [c for c in outcomes if solutions[c].status in (CellStatus.CERTIFIED, CellStatus.RELAXED)]
+        tolerant = more_tolerant_all([solutions[c] for c in chosen], [prepared[c].problem for c in chosen],
+                                     params.u_max, [outcomes[c].lemma4_terms for c in chosen])  # fmt: skip
+        for c, sol in zip(chosen, tolerant, strict=True):
+            solutions[c] = sol
     gain = np.zeros((C, 2, 2 * n_lm))
     if C:  # K_k of landmark k in columns 2k, 2k + 1: every cell's blocks in one scatter
         blocks = np.concatenate([sol.K.reshape(2, -1, 2) for sol in solutions], axis=1)  # (2, Σ n_c, 2)
@@ -728,34 +732,108 @@ def more_tolerant(solution: CellSolution, problem: CellProblem, u_max: float,
                   terms: tuple[float, float] | None = None) -> CellSolution:  # fmt: skip
     """Of a certified funnel cell's LP field and Lemma 4's field, the one with the larger ``δ_c`` (§11.4).
 
+    One cell of :func:`more_tolerant_all`; ``terms`` are Lemma 4's ``(min_k h_k(x_j), diam)`` when
+    already computed.
+    """
+    return more_tolerant_all([solution], [problem], u_max, [terms])[0]
+
+
+def more_tolerant_all(solutions: Sequence[CellSolution], problems: Sequence[CellProblem], u_max: float,
+                      terms: Sequence[tuple[float, float] | None] | None = None) -> list[CellSolution]:  # fmt: skip
+    """:func:`more_tolerant` of many certified funnel cells at once (every cell's vertices and rows in one pass).
+
     Lemma 4's field ``u = c(x_j − x) − εz`` with ``c = c_v`` has ``M = cI``, barrier margins at least
     ``c·h_k(x_j) − ε`` and progress margin ``ε``, so it tolerates ``min(h_min − ε/c, ε/c)``; the best
     ``ε = c·h_min/2`` (``h_min = min_k h_k(x_j)``), lowered to keep ``|u|_∞ ≤ c·diam + ε ≤ u_max``.
-    Both fields are re-checked at the vertices (:func:`field_margins`); the returned solution
-    carries the chosen gain, its margins and its ``δ_c``, with the same status and constants.
+    Both fields are re-checked at the vertices (the numbers of :func:`field_margins`) and their
+    ``δ_c`` is :func:`bearnav_cli.funnel.cell_tolerance`'s; each returned solution carries the chosen
+    gain, its margins and its ``δ_c``, with the same status and constants.
+
+    Parameters
+    ----------
+    solutions, problems : sequences of length C
+        Certified funnel edge cells and their problems.
+    u_max : float
+    terms : sequence of length C, optional
+        Lemma 4's ``(h_min, diam)`` per cell (None: computed).
+
+    Returns
+    -------
+    list of CellSolution, length C
     """
-    h_min, diam = _lemma4_terms(problem) if terms is None else terms  # ``terms``: already computed
-    c = solution.c_v
-    eps = min(0.5 * c * h_min, 0.5 * (u_max - c * diam))
-    z, x_j, landmarks = problem.z, problem.x_j, problem.landmarks
-
-    def tolerance(M: np.ndarray, a: np.ndarray) -> tuple[float, Margins]:
-        m = field_margins(M, a, problem.vertices, z, x_j, problem.cbf_n, problem.cbf_q, solution.c_h, c, u_max)
-        # the LP's own solution sits on its bounds up to the solver's rounding
-        if not (m.cbf <= 1e-9 * u_max and m.clf < 0 and m.input <= 1e-9 * u_max):
-            return 0.0, m
-        return cell_tolerance(M, problem.cbf_n, -m.cbf_rows, z, -m.clf), m
-
-    K = solution.K
-    lp, _ = tolerance(K.reshape(2, -1, 2).sum(axis=1), K @ landmarks.ravel())
-    if not eps > 0:
-        return dataclasses.replace(solution, tolerance=lp)
-    M, a = c * np.eye(2), c * x_j - eps * z
-    ours, margins = tolerance(M, a)
-    if ours <= lp:
-        return dataclasses.replace(solution, tolerance=lp)
-    return dataclasses.replace(solution, K=min_norm_gain(M, a, landmarks), margin_h=margins.cbf, margin_v=margins.clf,
-                               tolerance=ours)  # fmt: skip
+    C = len(solutions)
+    if not C:
+        return []
+    terms = [None] * C if terms is None else list(terms)
+    terms = [_lemma4_terms(p) if t is None else t for p, t in zip(problems, terms, strict=True)]
+    h_min, diam = np.array(terms, float).T
+    c_h = np.array([s.c_h for s in solutions], float)
+    c = np.array([s.c_v for s in solutions], float)
+    eps = np.minimum(0.5 * c * h_min, 0.5 * (u_max - c * diam))
+    z = np.array([p.z for p in problems], float)
+    x_j = np.array([p.x_j for p in problems], float)
+    # the two fields u = a − M x of every cell: the LP's (from its gain) and Lemma 4's
+    M = np.empty((2, C, 2, 2))
+    a = np.empty((2, C, 2))
+    for k, (sol, prob) in enumerate(zip(solutions, problems, strict=True)):
+        M[0, k] = sol.K.reshape(2, -1, 2).sum(axis=1)
+        a[0, k] = sol.K @ prob.landmarks.ravel()
+    M[1] = c[:, None, None] * np.eye(2)
+    a[1] = c[:, None] * x_j - np.where(eps > 0, eps, 0.0)[:, None] * z
+    # ragged vertices and barrier rows, and every (vertex, row) pair of the same cell
+    n_v = np.array([len(p.vertices) for p in problems])
+    n_h = np.array([len(p.cbf_q) for p in problems])
+    V = np.concatenate([p.vertices for p in problems])
+    N = np.concatenate([np.asarray(p.cbf_n, float).reshape(-1, 2) for p in problems])
+    Q = np.concatenate([np.asarray(p.cbf_q, float).ravel() for p in problems])
+    v_cell, h_cell = np.repeat(np.arange(C), n_v), np.repeat(np.arange(C), n_h)
+    v_start, h_start = np.cumsum(n_v) - n_v, np.cumsum(n_h) - n_h
+    pairs = n_v * n_h
+    pair_cell = np.repeat(np.arange(C), pairs)
+    local = np.arange(int(pairs.sum())) - np.repeat(np.cumsum(pairs) - pairs, pairs)
+    pair_row = h_start[pair_cell] + local % n_h[pair_cell]  # rows vary fastest
+    pair_vertex = v_start[pair_cell] + local // n_h[pair_cell]
+    U = a[:, v_cell] - np.einsum("fcij,cj->fci", M[:, v_cell], V)  # (2, ΣP, 2): u at every vertex
+    values = -(np.einsum("fpi,pi->fp", U[:, pair_vertex], N[pair_row])
+               + c_h[pair_cell] * (np.einsum("pi,pi->p", V[pair_vertex], N[pair_row]) + Q[pair_row]))  # fmt: skip
+    row_max = np.full((2, len(Q)), -np.inf)
+    cbf = np.full((2, C), -np.inf)
+    if len(Q):
+        np.maximum.at(row_max, (slice(None), pair_row), values)
+        np.maximum.at(cbf, (slice(None), h_cell), row_max)
+    clf = np.full((2, C), -np.inf)
+    np.maximum.at(clf, (slice(None), v_cell), np.einsum("fpi,pi->fp", U, z[v_cell])
+                  + c[v_cell] * np.einsum("pi,pi->p", V - x_j[v_cell], z[v_cell]))  # fmt: skip
+    peak = np.zeros((2, C))
+    np.maximum.at(peak, (slice(None), v_cell), np.abs(U).max(axis=2))
+    # δ_c = min over the barrier rows and the exit direction of margin / ‖Mᵀn‖ (funnel.cell_tolerance)
+    row_gain = np.hypot(*np.einsum("ri,frij->frj", N, M[:, h_cell]).transpose(2, 0, 1))  # (2, ΣH)
+    z_gain = np.hypot(*np.einsum("ci,fcij->fcj", z, M).transpose(2, 0, 1))  # (2, C)
+    sigma_h, sigma_v = -row_max, -clf
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio_h = np.where(row_gain > 0, sigma_h / row_gain, np.inf)
+        ratio_v = np.where(z_gain > 0, sigma_v / z_gain, np.inf)
+    delta = ratio_v.copy()
+    if len(Q):
+        np.minimum.at(delta, (slice(None), h_cell), ratio_h)
+    positive = sigma_v > 0
+    if len(Q):
+        bad_rows = np.zeros((2, C), bool)
+        np.logical_or.at(bad_rows, (slice(None), h_cell), ~(sigma_h > 0))
+        positive &= ~bad_rows
+    # the LP's own solution sits on its bounds up to the solver's rounding
+    valid = (cbf <= 1e-9 * u_max) & (clf < 0) & (peak - u_max <= 1e-9 * u_max)
+    delta = np.where(valid & positive, delta, 0.0)
+    delta[1, ~(eps > 0)] = -np.inf  # Lemma 4's field exists only for ε > 0
+    out = []
+    for k, (sol, prob) in enumerate(zip(solutions, problems, strict=True)):
+        if not delta[1, k] > delta[0, k]:
+            out.append(dataclasses.replace(sol, tolerance=float(delta[0, k])))
+            continue
+        out.append(dataclasses.replace(sol, K=min_norm_gain(M[1, k], a[1, k], prob.landmarks),
+                                       margin_h=float(cbf[1, k]) if n_h[k] else math.nan,
+                                       margin_v=float(clf[1, k]), tolerance=float(delta[1, k])))  # fmt: skip
+    return out
 
 
 def cell_tolerances(cells: Cells, gain: np.ndarray, c_h: np.ndarray, c_v: np.ndarray, u_max: float,
