@@ -327,7 +327,8 @@ class FreeSpace:
         return shapely.Polygon()
 
 
-def landmark_coverage(map_: Map, space: FreeSpace, cells: int = 100) -> tuple[np.ndarray, np.ndarray]:
+def landmark_coverage(map_: Map, space: FreeSpace, cells: int = 100,
+                      sight: list | None = None) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
     """Count the landmarks in line of sight from a grid over the free space (ALGORITHMS §1).
 
     Parameters
@@ -337,6 +338,8 @@ def landmark_coverage(map_: Map, space: FreeSpace, cells: int = 100) -> tuple[np
         Built from ``map_``.
     cells : int
         Grid spacing ``D / cells`` (D the bounds' diagonal); points at cell centres.
+    sight : list of shapely geometries, optional
+        The landmarks' :meth:`FreeSpace.visibility_regions`, when already built.
 
     Returns
     -------
@@ -354,7 +357,7 @@ def landmark_coverage(map_: Map, space: FreeSpace, cells: int = 100) -> tuple[np
     # one prepared point query per landmark (the segment test's answers away from shadow
     # boundaries, a null set): half the time of a segment per point and landmark
     counts = np.zeros(len(points), np.int64)
-    for region in space.visibility_regions(map_.landmarks):
+    for region in space.visibility_regions(map_.landmarks) if sight is None else sight:
         counts += shapely.intersects_xy(region, points[:, 0], points[:, 1])
     return points, counts
 

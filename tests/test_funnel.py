@@ -606,3 +606,21 @@ def test_free_space_behind_a_passage_narrower_than_2m_is_reported_not_covered(ca
     assert shapely.difference(far, regions.unreached).area <= 1e-9 * far.area
     report = composition.check(plan, SPEED)
     assert report.ok and report.coverage == pytest.approx(cells.free_coverage, rel=1e-9)
+
+
+@pytest.mark.parametrize("map_seed", [1, 4])
+def test_landmarks_seen_from_funnel_witnesses_match_the_segment_test(map_seed):
+    """decompose decides what a funnel cell sees through visibility regions; at every cell's witness
+    points (its vertices and edge ends, all off the obstacles) that must equal ALGORITHMS §1's test."""
+    cells = run_stages(build_map(random_spec(map_seed, ITERATIONS, 0)), ["rrtstar", "simplify", "decompose"])
+    space = FreeSpace.from_map(cells.map)
+    landmarks = cells.map.landmarks
+    sight = space.visibility_regions(landmarks)
+    for c in range(cells.n_cells):
+        node = cells.cell_node[c]
+        parent = cells.parent[node]
+        anchors = cells.nodes[[node] if parent < 0 else [node, parent]]
+        points = decompose.witness_points(space, cells.vertices(c), anchors)
+        exact = space.visible(np.repeat(points, len(landmarks), 0), np.tile(landmarks, (len(points), 1)),
+                              from_boundary=True).reshape(len(points), -1)  # fmt: skip
+        assert np.array_equal(decompose.seen_from(sight, points), exact), c

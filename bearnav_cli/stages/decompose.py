@@ -194,10 +194,43 @@ def goal_cell(nodes: np.ndarray, bounds: np.ndarray, tol: float) -> np.ndarray:
 # --------------------------------------------------------------------------- landmarks
 
 
+def witness_points(space: FreeSpace, polygon: np.ndarray, anchors: np.ndarray) -> np.ndarray:
+    """The points a cell's landmarks must be seen from: the anchors and the vertices of the cell's
+    free part (ALGORITHMS §5.4), shape (w, 2), unique rows."""
+    free_part = shapely.difference(shapely.Polygon(polygon), space.obstacles)
+    witnesses = [anchors]
+    for part in shapely.get_parts(free_part):
+        if isinstance(part, shapely.Polygon) and not part.is_empty:
+            witnesses.append(np.asarray(part.exterior.coords)[:-1])
+            witnesses.extend(np.asarray(h.coords)[:-1] for h in part.interiors)
+    return np.unique(np.concatenate(witnesses), axis=0)
+
+
+def seen_from(sight: list, points: np.ndarray) -> np.ndarray:
+    """``seen[q, k]``: landmark ``k`` is in line of sight from ``points[q]``, shape (w, L).
+
+    ``sight`` are the landmarks' visibility regions (:meth:`FreeSpace.visibility_regions`): one
+    prepared point query per landmark for all points, the segment test's answers away from shadow
+    boundaries. A point on a region's boundary counts as seeing (a vertex on a wall sees what the
+    wall does not hide).
+    """
+    seen = np.zeros((len(points), len(sight)), bool)
+    for k, region in enumerate(sight):
+        seen[:, k] = shapely.intersects_xy(region, points[:, 0], points[:, 1])
+    return seen
+
+
+def _segments_seen(space: FreeSpace, points: np.ndarray, landmarks: np.ndarray, from_boundary: bool = False):
+    """``seen[q, k]`` by the exact segment test (:meth:`FreeSpace.visible`), shape (w, L)."""
+    n_lm = len(landmarks)
+    pairs_p, pairs_l = np.repeat(points, n_lm, axis=0), np.tile(landmarks, (len(points), 1))
+    return space.visible(pairs_p, pairs_l, from_boundary=from_boundary).reshape(len(points), n_lm)
+
+
 def cell_landmarks(
-    space: FreeSpace,
     landmarks: np.ndarray,
-    polygon: np.ndarray,
+    seen: np.ndarray,
+    seen_from_anchors: np.ndarray,
     anchors: np.ndarray,
     n_landmarks: int,
 ) -> tuple[np.ndarray, bool]:
@@ -205,10 +238,11 @@ def cell_landmarks(
 
     Parameters
     ----------
-    space : FreeSpace
     landmarks : ndarray, shape (L, 2)
-    polygon : ndarray, shape (p, 2)
-        The cell.
+    seen : ndarray of bool, shape (w, L)
+        :func:`seen_from` the cell's :func:`witness_points`.
+    seen_from_anchors : ndarray of bool, shape (a, L)
+        :func:`seen_from` the anchors alone.
     anchors : ndarray, shape (a, 2)
         ``x_i, x_j`` of an edge cell, or ``g`` for the goal cell; their mean is the
         point the landmarks are ranked by distance from.
@@ -222,17 +256,7 @@ def cell_landmarks(
         True when fewer than 2 landmarks are visible from the whole free part (the choice
         was then topped up).
     """
-    free_part = shapely.difference(shapely.Polygon(polygon), space.obstacles)
-    witnesses = [anchors]
-    for part in shapely.get_parts(free_part):
-        if isinstance(part, shapely.Polygon) and not part.is_empty:
-            witnesses.append(np.asarray(part.exterior.coords)[:-1])
-            witnesses.extend(np.asarray(h.coords)[:-1] for h in part.interiors)
-    points = np.unique(np.concatenate(witnesses), axis=0)
     n_lm = len(landmarks)
-    pairs_p = np.repeat(points, n_lm, axis=0)
-    pairs_l = np.tile(landmarks, (len(points), 1))
-    seen = space.visible(pairs_p, pairs_l, from_boundary=True).reshape(len(points), n_lm)
     centre = anchors.mean(axis=0)
     dist = np.hypot(*(landmarks - centre).T)
     order = np.lexsort((np.arange(n_lm), dist))
@@ -240,8 +264,7 @@ def cell_landmarks(
     chosen = [k for k in order if everywhere[k]][:n_landmarks]
     flagged = len(chosen) < 2
     if flagged:
-        ends = space.visible(np.repeat(anchors, n_lm, axis=0), np.tile(landmarks, (len(anchors), 1)))
-        from_ends = ends.reshape(len(anchors), n_lm).all(axis=0)
+        from_ends = seen_from_anchors.all(axis=0)
         for pool in ([k for k in order if from_ends[k]], list(order)):
             for k in pool:
                 if len(chosen) >= 2:
@@ -266,24 +289,24 @@ def fixed_landmark(
         ``DEGENERATE_RISK`` or ``LANDMARK_INSIDE`` when rules 2 or 1 could not be met.
     """
     A, b = polygon_rows(polygon)
-    s_min = np.array([point_polygon_distance(landmarks[k], polygon, A, b) for k in chosen])
-    s_max = np.array([np.max(np.hypot(*(polygon - landmarks[k]).T)) for k in chosen])
+    lm = landmarks[chosen]  # (n, 2)
+    # s_min: exact distance to the convex polygon (0 inside), every chosen landmark at once
+    edge = np.roll(polygon, -1, axis=0) - polygon  # (p, 2)
+    rel = lm[:, None, :] - polygon[None]  # (n, p, 2)
+    t = np.clip(np.einsum("npi,pi->np", rel, edge) / np.einsum("pi,pi->p", edge, edge), 0.0, 1.0)
+    gap = rel - t[..., None] * edge
+    inside = np.all(lm @ A.T <= b, axis=1)
+    s_min = np.where(inside, 0.0, np.sqrt(np.min(np.einsum("npi,npi->np", gap, gap), axis=1)))
+    s_max = np.sqrt(np.max(np.einsum("npi,npi->np", rel, rel), axis=1))
     outside = s_min > tol
-    clear = np.zeros(len(chosen), bool)
-    for a, f in enumerate(chosen):
-        if not outside[a]:
-            continue
-        ok = True
-        for k in chosen:
-            if k == f:
-                continue
-            d = landmarks[k] - landmarks[f]
-            side = d[0] * (polygon[:, 1] - landmarks[f][1]) - d[1] * (polygon[:, 0] - landmarks[f][0])
-            scale = tol * np.hypot(*d)
-            if not (np.all(side > scale) or np.all(side < -scale)):
-                ok = False
-                break
-        clear[a] = ok
+    # rule 2: the cell lies strictly on one side of the line through l_f and every other l_k
+    d = lm[None, :, :] - lm[:, None, :]  # d[f, k] = l_k − l_f
+    side = (d[..., 0, None] * (polygon[None, None, :, 1] - lm[:, None, None, 1])
+            - d[..., 1, None] * (polygon[None, None, :, 0] - lm[:, None, None, 0]))  # (n, n, p)  # fmt: skip
+    scale = tol * np.hypot(d[..., 0], d[..., 1])[..., None]
+    one_side = np.all(side > scale, axis=2) | np.all(side < -scale, axis=2)
+    np.fill_diagonal(one_side, True)
+    clear = outside & one_side.all(axis=1)
     ratio = np.where(outside, s_max / np.where(outside, s_min, 1.0), np.inf)
     for pool, flag in ((clear, CellFlag.NONE), (outside, CellFlag.DEGENERATE_RISK)):
         if pool.any():
@@ -583,7 +606,8 @@ def run(tree: Tree, params: Params = Params(), progress: Callable[[int, int], No
     landmarks = map_.landmarks
     # Blind spots: the free points of the map stage's coverage grid (spacing D/100) that see
     # fewer than 2 landmarks. A cell holding one cannot be driven by bearings everywhere.
-    grid, counts = landmark_coverage(map_, space)
+    sight = space.visibility_regions(landmarks)
+    grid, counts = landmark_coverage(map_, space, sight=sight)
     blind = grid[counts < 2]
     exit_point = np.zeros((n, 2))
     exit_dir = np.zeros((n, 2))
@@ -591,15 +615,30 @@ def run(tree: Tree, params: Params = Params(), progress: Callable[[int, int], No
     fixed = np.zeros(n, np.int64)
     s_min = np.zeros(n)
     s_max = np.zeros(n)
+    anchors = [map_.goal[None, :]] + [nodes[[c, parent[c]]] for c in range(1, n)]
+    witnesses = [witness_points(space, r[0], anchors[c]) for c, r in enumerate(layout.regions)]
+    # every cell's witnesses against every landmark in one pass per landmark; the anchors are rows of them
+    wo = np.concatenate([[0], np.cumsum([len(w) for w in witnesses])]).tolist()
+    flat = np.concatenate(witnesses)
+    if funnel:  # cells at positive distance from O: the regions answer as the segment test does
+        seen_all = seen_from(sight, flat)
+    else:  # §4 cells touch O (radius 0: on P_raw itself): the exact segment test, from just off the wall
+        seen_all = _segments_seen(space, flat, landmarks, from_boundary=True)
+        ends = np.concatenate(anchors)
+        seen_ends = _segments_seen(space, ends, landmarks)
+        eo = np.concatenate([[0], np.cumsum([len(a) for a in anchors])]).tolist()
     for c, (polygon, A, b, _) in enumerate(layout.regions):
-        if c == 0:
-            anchors = map_.goal[None, :]
-        else:
+        if c > 0:
             j = parent[c]
             exit_point[c] = nodes[j]
             exit_dir[c] = (nodes[c] - nodes[j]) / np.hypot(*(nodes[c] - nodes[j]))
-            anchors = np.stack([nodes[c], nodes[j]])
-        chosen, few = cell_landmarks(space, landmarks, polygon, anchors, params.n_landmarks)
+        seen = seen_all[wo[c] : wo[c + 1]]
+        if funnel:
+            at_anchor = (witnesses[c][:, None, :] == anchors[c][None, :, :]).all(axis=2).any(axis=1)
+            from_anchors = seen[at_anchor]
+        else:
+            from_anchors = seen_ends[eo[c] : eo[c + 1]]
+        chosen, few = cell_landmarks(landmarks, seen, from_anchors, anchors[c], params.n_landmarks)
         if few:
             flags[c] |= CellFlag.FEW_LANDMARKS
         if np.any(np.all(blind @ A.T <= b + tol, axis=1)):
