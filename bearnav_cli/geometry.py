@@ -430,28 +430,28 @@ def clip(polygon: np.ndarray, normal: np.ndarray, offset: float, tol: float) -> 
         The clipped polygon, CCW; possibly with fewer than 3 vertices when the half-plane
         misses the polygon.
     """
-    side = polygon @ normal - offset
-    if np.all(side <= 0):
+    side_array = polygon @ normal - offset
+    if np.all(side_array <= 0):
         return polygon
-    # Vertex q contributes itself when kept, then the crossing of its edge q → q+1 when the edge
-    # crosses the line: both in one pass, in that order.
-    side_next = np.concatenate([side[1:], side[:1]])
-    step = np.concatenate([polygon[1:], polygon[:1]]) - polygon
-    cross = ((side < 0) & (side_next > 0)) | ((side_next < 0) & (side > 0))
-    with np.errstate(invalid="ignore", divide="ignore"):  # t is used only where the edge crosses
-        t = side / (side - side_next)
-        candidates = np.stack([polygon, polygon + t[:, None] * step], axis=1).reshape(-1, 2)
-    out = candidates[np.stack([side <= 0, cross], axis=1).ravel()]
-    # drop points within tol of the previous kept one (sequential only where a gap is that small)
-    gap = np.diff(out, axis=0)
-    if np.all(np.hypot(gap[:, 0], gap[:, 1]) > tol):
-        kept = list(out)
-    else:
-        kept = []
-        for v in out:
-            if not kept or np.hypot(*(v - kept[-1])) > tol:
-                kept.append(v)
-    if len(kept) > 1 and np.hypot(*(kept[0] - kept[-1])) <= tol:
+    # A cell has a handful of vertices: plain floats are several times faster than numpy calls here
+    # (and give the same numbers: the same operations in the same order).
+    side, points = side_array.tolist(), polygon.tolist()
+    p = len(points)
+    out = []
+    for q in range(p):
+        s0, s1 = side[q], side[(q + 1) % p]
+        x0, y0 = points[q]
+        if s0 <= 0:  # vertex q contributes itself when kept, then the crossing of its edge q → q+1
+            out.append((x0, y0))
+        if (s0 < 0 and s1 > 0) or (s1 < 0 and s0 > 0):
+            x1, y1 = points[(q + 1) % p]
+            t = s0 / (s0 - s1)
+            out.append((x0 + t * (x1 - x0), y0 + t * (y1 - y0)))
+    kept: list = []
+    for v in out:  # drop points within tol of the previous kept one
+        if not kept or math.hypot(v[0] - kept[-1][0], v[1] - kept[-1][1]) > tol:
+            kept.append(v)
+    if len(kept) > 1 and math.hypot(kept[0][0] - kept[-1][0], kept[0][1] - kept[-1][1]) <= tol:
         kept.pop()
     return np.array(kept, float).reshape(-1, 2)
 
