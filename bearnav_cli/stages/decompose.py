@@ -393,6 +393,9 @@ def _funnel_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) 
     # the uncovered part as separate pockets: a new cell only cuts the pockets it meets
     pockets = [[g, float(g.area), False] for g in shapely.get_parts(uncovered) if g.area > 0]
     before = 1.0 - sum(p[1] for p in pockets) / domain_area if domain_area > 0 else 1.0
+    # the boundary of F_m, a hair thick: a pocket's boundary off it is where the pocket meets the cells
+    domain_edge = shapely.buffer(domain.boundary, 1e3 * tol)
+    shapely.prepare(domain_edge)
     clearance = space.planning_clearance(None, goal, map_.diagonal)
     reach = space.with_clearance(clearance)
     added = []
@@ -401,7 +404,7 @@ def _funnel_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) 
     while sum(p[1] for p in pockets) > allowed and len(added) < params.max_added_nodes:
         grown = False
         for pocket in sorted((p for p in pockets if not p[2]), key=lambda p: -p[1]):
-            leaf = _densify_leaf(pocket[0], nodes, cost, reach, tol)
+            leaf = _densify_leaf(pocket[0], nodes, cost, reach, tol, domain_edge)
             if leaf is None:
                 pocket[2] = True
                 continue
@@ -477,11 +480,17 @@ def _seen(points: np.ndarray, cand: np.ndarray, nodes: np.ndarray, reach: FreeSp
     return free & (np.hypot(*(nodes[cand] - points[:, None, :]).transpose(2, 0, 1)) > 1e3 * tol)
 
 
-def _densify_leaf(pocket: shapely.Geometry, nodes: np.ndarray, cost: np.ndarray, reach: FreeSpace,
-                  tol: float) -> tuple[np.ndarray, int] | None:  # fmt: skip
+def _densify_leaf(pocket: shapely.Geometry, nodes: np.ndarray, cost: np.ndarray, reach: FreeSpace, tol: float,
+                  domain_edge: shapely.Geometry | None = None) -> tuple[np.ndarray, int] | None:  # fmt: skip
     """A leaf for an uncovered pocket: its point of largest clearance (the pole of inaccessibility, then
     a point on its surface) and the node with the least ``‖p − x_n‖ + cost(n)`` over the nodes it sees
-    along a segment free with clearance; ``None`` when no node is reachable."""
+    along a segment free with clearance; ``None`` when no node is reachable.
+
+    When no deep point of the pocket sees a node (a long pocket behind a bend), points where the
+    pocket meets the cells (its boundary off ``domain_edge``, the boundary of ``F_m``) are tried
+    last: a leaf there is near the tree, and its cell reaches into the pocket, so the pocket is
+    covered from its mouth inward over a few leaves.
+    """
     pole = shapely.ops.polylabel(pocket, tolerance=max(tol, 1e-3 * math.sqrt(pocket.area)))
     surface = shapely.point_on_surface(pocket)
     # then a grid over the pocket, farthest from its boundary first: a large pocket whose pole sees
@@ -492,7 +501,7 @@ def _densify_leaf(pocket: shapely.Geometry, nodes: np.ndarray, cost: np.ndarray,
     grid = grid[shapely.contains_xy(pocket, grid[:, 0], grid[:, 1])]
     depth_in = shapely.distance(pocket.boundary, shapely.points(grid)) if len(grid) else np.zeros(0)
     grid = grid[np.argsort(-depth_in, kind="stable")]
-    candidates = np.vstack([[pole.x, pole.y], [surface.x, surface.y], grid])
+    candidates = np.vstack([[pole.x, pole.y], [surface.x, surface.y], grid, _pocket_mouth(pocket, domain_edge)])
     candidates = candidates[reach.points_free(candidates)]
     # a few candidates at a time, deepest first, each against every node: most pockets are reached
     # from their pole, and a pocket no node sees costs one pass over its grid
@@ -513,6 +522,18 @@ def _densify_leaf(pocket: shapely.Geometry, nodes: np.ndarray, cost: np.ndarray,
         if first < len(group):
             return group[first], int(order[first, int(np.argmax(near[first]))])
     return None
+
+
+def _pocket_mouth(pocket: shapely.Geometry, domain_edge: shapely.Geometry | None) -> np.ndarray:
+    """Up to ``DENSIFY_GRID`` points spread along where ``pocket`` meets the cells, shape (k, 2)."""
+    if domain_edge is None:
+        return np.zeros((0, 2))
+    mouth = shapely.difference(pocket.boundary, domain_edge)
+    length = float(mouth.length)
+    if not length > 0:
+        return np.zeros((0, 2))
+    points = shapely.line_interpolate_point(mouth, np.linspace(0.0, 1.0, DENSIFY_GRID), normalized=True)
+    return shapely.get_coordinates(points).reshape(-1, 2)
 
 
 # --------------------------------------------------------------------------- paper cells (ALGORITHMS §4)
