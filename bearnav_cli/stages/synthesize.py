@@ -301,6 +301,8 @@ class PreparedCell:
         The template that is solved (``checker`` itself, or the dual form).
     h_scale, v_scale : float
         ``c_h = κ u_max / h_scale`` (NaN without barrier rows) and ``c_v = κ u_max / v_scale``.
+    lemma4_terms : tuple of float, optional
+        ``(min_k h_k(x_j), diam(P))`` when computed with the other cells' (:func:`_batched_scales`).
     """
 
     problem: CellProblem
@@ -310,6 +312,7 @@ class PreparedCell:
     template: LpTemplate
     h_scale: float
     v_scale: float
+    lemma4_terms: tuple[float, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -333,8 +336,9 @@ def _checked_v_max(v_max: float) -> float:
     return v_max
 
 
-def _batched_scales(cells: Cells, built: FieldTemplates, which: list[int]) -> dict[int, tuple[float, float]]:
-    """``(h_scale, max V)`` of :func:`_constant_scales` for the cells ``which``, in a few numpy passes.
+def _batched_scales(cells: Cells, built: FieldTemplates, which: list[int]) -> dict[int, tuple[float, float, tuple]]:
+    """``(h_scale, max V, (min_k h_k(x_j), diam))`` of :func:`_constant_scales` and :func:`_lemma4_terms`
+    for the cells ``which``, in a few numpy passes.
 
     The same numbers: minima and maxima are exact in any grouping, the squared distances are
     the same ``d₀² + d₁²`` (cells grouped by vertex count, so no padding), and ``np.sqrt`` rounds
@@ -356,11 +360,17 @@ def _batched_scales(cells: Cells, built: FieldTemplates, which: list[int]) -> di
         diff = V[:, :, None, :] - V[:, None, :, :]
         diff *= diff
         diam[group] = np.sqrt((diff[..., 0] + diff[..., 1]).max(axis=(1, 2)))
-    diam_list, h_min_list, n_h_list = diam.tolist(), h_min.tolist(), n_h.tolist()
+    # Lemma 4's min_k h_k(x_j): every barrier row at its cell's exit point
+    at_exit = np.full(len(p), math.inf)
+    if len(has_rows):
+        row_cell = np.repeat(np.arange(len(p)), n_h)
+        h_exit = np.einsum("ki,ki->k", cells.cbf_A, cells.exit_point[row_cell]) + cells.cbf_b
+        at_exit[has_rows] = np.minimum.reduceat(h_exit, cells.cbf_offsets[has_rows])
+    diam_list, h_min_list, n_h_list, exit_list = diam.tolist(), h_min.tolist(), n_h.tolist(), at_exit.tolist()
     out = {}
     for c in which:  # the Python max of _constant_scales, on the same two floats
         h_scale = max(DELTA_FRACTION * diam_list[c], -h_min_list[c]) if n_h_list[c] else math.nan
-        out[c] = (h_scale, v_max[c])
+        out[c] = (h_scale, v_max[c], (exit_list[c], diam_list[c]))
     return out
 
 
@@ -380,13 +390,13 @@ def prepare_cell(problem: CellProblem, params: Params) -> PreparedCell:
 
 
 def _prepared(problem: CellProblem, params: Params, space: str, L: np.ndarray, checker: LpTemplate, h_scale: float,
-              v_scale: float) -> PreparedCell:  # fmt: skip
+              v_scale: float, lemma4_terms: tuple[float, float] | None = None) -> PreparedCell:  # fmt: skip
     """The :class:`PreparedCell` of a built checker: the solved template is the checker or the dual form."""
     if params.lp_form == "vertex":
         template = checker
     else:
         template = dual_template(problem, L, params.u_max, params.w_h, params.w_v)
-    return PreparedCell(problem, space, L, checker, template, h_scale, v_scale)
+    return PreparedCell(problem, space, L, checker, template, h_scale, v_scale, lemma4_terms)
 
 
 def _kappa_sweep(prepared: PreparedCell, params: Params, solver: LpSolver, fixed: tuple, columns: tuple) -> tuple:
@@ -438,7 +448,8 @@ def _funnel_sweep(prepared: PreparedCell, params: Params, solver: LpSolver, fixe
     n_theta, n_h = template.n_theta, template.n_h
     result, upper, c_h, c_v, kappa, attempts = None, None, math.nan, math.nan, params.kappa, 0
     halving = 0
-    h_min, diam = _lemma4_terms(prepared.problem)  # geometry: the same at every κ
+    # geometry: the same at every κ
+    h_min, diam = prepared.lemma4_terms if prepared.lemma4_terms is not None else _lemma4_terms(prepared.problem)
     for halving in range(FUNNEL_HALVINGS + 1):
         kappa = params.kappa * 0.5**halving
         c_v = kappa * u_max / prepared.v_scale
@@ -678,9 +689,9 @@ def run(cells: Cells, params: Params = Params(), progress: Callable[[int, int], 
             if built is None:
                 prepared[c] = prepare_cell(problem, params)
             else:
-                h_scale, v_max = scales[c]
+                h_scale, v_max, terms = scales[c]
                 prepared[c] = _prepared(problem, params, "field", FIELD_MAP, built.templates[c], h_scale,
-                                        _checked_v_max(v_max))  # fmt: skip
+                                        _checked_v_max(v_max), terms)  # fmt: skip
         except ArtifactError as exc:
             raise ArtifactError(f"cell {c}: {exc}", field=exc.field) from exc
     outcomes = {}
