@@ -449,46 +449,13 @@ def vertex_template(problem: CellProblem, L: np.ndarray, u_max: float | None, w_
 
 
 def _field_vertex_template(problem: CellProblem, u_max: float | None, w_h: float, w_v: float) -> LpTemplate:
-    """:func:`vertex_template` in field space (``L`` = :data:`FIELD_MAP`), the default LP of every cell.
-
-    With ``θ = (M₀₀, M₀₁, a₀, M₁₀, M₁₁, a₁)``, ``d_gᵀu(v_q) = Σ_i d_gi (a_i − M_i0 v_q0 − M_i1 v_q1)``,
-    so the θ block of row ``(g, q)`` is the outer product ``d_g ⊗ w_q`` with ``w_q = (−v_q, 1)``,
-    and a box row of ``u_i`` holds ``w_q`` on ``(M_i0, M_i1, a_i)``. Each value is a single
-    product (the general path's products with the identity ``L`` only add exact zeros, so the
-    values are the same) written straight into the CSR value array: no dense block, no
-    gather, a handful of numpy calls per cell.
-    """
-    V = problem.vertices
-    p = len(V)
-    n_h = len(problem.cbf_q)
-    n_slack = n_h + 1
-    box = 2 if u_max is not None else 0
-    # Zero entries are +0, as the general path's sums give them: 0 − v and "+= 0" turn −0 into +0
-    # and change nothing else, so the arrays handed to HiGHS are the same bytes either way.
-    W = np.empty((p, 3))  # u(v_q) = [M, a] @ W[q]
-    np.subtract(0.0, V, out=W[:, :2])
-    W[:, 2] = 1.0
-    D = np.empty((n_slack, 1, 2, 1))  # d_g, shaped to broadcast against W into (n_slack, p, 2, 3)
-    np.negative(problem.cbf_n, out=D[:n_h, 0, :, 0])
-    D[n_h, 0, :, 0] = problem.z
-    slack_rows = n_slack * p
-    coef = np.multiply(D, W[:, None, :]).reshape(slack_rows, 6)
-    coef += 0.0
-    # CSR values in row order (see _vertex_sparsity): per slack row θ_0 … θ_5 then −1 on S_g,
-    # then the box rows of u_1 and of u_2, three values each.
-    n_slack_values = 7 * slack_rows
-    values = np.empty(n_slack_values + 3 * box * p)
-    slack_values = values[:n_slack_values].reshape(slack_rows, 7)
-    slack_values[:, :6] = coef
-    slack_values[:, 6] = -1.0
-    values[n_slack_values:].reshape(box, p, 3)[...] = W
-    rhs_h = (problem.cbf_n @ V.T + problem.cbf_q[:, None]).ravel()  # h_k(v_q), barrier-major
-    rhs_v = (problem.x_j - V) @ problem.z  # −V(v_q)
-    lower, rhs_const = _vertex_row_bounds(slack_rows, box * p, float(u_max) if box else 0.0)
-    indptr, indices, _ = _vertex_sparsity(_FIELD_PATTERN, 6, n_h, p, box)
-    col_lower, col_upper, cost = _slack_columns(6, n_h, float(w_h), float(w_v))
-    return LpTemplate(cost, indptr, indices, values, col_lower, col_upper, lower, None, rhs_h, rhs_v, rhs_const, 6,
-                      n_h, coef)  # fmt: skip
+    """:func:`vertex_template` in field space (``L`` = :data:`FIELD_MAP`), the default LP of every cell:
+    :func:`field_vertex_templates` of this one cell (one builder for both)."""
+    p, n_h = len(problem.vertices), len(problem.cbf_q)
+    built = field_vertex_templates(problem.vertices, np.array([0, p]), np.asarray(problem.cbf_n, float).reshape(-1, 2),
+                                   np.asarray(problem.cbf_q, float), np.array([0, n_h]), problem.z[None, :],
+                                   problem.x_j[None, :], [0], u_max, w_h, w_v)  # fmt: skip
+    return built.templates[0]
 
 
 @dataclass(frozen=True)
@@ -521,7 +488,7 @@ def field_vertex_templates(vertices: np.ndarray, vertex_offsets: np.ndarray, cbf
     """:func:`vertex_template` in field space for many cells at once, from flat arrays (the ``Cells`` layout).
 
     The coefficients ``d_g ⊗ w_q`` of every row of every cell come from one numpy pass (the
-    same single products as :func:`_field_vertex_template`), as do the ``+ q_k`` of the barrier
+    single products ``d_g ⊗ w_q``, with ``w_q = (−v_q, 1)``), as do the ``+ q_k`` of the barrier
     right-hand sides. What stays per cell is slicing, one concatenation of the CSR values and
     the two small matrix products ``n @ Vᵀ`` and ``(x_j − V) @ z``: those are the very BLAS calls
     of the per-cell builder, on the same views, so that the right-hand sides round the same way

@@ -623,3 +623,22 @@ def test_landmarks_seen_from_funnel_witnesses_match_the_segment_test(map_seed):
         exact = space.visible(np.repeat(points, len(landmarks), 0), np.tile(landmarks, (len(points), 1)),
                               from_boundary=True).reshape(len(points), -1)  # fmt: skip
         assert np.array_equal(decompose.seen_from(sight, points), exact), c
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_the_field_space_builder_is_the_general_vertex_lp(seed):
+    """The field-space vertex LP every cell solves (:func:`cell_lp.field_vertex_templates`, with its
+    written-out products) is exactly the general vertex builder's LP with ``L`` the field map."""
+    from bearnav_cli import cell_lp
+
+    rng = np.random.default_rng(seed)
+    vertices, A, b, k, x_i, x_j, z = random_funnel_cell(rng)
+    keep = np.arange(len(b)) != k
+    problem = CellProblem(vertices, A, b, z, x_j, -A[keep], b[keep], random_landmarks(rng, x_j))
+    general_L = np.array(cell_lp.FIELD_MAP)  # equal values, another object: the general path
+    for u_max in (None, 1.0):
+        fast = cell_lp.vertex_template(problem, cell_lp.FIELD_MAP, u_max, 1.0, 2.0)
+        general = cell_lp.vertex_template(problem, general_L, u_max, 1.0, 2.0)
+        for name in ("cost", "A_indptr", "A_indices", "A_values", "col_lower", "col_upper", "lower", "rhs_h",
+                     "rhs_v", "rhs_const", "vertex_rows"):  # fmt: skip
+            np.testing.assert_array_equal(getattr(fast, name), getattr(general, name), err_msg=name)
