@@ -235,8 +235,11 @@ def coverage(plan: Plan, space: FreeSpace) -> float:
 def time_bound(plan: Plan, speed: float) -> float:
     """Worst-case time to the goal from anywhere in ``D`` at constant ``speed`` (ALGORITHMS §11.3), s.
 
-    ``T_c = max_{P_c} V · max_{P_c} ‖u‖ / (s·σ_v)`` bounds the time in an edge cell (vertex
-    maxima: both are convex in ``x``); a robot leaving ``P_c`` lands on its exit face and switches
+    A robot drives ``ẋ = s·u/‖u‖``; (L2) holds on the whole cell (affine, checked at the vertices) as
+    ``zᵀu ≤ −c_v V − σ_v``, so ``V̇ ≤ −k(c_v V + σ_v)`` with ``k = s / max_{P_c} ‖u‖``. From
+    ``V ≤ V̄ = max_{P_c} V`` the exit line ``V = 0`` is reached within
+    ``T_c = ln(1 + c_v V̄/σ_v) / (k c_v)`` (``V̄/(k σ_v)`` when ``c_v = 0``, the limit; the decay
+    term makes the bound logarithmic in ``V̄/σ_v``). A robot leaving ``P_c`` lands on its exit face and switches
     to a containing cell of smaller rank, which must meet that face. ``W(c) = T_c + max W(k)``
     over those cells, in rank order; the goal cell takes at most ``max ‖v − g‖ / s``. Returns
     ``max_c W(c)`` (``inf`` if a cell has no positive progress margin).
@@ -260,7 +263,11 @@ def time_bound(plan: Plan, speed: float) -> float:
         if not sigma_v > 0:
             worst[c] = math.inf
             continue
-        t_c = float(np.max((verts - x_j) @ z)) * float(np.max(np.hypot(u[:, 0], u[:, 1]))) / (speed * sigma_v)
+        v_top = float(np.max((verts - x_j) @ z))
+        k_rate = speed / float(np.max(np.hypot(u[:, 0], u[:, 1])))
+        c_v = float(plan.c_v[c])
+        ratio = c_v * v_top / sigma_v
+        t_c = math.log1p(ratio) / (k_rate * c_v) if c_v > 0 and ratio > 1e-12 else v_top / (k_rate * sigma_v)
         face = shapely.LineString(verts[[k, (k + 1) % len(verts)]])
         landing = [int(m) for m in tree.query(face, predicate="intersects") if cells.cell_rank[m] < cells.cell_rank[c]]
         worst[c] = t_c + (max(worst[m] for m in landing) if landing else math.inf)
