@@ -607,7 +607,8 @@ def plot_command(
     background = [artifacts.load(p, ("tree", "simplified")).artifact for p in also or []]
     shown = loaded.artifact
     cells = shown.cells if isinstance(shown, Plan) else shown if isinstance(shown, Cells) else None
-    coverage = composition.coverage_regions(cells) if cells is not None and cells.is_funnel else None
+    coverage = (composition.coverage_regions(cells, margin=composition.coverage_margin(shown))
+                if cells is not None and cells.is_funnel else None)  # fmt: skip
     fig = plot.figure_for(shown, background=background, title=title, color_by=color_by, barriers=barriers,
                           labels=labels, cell_numbers=cell_numbers, coverage=coverage)  # fmt: skip
     plot.save_figure(fig, str(out_path))

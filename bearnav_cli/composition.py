@@ -29,7 +29,10 @@ from bearnav_cli.datatypes import Cells, Map, Plan, cell_list
 from bearnav_cli.funnel import cell_tolerance, coverage_domain, plan_tolerance_of, reached_parts
 from bearnav_cli.geometry import FreeSpace, barrier_margin
 
-__all__ = ["Composition", "CoverageRegions", "check", "coverage", "coverage_regions", "time_bound", "world_violations"]
+__all__ = [
+    "Composition", "CoverageRegions", "check", "coverage", "coverage_margin", "coverage_regions", "time_bound",
+    "world_violations",
+]  # fmt: skip
 
 #: Relative agreement of a recomputed tolerance with the stored one.
 TOLERANCE_RTOL = 1e-6
@@ -210,14 +213,31 @@ class CoverageRegions(NamedTuple):
     unreached: shapely.Geometry
 
 
-def coverage_regions(cells: Cells, space: FreeSpace | None = None) -> CoverageRegions:
-    """``F_m`` of the goal's free component, what of it the cells reach, and what they leave uncovered."""
+def coverage_margin(artifact: Cells | Plan) -> float:
+    """The barrier margin ``m`` of ``F_m`` that decompose used (map units).
+
+    From the artifact's statistics (decompose records it, synthesize copies it: DESIGN §3.3 has no
+    key for it, and a margin given on the command line is not in the map), else the map's own
+    ``decompose.barrier_margin``, else the default ``0.01·D``.
+    """
+    stats = artifact.stats if isinstance(artifact.stats, dict) else {}
+    recorded = stats.get("barrier_margin")
+    if isinstance(recorded, (int, float)) and not isinstance(recorded, bool) and math.isfinite(recorded) \
+            and recorded > 0:  # fmt: skip
+        return float(recorded)
+    map_ = artifact.map
+    requested = map_.params.get("decompose", {}).get("barrier_margin") if isinstance(map_.params, dict) else None
+    return barrier_margin(requested, map_.diagonal)
+
+
+def coverage_regions(cells: Cells, space: FreeSpace | None = None, margin: float | None = None) -> CoverageRegions:
+    """``F_m`` of the goal's free component, what of it the cells reach, and what they leave uncovered.
+
+    ``margin`` is ``m`` (default: :func:`coverage_margin` of ``cells``).
+    """
     map_ = cells.map
     space = FreeSpace.from_map(map_) if space is None else space
-    # the margin decompose used: the map's own decompose parameter, else the default (a margin given
-    # only on the command line is not in plan.npz; DESIGN §3.3 has no key for it)
-    requested = map_.params.get("decompose", {}).get("barrier_margin") if isinstance(map_.params, dict) else None
-    margin = barrier_margin(requested, map_.diagonal)
+    margin = coverage_margin(cells) if margin is None else margin
     full = coverage_domain(space.component_of(map_.goal), space.bounds, space.obstacles, margin)
     union = shapely.union_all(cell_polygons(cells))
     domain, unreached = reached_parts(full, union)
@@ -226,7 +246,7 @@ def coverage_regions(cells: Cells, space: FreeSpace | None = None) -> CoverageRe
 
 def coverage(plan: Plan, space: FreeSpace) -> float:
     """``area(D ∩ F_m) / area(F_m)`` over the parts of ``F_m`` the cells reach (§11.1, :func:`coverage_regions`)."""
-    regions = coverage_regions(plan.cells, space)
+    regions = coverage_regions(plan.cells, space, coverage_margin(plan))
     if regions.domain.area <= 0:
         return 1.0
     return float(1.0 - regions.uncovered.area / regions.domain.area)

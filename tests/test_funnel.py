@@ -642,3 +642,20 @@ def test_the_field_space_builder_is_the_general_vertex_lp(seed):
         for name in ("cost", "A_indptr", "A_indices", "A_values", "col_lower", "col_upper", "lower", "rhs_h",
                      "rhs_v", "rhs_const", "vertex_rows"):  # fmt: skip
             np.testing.assert_array_equal(getattr(fast, name), getattr(general, name), err_msg=name)
+
+
+def test_verify_recomputes_coverage_with_the_margin_decompose_used():
+    """A barrier margin given to decompose directly (the command line's --barrier-margin, not the
+    map's params) travels with the plan, so verify's F_m is decompose's F_m."""
+    map_ = build_map(random_spec(1, ITERATIONS, 0))
+    tree = run_stages(map_, ["rrtstar", "simplify"])
+    margin = 2.5 * DEFAULT_CLEARANCE * map_.diagonal
+    cells = decompose.run(tree, decompose.Params(barrier_margin=margin))
+    plan = synthesize.run(cells)
+    assert composition.coverage_margin(plan) == pytest.approx(margin)
+    report = composition.check(plan, SPEED)
+    assert report.ok, report.problems
+    assert report.coverage == pytest.approx(cells.free_coverage, rel=1e-9)
+    # and the default margin gives another F_m, so the test can tell them apart
+    default = composition.coverage_regions(cells, margin=DEFAULT_CLEARANCE * map_.diagonal)
+    assert default.domain.area != pytest.approx(composition.coverage_regions(cells).domain.area, rel=1e-6)

@@ -459,6 +459,7 @@ def _funnel_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) 
     node_added[len(tree.nodes):] = True
     stats = {
         "exit_inset": inset,
+        "barrier_margin": margin,  # m of F_m: verify recomputes the coverage with it
         "necked_cells": [i for i, r in enumerate(regions) if r.necked],
         "free_coverage_before": before,
         "free_coverage": after,

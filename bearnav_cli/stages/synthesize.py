@@ -725,6 +725,8 @@ def run(cells: Cells, params: Params = Params(), progress: Callable[[int, int], 
     elapsed = time.perf_counter() - started
     stats = _stats(cells, status, attempts, c_h, c_v, margin_v)
     stats["solve_ms_per_cell"] = round(1e3 * elapsed / C, 4)
+    if "barrier_margin" in (cells.stats or {}):  # the m of F_m, for verify (plan.npz has no key for it)
+        stats["barrier_margin"] = cells.stats["barrier_margin"]
     goal_tolerance = params.goal_tolerance if params.goal_tolerance is not None else 0.01 * cells.map.diagonal
     delta = np.full(C, np.nan)
     plan_tolerance = math.nan
