@@ -191,19 +191,15 @@ class LpSolver:
         -------
         LpResult
             Infeasible and unbounded are told apart: when HiGHS answers "unbounded
-            or infeasible" the LP is solved again without presolve and, if still
-            ambiguous, once more with a zero objective (a feasibility test).
+            or infeasible" the LP is solved once more with a zero objective (a
+            feasibility test).
         """
         n, m = len(cost), len(row_lower)
         model = (n, m, cost, A_indptr, A_indices, A_values, row_lower, row_upper, col_lower, col_upper)
         status = self._run(model)
-        if status == _AMBIGUOUS and OPTIONS["presolve"] != "off":
-            self._set("presolve", "off")
-            try:
-                status = self._run(model)
-            finally:
-                self._set("presolve", OPTIONS["presolve"])
-        if status == _AMBIGUOUS:  # still ambiguous: is the feasible set empty?
+        # presolve is off (OPTIONS), so "unbounded or infeasible" comes from the simplex itself:
+        # solving with a zero objective tells the two apart
+        if status == _AMBIGUOUS:
             feasible = self._run((n, m, np.zeros(n)) + model[3:])
             status = _UNBOUNDED if feasible == _OPTIMAL else feasible
         outcome = _STATUS_MAP.get(status, LpStatus.ERROR)
