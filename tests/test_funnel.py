@@ -659,3 +659,47 @@ def test_verify_recomputes_coverage_with_the_margin_decompose_used():
     # and the default margin gives another F_m, so the test can tell them apart
     default = composition.coverage_regions(cells, margin=DEFAULT_CLEARANCE * map_.diagonal)
     assert default.domain.area != pytest.approx(composition.coverage_regions(cells).domain.area, rel=1e-6)
+
+
+@pytest.mark.parametrize("map_seed", [1, 5])
+def test_a_unicycle_within_its_heading_allowance_meets_the_certified_conditions(map_seed):
+    """runtime.step.heading_allowance: any heading within it, at any forward speed, keeps every
+    barrier condition and the progress condition of the active cell's field (time-scaled by
+    λ = v/‖u‖), checked exactly at random points of the certified domain."""
+    from bearnav_cli.runtime import step
+
+    plan = make_plan(map_seed, 0)
+    arrays = PlanArrays.from_plan(plan)
+    rng = np.random.default_rng(map_seed)
+    x = sample_in_cells(plan.cells, 400, rng)
+    cell = cell_policy.least_rank_cell(arrays, x)
+    allowed = step.heading_allowance(arrays, cell, x, np.full(len(x), -1))
+    bounded = allowed < math.pi
+    assert bounded.mean() > 0.5  # the rule binds somewhere, or the test would say nothing
+    for r in np.flatnonzero(bounded):
+        c = cell[r]
+        u = arrays.field_a[c] - arrays.field_M[c] @ x[r]
+        norm = np.hypot(*u)
+        d = u / norm
+        for frac in (-0.999, -0.5, 0.5, 0.999):  # headings inside the allowance, both sides
+            angle = frac * allowed[r]
+            e = np.array([[math.cos(angle), -math.sin(angle)], [math.sin(angle), math.cos(angle)]]) @ d
+            v = rng.uniform(0.01, 10.0)
+            lam = v / norm
+            normals, offsets = plan.cells.barrier(c)
+            h = normals @ x[r] + offsets
+            assert np.all(normals @ (v * e) >= -lam * plan.c_h[c] * h - 1e-9 * v), r  # ḣ ≥ −λ c_h h
+            if arrays.parent_cell[c] >= 0:
+                z, x_j = arrays.exit_dir[c], arrays.exit_point[c]
+                assert z @ (v * e) < -lam * plan.c_v[c] * (z @ (x[r] - x_j)), r  # V̇ < −λ c_v V
+
+
+def test_the_unicycle_keeps_the_certificate_from_the_certified_domain():
+    """With the heading allowance, unicycle runs from D reach the goal without a collision."""
+    plan = make_plan(2, 0)
+    starts = sample_in_cells(plan.cells, 60, np.random.default_rng(2))
+    runs = simulate.rollout(plan, starts, simulate.Params(dynamics="unicycle", measurement="displacement",
+                                                          record_trajectories=False,
+                                                          speed=SPEED))  # fmt: skip
+    assert runs.start_in_domain.all()
+    assert np.all(runs.outcome == simulate.Outcome.SUCCESS), runs.counts()

@@ -31,7 +31,7 @@ RUNTIME_KEYS = (
     "landmarks", "nodes", "parent", "cell_node", "cell_A", "cell_b", "cell_row_offsets", "exit_point",
     "exit_dir", "gain", "u_max", "goal_tolerance", "cell_landmarks", "fixed_landmark", "status",
     "cbf_A", "cbf_b", "cbf_offsets", "certificate", "cell_rank", "tolerance", "plan_tolerance", "exit_inset",
-    "cell_vertices", "cell_vertex_offsets",
+    "cell_vertices", "cell_vertex_offsets", "c_h", "c_v",
 )  # fmt: skip
 
 #: The cell index of :class:`PlanArrays`: at most this many bins along each side of the bounds.
@@ -100,6 +100,9 @@ class PlanArrays:
         ρ (map units): the walls of the straight-line checks are ``B_r``, the bounds less ρ.
     cell_vertices, cell_vertex_offsets : ndarray, shapes (V, 2), (C + 1,)
         The cells as polygons (their bounding boxes index them, see ``bin_cells``).
+    c_h, c_v : ndarray, shape (C,)
+        The certificate's constants (1/s; ``c_h`` NaN without barrier rows): the unicycle's
+        heading allowance (:func:`bearnav_cli.runtime.step.heading_allowance`) needs the margins.
 
     Derived attributes (computed on construction): ``goal`` (2,), ``free_bounds`` (4,) ``B_r``,
     ``tol`` (``1e-9·D``),
@@ -140,6 +143,8 @@ class PlanArrays:
     robot_radius: float
     cell_vertices: np.ndarray
     cell_vertex_offsets: np.ndarray
+    c_h: np.ndarray
+    c_v: np.ndarray
     goal: np.ndarray = dataclasses.field(init=False, repr=False)
     bin_cells: np.ndarray = dataclasses.field(init=False, repr=False)
     bin_origin: np.ndarray = dataclasses.field(init=False, repr=False)
@@ -166,7 +171,7 @@ class PlanArrays:
             ("exit_dir", float), ("gain", float), ("u_max", float), ("bounds", float), ("cell_landmarks", bool),
             ("fixed_landmark", np.int64), ("status", np.int8), ("cbf_A", float), ("cbf_b", float),
             ("cbf_offsets", np.int64), ("obstacle_edges", float), ("cell_rank", float), ("tolerance", float),
-            ("cell_vertices", float), ("cell_vertex_offsets", np.int64),
+            ("cell_vertices", float), ("cell_vertex_offsets", np.int64), ("c_h", float), ("c_v", float),
         ):  # fmt: skip
             put(self, name, _readonly(getattr(self, name), dtype))
         for name in ("goal_tolerance", "plan_tolerance", "exit_inset", "robot_radius"):
@@ -248,7 +253,7 @@ class PlanArrays:
             "landmarks": (n_lm, 2), "nodes": (n, 2), "parent": (n,), "cell_node": (c,), "cell_A": (rows, 2),
             "cell_b": (rows,), "cell_row_offsets": (c + 1,), "exit_point": (c, 2), "exit_dir": (c, 2),
             "gain": (c, 2, 2 * n_lm), "u_max": (c,), "bounds": (4,), "cell_landmarks": (c, n_lm),
-            "fixed_landmark": (c,), "status": (c,),
+            "fixed_landmark": (c,), "status": (c,), "c_h": (c,), "c_v": (c,),
         }  # fmt: skip
         for name, shape in expected.items():
             if getattr(self, name).shape != shape:

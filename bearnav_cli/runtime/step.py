@@ -24,7 +24,7 @@ from bearnav_cli.runtime.plan_arrays import PlanArrays
 
 __all__ = [
     "APPROACH_ALIGNMENT", "DYNAMICS", "MEASUREMENTS", "STALL_FIELD", "ControlOutput", "ControlSettings", "ControlState",
-    "control", "follow_fields", "look_around", "timing", "unicycle_command",
+    "control", "follow_fields", "heading_allowance", "look_around", "timing", "unicycle_command",
 ]  # fmt: skip
 
 log = logging.getLogger(__name__)
@@ -76,6 +76,10 @@ class ControlSettings:
         Without a fix, the robot keeps following the fields on odometry beyond ``hold_time``
         while its estimate's 3σ stays below this (map units; the barrier margin in
         ``bearnav simulate``); 0: ``hold_time`` only.
+    certified_heading : bool
+        Unicycle on a funnel plan: drive forward only while the heading error keeps the velocity
+        inside every condition the cell's field meets at ``x̂`` (:func:`heading_allowance`), turn
+        in place otherwise; off: §7.1's rule alone.
     """
 
     speed: float
@@ -96,6 +100,7 @@ class ControlSettings:
     blind_error: float = 0.0
     bearing_sigma: float = 0.0
     max_fix_error: float = math.inf
+    certified_heading: bool = True
 
 
 @dataclass(frozen=True)
@@ -259,7 +264,8 @@ def control(
     velocity[scanning] = 0.0
     forward, motion = np.zeros(len(cell)), velocity.copy()
     if s.dynamics == "unicycle":
-        forward, turn, motion = unicycle_command(s, direction, heading, holding, scanning, target, turn)
+        allowed = heading_allowance(arrays, cell, est.x_hat, target) if s.certified_heading else None
+        forward, turn, motion = unicycle_command(s, direction, heading, holding, scanning, target, turn, allowed)
     # the estimate always moves on with the robot's own motion, steering with it or not
     new = ControlState(cell, target, last_dir, est.hold, np.where(est.known[:, None], est.x_hat, state.x_hat), motion,
                        est.known, est.var, scanning, spin)  # fmt: skip
@@ -354,13 +360,15 @@ def look_around(s: ControlSettings, state: ControlState, est: Estimate, last_dir
 
 
 def unicycle_command(s: ControlSettings, direction: np.ndarray, heading: np.ndarray, holding: np.ndarray,
-                     scanning: np.ndarray, target: np.ndarray, turn: np.ndarray) -> tuple[np.ndarray, ...]:  # fmt: skip
+                     scanning: np.ndarray, target: np.ndarray, turn: np.ndarray,
+                     allowed: np.ndarray | None = None) -> tuple[np.ndarray, ...]:  # fmt: skip
     """``(v, ω)`` of the unicycle toward the unit command ``direction`` (ALGORITHMS §7.1).
 
     §7.1's ``v = α cos e``; ``turn_first`` uses ``α cos³ e``: a unicycle far off its field slows
     down to turn instead of sweeping a wide arc past an obstacle corner. Holding or looking
     around, it turns in place; a straight approach drives only when aligned within
-    ``APPROACH_ALIGNMENT``.
+    ``APPROACH_ALIGNMENT``. ``allowed`` (R,), from :func:`heading_allowance`: where it is below
+    π the robot drives forward (never back) only while ``|e| < allowed``, else turns in place.
 
     Returns
     -------
@@ -376,8 +384,52 @@ def unicycle_command(s: ControlSettings, direction: np.ndarray, heading: np.ndar
     forward[(target >= 0) & (np.abs(e) > APPROACH_ALIGNMENT)] = 0.0
     if s.clamp_reverse:
         forward = np.maximum(forward, 0.0)
+    if allowed is not None:
+        bound = allowed < math.pi
+        forward[bound] = np.where(np.abs(e[bound]) < allowed[bound], np.maximum(forward[bound], 0.0), 0.0)
     turn = np.where(scanning, turn, s.beta * np.sin(e))
     return forward, turn, forward[:, None] * np.column_stack([np.cos(phi), np.sin(phi)])
+
+
+def heading_allowance(arrays: PlanArrays, cell: np.ndarray, x: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """The largest heading error at which a unicycle may drive forward and stay certified, shape (R,), rad.
+
+    The cell's field ``u`` meets at ``x`` its barrier conditions ``n_k·u + c_h h_k ≥ μ_k`` and its
+    progress condition ``−(z·u + c_v V) ≥ μ_v`` with pointwise margins ``μ`` (positive on a
+    certified cell, ALGORITHMS §11.2). Driving at any speed ``v > 0`` along a heading ``e`` instead
+    of ``d = u/‖u‖`` changes each left side, scaled by ``λ = v/‖u‖``, by at most ``v‖e − d‖``
+    (unit normals); so while ``‖e − d‖ = 2 sin(|Δ|/2) < min μ / ‖u‖`` the velocity still meets
+    ``ḣ_k ≥ −λ c_h h_k`` and ``V̇ ≤ −λ(c_v V + ε)`` with ``ε > 0``: the robot stays in the cell's safe
+    set and keeps progressing to its exit, as the single integrator does (a positive time scaling
+    of the certified field). Turning in place (``v = 0``) keeps every ``h`` and ``V``.
+
+    Returns ``π`` (no bound) for robots outside a funnel plan's cells, approaching a node, or where
+    a margin is not positive at ``x`` (an estimate off its cell: the certificate says nothing there).
+    """
+    p = np.asarray(x, float).reshape(-1, 2)
+    cell = np.asarray(cell, np.int64)
+    out = np.full(len(p), math.pi)
+    on = (cell >= 0) & (np.asarray(target) < 0)
+    if not arrays.funnel or not on.any():
+        return out
+    idx = np.flatnonzero(on)
+    c, q = cell[idx], p[idx]
+    u = arrays.field_a[c] - np.einsum("rij,rj->ri", arrays.field_M[c], q)
+    speed = np.hypot(u[:, 0], u[:, 1])
+    A, b = arrays.bar_A[c], arrays.bar_b[c]  # padding rows: 0·x + inf
+    h = np.einsum("rqi,ri->rq", A, q) + b
+    with np.errstate(invalid="ignore"):
+        margins = np.einsum("rqi,ri->rq", A, u) + arrays.c_h[c][:, None] * h
+    margin = np.min(np.where(np.isfinite(b), margins, math.inf), axis=1, initial=math.inf)
+    z, x_j = arrays.exit_dir[c], arrays.exit_point[c]
+    edge = arrays.parent_cell[c] >= 0  # the goal cell has no progress condition
+    progress = -(np.einsum("ri,ri->r", z, u) + arrays.c_v[c] * np.einsum("ri,ri->r", z, q - x_j))
+    margin = np.where(edge, np.minimum(margin, progress), margin)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.where(speed > 0, margin / speed, -1.0)
+    bounded = (ratio > 0) & (ratio < 2.0)  # ‖e − d‖ ≤ 2 always: ratio ≥ 2 allows any heading
+    out[idx[bounded]] = 2.0 * np.arcsin(0.5 * ratio[bounded])
+    return out
 
 
 #: ``dt = min(DT_PER_DIAGONAL · D / v, DT_MAX)`` by default (ALGORITHMS §7.1).

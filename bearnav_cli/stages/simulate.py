@@ -95,6 +95,9 @@ class Params:
     turn_first : bool
         Unicycle forward speed ``α cos³ e`` instead of ALGORITHMS §7.1's ``α cos e``: far off its
         field it slows down to turn rather than sweep a wide arc past an obstacle corner.
+    certified_heading : bool
+        Unicycle on a funnel plan: forward only within the heading allowance that keeps the
+        velocity inside the cell's certified conditions (``runtime.step.heading_allowance``).
     initial_heading : float or None
         Initial heading (degrees); ``None``: toward the active cell's exit point (the goal
         in the goal cell).
@@ -140,6 +143,7 @@ class Params:
     beta: float = 0.5
     clamp_reverse: bool = False
     turn_first: bool = True
+    certified_heading: bool = True
     initial_heading: float | None = None
     hold_time: float = 2.0
     odometry: bool = True
@@ -241,7 +245,7 @@ def settings(plan, params: Params) -> Settings:
     control = ControlSettings(
         speed=params.speed, dt=dt, eps_sw=eps_sw, tol=plan.map.tol, dynamics=params.dynamics, alpha=params.alpha,
         beta=params.beta, clamp_reverse=params.clamp_reverse, turn_first=params.turn_first,
-        measurement=params.measurement,
+        certified_heading=params.certified_heading, measurement=params.measurement,
         reconstruction=params.reconstruction, min_spread=math.radians(params.min_spread_deg),
         hold_time=params.hold_time, odometry=params.odometry,
         blind_error=blind_error,
