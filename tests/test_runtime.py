@@ -372,7 +372,8 @@ def test_look_around_starts_at_once_without_an_estimate_and_ends_lost_after_a_re
     for hold, lost in ((s.dt, False), (2 * math.pi / s.beta + 2 * s.dt, True)):
         est = Estimate(np.zeros((2, 2)), np.full(2, np.inf), no, np.array([False, True]), no, np.full(2, hold),
                        np.full(2, np.inf))  # fmt: skip
-        scanning, is_lost, spin, turn = look_around(s, state, est, np.array([[0.0, 1.0], [1.0, 0.0]]), np.zeros(2))
+        scanning, is_lost, spin, turn, _ = look_around(s, state, est, np.array([[0.0, 1.0], [1.0, 0.0]]),
+                                                       np.zeros(2))  # fmt: skip
         assert scanning.tolist() == [True, False] and is_lost.tolist() == [lost, False]
         assert spin[0] == 1.0 and turn.tolist() == [s.beta, 0.0]  # toward the last command (+90°)
 
@@ -387,3 +388,32 @@ def test_unicycle_turns_in_place_when_far_off_and_drives_when_aligned():
     np.testing.assert_allclose(forward, [s.alpha, 0.0, s.alpha], atol=1e-15)  # cos³ 90° = 0
     np.testing.assert_allclose(turn, [0.0, s.beta, 0.0], atol=1e-15)
     np.testing.assert_allclose(motion, [[s.alpha, 0.0], [0.0, 0.0], [s.alpha, 0.0]], atol=1e-15)
+
+
+def test_best_view_heading_points_the_camera_at_a_usable_fix():
+    """Looking on purpose: at the heading it picks, the camera (60°) sees at least two landmarks in
+    line of sight, and the runtime's own lsq fix from those bearings is usable."""
+    from bearnav_cli.geometry import FreeSpace
+    from bearnav_cli.runtime.step import best_view_heading
+    from bench.common import run_stages
+    from tests.conftest import build_map
+    from tests.funnel_maps import random_spec
+
+    plan = run_stages(build_map(random_spec(6, 300, 0)), ["rrtstar", "simplify", "decompose", "synthesize"])
+    arrays = PlanArrays.from_plan(plan)
+    s = _settings(fov=math.radians(60.0))
+    space = FreeSpace.from_map(plan.map)
+    rng = np.random.default_rng(4)
+    x = rng.uniform(plan.map.bounds[:2], plan.map.bounds[2:], (400, 2))
+    x = x[space.points_free(x)]
+    heading = best_view_heading(arrays, s, x, rng.uniform(-math.pi, math.pi, len(x)))
+    found = np.isfinite(heading)
+    assert found.mean() > 0.5
+    lm = plan.map.landmarks
+    in_view = runtime.bearing.in_field_of_view(x[found], heading[found], lm, s.fov, tol=arrays.tol)
+    seen = in_view & space.visible(np.repeat(x[found], len(lm), 0), np.tile(lm, (found.sum(), 1))).reshape(-1, len(lm))
+    assert np.all(seen.sum(axis=1) >= 2)
+    directions, _ = runtime.bearing.directions(x[found], lm)
+    rec = runtime.bearing.reconstruct(directions, seen, lm, 0, method="lsq", min_spread=s.min_spread, tol=arrays.tol)
+    assert rec.usable.all()
+    np.testing.assert_allclose(rec.x_hat, x[found], atol=1e-6)

@@ -334,7 +334,16 @@ def segments_clear(arrays: PlanArrays, a: np.ndarray, b: np.ndarray) -> np.ndarr
     a, b = _points(a), _points(b)
     lo, hi = arrays.free_bounds[:2], arrays.free_bounds[2:]
     ok = np.all((a >= lo) & (a <= hi) & (b >= lo) & (b <= hi), axis=1)
-    edges = arrays.obstacle_edges
+    return edges_clear(arrays.obstacle_edges, a, b, ok)
+
+
+def edges_clear(edges: np.ndarray, a: np.ndarray, b: np.ndarray, ok: np.ndarray | None = None) -> np.ndarray:
+    """Exact test that each segment ``[a_r, b_r]`` crosses or touches none of ``edges`` (E, 2, 2), shape (R,).
+
+    ``ok`` (R,): only those segments are tested (the others stay ``False``).
+    """
+    a, b = _points(a), _points(b)
+    ok = np.ones(len(a), bool) if ok is None else np.array(ok, bool)
     if not len(edges) or not ok.any():
         return ok
     p, q = edges[:, 0], edges[:, 1]
@@ -356,6 +365,23 @@ def segments_clear(arrays: PlanArrays, a: np.ndarray, b: np.ndarray) -> np.ndarr
         )  # fmt: skip
         ok[s : s + step] &= ~np.any(proper | touch, axis=1)
     return ok
+
+
+def in_sight(arrays: PlanArrays, x: np.ndarray) -> np.ndarray:
+    """Line of sight from each point to each landmark through the raw obstacles, shape (R, L) (ALGORITHMS §1).
+
+    The segment from ``x`` to ``l − tol·unit(l − x)`` must touch no raw obstacle edge, so a tag on
+    a wall is seen from the free side (:meth:`bearnav_cli.geometry.FreeSpace.visible`'s rule, exact
+    against the embedded map's rings).
+    """
+    p = _points(x)
+    lm = arrays.landmarks
+    d = lm[None, :, :] - p[:, None, :]
+    dist = np.hypot(d[..., 0], d[..., 1])
+    far = dist > arrays.tol
+    ends = lm[None] - arrays.tol * d / np.where(far, dist, 1.0)[..., None]
+    out = edges_clear(arrays.sight_edges, np.repeat(p, len(lm), axis=0), ends.reshape(-1, 2), far.ravel())
+    return out.reshape(len(p), len(lm))
 
 
 def approach_target(arrays: PlanArrays, x: np.ndarray, nearest: int = 8) -> np.ndarray:

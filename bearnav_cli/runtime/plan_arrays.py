@@ -86,6 +86,8 @@ class PlanArrays:
     obstacle_edges : ndarray, shape (E, 2, 2)
         Every ring edge of the inflated obstacles (from the embedded map), for the exact
         straight-line checks of :func:`approach_target`.
+    sight_edges : ndarray, shape (E', 2, 2)
+        Every ring edge of the raw obstacles: what hides a landmark (``cell_policy.in_sight``).
     certificate : {"funnel", "paper"}
         ``funnel``: the cells compose and the policy is ALGORITHMS §11.3's (least rank).
     cell_rank : ndarray, shape (C,)
@@ -135,6 +137,7 @@ class PlanArrays:
     cbf_b: np.ndarray
     cbf_offsets: np.ndarray
     obstacle_edges: np.ndarray
+    sight_edges: np.ndarray
     certificate: str
     cell_rank: np.ndarray
     tolerance: np.ndarray
@@ -170,7 +173,8 @@ class PlanArrays:
             ("cell_A", float), ("cell_b", float), ("cell_row_offsets", np.int64), ("exit_point", float),
             ("exit_dir", float), ("gain", float), ("u_max", float), ("bounds", float), ("cell_landmarks", bool),
             ("fixed_landmark", np.int64), ("status", np.int8), ("cbf_A", float), ("cbf_b", float),
-            ("cbf_offsets", np.int64), ("obstacle_edges", float), ("cell_rank", float), ("tolerance", float),
+            ("cbf_offsets", np.int64), ("obstacle_edges", float), ("sight_edges", float), ("cell_rank", float),
+            ("tolerance", float),
             ("cell_vertices", float), ("cell_vertex_offsets", np.int64), ("c_h", float), ("c_v", float),
         ):  # fmt: skip
             put(self, name, _readonly(getattr(self, name), dtype))
@@ -321,16 +325,18 @@ class PlanArrays:
         try:
             bounds = np.asarray(map_json["bounds"], float)
             radius = float(map_json.get("robot_radius", 0.0))
-            rings = [
-                (np.asarray(o["exterior"], float), *(np.asarray(h, float) for h in o.get("holes", ())))
-                for o in map_json["obstacles"]
-            ]
+            rings, sight = (
+                [(np.asarray(o["exterior"], float), *(np.asarray(h, float) for h in o.get("holes", ())))
+                 for o in map_json[key]]
+                for key in ("obstacles", "raw_obstacles")
+            )  # fmt: skip
         except (KeyError, TypeError, ValueError) as exc:
             raise ArtifactError("embedded map has no bounds or obstacles", file=file, field="map") from exc
         for key in ("goal_tolerance", "plan_tolerance", "exit_inset"):
             entries[key] = float(entries[key])
         entries["certificate"] = str(entries["certificate"])
-        return cls(bounds=bounds, obstacle_edges=ring_edges(rings), robot_radius=radius, **entries)
+        return cls(bounds=bounds, obstacle_edges=ring_edges(rings), sight_edges=ring_edges(sight), robot_radius=radius,
+                   **entries)  # fmt: skip
 
 
 def ring_edges(polygons: list[tuple[np.ndarray, ...]]) -> np.ndarray:

@@ -18,13 +18,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from bearnav_cli.runtime import bearing
-from bearnav_cli.runtime.cell_policy import affine_field, apply_gain, displacement, update
+from bearnav_cli.runtime.cell_policy import affine_field, apply_gain, displacement, in_sight, update
 from bearnav_cli.runtime.estimate import Estimate, fuse, measure
 from bearnav_cli.runtime.plan_arrays import PlanArrays
 
 __all__ = [
     "APPROACH_ALIGNMENT", "DYNAMICS", "MEASUREMENTS", "STALL_FIELD", "ControlOutput", "ControlSettings", "ControlState",
-    "control", "follow_fields", "heading_allowance", "look_around", "timing", "unicycle_command",
+    "best_view_heading", "control", "follow_fields", "heading_allowance", "look_around", "timing", "unicycle_command",
 ]  # fmt: skip
 
 log = logging.getLogger(__name__)
@@ -80,6 +80,13 @@ class ControlSettings:
         Unicycle on a funnel plan: drive forward only while the heading error keeps the velocity
         inside every condition the cell's field meets at ``x̂`` (:func:`heading_allowance`), turn
         in place otherwise; off: §7.1's rule alone.
+    fov, max_range : float
+        The camera's full field of view (radians) and range (map units), for looking on purpose.
+    look_on_purpose : bool
+        A robot that lost its fix first turns toward the nearest heading where the map says a
+        usable pair of tags is in view from its estimate (:func:`best_view_heading`), then, if that
+        gives no fix, looks all around; off (the default: it did not do better, docs/choices.md) or
+        a camera that sees all around: the revolution at once.
     """
 
     speed: float
@@ -101,6 +108,9 @@ class ControlSettings:
     bearing_sigma: float = 0.0
     max_fix_error: float = math.inf
     certified_heading: bool = True
+    fov: float = 2.0 * math.pi
+    max_range: float = math.inf
+    look_on_purpose: bool = False
 
 
 @dataclass(frozen=True)
@@ -127,6 +137,8 @@ class ControlState:
         Looking around at the last step.
     spin : ndarray, shape (R,)
         ``±1``: the direction of the current look-around.
+    look : ndarray, shape (R,)
+        The heading a look on purpose turns to (rad), NaN when none (:func:`look_around`).
     """
 
     cell: np.ndarray
@@ -139,6 +151,7 @@ class ControlState:
     var: np.ndarray
     scanning: np.ndarray
     spin: np.ndarray
+    look: np.ndarray
 
     @classmethod
     def initial(cls, heading: np.ndarray) -> ControlState:
@@ -147,7 +160,7 @@ class ControlState:
         r = len(h)
         return cls(np.full(r, -1, np.int64), np.full(r, -1, np.int64), np.column_stack([np.cos(h), np.sin(h)]),
                    np.zeros(r), np.zeros((r, 2)), np.zeros((r, 2)), np.zeros(r, bool), np.full(r, np.inf),
-                   np.zeros(r, bool), np.ones(r))  # fmt: skip
+                   np.zeros(r, bool), np.ones(r), np.full(r, np.nan))  # fmt: skip
 
     def take(self, idx: np.ndarray) -> ControlState:
         """The state of the robots ``idx``."""
@@ -258,7 +271,7 @@ def control(
     cell, target, last_dir, u, stalled, relocated = follow_fields(arrays, s, state, est, bearings, visible,
                                                                   displacements)  # fmt: skip
     holding = ~est.steer  # no position estimate this step
-    scanning, lost, spin, turn = look_around(s, state, est, last_dir, heading)
+    scanning, lost, spin, turn, look = look_around(s, state, est, last_dir, heading, arrays)
     direction = np.where(holding[:, None], last_dir, u)
     velocity = s.speed * direction
     velocity[scanning] = 0.0
@@ -268,7 +281,7 @@ def control(
         forward, turn, motion = unicycle_command(s, direction, heading, holding, scanning, target, turn, allowed)
     # the estimate always moves on with the robot's own motion, steering with it or not
     new = ControlState(cell, target, last_dir, est.hold, np.where(est.known[:, None], est.x_hat, state.x_hat), motion,
-                       est.known, est.var, scanning, spin)  # fmt: skip
+                       est.known, est.var, scanning, spin, look)  # fmt: skip
     # certified (§11.4): a funnel plan, driven by a certified cell's field (not a straight approach),
     # on an estimate whose error bound is within the plan's tolerance δ*
     certified = (arrays.funnel & est.steer & (target < 0) & (cell >= 0)
@@ -328,12 +341,15 @@ def follow_fields(arrays: PlanArrays, s: ControlSettings, state: ControlState, e
 
 
 def look_around(s: ControlSettings, state: ControlState, est: Estimate, last_dir: np.ndarray,
-                heading: np.ndarray) -> tuple[np.ndarray, ...]:  # fmt: skip
+                heading: np.ndarray, arrays: PlanArrays | None = None) -> tuple[np.ndarray, ...]:  # fmt: skip
     """Who looks around in place, who is lost, and how they turn (ALGORITHMS §7.5 with docs/choices.md).
 
     With odometry, a robot without an estimate never moves blind: it looks around at once, for
     one revolution at ``β``, then it is lost; without odometry §7.5's hold comes first. A
-    look-around starts toward the last command and keeps its direction.
+    look-around starts toward the last command and keeps its direction. Looking on purpose
+    (``s.look_on_purpose``, a camera narrower than 2π and ``arrays`` given), it first turns by the
+    shorter way to :func:`best_view_heading` at its estimate and stops there; if no fix comes, the
+    revolution follows from there (lost after ``3π/β`` in all: half a turn, then a whole one).
 
     Returns
     -------
@@ -342,6 +358,8 @@ def look_around(s: ControlSettings, state: ControlState, est: Estimate, last_dir
         ``±1``, the direction of each look-around.
     turn : ndarray, shape (R,)
         The turn rate of the robots looking around (rad / s; 0 for the others).
+    look : ndarray, shape (R,)
+        The heading each look on purpose turns to (rad; NaN for none).
     """
     holding = ~est.steer
     if s.odometry:
@@ -350,13 +368,72 @@ def look_around(s: ControlSettings, state: ControlState, est: Estimate, last_dir
     else:
         scanning = holding & (est.hold > s.hold_time)
         scan_time = est.hold - s.hold_time
-    lost = scanning & (scan_time > 2.0 * math.pi / s.beta)
+    purposeful = s.look_on_purpose and arrays is not None and s.fov < 2.0 * math.pi
+    budget = (3.0 if purposeful else 2.0) * math.pi / s.beta
+    lost = scanning & (scan_time > budget)
     phi = np.asarray(heading, float).reshape(len(holding))
     # a scan that always turned one way undid the unicycle's turn toward its field
     toward = bearing.wrap(np.arctan2(last_dir[:, 1], last_dir[:, 0]) - phi)
     starting = scanning & ~state.scanning  # a scan keeps the direction it started with
     spin = np.where(starting, np.where(toward < 0, -1.0, 1.0), state.spin)
-    return scanning, lost, spin, np.where(scanning, spin * s.beta, 0.0)
+    look = np.where(scanning & ~starting, state.look, np.nan)
+    if purposeful and starting.any() and np.all(np.isfinite(est.x_hat[starting])):
+        idx = np.flatnonzero(starting)
+        want = np.arctan2(last_dir[idx, 1], last_dir[idx, 0])  # where the robot was driving
+        look[idx] = best_view_heading(arrays, s, est.x_hat[idx], want)
+    turn = np.where(scanning, spin * s.beta, 0.0)
+    aiming = scanning & np.isfinite(look)
+    if aiming.any():
+        error = bearing.wrap(look[aiming] - phi[aiming])
+        # turn the shorter way and stop on the heading (no overshoot within one step)
+        turn[aiming] = np.clip(error / s.dt, -s.beta, s.beta)
+        spin[aiming] = np.where(error < 0, -1.0, 1.0)
+        arrived = np.abs(error) <= s.beta * s.dt * 1e-6 + 1e-12
+        done = np.flatnonzero(aiming)[arrived]
+        look[done] = np.nan  # reached without a fix: the revolution follows, in the same direction
+    return scanning, lost, spin, turn, look
+
+
+def best_view_heading(arrays: PlanArrays, s: ControlSettings, x: np.ndarray, phi: np.ndarray,
+                      headings: int = 72) -> np.ndarray:  # fmt: skip
+    """The camera heading at ``x`` from which the map promises the best fix, shape (R,) rad; NaN if none.
+
+    Among ``headings`` evenly spaced headings, those where at least two landmarks are in the field
+    of view, in range and in line of sight (``cell_policy.in_sight``) and spread enough for the
+    ``lsq`` fix (``λ_min(Σ P_k) ≥ 1 − cos θ_min``, as :func:`bearing.reconstruct` requires); of
+    those, the one nearest to ``phi`` (the direction the robot was driving: a fix there lasts when
+    it drives on), ties to the largest ``λ_min(Σ P_k / d_k²)`` (the smallest predicted fix
+    variance, :func:`bearing.fix_variance`).
+    """
+    p = np.asarray(x, float).reshape(-1, 2)
+    phi = np.asarray(phi, float).reshape(len(p))
+    lm = arrays.landmarks
+    d = lm[None] - p[:, None, :]  # (R, L, 2)
+    dist2 = np.maximum(np.einsum("rlk,rlk->rl", d, d), arrays.tol**2)
+    beta = d / np.sqrt(dist2)[..., None]
+    seen = in_sight(arrays, p)
+    if math.isfinite(s.max_range):
+        seen &= dist2 <= s.max_range**2
+    theta = np.linspace(-math.pi, math.pi, headings, endpoint=False)
+    angle = np.arctan2(d[..., 1], d[..., 0])  # (R, L)
+    in_view = np.abs(bearing.wrap(angle[:, None, :] - theta[None, :, None])) <= 0.5 * s.fov  # (R, H, L)
+    vis = in_view & seen[:, None, :]
+    bx, by = beta[..., 0][:, None, :], beta[..., 1][:, None, :]
+
+    def lam(weight: np.ndarray) -> np.ndarray:
+        a11 = np.sum(weight * (1.0 - bx * bx), axis=2)
+        a22 = np.sum(weight * (1.0 - by * by), axis=2)
+        a12 = -np.sum(weight * bx * by, axis=2)
+        return 0.5 * (a11 + a22) - np.hypot(0.5 * (a11 - a22), a12)
+
+    usable = (vis.sum(axis=2) >= 2) & (lam(vis.astype(float)) >= 1.0 - math.cos(s.min_spread))
+    score = np.where(usable, lam(np.where(vis, 1.0 / dist2[:, None, :], 0.0)), -np.inf)
+    turn = np.abs(bearing.wrap(theta[None, :] - phi[:, None]))
+    turn = np.where(usable, turn, np.inf)
+    best = np.lexsort((-score, turn), axis=1)[:, 0] if score.size else np.zeros(len(p), np.int64)
+    out = theta[best]
+    out[~usable.any(axis=1)] = np.nan
+    return out
 
 
 def unicycle_command(s: ControlSettings, direction: np.ndarray, heading: np.ndarray, holding: np.ndarray,

@@ -98,6 +98,10 @@ class Params:
     certified_heading : bool
         Unicycle on a funnel plan: forward only within the heading allowance that keeps the
         velocity inside the cell's certified conditions (``runtime.step.heading_allowance``).
+    look_on_purpose : bool
+        Without a fix, first turn toward the nearest heading where the map promises a usable pair of
+        tags (``runtime.step.best_view_heading``), then look all around; off (default): the
+        revolution at once.
     initial_heading : float or None
         Initial heading (degrees); ``None``: toward the active cell's exit point (the goal
         in the goal cell).
@@ -144,6 +148,7 @@ class Params:
     clamp_reverse: bool = False
     turn_first: bool = True
     certified_heading: bool = True
+    look_on_purpose: bool = False
     initial_heading: float | None = None
     hold_time: float = 2.0
     odometry: bool = True
@@ -251,6 +256,8 @@ def settings(plan, params: Params) -> Settings:
         blind_error=blind_error,
         bearing_sigma=math.radians(params.noise_deg),
         max_fix_error=math.inf if params.max_fix_error is None else params.max_fix_error,
+        fov=math.radians(params.fov), max_range=math.inf if params.range is None else float(params.range),
+        look_on_purpose=params.look_on_purpose,
     )  # fmt: skip
     return Settings(v, dt, eps_sw, goal_tolerance, plan.map.tol, control)
 
