@@ -22,8 +22,9 @@ import shapely
 from bearnav_cli.geometry import box_polygon, clip, convex_pieces, drop_collinear, polygon_rows
 
 __all__ = [
-    "NECK_ANGLE", "ObstaclePieces", "Region", "cell_tolerance", "coverage_domain", "depth", "exit_interval",
-    "exit_row_index", "funnel_region", "neck_rows", "necked", "plan_tolerance_of", "reached_parts", "wall_rows",
+    "NECK_ANGLE", "PIECE_BATCH", "ObstaclePieces", "Region", "cell_tolerance", "coverage_domain", "depth",
+    "exit_interval", "exit_row_index", "funnel_region", "inset_walls", "neck_rows", "necked", "plan_tolerance_of",
+    "reached_parts",
 ]  # fmt: skip
 
 #: ψ of the neck rows: the angle their lines make with the exit direction ``z`` (radians).
@@ -122,7 +123,7 @@ class ObstaclePieces:
         return -n, -np.einsum("ij,ij->i", n, anchor[apart]) - shift
 
 
-def wall_rows(free_bounds: np.ndarray, ends: np.ndarray, margin: float) -> tuple[np.ndarray, np.ndarray]:
+def inset_walls(free_bounds: np.ndarray, ends: np.ndarray, margin: float) -> tuple[np.ndarray, np.ndarray]:
     """The four walls of ``B_r`` as rows ``A x ≤ b``, each moved ``min(margin, d/2)`` inward (``d`` the
     segment's distance from that wall), shapes (4, 2), (4,)."""
     xmin, ymin, xmax, ymax = free_bounds
@@ -244,7 +245,7 @@ def funnel_region(
     Region
     """
     ends = np.asarray(ends, float).reshape(-1, 2)
-    A_w, b_w = wall_rows(free_bounds, ends, margin)
+    A_w, b_w = inset_walls(free_bounds, ends, margin)
     if start is None:  # the wall rows are the sides of a box: B_r moved inward, no clipping needed
         polygon = box_polygon(np.array([-b_w[0], -b_w[2], b_w[1], b_w[3]]))
     else:

@@ -52,6 +52,7 @@ from common import (
     run_stages,
 )
 
+from bearnav_cli import cell_lp
 from bearnav_cli import lp as lp_module
 from bearnav_cli.datatypes import Cells
 from bearnav_cli.stages import synthesize
@@ -82,8 +83,8 @@ def kitchen_cells() -> Cells:
     return run_stages(load_map(MAP), ("rrtstar", "simplify", "decompose"))
 
 
-def edge_problems(cells: Cells) -> list[synthesize.CellProblem]:
-    """One :class:`~bearnav_cli.stages.synthesize.CellProblem` per edge cell (the goal cell has no LP)."""
+def edge_problems(cells: Cells) -> list[cell_lp.CellProblem]:
+    """One :class:`~bearnav_cli.stages.cell_lp.CellProblem` per edge cell (the goal cell has no LP)."""
     problems = []
     for c in range(cells.n_cells):
         if cells.parent[cells.cell_node[c]] == -1:
@@ -91,7 +92,7 @@ def edge_problems(cells: Cells) -> list[synthesize.CellProblem]:
         A, b = cells.rows(c)
         n, q = cells.barrier(c)
         used = cells.cell_landmarks[c]
-        problems.append(synthesize.CellProblem(cells.vertices(c), A, b, cells.exit_dir[c], cells.exit_point[c], n, q,
+        problems.append(cell_lp.CellProblem(cells.vertices(c), A, b, cells.exit_dir[c], cells.exit_point[c], n, q,
                                                cells.map.landmarks[used]))  # fmt: skip
     return problems
 

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 import shapely
 
+from bearnav_cli import barriers, geometry
 from bearnav_cli.datatypes import CellFlag, Tree
 from bearnav_cli.errors import ArtifactError, InvalidParamsError
 from bearnav_cli.geometry import FreeSpace
@@ -166,9 +167,9 @@ def test_corridor_rows_keep_each_obstacle_piece_behind_its_own_row():
     square = shapely.box(4.0, 1.0, 6.0, 3.0)
     ell = shapely.union(shapely.box(2.0, -4.0, 8.0, -3.0), shapely.box(7.0, -4.0, 8.0, 3.5))  # wraps the edge
     obstacles = shapely.union(square, ell)
-    polygon = decompose.box_polygon(np.array([0.0, -6.0, 10.0, 6.0]))
+    polygon = geometry.box_polygon(np.array([0.0, -6.0, 10.0, 6.0]))
     ends = np.array([[1.0, 0.0], [6.5, 0.0]])
-    n, q, level = decompose.corridor_rows(ends, polygon, obstacles, margin=0.25)
+    n, q, level = barriers.corridor_rows(ends, polygon, obstacles, margin=0.25)
     assert len(n) >= 3  # the L is not convex around the edge: split into triangles
     np.testing.assert_allclose(np.hypot(n[:, 0], n[:, 1]), 1.0, atol=1e-12)
     np.testing.assert_allclose(level, -0.25)
@@ -181,7 +182,7 @@ def test_corridor_rows_keep_each_obstacle_piece_behind_its_own_row():
     assert not shapely.intersects_xy(obstacles.buffer(0.25 - 1e-9), grid[safe, 0], grid[safe, 1]).any()
     # edges that touch the segment cannot be separated: they get no row (and a warning); the
     # box's far edge still does, and every row still holds the segment
-    n2, q2, _ = decompose.corridor_rows(ends, polygon, shapely.box(3.0, -0.5, 3.5, 0.0), margin=0.25)
+    n2, q2, _ = barriers.corridor_rows(ends, polygon, shapely.box(3.0, -0.5, 3.5, 0.0), margin=0.25)
     assert len(n2) == 1 and np.all(ends @ n2.T + q2 > 0)
 
 
@@ -189,8 +190,8 @@ def test_smallest_angle_not_smallest_distance():
     # ALGORITHMS §4.5: o1 is nearer the edge line, o2 makes the smaller angle
     child, parent = np.array([0.0, 0.0]), np.array([10.0, 0.0])
     samples = np.array([[1.0, 0.5], [9.0, 0.9]])
-    A, b = decompose.polygon_rows(decompose.box_polygon(np.array([-1.0, -5.0, 11.0, 5.0])))
-    n, q, _ = decompose.cbf_rows(child, parent, samples, A, b, 1e-12)
+    A, b = geometry.polygon_rows(geometry.box_polygon(np.array([-1.0, -5.0, 11.0, 5.0])))
+    n, q, _ = barriers.cbf_rows(child, parent, samples, A, b, 1e-12)
     assert len(n) == 1
     h = samples @ n[0] + q[0]
     assert h[1] == pytest.approx(0.0, abs=1e-12) and h[0] < 0  # o2 on the line, o1 outside the wedge
@@ -198,15 +199,15 @@ def test_smallest_angle_not_smallest_distance():
 
 def test_a_side_without_samples_gets_no_row_and_edge_samples_are_skipped():
     child, parent = np.array([0.0, 0.0]), np.array([10.0, 0.0])
-    A, b = decompose.polygon_rows(decompose.box_polygon(np.array([-1.0, -5.0, 11.0, 5.0])))
-    n, _, on_edge = decompose.cbf_rows(child, parent, np.array([[5.0, 2.0], [5.0, 0.0]]), A, b, 1e-12)
+    A, b = geometry.polygon_rows(geometry.box_polygon(np.array([-1.0, -5.0, 11.0, 5.0])))
+    n, _, on_edge = barriers.cbf_rows(child, parent, np.array([[5.0, 2.0], [5.0, 0.0]]), A, b, 1e-12)
     assert len(n) == 1 and n[0][1] < 0 and on_edge
 
 
 def test_parent_apex_passes_through_the_parent():
     child, parent = np.array([0.0, 0.0]), np.array([10.0, 0.0])
-    A, b = decompose.polygon_rows(decompose.box_polygon(np.array([-1.0, -5.0, 11.0, 5.0])))
-    n, q, _ = decompose.cbf_rows(child, parent, np.array([[5.0, 2.0], [5.0, -3.0]]), A, b, 1e-12, apex="parent")
+    A, b = geometry.polygon_rows(geometry.box_polygon(np.array([-1.0, -5.0, 11.0, 5.0])))
+    n, q, _ = barriers.cbf_rows(child, parent, np.array([[5.0, 2.0], [5.0, -3.0]]), A, b, 1e-12, apex="parent")
     np.testing.assert_allclose(n @ parent + q, 0.0, atol=1e-12)
     assert np.all(n @ child + q > 0)
 
@@ -216,7 +217,7 @@ def test_goal_cell_rows(small_map):
     goal_poly = decompose.goal_cell(tree.nodes, small_map.bounds, small_map.tol)
     border = np.array([[0.0, 0.3], [0.4, 0.0]])
     samples = np.vstack([tree.collision_samples, border, goal_poly.mean(axis=0) + [0.3, 0.2]])
-    n, q = decompose.goal_cbf_rows(small_map.goal, samples, goal_poly, small_map.bounds, small_map.tol)
+    n, q = barriers.goal_cbf_rows(small_map.goal, samples, goal_poly, small_map.bounds, small_map.tol)
     assert len(n) >= 1
     rng = np.random.default_rng(0)
     x = rng.uniform(0, 8, size=(50, 2))

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from scipy.linalg import expm
 
+from bearnav_cli import cell_lp
 from bearnav_cli.datatypes import CellFlag, CellStatus, replace
 from bearnav_cli.errors import ArtifactError, InvalidParamsError
 from bearnav_cli.lp import LpResult, LpSolver, LpStatus, dense_to_csr
@@ -66,17 +67,18 @@ TOY_SAMPLES = np.array([[5.0, 3.0], [5.0, -3.0]])
 TOY_LANDMARKS = np.array([[-5.0, 10.0], [20.0, 10.0], [5.0, -15.0]])
 
 
-def toy(apex: str = "child", z_sign: float = 1.0) -> sy.CellProblem:
+def toy(apex: str = "child", z_sign: float = 1.0) -> cell_lp.CellProblem:
     """The toy cell of Appendix A (z into the cell unless ``z_sign`` is −1)."""
     A, b = rows_of(TOY_VERTICES)
     at, other = (TOY_XI, TOY_XJ) if apex == "child" else (TOY_XJ, TOY_XI)
     rows = [wedge_row(at, other, o) for o in TOY_SAMPLES]
     normals = np.array([r[0] for r in rows])
     offsets = np.array([r[1] for r in rows])
-    return sy.CellProblem(TOY_VERTICES, A, b, z_sign * unit(TOY_XI - TOY_XJ), TOY_XJ, normals, offsets, TOY_LANDMARKS)
+    z = z_sign * unit(TOY_XI - TOY_XJ)
+    return cell_lp.CellProblem(TOY_VERTICES, A, b, z, TOY_XJ, normals, offsets, TOY_LANDMARKS)
 
 
-def random_problem(rng: np.random.Generator) -> sy.CellProblem:
+def random_problem(rng: np.random.Generator) -> cell_lp.CellProblem:
     """A random convex cell cut by an exit line through x_j, 0–2 wedge rows at x_i, 2–5 landmarks."""
     while True:
         points = rng.uniform(-1, 1, (rng.integers(3, 10), 2)) * rng.uniform(1, 8, 2) + rng.uniform(-5, 5, 2)
@@ -103,7 +105,7 @@ def random_problem(rng: np.random.Generator) -> sy.CellProblem:
             normals.append(n)
             offsets.append(q)
     landmarks = rng.uniform(-20, 20, (rng.integers(2, 6), 2))
-    return sy.CellProblem(poly, A, b, z, xj, np.reshape(normals, (-1, 2)), np.array(offsets), landmarks)
+    return cell_lp.CellProblem(poly, A, b, z, xj, np.reshape(normals, (-1, 2)), np.array(offsets), landmarks)
 
 
 def field_of(K: np.ndarray, landmarks: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -111,7 +113,7 @@ def field_of(K: np.ndarray, landmarks: np.ndarray) -> tuple[np.ndarray, np.ndarr
     return K.reshape(2, -1, 2).sum(axis=1), K @ landmarks.ravel()
 
 
-def margins_of(sol: sy.CellSolution, p: sy.CellProblem, u_max: float = 1.0) -> sy.Margins:
+def margins_of(sol: sy.CellSolution, p: cell_lp.CellProblem, u_max: float = 1.0) -> sy.Margins:
     return sy.vertex_margins(sol.K, p.landmarks, p.vertices, p.z, p.x_j, p.cbf_n, p.cbf_q, sol.c_h, sol.c_v, u_max)
 
 
@@ -121,7 +123,7 @@ def solver() -> LpSolver:
 
 
 @pytest.fixture(scope="module")
-def random_cells() -> list[tuple[sy.CellProblem, float]]:
+def random_cells() -> list[tuple[cell_lp.CellProblem, float]]:
     """300 random cells, each with a κ that makes some LPs infeasible."""
     rng = np.random.default_rng(20240607)
     return [(random_problem(rng), float(rng.choice([0.25, 0.5, 1.0, 2.0, 4.0]))) for _ in range(300)]
@@ -159,14 +161,14 @@ def test_params_normalise_numbers():
 def test_t1_unbounded_without_input_rows(solver):
     p = toy()
     c_h, c_v = sy.cell_constants(p, 0.5, 1.0)
-    for lp in (sy.vertex_lp_field(p, c_h, c_v, None), sy.dual_lp(p, sy.FIELD_MAP, c_h, c_v, None)):
+    for lp in (cell_lp.vertex_lp_field(p, c_h, c_v, None), cell_lp.dual_lp(p, cell_lp.FIELD_MAP, c_h, c_v, None)):
         assert lp.solve(solver).status is LpStatus.UNBOUNDED
 
 
 def test_t2_infeasible_with_unit_constants(solver):
     p = toy()
-    assert sy.vertex_lp_field(p, 1.0, 1.0, 1.0).solve(solver).status is LpStatus.INFEASIBLE
-    assert sy.dual_lp(p, sy.FIELD_MAP, 1.0, 1.0, 1.0).solve(solver).status is LpStatus.INFEASIBLE
+    assert cell_lp.vertex_lp_field(p, 1.0, 1.0, 1.0).solve(solver).status is LpStatus.INFEASIBLE
+    assert cell_lp.dual_lp(p, cell_lp.FIELD_MAP, 1.0, 1.0, 1.0).solve(solver).status is LpStatus.INFEASIBLE
 
 
 def test_t3_optimal_value_and_status(solver):
@@ -174,7 +176,7 @@ def test_t3_optimal_value_and_status(solver):
     c_h, c_v = sy.cell_constants(p, 0.5, 1.0)
     assert c_v == pytest.approx(1 / 30, rel=1e-12)
     assert c_h == pytest.approx(0.5 / 6.860, rel=1e-4)
-    result = sy.vertex_lp_field(p, c_h, c_v, 1.0).solve(solver)
+    result = cell_lp.vertex_lp_field(p, c_h, c_v, 1.0).solve(solver)
     assert result.status is LpStatus.OPTIMAL
     assert result.objective == pytest.approx(-1.15399, abs=1e-5)
     sol = sy.solve_cell(p, sy.Params(), solver)
@@ -185,7 +187,7 @@ def test_t3_optimal_value_and_status(solver):
 def test_t4_parent_apex_forces_zero_optimum_and_stop_at_parent(solver):
     p = toy(apex="parent")
     c_h, c_v = sy.cell_constants(p, 0.5, 1.0)
-    lp = sy.vertex_lp_field(p, c_h, c_v, 1.0)
+    lp = cell_lp.vertex_lp_field(p, c_h, c_v, 1.0)
     result = lp.solve(solver)
     assert result.status is LpStatus.OPTIMAL
     assert abs(result.objective) <= 1e-9
@@ -215,7 +217,10 @@ def test_t5_z_toward_parent_stalls_and_inward_z_exits(solver, form):
     starts = np.array([[14.0, 4.0], [12.0, -4.0], [8.0, 1.0]])
     for z_sign in (-1.0, 1.0):
         p = toy(z_sign=z_sign)
-        lp = sy.vertex_lp_field(p, c_h, c_v, 1.0) if form == "vertex" else sy.dual_lp(p, sy.FIELD_MAP, c_h, c_v, 1.0)
+        if form == "vertex":
+            lp = cell_lp.vertex_lp_field(p, c_h, c_v, 1.0)
+        else:
+            lp = cell_lp.dual_lp(p, cell_lp.FIELD_MAP, c_h, c_v, 1.0)
         result = lp.solve(solver)
         assert result.status is LpStatus.OPTIMAL
         F = result.x[:6].reshape(2, 3)
@@ -234,10 +239,10 @@ def test_t6_three_forms_agree(solver):
     p = toy()
     c_h, c_v = sy.cell_constants(p, 0.5, 1.0)
     values = [
-        sy.vertex_lp_field(p, c_h, c_v, 1.0).solve(solver).objective,
-        sy.vertex_lp_gain(p, c_h, c_v, 1.0).solve(solver).objective,
-        sy.dual_lp(p, sy.field_map("full", p.landmarks), c_h, c_v, 1.0).solve(solver).objective,
-        sy.dual_lp(p, sy.FIELD_MAP, c_h, c_v, 1.0).solve(solver).objective,
+        cell_lp.vertex_lp_field(p, c_h, c_v, 1.0).solve(solver).objective,
+        cell_lp.vertex_lp_gain(p, c_h, c_v, 1.0).solve(solver).objective,
+        cell_lp.dual_lp(p, cell_lp.field_map("full", p.landmarks), c_h, c_v, 1.0).solve(solver).objective,
+        cell_lp.dual_lp(p, cell_lp.FIELD_MAP, c_h, c_v, 1.0).solve(solver).objective,
     ]
     assert np.ptp(values) <= 1e-7
 
@@ -250,18 +255,19 @@ def test_forms_agree_on_random_cells(solver, random_cells):
     for p, kappa in random_cells:
         c_h, c_v = sy.cell_constants(p, kappa, 1.0)
         results = [
-            sy.vertex_lp_field(p, c_h, c_v, 1.0).solve(solver),
-            sy.vertex_lp_gain(p, c_h, c_v, 1.0, "full").solve(solver),
-            sy.dual_lp(p, sy.field_map("full", p.landmarks), c_h, c_v, 1.0).solve(solver),
-            sy.dual_lp(p, sy.FIELD_MAP, c_h, c_v, 1.0).solve(solver),
+            cell_lp.vertex_lp_field(p, c_h, c_v, 1.0).solve(solver),
+            cell_lp.vertex_lp_gain(p, c_h, c_v, 1.0, "full").solve(solver),
+            cell_lp.dual_lp(p, cell_lp.field_map("full", p.landmarks), c_h, c_v, 1.0).solve(solver),
+            cell_lp.dual_lp(p, cell_lp.FIELD_MAP, c_h, c_v, 1.0).solve(solver),
         ]
         assert len({r.status for r in results}) == 1
         statuses.append(results[0].status)
         if results[0].status is LpStatus.OPTIMAL:
             assert np.ptp([r.objective for r in results]) <= 1e-7
         for structure in ("diag", "scalar"):
-            L = sy.field_map(structure, p.landmarks)
-            pair = [sy.vertex_lp(p, L, c_h, c_v, 1.0).solve(solver), sy.dual_lp(p, L, c_h, c_v, 1.0).solve(solver)]
+            L = cell_lp.field_map(structure, p.landmarks)
+            pair = [cell_lp.vertex_lp(p, L, c_h, c_v, 1.0).solve(solver),
+                    cell_lp.dual_lp(p, L, c_h, c_v, 1.0).solve(solver)]
             assert pair[0].status is pair[1].status
             if pair[0].status is LpStatus.OPTIMAL:
                 assert abs(pair[0].objective - pair[1].objective) <= 1e-7
@@ -275,12 +281,12 @@ def test_min_norm_gain_realises_the_optimal_field(solver, random_cells):
     compared = 0
     for p, kappa in random_cells:
         c_h, c_v = sy.cell_constants(p, kappa, 1.0)
-        field_lp = sy.vertex_lp_field(p, c_h, c_v, 1.0)
+        field_lp = cell_lp.vertex_lp_field(p, c_h, c_v, 1.0)
         result = field_lp.solve(solver)
         if result.status is not LpStatus.OPTIMAL:
             continue
         F = result.x[:6].reshape(2, 3)
-        K = sy.min_norm_gain(F[:, :2], F[:, 2], p.landmarks)
+        K = cell_lp.min_norm_gain(F[:, :2], F[:, 2], p.landmarks)
         M, a = field_of(K, p.landmarks)
         assert np.abs(M - F[:, :2]).max() <= 1e-9 and np.abs(a - F[:, 2]).max() <= 1e-9
         # K satisfies every gain-space constraint with the LP's slacks
@@ -288,20 +294,20 @@ def test_min_norm_gain_realises_the_optimal_field(solver, random_cells):
         m = sy.vertex_margins(K, p.landmarks, p.vertices, p.z, p.x_j, p.cbf_n, p.cbf_q, c_h, c_v, 1.0)
         assert np.all(m.cbf_rows <= S_h + 1e-9) and m.clf <= S_V + 1e-9 and m.input <= 1e-9
         # least norm among the gains with that field: adding any N with N G = 0 only grows it
-        G = sy.landmark_matrix(p.landmarks)
+        G = cell_lp.landmark_matrix(p.landmarks)
         rng = np.random.default_rng(len(p.vertices))
         N = rng.normal(size=K.shape)
         N -= N @ G @ np.linalg.solve(G.T @ G, G.T)
         assert np.linalg.norm(K + N) >= np.linalg.norm(K) - 1e-12
         # and no larger than the gain the gain-space LP returns when both realise the same field
-        gain_lp = sy.vertex_lp_gain(p, c_h, c_v, 1.0, "full")
+        gain_lp = cell_lp.vertex_lp_gain(p, c_h, c_v, 1.0, "full")
         K_gain = gain_lp.solve(solver).x[: 4 * len(p.landmarks)].reshape(2, -1)
         if np.allclose(np.column_stack(field_of(K_gain, p.landmarks)), F, atol=1e-9):
             compared += 1
             assert np.linalg.norm(K) <= np.linalg.norm(K_gain) + 1e-9
         else:  # another optimal field: its own minimum-norm gain is still no larger
             Mg, ag = field_of(K_gain, p.landmarks)
-            assert np.linalg.norm(sy.min_norm_gain(Mg, ag, p.landmarks)) <= np.linalg.norm(K_gain) + 1e-9
+            assert np.linalg.norm(cell_lp.min_norm_gain(Mg, ag, p.landmarks)) <= np.linalg.norm(K_gain) + 1e-9
     assert compared > 10
 
 
@@ -316,7 +322,7 @@ def test_optimal_field_is_not_unique_so_gain_norms_depend_on_the_vertex(solver):
     """
     p = toy()
     c_h, c_v = sy.cell_constants(p, 0.5, 1.0)
-    lp = sy.vertex_lp_field(p, c_h, c_v, 1.0)
+    lp = cell_lp.vertex_lp_field(p, c_h, c_v, 1.0)
     best = lp.solve(solver).objective
     dense = np.zeros((len(lp.row_lower) + 1, len(lp.cost)))
     for r in range(len(lp.row_lower)):
@@ -334,7 +340,7 @@ def test_optimal_field_is_not_unique_so_gain_norms_depend_on_the_vertex(solver):
                 row_lower=np.r_[lp.row_lower, -np.inf], row_upper=np.r_[lp.row_upper, best + 1e-9],
             )  # fmt: skip
             F = face.solve(solver).x[:6].reshape(2, 3)
-            gains.append(sy.min_norm_gain(F[:, :2], F[:, 2], p.landmarks))
+            gains.append(cell_lp.min_norm_gain(F[:, :2], F[:, 2], p.landmarks))
     norms = [np.linalg.norm(K) for K in gains]
     small, large = gains[int(np.argmin(norms))], gains[int(np.argmax(norms))]
     assert np.linalg.norm(large) > np.linalg.norm(small) + 1e-3
@@ -434,7 +440,7 @@ def test_exit_dir_must_point_into_the_cell(solver):
 
 def test_coincident_landmarks_warn(caplog):
     with caplog.at_level(logging.WARNING, logger=sy.__name__):
-        sy.min_norm_gain(np.eye(2), np.ones(2), np.array([[1.0, 2.0], [1.0, 2.0 + 1e-9]]))
+        cell_lp.min_norm_gain(np.eye(2), np.ones(2), np.array([[1.0, 2.0], [1.0, 2.0 + 1e-9]]))
     assert "cond" in caplog.text
 
 
@@ -557,4 +563,4 @@ def test_pipeline_cells_are_certified_and_rechecked(small_spec):
 
 def test_coincident_landmarks_are_an_input_error():
     with pytest.raises(ArtifactError):
-        sy.min_norm_gain(np.eye(2), np.ones(2), np.array([[1.0, 2.0], [1.0, 2.0]]))
+        cell_lp.min_norm_gain(np.eye(2), np.ones(2), np.array([[1.0, 2.0], [1.0, 2.0]]))

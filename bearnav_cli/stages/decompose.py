@@ -38,7 +38,6 @@ from bearnav_cli.geometry import (
     box_polygon,
     clip,
     landmark_coverage,
-    point_polygon_distance,
     polygon_rows,
 )
 
@@ -46,8 +45,7 @@ VERSION = 3
 log = logging.getLogger(__name__)
 
 #: Re-exported: the cell and barrier helpers are part of this stage's interface.
-__all__ = ["box_polygon", "cbf_rows", "clip", "corridor_rows", "goal_cbf_rows", "point_polygon_distance",
-           "polygon_rows", "wall_rows", "Params", "run", "summary"]  # fmt: skip
+__all__ = ["Params", "run", "summary"]
 
 CELL_MODES = ("funnel", "funnel-local", "paper")
 BARRIERS = ("corridor", "wedge")

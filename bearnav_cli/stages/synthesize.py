@@ -27,25 +27,16 @@ from dataclasses import dataclass
 import numpy as np
 
 from bearnav_cli.cell_lp import (
-    BOX_DIRECTIONS,
-    COND_WARNING,
     FIELD_MAP,
-    CellLp,
     CellProblem,
     FieldTemplates,
     LpTemplate,
-    dual_lp,
     dual_template,
     field_map,
     field_vertex_templates,
     gain_from_theta,
-    gram_condition,
-    landmark_matrix,
     min_norm_gain,
     theta_from_gain,
-    vertex_lp,
-    vertex_lp_field,
-    vertex_lp_gain,
     vertex_template,
 )
 from bearnav_cli.datatypes import CellFlag, Cells, CellStatus, Plan
@@ -54,13 +45,9 @@ from bearnav_cli.funnel import cell_tolerance, plan_tolerance_of
 from bearnav_cli.lp import LpResult, LpSolver, LpStatus
 
 __all__ = [
-    "BOX_DIRECTIONS", "COND_WARNING", "DELTA_FRACTION", "FIELD_MAP", "GAIN_STRUCTURES", "LP_FORMS", "VERSION",
-    "CellLp", "CellProblem", "CellSolution", "LpTemplate", "Margins", "Params", "PreparedCell", "SolveOutcome",
-    "cell_constants", "dual_lp", "dual_template", "field_map", "field_margins", "finish_cell", "gain_from_theta",
-    "goal_cell_solution",
-    "gram_condition", "landmark_matrix", "min_norm_gain", "prepare_cell", "run", "solve_cell", "solve_prepared",
-    "summary", "theta_from_gain", "vertex_lp", "vertex_lp_field", "vertex_lp_gain", "vertex_margins",
-    "vertex_template",
+    "CellSolution", "DELTA_FRACTION", "GAIN_STRUCTURES", "LP_FORMS", "Margins", "Params", "PreparedCell",
+    "SolveOutcome", "VERSION", "cell_constants", "field_margins", "finish_cell", "goal_cell_solution",
+    "prepare_cell", "run", "solve_cell", "solve_prepared", "summary", "vertex_margins",
 ]  # fmt: skip
 
 VERSION = 3
