@@ -596,3 +596,134 @@ def save_figure(fig: plt.Figure, path: str) -> None:
     """Write ``fig`` to ``path`` (format from the suffix) and close it."""
     fig.savefig(path, dpi=150)
     plt.close(fig)
+
+
+# --------------------------------------------------------------------------- perception and tags (issue 11)
+
+PERCEPTION_FAIL_COLOR = "#d62728"
+PERCEPTION_FAIL_FREE_COLOR = "#fd8d3c"
+EXISTING_TAG_COLOR = "#a50f15"
+PROPOSED_TAG_COLOR = "#6a3d9a"
+
+
+def _perception_legend(ax: plt.Axes) -> None:
+    """Axis labels, and one legend below the axes: the entries of a legend already drawn (e.g. by
+    :func:`figure_for`, whose obstacle proxies are not artists of the axes) and then the new ones."""
+    ax.set_xlabel(f"x ({AXIS_UNITS})")
+    ax.set_ylabel(f"y ({AXIS_UNITS})")
+    old = ax.get_legend()
+    handles = list(getattr(old, "legend_handles", None) or getattr(old, "legendHandles", [])) if old else []
+    labels = [t.get_text() for t in old.get_texts()] if old else []
+    for handle, label in zip(*ax.get_legend_handles_labels(), strict=True):
+        if label not in labels:
+            handles.append(handle)
+            labels.append(label)
+    if handles:
+        ax.legend(handles=handles, labels=labels, loc="upper center", bbox_to_anchor=(0.5, -0.07), ncol=3,
+                  fontsize=7, frameon=False)  # fmt: skip
+
+
+def plot_perception(ax: plt.Axes, coverage: Any, *, free: bool = True, landmarks: bool = True,
+                    legend: bool = True) -> plt.Axes:  # fmt: skip
+    """Where the perception rule fails: small red marks over the plan (issue 11; compute with ``perception``).
+
+    Draw it over :func:`figure_for` of the plan (or :func:`plot_map` with ``landmarks=False``).
+
+    Parameters
+    ----------
+    ax : Axes
+    coverage : PerceptionCoverage
+        :func:`bearnav_cli.perception.perception_coverage` (duck-typed: ``points`` (P, 2),
+        ``in_domain``, ``in_free`` and ``holds`` (P,) bool, ``fraction_domain``, ``fraction_free``,
+        ``landmarks`` (L, 2), ``fov_deg``, ``noise_deg``), so this module does not import it.
+    free : bool
+        Also mark the failing points of the free space outside ``D`` (orange dots).
+    landmarks : bool
+        Draw the landmarks the rule was evaluated with (triangles).
+    legend : bool
+        Label the axes (map units) and draw the legend.
+
+    Returns
+    -------
+    Axes
+        Artists carry the gids ``perception-fail-domain``, ``perception-fail-free`` and ``perception-tags``.
+    """
+    points, holds = np.asarray(coverage.points, float).reshape(-1, 2), np.asarray(coverage.holds, bool)
+    in_d, in_f = np.asarray(coverage.in_domain, bool), np.asarray(coverage.in_free, bool)
+    bad = points[in_d & ~holds]
+    share = 1.0 - coverage.fraction_domain
+    target = getattr(coverage, "error_target", None)
+    what = "fewer than 2 usable tags in view" if target is None else f"no fix within {target:g} in view"
+    label = f"{what}, in D ({share:.1%} of D; {coverage.fov_deg:g}° camera)"
+    ax.scatter(bad[:, 0], bad[:, 1], marker="x", s=6, lw=0.6, color=PERCEPTION_FAIL_COLOR, zorder=5.5,
+               gid="perception-fail-domain", label=label)  # fmt: skip
+    if free:
+        out = points[in_f & ~in_d & ~holds]
+        ax.scatter(out[:, 0], out[:, 1], marker=".", s=4, lw=0, color=PERCEPTION_FAIL_FREE_COLOR, zorder=5.4,
+                   gid="perception-fail-free", label="the same, in F outside D")  # fmt: skip
+    if landmarks:
+        lm = np.asarray(coverage.landmarks, float).reshape(-1, 2)
+        ax.scatter(lm[:, 0], lm[:, 1], marker="^", s=40, color=EXISTING_TAG_COLOR, edgecolor="white", linewidths=0.5,
+                   zorder=6, gid="perception-tags", label=f"tags ({len(lm)})")  # fmt: skip
+    if legend:
+        _perception_legend(ax)
+    return ax
+
+
+def plot_tags(ax: plt.Axes, proposal: Any, *, failures: bool = True, labels: bool = True,
+              uncoverable: bool = True, legend: bool = True) -> plt.Axes:  # fmt: skip
+    """Where to glue the proposed tags: existing tags, new ones labelled with their ids, what still fails.
+
+    Draw it over :func:`figure_for` of the plan (or :func:`plot_map` with ``landmarks=False``).
+
+    Parameters
+    ----------
+    ax : Axes
+    proposal : TagProposal
+        :func:`bearnav_cli.tags.propose_tags` (duck-typed: ``ids``, ``positions`` (K, 2),
+        ``normals`` (K, 2), ``uncoverable`` (U, 2), ``before`` and ``after`` coverages as
+        :func:`plot_perception` reads them).
+    failures : bool
+        Mark where the rule still fails with the new tags (:func:`plot_perception` of ``after``).
+    labels : bool
+        Write each new tag's id beside it.
+    uncoverable : bool
+        Mark the points of ``D`` no placement can cover (grey).
+    legend : bool
+        Label the axes (map units) and draw the legend.
+
+    Returns
+    -------
+    Axes
+        Artists carry the gids ``existing-tags``, ``proposed-tags``, ``proposed-tag-label`` (one text
+        per new tag), ``proposed-tag-facing`` and ``uncoverable``, besides those of :func:`plot_perception`.
+    """
+    if failures:
+        plot_perception(ax, proposal.after, landmarks=False, legend=False)
+    old = np.asarray(proposal.before.landmarks, float).reshape(-1, 2)
+    ax.scatter(old[:, 0], old[:, 1], marker="^", s=40, color=EXISTING_TAG_COLOR, edgecolor="white", linewidths=0.5,
+               zorder=6, gid="existing-tags", label=f"existing tags ({len(old)})")  # fmt: skip
+    new = np.asarray(proposal.positions, float).reshape(-1, 2)
+    ax.scatter(new[:, 0], new[:, 1], marker="D", s=34, color=PROPOSED_TAG_COLOR, edgecolor="white", linewidths=0.6,
+               zorder=6.5, gid="proposed-tags", label=f"proposed tags ({len(new)})")  # fmt: skip
+    if len(new):
+        normals = np.asarray(proposal.normals, float).reshape(-1, 2)
+        xmin, xmax = ax.get_xlim()
+        scale = 0.02 * abs(xmax - xmin) if xmax != xmin else 0.1
+        tips = new + scale * normals
+        ax.add_collection(LineCollection(np.stack([new, tips], axis=1), colors=PROPOSED_TAG_COLOR, linewidths=1.0,
+                                         zorder=6.4, gid="proposed-tag-facing"))  # fmt: skip
+    if labels:
+        for name, p, n in zip(proposal.ids, new, np.asarray(proposal.normals, float).reshape(-1, 2), strict=True):
+            ha = "left" if n[0] >= 0 else "right"
+            va = "bottom" if n[1] >= 0 else "top"
+            ax.annotate(str(name), p, xytext=(4 * np.sign(n[0]), 4 * np.sign(n[1])), textcoords="offset points",
+                        ha=ha, va=va, fontsize=6.5, color=PROPOSED_TAG_COLOR, zorder=8, gid="proposed-tag-label",
+                        path_effects=[patheffects.withStroke(linewidth=2, foreground="white")])  # fmt: skip
+    stuck = np.asarray(proposal.uncoverable, float).reshape(-1, 2)
+    if uncoverable and len(stuck):
+        ax.scatter(stuck[:, 0], stuck[:, 1], marker="s", s=5, lw=0, color=UNREACHED_COLOR, zorder=5.6,
+                   gid="uncoverable", label=f"no placement covers ({len(stuck)} points)")  # fmt: skip
+    if legend:
+        _perception_legend(ax)
+    return ax

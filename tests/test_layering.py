@@ -16,6 +16,7 @@ LAYERS = {
     "runtime": 2,  # the numpy-only package a robot installs: its modules import each other and errors only
     "cell_lp": 2.5, "routes": 2.5, "barriers": 2.5, "funnel": 2.5,  # build on lp and geometry
     "composition": 2.7,  # the §11.6 checks, on funnel and geometry; verify builds on it
+    "perception": 2.8, "tags": 2.9,  # issue 11 analyses on runtime, geometry and composition (tags also on lp)
     "stages": 3, "verify": 3,
     "artifacts": 4, "pipeline": 5,
     "cli": 6,

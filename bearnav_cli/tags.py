@@ -1,0 +1,609 @@
+"""Where to glue more tags: a greedy set cover of the perception rule and the bound it certifies (issue 11, part 1).
+
+:func:`propose_tags` places new tags on obstacle and wall boundaries so that the perception rule of
+:mod:`bearnav_cli.perception` (the camera looks along the field; two or more tags in view, in range
+and in line of sight, spread enough for a usable ``lsq`` fix, optionally with predicted error at
+most a target) holds at every grid point of the certified domain ``D`` where any placement can make
+it hold (docs/algorithms.md, "Perception coverage and tag placement"):
+
+1. **Candidates** (:func:`candidates`): points on every boundary edge of the raw obstacles and on
+   the four walls of the bounds ``B``, ``tag_width`` apart along each edge (one at the middle of an
+   edge shorter than that, e.g. the facets of a disc), kept where the free side is real free space
+   (the point nudged off the edge along its normal by :data:`NUDGE`·D is in ``B`` and outside every
+   raw obstacle) and some evaluation point sees it, at least ``tag_width`` from every existing tag
+   and from each other. Positions lie exactly on the boundary, which the map stage accepts.
+2. **Greedy** (the baseline): repeatedly add the candidate that makes the rule hold at the most
+   additional points of ``D`` (ties, including the first tag of a region that sees none, go to the
+   largest progress ``ψ``: a quarter per tag up to two, a quarter for the spread and error reached,
+   all of it once the rule holds; then the lowest index), until it holds at every point that can
+   be covered or ``max_tags`` are placed. Every (point, candidate) pair is evaluated at once: each
+   point keeps its running sums ``Σ_k P_k`` and ``Σ_k P_k/d_k²`` (``P_k = I − β_kβ_kᵀ``), so adding
+   a candidate is a closed-form 2×2 ``λ_min`` for every pair. A pruning pass then drops, the last
+   chosen first, every tag whose removal keeps the rule wherever it holds (``Params.prune``).
+3. **Lower bound**: the LP relaxation of the necessary condition "every coverable point of ``D``
+   sees at least two tags", ``min Σ x_c`` subject to ``Σ_{c seen from p} x_c ≥ 2 − (existing tags
+   seen from p)``, ``0 ≤ x ≤ 1`` (:class:`bearnav_cli.lp.LpSolver`); no placement among the
+   candidates that reaches the target uses fewer than ``ceil(LP optimum)`` new tags.
+
+:func:`map_spec_with_tags` appends the proposal to a map description (DESIGN §4); writing it is the
+caller's business. ``plot.plot_tags`` draws a proposal.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+import re
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import shapely
+
+from bearnav_cli import perception
+from bearnav_cli.errors import InvalidParamsError
+from bearnav_cli.geometry import FreeSpace
+from bearnav_cli.lp import INF, LpSolver, LpStatus
+from bearnav_cli.perception import EvaluationGrid, PerceptionCoverage
+from bearnav_cli.runtime import bearing
+
+__all__ = [
+    "NUDGE",
+    "TAG_WIDTH_FRACTION",
+    "Candidates",
+    "Params",
+    "TagProposal",
+    "candidates",
+    "map_spec_with_tags",
+    "new_tag_ids",
+    "propose_tags",
+]
+
+#: Default tag width as a fraction of the bounds' diagonal D: 0.19 m on the kitchen (D = 12.8 m), the
+#: size of a printed AprilTag; in map units, so it scales with maps drawn in other units.
+TAG_WIDTH_FRACTION = 0.015
+#: A candidate's free side is tested this far off its edge (fraction of D).
+NUDGE = 1e-6
+#: The LP optimum is rounded up after removing this much (solver tolerance).
+LP_SLACK = 1e-6
+
+
+@dataclass(frozen=True)
+class Params:
+    """Parameters of :func:`propose_tags` (deterministic: no seed).
+
+    Attributes
+    ----------
+    fov_deg : float
+        Camera field of view (degrees), in ``(0, 360]``.
+    max_range : float
+        Sensing range (map units), ``> 0``; ``inf`` for unlimited.
+    noise_deg : float
+        Bearing noise σ (degrees, ``≥ 0``): the predicted error ``3σ`` of a fix scales with it.
+    error_target : float or None
+        ``E`` (map units): the rule also needs predicted error ``≤ E``; ``None``: no error target.
+    max_tags : int or None
+        At most this many new tags (``≥ 0``); ``None``: as many as the target needs.
+    tag_width : float or None
+        Spacing of the candidates and least distance between tags (map units, ``> 0``); ``None``:
+        ``TAG_WIDTH_FRACTION·D``.
+    spacing : float or None
+        Spacing of the evaluation grid (map units, ``> 0``); ``None``: ``D/100``.
+    min_spread_deg : float
+        ``θ_min`` of a usable fix (degrees, ALGORITHMS §6.2), the runtime's 2° by default.
+    prune : bool
+        After the greedy, drop every chosen tag (the last chosen first) whose removal keeps the rule
+        wherever it holds; ``False`` gives the plain greedy.
+    """
+
+    fov_deg: float = 60.0
+    max_range: float = math.inf
+    noise_deg: float = 1.0
+    error_target: float | None = None
+    max_tags: int | None = None
+    tag_width: float | None = None
+    spacing: float | None = None
+    min_spread_deg: float = 2.0
+    prune: bool = True
+
+    def __post_init__(self) -> None:
+        perception.check_params(self.fov_deg, self.noise_deg, self.max_range, self.error_target, self.min_spread_deg,
+                                self.spacing)  # fmt: skip
+        m = self.max_tags
+        if m is not None and (isinstance(m, bool) or not isinstance(m, (int, np.integer)) or m < 0):
+            raise InvalidParamsError(f"must be an integer >= 0, got {m!r}", field="max_tags")
+        w = self.tag_width
+        if w is not None and (isinstance(w, bool) or not isinstance(w, (int, float, np.integer, np.floating))
+                              or not (w > 0 and math.isfinite(w))):  # fmt: skip
+            raise InvalidParamsError(f"must be positive, got {w!r}", field="tag_width")
+
+    def width(self, diagonal: float) -> float:
+        """The tag width in map units for a map of diagonal ``diagonal``."""
+        return TAG_WIDTH_FRACTION * diagonal if self.tag_width is None else float(self.tag_width)
+
+
+# --------------------------------------------------------------------------- candidates
+
+
+@dataclass(frozen=True, eq=False)
+class Candidates:
+    """Tag positions the greedy may choose from, ``C`` of them.
+
+    Attributes
+    ----------
+    positions : ndarray, shape (C, 2)
+        On a raw obstacle's boundary or a wall of ``B`` (map units).
+    normals : ndarray, shape (C, 2)
+        Unit normal of the edge, pointing to its free side (where the tag faces).
+    on_wall : ndarray of bool, shape (C,)
+        On a wall of the bounds (else on an obstacle).
+    """
+
+    positions: np.ndarray
+    normals: np.ndarray
+    on_wall: np.ndarray
+
+
+def _box_ring(bounds: np.ndarray) -> np.ndarray:
+    xmin, ymin, xmax, ymax = (float(v) for v in bounds)
+    return np.array([[xmin, ymin], [xmax, ymin], [xmax, ymax], [xmin, ymax]])
+
+
+def _edge_samples(ring: np.ndarray, width: float) -> tuple[np.ndarray, np.ndarray]:
+    """Points ``width`` apart along each edge of a closed ring (the middle of a shorter edge), and each one's edge's
+    left unit normal; shapes (n, 2), (n, 2)."""
+    a = np.asarray(ring, float).reshape(-1, 2)
+    b = np.roll(a, -1, axis=0)
+    d = b - a
+    length = np.hypot(d[:, 0], d[:, 1])
+    keep = length > 0
+    a, d, length = a[keep], d[keep], length[keep]
+    count = np.maximum(1, np.floor(length / width)).astype(np.int64)
+    edge = np.repeat(np.arange(len(a)), count)
+    k = np.arange(int(count.sum())) - np.repeat(np.cumsum(count) - count, count)
+    t = (k + 0.5) / count[edge]
+    points = a[edge] + t[:, None] * d[edge]
+    # an axis-parallel edge keeps its constant coordinate exactly (a + t·0)
+    left = np.column_stack([-d[:, 1], d[:, 0]]) / length[:, None]
+    return points, left[edge]
+
+
+def _thin(points: np.ndarray, blockers: np.ndarray, width: float) -> np.ndarray:
+    """Indices of ``points`` kept in order so that each is at least ``width`` from the blockers and the kept ones."""
+    kept: list[int] = []
+    taken = np.asarray(blockers, float).reshape(-1, 2)
+    if len(points) and len(taken):
+        d = np.hypot(*(points[:, None, :] - taken[None]).transpose(2, 0, 1))
+        free = np.all(d >= width, axis=1)
+    else:
+        free = np.ones(len(points), bool)
+    chosen = np.zeros((0, 2))
+    for i in np.flatnonzero(free):
+        if len(chosen) and np.min(np.hypot(*(chosen - points[i]).T)) < width:
+            continue
+        kept.append(int(i))
+        chosen = np.vstack([chosen, points[i]])
+    return np.array(kept, np.int64)
+
+
+def candidates(map_: Any, width: float, space: Any = None) -> Candidates:
+    """Candidate tag positions on the raw obstacles' boundaries and the walls (step 1 of the module docstring).
+
+    Only the geometric filters: on the boundary, the free side real (nudged point in ``B`` and
+    outside every raw obstacle), at least ``width`` from every existing tag and from each other
+    (walls first, then obstacles, in ring order). :func:`propose_tags` also drops the candidates
+    no evaluation point sees.
+
+    Parameters
+    ----------
+    map_ : Map
+    width : float
+        Tag width (map units).
+    space : FreeSpace, optional
+        ``FreeSpace.from_map(map_)``, when already built.
+
+    Returns
+    -------
+    Candidates
+    """
+    if space is None:
+        space = FreeSpace.from_map(map_)
+    rings = [(_box_ring(map_.bounds), True)]
+    for poly in map_.raw_obstacles:
+        rings += [(poly.exterior, False)] + [(h, False) for h in poly.holes]
+    pts, nrm, wall = [np.zeros((0, 2))], [np.zeros((0, 2))], [np.zeros(0, bool)]
+    for ring, on_wall in rings:
+        p, n = _edge_samples(ring, width)
+        pts.append(p)
+        nrm.append(n)
+        wall.append(np.full(len(p), on_wall))
+    points, normals, on_wall = np.concatenate(pts), np.concatenate(nrm), np.concatenate(wall)
+    eps = NUDGE * map_.diagonal
+    lo, hi = np.asarray(map_.bounds[:2], float), np.asarray(map_.bounds[2:], float)
+
+    def free_side(q: np.ndarray) -> np.ndarray:
+        ok = np.all((q >= lo) & (q <= hi), axis=1)
+        if ok.any() and not space.raw_obstacles.is_empty:
+            ok[ok] = ~shapely.intersects_xy(space.raw_obstacles, q[ok, 0], q[ok, 1])
+        return ok
+
+    in_box = np.all((points >= lo) & (points <= hi), axis=1)
+    plus, minus = free_side(points + eps * normals), free_side(points - eps * normals)
+    keep = in_box & (plus != minus)  # exactly one side free: a real boundary between an obstacle and free space
+    normals = np.where(plus[:, None], normals, -normals)
+    points, normals, on_wall = points[keep], normals[keep], on_wall[keep]
+    order = _thin(points, map_.landmarks, width)
+    return Candidates(points[order], normals[order], on_wall[order])
+
+
+# --------------------------------------------------------------------------- the closed-form rule
+
+
+def _lam_min(a11: np.ndarray, a22: np.ndarray, a12: np.ndarray) -> np.ndarray:
+    """Smallest eigenvalue of ``[[a11, a12], [a12, a22]]`` (the formula of ``bearing``'s ``lsq``)."""
+    return 0.5 * (a11 + a22) - np.hypot(0.5 * (a11 - a22), a12)
+
+
+@dataclass
+class _Sums:
+    """Running sums of one set of points: tag count, ``Σ P_k`` and ``Σ P_k/d_k²`` as (a11, a22, a12)."""
+
+    n: np.ndarray
+    s: np.ndarray  # (P, 3)
+    w: np.ndarray  # (P, 3)
+
+
+@dataclass(frozen=True)
+class _Rule:
+    """The perception rule in closed form on the running sums (equal to ``fix_quality`` up to rounding)."""
+
+    spread: float  # 1 − cos θ_min
+    sigma: float  # radians
+    target: float | None  # map units
+
+    def holds_and_progress(self, n: np.ndarray, s: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        lam_s = _lam_min(s[..., 0], s[..., 1], s[..., 2])
+        det = s[..., 0] * s[..., 1] - s[..., 2] * s[..., 2]
+        q = np.minimum(1.0, np.maximum(lam_s, 0.0) / self.spread)
+        ok = (n >= 2) & (lam_s >= self.spread) & (det > 0)
+        if self.target is not None and self.sigma > 0:
+            lam_w = _lam_min(w[..., 0], w[..., 1], w[..., 2])
+            error = 3.0 * self.sigma / np.sqrt(np.maximum(lam_w, 1e-300))
+            ok &= error <= self.target
+            q = np.minimum(q, np.minimum(1.0, self.target / error))
+        progress = np.where(ok, 1.0, 0.25 * np.minimum(n, 2) + 0.25 * (n >= 2) * np.minimum(q, 0.999))
+        return ok, progress
+
+
+def _projectors(points: np.ndarray, landmarks: np.ndarray, tol: float) -> tuple[np.ndarray, np.ndarray]:
+    """``P = I − ββᵀ`` as (a11, a22, a12) and ``P/max(d², tol²)``, for every point × landmark, shapes (P, L, 3)."""
+    unit, dist = bearing.directions(points, landmarks)
+    bx, by = unit[..., 0], unit[..., 1]
+    proj = np.stack([1.0 - bx * bx, 1.0 - by * by, -bx * by], axis=-1)
+    return proj, proj / np.maximum(dist * dist, tol * tol)[..., None]
+
+
+# --------------------------------------------------------------------------- the proposal
+
+
+@dataclass(frozen=True, eq=False)
+class TagProposal:
+    """New tags for a plan's map and what they achieve; ``K`` new tags, ``C`` candidates.
+
+    Attributes
+    ----------
+    ids : tuple of str, length K
+        New tag ids, none equal to an existing one (``tagN`` continuing the map's numbering, or
+        integers when every existing id is one).
+    positions : ndarray, shape (K, 2)
+        Where to glue them (map units), on a raw obstacle's boundary or a wall, in the order chosen.
+    normals : ndarray, shape (K, 2)
+        Unit normal of each tag's surface, toward the free side it faces.
+    gains : ndarray of int64, shape (K,)
+        Grid points of ``D`` where the rule comes to hold as each new tag is added in turn, in the
+        order of ``ids`` (the rule in the greedy's closed form).
+    before, after : PerceptionCoverage
+        The rule with the map's tags, and with the new ones added (fractions of ``D`` and ``F``).
+    lower_bound : int
+        ``ceil`` of the LP optimum: no placement among the candidates reaching the target uses fewer
+        new tags.
+    lp_objective : float
+        The LP optimum itself (NaN if the LP did not solve).
+    uncoverable : ndarray, shape (U, 2)
+        Points of ``D`` where the rule fails even with every candidate added (map units).
+    coverable_fraction : float
+        Share of the points of ``D`` where some placement makes the rule hold.
+    target_reached : bool
+        The rule holds, after, at every coverable point of ``D`` (false when ``max_tags`` stopped it).
+    candidates : Candidates
+        Every candidate considered.
+    params : Params
+    tag_width : float
+        The tag width used (map units).
+    """
+
+    ids: tuple
+    positions: np.ndarray
+    normals: np.ndarray
+    gains: np.ndarray
+    before: PerceptionCoverage
+    after: PerceptionCoverage
+    lower_bound: int
+    lp_objective: float
+    uncoverable: np.ndarray
+    coverable_fraction: float
+    target_reached: bool
+    candidates: Candidates
+    params: Params
+    tag_width: float
+    stats: dict = field(default_factory=dict, compare=False)
+
+    @property
+    def count(self) -> int:
+        """Number of new tags ``K``."""
+        return len(self.ids)
+
+    @property
+    def landmarks(self) -> np.ndarray:
+        """Existing and new tag positions, shape (L + K, 2): the landmarks of the map with the tags."""
+        return self.after.landmarks
+
+    @property
+    def landmark_ids(self) -> tuple:
+        """Existing and new ids, length L + K."""
+        return self.after.landmark_ids
+
+    def summary(self) -> str:
+        """One line: tags added against the lower bound, and the coverage of ``D`` and ``F`` before and after."""
+        reached = "target reached" if self.target_reached else "target NOT reached"
+        return (f"{self.count} new tags (lower bound {self.lower_bound}) to the {len(self.before.landmarks)} of the "
+                f"map, {reached}: rule holds on {self.before.fraction_domain:.1%} → {self.after.fraction_domain:.1%} "
+                f"of D and {self.before.fraction_free:.1%} → {self.after.fraction_free:.1%} of F; "
+                f"{1.0 - self.coverable_fraction:.1%} of D cannot be covered")  # fmt: skip
+
+
+def new_tag_ids(existing: Any, count: int) -> tuple[str, ...]:
+    """``count`` ids that clash with none of ``existing``.
+
+    Every existing id an integer: the next integers. Otherwise ``tagN`` with ``N`` after the largest
+    existing ``tagN`` (``tag0`` without one), skipping any id already taken.
+    """
+    taken = {str(i) for i in existing}
+    if taken and all(re.fullmatch(r"\d+", i) for i in taken):
+        prefix, start = "", max(int(i) for i in taken) + 1
+    else:
+        numbers = [int(m.group(1)) for i in taken if (m := re.fullmatch(r"tag(\d+)", i))]
+        prefix, start = "tag", max(numbers, default=-1) + 1
+    out: list[str] = []
+    n = start
+    while len(out) < count:
+        name = f"{prefix}{n}"
+        if name not in taken:
+            out.append(name)
+        n += 1
+    return tuple(out)
+
+
+def _lower_bound(visible: np.ndarray, deficit: np.ndarray) -> tuple[int, float]:
+    """``ceil`` of ``min Σ x`` s.t. ``visible @ x ≥ deficit``, ``0 ≤ x ≤ 1`` (over the rows with a positive
+    deficit), and the optimum itself (NaN if the LP does not solve)."""
+    rows = deficit > 0
+    if not rows.any():
+        return 0, 0.0
+    v, r = visible[rows], deficit[rows]
+    # identical rows are one constraint
+    packed = np.concatenate([np.packbits(v, axis=1), r[:, None].astype(np.uint8)], axis=1)
+    _, first = np.unique(packed, axis=0, return_index=True)
+    v, r = v[np.sort(first)], r[np.sort(first)]
+    n_c = v.shape[1]
+    indptr = np.concatenate([[0], np.cumsum(v.sum(axis=1))]).astype(np.int32)
+    indices = np.nonzero(v)[1].astype(np.int32)
+    result = LpSolver().solve(np.ones(n_c), indptr, indices, np.ones(len(indices)), r.astype(float),
+                              np.full(len(r), INF), np.zeros(n_c), np.ones(n_c))  # fmt: skip
+    if result.status is not LpStatus.OPTIMAL:
+        return 0, math.nan
+    return int(math.ceil(result.objective - LP_SLACK)), float(result.objective)
+
+
+@dataclass(frozen=True)
+class _Pairs:
+    """Every (point of D, candidate) pair where the camera sees the candidate, with the candidate's projector there."""
+
+    point: np.ndarray  # (n,) index into the points of D
+    cand: np.ndarray  # (n,) candidate index
+    proj: np.ndarray  # (n, 3) P = I − ββᵀ as (a11, a22, a12)
+    wproj: np.ndarray  # (n, 3) P / max(d², tol²)
+
+    @classmethod
+    def build(cls, seen: np.ndarray, points: np.ndarray, positions: np.ndarray, tol: float) -> _Pairs:
+        pi, ci = np.nonzero(seen)
+        d = positions[ci] - points[pi]
+        dist = np.hypot(d[:, 0], d[:, 1])
+        unit = d / np.where(dist > 0, dist, 1.0)[:, None]
+        bx, by = unit[:, 0], unit[:, 1]
+        proj = np.stack([1.0 - bx * bx, 1.0 - by * by, -bx * by], axis=1)
+        return cls(pi, ci, proj, proj / np.maximum(dist * dist, tol * tol)[:, None])
+
+    def add(self, sums: _Sums, c: int, sign: int = 1) -> np.ndarray:
+        """Add (``sign = -1``: remove) candidate ``c`` to the running sums; returns the points it is seen from."""
+        at = self.cand == c
+        p = self.point[at]
+        sums.n[p] += sign
+        sums.s[p] += sign * self.proj[at]
+        sums.w[p] += sign * self.wproj[at]
+        return p
+
+
+def _per_point(point: np.ndarray, values: np.ndarray, n: int) -> np.ndarray:
+    """Sums of the rows of ``values`` (m, 3) per point index, shape (n, 3)."""
+    return np.stack([np.bincount(point, values[:, k], n) for k in range(values.shape[1])], axis=1)
+
+
+def _greedy(pairs: _Pairs, sums: _Sums, coverable: np.ndarray, rule: _Rule, n_cand: int,
+            limit: float) -> list[int]:  # fmt: skip
+    """Step 2 of the module docstring; updates ``sums`` in place and returns the chosen candidates in order."""
+    covered, psi = rule.holds_and_progress(sums.n, sums.s, sums.w)
+    available = np.ones(n_cand, bool)
+    order = np.arange(n_cand)
+    chosen: list[int] = []
+    while len(chosen) < limit:
+        sel = (coverable & ~covered)[pairs.point] & available[pairs.cand]
+        if not sel.any():
+            break
+        p, c = pairs.point[sel], pairs.cand[sel]
+        ok, prog = rule.holds_and_progress(sums.n[p] + 1, sums.s[p] + pairs.proj[sel], sums.w[p] + pairs.wproj[sel])
+        primary = np.bincount(c, ok.astype(np.int64), n_cand)
+        progress = np.bincount(c, prog - psi[p], n_cand)
+        primary[~available] = -1
+        best = int(np.lexsort((order, -progress, -primary))[0])
+        if primary[best] <= 0 and not progress[best] > 0:
+            break  # nothing left helps (only possible with an error target)
+        seen_from = pairs.add(sums, best)
+        covered[seen_from], psi[seen_from] = rule.holds_and_progress(sums.n[seen_from], sums.s[seen_from],
+                                                                     sums.w[seen_from])  # fmt: skip
+        available[best] = False
+        chosen.append(best)
+    return chosen
+
+
+def _prune(chosen: list[int], pairs: _Pairs, sums: _Sums, rule: _Rule) -> list[int]:
+    """Drop chosen tags, the last chosen first, whose removal keeps the rule wherever it holds (``sums`` in place)."""
+    covered = rule.holds_and_progress(sums.n, sums.s, sums.w)[0]
+    keep = list(chosen)
+    for c in reversed(chosen):
+        p = pairs.add(sums, c, -1)
+        if np.all(rule.holds_and_progress(sums.n[p], sums.s[p], sums.w[p])[0] | ~covered[p]):
+            keep.remove(c)
+        else:
+            pairs.add(sums, c)
+    return keep
+
+
+def _gains(chosen: list[int], pairs: _Pairs, sums: _Sums, rule: _Rule) -> np.ndarray:
+    """Points where the rule comes to hold as each chosen tag is added in turn (``sums`` in place)."""
+    covered = rule.holds_and_progress(sums.n, sums.s, sums.w)[0]
+    out = []
+    for c in chosen:
+        p = pairs.add(sums, c)
+        ok = rule.holds_and_progress(sums.n[p], sums.s[p], sums.w[p])[0]
+        out.append(int(np.sum(ok & ~covered[p])))
+        covered[p] |= ok
+    return np.array(out, np.int64)
+
+
+def propose_tags(plan: Any, params: Params = Params()) -> TagProposal:
+    """New tags so that the perception rule holds wherever it can in the certified domain (issue 11, part 1).
+
+    See the module docstring for the candidates, the greedy and the bound. The fields do not depend
+    on the landmarks (ALGORITHMS Lemma 3), so the plan's headings hold for the new tags and
+    re-planning with them keeps the cells; only the gains change.
+
+    Parameters
+    ----------
+    plan : Plan
+        A ``bearnav.plan/2`` plan.
+    params : Params
+
+    Returns
+    -------
+    TagProposal
+        ``after`` is the rule re-evaluated by :func:`bearnav_cli.perception.evaluate` (the runtime's
+        own reconstruction) with the map's tags and the new ones; ``stats`` holds ``candidates``,
+        ``domain_points``, ``pairs`` (visible point × candidate pairs) and ``greedy`` (tags the
+        greedy chose before pruning).
+    """
+    map_ = plan.map
+    width = params.width(map_.diagonal)
+    grid: EvaluationGrid = perception.evaluation_grid(plan, params.spacing)
+    camera = dict(fov_deg=params.fov_deg, noise_deg=params.noise_deg, max_range=params.max_range,
+                  error_target=params.error_target, min_spread_deg=params.min_spread_deg)  # fmt: skip
+    existing_sight = grid.space.visibility_regions(map_.landmarks)
+    before = perception.evaluate(grid, map_.landmarks, map_.landmark_ids, sight=existing_sight, **camera)
+
+    cand = candidates(map_, width, grid.space)
+    sight = grid.space.visibility_regions(cand.positions)
+    seen_all = perception.visible_landmarks(grid.points, grid.heading, cand.positions, params.fov_deg,
+                                            params.max_range, sight, grid.tol)  # fmt: skip
+    useful = np.flatnonzero(seen_all.any(axis=0))  # seen from some evaluation point
+    cand = Candidates(cand.positions[useful], cand.normals[useful], cand.on_wall[useful])
+    sight = [sight[k] for k in useful]
+    dom = np.flatnonzero(grid.in_domain)
+    xd = grid.points[dom]
+    pairs = _Pairs.build(seen_all[np.ix_(dom, useful)], xd, cand.positions, grid.tol)
+
+    rule = _Rule(1.0 - math.cos(math.radians(params.min_spread_deg)), math.radians(params.noise_deg),
+                 params.error_target)  # fmt: skip
+    # running sums of the existing tags at every point of D
+    v0 = before.visible[dom].astype(float)
+    proj0, wproj0 = _projectors(xd, map_.landmarks, grid.tol)
+    start = _Sums(v0.sum(axis=1).astype(np.int64), np.einsum("pl,plk->pk", v0, proj0),
+                  np.einsum("pl,plk->pk", v0, wproj0))  # fmt: skip
+    # coverable: the rule holds with every candidate added
+    n_d = len(dom)
+    full = _Sums(start.n + np.bincount(pairs.point, minlength=n_d), start.s + _per_point(pairs.point, pairs.proj, n_d),
+                 start.w + _per_point(pairs.point, pairs.wproj, n_d))  # fmt: skip
+    coverable = rule.holds_and_progress(full.n, full.s, full.w)[0] | rule.holds_and_progress(start.n, start.s,
+                                                                                             start.w)[0]  # fmt: skip
+    deficit = np.where(coverable, np.maximum(0, 2 - start.n), 0)
+    seen_d = np.zeros((n_d, len(cand.positions)), bool)
+    seen_d[pairs.point, pairs.cand] = True
+    lower_bound, lp_objective = _lower_bound(seen_d, deficit)
+
+    limit = math.inf if params.max_tags is None else int(params.max_tags)
+    sums = _Sums(start.n.copy(), start.s.copy(), start.w.copy())
+    chosen = _greedy(pairs, sums, coverable, rule, len(cand.positions), limit)
+    greedy_count = len(chosen)
+    if params.prune:
+        chosen = _prune(chosen, pairs, sums, rule)
+    gains = _gains(chosen, pairs, _Sums(start.n.copy(), start.s.copy(), start.w.copy()), rule)
+
+    idx = np.array(chosen, np.int64)
+    ids = new_tag_ids(map_.landmark_ids, len(idx))
+    positions = cand.positions[idx].reshape(-1, 2)
+    after = perception.evaluate(grid, np.vstack([map_.landmarks, positions]), (*map_.landmark_ids, *ids),
+                                sight=existing_sight + [sight[k] for k in idx], **camera)  # fmt: skip
+    return TagProposal(
+        ids=ids, positions=positions, normals=cand.normals[idx].reshape(-1, 2), gains=gains, before=before,
+        after=after, lower_bound=lower_bound, lp_objective=lp_objective, uncoverable=xd[~coverable],
+        coverable_fraction=float(coverable.mean()) if n_d else math.nan,
+        target_reached=bool(np.all(after.holds[dom][coverable])), candidates=cand, params=params, tag_width=width,
+        stats={"candidates": len(cand.positions), "domain_points": n_d, "pairs": len(pairs.point),
+               "greedy": greedy_count},
+    )  # fmt: skip
+
+
+def map_spec_with_tags(spec: dict, proposal: TagProposal) -> dict:
+    """A map description (DESIGN §4, as ``yaml.safe_load`` returns it) with the proposed tags appended.
+
+    The existing landmarks and every other key are kept as they are (a deep copy: ``spec`` itself is
+    not changed); each new tag is appended as ``{id, position: [x, y]}``.
+
+    Parameters
+    ----------
+    spec : dict
+        The map description the plan was made from.
+    proposal : TagProposal
+
+    Returns
+    -------
+    dict
+
+    Raises
+    ------
+    InvalidParamsError
+        ``spec`` has no landmark list, or one of its ids is a proposed id (the proposal belongs to
+        another map).
+    """
+    if not isinstance(spec, dict) or not isinstance(spec.get("landmarks"), list):
+        raise InvalidParamsError("the map description has no list of landmarks", field="landmarks")
+    out = copy.deepcopy(spec)
+    ids = set()
+    for k, item in enumerate(out["landmarks"]):
+        ids.add(str(item.get("id", k)) if isinstance(item, dict) else str(k))
+    clash = sorted(ids & set(proposal.ids))
+    if clash:
+        raise InvalidParamsError(f"proposed id {clash[0]!r} is already a landmark of this map description "
+                                 "(was the plan made from it?)", field="landmarks")  # fmt: skip
+    for name, p in zip(proposal.ids, proposal.positions, strict=True):
+        out["landmarks"].append({"id": name, "position": [float(p[0]), float(p[1])]})
+    return out

@@ -1,0 +1,214 @@
+"""Perception coverage (issue 11 part 2): the rule, checked against an independent evaluation.
+
+On small random maps (tests/funnel_maps.py and the shared random-map tool): the camera heading is
+the direction of the runtime's field (computed here through ``cell_policy.field``, the gain applied
+to the displacements, not the affine form the module uses), visibility is the segment test of
+``FreeSpace.visible`` with an own field-of-view test, the fix is usable exactly when two or more
+tags are seen with ``λ_min(Σ P_k) ≥ 1 − cos 2°`` (numpy's ``eigvalsh``), and the predicted error
+is ``3σ/sqrt(λ_min(Σ P_k/d_k²))``. Then monotonicity in the camera, the error target, the noise
+scaling, bad parameters and the figure.
+"""
+
+from __future__ import annotations
+
+import functools
+import logging
+import math
+
+import matplotlib
+
+matplotlib.use("Agg")
+
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+
+from bearnav_cli import perception, plot  # noqa: E402
+from bearnav_cli.errors import InvalidParamsError  # noqa: E402
+from bearnav_cli.geometry import FreeSpace  # noqa: E402
+from bearnav_cli.runtime import cell_policy  # noqa: E402
+from bearnav_cli.runtime.plan_arrays import PlanArrays  # noqa: E402
+from bench.common import run_stages  # noqa: E402
+from tests.conftest import build_map  # noqa: E402
+from tests.funnel_maps import load_random_map_tool, random_spec  # noqa: E402
+
+PIPELINE = ["rrtstar", "simplify", "decompose", "synthesize"]
+ITERATIONS = 300
+#: Coarser than the default D/100, to keep the file fast; the rule does not depend on it.
+CELLS = 60
+
+
+@pytest.fixture(autouse=True)
+def _quiet(caplog):
+    caplog.set_level(logging.ERROR)  # random maps have blind spots: the map stage warns
+
+
+@functools.cache
+def random_plan(seed: int):
+    return run_stages(build_map(random_spec(seed, ITERATIONS)), PIPELINE)
+
+
+@functools.cache
+def tool_plan(seed: int, kind: str):
+    spec, _ = load_random_map_tool().generate(seed, kind)
+    spec.setdefault("params", {})["rrtstar"] = {"iterations": ITERATIONS, "seed": 0}
+    return run_stages(build_map(spec), PIPELINE)
+
+
+def plans():
+    return [("random 0", lambda: random_plan(0)), ("random 3", lambda: random_plan(3)),
+            ("rooms 2", lambda: tool_plan(2, "rooms"))]  # fmt: skip
+
+
+def spacing_of(plan) -> float:
+    return plan.map.diagonal / CELLS
+
+
+def _wrap(a):
+    return (np.asarray(a) + math.pi) % (2 * math.pi) - math.pi
+
+
+# --------------------------------------------------------------------------- the rule, independently
+
+
+@pytest.mark.parametrize("name,make", plans(), ids=[p[0] for p in plans()])
+def test_rule_matches_an_independent_evaluation(name, make):
+    plan = make()
+    fov, noise = 60.0, 1.0
+    cov = perception.perception_coverage(plan, fov, noise, spacing=spacing_of(plan))
+    assert cov.in_domain.any() and cov.in_free.any()
+    # D ⊂ F (ALGORITHMS §11.1 (C1)): every point of D is free
+    assert np.all(cov.in_free[cov.in_domain])
+    rng = np.random.default_rng(0)
+    pick = np.sort(rng.choice(len(cov.points), size=min(250, len(cov.points)), replace=False))
+    x = cov.points[pick]
+    arrays = PlanArrays.from_plan(plan)
+    # heading: the field (gain @ displacement) of the least-rank cell, or the straight approach
+    cell = cell_policy.least_rank_cell(arrays, x)
+    direction = np.zeros_like(x)
+    inside = cell >= 0
+    direction[inside] = cell_policy.field(arrays, cell[inside], x[inside])
+    target = cell_policy.approach_target(arrays, x[~inside])
+    direction[~inside] = np.where(target[:, None] >= 0, arrays.nodes[target] - x[~inside], 0.0)
+    heading = np.where(np.any(direction != 0, axis=1), np.arctan2(direction[:, 1], direction[:, 0]), np.nan)
+    # no heading only where no node can be approached in a straight line (never in D)
+    assert np.array_equal(np.isnan(cov.heading[pick]), np.isnan(heading))
+    assert not np.isnan(heading[inside]).any()
+    known = ~np.isnan(heading)
+    assert np.all(np.abs(_wrap(cov.heading[pick][known] - heading[known])) < 1e-9)
+    # visibility: own field-of-view test and the exact segment test through the raw obstacles
+    lm = plan.map.landmarks
+    d = lm[None] - x[:, None]
+    off = _wrap(np.arctan2(d[..., 1], d[..., 0]) - heading[:, None])
+    space = FreeSpace.from_map(plan.map)
+    sight = space.visible(np.repeat(x, len(lm), axis=0), np.tile(lm, (len(x), 1))).reshape(len(x), len(lm))
+    visible = (np.abs(off) <= math.radians(fov) / 2) & sight
+    assert np.array_equal(cov.visible[pick], visible)
+    assert np.array_equal(cov.visible_count[pick], visible.sum(axis=1))
+    # the fix: two or more tags spread by θ_min = 2°, and its 3σ error bound
+    beta = d / np.linalg.norm(d, axis=2)[..., None]
+    proj = np.eye(2)[None, None] - beta[..., :, None] * beta[..., None, :]
+    dist2 = np.sum(d * d, axis=2)
+    for q in range(len(x)):
+        v = visible[q]
+        lam = np.linalg.eigvalsh(proj[q, v].sum(axis=0))[0] if v.sum() >= 2 else 0.0
+        usable = v.sum() >= 2 and lam >= 1 - math.cos(math.radians(2.0))
+        assert cov.usable[pick[q]] == usable, (name, q)
+        if usable:
+            info = np.linalg.eigvalsh((proj[q, v] / dist2[q, v][:, None, None]).sum(axis=0))[0]
+            expected = 3 * math.radians(noise) / math.sqrt(info)
+            assert cov.predicted_error[pick[q]] == pytest.approx(expected, rel=1e-9)
+        else:
+            assert cov.predicted_error[pick[q]] == math.inf
+    assert np.array_equal(cov.holds, cov.usable)  # no error target: the fix alone
+    assert cov.fraction_domain == pytest.approx(np.mean(cov.holds[cov.in_domain]))
+    assert cov.fraction_free == pytest.approx(np.mean(cov.holds[cov.in_free]))
+    assert cov.plan_tolerance == plan.plan_tolerance
+    within = np.mean((cov.usable & (cov.predicted_error <= plan.plan_tolerance))[cov.in_domain])
+    assert cov.fraction_within_tolerance == pytest.approx(within)
+    assert len(cov.failing_domain) == np.sum(cov.in_domain & ~cov.holds)
+    assert str(len(lm)) in cov.summary() and "of D" in cov.summary()
+
+
+def test_the_rule_grows_with_the_camera_and_shrinks_with_an_error_target():
+    plan = random_plan(3)
+    s = spacing_of(plan)
+    narrow = perception.perception_coverage(plan, 60, 1.0, spacing=s)
+    short = perception.perception_coverage(plan, 60, 1.0, max_range=0.3 * plan.map.diagonal, spacing=s)
+    wide = perception.perception_coverage(plan, 360, 1.0, spacing=s)
+    # a superset of visible tags: never fewer, never worse spread, never a larger error
+    assert np.all(narrow.visible <= wide.visible) and np.all(short.visible <= narrow.visible)
+    assert np.all(wide.holds[narrow.holds]) and np.all(narrow.holds[short.holds])
+    both = narrow.usable & wide.usable
+    assert np.all(wide.predicted_error[both] <= narrow.predicted_error[both] * (1 + 1e-12))
+    assert wide.fraction_domain >= narrow.fraction_domain >= short.fraction_domain
+    # with an error target: exactly the usable fixes within it
+    target = float(np.median(wide.predicted_error[wide.usable]))
+    strict = perception.perception_coverage(plan, 360, 1.0, error_target=target, spacing=s)
+    assert np.array_equal(strict.holds, wide.usable & (wide.predicted_error <= target))
+    assert 0 < strict.fraction_domain < wide.fraction_domain
+    assert f"error ≤ {target:g}" in strict.summary()
+
+
+def test_noise_scales_the_predicted_error_and_not_the_rule():
+    plan = random_plan(0)
+    s = spacing_of(plan)
+    one = perception.perception_coverage(plan, 90, 1.0, spacing=s)
+    two = perception.perception_coverage(plan, 90, 2.0, spacing=s)
+    exact = perception.perception_coverage(plan, 90, 0.0, spacing=s)
+    assert np.array_equal(one.holds, two.holds) and np.array_equal(one.holds, exact.holds)
+    u = one.usable
+    assert np.allclose(two.predicted_error[u], 2 * one.predicted_error[u], rtol=1e-12)
+    assert np.all(exact.predicted_error[u] == 0)
+    # noise-free, every usable fix is within δ*
+    assert exact.fraction_within_tolerance == pytest.approx(exact.fraction_domain)
+
+
+def test_landmarks_override_and_default_grid():
+    plan = random_plan(0)
+    own = perception.perception_coverage(plan, 60, 1.0)
+    same = perception.perception_coverage(plan, 60, 1.0, landmarks=plan.map.landmarks,
+                                          landmark_ids=plan.map.landmark_ids)  # fmt: skip
+    assert own.landmark_ids == plan.map.landmark_ids and same.landmark_ids == own.landmark_ids
+    assert np.array_equal(own.holds, same.holds) and own.fraction_domain == same.fraction_domain
+    assert own.spacing == pytest.approx(plan.map.diagonal / perception.GRID_CELLS)
+    two = perception.perception_coverage(plan, 60, 1.0, landmarks=plan.map.landmarks[:2])
+    assert two.landmark_ids == ("0", "1") and two.visible.shape == (len(two.points), 2)
+    assert np.all(two.holds <= own.holds)  # a subset of the tags
+    # the headings do not depend on the landmarks (ALGORITHMS Lemma 3)
+    assert np.array_equal(two.heading, own.heading, equal_nan=True)
+    # every point of D has a heading (the field vanishes only at the goal)
+    assert not np.isnan(own.heading[own.in_domain]).any()
+
+
+@pytest.mark.parametrize(
+    "kwargs,field",
+    [({"fov_deg": 0}, "fov"), ({"fov_deg": 361}, "fov"), ({"fov_deg": -60}, "fov"), ({"fov_deg": math.nan}, "fov"),
+     ({"noise_deg": -1}, "noise_deg"), ({"noise_deg": math.inf}, "noise_deg"), ({"max_range": -1}, "range"),
+     ({"max_range": 0}, "range"), ({"error_target": 0}, "error_target"), ({"error_target": -0.1}, "error_target"),
+     ({"spacing": 0}, "spacing"), ({"spacing": -1.0}, "spacing")],
+)  # fmt: skip
+def test_bad_parameters_name_their_field(kwargs, field):
+    plan = random_plan(0)
+    args = {"fov_deg": 60.0, "noise_deg": 1.0, **kwargs}
+    with pytest.raises(InvalidParamsError) as info:
+        perception.perception_coverage(plan, **args)
+    assert info.value.field == field
+    assert "\n" not in str(info.value) and field in str(info.value)
+
+
+def test_figure_marks_where_the_rule_fails():
+    plan = random_plan(3)
+    cov = perception.perception_coverage(plan, 60, 1.0, spacing=spacing_of(plan))
+    fig, ax = plt.subplots()
+    plot.plot_map(ax, plan.map, landmarks=False, labels=False)
+    plot.plot_perception(ax, cov)
+    by_gid = {c.get_gid(): c for c in ax.collections if c.get_gid()}
+    assert len(by_gid["perception-fail-domain"].get_offsets()) == np.sum(cov.in_domain & ~cov.holds)
+    assert len(by_gid["perception-fail-free"].get_offsets()) == np.sum(cov.in_free & ~cov.in_domain & ~cov.holds)
+    assert len(by_gid["perception-tags"].get_offsets()) == len(cov.landmarks)
+    labels = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert any(f"{1 - cov.fraction_domain:.1%} of D" in t for t in labels)
+    assert any(t == f"tags ({len(cov.landmarks)})" for t in labels)
+    assert "map units" in ax.get_xlabel() and "map units" in ax.get_ylabel()
+    plt.close(fig)
