@@ -375,6 +375,8 @@ def field_samples(plan: Plan, *, arrows: int = 28) -> tuple[np.ndarray, np.ndarr
     (points where the field vanishes are dropped). Returns ``(points (K, 2), directions (K, 2))``.
     """
     map_ = plan.map
+    if arrows < 1:  # no arrows asked for
+        return np.zeros((0, 2)), np.zeros((0, 2))
     xmin, ymin, xmax, ymax = map_.free_bounds
     step = max(xmax - xmin, ymax - ymin) / arrows
     xs = np.arange(xmin + step / 2, xmax, step)
@@ -577,7 +579,7 @@ def figure_for(artifact: Any, *, background: Sequence[Any] = (), title: str | No
         if barriers:
             plot_barriers(ax, cells)
         plot_tree(ax, cells, nodes=True, lw=0.5, alpha=0.75, color="#2171b5")
-        if plan is not None:
+        if plan is not None and arrows > 0:
             plot_field(ax, plan, arrows=arrows)
     handles, _ = ax.get_legend_handles_labels()
     handles += map_handles(map_)

@@ -235,3 +235,9 @@ def test_cli_plot_writes_a_png_and_rejects_a_bad_colour(cli, write_map, small_sp
     assert not (tmp_path / "z.png").exists()
     assert_one_line_error(cli("plot", tmp_path / "plans" / "small" / "cells.npz", "-o", "z.png", "--color-by",
                               "tolerance"), "color_by")  # fmt: skip
+
+
+def test_no_arrows_draws_no_field(small_plan, draw):
+    assert plot.field_samples(small_plan, arrows=0)[0].shape == (0, 2)
+    ax = draw(small_plan, arrows=0)
+    assert not [c for c in ax.collections if isinstance(c, Quiver)]
