@@ -123,3 +123,23 @@ def test_coverage_warning_says_where(small_spec, caplog):
         build_map(small_spec)
     message = " ".join(r.getMessage() for r in caplog.records)
     assert "fewer than 2 landmarks" in message and "x in [" in message
+
+
+@pytest.mark.parametrize("name", ["kitchen.yaml", "storeroom.yaml"])
+def test_spec_of_gives_back_the_same_free_space(name):
+    """map_.spec_of writes a map as polygons (for `bearnav tags -o` elsewhere, or a vanished source):
+    the map stage turns it back into the same raw obstacles, landmarks, goal and bounds."""
+    from pathlib import Path
+
+    from bearnav_cli.cli import read_map_source
+    from bearnav_cli.stages import map_
+
+    original = map_.run(read_map_source(Path(__file__).parent.parent / "maps" / name))
+    again = map_.run(map_.MapSource(spec=map_.spec_of(original), file="again.yaml", sha256="0"))
+    raw = [to_shapely(p) for p in original.raw_obstacles]
+    back = [to_shapely(p) for p in again.raw_obstacles]
+    assert shapely.symmetric_difference(shapely.union_all(raw), shapely.union_all(back)).area < 1e-9
+    np.testing.assert_array_equal(again.landmarks, original.landmarks)
+    assert again.landmark_ids == original.landmark_ids
+    np.testing.assert_array_equal(again.bounds, original.bounds)
+    np.testing.assert_array_equal(again.goal, original.goal)

@@ -20,7 +20,15 @@ import shapely
 from bearnav_cli import occupancy
 from bearnav_cli.datatypes import Map
 from bearnav_cli.errors import InvalidMapError
-from bearnav_cli.geometry import CIRCLE_SEGMENTS, FreeSpace, circle_polygon, from_shapely, inflate, landmark_coverage
+from bearnav_cli.geometry import (
+    CIRCLE_SEGMENTS,
+    FreeSpace,
+    circle_polygon,
+    from_shapely,
+    inflate,
+    landmark_coverage,
+    to_shapely,
+)
 
 VERSION = 1
 log = logging.getLogger(__name__)
@@ -331,6 +339,37 @@ def _coverage_warning(map_: Map, space: FreeSpace, cells: int) -> None:
         "x in [%.3g, %.3g], y in [%.3g, %.3g] (e.g. at (%.3g, %.3g))",
         share, lo[0], hi[0], lo[1], hi[1], poor[0][0], poor[0][1],
     )
+
+
+def spec_of(map_: Map) -> dict:
+    """A map description (DESIGN §4, as ``yaml.safe_load`` gives it) that this stage turns back into
+    ``map_``'s free space: bounds, radius, goal, starts, landmarks, params, and the raw obstacles as
+    simple polygons (one with holes, such as an occupancy grid's wall frame around its rooms, as
+    the triangles of its constrained Delaunay triangulation, which this stage merges back). For a
+    map whose source file is gone, or to write a map elsewhere (an occupancy map's image path is
+    relative to its YAML)."""
+
+    def numbers(values) -> list:
+        return [float(v) for v in values]
+
+    def simple_parts(polygon) -> list:
+        if not polygon.holes:
+            return [np.asarray(polygon.exterior, float)]
+        triangles = shapely.get_parts(shapely.constrained_delaunay_triangles(to_shapely(polygon)))
+        return [np.asarray(t.exterior.coords)[:-1] for t in triangles if t.area > 0]
+
+    return {
+        "name": map_.name,
+        "bounds": numbers(map_.bounds),
+        "robot_radius": float(map_.robot_radius),
+        "goal": numbers(map_.goal),
+        "starts": [numbers(p) for p in map_.starts],
+        "obstacles": [{"polygon": [numbers(v) for v in part]} for o in map_.raw_obstacles for part in simple_parts(o)],
+        "landmarks": [
+            {"id": i, "position": numbers(p)} for i, p in zip(map_.landmark_ids, map_.landmarks, strict=True)
+        ],
+        "params": {stage: dict(values) for stage, values in (map_.params or {}).items()},
+    }
 
 
 def summary(map_: Map) -> str:
