@@ -2,19 +2,37 @@
 
 This is the only module that touches artifact files. Each file is self-describing:
 npz files hold a ``manifest`` entry (0-d JSON string), ``map.json`` a top-level
-``"manifest"`` object. Writes are atomic (temp file + ``os.replace``); loads check
-the schema, the keys, shapes and dtypes and the content hash.
+``"manifest"`` object.
+
+- **One loader**, :func:`load`: every way a read can fail (a missing or unreadable file, a
+  folder, a damaged zip or deflate stream, a ``.npy`` where an ``.npz`` belongs, JSON that is
+  not an object, a manifest without its fields, missing or extra entries, dtypes, shapes, the
+  content hash) raises :class:`ArtifactError` naming the file and the problem; then the
+  artifact's meaning is checked (``datatypes.INVARIANTS``), whatever its hash says.
+- **Writes** are atomic (temp files in the same folder, then ``os.replace``, with SIGINT and
+  SIGTERM held back while the files are renamed), checked against the same invariants first,
+  and ``sim.npz`` + ``sim.json`` are committed together. Temp files are named
+  ``.NAME.bearnav-PID-XXXX.tmp``: those of a run that died are removed by the next one.
+- **Output folders**: :func:`check_output_file` and :func:`check_output_folder` refuse bad
+  output paths before any work; :func:`output_folder` creates the folder and holds an
+  exclusive ``fcntl.flock`` on it (one run per folder).
 """
 
 from __future__ import annotations
 
+import contextlib
+import errno
 import hashlib
 import io
 import json
 import os
 import platform
+import re
+import signal
 import tempfile
+import threading
 import zipfile
+from collections.abc import Iterator
 from dataclasses import asdict, dataclass
 from importlib import metadata
 from pathlib import Path
@@ -22,14 +40,29 @@ from typing import Any, Callable
 
 import numpy as np
 
+try:  # POSIX; elsewhere output folders are not locked
+    import fcntl
+except ImportError:  # pragma: no cover
+    fcntl = None  # type: ignore[assignment]
+
 from bearnav_cli import __version__
-from bearnav_cli.datatypes import CELL_KEYS, PLAN_KEYS, SIMULATION_KEYS, Cells, Map, Plan, Simulation, Tree
-from bearnav_cli.errors import ArtifactError, BearnavError
+from bearnav_cli.datatypes import (
+    CELL_KEYS,
+    PLAN_KEYS,
+    SIMULATION_KEYS,
+    Cells,
+    Map,
+    Plan,
+    Simulation,
+    Tree,
+    validate_artifact,
+)
+from bearnav_cli.errors import ArtifactError, FolderBusyError, OutputPathError
 
 
 @dataclass(frozen=True)
 class Kind:
-    """One artifact type: its schema name, conventional file name and required entries.
+    """One artifact type: its schema name, conventional file name, the stage that writes it and its entries.
 
     ``entries`` maps each data key to ``(dtype kind, ndim)``; ``"U"`` is a 0-d JSON text.
     """
@@ -38,6 +71,11 @@ class Kind:
     schema: str
     filename: str
     entries: dict[str, tuple[str, int]]
+    stage: str = ""
+
+    @property
+    def suffix(self) -> str:
+        return Path(self.filename).suffix
 
 
 _TREE_ENTRIES = {
@@ -93,12 +131,12 @@ _PLAN_ENTRIES = {
 }
 
 KINDS: dict[str, Kind] = {
-    "map": Kind("map", "bearnav.map/1", "map.json", {}),
-    "tree": Kind("tree", "bearnav.tree/1", "tree.npz", _TREE_ENTRIES),
-    "simplified": Kind("simplified", "bearnav.simplified/1", "simplified.npz", _TREE_ENTRIES),
-    "cells": Kind("cells", "bearnav.cells/2", "cells.npz", _CELL_ENTRIES),
-    "plan": Kind("plan", "bearnav.plan/2", "plan.npz", _PLAN_ENTRIES),
-    "simulation": Kind("simulation", "bearnav.sim/1", "sim.npz", {"map": ("U", 0), **SIMULATION_KEYS}),
+    "map": Kind("map", "bearnav.map/1", "map.json", {}, "map"),
+    "tree": Kind("tree", "bearnav.tree/1", "tree.npz", _TREE_ENTRIES, "rrtstar"),
+    "simplified": Kind("simplified", "bearnav.simplified/1", "simplified.npz", _TREE_ENTRIES, "simplify"),
+    "cells": Kind("cells", "bearnav.cells/2", "cells.npz", _CELL_ENTRIES, "decompose"),
+    "plan": Kind("plan", "bearnav.plan/2", "plan.npz", _PLAN_ENTRIES, "synthesize"),
+    "simulation": Kind("simulation", "bearnav.sim/1", "sim.npz", {"map": ("U", 0), **SIMULATION_KEYS}, "simulate"),
 }
 
 
@@ -107,6 +145,25 @@ RETIRED_SCHEMAS = {
     "bearnav.cells/1": "cells without composable certificates; re-run `bearnav plan MAP.yaml --force`",
     "bearnav.plan/1": "per-cell certificates only; re-run `bearnav plan MAP.yaml --force` to get bearnav.plan/2",
 }
+
+#: Manifest fields (DESIGN §3.1): name -> (accepted JSON types, required).
+MANIFEST_FIELDS: dict[str, tuple[tuple[type, ...], bool]] = {
+    "schema": ((str,), True),
+    "stage": ((str,), True),
+    "stage_version": ((int,), True),
+    "params": ((dict,), True),
+    "input": ((dict,), True),
+    "content_sha256": ((str,), True),
+    "key": ((str,), True),
+    "software": ((dict,), False),
+    "summary": ((str,), False),
+    "elapsed_s": ((int, float), False),
+    "stats": ((dict,), False),
+}
+
+#: Part of every cache key: bumped when what an artifact holds changes for the same inputs (2: the
+#: embedded map no longer carries the YAML's ``source``), so older outputs rerun once.
+ARTIFACT_FORMAT = 2
 
 
 @dataclass(frozen=True)
@@ -135,7 +192,7 @@ def content_hash(entries: dict[str, Any], kind: str | None = None) -> str:
 
     For ``map.json`` the ``source`` field (file name and hash of the YAML) is provenance and
     stays out of the hash: editing a comment in the YAML reruns the map stage, but an
-    identical map does not invalidate the stages after it.
+    identical map does not invalidate the stages after it (which embed the map without it).
     """
     if kind == "map":
         document = json.loads(entries["map"])
@@ -157,8 +214,11 @@ def content_hash(entries: dict[str, Any], kind: str | None = None) -> str:
 def cache_key(stage: str, stage_version: int, params: dict, input_hash: str) -> str:
     """The freshness key: SHA-256 of the canonical JSON of what determines the output."""
     return sha256_text(
-        canonical_json({"stage": stage, "stage_version": stage_version, "params": params, "input": input_hash})
-    )
+        canonical_json(
+            {"stage": stage, "stage_version": stage_version, "params": params, "input": input_hash,
+             "format": ARTIFACT_FORMAT}
+        )
+    )  # fmt: skip
 
 
 def software_versions() -> dict[str, str]:
@@ -212,7 +272,18 @@ def make_manifest(
 #: Which Python type each artifact kind holds.
 _TYPES: dict[str, type] = {
     "map": Map, "tree": Tree, "simplified": Tree, "cells": Cells, "plan": Plan, "simulation": Simulation,
-}
+}  # fmt: skip
+
+
+def embedded_map_text(map_: Map) -> str:
+    """The map as later artifacts embed it: ``map.json``'s JSON without its provenance ``source``.
+
+    Leaving the YAML's name and hash out makes every later artifact depend on the map alone, so
+    the same map gives the same content hashes whatever file (or cached run) it came from.
+    """
+    document = map_.to_json()
+    document.pop("source", None)
+    return canonical_json(document)
 
 
 def entries_of(artifact: Any) -> dict[str, Any]:
@@ -220,12 +291,31 @@ def entries_of(artifact: Any) -> dict[str, Any]:
     if isinstance(artifact, Map):
         return {"map": artifact.to_json_text()}
     if isinstance(artifact, (Tree, Cells, Plan, Simulation)):
-        return {"map": artifact.map.to_json_text(), **artifact.arrays()}
+        return {"map": embedded_map_text(artifact.map), **artifact.arrays()}
     raise TypeError(f"not an artifact: {type(artifact).__name__}")
 
 
-def _from_entries(kind: str, entries: dict[str, Any], manifest: dict) -> Any:
-    map_ = Map.from_json(json.loads(entries["map"]))
+def _parse_map(text: str) -> Map:
+    try:
+        document = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ArtifactError(f"not valid JSON ({exc})", field="map") from exc
+    if not isinstance(document, dict):
+        raise ArtifactError(f"expected a JSON object, got {type(document).__name__}", field="map")
+    return Map.from_json(document)
+
+
+def _from_entries(kind: str, entries: dict[str, Any], manifest: dict, check_map: bool = True) -> Any:
+    """The typed artifact; the map is parsed and (when ``check_map``) checked first, so that an error
+    about it names ``map.FIELD`` rather than an array built on it."""
+    prefix = "" if kind == "map" else "map."
+    try:
+        map_ = _parse_map(entries["map"])
+        if check_map:
+            validate_artifact("map", map_)
+    except ArtifactError as exc:
+        field = exc.field if not prefix or exc.field in (None, "map") else prefix + exc.field
+        raise ArtifactError(exc.reason, field=field or "map") from None
     if kind == "map":
         return map_
     stats = dict(manifest.get("stats", {}))
@@ -245,7 +335,136 @@ def _from_entries(kind: str, entries: dict[str, Any], manifest: dict) -> Any:
     return Plan(cells=cells, stats=stats, **{key: entries[key] for key in PLAN_KEYS if key != "landmarks"})
 
 
+# --------------------------------------------------------------------------- memory
+
+
+def memory_budget() -> int:
+    """Bytes a single request may use: half of this machine's physical memory (``os.sysconf``)."""
+    try:
+        return int(os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")) // 2
+    except (ValueError, OSError, AttributeError):  # pragma: no cover - not POSIX
+        return 4 << 30
+
+
+def human_bytes(count: float) -> str:
+    """``"1.5 GB"``."""
+    for unit in ("B", "kB", "MB", "GB", "TB", "PB"):
+        if abs(count) < 1000 or unit == "PB":
+            return f"{count:.3g} {unit}" if unit != "B" else f"{int(count)} B"
+        count /= 1000
+    return f"{count:.3g} EB"  # pragma: no cover
+
+
 # --------------------------------------------------------------------------- writing
+
+_TEMP = re.compile(r"^\.(?P<name>.+)\.bearnav-(?P<pid>\d+)-[A-Za-z0-9_]+\.tmp(\.[A-Za-z0-9]+)?$")
+
+
+@contextlib.contextmanager
+def _signals_held() -> Iterator[None]:
+    """Hold SIGINT and SIGTERM back (main thread only): they are delivered when the block ends."""
+    if threading.current_thread() is not threading.main_thread() or not hasattr(signal, "pthread_sigmask"):
+        yield
+        return
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, [])
+    try:
+        signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
+
+
+def _make_parents(folder: Path) -> list[Path]:
+    """Create ``folder`` and its missing parents; return those created, outermost first."""
+    missing = []
+    probe = folder
+    while not probe.exists():
+        missing.append(probe)
+        if probe.parent == probe:
+            break
+        probe = probe.parent
+    if probe.exists() and not probe.is_dir():
+        raise OutputPathError("is a file, not a folder", file=str(probe))
+    created = []
+    for path in reversed(missing):
+        try:
+            path.mkdir()
+        except FileExistsError:
+            continue
+        except OSError as exc:
+            raise OutputPathError(f"cannot create folder ({exc.strerror or exc})", file=str(path)) from exc
+        created.append(path)
+    return created
+
+
+def _remove_empty(folders: list[Path]) -> None:
+    for path in reversed(folders):
+        try:
+            path.rmdir()
+        except OSError:
+            return
+
+
+def _temp_file(path: Path) -> tuple[int, Path]:
+    """A new temp file next to ``path`` (same suffix at the end, so formats that go by it work)."""
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.bearnav-{os.getpid()}-", suffix=f".tmp{path.suffix}",
+                               dir=path.parent)  # fmt: skip
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; an artifact is as readable as any other file
+    return fd, Path(tmp)
+
+
+def _write_temp(path: Path, write: Callable[[io.BufferedWriter], None]) -> Path:
+    """Write ``path``'s content into a temp file next to it; the temp file is removed if ``write`` fails."""
+    fd, tmp = _temp_file(path)
+    try:
+        with os.fdopen(fd, "wb") as handle:
+            write(handle)
+            handle.flush()
+            os.fsync(handle.fileno())
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    return tmp
+
+
+def _commit(pairs: list[tuple[Path, Path]], on_commit: Callable[[], None] | None = None) -> None:
+    """Rename every temp file into place with SIGINT/SIGTERM held back, then call ``on_commit``.
+
+    An interrupt that was already pending when the block began is re-raised after every file
+    is in place (so files that belong together land together).
+    """
+    interrupted: BaseException | None = None
+    with _signals_held():
+        for tmp, final in pairs:
+            done = False
+            while not done:
+                try:
+                    if os.path.lexists(tmp):
+                        os.replace(tmp, final)
+                    done = True
+                except KeyboardInterrupt as exc:
+                    interrupted = exc
+        if on_commit is not None:
+            on_commit()
+    if interrupted is not None:
+        raise interrupted
+
+
+def _write_all(files: list[tuple[Path, Callable[[io.BufferedWriter], None]]],
+               on_commit: Callable[[], None] | None = None) -> None:  # fmt: skip
+    """Write several files atomically and together: every temp file first, then one commit."""
+    written: list[tuple[Path, Path]] = []
+    try:
+        for path, write in files:
+            _make_parents(path.parent)
+            written.append((_write_temp(path, write), path))
+        _commit(written, on_commit)
+    except BaseException:
+        for tmp, _ in written:
+            tmp.unlink(missing_ok=True)
+        raise
 
 
 def atomic_write(path: str | os.PathLike, write: Callable[[io.BufferedWriter], None]) -> None:
@@ -253,42 +472,55 @@ def atomic_write(path: str | os.PathLike, write: Callable[[io.BufferedWriter], N
 
     An exception inside ``write`` removes the temp file and leaves any existing file untouched.
     """
+    _write_all([(Path(path), write)])
+
+
+@contextlib.contextmanager
+def atomic_output(path: str | os.PathLike) -> Iterator[Path]:
+    """A temp path (same folder, same suffix) for a writer that wants a file name (figures, GIFs).
+
+    The file is renamed to ``path`` when the block ends normally and removed otherwise.
+    """
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; an artifact is as readable as any other file
+    _make_parents(path.parent)
+    fd, tmp = _temp_file(path)
+    os.close(fd)
     try:
-        with os.fdopen(fd, "wb") as handle:
-            write(handle)
-            handle.flush()
-            os.fsync(handle.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+        yield tmp
+        if not tmp.exists() or tmp.stat().st_size == 0:
+            raise ArtifactError("the writer produced no file", file=str(path))
+        _commit([(tmp, path)])
+    finally:
+        tmp.unlink(missing_ok=True)
 
 
-def save(path: str | os.PathLike, artifact: Any, manifest: dict) -> Path:
-    """Write ``artifact`` with its ``manifest`` to ``path`` atomically."""
+def save(path: str | os.PathLike, artifact: Any, manifest: dict, on_commit: Callable[[], None] | None = None) -> Path:
+    """Check ``artifact`` (its invariants) and write it with its ``manifest`` to ``path`` atomically.
+
+    A simulation also writes ``sim.json`` (the metrics) next to ``sim.npz``; both are committed
+    together. ``on_commit`` is called once every file is in place, before a held-back interrupt
+    is delivered.
+    """
     kind = kind_of_schema(manifest.get("schema", ""))
     if kind is None or not isinstance(artifact, _TYPES[kind]):
         raise ArtifactError(f"manifest schema {manifest.get('schema')!r} does not fit a {type(artifact).__name__}")
-    entries = entries_of(artifact)
     path = Path(path)
+    validate_artifact(kind, artifact)
+    entries = entries_of(artifact)
+    files: list[tuple[Path, Callable[[io.BufferedWriter], None]]] = []
     if kind == "map":
         document = dict(json.loads(entries["map"]), manifest=manifest)
         text = json.dumps(document, indent=1, sort_keys=True) + "\n"
-        atomic_write(path, lambda handle: handle.write(text.encode()))
+        files.append((path, lambda handle: handle.write(text.encode())))
     else:
         arrays = {key: (np.array(value) if isinstance(value, str) else value) for key, value in entries.items()}
         arrays["manifest"] = np.array(canonical_json(manifest))
-        atomic_write(path, lambda handle: np.savez_compressed(handle, **arrays))
+        files.append((path, lambda handle: np.savez_compressed(handle, **arrays)))
     if kind == "simulation":
         # sim.json next to sim.npz: the metrics, for people and scripts that do not read npz
-        text = json.dumps({"manifest": manifest, "metrics": manifest.get("stats", {})}, indent=1, sort_keys=True)
-        atomic_write(metrics_path(path), lambda handle: handle.write((text + "\n").encode()))
+        metrics = json.dumps({"manifest": manifest, "metrics": manifest.get("stats", {})}, indent=1, sort_keys=True)
+        files.append((metrics_path(path), lambda handle: handle.write((metrics + "\n").encode())))
+    _write_all(files, on_commit)
     return path
 
 
@@ -297,53 +529,291 @@ def metrics_path(path: str | os.PathLike) -> Path:
     return Path(path).with_suffix(".json")
 
 
+def output_files(kind: str, path: str | os.PathLike) -> list[Path]:
+    """Every file an artifact of ``kind`` saved at ``path`` consists of (``sim.npz`` also has ``sim.json``)."""
+    path = Path(path)
+    return [path, metrics_path(path)] if kind == "simulation" else [path]
+
+
+# --------------------------------------------------------------------------- output paths and locks
+
+
+def _check_writable_folder(folder: Path, option: str | None) -> None:
+    """``folder`` is a folder we may write in, or can be created under one."""
+    probe = folder
+    while not probe.exists():
+        if probe.parent == probe:
+            break
+        probe = probe.parent
+    if not probe.is_dir():
+        raise OutputPathError("is a file, not a folder", file=str(probe), option=option)
+    if not os.access(probe, os.W_OK | os.X_OK):
+        raise OutputPathError("folder is not writable", file=str(probe), option=option)
+
+
+def check_output_file(path: str | os.PathLike, suffixes: tuple[str, ...], option: str | None = "-o/--out",
+                      inputs: tuple[str | os.PathLike, ...] = ()) -> Path:  # fmt: skip
+    """Refuse an output path before any work: wrong extension, a folder, the input itself, an unwritable folder.
+
+    Missing parent folders are fine (they are created when the file is written).
+    """
+    path = Path(path)
+    if path.is_dir():
+        raise OutputPathError(f"is a folder; give a file name ending in {suffixes[0]}", file=str(path), option=option)
+    if path.suffix.lower() not in suffixes:
+        shown = f"extension {path.suffix!r}" if path.suffix else "no extension"
+        raise OutputPathError(f"{shown}: expected {', '.join(suffixes)}", file=str(path), option=option)
+    if path.exists() and not path.is_file():
+        raise OutputPathError("exists and is not a regular file", file=str(path), option=option)
+    for source in inputs:
+        source = Path(source)
+        if source.exists() and path.exists() and os.path.samefile(source, path):
+            raise OutputPathError("is the input file; write the output elsewhere", file=str(path), option=option)
+    _check_writable_folder(path.parent, option)
+    return path
+
+
+def check_output_folder(folder: str | os.PathLike, names: tuple[str, ...] = (),
+                        option: str | None = "-o/--out") -> Path:  # fmt: skip
+    """Refuse an output folder before any work: a file there, a folder where one of ``names`` goes, unwritable."""
+    folder = Path(folder)
+    if folder.exists() and not folder.is_dir():
+        raise OutputPathError("is a file, expected a folder", file=str(folder), option=option)
+    for name in names:
+        if (folder / name).is_dir():
+            raise OutputPathError(f"is a folder where the file {name} belongs", file=str(folder / name), option=option)
+    _check_writable_folder(folder, option)
+    return folder
+
+
+#: Folders this process holds the lock of: real path -> [fd, depth] (the lock is re-entrant per process).
+_HELD: dict[str, list[int]] = {}
+
+
+def _pid_alive(pid: int) -> bool:
+    if pid == os.getpid():
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def remove_stale_temp_files(folder: str | os.PathLike) -> list[Path]:
+    """Remove the temp files a killed bearnav run left in ``folder`` (their writer's pid is gone)."""
+    removed = []
+    try:
+        names = os.listdir(folder)
+    except OSError:
+        return removed
+    for name in names:
+        match = _TEMP.match(name)
+        if match and not _pid_alive(int(match.group("pid"))):
+            path = Path(folder) / name
+            try:
+                path.unlink()
+                removed.append(path)
+            except OSError:
+                pass
+    return removed
+
+
+@contextlib.contextmanager
+def output_folder(folder: str | os.PathLike) -> Iterator[Path]:
+    """Create ``folder`` if needed and hold its lock while the block runs (one bearnav run per folder).
+
+    The lock is ``fcntl.flock`` on the folder itself (no lock file is left behind; the kernel drops
+    it when the process dies, even by SIGKILL). A second run finds it taken and raises
+    :class:`FolderBusyError` at once. Stale temp files of dead runs are removed on entry. If the
+    block fails, folders this call created are removed again when they are still empty.
+    """
+    folder = Path(folder)
+    created = _make_parents(folder)
+    key = os.path.realpath(folder)
+    held = _HELD.get(key)
+    if held is not None:
+        held[1] += 1
+        try:
+            yield folder
+        finally:
+            held[1] -= 1
+        return
+    if fcntl is None:  # pragma: no cover - not POSIX: no lock
+        remove_stale_temp_files(folder)
+        yield folder
+        return
+    try:
+        fd = os.open(folder, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0))
+    except OSError as exc:
+        _remove_empty(created)
+        raise OutputPathError(f"cannot open the folder to lock it ({exc.strerror or exc})", file=str(folder)) from exc
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError as exc:
+        os.close(fd)
+        _remove_empty(created)
+        if exc.errno in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES):
+            raise FolderBusyError(str(folder)) from None
+        raise OutputPathError(f"cannot lock the folder ({exc.strerror or exc})", file=str(folder)) from exc
+    _HELD[key] = [fd, 1]
+    ok = False
+    try:
+        remove_stale_temp_files(folder)
+        yield folder
+        ok = True
+    finally:
+        del _HELD[key]
+        try:
+            fcntl.flock(fd, fcntl.LOCK_UN)
+        finally:
+            os.close(fd)
+        if not ok:
+            _remove_empty(created)
+
+
 # --------------------------------------------------------------------------- reading
 
+_NPY_MAGIC = b"\x93NUMPY"
+_ZIP_MAGIC = (b"PK\x03\x04", b"PK\x05\x06")
 
-def _read_raw(path: Path) -> tuple[dict, dict[str, Any]]:
-    """Manifest and data entries of any artifact file, without checks beyond parsing."""
-    if not path.is_file():
-        raise ArtifactError("no such file", file=str(path))
-    if path.suffix == ".json":
-        try:
-            document = json.loads(path.read_text())
-        except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-            raise ArtifactError(f"not valid JSON ({exc})", file=str(path)) from exc
-        if not isinstance(document, dict) or not isinstance(document.get("manifest"), dict):
-            raise ArtifactError("no manifest (not a bearnav artifact)", file=str(path))
-        manifest = document.pop("manifest")
-        return manifest, {"map": canonical_json(document)}
+
+def _read_file(path: Path) -> bytes:
+    if path.is_dir():
+        raise ArtifactError("is a folder, not an artifact file", file=str(path))
     try:
-        with np.load(path, allow_pickle=False) as npz:
-            data = {key: npz[key] for key in npz.files}
-    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
-        raise ArtifactError(f"unreadable or corrupted npz ({exc})", file=str(path)) from exc
-    if "manifest" not in data or data["manifest"].dtype.kind != "U" or data["manifest"].ndim != 0:
-        raise ArtifactError("no manifest (not a bearnav artifact)", file=str(path))
+        return path.read_bytes()
+    except FileNotFoundError:
+        raise ArtifactError("no such file", file=str(path)) from None
+    except PermissionError:
+        raise ArtifactError("cannot read the file (permission denied)", file=str(path)) from None
+    except OSError as exc:
+        raise ArtifactError(f"cannot read the file ({exc.strerror or exc})", file=str(path)) from None
+
+
+def _parse_json(path: Path, data: bytes) -> tuple[dict, dict[str, Any]]:
     try:
-        manifest = json.loads(str(data.pop("manifest")))
+        document = json.loads(data.decode("utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise ArtifactError(f"not valid JSON ({exc})", file=str(path)) from None
+    if not isinstance(document, dict):
+        raise ArtifactError(f"expected a JSON object at the top level, got {type(document).__name__}", file=str(path))
+    manifest = document.pop("manifest", None)
+    if not isinstance(manifest, dict):
+        raise ArtifactError("no manifest object (not a bearnav artifact)", file=str(path), field="manifest")
+    if manifest.get("schema") == KINDS["simulation"].schema:
+        raise ArtifactError("holds a simulation's metrics; give its sim.npz", file=str(path))
+    return manifest, {"map": canonical_json(document)}
+
+
+def _parse_npz(path: Path, data: bytes) -> tuple[dict, dict[str, Any]]:
+    if data.startswith(_NPY_MAGIC):
+        raise ArtifactError("is a single .npy array, not an .npz archive", file=str(path))
+    if not data.startswith(_ZIP_MAGIC):
+        raise ArtifactError("not an npz archive (not a zip file)", file=str(path))
+    buffer = io.BytesIO(data)
+    try:
+        with zipfile.ZipFile(buffer) as archive:
+            infos = archive.infolist()
+    except (zipfile.BadZipFile, zipfile.LargeZipFile, OSError, ValueError, EOFError) as exc:
+        raise ArtifactError(f"damaged zip archive ({exc})", file=str(path)) from None
+    declared = sum(info.file_size for info in infos)
+    if declared > memory_budget():
+        raise ArtifactError(f"declares {human_bytes(declared)} of data, more than the {human_bytes(memory_budget())} "
+                            "a load may use", file=str(path))  # fmt: skip
+    for info in infos:
+        if not info.filename.endswith(".npy"):
+            raise ArtifactError(f"unexpected member {info.filename!r} (an npz holds .npy arrays)", file=str(path))
+    arrays: dict[str, np.ndarray] = {}
+    key = None
+    try:
+        with np.load(buffer, allow_pickle=False) as npz:
+            for key in npz.files:
+                arrays[key] = npz[key]
+    except MemoryError:
+        raise ArtifactError("too large to load", file=str(path), field=key) from None
+    except Exception as exc:  # noqa: BLE001 - zlib, zipfile, numpy's format errors: the file is damaged
+        what = f"damaged entry ({type(exc).__name__}: {exc})" if key else f"damaged npz ({type(exc).__name__}: {exc})"
+        raise ArtifactError(what, file=str(path), field=key) from None
+    raw = arrays.pop("manifest", None)
+    if raw is None:
+        raise ArtifactError("no manifest entry (not a bearnav artifact)", file=str(path))
+    if raw.dtype.kind != "U" or raw.ndim != 0:
+        raise ArtifactError(f"expected a 0-d JSON text, got a {raw.ndim}-d {raw.dtype} array", file=str(path),
+                            field="manifest")  # fmt: skip
+    try:
+        manifest = json.loads(str(raw))
     except json.JSONDecodeError as exc:
-        raise ArtifactError(f"manifest is not valid JSON ({exc})", file=str(path)) from exc
-    entries = {
-        key: (str(value) if value.dtype.kind == "U" and value.ndim == 0 else value) for key, value in data.items()
-    }
+        raise ArtifactError(f"not valid JSON ({exc})", file=str(path), field="manifest") from None
+    if not isinstance(manifest, dict):
+        raise ArtifactError(f"expected a JSON object, got {type(manifest).__name__}", file=str(path), field="manifest")
+    entries = {k: (str(v) if v.dtype.kind == "U" and v.ndim == 0 else v) for k, v in arrays.items()}
     return manifest, entries
 
 
-def read_manifest(path: str | os.PathLike) -> dict:
-    """The manifest of any artifact file (for ``inspect`` and freshness checks)."""
-    return _read_raw(Path(path))[0]
+def _read_raw(path: Path) -> tuple[dict, dict[str, Any]]:
+    """Manifest and data entries of any artifact file (npz or JSON, told apart by content)."""
+    data = _read_file(path)
+    if data.startswith(_NPY_MAGIC) or data.startswith(_ZIP_MAGIC) or path.suffix.lower() == ".npz":
+        return _parse_npz(path, data)
+    return _parse_json(path, data)
 
 
-def kind_of_schema(schema: str) -> str | None:
+def kind_of_schema(schema: Any) -> str | None:
     for kind in KINDS.values():
         if kind.schema == schema:
             return kind.name
     return None
 
 
+def _check_manifest(manifest: dict, path: Path, expect: tuple[str, ...] | None) -> str:
+    """The kind of the artifact, after checking the manifest's fields; raises ArtifactError."""
+    schema = manifest.get("schema")
+    kind = kind_of_schema(schema)
+    if kind is None:
+        if schema in RETIRED_SCHEMAS:
+            raise ArtifactError(f"is a {schema} artifact, which this version no longer reads "
+                                f"({RETIRED_SCHEMAS[schema]})", file=str(path), field="manifest.schema")  # fmt: skip
+        raise ArtifactError(f"unknown schema {schema!r}", file=str(path), field="manifest.schema")
+    if expect and kind not in expect:
+        names = " or ".join(KINDS[w].schema for w in expect)
+        raise ArtifactError(f"is a {schema} artifact, expected {names}", file=str(path))
+    for name, (types, required) in MANIFEST_FIELDS.items():
+        if name not in manifest:
+            if required:
+                raise ArtifactError("missing", file=str(path), field=f"manifest.{name}")
+            continue
+        value = manifest[name]
+        if not isinstance(value, types) or (isinstance(value, bool) and bool not in types):
+            wanted = " or ".join("an object" if t is dict else t.__name__ for t in types)
+            raise ArtifactError(f"expected {wanted}, got {type(value).__name__}", file=str(path),
+                                field=f"manifest.{name}")  # fmt: skip
+    if manifest["stage"] != KINDS[kind].stage:
+        raise ArtifactError(f"is {manifest['stage']!r}, but {schema} is written by {KINDS[kind].stage!r}",
+                            file=str(path), field="manifest.stage")  # fmt: skip
+    if not isinstance(manifest["input"].get("content_sha256"), str):
+        raise ArtifactError("expected a hash text", file=str(path), field="manifest.input.content_sha256")
+    if not isinstance(manifest["input"].get("path"), (str, type(None))):
+        raise ArtifactError("expected a path or null", file=str(path), field="manifest.input.path")
+    return kind
+
+
+def read_manifest(path: str | os.PathLike) -> dict:
+    """The checked manifest of any artifact file (for freshness checks and tests)."""
+    path = Path(path)
+    manifest, _ = _read_raw(path)
+    _check_manifest(manifest, path, None)
+    return manifest
+
+
+#: SHA-256 of the map texts whose invariants this process has checked (a plan reads one map five times).
+_CHECKED_MAPS: set[str] = set()
+
+
 def load(path: str | os.PathLike, expect: str | tuple[str, ...] | None = None) -> Loaded:
-    """Load and check an artifact.
+    """Load an artifact and check its form and its meaning.
 
     Parameters
     ----------
@@ -355,50 +825,68 @@ def load(path: str | os.PathLike, expect: str | tuple[str, ...] | None = None) -
     Raises
     ------
     ArtifactError
-        Naming the file and the problem: wrong type, missing entry, wrong shape or
-        dtype, content hash mismatch (corruption or tampering).
+        Naming the file (and the field) and the problem: unreadable, damaged, wrong type,
+        manifest fields, missing or unexpected entry, shape or dtype, content hash mismatch
+        (corruption or tampering), or an invariant of ``datatypes.INVARIANTS`` that does not hold.
     """
     path = Path(path)
     manifest, entries = _read_raw(path)
-    schema = manifest.get("schema")
-    kind = kind_of_schema(schema) if isinstance(schema, str) else None
-    if kind is None:
-        if schema in RETIRED_SCHEMAS:
-            raise ArtifactError(f"is a {schema} artifact, which this version no longer reads "
-                                f"({RETIRED_SCHEMAS[schema]})", file=str(path), field="manifest.schema")  # fmt: skip
-        raise ArtifactError(f"unknown schema {schema!r}", file=str(path), field="manifest.schema")
     wanted = (expect,) if isinstance(expect, str) else expect
-    if wanted and kind not in wanted:
-        names = " or ".join(KINDS[w].schema for w in wanted)
-        raise ArtifactError(f"is a {schema} artifact, expected {names}", file=str(path))
-    for key, (dtype_kind, ndim) in KINDS[kind].entries.items():
+    kind = _check_manifest(manifest, path, wanted)
+    declared = KINDS[kind].entries if kind != "map" else {"map": ("U", 0)}
+    for key, (dtype_kind, ndim) in declared.items():
         if key not in entries:
             raise ArtifactError("missing entry", file=str(path), field=key)
         value = entries[key]
         if dtype_kind == "U":
             if not isinstance(value, str):
                 raise ArtifactError("expected a JSON text", file=str(path), field=key)
+        elif isinstance(value, str):
+            raise ArtifactError(f"expected a {ndim}-d {dtype_kind} array, got a text", file=str(path), field=key)
         elif value.dtype.kind != dtype_kind or value.ndim != ndim:
             raise ArtifactError(
-                f"expected {ndim}-d {dtype_kind} array, got {value.ndim}-d {value.dtype}", file=str(path), field=key
+                f"expected a {ndim}-d {dtype_kind} array, got a {value.ndim}-d {value.dtype} one", file=str(path),
+                field=key,
             )
-    if content_hash(entries, kind) != manifest.get("content_sha256"):
+    extra = sorted(set(entries) - set(declared))
+    if extra:
+        raise ArtifactError(f"unexpected entry (not part of {KINDS[kind].schema})", file=str(path), field=extra[0])
+    if content_hash(entries, kind) != manifest["content_sha256"]:
         raise ArtifactError("content hash mismatch (file corrupted or edited)", file=str(path))
+    map_digest = sha256_text(entries["map"])
     try:
-        artifact = _from_entries(kind, entries, manifest)
-    except BearnavError as exc:
-        raise ArtifactError(str(exc), file=str(path)) from exc
+        artifact = _from_entries(kind, entries, manifest, check_map=map_digest not in _CHECKED_MAPS)
+        _CHECKED_MAPS.add(map_digest)
+        validate_artifact(kind, artifact, check_map=False)
+    except ArtifactError as exc:
+        raise exc.located(str(path)) from None
+    except (ValueError, TypeError, KeyError, IndexError, AttributeError, OverflowError) as exc:
+        raise ArtifactError(f"malformed ({type(exc).__name__}: {exc})", file=str(path)) from None
     return Loaded(artifact, manifest, path)
 
 
-def is_fresh(path: str | os.PathLike, key: str) -> bool:
-    """Whether the artifact at ``path`` was made with ``key`` and its content is intact."""
+def fresh(path: str | os.PathLike, kind: str, key: str, input_hash: str) -> Loaded | None:
+    """The artifact at ``path`` if it is fresh, else None.
+
+    Fresh means: it loads (every check of :func:`load`), its manifest has ``key`` and names
+    ``input_hash`` as its input's content hash, and, for a simulation, ``sim.json`` is there with
+    the same manifest (the two are written, checked and called fresh together).
+    """
     path = Path(path)
     if not path.is_file():
-        return False
+        return None
     try:
-        manifest, entries = _read_raw(path)
+        loaded = load(path, kind)
     except ArtifactError:
-        return False
-    kind = kind_of_schema(str(manifest.get("schema")))
-    return manifest.get("key") == key and content_hash(entries, kind) == manifest.get("content_sha256")
+        return None
+    manifest = loaded.manifest
+    if manifest["key"] != key or manifest["input"].get("content_sha256") != input_hash:
+        return None
+    if kind == "simulation":
+        try:
+            companion = json.loads(_read_file(metrics_path(path)).decode("utf-8"))
+        except (ArtifactError, UnicodeDecodeError, json.JSONDecodeError):
+            return None
+        if not isinstance(companion, dict) or companion.get("manifest") != json.loads(canonical_json(manifest)):
+            return None
+    return loaded

@@ -1,10 +1,35 @@
 """The ``bearnav`` command line (DESIGN §5): the only place that reads YAML, prints or exits.
 
-Exit codes: 0 success (fresh stages included), 1 the run finished but the outcome
-failed (no route), 2 usage, 3 invalid input (one line naming file, field and problem).
+Exit codes: 0 success (fresh stages included), 1 the run finished but the outcome failed (no
+route), 2 usage, 3 invalid input (one line naming file, field or option and the problem),
+130 interrupted (SIGINT: one line ``interrupted; nothing written for STAGE``), 143 terminated
+(SIGTERM, the same line).
 """
 
+# ruff: noqa: E402 - the SIGINT handler below must be in place before the slow imports that follow
+
 from __future__ import annotations
+
+import os
+import signal
+import sys
+import threading
+
+
+def _interrupted_while_starting(signum: int, frame: object) -> None:
+    """SIGINT or SIGTERM while Python is still importing: nothing has been read or written yet."""
+    command = next((arg for arg in sys.argv[1:] if not arg.startswith("-")), "bearnav")
+    word = "interrupted" if signum == signal.SIGINT else "terminated"
+    os.write(2, f"{word}; nothing written for {command}\n".encode())
+    os._exit(130 if signum == signal.SIGINT else 143)
+
+
+#: Whether this process is the ``bearnav`` program (not a test or a library importing the module).
+_AS_PROGRAM = os.path.basename(sys.argv[0]) in ("bearnav", "__main__.py")
+_STARTUP_HANDLERS: dict[int, object] = {}
+if threading.current_thread() is threading.main_thread():
+    for _signum in (signal.SIGINT, signal.SIGTERM):
+        _STARTUP_HANDLERS[_signum] = signal.signal(_signum, _interrupted_while_starting)
 
 import functools
 import hashlib
@@ -34,7 +59,9 @@ app = typer.Typer(
 out = Console()
 err = Console(stderr=True)
 
-EXIT_OUTCOME, EXIT_INVALID = 1, 3
+EXIT_OUTCOME, EXIT_INVALID, EXIT_INTERRUPTED, EXIT_TERMINATED = 1, 3, 130, 143
+#: Suffixes ``bearnav plot -o`` writes (matplotlib's formats that need nothing more than pillow).
+FIGURE_SUFFIXES = (".png", ".pdf", ".svg", ".svgz", ".eps", ".ps", ".jpg", ".jpeg", ".tif", ".tiff", ".webp")
 
 
 class _Quiet:
@@ -58,34 +85,87 @@ def _setup_logging() -> None:
 
 
 def _fail(message: str, code: int) -> typer.Exit:
-    err.print(f"[red]error:[/red] {message}", highlight=False, soft_wrap=True, markup=True)
+    err.print(f"[red]error:[/red] {message}".replace("\n", " "), highlight=False, soft_wrap=True, markup=True)
     return typer.Exit(code)
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, turned into an exception so that temp files are removed on the way out."""
+
+
+def _raise_interrupt(signum: int, frame: object) -> None:
+    raise KeyboardInterrupt if signum == signal.SIGINT else Terminated
+
+
+def _interrupt_message(command: str, exc: BaseException) -> str:
+    word = "terminated" if isinstance(exc, Terminated) else "interrupted"
+    stage = pipeline.ACTIVITY.stage
+    if stage is None:
+        return f"{word}; nothing written for {command}"
+    if pipeline.ACTIVITY.written:
+        return f"{word}; {stage} was written, nothing after it"
+    return f"{word}; nothing written for {stage}"
+
+
 def handles_errors(command: Callable) -> Callable:
-    """Turn bearnav errors into one line on stderr and exit code 3."""
+    """Turn every way a command can fail into one line on stderr and an exit code.
+
+    bearnav errors exit 3 (invalid input); SIGINT exits 130 and SIGTERM 143 with ``interrupted;
+    nothing written for STAGE`` (temp files are removed on the way); anything unexpected is an
+    internal error, one line too (``BEARNAV_TRACEBACK=1`` shows the traceback).
+    """
+    name = command.__name__.removesuffix("_command")
 
     @functools.wraps(command)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
         _setup_logging()
+        pipeline.reset_activity()
+        previous: dict[int, Any] = {}
+        if threading.current_thread() is threading.main_thread():
+            for signum in (signal.SIGINT, signal.SIGTERM):
+                previous[signum] = signal.signal(signum, _raise_interrupt)
         try:
             return command(*args, **kwargs)
+        except (typer.Exit, typer.Abort, typer.BadParameter):
+            raise
         except BearnavError as exc:
             raise _fail(str(exc).replace("[", r"\["), EXIT_INVALID) from None
+        except KeyboardInterrupt as exc:
+            message = _interrupt_message(name, exc)
+            err.print(message, highlight=False, soft_wrap=True, markup=False)
+            raise typer.Exit(EXIT_TERMINATED if isinstance(exc, Terminated) else EXIT_INTERRUPTED) from None
+        except MemoryError:
+            stage = pipeline.ACTIVITY.stage or name
+            raise _fail(f"out of memory in {stage}; nothing written for it (ask for less)", EXIT_INVALID) from None
+        except Exception as exc:  # noqa: BLE001 - the last guard: one line, never a traceback
+            if os.environ.get("BEARNAV_TRACEBACK"):
+                raise
+            stage = pipeline.ACTIVITY.stage or name
+            text = f"internal error in {stage} ({type(exc).__name__}: {exc}); nothing written for it"
+            raise _fail(text.replace("[", r"\[") + " (BEARNAV_TRACEBACK=1 shows where)", EXIT_INVALID) from None
+        finally:
+            for signum, handler in previous.items():
+                # the program ends now, its outcome decided: a late SIGINT must not turn it into a kill
+                signal.signal(signum, signal.SIG_IGN if _AS_PROGRAM else handler)
 
     return wrapper
+
+
+def _print_version(value: bool) -> None:
+    if value:
+        out.print(f"bearnav {__version__}", highlight=False)
+        raise typer.Exit(0)
 
 
 @app.callback()
 def main(
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bars or warnings."),
-    version: bool = typer.Option(False, "--version", help="Print the version and exit."),
+    version: bool = typer.Option(
+        False, "--version", help="Print the version and exit.", is_eager=True, callback=_print_version
+    ),
 ) -> None:
     """Certified bearing-only navigation controllers from a 2-D map."""
     _Quiet.enabled = quiet
-    if version:
-        out.print(f"bearnav {__version__}")
-        raise typer.Exit(0)
 
 
 # --------------------------------------------------------------------------- reading maps
@@ -192,7 +272,7 @@ def _progress_factory(progress: Progress) -> Callable[[str], pipeline.Progress]:
 def _progress_bar() -> Progress:
     return Progress(
         TextColumn("{task.description:<9}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
-        TimeElapsedColumn(), console=err, transient=True, disable=_Quiet.enabled,
+        TimeElapsedColumn(), console=err, transient=True, disable=_Quiet.enabled or not err.is_terminal,
     )
 
 
@@ -400,21 +480,36 @@ def verify_command(
     from bearnav_cli import verify  # scipy.sparse and the closed loop: only for this command
 
     _Quiet.enabled |= quiet
-    loaded = artifacts.load(plan_npz, "plan")
-    samples = artifacts.load(tree, ("tree", "simplified")).artifact.collision_samples if tree else None
+    pipeline.check_value("verify", "n_starts", starts, "--starts")
+    pipeline.check_value("verify", "seed", seed, "--seed")
+    pipeline.check_value("verify", "speed", speed, "--speed")
+    pipeline.check_value("verify", "min_success", min_success, "--min-success")
+    pipeline.ACTIVITY.stage = "verify"
+    loaded = pipeline.load(plan_npz, "plan")
+    samples = pipeline.load(tree, ("tree", "simplified")).artifact.collision_samples if tree else None
+    plan = loaded.artifact
+    where_speed = "--speed" if speed is not None else "params.simulate.speed"
     if speed is None:  # the speed the map simulates at (the paper maps' units are not metres)
-        speed = pipeline.resolve_params("simulate", loaded.artifact.map.params).speed
+        speed = pipeline.resolve_params("simulate", plan.map.params).speed
+    pipeline.check_value("verify", "speed", speed, where_speed, plan.map.diagonal)
+    if starts:
+        loop = pipeline.resolve_params("simulate", {}, {"speed": speed, "measurement": "displacement",
+                                                       "record_trajectories": False})  # fmt: skip
+        pipeline.check_closed_loop(plan, loop, starts, "--starts", where_speed, record=False)
+        pipeline.check_verify_starts(plan, starts)
     params = verify.Params(n_starts=starts, seed=seed, speed=speed, min_success=min_success)
+    world_map = _load_world(world) if world is not None else None
     with _progress_bar() as progress:
         track = _progress_factory(progress)("verify")
-        world_map = _load_world(world) if world is not None else None
-        report = verify.run(loaded.artifact, params, tree_samples=samples, progress=track, world=world_map)
+        report = verify.run(plan, params, tree_samples=samples, progress=track, world=world_map)
     if as_json:
         out.print_json(json.dumps(report.to_json()))
     else:
         out.print(f"verify    {plan_npz}  {report.summary()}", highlight=False, soft_wrap=True)
         for reason in report.reasons:
             out.print(f"  - {reason}", highlight=False, soft_wrap=True)
+        for note in getattr(report, "notes", []):
+            out.print(f"  note: {note}", highlight=False, soft_wrap=True)
     if report.failed:
         raise typer.Exit(EXIT_OUTCOME)
 
@@ -474,6 +569,8 @@ def simulate_command(
         occlusion=occlusion, reconstruction=reconstruction, dt=dt, speed=speed, alpha=alpha, beta=beta,
         clamp_reverse=clamp_reverse, hold_time=hold_time, odometry=odometry, odometry_noise=odometry_noise, seed=seed,
     )
+    if gif is not None:  # before any work, like every output path
+        artifacts.check_output_file(gif, (".gif",), "--gif", inputs=(plan_npz,))
     with _progress_bar() as progress:
         report = pipeline.run_stage("simulate", plan_npz, out_path, overrides, force,
                                     _progress_factory(progress)("simulate"))  # fmt: skip
@@ -492,7 +589,9 @@ def simulate_command(
     if gif is not None:
         from bearnav_cli import plot  # matplotlib only when asked
 
-        plot.save_animation(sim, str(gif))
+        pipeline.ACTIVITY.stage, pipeline.ACTIVITY.written = f"{gif} (sim.npz and sim.json were written)", False
+        with artifacts.atomic_output(gif) as tmp:
+            plot.save_animation(sim, str(tmp))
         if not as_json:
             out.print(f"wrote {gif}", highlight=False)
     rate = metrics.get("success_rate")
@@ -559,7 +658,7 @@ def inspect_command(artifact: Path = typer.Argument(..., help="Any bearnav artif
 
     Example: bearnav inspect plans/kitchen/tree.npz
     """
-    loaded = artifacts.load(artifact)
+    loaded = pipeline.load(artifact)
     manifest = loaded.manifest
     if as_json:
         out.print_json(json.dumps(manifest))
@@ -597,19 +696,27 @@ def plot_command(
 
     Example: bearnav plot plans/kitchen/plan.npz -o plan.png --color-by tolerance --cell-numbers
     """
+    artifacts.check_output_file(out_path, FIGURE_SUFFIXES, "-o/--out", inputs=(artifact, *(also or [])))
     # matplotlib is slow to import: only here
     from bearnav_cli import composition, plot
 
     if color_by is not None and color_by not in plot.COLOR_BY:
         raise _fail(f"--color-by: must be one of {', '.join(plot.COLOR_BY)}, got {color_by!r}", EXIT_INVALID)
 
-    loaded = artifacts.load(artifact)
-    background = [artifacts.load(p, ("tree", "simplified")).artifact for p in also or []]
+    pipeline.ACTIVITY.stage = str(out_path)
+    loaded = pipeline.load(artifact)
+    background = [pipeline.load(p, ("tree", "simplified")).artifact for p in also or []]
     shown = loaded.artifact
     cells = shown.cells if isinstance(shown, Plan) else shown if isinstance(shown, Cells) else None
     coverage = (composition.coverage_regions(cells, margin=composition.coverage_margin(shown))
                 if cells is not None and cells.is_funnel else None)  # fmt: skip
     fig = plot.figure_for(shown, background=background, title=title, color_by=color_by, barriers=barriers,
                           labels=labels, cell_numbers=cell_numbers, coverage=coverage)  # fmt: skip
-    plot.save_figure(fig, str(out_path))
+    with artifacts.atomic_output(out_path) as tmp:
+        plot.save_figure(fig, str(tmp))
     out.print(f"wrote {out_path}", highlight=False)
+
+
+if not _AS_PROGRAM:  # a test or a library imported the app: give SIGINT and SIGTERM back
+    for _signum, _handler in _STARTUP_HANDLERS.items():
+        signal.signal(_signum, _handler)

@@ -13,7 +13,7 @@ import enum
 import json
 import math
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
@@ -47,6 +47,132 @@ def frozen_array(value: Any, dtype: Any, shape: tuple[int | None, ...], name: st
 
 def _shape_text(shape: tuple[int | None, ...]) -> str:
     return "(" + ", ".join("n" if s is None else str(s) for s in shape) + ")"
+
+
+# --------------------------------------------------------------------------- meaning (checked on load)
+#
+# A content hash proves that a file is intact, not that it makes sense. Each artifact's schema
+# below is followed by its INVARIANTS: what the next stage relies on. artifacts.load runs them on
+# every file it reads (whatever its hash says), pipeline runs them on every stage's output before
+# it is saved, and docs/artifacts.md lists them ("Checked on load"; a test compares the lists).
+
+
+@dataclass(frozen=True)
+class Invariant:
+    """One property an artifact must have to make sense.
+
+    Attributes
+    ----------
+    field : str
+        The entry (or map field) it is about, as the error message names it.
+    rule : str
+        What must hold, in a few words (the text docs/artifacts.md shows).
+    check : callable
+        ``check(artifact) -> str | None``: what is wrong, or None; or a pair ``(subfield, text)`` to name
+        a part of the field (``params`` → ``params.rrtstar.seed``).
+    """
+
+    field: str
+    rule: str
+    check: Callable[[Any], Any]
+
+
+def validate(invariants: tuple[Invariant, ...], artifact: Any, prefix: str = "") -> None:
+    """Run ``invariants`` on ``artifact``; raise :class:`ArtifactError` naming the field of the first that fails."""
+    for invariant in invariants:
+        problem = invariant.check(artifact)
+        if problem is None:
+            continue
+        field = invariant.field
+        if isinstance(problem, tuple):
+            field, problem = f"{field}.{problem[0]}", problem[1]
+        raise ArtifactError(problem, field=prefix + field)
+
+
+def _first(mask: np.ndarray) -> int | None:
+    """Index of the first True of a bool array, or None."""
+    hits = np.flatnonzero(mask)
+    return int(hits[0]) if hits.size else None
+
+
+def _finite_problem(values: Any, allow_nan: bool = False) -> str | None:
+    values = np.asarray(values, float)
+    bad = np.isinf(values) if allow_nan else ~np.isfinite(values)
+    k = _first(bad.reshape(-1))
+    if k is None:
+        return None
+    return f"contains {'an infinity' if allow_nan else 'NaN or infinity'} (flat index {k})"
+
+
+def _at_least(values: Any, low: float, what: str, allow_nan: bool = False) -> str | None:
+    values = np.asarray(values, float).reshape(-1)
+    problem = _finite_problem(values, allow_nan)
+    if problem is not None:
+        return problem
+    k = _first(~np.isnan(values) & (values < low)) if allow_nan else _first(values < low)
+    return None if k is None else f"must be {what}, got {values[k]:g} at index {k}"
+
+
+def _ring_problem(polygons: tuple[Polygon, ...]) -> str | None:
+    """Rings of 3 or more finite vertices, simple polygons of positive area (shapely's validity)."""
+    for k, polygon in enumerate(polygons):
+        for ring in (polygon.exterior, *polygon.holes):
+            if len(ring) < 3:
+                return f"polygon {k} has a ring of {len(ring)} points (at least 3 are needed)"
+            if not np.all(np.isfinite(ring)):
+                return f"polygon {k} has a NaN or infinite vertex"
+    if not polygons:
+        return None
+    import shapely  # only when there are polygons to check (shapely is loaded by every stage anyway)
+
+    shapes = [shapely.Polygon(p.exterior, p.holes) for p in polygons]
+    valid = shapely.is_valid(shapes) & (shapely.area(shapes) > 0)
+    k = _first(~valid)
+    if k is None:
+        return None
+    return f"polygon {k} is not a simple polygon of positive area ({shapely.is_valid_reason(shapes[k])})"
+
+
+def _tree_problem(nodes: np.ndarray, parent: np.ndarray) -> str | None:
+    """``parent == -1`` exactly at node 0, indices in range, and every chain ends at node 0 (no cycle)."""
+    n = len(nodes)
+    if n == 0 or len(parent) != n:
+        return f"expected one parent per node ({n} nodes, {len(parent)} parents)"
+    if parent[0] != -1 or np.count_nonzero(parent == -1) != 1:
+        return "must be -1 exactly at node 0 (the root)"
+    k = _first((parent < -1) | (parent >= n))
+    if k is not None:
+        return f"node {k} has parent {int(parent[k])}, out of range 0..{n - 1}"
+    up = np.array(parent, np.int64)
+    up[0] = 0
+    for _ in range(max(1, math.ceil(math.log2(n))) + 1):  # pointer doubling: 2^k ancestors
+        up = up[up]
+    k = _first(up != 0)
+    return None if k is None else f"node {k}'s parent chain never reaches the root (a cycle)"
+
+
+def _root_problem(nodes: np.ndarray, map_: Any) -> str | None:
+    if len(nodes) and not np.all(np.abs(nodes[0] - map_.goal) <= 10 * map_.tol):
+        return f"node 0 {nodes[0].tolist()} is not the goal {map_.goal.tolist()}"
+    return None
+
+
+def _nodes_problem(artifact: Any) -> str | None:
+    """Finite node positions, node 0 at the goal of the artifact's map."""
+    return _finite_problem(artifact.nodes) or _root_problem(artifact.nodes, artifact.map)
+
+
+def _offsets_problem(offsets: np.ndarray, total: int, count: int) -> str | None:
+    if len(offsets) != count + 1:
+        return f"expected {count + 1} offsets, got {len(offsets)}"
+    if offsets[0] != 0 or offsets[-1] != total or np.any(np.diff(offsets) < 0):
+        return f"offsets must start at 0, never decrease and end at {total}"
+    return None
+
+
+def _in_range(values: np.ndarray, low: int, high: int) -> str | None:
+    k = _first((values < low) | (values > high))
+    return None if k is None else f"must lie in {low}..{high}, got {int(values[k])} at index {k}"
 
 
 @dataclass(frozen=True)
@@ -196,6 +322,84 @@ class Map:
             raise ArtifactError(f"malformed map ({type(exc).__name__}: {exc})", field="map") from exc
 
 
+def _map_params_problem(map_: Map) -> str | None:
+    params = map_.params
+    if not isinstance(params, dict):
+        return "expected a mapping of stage name to a mapping of options"
+    for stage, options in params.items():
+        if not isinstance(options, dict):
+            return str(stage), f"expected a mapping of options, got {type(options).__name__}"
+        for name, value in options.items():
+            if value is not None and not isinstance(value, (bool, int, float, str)):
+                return f"{stage}.{name}", f"expected a number, a string, true/false or null, got {type(value).__name__}"
+    return None
+
+
+def _map_points_problem(map_: Map, points: np.ndarray, strict: bool) -> str | None:
+    """The first point outside ``B_r`` (strictly inside, when ``strict``) or in an obstacle."""
+    lo, hi = map_.free_bounds[:2], map_.free_bounds[2:]
+    inside = np.all((points > lo) & (points < hi), axis=1) if strict else np.all((points >= lo) & (points <= hi),
+                                                                                   axis=1)  # fmt: skip
+    k = _first(~inside)
+    if k is not None:
+        return f"{points[k].tolist()} is outside B_r (the bounds less the robot radius)"
+    if not map_.obstacles or not len(points):
+        return None
+    import shapely
+
+    for j, polygon in enumerate(map_.obstacles):
+        hit = shapely.intersects_xy(shapely.Polygon(polygon.exterior, polygon.holes), points[:, 0], points[:, 1])
+        k = _first(np.asarray(hit).reshape(-1))
+        if k is not None:
+            return f"{points[k].tolist()} lies in obstacle {j}"
+    return None
+
+
+def _map_landmarks_problem(map_: Map) -> str | None:
+    if len(map_.landmarks) < 2:
+        return f"at least 2 landmarks are needed, got {len(map_.landmarks)}"
+    if len(set(map_.landmark_ids)) != len(map_.landmark_ids):
+        return "landmark ids must be distinct"
+    lo, hi = map_.bounds[:2], map_.bounds[2:]
+    k = _first(~np.all((map_.landmarks >= lo) & (map_.landmarks <= hi), axis=1))
+    return None if k is None else f"landmark {k} {map_.landmarks[k].tolist()} is outside the bounds"
+
+
+def _map_name_problem(map_: Map) -> str | None:
+    name = map_.name
+    if not name or any(c in name for c in "/\\:") or name.startswith("."):
+        return f"must be a non-empty name without path separators, got {name!r}"
+    return None
+
+
+def _map_bounds_problem(map_: Map) -> str | None:
+    xmin, ymin, xmax, ymax = map_.bounds
+    if not (xmin < xmax and ymin < ymax):
+        return "needs xmin < xmax and ymin < ymax"
+    r = map_.robot_radius
+    if math.isfinite(r) and not (xmax - xmin > 2 * r and ymax - ymin > 2 * r):
+        return f"leave no room for a robot of radius {r:g} (B_r is empty)"
+    return None
+
+
+#: What every map (``map.json``, and the map embedded in every later artifact) must satisfy.
+MAP_INVARIANTS: tuple[Invariant, ...] = (
+    Invariant("name", "a non-empty name without path separators", _map_name_problem),
+    Invariant("robot_radius", "finite, zero or positive",
+              lambda m: _at_least([m.robot_radius], 0.0, "zero or positive")),
+    Invariant("bounds", "xmin < xmax, ymin < ymax, wider and taller than the robot's diameter", _map_bounds_problem),
+    Invariant("obstacles", "simple polygons: rings of 3 or more finite vertices, positive area",
+              lambda m: _ring_problem(m.obstacles)),
+    Invariant("raw_obstacles", "simple polygons: rings of 3 or more finite vertices, positive area",
+              lambda m: _ring_problem(m.raw_obstacles)),
+    Invariant("goal", "strictly inside B_r (the bounds less the robot radius) and in no obstacle",
+              lambda m: _map_points_problem(m, m.goal[None, :], strict=True)),
+    Invariant("starts", "inside B_r and in no obstacle", lambda m: _map_points_problem(m, m.starts, strict=False)),
+    Invariant("landmarks", "at least 2, inside the bounds, with distinct ids", _map_landmarks_problem),
+    Invariant("params", "stage name -> parameter name -> a number, string, true/false or null", _map_params_problem),
+)  # fmt: skip
+
+
 @dataclass(frozen=True)
 class Tree:
     """A tree rooted at the goal, with the RRT* collision samples (ALGORITHMS §2–3).
@@ -256,6 +460,28 @@ class Tree:
             "cost": self.cost,
             "collision_samples": self.collision_samples,
         }
+
+
+def _tree_cost_problem(tree: Tree) -> str | None:
+    cost, parent, nodes = tree.cost, tree.parent, tree.nodes
+    if len(cost) and cost[0] != 0:
+        return f"must be 0 at the root, got {cost[0]:g}"
+    child = np.arange(1, len(nodes))
+    expected = cost[parent[child]] + np.hypot(*(nodes[child] - nodes[parent[child]]).T)
+    k = _first(np.abs(cost[child] - expected) > 1e-6 * max(tree.map.diagonal, 1.0))
+    if k is None:
+        return None
+    return f"node {k + 1}: {cost[k + 1]:g} is not its parent's cost plus the edge length ({expected[k]:g})"
+
+
+#: What ``tree.npz`` and ``simplified.npz`` must satisfy (besides their map's invariants).
+TREE_INVARIANTS: tuple[Invariant, ...] = (
+    Invariant("parent", "-1 exactly at node 0, indices in range, every chain ends at node 0 (no cycle)",
+              lambda t: _tree_problem(t.nodes, t.parent)),
+    Invariant("nodes", "finite; node 0 is the goal", lambda t: _nodes_problem(t)),
+    Invariant("cost", "0 at the root, the parent's cost plus the edge length at every other node", _tree_cost_problem),
+    Invariant("collision_samples", "finite", lambda t: _finite_problem(t.collision_samples)),
+)  # fmt: skip
 
 
 class CellStatus(enum.IntEnum):
@@ -444,6 +670,65 @@ class Cells:
         return {name: _entry(getattr(self, name)) for name in CELL_KEYS}
 
 
+def _cell_polygon_problem(cells: Cells) -> str | None:
+    """Each cell a counter-clockwise polygon of 3 or more vertices with positive area (shoelace)."""
+    offsets, verts = cells.cell_vertex_offsets, cells.cell_vertices
+    counts = np.diff(offsets)
+    k = _first(counts < 3)
+    if k is not None:
+        return f"cell {k} has {int(counts[k])} vertices (at least 3 are needed)"
+    if not len(verts):
+        return None
+    following = np.arange(len(verts)) + 1
+    following[offsets[1:] - 1] = offsets[:-1]
+    x, y = verts[:, 0], verts[:, 1]
+    area = np.add.reduceat(x * y[following] - x[following] * y, offsets[:-1]) / 2
+    k = _first(~(area > 0))
+    return None if k is None else f"cell {k} is not a counter-clockwise polygon of positive area (area {area[k]:.3g})"
+
+
+def _unit_problem(vectors: np.ndarray, rows: np.ndarray | None = None) -> str | None:
+    norms = np.hypot(vectors[:, 0], vectors[:, 1])
+    bad = np.abs(norms - 1.0) > 1e-6
+    if rows is not None:
+        bad &= rows
+    k = _first(bad)
+    return None if k is None else f"row {k} has norm {norms[k]:.6g}, expected 1"
+
+
+def _s_problem(cells: Cells) -> str | None:
+    problem = _at_least(cells.s_min, 0.0, "zero or positive")
+    if problem is not None:
+        return problem
+    k = _first(cells.s_min > cells.s_max * (1 + 1e-9) + cells.map.tol)
+    return None if k is None else f"cell {k}: s_min {cells.s_min[k]:g} exceeds s_max {cells.s_max[k]:g}"
+
+
+def _coverage_problem(value: float) -> str | None:
+    if math.isnan(value) or 0.0 <= value <= 1.0:
+        return None
+    return f"must lie in [0, 1] (or be NaN), got {value:g}"
+
+
+#: What ``cells.npz`` (and the cells of ``plan.npz``) must satisfy (besides their map's invariants).
+CELLS_INVARIANTS: tuple[Invariant, ...] = (
+    Invariant("parent", "-1 exactly at node 0, indices in range, every chain ends at node 0 (no cycle)",
+              lambda c: _tree_problem(c.nodes, c.parent)),
+    Invariant("nodes", "finite; node 0 is the goal", lambda c: _nodes_problem(c)),
+    Invariant("cell_node", "distinct node indices in range",
+              lambda c: None if len(np.unique(c.cell_node)) == len(c.cell_node) else "two cells share a node"),
+    Invariant("cell_vertices", "each cell a counter-clockwise polygon of 3 or more vertices with positive area",
+              _cell_polygon_problem),
+    Invariant("cell_A", "unit-norm rows", lambda c: _unit_problem(c.cell_A)),
+    Invariant("exit_dir", "a unit vector in every cell but the goal cell",
+              lambda c: _unit_problem(c.exit_dir, c.parent[c.cell_node] >= 0)),
+    Invariant("s_min", "0 <= s_min <= s_max", _s_problem),
+    Invariant("cell_flags", "only the known flag bits (0 to 31)", lambda c: _in_range(c.cell_flags, 0, 31)),
+    Invariant("cell_rank", "zero or positive", lambda c: _at_least(c.cell_rank, 0.0, "zero or positive")),
+    Invariant("free_coverage", "in [0, 1], or NaN", lambda c: _coverage_problem(c.free_coverage)),
+)  # fmt: skip
+
+
 def _entry(value: Any) -> Any:
     """A data entry as artifacts store it: texts stay ``str`` (a 0-d text entry), the rest arrays."""
     return value if isinstance(value, str) else np.asarray(value)
@@ -576,6 +861,28 @@ class Plan:
         return out
 
 
+def _goal_tolerance_problem(plan: Plan) -> str | None:
+    value = plan.goal_tolerance
+    return None if math.isfinite(value) and value > 0 else f"must be finite and positive, got {value:g}"
+
+
+def _tolerance_problem(values: Any) -> str | None:
+    return _at_least(values, 0.0, "zero or positive (or NaN)", allow_nan=True)
+
+
+#: What ``plan.npz`` adds to the cells' invariants (checked on ``plan.cells`` too).
+PLAN_INVARIANTS: tuple[Invariant, ...] = (
+    Invariant("goal_tolerance", "finite and positive", _goal_tolerance_problem),
+    Invariant("u_max", "positive", lambda p: _at_least(p.u_max, np.nextafter(0.0, 1.0), "positive")),
+    Invariant("c_v", "zero or positive", lambda p: _at_least(p.c_v, 0.0, "zero or positive")),
+    Invariant("c_h", "zero or positive, or NaN (no barrier rows)", lambda p: _tolerance_problem(p.c_h)),
+    Invariant("margin_h", "finite or NaN", lambda p: _finite_problem(p.margin_h, allow_nan=True)),
+    Invariant("margin_v", "finite or NaN", lambda p: _finite_problem(p.margin_v, allow_nan=True)),
+    Invariant("tolerance", "zero or positive, or NaN", lambda p: _tolerance_problem(p.tolerance)),
+    Invariant("plan_tolerance", "zero or positive, or NaN", lambda p: _tolerance_problem([p.plan_tolerance])),
+)  # fmt: skip
+
+
 #: Data keys of ``sim.npz`` besides ``map`` and ``manifest`` (dtype kind, ndim).
 SIMULATION_KEYS: dict[str, tuple[str, int]] = {
     "starts": ("f", 2), "outcome": ("i", 1), "steps": ("i", 1), "time": ("f", 1), "path_length": ("f", 1),
@@ -672,6 +979,73 @@ class Simulation:
     def arrays(self) -> dict[str, np.ndarray]:
         """The data entries of ``sim.npz`` (without ``manifest`` and ``map``)."""
         return {name: np.asarray(getattr(self, name)) for name in SIMULATION_KEYS}
+
+
+def _sim_cells_problem(sim: Simulation) -> str | None:
+    return _offsets_problem(sim.cell_vertex_offsets, len(sim.cell_vertices), len(sim.cell_status)) or (
+        _finite_problem(sim.cell_vertices)
+    )
+
+
+def _sim_trajectory_problem(sim: Simulation) -> str | None:
+    return _offsets_problem(sim.trajectory_offsets, len(sim.trajectory_coords), len(sim.outcome))
+
+
+#: What ``sim.npz`` must satisfy (besides its map's invariants).
+SIMULATION_INVARIANTS: tuple[Invariant, ...] = (
+    Invariant("parent", "-1 exactly at node 0, indices in range, every chain ends at node 0 (no cycle)",
+              lambda s: _tree_problem(s.nodes, s.parent)),
+    Invariant("nodes", "finite; node 0 is the goal", lambda s: _nodes_problem(s)),
+    Invariant("outcome", "0 to 4", lambda s: _in_range(s.outcome, 0, 4)),
+    Invariant("steps", "zero or positive", lambda s: _in_range(s.steps, 0, np.iinfo(np.int64).max)),
+    Invariant("starts", "finite", lambda s: _finite_problem(s.starts)),
+    Invariant("final_position", "finite", lambda s: _finite_problem(s.final_position)),
+    Invariant("time", "finite, zero or positive", lambda s: _at_least(s.time, 0.0, "zero or positive")),
+    Invariant("path_length", "finite, zero or positive", lambda s: _at_least(s.path_length, 0.0, "zero or positive")),
+    Invariant("min_clearance", "not NaN", lambda s: None if not np.isnan(s.min_clearance).any() else "contains NaN"),
+    Invariant("trajectory_offsets", "R + 1 offsets from 0, never decreasing, to the number of points",
+              _sim_trajectory_problem),
+    Invariant("trajectory_coords", "finite", lambda s: _finite_problem(s.trajectory_coords)),
+    Invariant("trajectory_heading", "finite", lambda s: _finite_problem(s.trajectory_heading)),
+    Invariant("trajectory_cells", "-1 (no cell) or a cell index",
+              lambda s: _in_range(s.trajectory_cells, -1, len(s.cell_status) - 1)),
+    Invariant("cell_status", "0 to 4", lambda s: _in_range(s.cell_status, 0, 4)),
+    Invariant("cell_vertex_offsets", "C + 1 offsets from 0, never decreasing, to the number of vertices; finite "
+              "vertices", _sim_cells_problem),
+    Invariant("dt", "finite and positive", lambda s: None if math.isfinite(s.dt) and s.dt > 0 else f"got {s.dt:g}"),
+)  # fmt: skip
+
+#: The invariants of each artifact kind (``artifacts.KINDS`` names); every kind but ``map`` also checks
+#: its embedded map against :data:`MAP_INVARIANTS` (fields ``map.NAME``).
+INVARIANTS: dict[str, tuple[Invariant, ...]] = {
+    "map": MAP_INVARIANTS,
+    "tree": TREE_INVARIANTS,
+    "simplified": TREE_INVARIANTS,
+    "cells": CELLS_INVARIANTS,
+    "plan": CELLS_INVARIANTS + PLAN_INVARIANTS,
+    "simulation": SIMULATION_INVARIANTS,
+}
+
+
+def validate_artifact(kind: str, artifact: Any, check_map: bool = True) -> None:
+    """Check what ``artifact`` (of ``kind``) means: its map's invariants, then its own.
+
+    Raises
+    ------
+    ArtifactError
+        Naming the field (``map.goal``, ``parent`` ...) and what is wrong.
+    """
+    if kind == "map":
+        if check_map:
+            validate(MAP_INVARIANTS, artifact)
+        return
+    if check_map:
+        validate(MAP_INVARIANTS, artifact.map, prefix="map.")
+    if kind == "plan":
+        validate(CELLS_INVARIANTS, artifact.cells)
+        validate(PLAN_INVARIANTS, artifact)
+        return
+    validate(INVARIANTS[kind], artifact)
 
 
 def replace(artifact: Any, **changes: Any) -> Any:

@@ -42,16 +42,54 @@ class InvalidParamsError(BearnavError, ValueError):
 
     def __init__(self, message: str, *, field: str | None = None):
         self.field = field
+        self.reason = message
         super().__init__(_locate(message, None, field))
 
 
 class ArtifactError(BearnavError, ValueError):
-    """An artifact file is missing, of the wrong type, corrupted or tampered with."""
+    """An artifact file is missing, unreadable, of the wrong type, corrupted, tampered with or meaningless."""
 
     def __init__(self, message: str, *, file: str | None = None, field: str | None = None):
         self.file = file
         self.field = field
+        self.reason = message
         super().__init__(_locate(message, file, field))
+
+    def located(self, file: str) -> ArtifactError:
+        """The same error naming ``file`` (when it names none yet)."""
+        return ArtifactError(self.reason, file=self.file or file, field=self.field)
+
+
+class OutputPathError(BearnavError, ValueError):
+    """An output path cannot be written: a folder where a file belongs, a file where a folder
+    belongs, an unwritable folder, an unknown extension, the input itself.
+
+    Parameters
+    ----------
+    message : str
+        What is wrong.
+    file : str
+        The path.
+    option : str, optional
+        The option that gave it (``-o/--out``, ``--gif``).
+    """
+
+    def __init__(self, message: str, *, file: str, option: str | None = None):
+        self.file = file
+        self.option = option
+        super().__init__(_locate(message, option, file))
+
+
+class FolderBusyError(BearnavError):
+    """Another bearnav run holds the lock of an output folder (one run per folder)."""
+
+    def __init__(self, folder: str):
+        self.file = folder
+        super().__init__(_locate("another bearnav run is writing to this folder; wait until it ends", folder, None))
+
+
+class ResourceLimitError(InvalidParamsError):
+    """A request would need more memory (or steps) than the limits allow; the message says what fits."""
 
 
 class StaleInputError(BearnavError):

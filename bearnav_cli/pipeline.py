@@ -1,13 +1,19 @@
-"""The stage table, parameter resolution, freshness and ``bearnav plan`` (DESIGN §3.1, §5).
+"""The stage table, parameter resolution and limits, freshness and ``bearnav plan`` (DESIGN §3.1, §5).
 
-A stage runs only when no output with the same cache key and an intact content
-hash exists. Parameters resolve as: the stage's defaults, then the map's
-``params: {stage: {...}}``, then explicit overrides (the CLI options).
+A stage runs only when no output with the same cache key, naming the current input's content
+hash, exists and loads (every check of :func:`bearnav_cli.artifacts.load`). Parameters resolve
+as: the stage's defaults, then the map's ``params: {stage: {...}}``, then explicit overrides (the
+CLI options); every numeric one must lie in its documented range (:data:`LIMITS`) and big
+requests are checked against a memory estimate before they start (:func:`check_resources`).
+
+Every output path is checked before any work, and every run holds the lock of its output
+folder (:func:`bearnav_cli.artifacts.output_folder`), so two runs never mix their artifacts.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -16,7 +22,7 @@ from typing import Any, Callable
 
 from bearnav_cli import artifacts
 from bearnav_cli.datatypes import Map
-from bearnav_cli.errors import InvalidMapError, InvalidParamsError
+from bearnav_cli.errors import ArtifactError, InvalidMapError, InvalidParamsError, ResourceLimitError
 from bearnav_cli.stages import decompose, map_, rrtstar, simplify, simulate, synthesize
 
 #: ``progress(done, total)``, called by long stages.
@@ -59,11 +65,201 @@ class StageReport:
     elapsed_s: float
     summary: str
     artifact: Any = dataclasses.field(repr=False, default=None)
+    manifest: dict | None = dataclasses.field(repr=False, default=None)
 
 
-def _coerce(stage: str, name: str, default: Any, value: Any, origin: str) -> Any:
+# --------------------------------------------------------------------------- what is running (interrupts)
+
+
+@dataclass
+class Activity:
+    """The stage this process is working on, for the message of an interrupt.
+
+    ``stage`` is set when a stage starts (before its input is read); ``written`` once its output
+    is committed (artifacts.save's ``on_commit``, run with SIGINT held back).
+    """
+
+    stage: str | None = None
+    written: bool = False
+
+
+ACTIVITY = Activity()
+
+
+def reset_activity() -> None:
+    ACTIVITY.stage, ACTIVITY.written = None, False
+
+
+def _begin(stage: str) -> None:
+    ACTIVITY.stage, ACTIVITY.written = stage, False
+
+
+def _committed() -> None:
+    ACTIVITY.written = True
+
+
+# --------------------------------------------------------------------------- limits
+
+
+@dataclass(frozen=True)
+class Range:
+    """The documented range of one numeric parameter (docs/cli.md "Option limits" shows :meth:`text`).
+
+    Attributes
+    ----------
+    low, high : float or None
+        Bounds (``None``: none); with ``per_diagonal`` they are multiples of the map's diagonal
+        ``D`` and are checked once the map is known.
+    low_open : bool
+        ``low`` itself is excluded.
+    integer : bool
+        The value must be an integer.
+    per_diagonal : bool
+        The bounds scale with ``D`` (a length).
+    """
+
+    low: float | None = None
+    high: float | None = None
+    low_open: bool = False
+    integer: bool = False
+    per_diagonal: bool = False
+
+    def _bound(self, value: float | None) -> str:
+        if value is None:
+            return "∞"
+        text = f"{value:g}" if not self.integer else str(int(value))
+        if self.per_diagonal:
+            return "0" if value == 0 else ("D" if value == 1 else f"{text}·D")
+        return text
+
+    def text(self) -> str:
+        """``"integer in [1, 10000000]"``, ``"(0, 10·D]"`` ..."""
+        left = "(" if self.low_open else "["
+        right = ")" if self.high is None else "]"
+        interval = f"{left}{self._bound(self.low)}, {self._bound(self.high)}{right}"
+        return f"integer in {interval}" if self.integer else interval
+
+    def describe(self) -> str:
+        """``"an integer in [1, 10000000]"``, ``"in (0, 10·D]"``: for messages."""
+        text = self.text()
+        return "an " + text if self.integer else "in " + text
+
+    def problem(self, value: Any, diagonal: float | None = None) -> str | None:
+        """What is wrong with ``value`` (None when it fits); D-relative bounds only with ``diagonal``."""
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            return f"expected a number, got {value!r}"
+        if isinstance(value, float) and not math.isfinite(value):
+            return f"must be finite ({self.describe()}), got {value}"
+        if self.integer and not (isinstance(value, int) or float(value).is_integer()):
+            return f"must be {self.describe()}, got {value!r}"
+        scale = 1.0
+        if self.per_diagonal:
+            if diagonal is None:  # the map is not known yet: only what does not depend on D
+                if self.low is None or value > self.low or (value == self.low and not self.low_open):
+                    return None
+                return f"must be {self.describe()}, got {value!r}"
+            scale = diagonal
+        low = None if self.low is None else self.low * scale
+        high = None if self.high is None else self.high * scale
+        too_low = low is not None and (value < low or (self.low_open and value == low))
+        too_high = high is not None and value > high
+        if too_low or too_high:
+            shown = f" (D = {diagonal:.4g})" if self.per_diagonal and diagonal is not None else ""
+            return f"must be {self.describe()}{shown}, got {value!r}"
+        return None
+
+
+#: Seeds: any integer numpy's ``default_rng`` takes that also fits 32 bits; negatives are refused.
+SEED = Range(0, 2**32 - 1, integer=True)
+#: Most runs ``random:N`` / ``verify --starts`` may ask for (a memory estimate may refuse fewer).
+MAX_RUNS = 1_000_000
+#: Most steps one closed-loop run may be allowed (``max_steps``, explicit or from speed and dt): about 60
+#: times what the example maps need at their speeds, a few minutes of one robot.
+MAX_STEPS_PER_RUN = 1_000_000
+#: Most cells of RRT*'s neighbour grid (3 per step along each side of the bounds).
+MAX_GRID_CELLS = 10_000_000
+#: Most border pseudo-samples of RRT* (they become collision samples every later stage reads).
+MAX_BORDER_SAMPLES = 200_000
+
+#: The range of every numeric parameter, by stage (``verify`` holds the options of ``bearnav verify``).
+LIMITS: dict[str, dict[str, Range]] = {
+    "map": {
+        "circle_segments": Range(8, 4096, integer=True),
+        "coverage_cells": Range(1, 1000, integer=True),
+    },
+    "rrtstar": {
+        "iterations": Range(1, 10_000_000, integer=True),
+        "step": Range(0, 10, low_open=True, per_diagonal=True),
+        "seed": SEED,
+        "border_spacing": Range(0, 10, per_diagonal=True),
+        "clearance": Range(0, 1, per_diagonal=True),
+    },
+    "simplify": {
+        "max_rounds": Range(1, 1000, integer=True),
+        "clearance": Range(0, 1, per_diagonal=True),
+    },
+    "decompose": {
+        "exit_inset": Range(0, 1, per_diagonal=True),
+        "coverage_target": Range(0, 1),
+        "max_added_nodes": Range(0, 100_000, integer=True),
+        "n_landmarks": Range(2, 1000, integer=True),
+        "barrier_margin": Range(0, 1, per_diagonal=True),
+    },
+    "synthesize": {
+        "u_max": Range(0, 1e6, low_open=True),
+        "kappa": Range(0, 1e6, low_open=True),
+        "halvings": Range(0, 60, integer=True),
+        "w_h": Range(0, 1e6),
+        "w_v": Range(0, 1e6),
+        "clf_margin": Range(0, 1),
+        "goal_tolerance": Range(0, 1, low_open=True, per_diagonal=True),
+    },
+    "simulate": {
+        "fov": Range(0, 360, low_open=True),
+        "noise_deg": Range(0, 180),
+        "range": Range(0, 1e6, low_open=True, per_diagonal=True),
+        "min_spread_deg": Range(0, 90, low_open=True),
+        "speed": Range(0, 1e3, low_open=True, per_diagonal=True),
+        "alpha": Range(0, 1e3, low_open=True, per_diagonal=True),
+        "beta": Range(0, 1e3, low_open=True),
+        "initial_heading": Range(-360, 360),
+        "hold_time": Range(0, 1e6, low_open=True),
+        "max_fix_error": Range(0, 1e3, low_open=True, per_diagonal=True),
+        "odometry_noise": Range(0, 1),
+        "dt": Range(0, 1e3, low_open=True),
+        "goal_tolerance": Range(0, 1, low_open=True, per_diagonal=True),
+        "max_steps": Range(1, MAX_STEPS_PER_RUN, integer=True),
+        "seed": SEED,
+    },
+    "verify": {
+        "n_starts": Range(0, MAX_RUNS, integer=True),
+        "seed": SEED,
+        "speed": Range(0, 1e3, low_open=True, per_diagonal=True),
+        "min_success": Range(0, 1),
+    },
+}
+
+#: How the command line spells a parameter when it differs from ``--name-with-dashes``.
+OPTION_NAMES = {("simulate", "range"): "--range", ("verify", "n_starts"): "--starts"}
+
+
+def option_name(stage: str, name: str) -> str:
+    """The command-line option of a parameter (``--border-spacing``)."""
+    return OPTION_NAMES.get((stage, name), "--" + name.replace("_", "-"))
+
+
+def check_value(stage: str, name: str, value: Any, where: str, diagonal: float | None = None) -> None:
+    """Raise :class:`InvalidParamsError` (field ``where``) if ``value`` lies outside ``LIMITS[stage][name]``."""
+    limit = LIMITS.get(stage, {}).get(name)
+    if limit is None or value is None:
+        return
+    problem = limit.problem(value, diagonal)
+    if problem is not None:
+        raise InvalidParamsError(problem, field=where)
+
+
+def _coerce(stage: str, name: str, default: Any, value: Any, where: str) -> Any:
     """Check and convert one parameter value against the type of its default."""
-    where = f"params.{stage}.{name}" if origin == "map" else f"--{name.replace('_', '-')}"
     kind = type(default)
     if isinstance(default, bool):
         if not isinstance(value, bool):
@@ -75,47 +271,211 @@ def _coerce(stage: str, name: str, default: Any, value: Any, origin: str) -> Any
         if isinstance(value, int):
             return value
     if isinstance(default, float) and isinstance(value, (int, float)) and not isinstance(value, bool):
-        return float(value)
+        try:
+            return float(value)
+        except OverflowError:
+            raise InvalidParamsError(f"out of range, got {value!r}", field=where) from None
     if isinstance(default, str) and isinstance(value, str):
         return value
+    if default is None and name in LIMITS.get(stage, {}):
+        if isinstance(value, (int, float)) and not isinstance(value, bool):
+            return value
+        raise InvalidParamsError(f"expected a number, got {value!r}", field=where)
     if default is None and isinstance(value, (int, float, str)) and not isinstance(value, bool):
         return value
     raise InvalidParamsError(f"expected {kind.__name__}, got {value!r}", field=where)
 
 
-def resolve_params(stage: str, map_params: dict | None, overrides: dict | None = None) -> Any:
+def _resolve(stage: str, map_params: dict | None, overrides: dict | None,
+             diagonal: float | None) -> tuple[Any, dict[str, str]]:  # fmt: skip
+    """The stage's ``Params`` and, per parameter, where its value came from (``--seed``, ``params.rrtstar.seed``)."""
+    params_type = STAGE_BY_NAME[stage].module.Params
+    defaults = {f.name: f.default for f in dataclasses.fields(params_type)}
+    values = dict(defaults)
+    where = {name: f"params.{stage}.{name}" for name in defaults}
+    explicit: list[str] = []
+    source_map = (map_params or {}).get(stage, {})
+    if not isinstance(source_map, dict):
+        raise InvalidParamsError("expected a mapping of options", field=f"params.{stage}")
+    for origin, source in (("map", source_map), ("cli", overrides or {})):
+        for name, value in source.items():
+            if value is None and origin == "cli":
+                continue
+            here = f"params.{stage}.{name}" if origin == "map" else option_name(stage, str(name))
+            if name not in defaults:
+                raise InvalidParamsError(f"unknown parameter (known: {', '.join(defaults)})", field=here)
+            values[name] = _coerce(stage, name, defaults[name], value, here)
+            where[name] = here
+            explicit.append(str(name))
+    for name, value in values.items():
+        check_value(stage, name, value, where[name], diagonal)
+    try:
+        params = params_type(**values)
+    except InvalidParamsError as exc:
+        field = where.get(exc.field or "", exc.field)
+        raise InvalidParamsError(exc.reason, field=field) from None
+    except (TypeError, ValueError, OverflowError) as exc:  # a value the Params checks did not expect
+        raise InvalidParamsError(f"invalid value ({exc})", field=f"params.{stage}") from None
+    where["_explicit"] = ",".join(explicit)  # the names set by the map or an option, not left at their default
+    return params, where
+
+
+def resolve_params(stage: str, map_params: dict | None, overrides: dict | None = None,
+                   diagonal: float | None = None) -> Any:  # fmt: skip
     """Build the stage's frozen ``Params``: defaults, then the map's, then ``overrides``.
 
     Raises
     ------
     InvalidParamsError
-        For an unknown name, a value of the wrong type or out of range (the stage's
-        ``Params`` checks its own ranges).
+        For an unknown name, a value of the wrong type or outside its range (:data:`LIMITS`;
+        lengths relative to the map's diagonal only when ``diagonal`` is given), naming the
+        option (``--seed``) or the map field (``params.rrtstar.seed``).
     """
-    params_type = STAGE_BY_NAME[stage].module.Params
-    defaults = {f.name: f.default for f in dataclasses.fields(params_type)}
-    values = dict(defaults)
-    for origin, source in (("map", (map_params or {}).get(stage, {})), ("cli", overrides or {})):
-        for name, value in source.items():
-            if value is None and origin == "cli":
-                continue
-            if name not in defaults:
-                where = f"params.{stage}.{name}" if origin == "map" else f"--{name}"
-                raise InvalidParamsError(f"unknown parameter (known: {', '.join(defaults)})", field=where)
-            values[name] = _coerce(stage, name, defaults[name], value, origin)
-    return params_type(**values)
+    return _resolve(stage, map_params, overrides, diagonal)[0]
 
 
-def check_map_params(map_params: dict, file: str) -> None:
-    """Reject unknown stage names and parameters in a map's ``params:`` section."""
-    for stage in map_params:
+def check_map_params(map_params: Any, file: str, diagonal: float | None = None) -> None:
+    """Reject unknown stage names and parameters, and bad values, in a map's ``params:`` section."""
+    if not isinstance(map_params, dict):
+        raise InvalidMapError("expected a mapping of stage name to options", file=file, field="params")
+    for stage, options in map_params.items():
         if stage not in STAGE_BY_NAME:
             known = ", ".join(STAGE_BY_NAME)
             raise InvalidMapError(f"unknown stage (known: {known})", file=file, field=f"params.{stage}")
+        if not isinstance(options, dict):
+            raise InvalidMapError("expected a mapping of options", file=file, field=f"params.{stage}")
         try:
-            resolve_params(stage, map_params)
+            resolve_params(stage, map_params, diagonal=diagonal)
         except InvalidParamsError as exc:
-            raise InvalidMapError(str(exc).split(": ", 1)[-1], file=file, field=exc.field) from exc
+            raise InvalidMapError(exc.reason, file=file, field=exc.field) from exc
+
+
+# --------------------------------------------------------------------------- resource estimates
+
+#: Bytes per RRT* iteration (sample, node, parent, cost, child list, bucket slot), measured on the kitchen.
+RRT_BYTES_PER_ITERATION = 400
+#: Bytes per cell of RRT*'s neighbour grid (an empty 4-slot bucket and its bookkeeping).
+RRT_BYTES_PER_GRID_CELL = 150
+#: Bytes per closed-loop run without its trajectory (state arrays and a 201-step position ring).
+RUN_BYTES = 4_000
+#: Bytes per recorded trajectory point (position, cell, heading, run index; twice while sorting).
+TRAJECTORY_POINT_BYTES = 80
+
+
+def _too_big(what: str, need: float, where: str, fits: str) -> ResourceLimitError:
+    budget = artifacts.memory_budget()
+    return ResourceLimitError(
+        f"{what} needs about {artifacts.human_bytes(need)} of memory, more than the "
+        f"{artifacts.human_bytes(budget)} a run may use (half of this machine's); {fits}", field=where
+    )
+
+
+def _check_rrtstar(params: rrtstar.Params, map_: Map, where: dict[str, str]) -> None:
+    xmin, ymin, xmax, ymax = map_.bounds
+    width, height = xmax - xmin, ymax - ymin
+    cell = params.step / rrtstar.BUCKETS_PER_STEP
+    grid = math.ceil(width / cell) * math.ceil(height / cell)
+    if grid > MAX_GRID_CELLS:
+        smallest = rrtstar.BUCKETS_PER_STEP * math.sqrt(width * height / MAX_GRID_CELLS)
+        raise ResourceLimitError(
+            f"{params.step:g} makes RRT*'s neighbour grid {grid:.3g} cells over {width:g} x {height:g} "
+            f"(limit {MAX_GRID_CELLS:.0e}); use at least {smallest:.3g}", field=where["step"]
+        )
+    border = 0 if params.border_spacing == 0 else 2 * (math.ceil(width / params.border_spacing)
+                                                      + math.ceil(height / params.border_spacing))  # fmt: skip
+    if border > MAX_BORDER_SAMPLES:
+        smallest = 2 * (width + height) / MAX_BORDER_SAMPLES
+        derived = "border_spacing" not in where.get("_explicit", "").split(",")
+        field = where["step"] if derived else where["border_spacing"]
+        hint = f"(step/10 = {params.border_spacing:g}) " if derived else ""
+        raise ResourceLimitError(
+            f"border pseudo-samples every {params.border_spacing:g} {hint}would be {border:,} points (limit "
+            f"{MAX_BORDER_SAMPLES:,}); use a --border-spacing of at least {smallest:.3g} (or 0: none)", field=field
+        )
+    fixed = grid * RRT_BYTES_PER_GRID_CELL + border * 64
+    need = params.iterations * RRT_BYTES_PER_ITERATION + fixed
+    budget = artifacts.memory_budget()
+    if need > budget:
+        fits = max(0, (budget - fixed) // RRT_BYTES_PER_ITERATION)
+        raise _too_big(f"{params.iterations:,} iterations", need, where["iterations"], f"at most {fits:,} fit")
+
+
+def check_closed_loop(plan: Any, sim: simulate.Params, runs: int, where_runs: str, where_speed: str,
+                      record: bool, where_dt: str | None = None) -> None:  # fmt: skip
+    """Refuse closed-loop requests that cannot finish: too many steps per run, or too much memory.
+
+    Each run may take ``max_steps`` steps, ``ceil(5·L/(v·dt)) + 1000`` by default with ``L`` at most
+    ``D`` plus the largest cost-to-go in the plan; memory is about :data:`RUN_BYTES` per run plus,
+    when trajectories are recorded, :data:`TRAJECTORY_POINT_BYTES` per step of a typical run.
+    """
+    settings = simulate.settings(plan, sim)
+    diagonal = plan.map.diagonal
+    longest = float(max(plan.cells.cell_rank.max(initial=0.0), 0.0)) + diagonal
+    per_step = settings.speed * settings.dt
+    if sim.max_steps is not None:
+        steps = int(sim.max_steps)  # its range is that of MAX_STEPS_PER_RUN
+    else:
+        steps = math.ceil(5.0 * longest / per_step) + 1000 if per_step > 0 else math.inf
+        if steps > MAX_STEPS_PER_RUN:
+            raise ResourceLimitError(
+                f"at speed {settings.speed:g} with dt = {settings.dt:.3g} s one run may take up to {steps:.3g} steps "
+                f"(limit {MAX_STEPS_PER_RUN:.0e}); raise the speed or dt", field=where_dt or where_speed
+            )
+    if runs > MAX_RUNS:
+        raise InvalidParamsError(f"at most {MAX_RUNS:,} runs, got {runs:,}", field=where_runs)
+    typical = min(steps, math.ceil((longest - 0.75 * diagonal) / per_step) + 1) if per_step > 0 else steps
+    per_run = RUN_BYTES + (TRAJECTORY_POINT_BYTES * typical if record else 0)
+    need = runs * per_run
+    budget = artifacts.memory_budget()
+    if need > budget:
+        fits = budget // per_run
+        raise _too_big(f"{runs:,} runs", need, where_runs, f"at most {fits:,} fit"
+                       + (" (without recorded trajectories: params.simulate.record_trajectories false)"
+                          if record else ""))  # fmt: skip
+
+
+def check_verify_starts(plan: Any, n_starts: int, where: str = "--starts") -> None:
+    """``verify``'s starts: the closed loop's memory plus the route matrix (starts × free-space vertices)."""
+    vertices = 4 + sum(len(p.exterior) + sum(len(h) for h in p.holes) for p in plan.map.obstacles)
+    per_start = RUN_BYTES + 40 * vertices
+    need = n_starts * per_start
+    budget = artifacts.memory_budget()
+    if need > budget:
+        raise _too_big(f"{n_starts:,} starts", need, where, f"at most {budget // per_start:,} fit")
+
+
+def check_resources(stage: str, params: Any, where: dict[str, str], artifact: Any) -> None:
+    """The estimates that need the stage's input: RRT*'s grid, border samples and memory; the closed loop's."""
+    if stage == "rrtstar":
+        _check_rrtstar(params, artifact, where)
+    elif stage == "simulate":
+        spec = simulate.parse_starts(params.starts)
+        runs = spec if isinstance(spec, int) else (len(artifact.map.starts) if isinstance(spec, str) else len(spec))
+        speed_where = where["alpha"] if params.dynamics == "unicycle" else where["speed"]
+        dt_where = where["dt"] if "dt" in where["_explicit"].split(",") else None
+        check_closed_loop(artifact, params, runs, where["starts"], speed_where, params.record_trajectories, dt_where)
+
+
+# --------------------------------------------------------------------------- loading and running
+
+
+def load(path: str | Path, expect: str | tuple[str, ...] | None = None) -> artifacts.Loaded:
+    """:func:`bearnav_cli.artifacts.load`, plus the map's ``params:`` checked against the stage table.
+
+    Raises
+    ------
+    ArtifactError
+        Everything :func:`artifacts.load` checks, and a ``params`` entry of the (embedded) map
+        that names an unknown stage or parameter or has a value of the wrong type or range.
+    """
+    loaded = artifacts.load(path, expect)
+    map_ = loaded.artifact if isinstance(loaded.artifact, Map) else loaded.artifact.map
+    try:
+        check_map_params(map_.params, str(path), diagonal=map_.diagonal)
+    except InvalidMapError as exc:
+        prefix = "" if isinstance(loaded.artifact, Map) else "map."
+        raise ArtifactError(exc.reason, file=str(path), field=prefix + (exc.field or "params")) from None
+    return loaded
 
 
 def _run_and_save(
@@ -130,12 +490,17 @@ def _run_and_save(
 ) -> StageReport:
     params_json = artifacts.params_dict(params)
     key = artifacts.cache_key(stage.name, stage.module.VERSION, params_json, input_hash)
-    if not force and artifacts.is_fresh(out, key):
-        loaded = artifacts.load(out, stage.output_kind)
-        return StageReport(stage.name, out, False, 0.0, loaded.manifest.get("summary", ""), loaded.artifact)
+    if not force:
+        loaded = artifacts.fresh(out, stage.output_kind, key, input_hash)
+        if loaded is not None:
+            _committed()
+            summary = loaded.manifest.get("summary", "")
+            return StageReport(stage.name, out, False, 0.0, summary, loaded.artifact, loaded.manifest)
     started = time.perf_counter()
     result = stage.module.run(payload, params, progress=progress)
     elapsed = time.perf_counter() - started
+    if isinstance(result, Map):  # lengths in the map's params:, checked once its diagonal is known
+        check_map_params(result.params, input_path or str(out), diagonal=result.diagonal)
     summary = stage.module.summary(result)
     manifest = artifacts.make_manifest(
         stage.output_kind,
@@ -149,18 +514,33 @@ def _run_and_save(
         elapsed_s=elapsed,
         stats=getattr(result, "stats", None),
     )
-    artifacts.save(out, result, manifest)
-    return StageReport(stage.name, out, True, elapsed, summary, result)
+    try:
+        artifacts.save(out, result, manifest, on_commit=_committed)
+    except ArtifactError as exc:
+        if exc.file is not None:
+            raise
+        raise ArtifactError(f"{stage.name} made an artifact that fails its own checks, nothing written "
+                            f"({exc})", file=str(out)) from None  # fmt: skip
+    return StageReport(stage.name, out, True, elapsed, summary, result, manifest)
+
+
+def _check_outputs(stage: Stage, out: Path, inputs: tuple[str | Path, ...] = ()) -> None:
+    for path in artifacts.output_files(stage.output_kind, out):
+        artifacts.check_output_file(path, (path.suffix if path != out else artifacts.KINDS[stage.output_kind].suffix,),
+                                    inputs=inputs)  # fmt: skip
 
 
 def run_map(source: map_.MapSource, out: Path, overrides: dict | None = None, force: bool = False) -> StageReport:
     """Run the map stage on a source read by the CLI and write ``map.json``."""
+    stage = STAGE_BY_NAME["map"]
+    _begin("map")
+    out = Path(out)
+    _check_outputs(stage, out, (source.file,))
     map_params = source.spec.get("params", {}) if isinstance(source.spec, dict) else {}
-    if not isinstance(map_params, dict):
-        raise InvalidMapError("expected a mapping of stage name to options", file=source.file, field="params")
     check_map_params(map_params, source.file)
     params = resolve_params("map", map_params, overrides)
-    return _run_and_save(STAGE_BY_NAME["map"], source, params, out, source.file, source.sha256, force, None)
+    with artifacts.output_folder(out.parent):
+        return _run_and_save(stage, source, params, out, source.file, source.sha256, force, None)
 
 
 def run_stage(
@@ -173,17 +553,31 @@ def run_stage(
 ) -> StageReport:
     """Run one stage after ``map`` on the artifact at ``input_path``.
 
-    The output goes to ``out`` or, by default, the stage's conventional file name
-    next to the input. A fresh output is kept unless ``force``.
+    The output goes to ``out`` or, by default, the stage's conventional file name next to the
+    input; it is checked before the input is read. A fresh output is kept unless ``force``.
     """
     stage = STAGE_BY_NAME[name]
-    loaded = artifacts.load(input_path, stage.input_kind)
-    source_map: Map = loaded.artifact if isinstance(loaded.artifact, Map) else loaded.artifact.map
-    params = resolve_params(name, source_map.params, overrides)
+    _begin(name)
     out = Path(out) if out is not None else Path(input_path).with_name(stage.filename)
-    return _run_and_save(
-        stage, loaded.artifact, params, out, str(input_path), loaded.manifest["content_sha256"], force, progress
-    )
+    _check_outputs(stage, out, (input_path,))
+    with artifacts.output_folder(out.parent):
+        loaded = load(input_path, stage.input_kind)
+        source_map: Map = loaded.artifact if isinstance(loaded.artifact, Map) else loaded.artifact.map
+        params, where = _resolve(name, source_map.params, overrides, source_map.diagonal)
+        check_resources(name, params, where, loaded.artifact)
+        return _run_and_save(
+            stage, loaded.artifact, params, out, str(input_path), loaded.manifest["content_sha256"], force, progress
+        )
+
+
+def _check_chain(reports: list[StageReport]) -> None:
+    """Each stage's output names the content hash of the artifact before it (the lock makes this hold)."""
+    for before, after in zip(reports[:-1], reports[1:], strict=True):
+        if before.manifest is None or after.manifest is None:
+            continue
+        if after.manifest["input"]["content_sha256"] != before.manifest["content_sha256"]:
+            raise ArtifactError(f"was made from another {before.path.name} than the one next to it; rerun with --force",
+                                file=str(after.path))  # fmt: skip
 
 
 def plan(
@@ -195,6 +589,9 @@ def plan(
     on_stage: Callable[[StageReport], None] | None = None,
 ) -> list[StageReport]:
     """Run every stage from the map description into ``out_dir``, skipping fresh ones.
+
+    The folder is checked first (a file in its place, a folder where an artifact goes,
+    unwritable) and locked for the whole run.
 
     Parameters
     ----------
@@ -212,19 +609,24 @@ def plan(
         Called with each :class:`StageReport` as soon as the stage is done.
     """
     overrides = overrides or {}
-    reports = [run_map(source, out_dir / STAGES[0].filename, overrides.get("map"), force)]
-    if on_stage:
-        on_stage(reports[-1])
-    for stage in STAGES[1:]:
-        report = run_stage(
-            stage.name,
-            reports[-1].path,
-            out_dir / stage.filename,
-            overrides.get(stage.name),
-            force,
-            progress(stage.name) if progress else None,
-        )
-        reports.append(report)
+    out_dir = Path(out_dir)
+    _begin("map")
+    artifacts.check_output_folder(out_dir, tuple(stage.filename for stage in STAGES))
+    with artifacts.output_folder(out_dir):
+        reports = [run_map(source, out_dir / STAGES[0].filename, overrides.get("map"), force)]
         if on_stage:
-            on_stage(report)
+            on_stage(reports[-1])
+        for stage in STAGES[1:]:
+            report = run_stage(
+                stage.name,
+                reports[-1].path,
+                out_dir / stage.filename,
+                overrides.get(stage.name),
+                force,
+                progress(stage.name) if progress else None,
+            )
+            reports.append(report)
+            if on_stage:
+                on_stage(report)
+        _check_chain(reports)
     return reports

@@ -12,7 +12,10 @@ Three independent checks:
    the collision samples are those of ``tree.npz`` when it is given.
 3. **Monte Carlo**: ``n_starts`` random starts in the goal's free component, run through
    :func:`bearnav_cli.stages.simulate.rollout`, compared with the straight distance and
-   with the exact shortest route (:func:`bearnav_cli.routes.route_lengths`).
+   with the exact shortest route (:func:`bearnav_cli.routes.route_lengths`). Free regions the
+   tree never reached (parts of ``F_m`` cut off from every cell, or for ``paper`` plans from
+   every tree edge, by passages narrower than ``2m``) are reported and no start is drawn
+   there; any collision of a run fails verification, whatever ``min_success`` says.
 
 :func:`run` returns a :class:`VerifyReport`; :attr:`VerifyReport.failed` is the exit decision.
 """
@@ -32,7 +35,8 @@ from bearnav_cli import composition
 from bearnav_cli.composition import Composition
 from bearnav_cli.datatypes import CellFlag, CellStatus, Map, Plan, cell_list
 from bearnav_cli.errors import ArtifactError, InvalidParamsError
-from bearnav_cli.geometry import FreeSpace
+from bearnav_cli.funnel import coverage_domain, reached_parts
+from bearnav_cli.geometry import FreeSpace, barrier_margin
 from bearnav_cli.routes import route_lengths, sample_starts
 from bearnav_cli.runtime import PlanArrays
 from bearnav_cli.stages import simulate
@@ -300,6 +304,74 @@ def check_geometry(plan: Plan, space: FreeSpace, tree_samples: np.ndarray | None
     )
 
 
+# --------------------------------------------------------------------------- free regions never reached
+
+
+@dataclass(frozen=True)
+class Unreached:
+    """The free regions the tree never reached (ALGORITHMS §11.5's unreached parts of ``F_m``).
+
+    Attributes
+    ----------
+    region : shapely geometry
+        The parts of ``F_m`` no cell (funnel plans) or tree edge (paper plans) meets.
+    avoid : shapely geometry
+        Where no Monte-Carlo start is drawn: ``region`` grown by ``1.5·m`` (its margin band and
+        the passage that cuts it off).
+    area, free_area : float
+        ``area(region)`` and the area of the goal's free component (map units²).
+    parts : list of (x, y, area)
+        A point inside each part and its area, largest first.
+    """
+
+    region: Any
+    avoid: Any
+    area: float
+    free_area: float
+    parts: list[tuple[float, float, float]]
+
+
+def unreached_regions(plan: Plan, space: FreeSpace) -> Unreached:
+    """The parts of ``F_m`` the plan never reached (:func:`bearnav_cli.composition.coverage_regions` for funnels)."""
+    map_ = plan.map
+    requested = map_.params.get("decompose", {}).get("barrier_margin") if isinstance(map_.params, dict) else None
+    margin = barrier_margin(requested, map_.diagonal)
+    component = space.component_of(map_.goal)
+    if plan.cells.is_funnel:
+        region = composition.coverage_regions(plan.cells, space).unreached
+    else:
+        cells = plan.cells
+        child = np.flatnonzero(cells.parent >= 0)
+        edges = shapely.linestrings(np.stack([cells.nodes[child], cells.nodes[cells.parent[child]]], axis=1)) \
+            if len(child) else np.array([shapely.Point(map_.goal)])  # fmt: skip
+        full = coverage_domain(component, space.bounds, space.obstacles, margin)
+        region = reached_parts(full, shapely.union_all(np.concatenate([edges, [shapely.Point(map_.goal)]])))[1]
+    parts = [p for p in shapely.get_parts(region) if p.area > 0]
+    parts.sort(key=lambda p: -p.area)
+    points = [(float(q.x), float(q.y), float(p.area)) for p, q in ((p, p.representative_point()) for p in parts)]
+    avoid = shapely.intersection(shapely.buffer(region, 1.5 * margin), component) if parts else shapely.Polygon()
+    return Unreached(region, avoid, float(sum(p.area for p in parts)), float(component.area), points)
+
+
+def _reached_starts(space: FreeSpace, goal: np.ndarray, count: int, rng: np.random.Generator,
+                    avoid: Any) -> np.ndarray:  # fmt: skip
+    """``count`` starts of :func:`sample_starts` outside ``avoid`` (redrawn from the same generator)."""
+    if avoid is None or avoid.is_empty:
+        return sample_starts(space, goal, count, rng)
+    shapely.prepare(avoid)
+    found, total = [], 0
+    for _ in range(1000):
+        batch = sample_starts(space, goal, max(2 * (count - total), 16), rng)
+        if not len(batch):
+            break
+        keep = ~shapely.intersects_xy(avoid, batch[:, 0], batch[:, 1])
+        found.append(batch[keep])
+        total += int(keep.sum())
+        if total >= count:
+            break
+    return np.concatenate(found)[:count] if found else np.zeros((0, 2))
+
+
 # --------------------------------------------------------------------------- the report
 
 
@@ -361,6 +433,7 @@ class VerifyReport:
     goal: np.ndarray
     composition: Composition | None = None
     world_cells: list[int] | None = None
+    unreached: Unreached | None = None
 
     # ------------------------------------------------------------- the composed certificate (§11)
     @property
@@ -465,12 +538,30 @@ class VerifyReport:
                 bad = np.flatnonzero(self.in_domain & (self.rollouts.outcome != simulate.Outcome.SUCCESS))
                 out.append(f"{len(bad)} runs from the certified domain did not reach the goal (the theorem says "
                            f"every one does: a bug): starts {cell_list(bad)}")  # fmt: skip
+        if self.rollouts is not None and len(self.rollouts):
+            hit = np.flatnonzero(self.rollouts.outcome == simulate.Outcome.COLLISION)
+            if hit.size:
+                out.append(f"{hit.size} of {len(self.rollouts)} closed-loop runs collided (any collision fails, "
+                           f"whatever --min-success says): starts {cell_list(hit)}")  # fmt: skip
         if self.world_cells:
             out.append(f"{len(self.world_cells)} cells no longer hold in the world (C1: they leave B_r or meet an "
                        f"obstacle): {cell_list(self.world_cells)}")  # fmt: skip
         if self.min_success is not None and not self.success_rate >= self.min_success:
             out.append(f"success rate {self.success_rate:.1%} below --min-success {self.min_success:.1%}")
         return out
+
+    @property
+    def notes(self) -> list[str]:
+        """What the report adds without failing: the free regions the tree never reached."""
+        u = self.unreached
+        if u is None or not u.parts:
+            return []
+        where = "; ".join(f"({x:.3g}, {y:.3g}) {area:.3g}" for x, y, area in u.parts[:5])
+        more = f" … ({len(u.parts)} in all)" if len(u.parts) > 5 else ""
+        share = f" ({u.area / u.free_area:.1%} of the free space)" if u.free_area > 0 else ""
+        regions = "1 free region" if len(u.parts) == 1 else f"{len(u.parts)} free regions"
+        return [f"{regions} the tree never reached, {u.area:.3g} map units²{share}, at (x, y) "
+                f"area: {where}{more}; no start was drawn there, the plan says nothing about them"]  # fmt: skip
 
     @property
     def failed(self) -> bool:
@@ -491,7 +582,7 @@ class VerifyReport:
                 ok = self.rollouts.outcome == simulate.Outcome.SUCCESS
                 text += f"; from D {int(ok[d].sum())}/{int(d.sum())} reached the goal"
                 text += f", from outside D (uncertified) {int(ok[~d].sum())}/{int((~d).sum())}"
-            return text + ("; FAILED" if self.failed else "")
+            return text + self._unreached_text() + ("; FAILED" if self.failed else "")
         text = f"{certified}/{n} cells certified, coverage {'ok' if self.geometry.coverage_ok else 'FAILS'}"
         if self.rollouts is not None:
             counts = self.outcome_counts
@@ -500,7 +591,13 @@ class VerifyReport:
             text += f" ({others})" if others else ""
             if len(self.rollouts) and self.approach_fraction > 0:
                 text += f"; {self.approach_fraction:.0%} started or relocated outside every safe set"
-        return text + ("; FAILED" if self.failed else "")
+        return text + self._unreached_text() + ("; FAILED" if self.failed else "")
+
+    def _unreached_text(self) -> str:
+        u = self.unreached
+        if u is None or not u.parts or u.free_area <= 0:
+            return ""
+        return f"; {u.area / u.free_area:.1%} of the free space never reached by the tree (no starts there)"
 
     def to_json(self) -> dict[str, Any]:
         """A JSON-ready dict (non-finite numbers become ``null``)."""
@@ -572,6 +669,11 @@ class VerifyReport:
             }  # fmt: skip
         if self.world_cells is not None:
             out["world_cells"] = self.world_cells
+        if self.unreached is not None:
+            u = self.unreached
+            out["unreached"] = {"area": u.area, "free_area": u.free_area,
+                                "parts": [{"point": [x, y], "area": a} for x, y, a in u.parts]}  # fmt: skip
+        out["notes"] = self.notes
         return out
 
 
@@ -617,6 +719,7 @@ def run(
             raise InvalidParamsError(problem, field="world")
         world_cells = composition.world_violations(plan, FreeSpace.from_map(world))
 
+    unreached = unreached_regions(plan, space)
     starts = np.zeros((0, 2))
     rollouts, skipped = None, None
     if params.n_starts == 0:
@@ -628,7 +731,7 @@ def run(
             skipped = f"malformed plan, no closed loop: {exc}"
         if skipped is None:
             rng = np.random.default_rng(params.seed)
-            starts = sample_starts(space, plan.map.goal, params.n_starts, rng)
+            starts = _reached_starts(space, plan.map.goal, params.n_starts, rng, unreached.avoid)
             # the certificates are stated for the displacement output; bearings are `bearnav simulate`'s job
             sim = simulate.Params(speed=params.speed, dt=params.dt, measurement="displacement",
                                   record_trajectories=False)  # fmt: skip
@@ -653,6 +756,7 @@ def run(
         goal=np.asarray(plan.map.goal, float),
         composition=comp,
         world_cells=world_cells,
+        unreached=unreached,
     )
     log.info("verify: %s", report.summary())
     return report

@@ -190,7 +190,7 @@ def test_sim_artifact_round_trip_and_metrics(plans, tmp_path):
 @pytest.mark.parametrize(
     "args, field",
     [
-        (["--fov", "0"], "fov"), (["--fov", "400"], "fov"), (["--noise-deg", "-1"], "noise_deg"),
+        (["--fov", "0"], "fov"), (["--fov", "400"], "fov"), (["--noise-deg", "-1"], "--noise-deg"),
         (["--dt", "0"], "dt"), (["--speed", "-0.1"], "speed"), (["--starts", "20,20"], "outside the bounds"),
         (["--starts", "3,4"], "inside an obstacle"), (["--starts", "hello"], "starts"),
     ],
