@@ -46,7 +46,7 @@ from rich.table import Table
 
 from bearnav_cli import __version__, artifacts, pipeline
 from bearnav_cli.datatypes import CellFlag, Cells, CellStatus, Plan, cell_list
-from bearnav_cli.errors import BearnavError, InvalidMapError
+from bearnav_cli.errors import BearnavError, InvalidMapError, InvalidParamsError
 from bearnav_cli.stages import map_
 from bearnav_cli.stages.map_ import GridSource, MapSource
 
@@ -470,6 +470,10 @@ def verify_command(
     world: Optional[Path] = typer.Option(
         None, help="Another map YAML in the same frame: list the cells whose (C1) no longer holds there."
     ),
+    fov: Optional[float] = typer.Option(
+        None, "--fov", help="Also report perception coverage for a camera of this field of view, degrees (0, 360]."
+    ),
+    noise_deg: float = typer.Option(1.0, "--noise-deg", help="Bearing noise (1σ, degrees) of that report."),
     quiet: bool = QUIET,
     as_json: bool = JSON,
 ) -> None:
@@ -499,17 +503,37 @@ def verify_command(
         pipeline.check_verify_starts(plan, starts)
     params = verify.Params(n_starts=starts, seed=seed, speed=speed, min_success=min_success)
     world_map = _load_world(world) if world is not None else None
+    seeing = None
+    if fov is not None:  # checked before the closed loop runs
+        from bearnav_cli import perception
+
+        try:
+            perception.check_params(fov, noise_deg)
+        except InvalidParamsError as exc:
+            option = {"fov": "--fov", "fov_deg": "--fov", "noise_deg": "--noise-deg"}.get(exc.field, exc.field)
+            raise _fail(f"{option}: {exc.reason}", EXIT_INVALID) from None
     with _progress_bar() as progress:
         track = _progress_factory(progress)("verify")
         report = verify.run(plan, params, tree_samples=samples, progress=track, world=world_map)
+    if fov is not None:
+        seeing = perception.perception_coverage(plan, fov, noise_deg)
     if as_json:
-        out.print_json(json.dumps(report.to_json()))
+        data = report.to_json()
+        if seeing is not None:
+            data["perception"] = {"fov_deg": fov, "noise_deg": noise_deg, "fraction_domain": seeing.fraction_domain,
+                                  "fraction_free": seeing.fraction_free,
+                                  "median_predicted_error": seeing.median_error_domain,
+                                  "fraction_within_tolerance": seeing.fraction_within_tolerance}  # fmt: skip
+        out.print_json(json.dumps(data))
     else:
         out.print(f"verify    {plan_npz}  {report.summary()}", highlight=False, soft_wrap=True)
         for reason in report.reasons:
             out.print(f"  - {reason}", highlight=False, soft_wrap=True)
         for note in getattr(report, "notes", []):
             out.print(f"  note: {note}", highlight=False, soft_wrap=True)
+        if seeing is not None:
+            out.print(f"  perception: {seeing.summary()} (the rule: `bearnav tags` places tags where it fails)",
+                      highlight=False, soft_wrap=True)  # fmt: skip
     if report.failed:
         raise typer.Exit(EXIT_OUTCOME)
 
@@ -674,6 +698,92 @@ def inspect_command(artifact: Path = typer.Argument(..., help="Any bearnav artif
         out.print(f"stats     {json.dumps(manifest['stats'], sort_keys=True)}", highlight=False, markup=False)
     software = ", ".join(f"{k} {v}" for k, v in manifest.get("software", {}).items())
     out.print(f"software  {software}  elapsed {manifest.get('elapsed_s', 0):.3f} s", highlight=False)
+
+
+@app.command("tags")
+@handles_errors
+def tags_command(
+    plan_npz: Path = typer.Argument(..., help="plan.npz from `bearnav plan`."),
+    fov: float = typer.Option(60.0, "--fov", help="Camera field of view, degrees, in (0, 360]."),
+    max_range: Optional[float] = typer.Option(None, "--range", help="Camera range, map units (default: unlimited)."),
+    noise_deg: float = typer.Option(1.0, "--noise-deg", help="Bearing noise (1σ, degrees) of the predicted fix error."),
+    error_target: Optional[float] = typer.Option(
+        None, "--error-target", help="Also require a predicted fix error (3σ) of at most this, map units."
+    ),
+    max_tags: Optional[int] = typer.Option(
+        None, "--max-tags", help="At most this many new tags (exit 1 if the rule then still fails somewhere)."
+    ),
+    map_yaml: Optional[Path] = typer.Option(
+        None, "--map", help="The map YAML to add the tags to (default: the plan's map, written as polygons)."
+    ),
+    out_path: Optional[Path] = typer.Option(
+        None, "-o", "--out", help="Map YAML with the new tags (default: next to the plan, map_tags.yaml)."
+    ),
+    figure: Optional[Path] = typer.Option(
+        None, "--figure", help="Where to glue them, a figure (default: the map YAML's name with .png)."
+    ),
+    quiet: bool = QUIET,
+    as_json: bool = JSON,
+) -> None:
+    """Propose tag positions so that a camera looking along the fields sees a usable pair from all of D.
+
+    The tags go on obstacle and wall boundaries, facing the free side, a tag's width apart; the
+    existing tags stay. Writes the map with the new tags and a figure of where to glue them; the
+    cells do not depend on the tags, so re-planning with the new map only changes the gains.
+
+    Example: bearnav tags plans/kitchen/plan.npz --fov 60 --noise-deg 1 -o kitchen_tags.yaml
+    """
+    from bearnav_cli import composition, tags
+
+    _Quiet.enabled |= quiet
+    out_path = out_path or plan_npz.parent / "map_tags.yaml"
+    artifacts.check_output_file(out_path, (".yaml", ".yml"), "-o/--out", inputs=tuple(p for p in (plan_npz, map_yaml)
+                                                                                        if p is not None))  # fmt: skip
+    figure = figure or out_path.with_suffix(".png")
+    artifacts.check_output_file(figure, FIGURE_SUFFIXES, "--figure")
+    options = {"fov": "--fov", "fov_deg": "--fov", "range": "--range", "max_range": "--range",
+               "noise_deg": "--noise-deg", "error_target": "--error-target", "max_tags": "--max-tags"}  # fmt: skip
+    try:
+        params = tags.Params(fov_deg=fov, max_range=float("inf") if max_range is None else max_range,
+                             noise_deg=noise_deg, error_target=error_target, max_tags=max_tags)  # fmt: skip
+    except InvalidParamsError as exc:  # name the option the user typed
+        raise _fail(f"{options.get(exc.field, exc.field)}: {exc.reason}", EXIT_INVALID) from None
+    pipeline.ACTIVITY.stage = "tags"
+    plan = pipeline.load(plan_npz, "plan").artifact
+    spec = map_.spec_of(plan.map)
+    if map_yaml is not None:
+        source = read_map_source(map_yaml)
+        problem = composition.map_frame_problem(plan.map, map_.run(source))
+        if problem:
+            raise _fail(f"{map_yaml}: {problem}: not the plan's map", EXIT_INVALID)
+        grid_elsewhere = "occupancy" in source.spec and map_yaml.resolve().parent != out_path.resolve().parent
+        spec = spec if grid_elsewhere else source.spec  # an occupancy image path is relative to its YAML
+    proposal = tags.propose_tags(plan, params)
+    new_spec = tags.map_spec_with_tags(spec, proposal)
+    map_.run(map_.MapSource(spec=new_spec, file=str(out_path), sha256=""))  # the map stage accepts it
+    text = yaml.safe_dump(new_spec, sort_keys=False, default_flow_style=None)
+    artifacts.atomic_write(out_path, lambda f: f.write(text.encode()))
+    from bearnav_cli import plot  # matplotlib is slow to import: only here
+
+    fig = plot.tags_figure(proposal, plan.map, f"{plan.map.name}: where to glue {proposal.count} new tags "
+                           f"({fov:g}° camera, {noise_deg:g}° noise)")  # fmt: skip
+    with artifacts.atomic_output(figure) as tmp:
+        plot.save_figure(fig, str(tmp))
+    if as_json:
+        out.print_json(json.dumps({
+            "map": str(out_path), "figure": str(figure), "new_tags": proposal.count,
+            "lower_bound": proposal.lower_bound, "ids": list(proposal.ids),
+            "positions": [[float(v) for v in p] for p in proposal.positions],
+            "target_reached": proposal.target_reached,
+            "domain_before": proposal.before.fraction_domain, "domain_after": proposal.after.fraction_domain,
+            "free_before": proposal.before.fraction_free, "free_after": proposal.after.fraction_free,
+        }))  # fmt: skip
+    else:
+        out.print(f"tags      {out_path}  {proposal.summary()}", highlight=False, soft_wrap=True)
+        out.print(f"wrote {out_path} and {figure}; re-plan with `bearnav plan {out_path}`", highlight=False,
+                  soft_wrap=True)
+    if not proposal.target_reached:
+        raise typer.Exit(EXIT_OUTCOME)
 
 
 @app.command("plot")

@@ -466,12 +466,12 @@ def map_handles(map_: Map) -> list:
             Patch(color=INFLATED_COLOR, label=f"inflated by the robot radius ({map_.robot_radius:g})")]  # fmt: skip
 
 
-def _frame(map_: Map, title: str, *, legend_rows: int = 0) -> tuple[plt.Figure, plt.Axes]:
+def _frame(map_: Map, title: str, *, legend_rows: int = 0, landmarks: bool = True) -> tuple[plt.Figure, plt.Axes]:
     xmin, ymin, xmax, ymax = map_.bounds
     width = 8.0
     height = max(3.0, width * (ymax - ymin) / (xmax - xmin)) + 0.25 * legend_rows
     fig, ax = plt.subplots(figsize=(width + 1.8, height))  # the extra width holds the legend or colour bar
-    plot_map(ax, map_, labels=False)
+    plot_map(ax, map_, labels=False, landmarks=landmarks)
     ax.set_title(title)
     ax.set_xlabel(f"x ({AXIS_UNITS})")
     ax.set_ylabel(f"y ({AXIS_UNITS})")
@@ -729,3 +729,13 @@ def plot_tags(ax: plt.Axes, proposal: Any, *, failures: bool = True, labels: boo
     if legend:
         _perception_legend(ax)
     return ax
+
+
+def tags_figure(proposal: Any, map_: Map, title: str | None = None) -> plt.Figure:
+    """Where to glue the proposed tags on the map (:func:`plot_map` without its tags, then :func:`plot_tags`)."""
+    fig, ax = _frame(map_, title or f"{map_.name}: where to glue {len(proposal.ids)} new tags", legend_rows=3,
+                     landmarks=False)  # fmt: skip
+    plot_tags(ax, proposal)
+    fig.tight_layout()
+    return fig
+

@@ -1,0 +1,59 @@
+"""`bearnav tags` and `bearnav verify --fov` from the command line (issue 11 parts 1-2)."""
+
+from __future__ import annotations
+
+import yaml
+
+from bearnav_cli.cli import read_map_source
+from bearnav_cli.stages import map_
+
+from .test_cli_errors import assert_one_line_error
+
+
+def _plan(cli, write_map, small_spec, tmp_path):
+    spec = dict(small_spec)
+    spec["landmarks"] = spec["landmarks"][:2]  # too few for a 60° camera: tags are needed
+    spec.setdefault("params", {})["rrtstar"] = {"iterations": 300, "seed": 0}
+    result = cli("plan", write_map(spec), "-o", tmp_path / "p", "-q")
+    assert (tmp_path / "p" / "plan.npz").exists(), result.output
+    return tmp_path / "p" / "plan.npz"
+
+
+def test_tags_writes_a_map_with_the_new_tags_and_a_figure(cli, write_map, small_spec, tmp_path):
+    plan = _plan(cli, write_map, small_spec, tmp_path)
+    out = tmp_path / "with_tags.yaml"
+    result = cli("tags", plan, "--fov", "60", "-o", out)
+    assert result.exit_code == 0, result.output
+    assert out.exists() and out.with_suffix(".png").exists()
+    spec = yaml.safe_load(out.read_text())
+    ids = [t["id"] for t in spec["landmarks"]]
+    assert len(ids) > 2 and len(set(ids)) == len(ids)  # new tags, new ids
+    assert spec["landmarks"][:2] == [{"id": str(t["id"]), "position": t["position"]} for t in spec["landmarks"][:2]]
+    new_map = map_.run(read_map_source(out))  # the map stage accepts it as it is
+    assert len(new_map.landmarks) == len(ids)
+    assert "new tags" in result.output and "rule holds on" in result.output
+
+
+def test_tags_with_too_few_tags_allowed_reports_and_exits_1(cli, write_map, small_spec, tmp_path):
+    plan = _plan(cli, write_map, small_spec, tmp_path)
+    result = cli("tags", plan, "--fov", "60", "--max-tags", "0", "-o", tmp_path / "none.yaml")
+    assert result.exit_code == 1, result.output
+    assert "target NOT reached" in result.output
+    assert (tmp_path / "none.yaml").exists()  # it finishes and writes what it reached
+
+
+def test_tags_and_verify_refuse_bad_camera_options_in_one_line(cli, write_map, small_spec, tmp_path):
+    plan = _plan(cli, write_map, small_spec, tmp_path)
+    for args, option in ((("--fov", "0"), "--fov"), (("--fov", "400"), "--fov"), (("--noise-deg", "-1"), "--noise-deg"),
+                         (("--range", "-2"), "--range"), (("--max-tags", "-1"), "--max-tags")):  # fmt: skip
+        result = cli("tags", plan, *args, "-o", tmp_path / "bad.yaml")
+        assert_one_line_error(result, option)
+        assert not (tmp_path / "bad.yaml").exists()
+    assert_one_line_error(cli("verify", plan, "--fov", "0", "--starts", "0"), "--fov")
+    assert_one_line_error(cli("tags", plan, "-o", tmp_path / "bad.txt"), "bad.txt")
+
+
+def test_verify_reports_perception_coverage(cli, write_map, small_spec, tmp_path):
+    plan = _plan(cli, write_map, small_spec, tmp_path)
+    result = cli("verify", plan, "--fov", "60", "--noise-deg", "1", "--starts", "0")
+    assert "perception:" in result.output and "60° camera" in result.output, result.output
