@@ -266,7 +266,9 @@ def example(request, tmp_path_factory):
     pipeline.plan(read_map_source(REPO / "maps" / f"{request.param}.yaml"), out)
     plan = artifacts.load(out / "plan.npz").artifact
     tree = artifacts.load(out / "tree.npz").artifact
-    return plan, verify.run(plan, verify.Params(n_starts=200), tree_samples=tree.collision_samples)
+    # at the map's own speed, as `bearnav verify` drives it (the paper maps' units are not metres)
+    speed = pipeline.resolve_params("simulate", plan.map.params).speed
+    return plan, verify.run(plan, verify.Params(n_starts=200, speed=speed), tree_samples=tree.collision_samples)
 
 
 def test_every_example_map_is_certified_and_reaches_the_goal_from_random_starts(example):
@@ -281,6 +283,9 @@ def test_every_example_map_is_certified_and_reaches_the_goal_from_random_starts(
 
 def test_every_example_map_reaches_the_goal_from_its_own_starts(example):
     """DESIGN §8 end to end: every default start of every example map reaches the goal."""
+    from bearnav_cli import pipeline
+
     plan, _ = example
-    runs = simulate.rollout(plan, plan.map.starts, simulate.Params(record_trajectories=False))
+    params = pipeline.resolve_params("simulate", plan.map.params, {"record_trajectories": False})
+    runs = simulate.rollout(plan, plan.map.starts, params)
     assert (runs.outcome == simulate.Outcome.SUCCESS).all(), runs.counts()
