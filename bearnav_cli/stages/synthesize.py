@@ -511,16 +511,22 @@ def solve_prepared(prepared: PreparedCell, params: Params, solver: LpSolver, fun
     return SolveOutcome(status, result, upper, c_h, c_v, kappa, attempts)
 
 
-def finish_cell(prepared: PreparedCell, outcome: SolveOutcome) -> CellSolution:
-    """The gain of the solved LP (Lemma 3 in field space; zero after a failure) and its re-checked margins."""
+def finish_cell(prepared: PreparedCell, outcome: SolveOutcome, recheck: bool = True) -> CellSolution:
+    """The gain of the solved LP (Lemma 3 in field space; zero after a failure) and its re-checked margins.
+
+    ``recheck=False`` leaves the margins NaN for :func:`more_tolerant_all`, which re-checks every
+    cell's field at its vertices in one pass.
+    """
     problem = prepared.problem
     status, result = outcome.status, outcome.result
     if result.status is LpStatus.OPTIMAL:
         K = gain_from_theta(prepared.space, result.x[: prepared.L.shape[2]], problem.landmarks)
     else:
         status, K = CellStatus.SOLVER_FAILURE, np.zeros((2, 2 * len(problem.landmarks)))
-    margin_h, margin_v = _template_margins(prepared.checker, outcome.row_upper, prepared.space, K, problem.landmarks,
-                                           len(problem.vertices))  # fmt: skip
+    margin_h = margin_v = math.nan
+    if recheck or status not in (CellStatus.CERTIFIED, CellStatus.RELAXED):
+        margin_h, margin_v = _template_margins(prepared.checker, outcome.row_upper, prepared.space, K,
+                                               problem.landmarks, len(problem.vertices))  # fmt: skip
     return CellSolution(status, K, outcome.c_h, outcome.c_v, margin_h, margin_v, outcome.attempts, outcome.kappa,
                         result.objective)  # fmt: skip
 
@@ -687,17 +693,18 @@ def run(cells: Cells, params: Params = Params(), progress: Callable[[int, int], 
         outcomes[c] = solve_prepared(prepared[c], params, solver, funnel=cells.is_funnel)
         if progress is not None and (done % report_every == 0 or done == len(prepared)):
             progress(C - len(prepared) + done, C)
+    tolerant = cells.is_funnel and params.tolerant  # more_tolerant_all re-checks those cells' margins
     for c, outcome in outcomes.items():
-        solutions[c] = sol = finish_cell(prepared[c], outcome)
+        solutions[c] = sol = finish_cell(prepared[c], outcome, recheck=not tolerant)
         if sol.status == CellStatus.NOT_CERTIFIED:
             log.warning("cell %d not certified: least-violation margins h %.3g, V %.3g", c, sol.margin_h, sol.margin_v)
         elif sol.status == CellStatus.SOLVER_FAILURE:
             log.warning("cell %d: solver failure (unbounded or error)", c)
-    if cells.is_funnel and params.tolerant:
+    if tolerant:
         chosen = [c for c in outcomes if solutions[c].status in (CellStatus.CERTIFIED, CellStatus.RELAXED)]
-        tolerant = more_tolerant_all([solutions[c] for c in chosen], [prepared[c].problem for c in chosen],
-                                     params.u_max, [outcomes[c].lemma4_terms for c in chosen])  # fmt: skip
-        for c, sol in zip(chosen, tolerant, strict=True):
+        picked = more_tolerant_all([solutions[c] for c in chosen], [prepared[c].problem for c in chosen],
+                                   params.u_max, [outcomes[c].lemma4_terms for c in chosen])  # fmt: skip
+        for c, sol in zip(chosen, picked, strict=True):
             solutions[c] = sol
     gain = np.zeros((C, 2, 2 * n_lm))
     if C:  # K_k of landmark k in columns 2k, 2k + 1: every cell's blocks in one scatter
@@ -827,8 +834,9 @@ def more_tolerant_all(solutions: Sequence[CellSolution], problems: Sequence[Cell
     delta[1, ~(eps > 0)] = -np.inf  # Lemma 4's field exists only for ε > 0
     out = []
     for k, (sol, prob) in enumerate(zip(solutions, problems, strict=True)):
-        if not delta[1, k] > delta[0, k]:
-            out.append(dataclasses.replace(sol, tolerance=float(delta[0, k])))
+        if not delta[1, k] > delta[0, k]:  # the LP's field, with its margins re-checked here
+            out.append(dataclasses.replace(sol, margin_h=float(cbf[0, k]) if n_h[k] else math.nan,
+                                           margin_v=float(clf[0, k]), tolerance=float(delta[0, k])))  # fmt: skip
             continue
         out.append(dataclasses.replace(sol, K=min_norm_gain(M[1, k], a[1, k], prob.landmarks),
                                        margin_h=float(cbf[1, k]) if n_h[k] else math.nan,
