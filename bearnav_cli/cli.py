@@ -38,11 +38,13 @@ import logging
 from pathlib import Path
 from typing import Any, Callable, List, Optional
 
+import numpy as np
 import typer
 import yaml
 from rich.console import Console
-from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.progress import BarColumn, Progress, ProgressColumn, TextColumn, TimeElapsedColumn
 from rich.table import Table
+from rich.text import Text
 
 from bearnav_cli import __version__, artifacts, pipeline
 from bearnav_cli.datatypes import CellFlag, Cells, CellStatus, Plan, cell_list
@@ -50,10 +52,31 @@ from bearnav_cli.errors import BearnavError, InvalidMapError, InvalidParamsError
 from bearnav_cli.stages import map_
 from bearnav_cli.stages.map_ import GridSource, MapSource
 
+
+def _usage_metavar(make_metavar: Callable) -> Callable:
+    """typer writes a required argument as ``{source}`` in the usage line; write its metavar (``MAP``) as is."""
+
+    def make(self: Any, ctx: Any, *, usage: bool = False) -> str:
+        if usage and self.metavar is not None and self.required:
+            return self.metavar
+        return make_metavar(self, ctx, usage=usage)
+
+    return make
+
+
+try:
+    from typer.core import TyperArgument
+
+    TyperArgument.make_metavar = _usage_metavar(TyperArgument.make_metavar)
+except (ImportError, AttributeError):  # another typer: its own usage line
+    pass
+
 app = typer.Typer(
     add_completion=True,
     no_args_is_help=True,
     help="Certified bearing-only navigation controllers from a 2-D map.\n\n"
+    "Lengths are in map units; a default written '0.01 D' is 1% of D, the diagonal of the map's bounds. "
+    "Maps: docs/maps.md; commands and the words of their output: docs/cli.md.\n\n"
     "Example: bearnav plan maps/kitchen.yaml",
 )
 out = Console()
@@ -212,8 +235,17 @@ def read_map_source(
     spec, data = _read_yaml(path)
     if not isinstance(spec, dict):
         raise InvalidMapError("expected a mapping at the top level", file=str(path))
+    if isinstance(spec.get("manifest"), dict) and "schema" in spec["manifest"]:
+        raise InvalidMapError(f"is an artifact ({spec['manifest']['schema']}), not a map YAML; plan from it with "
+                              f"`bearnav plan {path}`", file=str(path))  # fmt: skip
     blobs = [data]
     grid = None
+    if "image" not in spec:
+        given = [name for name, value in (("--goal", goal), ("--landmark", landmarks), ("--start", starts),
+                                          ("--robot-radius", robot_radius)) if value not in (None, [])]  # fmt: skip
+        if given:
+            raise BearnavError(f"{given[0]}: only for a bare map_server YAML; {path} is a bearnav map, "
+                               "set it there (docs/maps.md)")  # fmt: skip
     if "image" in spec:  # a bare map_server YAML: the rest comes from options
         grid, extra = _grid_source(path, str(path), "image")
         blobs = extra
@@ -254,7 +286,7 @@ def _pair(text: str, option: str) -> list[float]:
 def _report_line(report: pipeline.StageReport) -> str:
     state = "ran  " if report.ran else "fresh"
     timing = f"{report.elapsed_s:6.2f} s" if report.ran else "       -"
-    return f"{report.stage:<9} {state} {timing}  {report.path}  {report.summary}"
+    return f"{report.stage:<10} {state} {timing}  {report.path}  {report.summary}"
 
 
 def _progress_factory(progress: Progress) -> Callable[[str], pipeline.Progress]:
@@ -269,9 +301,18 @@ def _progress_factory(progress: Progress) -> Callable[[str], pipeline.Progress]:
     return make
 
 
+class _CountColumn(ProgressColumn):
+    """``done/total``, or nothing while the stage has not said how much there is (never ``0/None``)."""
+
+    def render(self, task: Any) -> Text:
+        if task.total is None:
+            return Text("")
+        return Text(f"{int(task.completed)}/{int(task.total)}")
+
+
 def _progress_bar() -> Progress:
     return Progress(
-        TextColumn("{task.description:<9}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
+        TextColumn("{task.description:<10}"), BarColumn(), _CountColumn(),
         TimeElapsedColumn(), console=err, transient=True, disable=_Quiet.enabled or not err.is_terminal,
     )
 
@@ -308,7 +349,10 @@ def _finish(reports: list[pipeline.StageReport], as_json: bool) -> None:
 
 # --------------------------------------------------------------------------- commands
 
-MAP_ARG = typer.Argument(..., help="Map YAML (bearnav format, or a ROS map_server YAML).")
+#: Where the words of the verify and simulate output are defined.
+WORDS_NOTE = 'lost, stall, left-cell events, approach, hold, certified, D, F_m: docs/cli.md "Words in the output"'
+
+MAP_ARG = typer.Argument(..., metavar="MAP", help="Map YAML (bearnav format, or a ROS map_server YAML).")
 FORCE = typer.Option(False, "--force", help="Rerun even if the output is fresh.")
 QUIET = typer.Option(False, "--quiet", "-q", help="No progress bars or warnings.")
 JSON = typer.Option(False, "--json", help="Print machine-readable JSON.")
@@ -346,7 +390,7 @@ def map_command(
 @app.command("rrtstar")
 @handles_errors
 def rrtstar_command(
-    map_json: Path = typer.Argument(..., help="map.json from `bearnav map`."),
+    map_json: Path = typer.Argument(..., metavar="MAP_JSON", help="map.json from `bearnav map`."),
     out_path: Optional[Path] = typer.Option(None, "-o", "--out", help="Output (default tree.npz next to the input)."),
     iterations: Optional[int] = typer.Option(None, help="Random samples drawn (1500)."),
     step: Optional[float] = typer.Option(None, help="Steering distance eta, map units (1.0)."),
@@ -373,7 +417,7 @@ def rrtstar_command(
 @app.command("simplify")
 @handles_errors
 def simplify_command(
-    tree_npz: Path = typer.Argument(..., help="tree.npz from `bearnav rrtstar`."),
+    tree_npz: Path = typer.Argument(..., metavar="TREE_NPZ", help="tree.npz from `bearnav rrtstar`."),
     out_path: Optional[Path] = typer.Option(
         None, "-o", "--out", help="Output (default simplified.npz next to the input)."
     ),
@@ -395,7 +439,7 @@ def simplify_command(
 @app.command("decompose")
 @handles_errors
 def decompose_command(
-    tree_npz: Path = typer.Argument(..., help="simplified.npz from `bearnav simplify`."),
+    tree_npz: Path = typer.Argument(..., metavar="SIMPLIFIED_NPZ", help="simplified.npz from `bearnav simplify`."),
     out_path: Optional[Path] = typer.Option(None, "-o", "--out", help="Output (default cells.npz next to the input)."),
     cells: Optional[str] = typer.Option(
         None, help="'funnel' (default: composable, ALGORITHMS §11), 'funnel-local' (+ bisectors) or 'paper' (§4)."
@@ -429,7 +473,7 @@ def decompose_command(
 @app.command("synthesize")
 @handles_errors
 def synthesize_command(
-    cells_npz: Path = typer.Argument(..., help="cells.npz from `bearnav decompose`."),
+    cells_npz: Path = typer.Argument(..., metavar="CELLS_NPZ", help="cells.npz from `bearnav decompose`."),
     out_path: Optional[Path] = typer.Option(None, "-o", "--out", help="Output (default plan.npz next to the input)."),
     u_max: Optional[float] = typer.Option(None, help="Input box |u_k| <= u_max, map units/s (1.0)."),
     kappa: Optional[float] = typer.Option(None, help="Initial constant scale kappa of c_v and c_h (0.5)."),
@@ -459,7 +503,7 @@ def synthesize_command(
 @app.command("verify")
 @handles_errors
 def verify_command(
-    plan_npz: Path = typer.Argument(..., help="plan.npz from `bearnav synthesize`."),
+    plan_npz: Path = typer.Argument(..., metavar="PLAN_NPZ", help="plan.npz from `bearnav synthesize`."),
     starts: int = typer.Option(200, "--starts", help="Random free starts for the closed-loop check (0 = skip)."),
     seed: int = typer.Option(0, help="Seed of the random starts."),
     speed: Optional[float] = typer.Option(
@@ -534,6 +578,10 @@ def verify_command(
         if seeing is not None:
             out.print(f"  perception: {seeing.summary()} (the rule: `bearnav tags` places tags where it fails)",
                       highlight=False, soft_wrap=True)  # fmt: skip
+        if starts:
+            out.print(f"  the {starts} runs drive with displacements (exact positions) and a full view, at speed "
+                      f"{speed:g} map units/s: `bearnav simulate` adds bearings, a camera and noise; {WORDS_NOTE}",
+                      highlight=False, markup=False, soft_wrap=True)  # fmt: skip
     if report.failed:
         raise typer.Exit(EXIT_OUTCOME)
 
@@ -554,9 +602,13 @@ def _run_one(stage: str, source: Path, out_path: Optional[Path], overrides: dict
 @app.command("simulate")
 @handles_errors
 def simulate_command(
-    plan_npz: Path = typer.Argument(..., help="plan.npz from `bearnav synthesize` or `bearnav plan`."),
+    plan_npz: Path = typer.Argument(
+        ..., metavar="PLAN_NPZ", help="plan.npz from `bearnav synthesize` or `bearnav plan`."
+    ),
     out_path: Optional[Path] = typer.Option(None, "-o", "--out", help="Output (default sim.npz next to the plan)."),
-    starts: Optional[str] = typer.Option(None, help="'map' (default), 'random:N' or 'x,y;x,y;...'."),
+    starts: Optional[str] = typer.Option(
+        None, help="'map' (default), 'random:N' or \"x,y;x,y;...\" (quoted: the shell splits at ;)."
+    ),
     dynamics: Optional[str] = typer.Option(None, help="'single' (default) or 'unicycle'."),
     measurement: Optional[str] = typer.Option(None, help="'bearing' (default) or 'displacement'."),
     fov: Optional[float] = typer.Option(None, help="Camera field of view, degrees (360)."),
@@ -610,10 +662,13 @@ def simulate_command(
         for name, value in _metric_rows(metrics):
             table.add_row(name, value)
         out.print(table)
+        out.print(WORDS_NOTE, highlight=False, markup=False, soft_wrap=True)
     if gif is not None:
         from bearnav_cli import plot  # matplotlib only when asked
 
         pipeline.ACTIVITY.stage, pipeline.ACTIVITY.written = f"{gif} (sim.npz and sim.json were written)", False
+        if not _Quiet.enabled and not as_json:  # a GIF takes seconds: say what is happening
+            err.print(f"writing {gif} (80 frames) ...", highlight=False, markup=False)
         with artifacts.atomic_output(gif) as tmp:
             plot.save_animation(sim, str(tmp))
         if not as_json:
@@ -635,9 +690,9 @@ def _metric_rows(metrics: dict) -> list[tuple[str, str]]:
     rows += [(f"  {name}", str(n)) for name, n in metrics["outcomes"].items() if n]
     rows += [
         ("mean time (s)", num(metrics["time_mean_s"], ".1f")),
-        ("mean path length", num(metrics["path_length_mean"], ".2f")),
+        ("mean path length (map units)", num(metrics["path_length_mean"], ".2f")),
         ("path / tree route", num(metrics["path_over_tree_route_mean"], ".3f")),
-        ("min clearance", num(metrics["min_clearance"], ".3f")),
+        ("min clearance (map units)", num(metrics["min_clearance"], ".3f")),
         ("left-cell events", str(metrics["left_cell_events"])),
         ("runs with an approach", str(metrics["runs_with_approach"])),
         ("hold time total (s)", num(metrics["hold_time_total_s"], ".1f")),
@@ -648,23 +703,64 @@ def _metric_rows(metrics: dict) -> list[tuple[str, str]]:
 @app.command("plan")
 @handles_errors
 def plan_command(
-    source: Path = MAP_ARG,
-    out_dir: Optional[Path] = typer.Option(None, "-o", "--out", help="Output folder (default plans/<name>/)."),
+    source: Path = typer.Argument(
+        ..., metavar="MAP", help="Map YAML (bearnav format, or a bare ROS map_server YAML with --goal), or a map.json."
+    ),
+    out_dir: Optional[Path] = typer.Option(
+        None, "-o", "--out", help="Output folder (default plans/<name>/; for a map.json, its folder)."
+    ),
+    goal: Optional[str] = typer.Option(None, help="Goal X,Y, map units (bare occupancy grids only)."),
+    landmark: Optional[List[str]] = typer.Option(
+        None, metavar="X,Y", help="Landmark X,Y, map units, repeatable (bare grids only)."
+    ),
+    start: Optional[List[str]] = typer.Option(
+        None, metavar="X,Y", help="Start X,Y, map units, repeatable (bare grids only)."
+    ),
+    robot_radius: Optional[float] = typer.Option(None, help="Robot radius, map units (bare grids only; 0)."),
+    unknown: Optional[str] = typer.Option(None, help="Unknown grid cells count as 'obstacle' (default) or 'free'."),
+    circle_segments: Optional[int] = typer.Option(None, help="Vertices of a polygonised circle (64)."),
     iterations: Optional[int] = typer.Option(None, help="RRT* iterations (map's params, else 1500)."),
-    step: Optional[float] = typer.Option(None, help="RRT* step (map's params, else 1.0)."),
-    seed: Optional[int] = typer.Option(None, help="RRT* seed."),
+    step: Optional[float] = typer.Option(None, help="RRT* step, map units (map's params, else 1.0)."),
+    seed: Optional[int] = typer.Option(None, help="RRT* seed (map's params, else 0)."),
+    cells: Optional[str] = typer.Option(
+        None, help="Decompose: 'funnel' (default, ALGORITHMS §11), 'funnel-local' or 'paper' (§4) cells."
+    ),
     force: bool = FORCE,
     quiet: bool = QUIET,
     as_json: bool = JSON,
 ) -> None:
     """Run every stage from the map to the last one, skipping fresh stages.
 
-    Example: bearnav plan maps/kitchen.yaml --seed 3
+    Takes the same map options as `bearnav map`; a map.json from `bearnav map` starts at rrtstar.
+
+    Examples: bearnav plan maps/kitchen.yaml --seed 3;
+    bearnav plan lab.yaml --goal 1,1 --landmark 0,2 --landmark 4,0 (a bare map_server YAML)
     """
     _Quiet.enabled |= quiet
-    src = read_map_source(source)
-    target = out_dir or Path("plans") / str(src.spec.get("name", source.stem))
-    overrides = {"rrtstar": {"iterations": iterations, "step": step, "seed": seed}}
+    if cells is not None and cells not in CELL_KINDS:  # before any stage runs
+        raise _fail(f"--cells: must be one of {', '.join(CELL_KINDS)}, got {cells!r}", EXIT_INVALID)
+    map_options = {"--goal": goal, "--landmark": landmark, "--start": start, "--robot-radius": robot_radius,
+                   "--unknown": unknown, "--circle-segments": circle_segments}  # fmt: skip
+    overrides = {
+        "map": {"unknown": unknown, "circle_segments": circle_segments},
+        "rrtstar": {"iterations": iterations, "step": step, "seed": seed},
+        "decompose": {"cells": cells},
+    }
+    if source.is_dir():
+        inside = source / "map.json"
+        hint = f"; did you mean {inside}?" if inside.is_file() else " (give a map YAML or a map.json)"
+        raise _fail(f"{source}: is a folder{hint}", EXIT_INVALID)
+    if _is_map_artifact(source):
+        given = [name for name, value in map_options.items() if value not in (None, [])]
+        if given:
+            raise _fail(f"{given[0]}: {source} is a map.json, built already; give the map YAML to change "
+                        "its map options", EXIT_INVALID)  # fmt: skip
+        src: Any = source
+        target = out_dir or source.parent
+    else:
+        goal_xy = _pair(goal, "--goal") if goal else None
+        src = read_map_source(source, goal_xy, landmark, start, robot_radius)
+        target = out_dir or Path("plans") / str(src.spec.get("name", source.stem))
 
     def show(report: pipeline.StageReport) -> None:
         if not as_json:
@@ -675,15 +771,37 @@ def plan_command(
     _finish(reports, as_json)
 
 
+#: ``decompose --cells`` (and ``plan --cells``) choices.
+CELL_KINDS = ("funnel", "funnel-local", "paper")
+
+
+def _is_map_artifact(path: Path) -> bool:
+    """A ``map.json`` written by the map stage (told by its suffix: map YAMLs end in .yaml or .yml)."""
+    return path.suffix.lower() == ".json"
+
+
 @app.command("inspect")
 @handles_errors
-def inspect_command(artifact: Path = typer.Argument(..., help="Any bearnav artifact."), as_json: bool = JSON) -> None:
-    """Check an artifact and print its manifest and one-line summary.
+def inspect_command(
+    artifact: Path = typer.Argument(..., metavar="ARTIFACT", help="Any bearnav artifact (map.json, *.npz)."),
+    cells: bool = typer.Option(False, "--cells", help="Also print the per-cell statistics in full."),
+    cell: Optional[int] = typer.Option(
+        None, "--cell", metavar="N", help="Print one cell of cells.npz or plan.npz: rows, vertices, status, δ_c."
+    ),
+    quiet: bool = QUIET,
+    as_json: bool = JSON,
+) -> None:
+    """Check an artifact and print a short summary of its manifest (per-cell detail with --cells).
 
-    Example: bearnav inspect plans/kitchen/tree.npz
+    Examples: bearnav inspect plans/kitchen/plan.npz;
+    bearnav inspect plans/kitchen/plan.npz --cell 12
     """
+    _Quiet.enabled |= quiet
     loaded = pipeline.load(artifact)
     manifest = loaded.manifest
+    if cell is not None:
+        _inspect_cell(artifact, loaded.artifact, cell, as_json)
+        return
     if as_json:
         out.print_json(json.dumps(manifest))
         return
@@ -694,16 +812,93 @@ def inspect_command(artifact: Path = typer.Argument(..., help="Any bearnav artif
     inp = manifest.get("input", {})
     out.print(f"input     {inp.get('path')}  sha256 {str(inp.get('content_sha256'))[:16]}…", highlight=False)
     out.print(f"content   sha256 {manifest['content_sha256'][:16]}…  key {manifest['key'][:16]}…", highlight=False)
-    if manifest.get("stats"):
-        out.print(f"stats     {json.dumps(manifest['stats'], sort_keys=True)}", highlight=False, markup=False)
+    stats = manifest.get("stats") or {}
+    if stats:
+        shown = stats if cells else _short_stats(stats)
+        out.print(f"stats     {json.dumps(shown, sort_keys=True)}", highlight=False, markup=False)
     software = ", ".join(f"{k} {v}" for k, v in manifest.get("software", {}).items())
     out.print(f"software  {software}  elapsed {manifest.get('elapsed_s', 0):.3f} s", highlight=False)
+    per_cell = sorted(key for key, value in stats.items() if isinstance(value, list) and value)
+    if not cells and per_cell:
+        out.print(f"(--cells adds the per-cell statistics {', '.join(per_cell)}; --cell N shows one cell)",
+                  highlight=False, markup=False, soft_wrap=True)  # fmt: skip
+
+
+def _short_stats(stats: dict) -> dict:
+    """The manifest's statistics for the default ``inspect``: per-cell lists left out (``--cells``
+    shows them), lists of cells inside a mapping counted, zero counts dropped, floats to 4 digits."""
+
+    def short(value: Any) -> Any:
+        if isinstance(value, float):
+            return float(f"{value:.4g}")
+        if isinstance(value, list):
+            return len(value)
+        if isinstance(value, dict):
+            return {k: short(v) for k, v in value.items() if v not in (0, [], None, {})}
+        return value
+
+    return {key: short(value) for key, value in stats.items()
+            if not isinstance(value, list) and value not in ({}, None)}  # fmt: skip
+
+
+def _inspect_cell(path: Path, artifact: Any, c: int, as_json: bool) -> None:
+    """``inspect --cell N``: one cell of a cells.npz or plan.npz, everything a user needs to find it."""
+    plan = artifact if isinstance(artifact, Plan) else None
+    cells = plan.cells if plan is not None else artifact
+    if not isinstance(cells, Cells):
+        raise _fail(f"--cell: {path} holds no cells (give cells.npz or plan.npz)", EXIT_INVALID)
+    if not 0 <= c < cells.n_cells:
+        raise _fail(f"--cell: {path} has cells 0 to {cells.n_cells - 1}, got {c}", EXIT_INVALID)
+    A, b = cells.rows(c)
+    vertices = cells.vertices(c)
+    node = int(cells.cell_node[c])
+    parent = int(cells.parent[node])
+    ids = [str(cells.map.landmark_ids[k]) for k in np.flatnonzero(cells.cell_landmarks[c])]
+    flags = [flag.name.lower() for flag in CellFlag if flag and int(cells.cell_flags[c]) & flag]
+    info: dict[str, Any] = {
+        "cell": c, "node": node, "node_position": [float(v) for v in cells.nodes[node]],
+        "parent_cell": parent, "rank": float(cells.cell_rank[c]), "exit_row": int(cells.cell_exit_row[c]),
+        "vertices": [[float(v) for v in p] for p in vertices],
+        "rows": [{"a": [float(v) for v in a], "b": float(bb)} for a, bb in zip(A, b, strict=True)],
+        "landmarks": ids, "fixed_landmark": str(cells.map.landmark_ids[int(cells.fixed_landmark[c])]),
+        "flags": flags, "added_by_densification": bool(cells.node_added[node]),
+    }  # fmt: skip
+    if plan is not None:
+        status = CellStatus(int(plan.status[c]))
+        tol = float(plan.tolerance[c])
+        info.update(status=status.name.lower(), status_code=int(status), tolerance=None if np.isnan(tol) else tol,
+                    margin_h=float(plan.margin_h[c]), margin_v=float(plan.margin_v[c]))  # fmt: skip
+    if as_json:
+        out.print_json(json.dumps(info))
+        return
+
+    def point(p: Any) -> str:
+        return f"({p[0]:.4g}, {p[1]:.4g})"
+
+    lines = [f"cell {c} of {path} ({cells.n_cells} cells)"]
+    lines.append(f"node      {node} at {point(cells.nodes[node])}, "
+                 + (f"parent cell {parent}" if parent >= 0 else "the goal cell")
+                 + (" (added by densification)" if info["added_by_densification"] else "")
+                 + f"; rank {info['rank']:.4g} (cost-to-go, map units)")  # fmt: skip
+    if plan is not None:
+        tol_text = "none" if info["tolerance"] is None else f"{info['tolerance']:.4g} map units"
+        lines.append(f"status    {info['status_code']} {info['status']}; δ_c (position error tolerated) {tol_text}")
+    lines.append(f"vertices  {len(vertices)}, CCW: " + " ".join(point(p) for p in vertices))
+    lines.append(f"rows      {len(A)}, the cell is {{x : a·x ≤ b}}; the exit row is {info['exit_row']}"
+                 + (" (none: goal cell)" if info["exit_row"] < 0 else ""))  # fmt: skip
+    for k, (a, bb) in enumerate(zip(A, b, strict=True)):
+        mark = "  <- exit" if k == info["exit_row"] else ""
+        lines.append(f"  {k:>3}  a = ({a[0]: .4f}, {a[1]: .4f})  b = {bb: .5g}{mark}")
+    lines.append(f"landmarks {', '.join(ids) or 'none'} (fixed: {info['fixed_landmark']})")
+    lines.append(f"flags     {', '.join(flags) or 'none'}")
+    for line in lines:
+        out.print(line, highlight=False, markup=False, soft_wrap=True)
 
 
 @app.command("tags")
 @handles_errors
 def tags_command(
-    plan_npz: Path = typer.Argument(..., help="plan.npz from `bearnav plan`."),
+    plan_npz: Path = typer.Argument(..., metavar="PLAN_NPZ", help="plan.npz from `bearnav plan`."),
     fov: float = typer.Option(60.0, "--fov", help="Camera field of view, degrees, in (0, 360]."),
     max_range: Optional[float] = typer.Option(None, "--range", help="Camera range, map units (default: unlimited)."),
     noise_deg: float = typer.Option(1.0, "--noise-deg", help="Bearing noise (1σ, degrees) of the predicted fix error."),
@@ -789,7 +984,7 @@ def tags_command(
 @app.command("plot")
 @handles_errors
 def plot_command(
-    artifact: Path = typer.Argument(..., help="Any bearnav artifact."),
+    artifact: Path = typer.Argument(..., metavar="ARTIFACT", help="Any bearnav artifact (map.json, *.npz)."),
     out_path: Path = typer.Option(..., "-o", "--out", help="Figure file (.png, .pdf, .svg)."),
     also: Optional[List[Path]] = typer.Option(None, "--also", help="Tree artifact drawn faintly underneath."),
     title: Optional[str] = typer.Option(None, help="Figure title."),
@@ -801,11 +996,13 @@ def plot_command(
         None, "--labels/--no-labels", help="Landmark ids: all, or none (default: those that do not collide)."
     ),
     cell_numbers: bool = typer.Option(False, "--cell-numbers", help="Write each cell's index where it is active."),
+    quiet: bool = QUIET,
 ) -> None:
     """Draw an artifact: map, tree, collision samples, cells, the plan's field, simulated runs.
 
     Example: bearnav plot plans/kitchen/plan.npz -o plan.png --color-by tolerance --cell-numbers
     """
+    _Quiet.enabled |= quiet
     artifacts.check_output_file(out_path, FIGURE_SUFFIXES, "-o/--out", inputs=(artifact, *(also or [])))
     # matplotlib is slow to import: only here
     from bearnav_cli import composition, plot

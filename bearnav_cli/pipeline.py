@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -459,6 +460,25 @@ def check_resources(stage: str, params: Any, where: dict[str, str], artifact: An
 # --------------------------------------------------------------------------- loading and running
 
 
+#: Suffixes of files that are map descriptions, not artifacts.
+MAP_SUFFIXES = (".yaml", ".yml")
+
+
+def _check_artifact_path(path: Path, expect: str | tuple[str, ...] | None) -> None:
+    """Advice for the usual wrong-kind inputs before the loader's generic message: a folder, a map YAML."""
+    wanted = (expect,) if isinstance(expect, str) else tuple(expect or ())
+    names = [artifacts.KINDS[kind].filename for kind in wanted] or ["plan.npz", "map.json"]
+    if path.is_dir():
+        inside = [path / name for name in names if (path / name).is_file()]
+        hint = f"; did you mean {inside[0]}?" if inside else f" (expected a file such as {names[0]})"
+        raise ArtifactError(f"is a folder, not an artifact file{hint}", file=str(path))
+    if path.suffix.lower() in MAP_SUFFIXES and path.is_file():
+        folder = Path("plans") / path.stem
+        raise ArtifactError(
+            f"is a map YAML, not an artifact: run `bearnav plan {path}` first (it writes {folder}/map.json ... "
+            f"{folder}/plan.npz), then give one of those", file=str(path))
+
+
 def load(path: str | Path, expect: str | tuple[str, ...] | None = None) -> artifacts.Loaded:
     """:func:`bearnav_cli.artifacts.load`, plus the map's ``params:`` checked against the stage table.
 
@@ -468,6 +488,7 @@ def load(path: str | Path, expect: str | tuple[str, ...] | None = None) -> artif
         Everything :func:`artifacts.load` checks, and a ``params`` entry of the (embedded) map
         that names an unknown stage or parameter or has a value of the wrong type or range.
     """
+    _check_artifact_path(Path(path), expect)
     loaded = artifacts.load(path, expect)
     map_ = loaded.artifact if isinstance(loaded.artifact, Map) else loaded.artifact.map
     try:
@@ -501,7 +522,8 @@ def _run_and_save(
     elapsed = time.perf_counter() - started
     if isinstance(result, Map):  # lengths in the map's params:, checked once its diagonal is known
         check_map_params(result.params, input_path or str(out), diagonal=result.diagonal)
-    summary = stage.module.summary(result)
+    summary = map_.summary(result, map_.listed_obstacles(payload)) if isinstance(result, Map) else \
+        stage.module.summary(result)
     manifest = artifacts.make_manifest(
         stage.output_kind,
         result,
@@ -580,8 +602,20 @@ def _check_chain(reports: list[StageReport]) -> None:
                                 file=str(after.path))  # fmt: skip
 
 
+def _adopt_map(map_json: Path, target: Path) -> StageReport:
+    """A ready ``map.json`` as the map stage's report, copied into the plan folder when it lies elsewhere."""
+    loaded = load(map_json, "map")
+    if not (target.exists() and os.path.samefile(map_json, target)):
+        data = map_json.read_bytes()
+        artifacts.atomic_write(target, lambda f: f.write(data))
+        loaded = load(target, "map")
+    _committed()
+    manifest = loaded.manifest
+    return StageReport("map", target, False, 0.0, manifest.get("summary", ""), loaded.artifact, manifest)
+
+
 def plan(
-    source: map_.MapSource,
+    source: map_.MapSource | Path,
     out_dir: Path,
     overrides: dict[str, dict] | None = None,
     force: bool = False,
@@ -595,8 +629,9 @@ def plan(
 
     Parameters
     ----------
-    source : MapSource
-        The map description.
+    source : MapSource or Path
+        The map description, or a ``map.json`` already written by the map stage (copied into
+        ``out_dir`` when it lies elsewhere; the map stage then does not run).
     out_dir : Path
         Folder for ``map.json``, ``tree.npz`` ...
     overrides : dict, optional
@@ -613,7 +648,10 @@ def plan(
     _begin("map")
     artifacts.check_output_folder(out_dir, tuple(stage.filename for stage in STAGES))
     with artifacts.output_folder(out_dir):
-        reports = [run_map(source, out_dir / STAGES[0].filename, overrides.get("map"), force)]
+        if isinstance(source, Path):
+            reports = [_adopt_map(source, out_dir / STAGES[0].filename)]
+        else:
+            reports = [run_map(source, out_dir / STAGES[0].filename, overrides.get("map"), force)]
         if on_stage:
             on_stage(reports[-1])
         for stage in STAGES[1:]:

@@ -95,7 +95,7 @@ def plot_map(ax: plt.Axes, map_: Map, *, landmarks: bool = True, starts: bool = 
                    zorder=6, label="landmarks")  # fmt: skip
     if starts and len(map_.starts):
         ax.scatter(*map_.starts.T, marker="o", s=36, facecolor="white", edgecolor="#1f77b4", zorder=6,
-                   label="starts")
+                   label="map starts")
     ax.scatter(*map_.goal, marker="*", s=180, color="#2ca02c", edgecolor="white", linewidths=0.5, zorder=7,
                label="goal")  # fmt: skip
     pad = 0.02 * map_.diagonal
@@ -436,7 +436,7 @@ def plot_sim_background(ax: plt.Axes, sim: Simulation) -> plt.Axes:
     """The simulation's cells (outlines, filled by status) and tree, faintly."""
     _draw_cells(ax, sim.cell_vertices, sim.cell_vertex_offsets, sim.cell_status, fill=0.12, line=0.35, lw=0.3,
                 legend=False)  # fmt: skip
-    return plot_tree(ax, sim, lw=0.8, alpha=0.6)
+    return plot_tree(ax, sim, lw=0.8, alpha=0.6, label="simplified tree")
 
 
 def plot_trajectories(ax: plt.Axes, sim: Simulation, *, limit: int = 400) -> plt.Axes:
@@ -451,9 +451,13 @@ def plot_trajectories(ax: plt.Axes, sim: Simulation, *, limit: int = 400) -> plt
         shown.add(outcome)
         color = OUTCOME_COLORS[outcome]
         ax.plot(*path.T, color=color, lw=0.9, alpha=0.85, zorder=4, label=label)
-        ax.plot(*path[0], "o", ms=3, mfc="white", mec=color, zorder=5)
+        start_label = "run starts" if "start" not in shown else None
+        shown.add("start")
+        ax.plot(*path[0], "o", ms=3, mfc="white", mec=color, zorder=5, label=start_label)
         if outcome != 0:
-            ax.plot(*path[-1], "x", ms=5, color=color, zorder=5)
+            end_label = "where a failed run ended" if "end" not in shown else None
+            shown.add("end")
+            ax.plot(*path[-1], "x", ms=5, color=color, zorder=5, label=end_label)
     return ax
 
 
@@ -490,21 +494,34 @@ def save_animation(sim: Simulation, path: str, *, frames: int = 80, limit: int =
     plot_sim_background(ax, sim)
     runs = [r for r in range(min(len(sim.outcome), limit)) if len(sim.trajectory(r))]
     lines = [ax.plot([], [], color=OUTCOME_COLORS[int(sim.outcome[r])], lw=0.9, zorder=4)[0] for r in runs]
-    heads = ax.scatter(np.zeros(len(runs)), np.zeros(len(runs)), s=12, zorder=5,
-                       c=[OUTCOME_COLORS[int(sim.outcome[r])] for r in runs])  # fmt: skip
+    colors = [OUTCOME_COLORS[int(sim.outcome[r])] for r in runs]
+    heads = ax.scatter(np.zeros(len(runs)), np.zeros(len(runs)), s=12, zorder=5, c=colors)
+    offsets = sim.trajectory_offsets
+    headings = [np.asarray(sim.trajectory_heading[offsets[r]:offsets[r + 1]], float) for r in runs]
+    has_heading = all(len(h) == len(sim.trajectory(r)) for h, r in zip(headings, runs, strict=True)) and runs
+    xmin, ymin, xmax, ymax = sim.map.bounds
+    size = 0.03 * max(xmax - xmin, ymax - ymin)  # each robot's heading, an arrow this long
+    arrows = ax.quiver(np.zeros(len(runs)), np.zeros(len(runs)), np.ones(len(runs)), np.zeros(len(runs)),
+                       color=colors, angles="xy", scale_units="xy", scale=1.0 / size, width=0.004,
+                       zorder=5.5) if has_heading else None  # fmt: skip
     longest = max((len(sim.trajectory(r)) for r in runs), default=1)
     fig.tight_layout()
 
     def draw(k: int) -> list:
         upto = max(1, int(round((k + 1) / frames * longest)))
-        tips = []
-        for line, r in zip(lines, runs, strict=True):
+        tips, angles = [], []
+        for i, (line, r) in enumerate(zip(lines, runs, strict=True)):
             path = sim.trajectory(r)[:upto]
             line.set_data(path[:, 0], path[:, 1])
             tips.append(path[-1])
+            if arrows is not None:
+                angles.append(headings[i][len(path) - 1])
         if tips:
             heads.set_offsets(np.array(tips))
-        return [*lines, heads]
+            if arrows is not None:
+                arrows.set_offsets(np.array(tips))
+                arrows.set_UVC(np.cos(angles), np.sin(angles))
+        return [*lines, heads] + ([arrows] if arrows is not None else [])
 
     FuncAnimation(fig, draw, frames=frames, blit=False).save(path, writer=PillowWriter(fps=12), dpi=60)
     plt.close(fig)
@@ -570,7 +587,9 @@ def figure_for(artifact: Any, *, background: Sequence[Any] = (), title: str | No
         plot_tree(ax, extra, color="#9ecae1", lw=0.5, alpha=0.8, label="RRT* tree")
     if isinstance(artifact, Tree):
         plot_samples(ax, artifact)
-        plot_tree(ax, artifact, nodes=len(artifact.nodes) < 400, lw=1.0 if background else 0.7)
+        simplified = "rounds" in artifact.stats  # simplified.npz (its stats count the rounds), not tree.npz
+        plot_tree(ax, artifact, nodes=len(artifact.nodes) < 400, lw=1.0 if background else 0.7,
+                  label="simplified tree" if simplified else "RRT* tree")  # fmt: skip
     if cells is not None:
         plot_cells(ax, cells, plan.status if plan is not None else None, color_by=color_by,
                    tolerance=plan.tolerance if plan is not None else None, numbers=cell_numbers)  # fmt: skip
@@ -578,7 +597,7 @@ def figure_for(artifact: Any, *, background: Sequence[Any] = (), title: str | No
             plot_uncovered(ax, cells, coverage.uncovered, coverage.unreached)
         if barriers:
             plot_barriers(ax, cells)
-        plot_tree(ax, cells, nodes=True, lw=0.5, alpha=0.75, color="#2171b5")
+        plot_tree(ax, cells, nodes=True, lw=0.5, alpha=0.75, color="#2171b5", label="simplified tree")
         if plan is not None and arrows > 0:
             plot_field(ax, plan, arrows=arrows)
     handles, _ = ax.get_legend_handles_labels()

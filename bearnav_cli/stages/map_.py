@@ -372,10 +372,29 @@ def spec_of(map_: Map) -> dict:
     }
 
 
-def summary(map_: Map) -> str:
-    """One line for ``inspect`` and ``plan``."""
+def listed_obstacles(source: MapSource) -> int | None:
+    """How many obstacles the description lists (None when an occupancy grid adds its own)."""
+    if source.grid is not None or not isinstance(source.spec, dict):
+        return None
+    listed = source.spec.get("obstacles", [])
+    return len(listed) if isinstance(listed, list) else None
+
+
+def summary(map_: Map, listed: int | None = None) -> str:
+    """One line for ``inspect`` and ``plan``; with ``listed`` (:func:`listed_obstacles`) it says what was merged."""
     xmin, ymin, xmax, ymax = map_.bounds
+    raw, inflated = len(map_.raw_obstacles), len(map_.obstacles)
+    radius = f"robot radius {map_.robot_radius:g}"
+    if listed is None or (listed == raw == inflated):
+        shapes = f"{inflated} obstacles ({radius})"
+    else:
+        shapes = f"{listed} obstacles merged into {raw} (touching or overlapping)" if raw != listed else \
+            f"{listed} obstacles"
+        if inflated != raw:
+            shapes += f" and into {inflated} by the {radius} (gaps it cannot pass)"
+        else:
+            shapes += f", {radius}"
     return (
-        f"{map_.name}: {xmax - xmin:g} x {ymax - ymin:g} bounds, {len(map_.obstacles)} obstacles "
-        f"(robot radius {map_.robot_radius:g}), {len(map_.landmarks)} landmarks, {len(map_.starts)} starts"
+        f"{map_.name}: {xmax - xmin:g} x {ymax - ymin:g} bounds, {shapes}, "
+        f"{len(map_.landmarks)} landmarks, {len(map_.starts)} starts"
     )
