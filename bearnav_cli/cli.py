@@ -107,6 +107,18 @@ def _setup_logging() -> None:
     logger.propagate = False
 
 
+def _plotting():
+    """:mod:`bearnav_cli.plot` on matplotlib's file backend: the command line only writes files.
+
+    The backend is chosen here, not in ``plot`` itself, so that importing ``plot`` from a notebook
+    keeps the notebook's backend.
+    """
+    from bearnav_cli import plot
+
+    plot.use_file_backend()
+    return plot
+
+
 def _fail(message: str, code: int) -> typer.Exit:
     err.print(f"[red]error:[/red] {message}".replace("\n", " "), highlight=False, soft_wrap=True, markup=True)
     return typer.Exit(code)
@@ -664,7 +676,7 @@ def simulate_command(
         out.print(table)
         out.print(WORDS_NOTE, highlight=False, markup=False, soft_wrap=True)
     if gif is not None:
-        from bearnav_cli import plot  # matplotlib only when asked
+        plot = _plotting()  # matplotlib only when asked
 
         pipeline.ACTIVITY.stage, pipeline.ACTIVITY.written = f"{gif} (sim.npz and sim.json were written)", False
         if not _Quiet.enabled and not as_json:  # a GIF takes seconds: say what is happening
@@ -958,7 +970,7 @@ def tags_command(
     map_.run(map_.MapSource(spec=new_spec, file=str(out_path), sha256=""))  # the map stage accepts it
     text = yaml.safe_dump(new_spec, sort_keys=False, default_flow_style=None)
     artifacts.atomic_write(out_path, lambda f: f.write(text.encode()))
-    from bearnav_cli import plot  # matplotlib is slow to import: only here
+    plot = _plotting()  # matplotlib is slow to import: only here
 
     fig = plot.tags_figure(proposal, plan.map, f"{plan.map.name}: where to glue {proposal.count} new tags "
                            f"({fov:g}° camera, {noise_deg:g}° noise)")  # fmt: skip
@@ -1005,7 +1017,9 @@ def plot_command(
     _Quiet.enabled |= quiet
     artifacts.check_output_file(out_path, FIGURE_SUFFIXES, "-o/--out", inputs=(artifact, *(also or [])))
     # matplotlib is slow to import: only here
-    from bearnav_cli import composition, plot
+    from bearnav_cli import composition
+
+    plot = _plotting()
 
     if color_by is not None and color_by not in plot.COLOR_BY:
         raise _fail(f"--color-by: must be one of {', '.join(plot.COLOR_BY)}, got {color_by!r}", EXIT_INVALID)

@@ -13,23 +13,29 @@ import math
 from typing import Any, Sequence
 
 import matplotlib
+import matplotlib.pyplot as plt
+import numpy as np
+import shapely
+from matplotlib import colors as mcolors
+from matplotlib import patheffects
+from matplotlib.cm import ScalarMappable
+from matplotlib.collections import LineCollection
+from matplotlib.patches import Patch, PathPatch
+from matplotlib.path import Path as MplPath
+from shapely.geometry.polygon import orient
 
-matplotlib.use("Agg")  # files only: bearnav never opens windows
+from bearnav_cli import runtime
+from bearnav_cli.datatypes import Cells, CellStatus, Map, Plan, Polygon, Simulation, Tree
+from bearnav_cli.errors import InvalidParamsError
 
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import shapely  # noqa: E402
-from matplotlib import colors as mcolors  # noqa: E402
-from matplotlib import patheffects  # noqa: E402
-from matplotlib.cm import ScalarMappable  # noqa: E402
-from matplotlib.collections import LineCollection  # noqa: E402
-from matplotlib.patches import Patch, PathPatch  # noqa: E402
-from matplotlib.path import Path as MplPath  # noqa: E402
-from shapely.geometry.polygon import orient  # noqa: E402
 
-from bearnav_cli import runtime  # noqa: E402
-from bearnav_cli.datatypes import Cells, CellStatus, Map, Plan, Polygon, Simulation, Tree  # noqa: E402
-from bearnav_cli.errors import InvalidParamsError  # noqa: E402
+def use_file_backend() -> None:
+    """Switch matplotlib to its file backend (Agg), as the command line does before drawing.
+
+    Importing this module leaves the backend alone, so a notebook that imports it keeps its own.
+    """
+    matplotlib.use("Agg")
+
 
 RAW_COLOR = "#4d4d4d"
 INFLATED_COLOR = "#c9c9c9"

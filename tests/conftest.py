@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import copy
+import os
 from pathlib import Path
 
 import pytest
@@ -12,6 +13,8 @@ from typer.testing import CliRunner
 from bearnav_cli.stages import map_
 
 REPO = Path(__file__).resolve().parents[1]
+# figures are drawn into files only, whatever display the machine running the tests has
+os.environ.setdefault("MPLBACKEND", "Agg")
 
 SMALL_MAP = {
     "name": "small",

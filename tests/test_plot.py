@@ -241,3 +241,14 @@ def test_no_arrows_draws_no_field(small_plan, draw):
     assert plot.field_samples(small_plan, arrows=0)[0].shape == (0, 2)
     ax = draw(small_plan, arrows=0)
     assert not [c for c in ax.collections if isinstance(c, Quiver)]
+
+
+def test_importing_plot_keeps_the_callers_backend():
+    """plot does not switch matplotlib's backend (a notebook keeps its own); the CLI picks Agg."""
+    import subprocess
+    import sys
+
+    code = ("import matplotlib; matplotlib.use('svg'); import bearnav_cli.plot; "
+            "print(matplotlib.get_backend())")  # fmt: skip
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip().lower() == "svg"
