@@ -175,7 +175,7 @@ def _in_range(values: np.ndarray, low: int, high: int) -> str | None:
     return None if k is None else f"must lie in {low}..{high}, got {int(values[k])} at index {k}"
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # arrays inside: identity equality, a hash that works
 class Polygon:
     """A simple polygon with optional holes, in map units.
 
@@ -204,7 +204,7 @@ class Polygon:
         return cls(np.asarray(data["exterior"], float), tuple(np.asarray(h, float) for h in data["holes"]))
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # arrays inside: identity equality, a hash that works
 class Map:
     """The normalised map (schema ``bearnav.map/1``, DESIGN §3.2, ALGORITHMS §1).
 
@@ -400,7 +400,7 @@ MAP_INVARIANTS: tuple[Invariant, ...] = (
 )  # fmt: skip
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # arrays inside: identity equality, a hash that works
 class Tree:
     """A tree rooted at the goal, with the RRT* collision samples (ALGORITHMS §2–3).
 
@@ -537,7 +537,7 @@ _CELL_FIELDS = {
 }
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # arrays inside: identity equality, a hash that works
 class Cells:
     """Convex cells with their CLF and CBF rows, one per tree node (``cells.npz``, ALGORITHMS §4).
 
@@ -790,7 +790,7 @@ PLAN_KEYS = ("landmarks", "gain", "c_h", "c_v", "u_max", "margin_h", "margin_v",
              "tolerance", "plan_tolerance")  # fmt: skip
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # arrays inside: identity equality, a hash that works
 class Plan:
     """Cells with a synthesised, certified controller each (``plan.npz``, DESIGN §3.2, ALGORITHMS §5).
 
@@ -894,7 +894,7 @@ SIMULATION_KEYS: dict[str, tuple[str, int]] = {
 }  # fmt: skip
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # arrays inside: identity equality, a hash that works
 class Simulation:
     """The closed-loop runs of ``bearnav simulate`` (``sim.npz``; metrics in ``sim.json``), R runs.
 
