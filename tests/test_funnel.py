@@ -703,3 +703,20 @@ def test_the_unicycle_keeps_the_certificate_from_the_certified_domain():
                                                           speed=SPEED))  # fmt: skip
     assert runs.start_in_domain.all()
     assert np.all(runs.outcome == simulate.Outcome.SUCCESS), runs.counts()
+
+
+def test_a_robot_outside_every_cell_with_no_node_in_sight_gets_no_command():
+    """Outside D with no tree node in straight sight no field applies: the step commands nothing
+    (the robot stalls) instead of driving by some other cell's field (it once used the last cell's)."""
+    from bearnav_cli.runtime import step
+
+    plan = make_plan(1, 0)
+    arrays = PlanArrays.from_plan(plan)
+    inside = np.asarray(plan.map.raw_obstacles[0].exterior, float).mean(axis=0)[None]  # no sight from here
+    assert cell_policy.least_rank_cell(arrays, inside)[0] == -1
+    assert cell_policy.approach_target(arrays, inside)[0] == -1
+    s = step.ControlSettings(speed=0.1, dt=0.1, eps_sw=0.02, tol=arrays.tol, measurement="displacement")
+    n = len(arrays.landmarks)
+    out = step.control(arrays, s, step.ControlState.initial(np.zeros(1)), np.zeros((1, n, 2)),
+                       np.ones((1, n), bool), np.zeros(1), x_true=inside)  # fmt: skip
+    assert np.all(out.velocity == 0.0) and out.stalled[0] and not out.certified[0]

@@ -329,6 +329,9 @@ def follow_fields(arrays: PlanArrays, s: ControlSettings, state: ControlState, e
         y = np.where(rec.usable[:, None], rec.y, bearing.scaled_output(x_hat[idx], arrays.landmarks, f, s.tol))
     ui = apply_gain(arrays, c, y)
     stalled[idx] = np.hypot(*affine_field(arrays, c, x_hat[idx]).T) < STALL_FIELD * arrays.u_max[c]
+    # outside every cell with no node in straight sight: no field applies (index -1 would pick the
+    # last cell's), so no command; the robot stalls rather than drive by another cell's field
+    ui[(c < 0) & (t < 0)] = 0.0
     going = t >= 0
     ui[going] = arrays.nodes[t[going]] - x_hat[idx[going]]
     stalled[idx[going]] = False

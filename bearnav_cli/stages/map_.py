@@ -388,11 +388,13 @@ def summary(map_: Map, listed: int | None = None) -> str:
     if listed is None or (listed == raw == inflated):
         shapes = f"{inflated} obstacles ({radius})"
     else:
-        shapes = f"{listed} obstacles merged into {raw} (touching or overlapping)" if raw != listed else \
-            f"{listed} obstacles"
+        merged = []
+        if raw != listed:
+            merged.append(f"into {raw} (touching or overlapping)")
         if inflated != raw:
-            shapes += f" and into {inflated} by the {radius} (gaps it cannot pass)"
-        else:
+            merged.append(f"into {inflated} by the {radius} (gaps it cannot pass)")
+        shapes = f"{listed} obstacles merged " + " and ".join(merged) if merged else f"{listed} obstacles"
+        if inflated == raw:
             shapes += f", {radius}"
     return (
         f"{map_.name}: {xmax - xmin:g} x {ymax - ymin:g} bounds, {shapes}, "
