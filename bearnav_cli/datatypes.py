@@ -474,11 +474,16 @@ def _tree_cost_problem(tree: Tree) -> str | None:
     return f"node {k + 1}: {cost[k + 1]:g} is not its parent's cost plus the edge length ({expected[k]:g})"
 
 
-#: What ``tree.npz`` and ``simplified.npz`` must satisfy (besides their map's invariants).
-TREE_INVARIANTS: tuple[Invariant, ...] = (
+#: The tree every tree-carrying artifact holds (trees, and the cells' nodes and parents).
+_TREE_SHAPE: tuple[Invariant, ...] = (
     Invariant("parent", "-1 exactly at node 0, indices in range, every chain ends at node 0 (no cycle)",
               lambda t: _tree_problem(t.nodes, t.parent)),
-    Invariant("nodes", "finite; node 0 is the goal", lambda t: _nodes_problem(t)),
+    Invariant("nodes", "finite; node 0 is the goal", _nodes_problem),
+)  # fmt: skip
+
+#: What ``tree.npz`` and ``simplified.npz`` must satisfy (besides their map's invariants).
+TREE_INVARIANTS: tuple[Invariant, ...] = (
+    *_TREE_SHAPE,
     Invariant("cost", "0 at the root, the parent's cost plus the edge length at every other node", _tree_cost_problem),
     Invariant("collision_samples", "finite", lambda t: _finite_problem(t.collision_samples)),
 )  # fmt: skip
@@ -712,9 +717,7 @@ def _coverage_problem(value: float) -> str | None:
 
 #: What ``cells.npz`` (and the cells of ``plan.npz``) must satisfy (besides their map's invariants).
 CELLS_INVARIANTS: tuple[Invariant, ...] = (
-    Invariant("parent", "-1 exactly at node 0, indices in range, every chain ends at node 0 (no cycle)",
-              lambda c: _tree_problem(c.nodes, c.parent)),
-    Invariant("nodes", "finite; node 0 is the goal", lambda c: _nodes_problem(c)),
+    *_TREE_SHAPE,
     Invariant("cell_node", "distinct node indices in range",
               lambda c: None if len(np.unique(c.cell_node)) == len(c.cell_node) else "two cells share a node"),
     Invariant("cell_vertices", "each cell a counter-clockwise polygon of 3 or more vertices with positive area",

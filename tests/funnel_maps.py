@@ -17,7 +17,12 @@ import shapely
 
 from bearnav_cli.geometry import CIRCLE_SEGMENTS, circle_polygon
 
-__all__ = ["random_spec"]
+__all__ = ["ITERATIONS", "PIPELINE", "load_random_map_tool", "random_spec"]
+
+#: The stages after ``map`` that make a plan.
+PIPELINE = ["rrtstar", "simplify", "decompose", "synthesize"]
+#: RRT* iterations of the random test maps: enough for their small boxes, each plan under a second.
+ITERATIONS = 300
 
 
 def _round(value: float) -> float:

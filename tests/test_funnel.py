@@ -35,14 +35,12 @@ from bearnav_cli.runtime.plan_arrays import PlanArrays
 from bearnav_cli.stages import decompose, simulate, synthesize
 from bench.common import run_stages
 from tests.conftest import build_map
-from tests.funnel_maps import load_random_map_tool, random_spec
+from tests.funnel_maps import ITERATIONS, PIPELINE, load_random_map_tool, random_spec
 
 SPEED = 0.5
-PIPELINE = ["rrtstar", "simplify", "decompose", "synthesize"]
 #: The random maps and RRT* seeds of the end-to-end test.
 MAP_SEEDS = range(20)
 RRT_SEEDS = range(3)
-ITERATIONS = 300
 
 
 @pytest.fixture(autouse=True)

@@ -15,25 +15,19 @@ import functools
 import logging
 import math
 
-import matplotlib
+import matplotlib.pyplot as plt
+import numpy as np
+import pytest
+import shapely
 
-matplotlib.use("Agg")
+from bearnav_cli import perception, pipeline, plot, tags
+from bearnav_cli.datatypes import replace
+from bearnav_cli.errors import InvalidParamsError
+from bearnav_cli.stages import decompose, synthesize
+from bench.common import run_stages
+from tests.conftest import build_map
+from tests.funnel_maps import ITERATIONS, PIPELINE, load_random_map_tool, random_spec
 
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import pytest  # noqa: E402
-import shapely  # noqa: E402
-
-from bearnav_cli import perception, pipeline, plot, tags  # noqa: E402
-from bearnav_cli.datatypes import replace  # noqa: E402
-from bearnav_cli.errors import InvalidParamsError  # noqa: E402
-from bearnav_cli.stages import decompose, synthesize  # noqa: E402
-from bench.common import run_stages  # noqa: E402
-from tests.conftest import build_map  # noqa: E402
-from tests.funnel_maps import load_random_map_tool, random_spec  # noqa: E402
-
-PIPELINE = ["rrtstar", "simplify", "decompose", "synthesize"]
-ITERATIONS = 300
 #: Evaluation grid D/CELLS: coarser than the default D/100 to keep the file fast.
 CELLS = 60
 
