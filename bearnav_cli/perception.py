@@ -84,17 +84,12 @@ def check_params(fov_deg: float, noise_deg: float, max_range: float = math.inf, 
     def number(value: Any) -> bool:
         return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool)
 
-    if not number(fov_deg) or not 0 < fov_deg <= 360:
-        raise InvalidParamsError(f"must be in (0, 360] degrees, got {fov_deg!r}", field="fov")
-    if not number(noise_deg) or not (noise_deg >= 0 and math.isfinite(noise_deg)):
-        raise InvalidParamsError(f"must be zero or positive, got {noise_deg!r}", field="noise_deg")
+    bearing.check_camera(fov_deg, noise_deg, min_spread_deg)
     if not number(max_range) or not max_range > 0:
         raise InvalidParamsError(f"must be positive, got {max_range!r}", field="range")
     if error_target is not None and (not number(error_target) or not (error_target > 0 and
                                                                        math.isfinite(error_target))):  # fmt: skip
         raise InvalidParamsError(f"must be positive, got {error_target!r}", field="error_target")
-    if not number(min_spread_deg) or not 0 < min_spread_deg <= 90:
-        raise InvalidParamsError(f"must be in (0, 90] degrees, got {min_spread_deg!r}", field="min_spread_deg")
     _check_spacing(spacing)
 
 

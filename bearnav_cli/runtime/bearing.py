@@ -163,6 +163,25 @@ def in_field_of_view(x: Any, heading: Any, landmarks: Any, fov: float, *, tol: f
     return visible & (np.abs(off) <= 0.5 * fov + ANGLE_SLACK)
 
 
+def check_camera(fov_deg: Any, noise_deg: Any, min_spread_deg: Any = 2.0) -> None:
+    """Raise :class:`InvalidParamsError` naming the field for a camera outside its ranges.
+
+    ``fov_deg`` in ``(0, 360]`` (degrees), ``noise_deg`` finite and ``≥ 0`` (degrees, 1σ),
+    ``min_spread_deg`` (``θ_min`` of §6.2) in ``(0, 90]`` degrees; booleans are not numbers.
+    The one check of ``bearnav simulate``, ``bearnav tags`` and the perception report.
+    """
+
+    def number(value: Any) -> bool:
+        return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool)
+
+    if not number(fov_deg) or not 0 < fov_deg <= 360:
+        raise InvalidParamsError(f"must be in (0, 360] degrees, got {fov_deg!r}", field="fov")
+    if not number(noise_deg) or not (noise_deg >= 0 and math.isfinite(noise_deg)):
+        raise InvalidParamsError(f"must be zero or positive, got {noise_deg!r}", field="noise_deg")
+    if not number(min_spread_deg) or not 0 < min_spread_deg <= 90:
+        raise InvalidParamsError(f"must be in (0, 90] degrees, got {min_spread_deg!r}", field="min_spread_deg")
+
+
 def in_range(x: Any, landmarks: Any, max_range: float) -> np.ndarray:
     """Rule (d) of ALGORITHMS §6.1: ``‖l_k − x‖ ≤ max_range``, shape (R, L) bool.
 

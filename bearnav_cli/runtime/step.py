@@ -330,13 +330,16 @@ def follow_fields(arrays: PlanArrays, s: ControlSettings, state: ControlState, e
     ui = apply_gain(arrays, c, y)
     stalled[idx] = np.hypot(*affine_field(arrays, c, x_hat[idx]).T) < STALL_FIELD * arrays.u_max[c]
     # outside every cell with no node in straight sight: no field applies (index -1 would pick the
-    # last cell's), so no command; the robot stalls rather than drive by another cell's field
-    ui[(c < 0) & (t < 0)] = 0.0
+    # last cell's), so no command: the robot waits for an estimate that lands in a cell
+    nowhere = (c < 0) & (t < 0)
+    ui[nowhere] = 0.0
     going = t >= 0
     ui[going] = arrays.nodes[t[going]] - x_hat[idx[going]]
     stalled[idx[going]] = False
     norm = np.hypot(ui[:, 0], ui[:, 1])
     stalled[idx[~(norm > 0)]] = True
+    if s.measurement != "displacement" and s.bearing_sigma > 0:
+        stalled[idx[nowhere]] = False  # a noisy estimate off every cell may land in one at the next fix
     ok = norm > 0
     u[idx[ok]] = ui[ok] / norm[ok, None]
     last_dir[idx[ok]] = u[idx[ok]]
@@ -459,8 +462,10 @@ def unicycle_command(s: ControlSettings, direction: np.ndarray, heading: np.ndar
     """
     phi = np.asarray(heading, float).reshape(len(direction))
     e = bearing.wrap(np.arctan2(direction[:, 1], direction[:, 0]) - phi)
+    e[~np.any(direction != 0.0, axis=1)] = 0.0  # no command: neither turn nor drive for it
     gain = np.cos(e) ** 3 if s.turn_first else np.cos(e)
-    forward = np.where(holding | scanning, 0.0, s.alpha * gain)
+    idle = ~np.any(direction != 0.0, axis=1) & ~holding & ~scanning
+    forward = np.where(holding | scanning | idle, 0.0, s.alpha * gain)
     forward[(target >= 0) & (np.abs(e) > APPROACH_ALIGNMENT)] = 0.0
     if s.clamp_reverse:
         forward = np.maximum(forward, 0.0)

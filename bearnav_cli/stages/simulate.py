@@ -167,12 +167,7 @@ class Params:
             if getattr(self, name) not in allowed:
                 raise InvalidParamsError(f"must be one of {', '.join(allowed)}, got {getattr(self, name)!r}",
                                          field=name)  # fmt: skip
-        if isinstance(self.fov, bool) or not (0 < self.fov <= 360):
-            raise InvalidParamsError(f"must be in (0, 360] degrees, got {self.fov}", field="fov")
-        if isinstance(self.noise_deg, bool) or not (self.noise_deg >= 0 and math.isfinite(self.noise_deg)):
-            raise InvalidParamsError(f"must be zero or positive, got {self.noise_deg}", field="noise_deg")
-        if not 0 < self.min_spread_deg <= 90:
-            raise InvalidParamsError(f"must be in (0, 90] degrees, got {self.min_spread_deg}", field="min_spread_deg")
+        bearing.check_camera(self.fov, self.noise_deg, self.min_spread_deg)
         for name in ("speed", "alpha", "beta", "hold_time"):
             _positive(getattr(self, name), name, allow_none=False)
         for name in ("range", "dt", "goal_tolerance"):
