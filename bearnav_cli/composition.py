@@ -30,7 +30,8 @@ from bearnav_cli.funnel import cell_tolerance, coverage_domain, plan_tolerance_o
 from bearnav_cli.geometry import FreeSpace, barrier_margin
 
 __all__ = [
-    "Composition", "CoverageRegions", "check", "coverage", "coverage_margin", "coverage_regions", "time_bound",
+    "Composition", "CoverageRegions", "check", "coverage", "coverage_margin", "coverage_regions", "covered_fraction",
+    "time_bound",
     "world_violations",
 ]  # fmt: skip
 
@@ -58,6 +59,8 @@ class Composition:
     time_bound : float
         The worst-case time to the goal at ``speed`` (s), :func:`time_bound`.
     speed : float
+    regions : CoverageRegions or None
+        The split of ``F_m`` the coverage was measured on (:func:`coverage_regions`).
     """
 
     failures: dict[str, list[int]]
@@ -68,6 +71,7 @@ class Composition:
     time_bound: float
     speed: float
     notes: list[str] = field(default_factory=list)
+    regions: CoverageRegions | None = None
 
     @property
     def ok(self) -> bool:
@@ -182,8 +186,9 @@ def check(plan: Plan, speed: float, space: FreeSpace | None = None) -> Compositi
     notes = []
     if not math.isclose(plan_tolerance, plan.plan_tolerance, rel_tol=TOLERANCE_RTOL, abs_tol=1e-12):
         notes.append(f"stored δ* {plan.plan_tolerance:.6g} differs from the recomputed {plan_tolerance:.6g}")
-    return Composition(failures, tolerance, plan_tolerance, coverage(plan, space), float(cells.free_coverage),
-                       time_bound(plan, speed), speed, notes)  # fmt: skip
+    regions = coverage_regions(cells, space, coverage_margin(plan))
+    return Composition(failures, tolerance, plan_tolerance, covered_fraction(regions), float(cells.free_coverage),
+                       time_bound(plan, speed), speed, notes, regions)  # fmt: skip
 
 
 def world_violations(plan: Plan, space: FreeSpace) -> list[int]:
@@ -246,7 +251,11 @@ def coverage_regions(cells: Cells, space: FreeSpace | None = None, margin: float
 
 def coverage(plan: Plan, space: FreeSpace) -> float:
     """``area(D ∩ F_m) / area(F_m)`` over the parts of ``F_m`` the cells reach (§11.1, :func:`coverage_regions`)."""
-    regions = coverage_regions(plan.cells, space, coverage_margin(plan))
+    return covered_fraction(coverage_regions(plan.cells, space, coverage_margin(plan)))
+
+
+def covered_fraction(regions: CoverageRegions) -> float:
+    """The covered fraction of the reached part of ``F_m`` (1 when it is empty)."""
     if regions.domain.area <= 0:
         return 1.0
     return float(1.0 - regions.uncovered.area / regions.domain.area)

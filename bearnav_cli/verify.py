@@ -36,7 +36,7 @@ from bearnav_cli.composition import Composition
 from bearnav_cli.datatypes import CellFlag, CellStatus, Map, Plan, cell_list
 from bearnav_cli.errors import ArtifactError, InvalidParamsError
 from bearnav_cli.funnel import coverage_domain, reached_parts
-from bearnav_cli.geometry import FreeSpace, barrier_margin
+from bearnav_cli.geometry import FreeSpace
 from bearnav_cli.routes import route_lengths, sample_starts
 from bearnav_cli.runtime import PlanArrays
 from bearnav_cli.stages import simulate
@@ -331,14 +331,16 @@ class Unreached:
     parts: list[tuple[float, float, float]]
 
 
-def unreached_regions(plan: Plan, space: FreeSpace) -> Unreached:
-    """The parts of ``F_m`` the plan never reached (:func:`bearnav_cli.composition.coverage_regions` for funnels)."""
+def unreached_regions(plan: Plan, space: FreeSpace, regions: composition.CoverageRegions | None = None) -> Unreached:
+    """The parts of ``F_m`` the plan never reached (:func:`bearnav_cli.composition.coverage_regions` for funnels;
+    ``regions``: that split when already made, e.g. by :func:`bearnav_cli.composition.check`)."""
     map_ = plan.map
-    requested = map_.params.get("decompose", {}).get("barrier_margin") if isinstance(map_.params, dict) else None
-    margin = barrier_margin(requested, map_.diagonal)
+    margin = composition.coverage_margin(plan)
     component = space.component_of(map_.goal)
     if plan.cells.is_funnel:
-        region = composition.coverage_regions(plan.cells, space).unreached
+        if regions is None:
+            regions = composition.coverage_regions(plan.cells, space, margin)
+        region = regions.unreached
     else:
         cells = plan.cells
         child = np.flatnonzero(cells.parent >= 0)
@@ -719,7 +721,7 @@ def run(
             raise InvalidParamsError(problem, field="world")
         world_cells = composition.world_violations(plan, FreeSpace.from_map(world))
 
-    unreached = unreached_regions(plan, space)
+    unreached = unreached_regions(plan, space, comp.regions if comp is not None else None)
     starts = np.zeros((0, 2))
     rollouts, skipped = None, None
     if params.n_starts == 0:
