@@ -337,7 +337,8 @@ def _outcome_failure(artifact: Any) -> str | None:
         return "no route: the tree has only its root (every sample fell in obstacles?)"
     blind = cells.flagged(CellFlag.BLIND_SPOT) if isinstance(cells, Cells) else []
     if blind:
-        return f"cells {cell_list(blind, 20)} have free points that see fewer than 2 landmarks (add landmarks there)"
+        return (f"cells {cell_list(blind, 20)} have free points that see fewer than 2 landmarks (add landmarks there: "
+                "`bearnav tags PLAN.npz --fov 360` proposes where, or give your camera's --fov)")  # fmt: skip
     status = getattr(artifact, "status", None)
     if status is not None:
         bad = (status == CellStatus.NOT_CERTIFIED) | (status == CellStatus.SOLVER_FAILURE)
