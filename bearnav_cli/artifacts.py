@@ -162,8 +162,9 @@ MANIFEST_FIELDS: dict[str, tuple[tuple[type, ...], bool]] = {
 }
 
 #: Part of every cache key: bumped when what an artifact holds changes for the same inputs (2: the
-#: embedded map no longer carries the YAML's ``source``), so older outputs rerun once.
-ARTIFACT_FORMAT = 2
+#: embedded map no longer carries the YAML's ``source``; 3: content hashes leave out the map's
+#: ``params``), so older outputs rerun once.
+ARTIFACT_FORMAT = 3
 
 
 @dataclass(frozen=True)
@@ -187,17 +188,26 @@ def sha256_text(text: str) -> str:
     return hashlib.sha256(text.encode()).hexdigest()
 
 
+#: Fields of the map document that stay out of every content hash: ``source`` is provenance,
+#: ``params`` the per-stage overrides, which reach each stage's cache key through its resolved
+#: parameters instead (a stage reruns only when what it computes from changes).
+_UNHASHED_MAP_FIELDS = ("source", "params")
+
+
 def content_hash(entries: dict[str, Any], kind: str | None = None) -> str:
     """SHA-256 over data entries in sorted key order (name, dtype, shape and bytes of each).
 
-    For ``map.json`` the ``source`` field (file name and hash of the YAML) is provenance and
-    stays out of the hash: editing a comment in the YAML reruns the map stage, but an
-    identical map does not invalidate the stages after it (which embed the map without it).
+    The map (``map.json``'s document, or the ``map`` entry every later artifact embeds) is hashed
+    without ``source`` (the YAML's name and hash) and ``params`` (the map's per-stage parameters):
+    editing a comment or ``params: simulate:`` in the YAML reruns the map stage, but an identical
+    map does not invalidate the stages after it, and each stage's own parameters are part of its
+    cache key (:func:`cache_key`).
     """
-    if kind == "map":
+    if "map" in entries:
         document = json.loads(entries["map"])
-        document.pop("source", None)
-        entries = {"map": canonical_json(document)}
+        for name in _UNHASHED_MAP_FIELDS:
+            document.pop(name, None)
+        entries = {**entries, "map": canonical_json(document)}
     digest = hashlib.sha256()
     for key in sorted(entries):
         value = entries[key]

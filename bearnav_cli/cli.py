@@ -48,7 +48,7 @@ from rich.text import Text
 
 from bearnav_cli import __version__, artifacts, pipeline
 from bearnav_cli.datatypes import CellFlag, Cells, CellStatus, Plan, cell_list
-from bearnav_cli.errors import BearnavError, InvalidMapError, InvalidParamsError
+from bearnav_cli.errors import BearnavError, InternalError, InvalidMapError, InvalidParamsError
 from bearnav_cli.stages import map_
 from bearnav_cli.stages.map_ import GridSource, MapSource
 
@@ -83,6 +83,8 @@ out = Console()
 err = Console(stderr=True)
 
 EXIT_OUTCOME, EXIT_INVALID, EXIT_INTERRUPTED, EXIT_TERMINATED = 1, 3, 130, 143
+#: A bug of bearnav's own, never the user's input (EX_SOFTWARE of sysexits.h).
+EXIT_INTERNAL = 70
 #: Suffixes ``bearnav plot -o`` writes (matplotlib's formats that need nothing more than pillow).
 FIGURE_SUFFIXES = (".png", ".pdf", ".svg", ".svgz", ".eps", ".ps", ".jpg", ".jpeg", ".tif", ".tiff", ".webp")
 
@@ -146,8 +148,9 @@ def handles_errors(command: Callable) -> Callable:
     """Turn every way a command can fail into one line on stderr and an exit code.
 
     bearnav errors exit 3 (invalid input); SIGINT exits 130 and SIGTERM 143 with ``interrupted;
-    nothing written for STAGE`` (temp files are removed on the way); anything unexpected is an
-    internal error, one line too (``BEARNAV_TRACEBACK=1`` shows the traceback).
+    nothing written for STAGE`` (temp files are removed on the way); a broken invariant
+    (:class:`InternalError`) and anything unexpected are internal errors, one line too, exit 70
+    (``BEARNAV_TRACEBACK=1`` shows the traceback).
     """
     name = command.__name__.removesuffix("_command")
 
@@ -163,6 +166,9 @@ def handles_errors(command: Callable) -> Callable:
             return command(*args, **kwargs)
         except (typer.Exit, typer.Abort, typer.BadParameter):
             raise
+        except InternalError as exc:
+            raise _fail(f"internal error (a bug in bearnav, not your input): {exc}".replace("[", r"\["),
+                        EXIT_INTERNAL) from None  # fmt: skip
         except BearnavError as exc:
             raise _fail(str(exc).replace("[", r"\["), EXIT_INVALID) from None
         except KeyboardInterrupt as exc:
@@ -177,7 +183,7 @@ def handles_errors(command: Callable) -> Callable:
                 raise
             stage = pipeline.ACTIVITY.stage or name
             text = f"internal error in {stage} ({type(exc).__name__}: {exc}); nothing written for it"
-            raise _fail(text.replace("[", r"\[") + " (BEARNAV_TRACEBACK=1 shows where)", EXIT_INVALID) from None
+            raise _fail(text.replace("[", r"\[") + " (BEARNAV_TRACEBACK=1 shows where)", EXIT_INTERNAL) from None
         finally:
             for signum, handler in previous.items():
                 # the program ends now, its outcome decided: a late SIGINT must not turn it into a kill

@@ -2,7 +2,8 @@
 
 Every error the library raises on purpose derives from :class:`BearnavError`, so a
 caller (the CLI) can turn it into a one-line message and an exit code. Errors
-about input data also derive from :class:`ValueError`.
+about input data also derive from :class:`ValueError`; :class:`InternalError`, a bug of
+bearnav's own, does not.
 """
 
 from __future__ import annotations
@@ -92,5 +93,22 @@ class ResourceLimitError(InvalidParamsError):
     """A request would need more memory (or steps) than the limits allow; the message says what fits."""
 
 
-class StaleInputError(BearnavError):
-    """An artifact was built from an input whose content has changed since."""
+class InternalError(BearnavError):
+    """A broken internal invariant: a bug in bearnav, not bad input.
+
+    A stage made an artifact that fails its own type's checks, say. The CLI reports it apart from
+    invalid input (exit 70, EX_SOFTWARE of sysexits.h, instead of 3), so that a bug never reads as
+    the user's mistake.
+
+    Parameters
+    ----------
+    message : str
+        What broke.
+    file : str, optional
+        The file it concerns (an output that was not written, say).
+    """
+
+    def __init__(self, message: str, *, file: str | None = None):
+        self.file = file
+        self.reason = message
+        super().__init__(_locate(message, file, None))

@@ -22,8 +22,8 @@ from types import ModuleType
 from typing import Any, Callable
 
 from bearnav_cli import artifacts
-from bearnav_cli.datatypes import Map
-from bearnav_cli.errors import ArtifactError, InvalidMapError, InvalidParamsError, ResourceLimitError
+from bearnav_cli.datatypes import Map, Plan
+from bearnav_cli.errors import ArtifactError, InternalError, InvalidMapError, InvalidParamsError, ResourceLimitError
 from bearnav_cli.stages import decompose, map_, rrtstar, simplify, simulate, synthesize
 
 #: ``progress(done, total)``, called by long stages.
@@ -514,9 +514,10 @@ def _run_and_save(
     if not force:
         loaded = artifacts.fresh(out, stage.output_kind, key, input_hash)
         if loaded is not None:
+            artifact = _with_current_params(loaded, payload, out)
             _committed()
             summary = loaded.manifest.get("summary", "")
-            return StageReport(stage.name, out, False, 0.0, summary, loaded.artifact, loaded.manifest)
+            return StageReport(stage.name, out, False, 0.0, summary, artifact, loaded.manifest)
     started = time.perf_counter()
     result = stage.module.run(payload, params, progress=progress)
     elapsed = time.perf_counter() - started
@@ -541,9 +542,30 @@ def _run_and_save(
     except ArtifactError as exc:
         if exc.file is not None:
             raise
-        raise ArtifactError(f"{stage.name} made an artifact that fails its own checks, nothing written "
+        # the stage's own output breaks its type's invariants: a bug, not the user's input
+        raise InternalError(f"{stage.name} made an artifact that fails its own checks, nothing written "
                             f"({exc})", file=str(out)) from None  # fmt: skip
     return StageReport(stage.name, out, True, elapsed, summary, result, manifest)
+
+
+def _with_current_params(loaded: artifacts.Loaded, payload: Any, out: Path) -> Any:
+    """A fresh artifact whose embedded map carries the input's ``params:`` (rewritten if they differ).
+
+    The map's ``params`` stay out of content hashes (:func:`artifacts.content_hash`), so an edit of
+    ``params: simulate:`` leaves every planning stage fresh; but ``plan.npz`` alone must drive
+    ``bearnav simulate`` with the map's current ``params:``, so the file is written again with the
+    new ones: same data, same content hash, same manifest, no stage rerun.
+    """
+    artifact = loaded.artifact
+    current = payload.map if hasattr(payload, "map") else payload
+    if isinstance(artifact, Map) or not isinstance(current, Map) or artifact.map.params == current.params:
+        return artifact
+    if isinstance(artifact, Plan):  # a plan's map is its cells'
+        refreshed = dataclasses.replace(artifact, cells=dataclasses.replace(artifact.cells, map=current))
+    else:
+        refreshed = dataclasses.replace(artifact, map=current)
+    artifacts.save(out, refreshed, loaded.manifest)
+    return refreshed
 
 
 def _check_outputs(stage: Stage, out: Path, inputs: tuple[str | Path, ...] = ()) -> None:

@@ -78,6 +78,27 @@ def test_content_identical_rerun_does_not_invalidate_the_next_stage(cli, write_m
     assert stage_states(out) == {stage.name: "ran" if stage.name == "map" else "fresh" for stage in pipeline.STAGES}
 
 
+@pytest.mark.parametrize("edited", ["simulate", "simplify"])
+def test_editing_one_stage_params_reruns_that_stage_and_later_ones_only(cli, write_map, small_spec, tmp_path, edited):
+    """Issue 14.1: the map's ``params:`` are out of its content hash; each stage's own are in its key."""
+    path = write_map(small_spec)
+    _plan(cli, path)
+    edit = {"simulate": {"speed": 0.2}, "simplify": {"ctl": "extremes"}}[edited]
+    small_spec.setdefault("params", {})[edited] = edit
+    write_map(small_spec)
+    states = stage_states(_plan(cli, path))
+    order = [stage.name for stage in pipeline.STAGES]
+    first = order.index(edited) if edited in order else len(order)
+    # the map stage reads the YAML, so it always reruns; nothing before the edited stage does
+    assert states["map"] == "ran" and all(states[name] == "fresh" for name in order[1:first])
+    if edited in order:  # the edited stage reruns (those after it rerun when its output changed)
+        assert states[edited] == "ran"
+    # plan.npz, fresh or not, embeds the map's current params: alone it drives `bearnav simulate`
+    plan = artifacts.load(tmp_path / "plans" / "small" / "plan.npz", "plan")
+    assert plan.artifact.map.params == small_spec["params"]
+    assert plan.manifest["content_sha256"] == artifacts.content_hash(artifacts.entries_of(plan.artifact), "plan")
+
+
 def test_same_seed_same_hash_other_seed_other_hash(cli, write_map, small_spec, tmp_path):
     path = write_map(small_spec)
     hashes = []

@@ -106,3 +106,41 @@ def test_bare_ros_yaml_needs_a_goal(cli, tmp_path):
 def test_bad_stage_option_value(cli, write_map, small_spec, tmp_path):
     small_spec["params"]["rrtstar"]["iterations"] = "many"
     assert_one_line_error(cli("plan", write_map(small_spec), "-o", tmp_path / "p"), "small.yaml", "iterations")
+
+
+def assert_internal_error(result, *words):
+    """A bug of bearnav's own: one line, exit 70 (not 3: it must not read as bad input)."""
+    assert result.exit_code == 70, result.output
+    lines = [line for line in result.output.splitlines() if line.startswith("error:")]
+    assert len(lines) == 1 and lines[0].startswith("error: internal error"), result.output
+    assert "Traceback" not in result.output
+    for word in words:
+        assert word in lines[0], (word, lines[0])
+
+
+def test_a_stage_output_that_fails_its_own_checks_is_an_internal_error(cli, write_map, small_spec, tmp_path,
+                                                                         monkeypatch):  # fmt: skip
+    from bearnav_cli import artifacts
+    from bearnav_cli.errors import ArtifactError
+
+    checks = artifacts.validate_artifact
+
+    def broken(kind, artifact, **kwargs):
+        if kind == "cells":
+            raise ArtifactError("a broken invariant", field="cell_b")
+        return checks(kind, artifact, **kwargs)
+
+    monkeypatch.setattr(artifacts, "validate_artifact", broken)
+    result = cli("plan", write_map(small_spec), "-o", tmp_path / "plans")
+    assert_internal_error(result, "decompose", "cell_b", "a bug in bearnav")
+    assert not (tmp_path / "plans" / "cells.npz").exists() and (tmp_path / "plans" / "simplified.npz").exists()
+
+
+def test_an_unexpected_exception_is_an_internal_error(cli, write_map, small_spec, tmp_path, monkeypatch):
+    from bearnav_cli.stages import simplify
+
+    def crash(*args, **kwargs):
+        raise ZeroDivisionError("division by zero")
+
+    monkeypatch.setattr(simplify, "run", crash)
+    assert_internal_error(cli("plan", write_map(small_spec), "-o", tmp_path / "plans"), "simplify", "ZeroDivisionError")
