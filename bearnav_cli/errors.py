@@ -8,6 +8,11 @@ bearnav's own, does not.
 
 from __future__ import annotations
 
+__all__ = [
+    "ArtifactError", "BearnavError", "FolderBusyError", "InternalError", "InvalidMapError", "InvalidParamsError",
+    "OutputPathError", "ResourceLimitError",
+]
+
 
 class BearnavError(Exception):
     """Base class of every error raised on purpose by bearnav."""

@@ -17,6 +17,12 @@ import shapely
 
 from bearnav_cli.datatypes import Map, Polygon
 
+__all__ = [
+    "barrier_margin", "box_polygon", "BUFFER_QUAD_SEGS", "circle_polygon", "CIRCLE_SEGMENTS", "clip", "convex_pieces",
+    "DEFAULT_CLEARANCE", "drop_collinear", "FreeSpace", "from_shapely", "inflate", "landmark_coverage",
+    "point_polygon_distance", "polygon_rows", "to_shapely",
+]
+
 #: Vertices of a polygonised circle (ALGORITHMS §1): the 64-gon circumscribes the disc.
 CIRCLE_SEGMENTS = 64
 #: Segments per quarter circle of the round joins used for inflation.

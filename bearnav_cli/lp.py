@@ -27,6 +27,10 @@ from dataclasses import dataclass
 import highspy
 import numpy as np
 
+__all__ = [
+    "dense_to_csr", "highs_lp", "INF", "LpResult", "LpSolver", "LpStatus", "OPTIONS",
+]
+
 log = logging.getLogger(__name__)
 
 #: Infinite bound understood by the solver (``highspy.kHighsInf``, i.e. ``math.inf``).

@@ -19,6 +19,10 @@ import shapely
 
 from bearnav_cli.errors import InvalidMapError, InvalidParamsError
 
+__all__ = [
+    "classify", "decode_image", "FREE", "grid_obstacles", "MODES", "OCCUPIED", "UNKNOWN", "vectorize",
+]
+
 OCCUPIED, FREE, UNKNOWN = 1, 0, -1
 MODES = ("trinary", "scale", "raw")
 _DEFAULTS = {"negate": 0, "occupied_thresh": 0.65, "free_thresh": 0.196, "mode": "trinary"}

@@ -28,6 +28,16 @@ from bearnav_cli import runtime
 from bearnav_cli.datatypes import Cells, CellStatus, Map, Plan, Polygon, Simulation, Tree
 from bearnav_cli.errors import InvalidParamsError
 
+__all__ = [
+    "active_regions", "ADDED_COLOR", "AXIS_UNITS", "cell_polygons", "COLOR_BY", "EXISTING_TAG_COLOR", "EXIT_COLOR",
+    "field_samples", "figure_for", "INFLATED_COLOR", "label_landmarks", "map_handles", "OUTCOME_COLORS",
+    "OUTCOME_NAMES", "OUTLINE_COLOR", "PERCEPTION_FAIL_COLOR", "PERCEPTION_FAIL_FREE_COLOR", "plot_barriers",
+    "plot_cells", "plot_field", "plot_map", "plot_perception", "plot_samples", "plot_sim_background", "plot_tags",
+    "plot_trajectories", "plot_tree", "plot_uncovered", "PROPOSED_TAG_COLOR", "RAW_COLOR", "save_animation",
+    "save_figure", "STATUS_COLORS", "tags_figure", "UNCERTIFIED_COLOR", "UNCOVERED_COLOR", "UNREACHED_COLOR",
+    "use_file_backend",
+]
+
 
 def use_file_backend() -> None:
     """Switch matplotlib to its file backend (Agg), as the command line does before drawing.

@@ -18,6 +18,10 @@ import shapely
 
 from bearnav_cli.geometry import FreeSpace
 
+__all__ = [
+    "route_lengths", "sample_starts",
+]
+
 #: Candidate vertices tested per start and round when searching the shortest route.
 _ROUTE_BATCH = 8
 

@@ -25,6 +25,12 @@ import numpy as np
 
 from bearnav_cli.runtime.plan_arrays import CHUNK, PlanArrays
 
+__all__ = [
+    "affine_field", "apply_gain", "approach_target", "barrier_values", "contains", "displacement", "edges_clear",
+    "field", "funnel_update", "in_safe_set", "in_sight", "least_rank_cell", "locate", "lyapunov", "nearest_node",
+    "segments_clear", "switch", "update", "voronoi_owner",
+]
+
 # --------------------------------------------------------------------------- vectorised queries
 
 

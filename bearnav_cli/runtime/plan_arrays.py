@@ -21,6 +21,10 @@ import numpy as np
 
 from bearnav_cli.errors import ArtifactError
 
+__all__ = [
+    "CHUNK", "INDEX_BINS", "PlanArrays", "ring_edges", "RUNTIME_KEYS", "tree_costs",
+]
+
 log = logging.getLogger(__name__)
 
 #: Largest number of robot × node distances computed at once by :func:`voronoi_owner`.

@@ -23,6 +23,11 @@ from bearnav_cli.datatypes import Map, Tree
 from bearnav_cli.errors import InvalidParamsError
 from bearnav_cli.geometry import FreeSpace
 
+__all__ = [
+    "border_samples", "BRUTE_FORCE_NODES", "BUCKETS_PER_STEP", "Params", "POLICIES", "rewiring_radius", "run",
+    "summary", "VERSION",
+]
+
 VERSION = 1
 POLICIES = ("skip", "extend")
 #: Buckets per step length along each axis: smaller buckets make nearest-node queries in a
