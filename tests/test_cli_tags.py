@@ -28,7 +28,9 @@ def test_tags_writes_a_map_with_the_new_tags_and_a_figure(cli, write_map, small_
     spec = yaml.safe_load(out.read_text())
     ids = [t["id"] for t in spec["landmarks"]]
     assert len(ids) > 2 and len(set(ids)) == len(ids)  # new tags, new ids
-    assert spec["landmarks"][:2] == [{"id": str(t["id"]), "position": t["position"]} for t in spec["landmarks"][:2]]
+    # the existing tags are kept as they were (their facing too, which the map stage inferred: on a wall)
+    kept = [{"id": str(t["id"]), "position": t["position"], "facing": t.get("facing")} for t in spec["landmarks"][:2]]
+    assert spec["landmarks"][:2] == kept and all(t["facing"] is not None for t in kept)
     new_map = map_.run(read_map_source(out))  # the map stage accepts it as it is
     assert len(new_map.landmarks) == len(ids)
     assert "new tags" in result.output and "rule holds on" in result.output

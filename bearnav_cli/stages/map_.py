@@ -30,7 +30,10 @@ from bearnav_cli.geometry import (
     to_shapely,
 )
 
-VERSION = 1
+__all__ = ["GridSource", "MAP_KEYS", "MapSource", "Params", "VERSION", "infer_facing", "listed_obstacles", "run",
+           "spec_of", "summary"]  # fmt: skip
+
+VERSION = 2  # 2: landmarks have a facing
 log = logging.getLogger(__name__)
 
 #: Top-level keys of a bearnav map YAML.
@@ -168,17 +171,24 @@ def _obstacle(reader: _Reader, item: Any, field: str, segments: int) -> shapely.
     return shapely.Polygon(circle_polygon(tuple(center), radius, segments))
 
 
-def _landmarks(reader: _Reader, value: Any) -> tuple[tuple[str, ...], np.ndarray]:
+def _landmarks(reader: _Reader, value: Any) -> tuple[tuple[str, ...], np.ndarray, np.ndarray]:
+    """Ids, positions and facings (radians; NaN: explicitly free-standing; None: infer from the walls)."""
     if not isinstance(value, list):
         raise reader.fail("landmarks", f"expected a list, got {_describe(value)}")
-    ids, positions = [], []
+    ids, positions, facing = [], [], []
     for k, item in enumerate(value):
         where = f"landmarks[{k}]"
         if isinstance(item, dict):
-            entry = reader.mapping(item, where, ("id", "position"))
+            entry = reader.mapping(item, where, ("id", "position", "facing"))
             if "position" not in entry:
                 raise reader.fail(where, "needs a position")
             positions.append(reader.point(entry["position"], f"{where}.position"))
+            if "facing" not in entry:
+                facing.append(None)
+            elif entry["facing"] is None:
+                facing.append(math.nan)
+            else:
+                facing.append(math.radians(reader.number(entry["facing"], f"{where}.facing")))
             raw_id = entry.get("id", k)
             if not isinstance(raw_id, (str, int)) or isinstance(raw_id, bool):
                 raise reader.fail(f"{where}.id", f"expected a string or integer, got {_describe(raw_id)}")
@@ -186,10 +196,84 @@ def _landmarks(reader: _Reader, value: Any) -> tuple[tuple[str, ...], np.ndarray
         else:
             positions.append(reader.point(item, where))
             ids.append(str(k))
+            facing.append(None)
     for k, name in enumerate(ids):
         if name in ids[:k]:
             raise reader.fail(f"landmarks[{k}].id", f"duplicate id {name!r}")
-    return tuple(ids), np.array(positions, float).reshape(-1, 2)
+    return tuple(ids), np.array(positions, float).reshape(-1, 2), np.array(facing, object)
+
+
+def infer_facing(points: np.ndarray, bounds: np.ndarray, raw: shapely.Geometry, tol: float) -> np.ndarray:
+    """The facing of tags on walls: the direction into free space (rad in ``[0, 2π)``; NaN elsewhere).
+
+    A point within ``tol`` of edges of the raw obstacles' rings or of the bounds lies on a wall. The
+    edges through it split the directions around it into sectors; the free one (inside the bounds,
+    outside every raw obstacle) is the side the printed face looks toward, and the facing is its
+    middle: on a straight wall the outward normal, at a corner the bisector of the two edges'
+    normals (at a convex corner the free sector spans 270°, at a concave one 90°). When several
+    sectors are free (two obstacles touching at the point) the widest wins. A point on no edge, or
+    with no free sector, gets NaN: a free-standing tag, seen from every side.
+
+    Parameters
+    ----------
+    points : ndarray, shape (L, 2)
+    bounds : ndarray, shape (4,)
+    raw : shapely geometry
+        The raw (not inflated) obstacles.
+    tol : float
+        How far from an edge a point still lies on it (map units; the map's ``tol``).
+
+    Returns
+    -------
+    ndarray, shape (L,)
+    """
+    xmin, ymin, xmax, ymax = (float(v) for v in bounds)
+    rings = [np.array([[xmin, ymin], [xmax, ymin], [xmax, ymax], [xmin, ymax]])]
+    for poly in shapely.get_parts(raw) if not raw.is_empty else ():
+        rings += [np.asarray(poly.exterior.coords)[:-1]] + [np.asarray(h.coords)[:-1] for h in poly.interiors]
+    a = np.concatenate(rings)
+    b = np.concatenate([np.roll(r, -1, axis=0) for r in rings])
+    d = b - a
+    length = np.hypot(d[:, 0], d[:, 1])
+    a, b, d, length = a[length > 0], b[length > 0], d[length > 0], length[length > 0]
+    unit = d / length[:, None]
+    radius = 1e3 * tol  # the free-side probes: far beyond the tolerance, far below any feature size
+    out = np.full(len(points), np.nan)
+    for k, p in enumerate(np.asarray(points, float).reshape(-1, 2)):
+        t = np.clip(((p - a) * unit).sum(axis=1), 0.0, length)
+        near = np.hypot(*(a + t[:, None] * unit - p).T) <= tol
+        if not near.any():
+            continue
+        at_a = np.hypot(*(p - a[near]).T) <= tol
+        at_b = np.hypot(*(p - b[near]).T) <= tol
+        rays = np.concatenate([unit[near][~at_b], -unit[near][~at_a]])  # along each edge, away from p
+        angles = np.unique(np.round(np.mod(np.arctan2(rays[:, 1], rays[:, 0]), 2 * math.pi), 12))
+        if len(angles) < 2:
+            continue
+        width = np.diff(np.append(angles, angles[0] + 2 * math.pi))
+        middle = angles + width / 2
+        probe = p + radius * np.column_stack([np.cos(middle), np.sin(middle)])
+        free = (probe[:, 0] > xmin) & (probe[:, 0] < xmax) & (probe[:, 1] > ymin) & (probe[:, 1] < ymax)
+        if not raw.is_empty:
+            free &= ~shapely.intersects_xy(raw, probe[:, 0], probe[:, 1])
+        if free.any():
+            best = np.flatnonzero(free)[np.argmax(width[free])]
+            out[k] = math.fmod(middle[best], 2 * math.pi)
+    return out
+
+
+def _facing(reader: _Reader, given: np.ndarray, landmarks: np.ndarray, bounds: np.ndarray,
+            raw: shapely.Geometry, tol: float) -> np.ndarray:  # fmt: skip
+    """Each landmark's facing: the one given, else the one its wall implies (:func:`infer_facing`)."""
+    inferred = infer_facing(landmarks, bounds, raw, tol)
+    facing = np.array([inferred[k] if f is None else f for k, f in enumerate(given)], float)
+    for k in np.flatnonzero([f is not None for f in given]):
+        f = facing[k]
+        if math.isfinite(f) and math.isfinite(inferred[k]) and math.cos(f - inferred[k]) < 0:
+            log.warning("%s: landmarks[%d].facing %.4g° points into the wall it is on (its free side faces "
+                        "%.4g°): the tag cannot be seen", reader.file, k, math.degrees(f) % 360,
+                        math.degrees(inferred[k]))  # fmt: skip
+    return facing
 
 
 def run(source: MapSource, params: Params = Params(), progress: object = None) -> Map:
@@ -268,7 +352,7 @@ def run(source: MapSource, params: Params = Params(), progress: object = None) -
     starts = reader.points(spec.get("starts", []), "starts")
     if "landmarks" not in spec:
         raise reader.fail("landmarks", "missing (at least 2 are needed)")
-    landmark_ids, landmarks = _landmarks(reader, spec["landmarks"])
+    landmark_ids, landmarks, given_facing = _landmarks(reader, spec["landmarks"])
     stage_params = spec.get("params", {})
     if not isinstance(stage_params, dict) or not all(isinstance(v, dict) for v in stage_params.values()):
         raise reader.fail("params", "expected a mapping of stage name to a mapping of options")
@@ -285,6 +369,7 @@ def run(source: MapSource, params: Params = Params(), progress: object = None) -
         raw_obstacles=from_shapely(raw),
         params=stage_params,
         source={"file": source.file, "sha256": source.sha256},
+        landmark_facing=_facing(reader, given_facing, landmarks, bounds, raw, 1e-9 * math.dist(bounds[:2], bounds[2:])),
     )
     _validate(reader, map_, params)
     return map_
@@ -366,7 +451,8 @@ def spec_of(map_: Map) -> dict:
         "starts": [numbers(p) for p in map_.starts],
         "obstacles": [{"polygon": [numbers(v) for v in part]} for o in map_.raw_obstacles for part in simple_parts(o)],
         "landmarks": [
-            {"id": i, "position": numbers(p)} for i, p in zip(map_.landmark_ids, map_.landmarks, strict=True)
+            {"id": i, "position": numbers(p), "facing": None if math.isnan(f) else round(math.degrees(f), 9)}
+            for i, p, f in zip(map_.landmark_ids, map_.landmarks, map_.landmark_facing, strict=True)
         ],
         "params": {stage: dict(values) for stage, values in (map_.params or {}).items()},
     }

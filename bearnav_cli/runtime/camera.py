@@ -1,0 +1,619 @@
+"""From AprilTag detections in one image to the world-frame bearings and heading the Controller needs.
+
+Numpy only (and :mod:`bearnav_cli.errors`): this runs on the robot, next to the detector's driver.
+``docs/camera.md`` states the conventions, the formulas and what is rejected.
+
+Frames (ROS REP 103 / REP 105):
+
+- **world** (the map): ``x``, ``y`` on the floor, ``z`` up; headings are counter-clockwise from ``+x``;
+- **robot** ``J``: ``x`` forward, ``y`` left, ``z`` up, at the robot's map position on the floor;
+- **camera optical** ``C``: ``z`` forward, ``x`` right, ``y`` down (``sensor_msgs/CameraInfo``);
+- **tag** ``AT``: the AprilTag library's (``apriltag_pose.c``, also what ``apriltag_ros`` publishes):
+  origin at the tag centre, ``x`` to the right and ``y`` down as the printed tag is seen from the
+  front, ``z = x × y`` into the tag (away from a camera that sees it). Its corner ``p[0]`` is at
+  ``(−s, +s)`` (bottom left), then ``(+s, +s)``, ``(+s, −s)``, ``(−s, −s)``. OpenCV's ``solvePnP``
+  marker frame has ``y`` up and ``z`` out of the tag: :func:`tag_pose_from_opencv` converts.
+
+The bearing of a tag is the direction of the ray through the tag centre (the intersection of the
+undistorted corner diagonals, exact under perspective), in the robot frame through the mount, then
+turned by the robot's heading and projected onto the floor. The heading is the compass's when given,
+else the one the tag poses give by the paper's ``W_R_J = W_R_AT · (J_R_AT)⁻¹``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from bearnav_cli.errors import InvalidParamsError
+
+__all__ = [
+    "BEHIND_MARGIN", "CORNER_SLACK", "Detection", "Intrinsics", "Mount", "Observation", "TagMap", "heading_from_tag",
+    "observe", "project_world", "tag_corners_world", "tag_number", "tag_pose_from_opencv", "tag_rotation_world",
+]  # fmt: skip
+
+#: A detection is rejected as seen from behind when its world bearing points past the tag's plane,
+#: along the tag's facing, by more than this (rad): ``bearing · facing > sin(BEHIND_MARGIN)``. A
+#: detector decodes a tag up to about 75–80° off its normal, so a real view stays ≥ 10° in front of
+#: the plane; the 10° here absorb a compass error of the same size on top.
+BEHIND_MARGIN = math.radians(10.0)
+#: How far (px) a corner may lie outside the image (``[−0.5, size − 0.5]`` with pixel centres at
+#: integers) before the detection is rejected: half a pixel, sub-pixel refinement's reach.
+CORNER_SLACK = 0.5
+#: Per-tag headings that agree within this (rad) are averaged; one that disagrees is left out.
+HEADING_AGREEMENT = math.radians(10.0)
+#: Distortion models of ``sensor_msgs/CameraInfo`` understood (both are the Brown–Conrady model).
+DISTORTION_MODELS = ("plumb_bob", "rational_polynomial")
+
+
+def _finite(value: Any, name: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise InvalidParamsError(f"expected a number, got {value!r}", field=name)
+    if not math.isfinite(float(value)):
+        raise InvalidParamsError(f"must be finite, got {value}", field=name)
+    return float(value)
+
+
+# --------------------------------------------------------------------------- intrinsics
+
+
+@dataclass(frozen=True)
+class Intrinsics:
+    """A pinhole camera with Brown–Conrady distortion, as in ``sensor_msgs/CameraInfo``.
+
+    Attributes
+    ----------
+    fx, fy : float
+        Focal lengths (px), positive.
+    cx, cy : float
+        Principal point (px; pixel centres at integer coordinates, as in OpenCV and ROS).
+    width, height : int
+        Image size (px).
+    distortion : tuple of float
+        ``CameraInfo.d``: ``plumb_bob`` ``(k1, k2, t1, t2[, k3])``, or the 8 coefficients of
+        ``rational_polynomial`` ``(k1, k2, t1, t2, k3, k4, k5, k6)``; empty (or zeros) for none.
+    """
+
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+    width: int
+    height: int
+    distortion: tuple = ()
+
+    def __post_init__(self) -> None:
+        for name in ("fx", "fy"):
+            value = _finite(getattr(self, name), name)
+            if value <= 0:
+                raise InvalidParamsError(f"the focal length must be positive (px), got {value}", field=name)
+            object.__setattr__(self, name, value)
+        for name in ("cx", "cy"):
+            object.__setattr__(self, name, _finite(getattr(self, name), name))
+        for name in ("width", "height"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value <= 0:
+                raise InvalidParamsError(f"must be a positive number of pixels, got {value!r}", field=name)
+            object.__setattr__(self, name, int(value))
+        d = tuple(_finite(v, "distortion") for v in self.distortion)
+        if len(d) not in (0, 4, 5, 8):
+            raise InvalidParamsError(f"expected 0, 4, 5 (plumb_bob) or 8 (rational_polynomial) coefficients, got "
+                                     f"{len(d)}", field="distortion")  # fmt: skip
+        object.__setattr__(self, "distortion", d)
+
+    @classmethod
+    def from_camera_info(cls, k: Any, d: Any, width: int, height: int,
+                         distortion_model: str = "plumb_bob") -> Intrinsics:  # fmt: skip
+        """From the fields of a ``sensor_msgs/CameraInfo``.
+
+        Parameters
+        ----------
+        k : sequence of 9 float
+            ``CameraInfo.k`` (``K``), row-major ``[fx, 0, cx, 0, fy, cy, 0, 0, 1]``.
+        d : sequence of float
+            ``CameraInfo.d``.
+        width, height : int
+        distortion_model : {"plumb_bob", "rational_polynomial"}
+            An all-zero ``d`` is accepted with any model name.
+        """
+        k = np.asarray(k, float).reshape(-1)
+        if k.shape != (9,):
+            raise InvalidParamsError(f"expected the 9 numbers of CameraInfo.k, got {k.size}", field="k")
+        d = tuple(float(v) for v in np.asarray(d, float).reshape(-1))
+        if distortion_model not in DISTORTION_MODELS and any(d):
+            raise InvalidParamsError(f"unsupported distortion model {distortion_model!r} (expected one of: "
+                                     f"{', '.join(DISTORTION_MODELS)})", field="distortion_model")  # fmt: skip
+        for name, value in (("fx", k[0]), ("fy", k[4])):
+            if not (math.isfinite(value) and value > 0):
+                raise InvalidParamsError(f"the focal length must be positive (px), got {value:g} (an uncalibrated "
+                                         "camera publishes K = 0: calibrate it)", field=name)  # fmt: skip
+        if not np.all(np.isfinite(k)):
+            raise InvalidParamsError("CameraInfo.k contains NaN or infinity", field="k")
+        if abs(k[1]) > 1e-9 * max(abs(k[0]), 1.0) or abs(k[3]) > 0 or np.any(k[6:] != (0.0, 0.0, 1.0)):
+            raise InvalidParamsError("expected [fx, 0, cx, 0, fy, cy, 0, 0, 1] (no skew)", field="k")
+        if distortion_model == "rational_polynomial" and len(d) not in (0, 8):
+            raise InvalidParamsError(f"rational_polynomial needs 8 coefficients, got {len(d)}", field="distortion")
+        return cls(fx=k[0], fy=k[4], cx=k[2], cy=k[5], width=width, height=height, distortion=d if any(d) else ())
+
+    @classmethod
+    def from_fov(cls, width: int, height: int, hfov: float) -> Intrinsics:
+        """An ideal camera: square pixels, centred principal point, no distortion.
+
+        Parameters
+        ----------
+        width, height : int
+            Image size (px).
+        hfov : float
+            Horizontal field of view (rad, in (0, π)), edge to edge of the image.
+        """
+        hfov = _finite(hfov, "hfov")
+        if not 0 < hfov < math.pi:
+            raise InvalidParamsError(f"a pinhole camera's field of view lies in (0°, 180°), got "
+                                     f"{math.degrees(hfov):g}°", field="hfov")  # fmt: skip
+        f = 0.5 * width / math.tan(0.5 * hfov)
+        return cls(fx=f, fy=f, cx=0.5 * (width - 1), cy=0.5 * (height - 1), width=width, height=height)
+
+    @property
+    def hfov(self) -> float:
+        """Horizontal field of view (rad) of the undistorted pinhole, edge to edge."""
+        return math.atan((self.cx + 0.5) / self.fx) + math.atan((self.width - 0.5 - self.cx) / self.fx)
+
+    @property
+    def vfov(self) -> float:
+        """Vertical field of view (rad) of the undistorted pinhole, edge to edge."""
+        return math.atan((self.cy + 0.5) / self.fy) + math.atan((self.height - 0.5 - self.cy) / self.fy)
+
+    def _coefficients(self) -> tuple[float, ...]:
+        d = self.distortion + (0.0,) * (8 - len(self.distortion))
+        return d  # k1, k2, t1, t2, k3, k4, k5, k6
+
+    def distort(self, xy: Any) -> np.ndarray:
+        """Normalised image coordinates ``(x/z, y/z)`` after distortion; shape (n, 2) in, (n, 2) out."""
+        xy = np.asarray(xy, float).reshape(-1, 2)
+        if not self.distortion:
+            return xy.copy()
+        k1, k2, t1, t2, k3, k4, k5, k6 = self._coefficients()
+        x, y = xy[:, 0], xy[:, 1]
+        r2 = x * x + y * y
+        radial = (1 + r2 * (k1 + r2 * (k2 + r2 * k3))) / (1 + r2 * (k4 + r2 * (k5 + r2 * k6)))
+        xd = x * radial + 2 * t1 * x * y + t2 * (r2 + 2 * x * x)
+        yd = y * radial + t1 * (r2 + 2 * y * y) + 2 * t2 * x * y
+        return np.column_stack([xd, yd])
+
+    def undistort(self, pixels: Any) -> np.ndarray:
+        """Normalised undistorted coordinates ``(x/z, y/z)`` of pixels; shape (n, 2) in and out.
+
+        The inverse of :meth:`distort` by fixed-point iteration (as OpenCV's ``undistortPoints``),
+        run until it moves less than 1e-15 or 100 times.
+        """
+        uv = np.asarray(pixels, float).reshape(-1, 2)
+        xd = np.column_stack([(uv[:, 0] - self.cx) / self.fx, (uv[:, 1] - self.cy) / self.fy])
+        if not self.distortion:
+            return xd
+        k1, k2, t1, t2, k3, k4, k5, k6 = self._coefficients()
+        xy = xd.copy()
+        for _ in range(100):
+            x, y = xy[:, 0], xy[:, 1]
+            r2 = x * x + y * y
+            radial = (1 + r2 * (k1 + r2 * (k2 + r2 * k3))) / (1 + r2 * (k4 + r2 * (k5 + r2 * k6)))
+            dx = 2 * t1 * x * y + t2 * (r2 + 2 * x * x)
+            dy = t1 * (r2 + 2 * y * y) + 2 * t2 * x * y
+            new = np.column_stack([(xd[:, 0] - dx) / radial, (xd[:, 1] - dy) / radial])
+            done = np.max(np.abs(new - xy), initial=0.0) < 1e-15
+            xy = new
+            if done:
+                break
+        return xy
+
+    def rays(self, pixels: Any) -> np.ndarray:
+        """Unit rays in the optical frame through pixels (undistorted); shape (n, 2) in, (n, 3) out."""
+        xy = self.undistort(pixels)
+        ray = np.column_stack([xy, np.ones(len(xy))])
+        return ray / np.linalg.norm(ray, axis=1, keepdims=True)
+
+    def project(self, points: Any) -> np.ndarray:
+        """Pixels of points given in the optical frame (``z > 0``); shape (n, 3) in, (n, 2) out."""
+        p = np.asarray(points, float).reshape(-1, 3)
+        xy = self.distort(p[:, :2] / p[:, 2:3])
+        return np.column_stack([self.fx * xy[:, 0] + self.cx, self.fy * xy[:, 1] + self.cy])
+
+
+# --------------------------------------------------------------------------- mount, tags
+
+
+#: ``robot_R_camera`` of a camera looking along the robot's ``x`` axis: optical ``x`` (right) is the
+#: robot's ``−y``, optical ``y`` (down) the robot's ``−z``, optical ``z`` (forward) the robot's ``x``.
+_FORWARD = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
+
+
+def _rz(angle: float) -> np.ndarray:
+    c, s = math.cos(angle), math.sin(angle)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+@dataclass(frozen=True, eq=False)
+class Mount:
+    """Where the camera sits on the robot (the ``base_link → camera_color_optical_frame`` transform).
+
+    Attributes
+    ----------
+    rotation : ndarray, shape (3, 3)
+        ``robot_R_camera``: columns are the optical axes in robot coordinates (a rotation).
+    translation : ndarray, shape (3,)
+        The camera centre in the robot frame (metres, map units).
+    """
+
+    rotation: np.ndarray
+    translation: np.ndarray = field(default_factory=lambda: np.zeros(3))
+
+    def __post_init__(self) -> None:
+        r = np.array(self.rotation, float)
+        t = np.array(self.translation, float).reshape(-1)
+        if r.shape != (3, 3) or not np.all(np.isfinite(r)):
+            raise InvalidParamsError("expected a finite 3 × 3 matrix", field="rotation")
+        if not np.allclose(r.T @ r, np.eye(3), atol=1e-6) or np.linalg.det(r) < 0:
+            raise InvalidParamsError("robot_R_camera must be a rotation (orthonormal, determinant +1)",
+                                     field="rotation")  # fmt: skip
+        if t.shape != (3,) or not np.all(np.isfinite(t)):
+            raise InvalidParamsError("expected 3 finite numbers (m)", field="translation")
+        r.flags.writeable = t.flags.writeable = False
+        object.__setattr__(self, "rotation", r)
+        object.__setattr__(self, "translation", t)
+
+    @classmethod
+    def forward(cls, height: float = 0.0, yaw: float = 0.0) -> Mount:
+        """A level camera at ``height`` above the robot's origin, looking along its ``x`` axis turned by
+        ``yaw`` (rad, counter-clockwise)."""
+        return cls(_rz(_finite(yaw, "yaw")) @ _FORWARD, np.array([0.0, 0.0, _finite(height, "height")]))
+
+
+def tag_number(tag_id: str) -> int:
+    """The detector's id in a map's landmark id: ``"tag12"``, ``"tag_12"``, ``"12"`` → 12; -1 when none."""
+    match = re.fullmatch(r"[A-Za-z_\-]*?(\d+)", str(tag_id).strip())
+    return int(match.group(1)) if match else -1
+
+
+@dataclass(frozen=True, eq=False)
+class TagMap:
+    """The plan's landmarks as a camera sees them.
+
+    Attributes
+    ----------
+    numbers : ndarray of int64, shape (L,)
+        Detector id of each landmark (-1: the map's id has no number; never matched).
+    positions : ndarray, shape (L, 2)
+        Tag centres on the map (map units).
+    facing : ndarray, shape (L,)
+        Direction the printed face looks toward (rad); NaN for a free-standing tag (seen from every
+        side, no orientation).
+    ids : tuple of str
+        The map's ids, for messages.
+    """
+
+    numbers: np.ndarray
+    positions: np.ndarray
+    facing: np.ndarray
+    ids: tuple = ()
+
+    def __post_init__(self) -> None:
+        numbers = np.array(self.numbers, np.int64).reshape(-1)
+        positions = np.array(self.positions, float).reshape(-1, 2)
+        facing = np.array(self.facing, float).reshape(-1)
+        n = len(numbers)
+        if len(positions) != n or len(facing) != n:
+            raise InvalidParamsError(f"{n} numbers, {len(positions)} positions and {len(facing)} facings",
+                                     field="landmarks")  # fmt: skip
+        ids = tuple(str(i) for i in self.ids) if self.ids else tuple(str(v) for v in numbers)
+        used = numbers[numbers >= 0]
+        values, counts = np.unique(used, return_counts=True)
+        if (counts > 1).any():
+            twice = int(values[counts > 1][0])
+            names = [ids[k] for k in np.flatnonzero(numbers == twice)]
+            raise InvalidParamsError(f"landmarks {', '.join(names)} have the same detector id {twice}",
+                                     field="landmarks")  # fmt: skip
+        for a in (numbers, positions, facing):
+            a.flags.writeable = False
+        object.__setattr__(self, "numbers", numbers)
+        object.__setattr__(self, "positions", positions)
+        object.__setattr__(self, "facing", facing)
+        object.__setattr__(self, "ids", ids)
+        object.__setattr__(self, "_index", {int(v): k for k, v in enumerate(numbers) if v >= 0})
+
+    @classmethod
+    def from_map_json(cls, map_json: dict) -> TagMap:
+        """From the map JSON embedded in ``plan.npz`` (``json.loads(str(np.load(path)["map"]))``).
+
+        A landmark without ``"facing"`` (maps written before tags had one) is free-standing (NaN).
+        """
+        try:
+            landmarks = map_json["landmarks"]
+            ids = tuple(str(lm["id"]) for lm in landmarks)
+            positions = np.array([lm["position"] for lm in landmarks], float).reshape(-1, 2)
+            facing = np.radians([math.nan if lm.get("facing") is None else float(lm["facing"]) for lm in landmarks])
+        except (KeyError, TypeError, ValueError, AttributeError) as exc:
+            raise InvalidParamsError(f"not a bearnav map JSON ({type(exc).__name__}: {exc})", field="map") from exc
+        return cls(np.array([tag_number(i) for i in ids], np.int64), positions, facing, ids)
+
+    @classmethod
+    def from_plan(cls, path: str) -> TagMap:
+        """From ``plan.npz`` (the map embedded in it)."""
+        with np.load(path, allow_pickle=False) as z:
+            return cls.from_map_json(json.loads(str(z["map"])))
+
+    def index(self, number: int) -> int:
+        """Row of the landmark with detector id ``number`` (-1 when the plan has none)."""
+        return self._index.get(int(number), -1)  # type: ignore[attr-defined]
+
+
+def tag_rotation_world(facing: float) -> np.ndarray:
+    """``W_R_AT`` of an upright tag on a vertical wall whose printed face looks toward ``facing`` (rad).
+
+    Tag ``x`` is to the right of a viewer facing the tag, ``y`` down, ``z`` into the wall
+    (AprilTag convention, see the module docstring).
+    """
+    n = np.array([math.cos(facing), math.sin(facing), 0.0])
+    return np.column_stack([[-n[1], n[0], 0.0], [0.0, 0.0, -1.0], -n])
+
+
+def tag_corners_world(position: Any, facing: float, size: float, height: float) -> np.ndarray:
+    """The four corners (3-D world points, AprilTag order) of an upright tag; shape (4, 3).
+
+    ``size`` is the edge of the black square (map units), ``height`` that of its centre.
+    """
+    centre = np.array([*np.asarray(position, float).reshape(2), height])
+    s = 0.5 * size
+    local = np.array([[-s, s, 0.0], [s, s, 0.0], [s, -s, 0.0], [-s, -s, 0.0]])
+    return centre + local @ tag_rotation_world(facing).T
+
+
+def project_world(intrinsics: Intrinsics, mount: Mount, x: Any, heading: float, points: Any) -> tuple:
+    """Pixels and optical depth of world points seen by a robot at ``x`` (map units) with yaw ``heading``.
+
+    Returns ``(pixels (n, 2), depth (n,))``; pixels of points behind the camera (``depth <= 0``) are
+    meaningless. For tests and simulations (a robot never knows its true pose).
+    """
+    p = np.asarray(points, float).reshape(-1, 3)
+    origin = np.array([*np.asarray(x, float).reshape(2), 0.0])
+    world_r_cam = _rz(heading) @ mount.rotation
+    cam = (p - origin - _rz(heading) @ mount.translation) @ world_r_cam
+    return intrinsics.project(np.where(cam[:, 2:3] > 0, cam, 1.0)), cam[:, 2]
+
+
+def tag_pose_from_opencv(rotation: Any, translation: Any) -> tuple[np.ndarray, np.ndarray]:
+    """An OpenCV marker pose (``solvePnP``: ``y`` up, ``z`` out of the tag) in the AprilTag convention.
+
+    ``rotation`` is a rotation vector (3,) or matrix (3, 3); returns ``(camera_R_tag, camera_t_tag)``.
+    """
+    r = np.asarray(rotation, float)
+    if r.shape in ((3,), (3, 1), (1, 3)):
+        v = r.reshape(3)
+        angle = float(np.linalg.norm(v))
+        if angle < 1e-15:
+            r = np.eye(3)
+        else:
+            k = v / angle
+            kx = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+            r = np.eye(3) + math.sin(angle) * kx + (1 - math.cos(angle)) * kx @ kx
+    return r.reshape(3, 3) @ np.diag([1.0, -1.0, -1.0]), np.asarray(translation, float).reshape(3).copy()
+
+
+def heading_from_tag(camera_R_tag: Any, tag_facing: float, mount: Mount) -> float:  # noqa: N803 (the paper's name)
+    """The robot's heading from one tag's pose: the paper's ``W_R_J = W_R_AT · (J_R_AT)⁻¹``.
+
+    Parameters
+    ----------
+    camera_R_tag : array_like, shape (3, 3)
+        The detector's tag orientation in the optical frame (AprilTag convention: tag ``x`` right,
+        ``y`` down, ``z`` into the tag; :func:`tag_pose_from_opencv` converts OpenCV's).
+    tag_facing : float
+        The tag's facing on the map (rad): it is upright on a vertical wall, so
+        ``W_R_AT`` = :func:`tag_rotation_world`.
+    mount : Mount
+        ``J_R_AT = robot_R_camera · camera_R_tag``.
+
+    Returns
+    -------
+    float
+        The yaw of ``W_R_J`` (rad, in ``(−π, π]``): the angle of the robot's ``x`` axis projected on
+        the floor (a pose that is not exactly level still gives the nearest yaw).
+    """
+    r = np.asarray(camera_R_tag, float)
+    if r.shape != (3, 3) or not np.all(np.isfinite(r)):
+        raise InvalidParamsError("expected a finite 3 × 3 rotation", field="camera_R_tag")
+    if not math.isfinite(tag_facing):
+        raise InvalidParamsError("a free-standing tag (facing NaN) has no known orientation to take a heading "
+                                 "from", field="tag_facing")  # fmt: skip
+    w_r_j = tag_rotation_world(tag_facing) @ (mount.rotation @ r).T
+    return math.atan2(w_r_j[1, 0], w_r_j[0, 0])
+
+
+# --------------------------------------------------------------------------- observe
+
+
+@dataclass(frozen=True, eq=False)
+class Detection:
+    """One AprilTag found in an image.
+
+    Attributes
+    ----------
+    tag_id : int
+        The detector's id (tag36h11: 0–586).
+    corners : ndarray, shape (4, 2)
+        Corner pixels in the detector's order (AprilTag's counter-clockwise or OpenCV's clockwise:
+        the centre is the intersection of the diagonals 0–2 and 1–3 either way).
+    pose : tuple of ndarray, optional
+        ``(camera_R_tag (3, 3), camera_t_tag (3,))`` in the AprilTag tag convention (metres).
+    """
+
+    tag_id: int
+    corners: np.ndarray
+    pose: tuple | None = None
+
+    def __post_init__(self) -> None:
+        corners = np.array(self.corners, float)
+        if corners.shape != (4, 2):
+            raise InvalidParamsError(f"expected 4 corners (4, 2), got shape {corners.shape}", field="corners")
+        corners.flags.writeable = False
+        object.__setattr__(self, "corners", corners)
+        object.__setattr__(self, "tag_id", int(self.tag_id))
+        if self.pose is not None:
+            r, t = (np.array(v, float) for v in self.pose)
+            if r.shape != (3, 3) or t.reshape(-1).shape != (3,):
+                raise InvalidParamsError("expected (camera_R_tag (3, 3), camera_t_tag (3,))", field="pose")
+            object.__setattr__(self, "pose", (r, t.reshape(3)))
+
+
+@dataclass(frozen=True, eq=False)
+class Observation:
+    """What one image says, in the form :meth:`Controller.command` takes.
+
+    Attributes
+    ----------
+    bearings : ndarray, shape (L, 2)
+        World-frame unit bearing of each landmark (zero rows where not visible).
+    visible : ndarray of bool, shape (L,)
+    heading : float or None
+        The robot heading used (rad): the compass's if given, else from the tag poses (the circular
+        mean of the per-tag headings that agree, :data:`HEADING_AGREEMENT`); None without either.
+    unknown, from_behind, outside_image, duplicates : int
+        Rejected detections: ids not in the plan; seen from behind (:data:`BEHIND_MARGIN`); a corner
+        outside the image by more than :data:`CORNER_SLACK`; a second detection of the same tag.
+    pose_heading : float or None
+        The heading the tag poses gave (also when a compass heading was used: compare them).
+    """
+
+    bearings: np.ndarray
+    visible: np.ndarray
+    heading: float | None
+    unknown: int = 0
+    from_behind: int = 0
+    outside_image: int = 0
+    duplicates: int = 0
+    pose_heading: float | None = None
+
+    @property
+    def rejected(self) -> int:
+        """All rejected detections."""
+        return self.unknown + self.from_behind + self.outside_image + self.duplicates
+
+
+def _mean_heading(headings: list[float]) -> float | None:
+    """Circular mean of the largest group of headings that agree within :data:`HEADING_AGREEMENT`."""
+    if not headings:
+        return None
+    h = np.array(headings)
+    diff = np.abs(np.angle(np.exp(1j * (h[:, None] - h[None, :]))))
+    best = int(np.argmax((diff <= HEADING_AGREEMENT).sum(axis=1)))
+    group = h[diff[best] <= HEADING_AGREEMENT]
+    return float(np.angle(np.exp(1j * group).mean()))
+
+
+def observe(detections: Any, intrinsics: Intrinsics, mount: Mount, tags: TagMap, heading: float | None = None, *,
+            behind_margin: float = BEHIND_MARGIN) -> Observation:  # fmt: skip
+    """World-frame bearings (and the heading) from the AprilTag detections in one image.
+
+    Parameters
+    ----------
+    detections : iterable of Detection
+    intrinsics : Intrinsics
+    mount : Mount
+    tags : TagMap
+        The plan's landmarks (:meth:`TagMap.from_plan`), in the order of the Controller's rows.
+    heading : float, optional
+        The compass yaw (rad). Without it the tag poses give the heading; a frame with accepted
+        detections but neither raises.
+    behind_margin : float
+        See :data:`BEHIND_MARGIN` (rad).
+
+    Returns
+    -------
+    Observation
+
+    Raises
+    ------
+    InvalidParamsError
+        No heading: neither the compass nor a detection with a pose of a tag with a known facing.
+
+    Notes
+    -----
+    Rejected, and counted in the result: ids not among the plan's (``unknown``), detections with a
+    corner outside the image by more than :data:`CORNER_SLACK` (``outside_image``; a real detector
+    never returns one), a tag seen from behind (``from_behind``: its bearing points along its facing
+    past the tag's plane by more than ``behind_margin``: a printed tag cannot be seen from behind, so
+    it is a misidentification or a reflection) and a second detection of a tag (``duplicates``).
+    When a detection carries a pose, its range ``‖camera_t_tag‖`` places the tag along the ray, so
+    the bearing is taken from the robot's origin (no parallax from a camera off the robot's centre);
+    without one it is the ray's direction from the camera centre.
+    """
+    n_lm = len(tags.numbers)
+    bearings, visible = np.zeros((n_lm, 2)), np.zeros(n_lm, bool)
+    unknown = outside = duplicates = behind = 0
+    lo = -0.5 - CORNER_SLACK
+    hi_u, hi_v = intrinsics.width - 0.5 + CORNER_SLACK, intrinsics.height - 0.5 + CORNER_SLACK
+    accepted: list[tuple[int, Detection]] = []
+    seen: set[int] = set()
+    for det in detections:
+        k = tags.index(det.tag_id)
+        if k < 0:
+            unknown += 1
+            continue
+        c = det.corners
+        if not np.all(np.isfinite(c)) or (c < lo).any() or (c[:, 0] > hi_u).any() or (c[:, 1] > hi_v).any():
+            outside += 1
+            continue
+        if k in seen:
+            duplicates += 1
+            continue
+        seen.add(k)
+        accepted.append((k, det))
+    pose_headings = [heading_from_tag(det.pose[0], float(tags.facing[k]), mount) for k, det in accepted
+                     if det.pose is not None and math.isfinite(tags.facing[k])]  # fmt: skip
+    pose_heading = _mean_heading(pose_headings)
+    if heading is not None:
+        heading = _finite(heading, "heading")
+    elif accepted:
+        if pose_heading is None:
+            raise InvalidParamsError("no heading: pass the compass yaw, or detections with tag poses (of tags "
+                                     "with a known facing)", field="heading")  # fmt: skip
+        heading = pose_heading
+    if accepted:
+        corners = np.stack([det.corners for _, det in accepted])  # (m, 4, 2)
+        xy = intrinsics.undistort(corners.reshape(-1, 2)).reshape(-1, 4, 2)
+        centre = _diagonals(xy)
+        ray = np.column_stack([centre, np.ones(len(centre))])
+        ray /= np.linalg.norm(ray, axis=1, keepdims=True)
+        world_r_robot = _rz(heading)
+        sin_margin = math.sin(behind_margin)
+        for (k, det), r in zip(accepted, ray, strict=True):
+            v = mount.rotation @ r
+            if det.pose is not None and np.all(np.isfinite(det.pose[1])):
+                v = mount.translation + v * float(np.linalg.norm(det.pose[1]))
+            w = (world_r_robot @ v)[:2]
+            norm = math.hypot(w[0], w[1])
+            if norm < 1e-12:  # straight up or down: no direction on the floor
+                continue
+            b = w / norm
+            f = tags.facing[k]
+            if math.isfinite(f) and b[0] * math.cos(f) + b[1] * math.sin(f) > sin_margin:
+                behind += 1
+                continue
+            bearings[k], visible[k] = b, True
+    return Observation(bearings, visible, heading, unknown=unknown, from_behind=behind, outside_image=outside,
+                       duplicates=duplicates, pose_heading=pose_heading)  # fmt: skip
+
+
+def _diagonals(xy: np.ndarray) -> np.ndarray:
+    """Intersection of the diagonals 0–2 and 1–3 of quads (m, 4, 2) → (m, 2); the mean of the corners
+    when they are parallel (a degenerate quad)."""
+    p, r = xy[:, 0], xy[:, 2] - xy[:, 0]
+    q, s = xy[:, 1], xy[:, 3] - xy[:, 1]
+    den = r[:, 0] * s[:, 1] - r[:, 1] * s[:, 0]
+    qp = q - p
+    t = (qp[:, 0] * s[:, 1] - qp[:, 1] * s[:, 0]) / np.where(den != 0, den, 1.0)
+    out = p + t[:, None] * r
+    return np.where((np.abs(den) > 1e-300)[:, None], out, xy.mean(axis=1))
