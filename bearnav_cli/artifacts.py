@@ -40,6 +40,14 @@ from typing import Any, Callable
 
 import numpy as np
 
+__all__ = [
+    "ARTIFACT_FORMAT", "atomic_output", "atomic_write", "cache_key", "canonical_json", "check_output_file",
+    "check_output_folder", "content_hash", "embedded_map_text", "entries_of", "fresh", "human_bytes", "Kind",
+    "kind_of_schema", "KINDS", "load", "Loaded", "make_manifest", "MANIFEST_FIELDS", "memory_budget", "metrics_path",
+    "output_files", "output_folder", "params_dict", "read_manifest", "remove_stale_temp_files", "RETIRED_SCHEMAS",
+    "save", "sha256_text", "software_versions",
+]
+
 try:  # POSIX; elsewhere output folders are not locked
     import fcntl
 except ImportError:  # pragma: no cover
@@ -136,7 +144,7 @@ KINDS: dict[str, Kind] = {
     "simplified": Kind("simplified", "bearnav.simplified/1", "simplified.npz", _TREE_ENTRIES, "simplify"),
     "cells": Kind("cells", "bearnav.cells/2", "cells.npz", _CELL_ENTRIES, "decompose"),
     "plan": Kind("plan", "bearnav.plan/2", "plan.npz", _PLAN_ENTRIES, "synthesize"),
-    "simulation": Kind("simulation", "bearnav.sim/1", "sim.npz", {"map": ("U", 0), **SIMULATION_KEYS}, "simulate"),
+    "simulation": Kind("simulation", "bearnav.sim/2", "sim.npz", {"map": ("U", 0), **SIMULATION_KEYS}, "simulate"),
 }
 
 
@@ -144,6 +152,7 @@ KINDS: dict[str, Kind] = {
 RETIRED_SCHEMAS = {
     "bearnav.cells/1": "cells without composable certificates; re-run `bearnav plan MAP.yaml --force`",
     "bearnav.plan/1": "per-cell certificates only; re-run `bearnav plan MAP.yaml --force` to get bearnav.plan/2",
+    "bearnav.sim/1": "runs without their loop constants; re-run `bearnav simulate PLAN.npz --force`",
 }
 
 #: Manifest fields (DESIGN §3.1): name -> (accepted JSON types, required).
@@ -204,10 +213,14 @@ def content_hash(entries: dict[str, Any], kind: str | None = None) -> str:
     cache key (:func:`cache_key`).
     """
     if "map" in entries:
-        document = json.loads(entries["map"])
-        for name in _UNHASHED_MAP_FIELDS:
-            document.pop(name, None)
-        entries = {**entries, "map": canonical_json(document)}
+        try:
+            document = json.loads(entries["map"])
+        except (TypeError, ValueError):  # a damaged entry: hashed as it is, its loader names the problem
+            document = None
+        if isinstance(document, dict):
+            for name in _UNHASHED_MAP_FIELDS:
+                document.pop(name, None)
+            entries = {**entries, "map": canonical_json(document)}
     digest = hashlib.sha256()
     for key in sorted(entries):
         value = entries[key]
@@ -334,7 +347,8 @@ def _from_entries(kind: str, entries: dict[str, Any], manifest: dict, check_map:
                                                                            "collision_samples")})
     if kind == "simulation":
         values = {key: entries[key] for key in SIMULATION_KEYS}
-        values["dt"] = float(values["dt"])
+        for key in ("speed", "dt", "eps_sw", "goal_tolerance"):
+            values[key] = float(values[key])
         return Simulation(map=map_, stats=stats, **values)
     cell_arrays = {key: entries[key] for key in CELL_KEYS}
     if kind == "cells":

@@ -15,6 +15,9 @@ import signal
 import sys
 import threading
 
+# the command line is the program; Python callers use the stages, pipeline and runtime instead
+__all__ = ["EXIT_INTERNAL", "EXIT_INTERRUPTED", "EXIT_INVALID", "EXIT_OUTCOME", "EXIT_TERMINATED", "app", "main"]
+
 
 def _interrupted_while_starting(signum: int, frame: object) -> None:
     """SIGINT or SIGTERM while Python is still importing: nothing has been read or written yet."""
@@ -644,10 +647,18 @@ def simulate_command(
     ),
     hold_time: Optional[float] = typer.Option(None, help="Seconds without a fix before looking around (2)."),
     odometry: Optional[bool] = typer.Option(None, "--odometry/--no-odometry", help="Bridge gaps between fixes."),
-    odometry_noise: Optional[float] = typer.Option(None, help="Wheel slip of the simulated robot (0; 0.05 = 5%)."),
+    odometry_noise: Optional[float] = typer.Option(
+        None, help="Wheel slip of the simulated robot, of the distance travelled (0.02 = 2%; 0: exact motion)."
+    ),
+    camera: Optional[str] = typer.Option(
+        None, help="'ideal' (default) or 'render' (draws frames and detects AprilTags; needs bearnav\\[camera])"
+    ),
     seed: Optional[int] = typer.Option(None, help="Seed of the noise and of random starts (0)."),
     min_success: float = typer.Option(1.0, help="Exit 1 when fewer runs than this fraction reach the goal."),
     gif: Optional[Path] = typer.Option(None, help="Also write an animation of the runs (.gif)."),
+    bag: Optional[Path] = typer.Option(
+        None, help="Also write the runs as a ROS 2 bag: NAME.mcap (one MCAP file) or NAME (a bag folder)."
+    ),
     force: bool = FORCE,
     quiet: bool = QUIET,
     as_json: bool = JSON,
@@ -663,16 +674,27 @@ def simulate_command(
         starts=starts, dynamics=dynamics, measurement=measurement, fov=fov, noise_deg=noise_deg, range=range_,
         occlusion=occlusion, reconstruction=reconstruction, dt=dt, speed=speed, alpha=alpha, beta=beta,
         clamp_reverse=clamp_reverse, hold_time=hold_time, odometry=odometry, odometry_noise=odometry_noise, seed=seed,
+        camera=camera,
     )
     if gif is not None:  # before any work, like every output path
         artifacts.check_output_file(gif, (".gif",), "--gif", inputs=(plan_npz,))
+    if bag is not None:  # before any work too: suffix, folder, rosbags installed
+        from bearnav_cli import bag as ros_bag
+
+        ros_bag.check_path(bag, "--bag")
     with _progress_bar() as progress:
         report = pipeline.run_stage("simulate", plan_npz, out_path, overrides, force,
                                     _progress_factory(progress)("simulate"))  # fmt: skip
     sim = report.artifact
     metrics = sim.stats
+    if bag is not None:
+        pipeline.ACTIVITY.stage, pipeline.ACTIVITY.written = f"{bag} (sim.npz and sim.json were written)", False
+        if not _Quiet.enabled and not as_json and len(sim.trajectory_coords) > 50_000:  # about a second each
+            err.print(f"writing {bag} ({len(sim.trajectory_coords)} poses) ...", highlight=False, markup=False)
+        ros_bag.write(bag, sim, option="--bag")
     if as_json:
-        out.print_json(json.dumps({"sim": str(report.path), "ran": report.ran, "metrics": metrics}))
+        shown = {"sim": str(report.path), "ran": report.ran, "metrics": metrics}
+        out.print_json(json.dumps(shown if bag is None else dict(shown, bag=str(bag))))
     else:
         out.print(_report_line(report), highlight=False, soft_wrap=True)
         table = Table(title=None, box=None, show_header=True, header_style="bold")
@@ -682,6 +704,8 @@ def simulate_command(
             table.add_row(name, value)
         out.print(table)
         out.print(WORDS_NOTE, highlight=False, markup=False, soft_wrap=True)
+        if bag is not None:
+            out.print(f"wrote {bag}", highlight=False)
     if gif is not None:
         plot = _plotting()  # matplotlib only when asked
 

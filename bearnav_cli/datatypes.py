@@ -19,6 +19,13 @@ import numpy as np
 
 from bearnav_cli.errors import ArtifactError
 
+__all__ = [
+    "CELL_KEYS", "cell_list", "CellFlag", "Cells", "CELLS_INVARIANTS", "CellStatus", "CERTIFICATES", "frozen_array",
+    "Invariant", "INVARIANTS", "Map", "MAP_INVARIANTS", "Outcome", "Plan", "PLAN_INVARIANTS", "PLAN_KEYS", "Polygon",
+    "ragged", "replace", "Simulation", "SIMULATION_INVARIANTS", "SIMULATION_KEYS", "Tree", "TREE_INVARIANTS",
+    "validate", "validate_artifact",
+]
+
 
 def frozen_array(value: Any, dtype: Any, shape: tuple[int | None, ...], name: str) -> np.ndarray:
     """Return a read-only copy of ``value`` as ``dtype`` after checking its shape.
@@ -232,6 +239,10 @@ class Map:
         Per-stage parameter overrides from the map file, ``{stage: {name: value}}``.
     source : dict
         ``{"file": name, "sha256": hash}`` of the input the map came from.
+    landmark_facing : ndarray, shape (L,)
+        Direction each tag's printed face looks toward (rad, counter-clockwise from +x, in
+        ``[0, 2π)``); NaN for a free-standing tag seen from every side (the default). Stored to
+        1e-9 degree, so that the map JSON (degrees) round-trips it exactly.
     """
 
     name: str
@@ -245,6 +256,7 @@ class Map:
     raw_obstacles: tuple[Polygon, ...]
     params: dict = field(default_factory=dict)
     source: dict = field(default_factory=dict)
+    landmark_facing: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "bounds", frozen_array(self.bounds, float, (4,), "bounds"))
@@ -254,6 +266,16 @@ class Map:
         object.__setattr__(self, "landmark_ids", tuple(str(i) for i in self.landmark_ids))
         if len(self.landmark_ids) != len(self.landmarks):
             raise ArtifactError("one id per landmark expected", field="landmarks")
+        facing = np.full(len(self.landmarks), np.nan) if self.landmark_facing is None else self.landmark_facing
+        facing = np.asarray(facing, float).reshape(-1)
+        if len(facing) != len(self.landmarks):
+            raise ArtifactError("one facing (or NaN) per landmark expected", field="landmark_facing")
+        if np.isinf(facing).any():
+            raise ArtifactError("contains infinity", field="landmark_facing")
+        # degrees to 1e-9 in [0, 360), as map.json writes them: the JSON round trip is exact
+        degrees = [math.nan if math.isnan(f) else _facing_degrees(f) for f in facing.tolist()]
+        object.__setattr__(self, "landmark_facing", frozen_array(np.radians(np.array(degrees, float)), float,
+                                                                 (len(self.landmarks),), "landmark_facing"))
         for name in ("bounds", "goal", "starts", "landmarks"):
             if not np.all(np.isfinite(getattr(self, name))):
                 raise ArtifactError("contains NaN or infinity", field=name)
@@ -288,7 +310,8 @@ class Map:
             "goal": self.goal.tolist(),
             "starts": self.starts.tolist(),
             "landmarks": [
-                {"id": i, "position": p.tolist()} for i, p in zip(self.landmark_ids, self.landmarks, strict=True)
+                {"id": i, "position": p.tolist(), "facing": _facing_degrees(f)}
+                for i, p, f in zip(self.landmark_ids, self.landmarks, self.landmark_facing, strict=True)
             ],
             "obstacles": [p.to_json() for p in self.obstacles],
             "raw_obstacles": [p.to_json() for p in self.raw_obstacles],
@@ -315,11 +338,19 @@ class Map:
                 raw_obstacles=tuple(Polygon.from_json(p) for p in data["raw_obstacles"]),
                 params=dict(data.get("params", {})),
                 source=dict(data.get("source", {})),
+                # maps written before tags had a facing: every tag free-standing
+                landmark_facing=np.radians(np.array([math.nan if lm.get("facing") is None else float(lm["facing"])
+                                                     for lm in data["landmarks"]], float)),
             )
-        except (KeyError, TypeError, ValueError) as exc:
+        except (KeyError, TypeError, ValueError, AttributeError) as exc:
             if isinstance(exc, ArtifactError):
                 raise
             raise ArtifactError(f"malformed map ({type(exc).__name__}: {exc})", field="map") from exc
+
+
+def _facing_degrees(facing: float) -> float | None:
+    """A tag's facing as ``map.json`` writes it: degrees in ``[0, 360)``, or None (free-standing)."""
+    return None if math.isnan(facing) else round(math.degrees(facing) % 360.0, 9) % 360.0
 
 
 def _map_params_problem(map_: Map) -> str | None:
@@ -886,45 +917,70 @@ PLAN_INVARIANTS: tuple[Invariant, ...] = (
 )  # fmt: skip
 
 
+class Outcome(enum.IntEnum):
+    """How a run of ``bearnav simulate`` ended (``sim.npz`` ``outcome``, ALGORITHMS §7.4)."""
+
+    SUCCESS = 0  # within goal_tolerance of the goal
+    COLLISION = 1  # a step segment met the inflated obstacles or left the bounds (or the start was not free)
+    STALL = 2  # field below 1e-6·u_max, or no net progress over the progress window with a fix
+    TIMEOUT = 3  # more than max_steps steps
+    LOST = 4  # fewer than two usable landmarks for longer than hold_time
+
+
 #: Data keys of ``sim.npz`` besides ``map`` and ``manifest`` (dtype kind, ndim).
 SIMULATION_KEYS: dict[str, tuple[str, int]] = {
     "starts": ("f", 2), "outcome": ("i", 1), "steps": ("i", 1), "time": ("f", 1), "path_length": ("f", 1),
     "route_length": ("f", 1), "left_cell": ("i", 1), "approach_steps": ("i", 1), "hold_steps": ("i", 1),
-    "min_clearance": ("f", 1), "final_position": ("f", 2), "trajectory_coords": ("f", 2),
+    "certified_steps": ("i", 1), "start_in_domain": ("b", 1), "min_clearance": ("f", 1),
+    "final_position": ("f", 2), "final_cell": ("i", 1), "max_steps": ("i", 1), "trajectory_coords": ("f", 2),
     "trajectory_cells": ("i", 1), "trajectory_heading": ("f", 1), "trajectory_offsets": ("i", 1),
     "nodes": ("f", 2), "parent": ("i", 1), "cell_vertices": ("f", 2), "cell_vertex_offsets": ("i", 1),
-    "cell_status": ("i", 1), "dt": ("f", 0),
+    "cell_status": ("i", 1), "speed": ("f", 0), "dt": ("f", 0), "eps_sw": ("f", 0), "goal_tolerance": ("f", 0),
 }  # fmt: skip
+_SIM_SCALARS = ("speed", "dt", "eps_sw", "goal_tolerance")
+_SIM_PER_RUN = ("steps", "time", "path_length", "route_length", "left_cell", "approach_steps", "hold_steps",
+                "certified_steps", "start_in_domain", "min_clearance", "final_cell", "max_steps")  # fmt: skip
 
 
 @dataclass(frozen=True, eq=False)  # arrays inside: identity equality, a hash that works
 class Simulation:
     """The closed-loop runs of ``bearnav simulate`` (``sim.npz``; metrics in ``sim.json``), R runs.
 
+    What :func:`bearnav_cli.stages.simulate.rollout` returns (``stats`` empty) and what
+    :func:`~bearnav_cli.stages.simulate.run` saves (``stats`` the metrics).
+
     Attributes
     ----------
     map : Map
+        The plan's map (the world the robots drove in may differ: ``rollout(world=...)``).
     starts, final_position : ndarray, shape (R, 2)
         Where each run began and ended (map units).
     outcome : ndarray of int8, shape (R,)
-        0 success, 1 collision, 2 stall, 3 timeout, 4 lost (ALGORITHMS §7.4).
-    steps, left_cell, approach_steps, hold_steps : ndarray of int64, shape (R,)
-        Euler steps; relocations through a side face; steps driven straight to a tree node;
-        steps without a usable reconstruction.
+        :class:`Outcome` values: 0 success, 1 collision, 2 stall, 3 timeout, 4 lost (ALGORITHMS §7.4).
+    steps, left_cell, approach_steps, hold_steps, certified_steps : ndarray of int64, shape (R,)
+        Euler steps; relocations through a side face (§7.3); steps driven straight to a tree node from
+        outside every safe set; steps without a usable reconstruction (§7.5); steps covered by the
+        composed certificate (§11.4; 0 for ``paper`` plans).
+    start_in_domain : ndarray of bool, shape (R,)
+        The start lies in the certified domain ``D`` (a funnel plan's cells, ALGORITHMS §11.3).
+    final_cell, max_steps : ndarray of int64, shape (R,)
+        Active cell at the end (``-1`` if the start was not free or never had a fix); step limit of the run.
     time, path_length, route_length, min_clearance : ndarray, shape (R,)
-        Seconds; path length; the tree route from the start (``‖x₀ − x_n‖ + cost(n)``); the
-        smallest distance from the inflated obstacles (map units).
+        Seconds (``steps · dt``); path length; the tree route from the start (``‖x₀ − x_n‖ +
+        cost(n)``); the smallest distance from the inflated obstacles and the walls (map units).
     trajectory_coords, trajectory_cells, trajectory_heading, trajectory_offsets : ndarray
-        Shapes (P, 2), (P,), (P,), (R + 1,): run ``r`` is ``coords[o[r]:o[r + 1]]`` with the
-        active cell and the camera heading (rad) at each point; empty when not recorded.
+        Shapes (P, 2), (P,), (P,), (R + 1,): run ``r`` is ``coords[o[r]:o[r + 1]]`` (start first,
+        ``steps + 1`` points) with the cell whose field moved the robot on from each point (the active
+        cell at the end for the last point) and the camera heading (rad); empty when not recorded.
     nodes, parent : ndarray, shapes (N, 2), (N,)
         The simplified tree the plan was built on.
     cell_vertices, cell_vertex_offsets, cell_status : ndarray, shapes (V, 2), (C + 1,), (C,)
         The plan's cells and their synthesis status (for plots).
-    dt : float
-        The Euler step (s).
+    speed, dt, eps_sw, goal_tolerance : float
+        The loop constants used: the speed ``dt`` and ``eps_sw`` are scaled by (map units / s), the
+        Euler step (s), the switching radius and the success radius (map units).
     stats : dict
-        The metrics of ``sim.json``.
+        The metrics of ``sim.json`` (empty from ``rollout``).
     """
 
     map: Map
@@ -937,8 +993,12 @@ class Simulation:
     left_cell: np.ndarray
     approach_steps: np.ndarray
     hold_steps: np.ndarray
+    certified_steps: np.ndarray
+    start_in_domain: np.ndarray
     min_clearance: np.ndarray
     final_position: np.ndarray
+    final_cell: np.ndarray
+    max_steps: np.ndarray
     trajectory_coords: np.ndarray
     trajectory_cells: np.ndarray
     trajectory_heading: np.ndarray
@@ -948,36 +1008,65 @@ class Simulation:
     cell_vertices: np.ndarray
     cell_vertex_offsets: np.ndarray
     cell_status: np.ndarray
+    speed: float
     dt: float
+    eps_sw: float
+    goal_tolerance: float
     stats: dict = field(default_factory=dict, compare=False)
 
     def __post_init__(self) -> None:
         r = len(np.asarray(self.outcome))
-        dtypes = {"f": float, "i": np.int64}
+        dtypes = {"f": float, "i": np.int64, "b": bool}
         for name, (kind, ndim) in SIMULATION_KEYS.items():
-            if name == "dt":
+            if name in _SIM_SCALARS:
+                object.__setattr__(self, name, float(getattr(self, name)))
                 continue
             shape: tuple[int | None, ...] = (None, 2) if ndim == 2 else (None,)
             if name in ("starts", "final_position"):
                 shape = (r, 2)
-            elif name in ("steps", "time", "path_length", "route_length", "left_cell", "approach_steps",
-                          "hold_steps", "min_clearance"):  # fmt: skip
+            elif name in _SIM_PER_RUN:
                 shape = (r,)
             elif name == "trajectory_offsets":
                 shape = (r + 1,)
             dtype = np.int8 if name in ("outcome", "cell_status") else dtypes[kind]
             object.__setattr__(self, name, frozen_array(getattr(self, name), dtype, shape, name))
-        object.__setattr__(self, "dt", float(self.dt))
         points = len(self.trajectory_coords)
         if len(self.trajectory_cells) != points or len(self.trajectory_heading) != points:
             raise ArtifactError("trajectory arrays differ in length", field="trajectory_cells")
         if points and (self.trajectory_offsets[0] != 0 or self.trajectory_offsets[-1] != points):
             raise ArtifactError("offsets do not span the trajectory points", field="trajectory_offsets")
 
+    def __len__(self) -> int:
+        return len(self.outcome)
+
     def trajectory(self, r: int) -> np.ndarray:
         """Positions of run ``r``, shape (steps + 1, 2) (empty when not recorded)."""
         o = self.trajectory_offsets
         return self.trajectory_coords[o[r] : o[r + 1]]
+
+    def cells_along(self, r: int) -> np.ndarray:
+        """Cells along run ``r``, aligned with :meth:`trajectory`."""
+        o = self.trajectory_offsets
+        return self.trajectory_cells[o[r] : o[r + 1]]
+
+    def counts(self) -> dict[str, int]:
+        """Number of runs per outcome name (every outcome listed)."""
+        return {o.name.lower(): int(np.count_nonzero(self.outcome == o)) for o in Outcome}
+
+    @property
+    def success_rate(self) -> float:
+        """Fraction of successful runs (NaN without runs)."""
+        return float(np.mean(self.outcome == Outcome.SUCCESS)) if len(self) else math.nan
+
+    def success_rate_of(self, runs: np.ndarray) -> float:
+        """Fraction of successful runs among ``runs`` (bool mask, shape (R,)); NaN when it selects none."""
+        done = self.outcome[runs] == Outcome.SUCCESS
+        return float(np.mean(done)) if len(done) else math.nan
+
+    @property
+    def certified_fraction(self) -> float:
+        """Steps covered by the composed certificate over all steps (ALGORITHMS §11.4; 0 without steps)."""
+        return float(self.certified_steps.sum() / max(1, self.steps.sum()))
 
     def arrays(self) -> dict[str, np.ndarray]:
         """The data entries of ``sim.npz`` (without ``manifest`` and ``map``)."""
@@ -1015,8 +1104,21 @@ SIMULATION_INVARIANTS: tuple[Invariant, ...] = (
     Invariant("cell_status", "0 to 4", lambda s: _in_range(s.cell_status, 0, 4)),
     Invariant("cell_vertex_offsets", "C + 1 offsets from 0, never decreasing, to the number of vertices; finite "
               "vertices", _sim_cells_problem),
-    Invariant("dt", "finite and positive", lambda s: None if math.isfinite(s.dt) and s.dt > 0 else f"got {s.dt:g}"),
+    Invariant("certified_steps", "zero or positive, at most steps",
+              lambda s: _in_range(s.certified_steps, 0, np.iinfo(np.int64).max)
+              or (None if (s.certified_steps <= s.steps).all() else "more than steps")),
+    Invariant("final_cell", "-1 (no cell) or a cell index",
+              lambda s: _in_range(s.final_cell, -1, len(s.cell_status) - 1)),
+    Invariant("dt", "finite and positive", lambda s: _positive_scalar(s.dt)),
+    Invariant("speed", "finite and positive", lambda s: _positive_scalar(s.speed)),
+    Invariant("eps_sw", "finite and positive", lambda s: _positive_scalar(s.eps_sw)),
+    Invariant("goal_tolerance", "finite and positive", lambda s: _positive_scalar(s.goal_tolerance)),
 )  # fmt: skip
+
+
+def _positive_scalar(value: float) -> str | None:
+    return None if math.isfinite(value) and value > 0 else f"got {value:g}"
+
 
 #: The invariants of each artifact kind (``artifacts.KINDS`` names); every kind but ``map`` also checks
 #: its embedded map against :data:`MAP_INVARIANTS` (fields ``map.NAME``).

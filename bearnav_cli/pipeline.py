@@ -26,6 +26,14 @@ from bearnav_cli.datatypes import Map, Plan
 from bearnav_cli.errors import ArtifactError, InternalError, InvalidMapError, InvalidParamsError, ResourceLimitError
 from bearnav_cli.stages import decompose, map_, rrtstar, simplify, simulate, synthesize
 
+__all__ = [
+    "Activity", "ACTIVITY", "check_closed_loop", "check_map_params", "check_resources", "check_value",
+    "check_verify_starts", "LIMITS", "load", "MAP_SUFFIXES", "MAX_BORDER_SAMPLES", "MAX_GRID_CELLS", "MAX_RUNS",
+    "MAX_STEPS_PER_RUN", "option_name", "OPTION_NAMES", "plan", "Range", "reset_activity", "resolve_params",
+    "RRT_BYTES_PER_GRID_CELL", "RRT_BYTES_PER_ITERATION", "RUN_BYTES", "run_map", "run_stage", "SEED", "SIMULATE",
+    "Stage", "STAGE_BY_NAME", "StageReport", "STAGES", "TRAJECTORY_POINT_BYTES",
+]
+
 #: ``progress(done, total)``, called by long stages.
 Progress = Callable[[int, int], None]
 

@@ -33,13 +33,17 @@ import shapely
 
 from bearnav_cli import composition
 from bearnav_cli.composition import Composition
-from bearnav_cli.datatypes import CellFlag, CellStatus, Map, Plan, cell_list
+from bearnav_cli.datatypes import CellFlag, CellStatus, Map, Outcome, Plan, Simulation, cell_list
 from bearnav_cli.errors import ArtifactError, InvalidParamsError
 from bearnav_cli.funnel import coverage_domain, reached_parts
 from bearnav_cli.geometry import FreeSpace
 from bearnav_cli.routes import route_lengths, sample_starts
 from bearnav_cli.runtime import PlanArrays
 from bearnav_cli.stages import simulate
+
+__all__ = ["CERTIFICATE_TOL", "CERTIFIED", "COVERAGE_TOL", "GOAL_FIELD_TOL", "UNIT_TOL", "Certificates", "Geometry",
+           "Params", "Unreached", "VerifyReport", "certificate_problems", "certificates", "check_geometry",
+           "flagged_cells", "run", "unreached_regions"]  # fmt: skip
 
 log = logging.getLogger(__name__)
 
@@ -405,7 +409,7 @@ class VerifyReport:
     geometry : Geometry
     starts : ndarray, shape (R, 2)
         Monte-Carlo starts.
-    rollouts : Rollouts or None
+    rollouts : Simulation or None
         Their closed-loop runs (None when skipped).
     straight : ndarray, shape (R,)
         ``‖x₀ − g‖``. The path ratios (:attr:`ratio_straight`, :attr:`ratio_route`) are means
@@ -427,7 +431,7 @@ class VerifyReport:
     flagged: dict[str, list[int]]
     geometry: Geometry
     starts: np.ndarray
-    rollouts: simulate.Rollouts | None
+    rollouts: Simulation | None
     straight: np.ndarray
     route: np.ndarray
     min_success: float | None
@@ -491,7 +495,7 @@ class VerifyReport:
         if self.rollouts is None:
             return math.nan
         r = self.rollouts
-        ok = (r.outcome == simulate.Outcome.SUCCESS) & (reference > 0)
+        ok = (r.outcome == Outcome.SUCCESS) & (reference > 0)
         rest = np.hypot(*(r.final_position[ok] - self.goal).T)
         return _mean_or_nan((r.path_length[ok] + rest) / reference[ok])
 
@@ -537,11 +541,11 @@ class VerifyReport:
         if self.composition is not None:
             out.extend(self.composition.problems)
             if self.rollouts is not None and self.in_domain.any() and self.success_in_domain < 1.0:
-                bad = np.flatnonzero(self.in_domain & (self.rollouts.outcome != simulate.Outcome.SUCCESS))
+                bad = np.flatnonzero(self.in_domain & (self.rollouts.outcome != Outcome.SUCCESS))
                 out.append(f"{len(bad)} runs from the certified domain did not reach the goal (the theorem says "
                            f"every one does: a bug): starts {cell_list(bad)}")  # fmt: skip
         if self.rollouts is not None and len(self.rollouts):
-            hit = np.flatnonzero(self.rollouts.outcome == simulate.Outcome.COLLISION)
+            hit = np.flatnonzero(self.rollouts.outcome == Outcome.COLLISION)
             if hit.size:
                 out.append(f"{hit.size} of {len(self.rollouts)} closed-loop runs collided (any collision fails, "
                            f"whatever --min-success says): starts {cell_list(hit)}")  # fmt: skip
@@ -581,7 +585,7 @@ class VerifyReport:
                     f"time to goal ≤ {comp.time_bound:.4g} s")  # fmt: skip
             if self.rollouts is not None and len(self.rollouts):
                 d = self.in_domain
-                ok = self.rollouts.outcome == simulate.Outcome.SUCCESS
+                ok = self.rollouts.outcome == Outcome.SUCCESS
                 text += f"; from D {int(ok[d].sum())}/{int(d.sum())} reached the goal"
                 text += f", from outside D (uncertified) {int(ok[~d].sum())}/{int((~d).sum())}"
             return text + self._unreached_text() + ("; FAILED" if self.failed else "")
@@ -734,8 +738,9 @@ def run(
         if skipped is None:
             rng = np.random.default_rng(params.seed)
             starts = _reached_starts(space, plan.map.goal, params.n_starts, rng, unreached.avoid)
-            # the certificates are stated for the displacement output; bearings are `bearnav simulate`'s job
-            sim = simulate.Params(speed=params.speed, dt=params.dt, measurement="displacement",
+            # the certificates are stated for the displacement output and the exact motion of §7.1:
+            # bearings and wheel slip are `bearnav simulate`'s job
+            sim = simulate.Params(speed=params.speed, dt=params.dt, measurement="displacement", odometry_noise=0.0,
                                   record_trajectories=False)  # fmt: skip
             rollouts = simulate.rollout(plan, starts, sim, progress=progress)
     straight = np.hypot(*(starts - plan.map.goal).T) if len(starts) else np.zeros(0)

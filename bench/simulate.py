@@ -3,14 +3,14 @@
 The kitchen plan is built in-process by ``map → rrtstar → simplify → decompose →
 synthesize`` with the map's parameters, and ``simulate.Params(starts="random:N")`` draws
 the starts through ``simulate.resolve_starts``. For three configurations (the defaults:
-bearings, 360° field of view, occlusion, noise-free, single integrator; ``fov=60`` with
-the unicycle; ``noise_deg=1``), all with ``record_trajectories=False``, three things
-are timed side by side in each round:
+bearings, 360° field of view, occlusion, noise-free bearings, 2% wheel slip, single
+integrator; ``odometry_noise=0``; ``fov=60`` with the unicycle; ``noise_deg=1``), all with
+``record_trajectories=False``, three things are timed side by side in each round:
 
 * **vectorised**: ``simulate.rollout(plan, starts, params)``, every robot advanced
   together as arrays;
-* **per-robot loop**: the anchor. The same setup as ``rollout`` (plan arrays, free
-  space, settings, step limits, initial headings, one ``simulate._Loop``), then, robot
+* **per-robot loop**: the anchor. The same setup as ``rollout`` (``simulate.start_loop``:
+  plan arrays, the simulated world, settings, step limits, initial headings), then, robot
   by robot, ``loop.step(np.array([i]))`` until that robot has finished: exactly the
   step ``rollout`` runs, with ``R = 1`` arrays;
 * **rollout per robot**: ``simulate.rollout(plan, starts[i:i + 1], params)`` for each
@@ -19,9 +19,9 @@ are timed side by side in each round:
 The two per-robot variants run on the first ``--loop-robots`` starts (they are drawn
 uniformly, so any subset is a random one) and their times are scaled linearly to all
 the starts. The order of the variants rotates between rounds; times are medians over the
-rounds. Noise-free, the per-robot runs must end exactly as the vectorised ones (outcome
-and step count of every compared robot); with noise the random streams differ, so there
-is nothing to compare. The budget is 1,000 starts in under 5 s.
+rounds. Noise-free and with exact motion, the per-robot runs must end exactly as the
+vectorised ones (outcome and step count of every compared robot); with bearing noise or wheel
+slip the random streams differ, so there is nothing to compare. The budget is 1,000 starts in under 5 s.
 
 Run from the repository root::
 
@@ -41,15 +41,14 @@ import numpy as np
 from common import README, REPO_DIR, load_map, machine_line, markdown_table, replace_section, run_stages
 
 from bearnav_cli.datatypes import Plan
-from bearnav_cli.geometry import FreeSpace
-from bearnav_cli.runtime import PlanArrays
 from bearnav_cli.stages import simulate
 
 SECTION = "simulate"
 MAP = REPO_DIR / "maps" / "kitchen.yaml"
 #: (label, Params overrides); the first is the default configuration the budget applies to.
 CONFIGS = (
-    ("default (bearing, 360°, occlusion, noise-free, single integrator)", {}),
+    ("default (bearing, 360°, occlusion, noise-free bearings, 2% wheel slip, single integrator)", {}),
+    ("exact motion (odometry_noise 0)", {"odometry_noise": 0.0}),
     ("fov 60°, unicycle", {"fov": 60.0, "dynamics": "unicycle"}),
     ("noise 1°", {"noise_deg": 1.0}),
 )
@@ -68,24 +67,14 @@ def kitchen_plan() -> Plan:
 def per_robot_loop(plan: Plan, starts: np.ndarray, params: simulate.Params) -> tuple[np.ndarray, np.ndarray]:
     """Outcome and steps of every start, one robot at a time through ``simulate._Loop.step``.
 
-    The setup is ``simulate.rollout``'s, done once for all the starts; then each robot is
-    stepped alone (``R = 1`` arrays) until it has an outcome.
+    The setup is ``simulate.rollout``'s (``simulate.start_loop``), done once for all the starts;
+    then each robot is stepped alone (``R = 1`` arrays) until it has an outcome.
     """
-    arrays = PlanArrays.from_plan(plan)
-    space = FreeSpace.from_map(plan.map)
-    s = simulate.settings(plan, params)
-    x0 = np.array(starts, float).reshape(-1, 2)
-    limits = simulate.step_limits(arrays, x0, s, params)
-    blocked = ~space.points_free(x0)
-    heading = np.zeros(len(x0))
-    if (~blocked).any():
-        heading[~blocked] = simulate.initial_headings(arrays, x0[~blocked], params)
-    loop = simulate._Loop(arrays, space, x0, heading, s, params, limits)
-    loop.finish(np.flatnonzero(blocked), simulate.Outcome.COLLISION)
-    for i in np.flatnonzero(~blocked):
-        active = np.array([i])
-        while active.size:
-            active = loop.step(active)
+    loop, active, _ = simulate.start_loop(plan, starts, params)
+    for i in active:
+        one = np.array([i])
+        while one.size:
+            one = loop.step(one)
     return loop.outcome.copy(), loop.steps.copy()
 
 
@@ -155,7 +144,7 @@ def main(argv: list[str] | None = None) -> None:
         ratio, call_ratio = loop_s / t["vectorised"], call_s / t["vectorised"]
         counts = vec.counts()
         outcomes = ", ".join(f"{k} {v}" for k, v in counts.items() if v)
-        if params.noise_deg == 0:
+        if params.noise_deg == 0 and params.odometry_noise == 0:
             same = [
                 bool(np.array_equal(vec.outcome[:n_loop], o) and np.array_equal(vec.steps[:n_loop], s))
                 for o, s in (res["loop"], res["per_call"])
@@ -163,7 +152,7 @@ def main(argv: list[str] | None = None) -> None:
             identical = "yes" if all(same) else f"NO (loop {same[0]}, rollout per robot {same[1]})"
             checks.append((label, all(same)))
         else:
-            identical = "n/a (noise)"
+            identical = "n/a (noise or slip)"
         share = vec.steps[:n_loop].sum() / max(1, vec.steps.sum())
         rows.append([
             label,

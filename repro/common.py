@@ -17,7 +17,7 @@ import numpy as np
 from matplotlib.lines import Line2D
 
 from bearnav_cli import artifacts, pipeline
-from bearnav_cli.datatypes import Map, Polygon
+from bearnav_cli.datatypes import Map, Outcome, Polygon, Simulation
 from bearnav_cli.plot import OUTCOME_COLORS, OUTCOME_NAMES
 from bearnav_cli.stages import simulate
 
@@ -57,10 +57,10 @@ def sim_params(plan, **overrides: Any) -> simulate.Params:
 
 def outcome_name(value: int) -> str:
     """``success``, ``collision``, ``stall``, ``timeout`` or ``lost``."""
-    return simulate.Outcome(int(value)).name.lower()
+    return Outcome(int(value)).name.lower()
 
 
-def run_rows(rollouts: simulate.Rollouts) -> list[dict]:
+def run_rows(rollouts: Simulation) -> list[dict]:
     """One JSON-ready record per run: start, outcome, time, path length, steps, clearance, end point."""
     return [
         {
@@ -76,7 +76,7 @@ def run_rows(rollouts: simulate.Rollouts) -> list[dict]:
     ]
 
 
-def experiment(rollouts: simulate.Rollouts, params: simulate.Params, runs: bool = True) -> dict:
+def experiment(rollouts: Simulation, params: simulate.Params, runs: bool = True) -> dict:
     """Success rate, outcome counts, the parameters and (optionally) every run of one rollout."""
     record = {
         "params": artifacts.params_dict(params),
@@ -134,7 +134,7 @@ def rotate_map(map_: Map, degrees: float, center: tuple[float, float]) -> Map:
     )
 
 
-def draw_runs(ax, rollouts: simulate.Rollouts, *, linestyle: str = "-", lw: float = 1.1) -> None:
+def draw_runs(ax, rollouts: Simulation, *, linestyle: str = "-", lw: float = 1.1) -> None:
     """Every run's path coloured by outcome, its start (circle) and, if it failed, its end (cross)."""
     for r in range(len(rollouts)):
         path = rollouts.trajectory(r)
@@ -143,11 +143,11 @@ def draw_runs(ax, rollouts: simulate.Rollouts, *, linestyle: str = "-", lw: floa
         color = OUTCOME_COLORS[int(rollouts.outcome[r])]
         ax.plot(*path.T, color=color, lw=lw, ls=linestyle, alpha=0.9, zorder=4)
         ax.plot(*path[0], "o", ms=4, mfc="white", mec=color, zorder=5)
-        if rollouts.outcome[r] != simulate.Outcome.SUCCESS:
+        if rollouts.outcome[r] != Outcome.SUCCESS:
             ax.plot(*path[-1], "x", ms=6, mew=1.5, color=color, zorder=5)
 
 
-def outcome_handles(*rollouts: simulate.Rollouts) -> list[Line2D]:
+def outcome_handles(*rollouts: Simulation) -> list[Line2D]:
     """Legend entries for the outcomes that occur in ``rollouts``."""
     seen = sorted({int(o) for r in rollouts for o in r.outcome})
     return [Line2D([], [], color=OUTCOME_COLORS[o], lw=1.5, label=OUTCOME_NAMES[o]) for o in seen]

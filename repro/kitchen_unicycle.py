@@ -23,6 +23,7 @@ from common import arguments, draw_runs, experiment, load, outcome_handles, sim_
 from matplotlib.patches import Wedge
 
 from bearnav_cli import plot
+from bearnav_cli.datatypes import Simulation
 from bearnav_cli.stages import simulate
 
 FOV_DEG = 60.0
@@ -30,7 +31,7 @@ FOV_DEG = 60.0
 CONES = 9
 
 
-def draw_cones(ax: plt.Axes, runs: simulate.Rollouts, fov: float, radius: float) -> None:
+def draw_cones(ax: plt.Axes, runs: Simulation, fov: float, radius: float) -> None:
     """The camera's view cone at ``CONES`` evenly spaced points of every path."""
     offsets = runs.trajectory_offsets
     for r in range(len(runs)):

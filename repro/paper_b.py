@@ -22,6 +22,7 @@ from common import arguments, draw_runs, experiment, load, outcome_handles, rota
 from matplotlib.lines import Line2D
 
 from bearnav_cli import plot
+from bearnav_cli.datatypes import Simulation
 from bearnav_cli.stages import simulate
 
 #: The deformation: a rotation by ANGLE_DEG (counter-clockwise positive) about CENTER.
@@ -43,7 +44,7 @@ def outline(ax: plt.Axes, map_) -> None:
                 label="undeformed obstacles" if k == 0 else None)  # fmt: skip
 
 
-def rate(runs: simulate.Rollouts) -> str:
+def rate(runs: Simulation) -> str:
     return f"{runs.counts()['success']}/{len(runs)}"
 
 

@@ -26,7 +26,7 @@ import shapely
 
 from bearnav_cli import artifacts, composition, verify
 from bearnav_cli.cell_lp import CellProblem, min_norm_gain
-from bearnav_cli.datatypes import CellStatus, replace
+from bearnav_cli.datatypes import CellStatus, Outcome, replace
 from bearnav_cli.errors import InvalidMapError
 from bearnav_cli.geometry import DEFAULT_CLEARANCE, FreeSpace
 from bearnav_cli.lp import LpSolver
@@ -488,7 +488,7 @@ def test_time_bound_holds_in_simulation(map_seed):
     assert runs.start_in_domain.all()
     bound = composition.time_bound(plan, SPEED)
     assert math.isfinite(bound)
-    assert np.all(runs.outcome == simulate.Outcome.SUCCESS), runs.counts()
+    assert np.all(runs.outcome == Outcome.SUCCESS), runs.counts()
     assert np.all(runs.time <= bound), (runs.time.max(), bound)
 
 
@@ -700,7 +700,7 @@ def test_the_unicycle_keeps_the_certificate_from_the_certified_domain():
                                                           record_trajectories=False,
                                                           speed=SPEED))  # fmt: skip
     assert runs.start_in_domain.all()
-    assert np.all(runs.outcome == simulate.Outcome.SUCCESS), runs.counts()
+    assert np.all(runs.outcome == Outcome.SUCCESS), runs.counts()
 
 
 def test_a_robot_outside_every_cell_with_no_node_in_sight_gets_no_command():

@@ -10,15 +10,16 @@ import numpy as np
 import pytest
 
 from bearnav_cli import runtime
-from bearnav_cli.datatypes import Cells, Plan
+from bearnav_cli.datatypes import Cells, Outcome, Plan, Simulation
 from bearnav_cli.errors import ArtifactError
 from bearnav_cli.runtime import PlanArrays
 from bearnav_cli.stages import simulate
-from bearnav_cli.stages.simulate import Outcome
 
 from .conftest import REPO
 from .handmade import CHAIN_NODES, CHAIN_PARENT, cell_polygons, first_cells, hand_map, hand_plan
 
+#: The exact motion of ALGORITHMS §7.1 (no wheel slip), for tests of exact paths.
+EXACT = simulate.Params(odometry_noise=0.0)
 #: A field that pushes +x everywhere (it breaks the CLF of a cell whose exit lies at −x).
 RIGHT = (np.zeros((2, 2)), np.array([1.0, 0.0]))
 LEFT = (np.zeros((2, 2)), np.array([-1.0, 0.0]))
@@ -219,7 +220,14 @@ def test_a_robot_outside_every_safe_set_drives_straight_to_a_visible_node():
 
 def test_chain_runs_reach_the_goal(chain):
     starts = np.array([[9.5, 7.5], [6.0, 0.2], [2.0, 7.9], [0.1, 0.1], [1.0, 1.05]])
-    out = simulate.rollout(chain, starts)
+    # with the default wheel slip (2%) every step is a few percent off its command ...
+    slipped = simulate.rollout(chain, starts)
+    assert slipped.outcome.tolist() == [Outcome.SUCCESS] * 5
+    per_step = slipped.path_length[:-1] / (slipped.steps[:-1] * slipped.speed * slipped.dt)
+    assert np.all(np.abs(per_step - 1.0) < 0.1) and not np.allclose(per_step, 1.0)
+    # ... exactly on it with the exact motion of §7.1
+    out = simulate.rollout(chain, starts, EXACT)
+    assert isinstance(out, Simulation) and out.stats == {}  # the one type of a set of runs (sim.npz's)
     assert out.outcome.tolist() == [Outcome.SUCCESS] * 5
     assert out.steps[-1] == 0 and out.path_length[-1] == 0.0  # starts inside the goal tolerance
     v_dt = out.speed * out.dt
@@ -265,7 +273,7 @@ def test_a_step_that_grazes_an_obstacle_corner_is_a_collision():
     """Robot on y = 4 moving −x; a diamond's bottom vertex sits at (6.0031, 4), between two step ends."""
     diamond = [[6.0031, 4.0], [7.0, 5.0], [6.0031, 6.0], [5.5, 5.0]]
     plan = hand_plan(hand_map(obstacles=[diamond]), fields={2: LEFT})
-    out = simulate.rollout(plan, [[9.0, 4.0], [9.0, 4.0 - 1e-9]])
+    out = simulate.rollout(plan, [[9.0, 4.0], [9.0, 4.0 - 1e-9]], EXACT)  # exactly along y = 4
     assert out.outcome.tolist() == [Outcome.COLLISION, Outcome.SUCCESS]
     path = out.trajectory(0)
     assert path[-2, 0] > 6.0031 > path[-1, 0]  # the colliding step spans the vertex

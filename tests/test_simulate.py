@@ -14,11 +14,11 @@ from typer.testing import CliRunner
 
 from bearnav_cli import artifacts, pipeline, runtime
 from bearnav_cli.cli import app, read_map_source
+from bearnav_cli.datatypes import Outcome
 from bearnav_cli.errors import InvalidParamsError
 from bearnav_cli.geometry import FreeSpace
 from bearnav_cli.runtime import ControlState, PlanArrays, bearing
 from bearnav_cli.stages import simulate
-from bearnav_cli.stages.simulate import Outcome
 
 from .conftest import REPO
 
@@ -92,18 +92,50 @@ def test_runtime_controller_and_simulation_give_the_same_commands(plans):
         assert command.tolist() == [v, omega]
 
 
+#: (map, fov) whose map starts do not all reach the goal with the default 2% wheel slip (issue 11 part 5):
+#: one run of four each (paper_sim_circles: a timeout at 90°, lost at 60°; paper_b_circles: a collision
+#: at 90° and at 60°). The controller's filter adds odometry errors up as independent per step
+#: (runtime.estimate.fuse), while wheel slip is mostly systematic: it trusts odometry too long.
+SLIP_FAILURES = {("paper_sim_circles", 90.0), ("paper_sim_circles", 60.0), ("paper_b_circles", 90.0),
+                 ("paper_b_circles", 60.0)}  # fmt: skip
+
+
+@pytest.mark.parametrize("slip", ["exact", "default"])
 @pytest.mark.parametrize("fov", [90.0, 60.0])
 @pytest.mark.parametrize("name", EXAMPLE_MAPS)
-def test_unicycle_reaches_the_goal_from_the_map_starts(plans, name, fov):
+def test_unicycle_reaches_the_goal_from_the_map_starts(plans, name, fov, slip, request):
+    """DESIGN §8: every map start reaches the goal; with the exact motion of §7.1 (the certificates'
+    model) and with the default wheel slip (known failures marked, not hidden)."""
+    if slip == "default" and (name, fov) in SLIP_FAILURES:
+        request.applymarker(pytest.mark.xfail(reason="1 of 4 map starts fails with 2% wheel slip", strict=False))
     plan, _ = plans[name]
-    run = simulate.rollout(plan, plan.map.starts, params_for(plan, fov=fov, dynamics="unicycle"))
+    changes = {"odometry_noise": 0.0} if slip == "exact" else {}
+    run = simulate.rollout(plan, plan.map.starts, params_for(plan, fov=fov, dynamics="unicycle", **changes))
     assert (run.outcome == Outcome.SUCCESS).all(), run.counts()
 
 
+def test_the_field_of_view_shows_with_the_default_wheel_slip(plans):
+    """A robot that loses its fix drives on odometry: exact odometry (no slip) makes a 60° camera's
+    paths those of a 360° one on paper_b_circles (up to rounding), although it spends over a thousand steps without a
+    fix; with the default slip the blind stretches drift and the paths differ."""
+    plan, _ = plans["paper_b_circles"]
+    slips = (("exact", {"odometry_noise": 0.0}), ("default", {}))
+    runs = {(fov, slip): simulate.rollout(plan, plan.map.starts, params_for(plan, fov=fov, **changes))
+            for fov in (360.0, 60.0) for slip, changes in slips}  # fmt: skip
+
+    def same(a, b):  # up to rounding: 1e-6·D (exact: 2e-7 on this 250-unit map; slip: units)
+        return np.array_equal(a.trajectory_offsets, b.trajectory_offsets) and np.allclose(
+            a.trajectory_coords, b.trajectory_coords, rtol=0.0, atol=1e-6 * plan.map.diagonal)  # fmt: skip
+
+    assert runs[(60.0, "exact")].hold_steps.sum() > 1000 and same(runs[(360.0, "exact")], runs[(60.0, "exact")])
+    assert not same(runs[(360.0, "default")], runs[(60.0, "default")])
+
+
 def test_no_noise_free_run_collides_on_the_kitchen(plans):
+    """Noise-free: exact bearings and the exact motion of §7.1 (no wheel slip)."""
     plan, _ = plans["kitchen"]
     for changes in ({}, {"fov": 60.0}, {"fov": 90.0, "dynamics": "unicycle"}):
-        params = params_for(plan, starts="random:200", **changes)
+        params = params_for(plan, starts="random:200", odometry_noise=0.0, **changes)
         run = simulate.rollout(plan, simulate.resolve_starts(plan, params), dataclasses.replace(
             params, record_trajectories=False))  # fmt: skip
         assert run.counts()["collision"] == 0, (changes, run.counts())
@@ -113,10 +145,11 @@ def test_no_noise_free_run_collides_on_the_kitchen(plans):
 @pytest.mark.parametrize("dynamics", ["single", "unicycle"])
 def test_kitchen_random_starts_with_a_narrow_noisy_camera(plans, dynamics):
     """A 60° camera with 1° of bearing noise: at least 95% of 200 random starts reach the goal
-    (the fixes are fused with odometry; 5% wheel slip makes that odometry imperfect)."""
+    (the fixes are fused with odometry; the default 2% wheel slip makes that odometry imperfect)."""
     plan, _ = plans["kitchen"]
-    params = params_for(plan, starts="random:200", fov=60.0, noise_deg=1.0, odometry_noise=0.05, dynamics=dynamics,
+    params = params_for(plan, starts="random:200", fov=60.0, noise_deg=1.0, dynamics=dynamics,
                         record_trajectories=False)  # fmt: skip
+    assert params.odometry_noise == 0.02
     run = simulate.rollout(plan, simulate.resolve_starts(plan, params), params)
     assert run.success_rate >= 0.95, run.counts()
 
@@ -175,13 +208,19 @@ def test_sim_artifact_round_trip_and_metrics(plans, tmp_path):
     loaded = artifacts.load(tmp_path / "sim.npz", "simulation")
     assert loaded.manifest["content_sha256"] == artifacts.load(tmp_path / "sim.npz").manifest["content_sha256"]
     assert np.array_equal(loaded.artifact.trajectory_coords, sim.trajectory_coords)
+    for name in ("certified_steps", "start_in_domain", "final_cell", "max_steps", "route_length"):
+        assert np.array_equal(getattr(loaded.artifact, name), getattr(sim, name)), name
+    assert (loaded.artifact.speed, loaded.artifact.eps_sw, loaded.artifact.goal_tolerance) == (
+        sim.speed, sim.eps_sw, sim.goal_tolerance)  # fmt: skip
+    assert loaded.artifact.success_rate == sim.success_rate and loaded.artifact.counts() == sim.counts()
+    assert loaded.manifest["params"]["odometry_noise"] == 0.02 and loaded.manifest["params"]["camera"] == "ideal"
     metrics = json.loads((tmp_path / "sim.json").read_text())["metrics"]
     assert metrics["runs"] == 20 and sum(metrics["outcomes"].values()) == 20
     done = sim.outcome == Outcome.SUCCESS
     assert metrics["success_rate"] == pytest.approx(done.mean())
     assert metrics["path_over_tree_route_mean"] > 0.5
     assert (sim.min_clearance >= 0).all()
-    # the same seed gives the same content
+    # the same seed gives the same content (bearing noise and wheel slip are seeded)
     again = pipeline.run_stage("simulate", path, tmp_path / "again.npz", {"starts": "random:20", "fov": 90.0})
     assert again.artifact.arrays().keys() == sim.arrays().keys()
     assert artifacts.load(tmp_path / "again.npz").manifest["content_sha256"] == loaded.manifest["content_sha256"]
@@ -225,7 +264,8 @@ def test_simulate_cli_table_json_and_exit_code(plans, tmp_path):
 
 def test_params_are_checked():
     for kwargs, name in (({"fov": 0.0}, "fov"), ({"noise_deg": -1.0}, "noise_deg"), ({"dynamics": "car"}, "dynamics"),
-                         ({"starts": "random:0"}, "starts"), ({"hold_time": 0.0}, "hold_time")):  # fmt: skip
+                         ({"starts": "random:0"}, "starts"), ({"hold_time": 0.0}, "hold_time"),
+                         ({"camera": "tv"}, "camera"), ({"odometry_noise": -0.01}, "odometry_noise")):  # fmt: skip
         with pytest.raises(InvalidParamsError) as err:
             simulate.Params(**kwargs)
         assert err.value.field == name

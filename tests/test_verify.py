@@ -11,7 +11,7 @@ import pytest
 import yaml
 
 from bearnav_cli import verify
-from bearnav_cli.datatypes import CellFlag, Plan, replace
+from bearnav_cli.datatypes import CellFlag, Outcome, Plan, replace
 from bearnav_cli.errors import InvalidParamsError
 from bearnav_cli.geometry import FreeSpace
 from bearnav_cli.stages import simulate
@@ -248,7 +248,7 @@ def test_kitchen_plan_is_certified_and_covers_the_map(kitchen):
     assert sum(report.outcome_counts.values()) == 200
     routes, straight = report.route, report.straight
     assert np.all(routes >= straight - 1e-9)
-    done = report.rollouts.outcome == simulate.Outcome.SUCCESS
+    done = report.rollouts.outcome == Outcome.SUCCESS
     finish = np.hypot(*(report.rollouts.final_position[done] - plan.map.goal).T)
     assert np.all(report.rollouts.path_length[done] + finish >= routes[done] - 1e-9)  # routes are shortest
 
@@ -288,4 +288,4 @@ def test_every_example_map_reaches_the_goal_from_its_own_starts(example):
     plan, _ = example
     params = pipeline.resolve_params("simulate", plan.map.params, {"record_trajectories": False})
     runs = simulate.rollout(plan, plan.map.starts, params)
-    assert (runs.outcome == simulate.Outcome.SUCCESS).all(), runs.counts()
+    assert (runs.outcome == Outcome.SUCCESS).all(), runs.counts()

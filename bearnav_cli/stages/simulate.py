@@ -1,39 +1,38 @@
 """``bearnav simulate``: the closed loop of ALGORITHMS §7, every robot advanced together.
 
-Each step measures what a robot's camera would see (world-frame bearings with Gaussian
-angle noise, the field of view around the camera heading, occlusion by the raw
-obstacles, an optional range), hands it to :func:`bearnav_cli.runtime.control` (the
-very function a robot runs: reconstruction, cell policy, gain, speed normalisation,
-hold policy) and integrates the single integrator or the unicycle. The measurement
-``displacement`` feeds the true displacements instead (``x̂ = x``, paper B).
-
-All robots advance in lock step as arrays: a step is a handful of numpy operations
-over the robots still running, one batched line-of-sight test of their landmark
-sight lines and one batched, exact segment test
-(:meth:`~bearnav_cli.geometry.FreeSpace.segments_free`) of their step segments against
-the inflated obstacles and the bounds.
+Each step asks the simulated camera (:mod:`bearnav_cli.world.camera`, or ``camera="render"``) what
+the robots see, hands it to :func:`bearnav_cli.runtime.control` (the very function a robot runs)
+and moves the simulated bases (:mod:`bearnav_cli.world.motion`: single integrator or unicycle,
+wheel slip, the exact collision test, clearance). The measurement ``displacement`` feeds the true
+displacements instead (``x̂ = x``, paper B). This module keeps the loop's bookkeeping: outcomes,
+the no-progress window, step limits, the recorded trajectories and the metrics. All robots advance
+in lock step as arrays.
 """
 
 from __future__ import annotations
 
-import enum
 import logging
 import math
-import re
 from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-import shapely
 
 from bearnav_cli import runtime
-from bearnav_cli.datatypes import Simulation
+from bearnav_cli.datatypes import Outcome, Simulation, replace
 from bearnav_cli.errors import InvalidParamsError
 from bearnav_cli.geometry import FreeSpace
-from bearnav_cli.routes import sample_starts
 from bearnav_cli.runtime import ControlSettings, ControlState, PlanArrays, bearing
+from bearnav_cli.world import starts as world_starts
+from bearnav_cli.world.camera import CAMERAS, Camera, IdealCamera
+from bearnav_cli.world.motion import Base, Contact, initial_headings
+from bearnav_cli.world.starts import parse_starts
 
-VERSION = 1
+__all__ = ["PROGRESS_EVERY", "PROGRESS_WINDOW", "Params", "Settings", "VERSION", "in_domain", "make_camera",
+           "metrics", "resolve_starts", "rollout", "run", "settings", "start_loop", "step_limits", "summary",
+           "tree_routes"]  # fmt: skip
+
+VERSION = 2
 log = logging.getLogger(__name__)
 
 #: A robot must move ``2·v·dt`` net over this many steps with a fix, or it stalls (ALGORITHMS §7.2).
@@ -42,18 +41,10 @@ PROGRESS_WINDOW = 200
 PROGRESS_EVERY = 25
 #: Outcome of a robot still running (internal).
 RUNNING = -1
-#: ``--starts`` forms: ``map``, ``random:N`` or ``x,y;x,y;...``.
-_RANDOM = re.compile(r"^random:(\d+)$")
 
 
-class Outcome(enum.IntEnum):
-    """How a run ended (ALGORITHMS §7.4)."""
-
-    SUCCESS = 0  # within goal_tolerance of the goal
-    COLLISION = 1  # a step segment met the inflated obstacles or left the bounds (or the start was not free)
-    STALL = 2  # field below 1e-6·u_max, or no net progress over PROGRESS_WINDOW steps with a fix
-    TIMEOUT = 3  # more than max_steps steps
-    LOST = 4  # fewer than two usable landmarks for longer than hold_time
+def _radians(degrees: float | None) -> float | None:
+    return None if degrees is None else math.radians(degrees)
 
 
 def _positive(value: float | None, name: str, *, allow_none: bool = True) -> None:
@@ -109,11 +100,18 @@ class Params:
         Seconds without a usable reconstruction before the robot stops to look around (a
         revolution at ``beta``); then the run is ``lost`` (§7.5).
     odometry : bool
-        Between fixes, carry ``x̂`` forward with the commanded motion (exact here: the
-        simulation has no wheel slip) for at most ``hold_time``; off: §7.5's hold as written.
+        Between fixes, carry ``x̂`` forward with the commanded motion (wheel odometry: it errs by
+        the wheel slip, ``odometry_noise``) for ``hold_time``, and on while the filter's 3σ stays
+        within the barrier margin; off: §7.5's hold as written.
     odometry_noise : float
-        Wheel slip: each step's true displacement is the commanded one scaled by ``1 + ε`` and
-        turned by ``ε'`` (rad), ``ε, ε' ~ N(0, odometry_noise²)``; 0 is the exact dynamics of §7.1.
+        Wheel slip ``σ`` of the simulated base (default 0.02): odometry alone errs by ``≈ σ·d``
+        (standard deviation, along and across the path) over a straight run of length ``d`` (per run
+        a scale error and a heading bias, both ``N(0, σ²)``, plus per-step jitter of the same size:
+        :class:`bearnav_cli.world.motion.Base`). 0 is the exact motion of §7.1 that the certificates
+        assume (``verify`` runs with it). The controller's filter assumes ``odometry_drift`` = 5% of
+        each step (:class:`~bearnav_cli.runtime.ControlSettings`): more than one step's slip (2σ =
+        4% rms), but it adds steps up as independent (σ like ``5%·√(d·step)``) while the per-run
+        slip adds up linearly, so after a few blind steps it is over-confident (``docs/choices.md``).
     max_fix_error : float or None
         Use a noisy fix only if its predicted 3σ position error (from ``noise_deg`` and the
         bearing geometry, :func:`bearnav_cli.runtime.bearing.fix_variance`) is at most this (map units);
@@ -128,8 +126,13 @@ class Params:
     max_steps : int or None
         Step limit of every run; ``None`` means ``ceil(5·L_route/(v·dt)) + 1000`` per run, with
         ``L_route = ‖x₀ − x_n‖ + cost(n)`` and ``n`` the start's nearest tree node.
+    camera : {"ideal", "render"}
+        ``ideal``: the bearings of ALGORITHMS §6.1 (:class:`bearnav_cli.world.camera.IdealCamera`,
+        ``fov``, ``noise_deg``, ``range`` and ``occlusion`` above); ``render``: frames drawn and
+        AprilTags detected in them (``bearnav_cli.world.render.RenderedCamera``, needs
+        ``bearnav[camera]``; its figures go to the metrics under ``camera``).
     seed : int
-        Seeds the bearing noise and the random starts (separate streams).
+        Seeds the bearing noise, the wheel slip and the random starts (separate streams).
     record_trajectories : bool
         Keep every robot's trajectory (``verify`` turns this off).
     """
@@ -153,17 +156,18 @@ class Params:
     hold_time: float = 2.0
     odometry: bool = True
     max_fix_error: float | None = None
-    odometry_noise: float = 0.0
+    odometry_noise: float = 0.02
     starts: str = "map"
     dt: float | None = None
     goal_tolerance: float | None = None
     max_steps: int | None = None
+    camera: str = "ideal"
     seed: int = 0
     record_trajectories: bool = True
 
     def __post_init__(self) -> None:
         for name, allowed in (("dynamics", runtime.DYNAMICS), ("measurement", runtime.MEASUREMENTS),
-                              ("reconstruction", bearing.METHODS)):  # fmt: skip
+                              ("reconstruction", bearing.METHODS), ("camera", CAMERAS)):  # fmt: skip
             if getattr(self, name) not in allowed:
                 raise InvalidParamsError(f"must be one of {', '.join(allowed)}, got {getattr(self, name)!r}",
                                          field=name)  # fmt: skip
@@ -181,32 +185,6 @@ class Params:
         ):
             raise InvalidParamsError(f"must be a positive integer, got {self.max_steps}", field="max_steps")
         parse_starts(self.starts)  # syntax only; positions are checked against the map in run()
-
-
-def parse_starts(spec: str) -> str | int | np.ndarray:
-    """``"map"``, the count of ``random:N``, or the explicit starts as an array (n, 2).
-
-    Raises
-    ------
-    InvalidParamsError
-        Anything else.
-    """
-    text = str(spec).strip()
-    if text == "map":
-        return "map"
-    match = _RANDOM.match(text)
-    if match:
-        count = int(match.group(1))
-        if count < 1:
-            raise InvalidParamsError("random:N needs N >= 1", field="starts")
-        return count
-    try:
-        points = [[float(v) for v in item.split(",")] for item in text.split(";") if item.strip()]
-    except ValueError:
-        points = []
-    if not points or any(len(p) != 2 or not all(math.isfinite(v) for v in p) for p in points):
-        raise InvalidParamsError(f"expected map, random:N or x,y;x,y;..., got {spec!r}", field="starts")
-    return np.array(points, float)
 
 
 @dataclass(frozen=True)
@@ -257,126 +235,37 @@ def settings(plan, params: Params) -> Settings:
     return Settings(v, dt, eps_sw, goal_tolerance, plan.map.tol, control)
 
 
-@dataclass(frozen=True, eq=False)
-class Rollouts:
-    """The runs of one :func:`rollout` call, ``R`` robots.
-
-    Attributes
-    ----------
-    starts : ndarray, shape (R, 2)
-    outcome : ndarray of int8, shape (R,)
-        :class:`Outcome` values.
-    steps : ndarray of int64, shape (R,)
-        Euler steps taken.
-    time : ndarray, shape (R,)
-        ``steps · dt`` (s).
-    path_length : ndarray, shape (R,)
-        Length of the trajectory polyline (map units).
-    left_cell : ndarray of int64, shape (R,)
-        Relocations after leaving the cell through a side face (ALGORITHMS §7.3).
-    approach_steps : ndarray of int64, shape (R,)
-        Steps driven straight to a tree node from outside every safe set (docs/choices.md).
-    hold_steps : ndarray of int64, shape (R,)
-        Steps without a usable reconstruction (hold policy, §7.5).
-    certified_steps : ndarray of int64, shape (R,)
-        Steps covered by the composed certificate (ALGORITHMS §11.4; 0 for ``paper`` plans).
-    start_in_domain : ndarray of bool, shape (R,)
-        The start lies in the certified domain ``D`` (a funnel plan's cells, ALGORITHMS §11.3).
-    min_clearance : ndarray, shape (R,)
-        Smallest distance from the inflated obstacles and the walls of ``B_r`` along the run (map units).
-    final_position : ndarray, shape (R, 2)
-    final_cell : ndarray of int64, shape (R,)
-        Active cell at the end (``-1`` if the start was not free or never had a fix).
-    max_steps : ndarray of int64, shape (R,)
-        Step limit of each run.
-    trajectory_coords, trajectory_cells, trajectory_offsets : ndarray, shapes (P, 2), (P,), (R + 1,)
-        Run ``r`` visits ``trajectory_coords[o[r]:o[r + 1]]`` (start first, ``steps + 1`` points);
-        ``trajectory_cells`` is the cell whose field moved the robot on from each point (the
-        active cell at the end for the last point). Empty when trajectories are not recorded.
-    trajectory_heading : ndarray, shape (P,)
-        Camera heading at each trajectory point (rad).
-    speed, dt, eps_sw, goal_tolerance : float
-        The loop constants used.
-    """
-
-    starts: np.ndarray
-    outcome: np.ndarray
-    steps: np.ndarray
-    time: np.ndarray
-    path_length: np.ndarray
-    left_cell: np.ndarray
-    approach_steps: np.ndarray
-    hold_steps: np.ndarray
-    certified_steps: np.ndarray
-    start_in_domain: np.ndarray
-    min_clearance: np.ndarray
-    final_position: np.ndarray
-    final_cell: np.ndarray
-    max_steps: np.ndarray
-    trajectory_coords: np.ndarray
-    trajectory_cells: np.ndarray
-    trajectory_offsets: np.ndarray
-    trajectory_heading: np.ndarray
-    speed: float
-    dt: float
-    eps_sw: float
-    goal_tolerance: float
-
-    def __len__(self) -> int:
-        return len(self.outcome)
-
-    def trajectory(self, r: int) -> np.ndarray:
-        """Positions of run ``r``, shape (steps + 1, 2) (empty if not recorded)."""
-        o = self.trajectory_offsets
-        return self.trajectory_coords[o[r] : o[r + 1]]
-
-    def cells_along(self, r: int) -> np.ndarray:
-        """Cells along run ``r``, aligned with :meth:`trajectory`."""
-        o = self.trajectory_offsets
-        return self.trajectory_cells[o[r] : o[r + 1]]
-
-    def counts(self) -> dict[str, int]:
-        """Number of runs per outcome name (every outcome listed)."""
-        return {o.name.lower(): int(np.count_nonzero(self.outcome == o)) for o in Outcome}
-
-    @property
-    def success_rate(self) -> float:
-        """Fraction of successful runs (NaN without runs)."""
-        return float(np.mean(self.outcome == Outcome.SUCCESS)) if len(self) else math.nan
-
-    def success_rate_of(self, runs: np.ndarray) -> float:
-        """Fraction of successful runs among ``runs`` (bool mask, shape (R,)); NaN when it selects none."""
-        done = self.outcome[runs] == Outcome.SUCCESS
-        return float(np.mean(done)) if len(done) else math.nan
-
-    @property
-    def certified_fraction(self) -> float:
-        """Steps covered by the composed certificate over all steps (ALGORITHMS §11.4; 0 without steps)."""
-        return float(self.certified_steps.sum() / max(1, self.steps.sum()))
-
-
-def step_limits(arrays: PlanArrays, starts: np.ndarray, s: Settings, params: Params) -> np.ndarray:
-    """``max_steps`` of each run (ALGORITHMS §7.2), shape (R,)."""
+def step_limits(arrays: PlanArrays, starts: np.ndarray, s: Settings, params: Params,
+                routes: np.ndarray | None = None) -> np.ndarray:  # fmt: skip
+    """``max_steps`` of each run (ALGORITHMS §7.2), shape (R,); ``routes``: :func:`tree_routes` if known."""
     if params.max_steps is not None:
         return np.full(len(starts), int(params.max_steps), np.int64)
-    return np.ceil(5.0 * tree_routes(arrays, starts) / (s.speed * s.dt)).astype(np.int64) + 1000
+    routes = tree_routes(arrays, starts) if routes is None else routes
+    return np.ceil(5.0 * routes / (s.speed * s.dt)).astype(np.int64) + 1000
 
 
 def tree_routes(arrays: PlanArrays, starts: np.ndarray) -> np.ndarray:
     """``L_route = ‖x₀ − x_n‖ + cost(n)`` with ``n`` the start's nearest node (map units), shape (R,)."""
+    if not len(starts):
+        return np.zeros(0)
     near = runtime.nearest_node(arrays, starts)
     return np.hypot(*(starts - arrays.nodes[near]).T) + arrays.node_cost[near]
 
 
 class _Loop:
-    """Mutable state of every robot during :func:`rollout` (arrays indexed by run)."""
+    """Mutable state of every robot during :func:`rollout` (arrays indexed by run).
 
-    def __init__(self, arrays: PlanArrays, space: FreeSpace, starts: np.ndarray, heading: np.ndarray, s: Settings,
-                 params: Params, limits: np.ndarray, world_landmarks: np.ndarray | None = None):  # fmt: skip
+    The world around the controller is three objects: ``camera`` (None for the displacement
+    measurement), ``base`` (:class:`~bearnav_cli.world.motion.Base`) and ``contact``
+    (:class:`~bearnav_cli.world.motion.Contact`); the rest is the loop's own bookkeeping.
+    """
+
+    def __init__(self, arrays: PlanArrays, camera: Camera | None, base: Base, contact: Contact, starts: np.ndarray,
+                 heading: np.ndarray, s: Settings, params: Params, limits: np.ndarray,
+                 world_landmarks: np.ndarray | None = None):  # fmt: skip
         r = len(starts)
-        self.arrays, self.space, self.s, self.params, self.limits = arrays, space, s, params, limits
-        self.rng = np.random.default_rng([params.seed, 2])
-        self.slip = np.random.default_rng([params.seed, 3])
+        self.arrays, self.camera, self.base, self.contact = arrays, camera, base, contact
+        self.s, self.params, self.limits = s, params, limits
         self.x = starts.copy()
         self.phi = heading.copy()  # unicycle yaw; the single integrator's camera looks along its last command
         self.state = ControlState.initial(heading)
@@ -388,41 +277,22 @@ class _Loop:
         self.approach = np.zeros(r, np.int64)
         self.held = np.zeros(r, np.int64)
         self.certified = np.zeros(r, np.int64)
-        self.clearance = space.clearance(starts) if r else np.zeros(0)
-        self.last_clearance = self.clearance.copy()  # at the last query, and the path length since
-        self.since = np.zeros(r)
         self.history = np.zeros((PROGRESS_WINDOW + 1, r, 2))  # ring buffer of positions, by moving steps
         self.history[0] = starts
         self.trace: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
-        self.fov = math.radians(params.fov)
-        self.sigma = math.radians(params.noise_deg)
-        self.max_range = math.inf if params.range is None else float(params.range)
         self.world = arrays.landmarks if world_landmarks is None else np.asarray(world_landmarks, float)
-        self.sight = space.visibility_regions(self.world) if params.occlusion else []
+        # paper B's deformed world, displacement-fed: the controller measures the moved landmarks
+        self.moved_world = self.world is not arrays.landmarks and params.measurement == "displacement"
 
     def finish(self, runs: np.ndarray, outcome: Outcome) -> None:
         self.outcome[runs] = outcome
 
-    def camera_heading(self, idx: np.ndarray) -> np.ndarray:
-        """The unicycle's yaw; the single integrator's camera looks along its last command (or scans)."""
-        return self.phi[idx]
-
     def measure(self, idx: np.ndarray, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Noisy world-frame bearings (R, L, 2) and what the camera sees (R, L), ALGORITHMS §6.1."""
-        params = self.params
-        n_lm = len(self.world)
-        if params.measurement == "displacement":
+        """World-frame bearings (R, L, 2) and what the camera sees (R, L), ALGORITHMS §6.1."""
+        if self.camera is None:  # displacement measurement: no camera
+            n_lm = len(self.world)
             return np.zeros((len(idx), n_lm, 2)), np.ones((len(idx), n_lm), bool)
-        seen = bearing.in_field_of_view(p, self.camera_heading(idx), self.world, self.fov, tol=self.s.tol)
-        if math.isfinite(self.max_range):
-            seen &= bearing.in_range(p, self.world, self.max_range)
-        if params.occlusion and seen.any():
-            # one prepared point query per sight line against each landmark's visibility region
-            # (FreeSpace.visibility_regions: the same answers as the segment test, much cheaper)
-            for k in np.flatnonzero(seen.any(axis=0)):
-                rows = np.flatnonzero(seen[:, k])
-                seen[rows, k] = shapely.intersects_xy(self.sight[k], p[rows, 0], p[rows, 1])
-        return bearing.noisy_bearings(p, self.world, self.sigma, self.rng), seen
+        return self.camera.measure(idx, p, self.phi[idx])
 
     def step(self, active: np.ndarray) -> np.ndarray:
         """Advance the robots ``active`` by one step (ALGORITHMS §7.2); return those still running."""
@@ -435,11 +305,10 @@ class _Loop:
             if not active.size:
                 return active
         bearings, seen = self.measure(active, p)
-        moved_world = self.world is not arrays.landmarks and params.measurement == "displacement"
-        measured = (self.world[None] - p[:, None, :]) if moved_world else None
+        measured = (self.world[None] - p[:, None, :]) if self.moved_world else None
         out = runtime.control(arrays, s.control, self.state.take(active), bearings, seen, self.phi[active], x_true=p,
                               displacements=measured)  # fmt: skip
-        heading = self.camera_heading(active)
+        heading = self.phi[active]
         self.state.put(active, out.state)
         self.left[active] += out.relocated
         self.approach[active] += out.state.target >= 0
@@ -451,48 +320,23 @@ class _Loop:
             if hit.any():
                 self.finish(active[hit], outcome)
                 ended |= hit
+        command = (out.velocity, out.forward, out.turn, out.scanning, out.fix)
         if ended.any():
             keep = ~ended
             active, p, heading = active[keep], p[keep], heading[keep]
-            out_v, out_f, out_t, fix = out.velocity[keep], out.forward[keep], out.turn[keep], out.fix[keep]
-            out_scan = out.scanning[keep]
+            command = tuple(c[keep] for c in command)
             if not active.size:
                 return active
-        else:
-            out_v, out_f, out_t, fix, out_scan = out.velocity, out.forward, out.turn, out.fix, out.scanning
-        phi = self.phi[active]
-        if params.dynamics == "unicycle":
-            q = p + s.dt * out_f[:, None] * np.column_stack([np.cos(phi), np.sin(phi)])
-            self.phi[active] = bearing.wrap(phi + s.dt * out_t)
-        else:
-            q = p + s.dt * out_v
-            # the camera looks along the last command, or turns while the robot looks around
-            d = self.state.last_dir[active]
-            self.phi[active] = np.where(out_scan, bearing.wrap(phi + s.dt * out_t), np.arctan2(d[:, 1], d[:, 0]))
-        if params.odometry_noise > 0:
-            # wheel slip: the robot moves a little farther or shorter and off its command, so the
-            # controller's odometry is only an estimate
-            move = q - p
-            scale = 1.0 + params.odometry_noise * self.slip.standard_normal(len(p))
-            turn = params.odometry_noise * self.slip.standard_normal(len(p))
-            c, s_ = np.cos(turn), np.sin(turn)
-            rotated = np.column_stack([c * move[:, 0] - s_ * move[:, 1], s_ * move[:, 0] + c * move[:, 1]])
-            q = p + scale[:, None] * rotated
-        free = self.space.segments_free(p, q)
+        velocity, forward, turn, scanning, fix = command
+        q, self.phi[active] = self.base.step(active, p, self.phi[active], velocity, forward, turn, scanning,
+                                             self.state.last_dir[active])  # fmt: skip
+        free = self.contact.free(p, q)
         if params.record_trajectories:
             self.trace.append((active, p, self.state.cell[active].copy(), heading))
         self.x[active] = q
         self.steps[active] += 1
         self.length[active] += np.hypot(*(q - p).T)
-        # the smallest clearance so far: a step moves at most `reach` closer to an obstacle, so a
-        # robot whose last measured clearance minus the distance since is above its minimum needs no query
-        self.since[active] += np.hypot(*(q - p).T)
-        due = self.last_clearance[active] - self.since[active] < self.clearance[active]
-        if due.any():
-            idx = active[due]
-            measured = self.space.clearance(q[due])
-            self.clearance[idx] = np.minimum(self.clearance[idx], measured)
-            self.last_clearance[idx], self.since[idx] = measured, 0.0
+        self.contact.track(active, p, q)
         if not free.all():
             self.finish(active[~free], Outcome.COLLISION)
             active, q, fix = active[free], q[free], fix[free]
@@ -520,24 +364,62 @@ class _Loop:
         runs = np.concatenate([*(t[0] for t in self.trace), np.arange(r)])
         points = np.concatenate([*(t[1] for t in self.trace), self.x]) if r else np.zeros((0, 2))
         cells = np.concatenate([*(t[2] for t in self.trace), self.state.cell])
-        final_heading = self.camera_heading(np.arange(r))
-        heading = np.concatenate([*(t[3] for t in self.trace), final_heading])
+        heading = np.concatenate([*(t[3] for t in self.trace), self.phi])
         order = np.argsort(runs, kind="stable")  # steps were appended in time order
         offsets = np.concatenate([[0], np.cumsum(np.bincount(runs, minlength=r))]).astype(np.int64)
         return points[order], cells[order], heading[order], offsets
 
 
-def initial_headings(arrays: PlanArrays, starts: np.ndarray, params: Params) -> np.ndarray:
-    """The heading each run starts with (rad, shape (R,)): ``initial_heading``, or toward the exit
-    point of the cell the start is located in (the goal in the goal cell), ALGORITHMS §7.1."""
-    if params.initial_heading is not None:
-        return np.full(len(starts), math.radians(params.initial_heading))
-    if not len(starts):
-        return np.zeros(0)
-    cell = runtime.locate(arrays, starts)
-    aim = np.where((arrays.parent_cell[cell] >= 0)[:, None], arrays.exit_point[cell], arrays.goal)
-    d = aim - starts
-    return np.arctan2(d[:, 1], d[:, 0])
+def make_camera(plan, world, space: FreeSpace, params: Params) -> Camera | None:
+    """The camera of :attr:`Params.camera` for robots in ``world`` (whose free space is ``space``),
+    drawing from the stream ``[seed, 2]``; ``None`` for ``measurement="displacement"``.
+
+    Raises
+    ------
+    InvalidParamsError
+        ``camera="render"`` in a world other than the plan's map (it draws the plan's).
+    """
+    if params.measurement == "displacement":
+        return None
+    rng = np.random.default_rng([params.seed, 2])
+    if params.camera == "render":
+        if world is not plan.map:
+            raise InvalidParamsError("the rendered camera draws the plan's own map; use camera ideal for another world",
+                                     field="camera")  # fmt: skip
+        from bearnav_cli.world.render import RenderedCamera  # OpenCV, only when asked for
+
+        return RenderedCamera.for_plan(plan, fov=math.radians(params.fov), rng=rng)
+    return IdealCamera(space, world.landmarks, fov=math.radians(params.fov), noise=math.radians(params.noise_deg),
+                       max_range=math.inf if params.range is None else float(params.range),
+                       occlusion=params.occlusion, tol=plan.map.tol, rng=rng)  # fmt: skip
+
+
+def start_loop(plan, starts: np.ndarray, params: Params = Params(), world=None) -> tuple[_Loop, np.ndarray, dict]:
+    """The loop of :func:`rollout` before its first step: the loop, the runs to step and what it was built from.
+
+    Starts that are not free are already finished as collisions. The dict holds the ``arrays``,
+    ``settings`` and ``routes`` (:func:`tree_routes`) of the runs.
+    """
+    arrays = PlanArrays.from_plan(plan)
+    world = plan.map if world is None else world
+    if len(world.landmarks) != len(arrays.landmarks):
+        raise InvalidParamsError("the world must have the plan's landmarks (moved, not added)", field="world")
+    space = FreeSpace.from_map(world)
+    s = settings(plan, params)
+    x0 = np.array(starts, float).reshape(-1, 2)
+    routes = tree_routes(arrays, x0)
+    limits = step_limits(arrays, x0, s, params, routes)
+    blocked = ~space.points_free(x0)
+    heading = np.zeros(len(x0))
+    if (~blocked).any():
+        heading[~blocked] = initial_headings(arrays, x0[~blocked], _radians(params.initial_heading))
+    camera = make_camera(plan, world, space, params)
+    base = Base(params.dynamics, s.dt, params.odometry_noise, len(x0), np.random.default_rng([params.seed, 3]))
+    loop = _Loop(arrays, camera, base, Contact(space, x0), x0, heading, s, params, limits, world.landmarks)
+    if blocked.any():
+        log.warning("%d starts are not free: counted as collisions", int(np.count_nonzero(blocked)))
+        loop.finish(np.flatnonzero(blocked), Outcome.COLLISION)
+    return loop, np.flatnonzero(~blocked), {"arrays": arrays, "settings": s, "routes": routes}
 
 
 def rollout(
@@ -546,7 +428,7 @@ def rollout(
     params: Params = Params(),
     progress: Callable[[int, int], None] | None = None,
     world=None,
-) -> Rollouts:
+) -> Simulation:
     """Run the closed loop from every start at once.
 
     Parameters
@@ -567,26 +449,12 @@ def rollout(
 
     Returns
     -------
-    Rollouts
-        Outcome, steps, time, path length, relocations and trajectory of every run.
+    Simulation
+        Outcome, figures and trajectory of every run, the loop constants, the plan's tree and
+        cells; ``stats`` holds only the camera's ``report()`` (under ``camera``) if it has one.
     """
-    arrays = PlanArrays.from_plan(plan)
-    world = plan.map if world is None else world
-    if len(world.landmarks) != len(arrays.landmarks):
-        raise InvalidParamsError("the world must have the plan's landmarks (moved, not added)", field="world")
-    space = FreeSpace.from_map(world)
-    s = settings(plan, params)
-    x0 = np.array(starts, float).reshape(-1, 2)
-    limits = step_limits(arrays, x0, s, params)
-    blocked = ~space.points_free(x0)
-    heading = np.zeros(len(x0))
-    if (~blocked).any():
-        heading[~blocked] = initial_headings(arrays, x0[~blocked], params)
-    loop = _Loop(arrays, space, x0, heading, s, params, limits, world.landmarks)
-    if blocked.any():
-        log.warning("%d starts are not free: counted as collisions", int(np.count_nonzero(blocked)))
-        loop.finish(np.flatnonzero(blocked), Outcome.COLLISION)
-    active = np.flatnonzero(~blocked)
+    loop, active, built = start_loop(plan, starts, params, world)
+    s, x0 = built["settings"], loop.x.copy()
     iteration = 0
     while active.size:
         active = loop.step(active)
@@ -596,29 +464,38 @@ def rollout(
     if progress is not None:
         progress(len(x0), len(x0))
     coords, cells, headings, offsets = loop.trajectories()
-    return Rollouts(
+    report = getattr(loop.camera, "report", None)
+    return Simulation(
+        map=plan.map,
         starts=x0,
         outcome=loop.outcome,
         steps=loop.steps,
         time=loop.steps * s.dt,
         path_length=loop.length,
+        route_length=built["routes"],
         left_cell=loop.left,
         approach_steps=loop.approach,
         hold_steps=loop.held,
         certified_steps=loop.certified,
-        start_in_domain=in_domain(arrays, x0),
-        min_clearance=loop.clearance,
+        start_in_domain=in_domain(built["arrays"], x0),
+        min_clearance=loop.contact.clearance,
         final_position=loop.x,
         final_cell=loop.state.cell,
-        max_steps=limits,
+        max_steps=loop.limits,
         trajectory_coords=coords,
         trajectory_cells=cells,
-        trajectory_offsets=offsets,
         trajectory_heading=headings,
+        trajectory_offsets=offsets,
+        nodes=plan.cells.nodes,
+        parent=plan.cells.parent,
+        cell_vertices=plan.cells.cell_vertices,
+        cell_vertex_offsets=plan.cells.cell_vertex_offsets,
+        cell_status=plan.status,
         speed=s.speed,
         dt=s.dt,
         eps_sw=s.eps_sw,
         goal_tolerance=s.goal_tolerance,
+        stats={"camera": report()} if callable(report) else {},
     )
 
 
@@ -633,64 +510,39 @@ def in_domain(arrays: PlanArrays, starts: np.ndarray) -> np.ndarray:
 
 
 def resolve_starts(plan, params: Params) -> np.ndarray:
-    """The starts of :attr:`Params.starts` for this plan, shape (R, 2).
-
-    Raises
-    ------
-    InvalidParamsError
-        A start outside the bounds or inside an obstacle, named by its index and position.
-    """
-    spec = parse_starts(params.starts)
-    space = FreeSpace.from_map(plan.map)
-    if isinstance(spec, int):
-        return sample_starts(space, plan.map.goal, spec, np.random.default_rng([params.seed, 1]))
-    starts = np.asarray(plan.map.starts, float).reshape(-1, 2) if isinstance(spec, str) else spec
-    inside = space.in_bounds(starts)
-    blocked = space.in_obstacle(starts)
-    for k, (x, y) in enumerate(starts):
-        if not inside[k]:
-            raise InvalidParamsError(f"start {k} ({x:g}, {y:g}) is outside the bounds", field="starts")
-        if blocked[k]:
-            raise InvalidParamsError(f"start {k} ({x:g}, {y:g}) is inside an obstacle", field="starts")
-    return starts
+    """The starts of :attr:`Params.starts` for this plan, shape (R, 2) (``random:N`` from the stream
+    ``[seed, 1]``); see :func:`bearnav_cli.world.starts.resolve_starts`."""
+    return world_starts.resolve_starts(plan.map, params.starts, np.random.default_rng([params.seed, 1]))
 
 
-def metrics(rollouts: Rollouts, routes: np.ndarray, goal: np.ndarray) -> dict:
-    """The figures ``bearnav simulate`` prints and writes to ``sim.json``.
-
-    Parameters
-    ----------
-    rollouts : Rollouts
-    routes : ndarray, shape (R,)
-        Tree route length ``L_route`` of each start (map units).
-    goal : ndarray, shape (2,)
-    """
-    done = rollouts.outcome == Outcome.SUCCESS
-    n = len(rollouts)
+def metrics(sim: Simulation) -> dict:
+    """The figures ``bearnav simulate`` prints and writes to ``sim.json`` (from the runs alone)."""
+    done = sim.outcome == Outcome.SUCCESS
+    n = len(sim)
 
     def mean(values: np.ndarray) -> float | None:
         return float(np.mean(values)) if len(values) else None
 
-    finish = np.hypot(*(rollouts.final_position - goal).T)  # the last straight bit into the goal ball
-    ratio = (rollouts.path_length + finish)[done] / np.maximum(routes[done], 1e-300)
+    finish = np.hypot(*(sim.final_position - sim.map.goal).T)  # the last straight bit into the goal ball
+    ratio = (sim.path_length + finish)[done] / np.maximum(sim.route_length[done], 1e-300)
     return {
         "runs": n,
         "success_rate": float(np.mean(done)) if n else None,
-        "outcomes": rollouts.counts(),
-        "time_mean_s": mean(rollouts.time[done]),
-        "time_max_s": float(np.max(rollouts.time[done])) if done.any() else None,
-        "path_length_mean": mean(rollouts.path_length[done]),
+        "outcomes": sim.counts(),
+        "time_mean_s": mean(sim.time[done]),
+        "time_max_s": float(np.max(sim.time[done])) if done.any() else None,
+        "path_length_mean": mean(sim.path_length[done]),
         "path_over_tree_route_mean": mean(ratio),
-        "min_clearance": float(np.min(rollouts.min_clearance)) if n else None,
-        "left_cell_events": int(rollouts.left_cell.sum()),
-        "runs_with_left_cell": int(np.count_nonzero(rollouts.left_cell > 0)),
-        "runs_with_approach": int(np.count_nonzero(rollouts.approach_steps > 0)),
-        "hold_time_total_s": float(rollouts.hold_steps.sum() * rollouts.dt),
-        "certified_step_fraction": rollouts.certified_fraction,
-        "runs_from_certified_domain": int(np.count_nonzero(rollouts.start_in_domain)),
-        "success_rate_in_domain": _finite_or_none(rollouts.success_rate_of(rollouts.start_in_domain)),
-        "success_rate_outside_domain": _finite_or_none(rollouts.success_rate_of(~rollouts.start_in_domain)),
-        "dt": rollouts.dt,
+        "min_clearance": float(np.min(sim.min_clearance)) if n else None,
+        "left_cell_events": int(sim.left_cell.sum()),
+        "runs_with_left_cell": int(np.count_nonzero(sim.left_cell > 0)),
+        "runs_with_approach": int(np.count_nonzero(sim.approach_steps > 0)),
+        "hold_time_total_s": float(sim.hold_steps.sum() * sim.dt),
+        "certified_step_fraction": sim.certified_fraction,
+        "runs_from_certified_domain": int(np.count_nonzero(sim.start_in_domain)),
+        "success_rate_in_domain": _finite_or_none(sim.success_rate_of(sim.start_in_domain)),
+        "success_rate_outside_domain": _finite_or_none(sim.success_rate_of(~sim.start_in_domain)),
+        "dt": sim.dt,
     }
 
 
@@ -704,43 +556,16 @@ def run(plan, params: Params = Params(), progress: Callable[[int, int], None] | 
     Returns
     -------
     Simulation
-        Every run's outcome, figures and trajectory, the metrics, and the tree and cells
-        it ran on (so ``sim.npz`` alone can be drawn).
+        What :func:`rollout` returns, with the :func:`metrics` (and the camera's report, if any)
+        as its ``stats``.
     """
-    starts = resolve_starts(plan, params)
-    rollouts = rollout(plan, starts, params, progress)
-    routes = tree_routes(PlanArrays.from_plan(plan), starts) if len(starts) else np.zeros(0)
-    cells = plan.cells
-    return Simulation(
-        map=plan.map,
-        starts=starts,
-        outcome=rollouts.outcome,
-        steps=rollouts.steps,
-        time=rollouts.time,
-        path_length=rollouts.path_length,
-        route_length=routes,
-        left_cell=rollouts.left_cell,
-        approach_steps=rollouts.approach_steps,
-        hold_steps=rollouts.hold_steps,
-        min_clearance=rollouts.min_clearance,
-        final_position=rollouts.final_position,
-        trajectory_coords=rollouts.trajectory_coords,
-        trajectory_cells=rollouts.trajectory_cells,
-        trajectory_heading=rollouts.trajectory_heading,
-        trajectory_offsets=rollouts.trajectory_offsets,
-        nodes=cells.nodes,
-        parent=cells.parent,
-        cell_vertices=cells.cell_vertices,
-        cell_vertex_offsets=cells.cell_vertex_offsets,
-        cell_status=plan.status,
-        dt=float(rollouts.dt),
-        stats=metrics(rollouts, routes, plan.map.goal),
-    )
+    sim = rollout(plan, resolve_starts(plan, params), params, progress)
+    return replace(sim, stats={**metrics(sim), **sim.stats})
 
 
-def summary(result: Simulation | Rollouts) -> str:
+def summary(result: Simulation) -> str:
     """One line: success rate and the other outcomes."""
-    counts = {o.name.lower(): int(np.count_nonzero(result.outcome == o)) for o in Outcome}
+    counts = result.counts()
     others = ", ".join(f"{n} {name}" for name, n in counts.items() if name != "success" and n)
-    text = f"{counts['success']}/{len(result.outcome)} runs reached the goal"
+    text = f"{counts['success']}/{len(result)} runs reached the goal"
     return text + (f" ({others})" if others else "")

@@ -18,7 +18,10 @@ import shapely
 from bearnav_cli.geometry import FreeSpace
 from bearnav_cli.runtime import bearing
 
-__all__ = ["Camera", "IdealCamera"]
+__all__ = ["CAMERAS", "Camera", "IdealCamera"]
+
+#: The simulated cameras ``bearnav simulate --camera`` chooses from.
+CAMERAS = ("ideal", "render")
 
 
 class Camera(Protocol):

@@ -1,0 +1,164 @@
+"""The simulated base: how a step's command moves the robot (with wheel slip), and what it hits.
+
+:class:`Base` integrates the command :func:`bearnav_cli.runtime.control` returns for one step
+(the single integrator ``x ← x + dt·u`` or the unicycle ``x ← x + dt·v·(cos φ, sin φ)``,
+``φ ← φ + dt·ω``, ALGORITHMS §7.1) and perturbs the displacement the way real wheels do: a
+per-run scale (wheel radius) error and heading bias, plus a little per-step jitter
+(:class:`Base` says how much). :class:`Contact` is the exact collision test of each step segment
+(:meth:`~bearnav_cli.geometry.FreeSpace.segments_free`) and the bookkeeping of every run's
+smallest clearance.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from bearnav_cli import runtime
+from bearnav_cli.geometry import FreeSpace
+from bearnav_cli.runtime import PlanArrays, bearing
+
+__all__ = ["Base", "Contact", "initial_headings"]
+
+
+def initial_headings(arrays: PlanArrays, starts: np.ndarray, heading: float | None = None) -> np.ndarray:
+    """The heading each run starts with (rad, shape (R,)): ``heading`` (rad) for all, or (``None``)
+    toward the exit point of the cell the start is located in (the goal in the goal cell), §7.1."""
+    if heading is not None:
+        return np.full(len(starts), float(heading))
+    if not len(starts):
+        return np.zeros(0)
+    cell = runtime.locate(arrays, starts)
+    aim = np.where((arrays.parent_cell[cell] >= 0)[:, None], arrays.exit_point[cell], arrays.goal)
+    d = aim - starts
+    return np.arctan2(d[:, 1], d[:, 0])
+
+
+class Base:
+    """The bases of ``R`` robots: commanded motion made true motion, with wheel slip.
+
+    Wheel slip of size ``σ = slip`` is what odometry gets wrong about a robot's displacement,
+    modelled as real odometry errs:
+
+    * per run, drawn once: a scale error ``ε_s ~ N(0, σ²)`` (wheel radius: every step is
+      ``1 + ε_s`` times as long as commanded) and a heading bias ``ε_h ~ N(0, σ²)`` (rad: every
+      step is turned by ``ε_h`` from the commanded direction);
+    * per step: jitter of the same size on both, ``N(0, σ²)``, drawn anew each step.
+
+    Over a straight run of length ``d`` in steps of length ``ℓ`` the systematic part displaces the
+    robot by ``ε_s·d`` along and ``≈ ε_h·d`` across its path, the jitter by only ``σ·√(d·ℓ)``: the
+    error odometry accumulates has a standard deviation of ``σ·d·√(1 + ℓ/d) ≈ σ·d`` in each
+    direction (``tests/test_world.py`` measures it). ``σ = 0`` is the exact motion of §7.1 (no
+    random numbers drawn).
+
+    Parameters
+    ----------
+    dynamics : {"single", "unicycle"}
+    dt : float
+        Step (s).
+    slip : float
+        ``σ`` (relative; 0.02 = 2% of the distance travelled).
+    runs : int
+        ``R``: the per-run errors are drawn for every run at once.
+    rng : numpy.random.Generator
+        Source of the per-run errors, then of each step's jitter.
+    """
+
+    def __init__(self, dynamics: str, dt: float, slip: float, runs: int, rng: np.random.Generator) -> None:
+        self.dynamics, self.dt, self.slip, self.rng = dynamics, float(dt), float(slip), rng
+        if self.slip > 0:
+            errors = self.slip * rng.standard_normal((runs, 2))
+            self.scale_error, self.heading_bias = errors[:, 0].copy(), errors[:, 1].copy()
+        else:
+            self.scale_error = self.heading_bias = np.zeros(runs)
+
+    def commanded(self, x: np.ndarray, heading: np.ndarray, velocity: np.ndarray, forward: np.ndarray,
+                  turn: np.ndarray, scanning: np.ndarray,
+                  last_dir: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+        """The exact displacement of one step (R, 2) and the new camera headings (R,), ALGORITHMS §7.1.
+
+        Parameters
+        ----------
+        x : ndarray, shape (R, 2)
+            Positions (map units).
+        heading : ndarray, shape (R,)
+            The unicycle's yaw, or the single integrator's camera heading (rad).
+        velocity : ndarray, shape (R, 2)
+            Single integrator command (map units / s).
+        forward, turn : ndarray, shape (R,)
+            Unicycle command ``v`` (map units / s) and ``ω`` (rad / s; also the single integrator's
+            camera turn while it looks around).
+        scanning : ndarray of bool, shape (R,)
+            The robot turns in place to look around.
+        last_dir : ndarray, shape (R, 2)
+            The single integrator's last command direction: its camera looks along it.
+        """
+        if self.dynamics == "unicycle":
+            move = self.dt * forward[:, None] * np.column_stack([np.cos(heading), np.sin(heading)])
+            return move, bearing.wrap(heading + self.dt * turn)
+        look = np.where(scanning, bearing.wrap(heading + self.dt * turn), np.arctan2(last_dir[:, 1], last_dir[:, 0]))
+        return self.dt * velocity, look
+
+    def slipped(self, runs: np.ndarray, move: np.ndarray) -> np.ndarray:
+        """The true displacements (R, 2) of commanded displacements ``move`` of robots ``runs``."""
+        if self.slip <= 0 or not len(runs):
+            return move
+        jitter = self.slip * self.rng.standard_normal((len(runs), 2))
+        scale = 1.0 + self.scale_error[runs] + jitter[:, 0]
+        turn = self.heading_bias[runs] + jitter[:, 1]
+        c, s = np.cos(turn), np.sin(turn)
+        return scale[:, None] * np.column_stack([c * move[:, 0] - s * move[:, 1], s * move[:, 0] + c * move[:, 1]])
+
+    def step(self, runs: np.ndarray, x: np.ndarray, heading: np.ndarray, velocity: np.ndarray, forward: np.ndarray,
+             turn: np.ndarray, scanning: np.ndarray,
+             last_dir: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+        """Where the robots ``runs`` (shape (R,)) are after one step, and their new camera headings.
+
+        See :meth:`commanded` for the arguments; the displacement is then :meth:`slipped`.
+        """
+        move, look = self.commanded(x, heading, velocity, forward, turn, scanning, last_dir)
+        return x + self.slipped(runs, move), look
+
+
+class Contact:
+    """Collisions of every run with the world, and the smallest clearance along each run.
+
+    Parameters
+    ----------
+    space : FreeSpace
+        The world the robots drive in (inflated obstacles and the bounds).
+    starts : ndarray, shape (R, 2)
+        Where the runs begin (their first clearance).
+    """
+
+    def __init__(self, space: FreeSpace, starts: np.ndarray) -> None:
+        self.space = space
+        r = len(starts)
+        #: Smallest clearance so far of each run (map units), shape (R,).
+        self.clearance = space.clearance(starts) if r else np.zeros(0)
+        self.last_clearance = self.clearance.copy()  # at each run's last query ...
+        self.since = np.zeros(r)  # ... and the path length driven since
+
+    def free(self, p: np.ndarray, q: np.ndarray) -> np.ndarray:
+        """Whether each step segment ``p → q`` (shapes (R, 2)) stays free: the exact segment test."""
+        return self.space.segments_free(p, q)
+
+    def track(self, runs: np.ndarray, p: np.ndarray, q: np.ndarray) -> None:
+        """Update the smallest clearance of ``runs`` after their steps ``p → q``.
+
+        Lazily: a step moves a robot at most its length closer to an obstacle, so a robot whose
+        clearance at its last query, minus the distance driven since, is still above its minimum
+        needs no query.
+        """
+        self.since[runs] += np.hypot(*(q - p).T)
+        due = self.last_clearance[runs] - self.since[runs] < self.clearance[runs]
+        if due.any():
+            idx = runs[due]
+            measured = self.space.clearance(q[due])
+            self.clearance[idx] = np.minimum(self.clearance[idx], measured)
+            self.last_clearance[idx], self.since[idx] = measured, 0.0
+
+    def step(self, runs: np.ndarray, p: np.ndarray, q: np.ndarray) -> np.ndarray:
+        """:meth:`free` and :meth:`track` for one step of ``runs``; returns the free mask (R,)."""
+        free = self.free(p, q)
+        self.track(runs, p, q)
+        return free
