@@ -42,14 +42,16 @@ def cbf_rows(
     child, parent : ndarray, shape (2,)
         ``x_i`` and ``x_j``.
     samples : ndarray, shape (S, 2)
-        Collision samples.
+        Collision samples (map units).
     A, b : ndarray, shapes (p, 2), (p,)
-        The cell's half-planes (for the in-cell filter).
+        The cell's half-planes ``A x <= b`` (for the in-cell filter).
     tol : float
-        Map tolerance.
+        Map tolerance (map units) of the in-cell filter and of the on-edge-line test.
     apex : {"child", "parent"}
         Where the wedge's lines pass through.
     sample_filter : {"both", "projection", "cell"}
+        Which samples may bound the wedge: those projecting onto the edge ``[x_i, x_j]``,
+        those inside the cell, or both.
 
     Returns
     -------
@@ -99,10 +101,27 @@ def goal_cbf_rows(
     Each sample ``o`` in the cell and off the border gives ``h_o(x) = n_o·(x − o)`` with
     ``n_o = unit(g − o)``; only rows that support an edge of the safe polygon are kept.
 
+    Parameters
+    ----------
+    goal : ndarray, shape (2,)
+        The goal ``g`` (map units); every row's normal points from its sample toward it.
+    samples : ndarray, shape (S, 2)
+        Collision samples of the tree (map units), border pseudo-samples included.
+    polygon : ndarray, shape (p, 2)
+        The goal cell (CCW, map units); only samples inside it (within ``tol``) give rows, and
+        the safe polygon the kept rows must support is this cell clipped by every row.
+    bounds : ndarray, shape (4,)
+        ``(xmin, ymin, xmax, ymax)`` of the map (map units); samples within ``tol`` of a border
+        line are border pseudo-samples and give no row.
+    tol : float
+        Map tolerance (map units) of the in-cell, on-border and supporting-edge tests.
+
     Returns
     -------
     normals : ndarray, shape (h, 2)
+        Unit normals ``n_o`` of the supporting rows.
     offsets : ndarray, shape (h,)
+        ``−n_o·o``, so that ``h(x) = normals @ x + offsets``.
     """
     A, b = polygon_rows(polygon)
     inside = np.all(samples @ A.T <= b + tol, axis=1)
@@ -142,7 +161,25 @@ def _nearest_separators(pieces, segment: shapely.Geometry) -> tuple[np.ndarray, 
 
 def wall_rows(polygon: np.ndarray, bounds: np.ndarray, reach: float) -> tuple[np.ndarray, np.ndarray]:
     """One row ``h(x) = n·x + q`` (inward unit normal, ``h`` the distance to the wall) per wall of ``B``
-    within ``reach`` of the cell, shapes (w, 2), (w,)."""
+    within ``reach`` of the cell.
+
+    Parameters
+    ----------
+    polygon : ndarray, shape (p, 2)
+        The cell's vertices (map units); a wall gets a row when some vertex lies within
+        ``reach`` of its line.
+    bounds : ndarray, shape (4,)
+        ``(xmin, ymin, xmax, ymax)`` of the walls ``B`` (map units).
+    reach : float
+        Distance from a wall (map units) below which the wall gets a row.
+
+    Returns
+    -------
+    normals : ndarray, shape (w, 2)
+        Inward unit normals, in the order left, right, bottom, top wall (``w <= 4``).
+    offsets : ndarray, shape (w,)
+        ``q``, so that ``h(x) = normals @ x + offsets`` is the distance to each wall.
+    """
     xmin, ymin, xmax, ymax = bounds
     normals, offsets = [], []
     for axis, value, sign in ((0, xmin, 1.0), (0, xmax, -1.0), (1, ymin, 1.0), (1, ymax, -1.0)):

@@ -106,6 +106,7 @@ def landmark_matrix(landmarks: np.ndarray) -> np.ndarray:
     Parameters
     ----------
     landmarks : ndarray, shape (n, 2)
+        Landmark positions ``l_k`` (map units).
 
     Returns
     -------
@@ -129,6 +130,8 @@ def field_map(space: str, landmarks: np.ndarray) -> np.ndarray:
         (4n). ``diag``: ``θ = (K[0, 2k] for k, K[1, 2k+1] for k)`` (2n). ``scalar``:
         ``K_k = θ_k I`` (n).
     landmarks : ndarray, shape (n, 2)
+        Landmark positions (map units); they enter ``L`` through ``G`` (:func:`landmark_matrix`)
+        in the gain spaces, and only their number matters for the size.
 
     Returns
     -------
@@ -155,7 +158,31 @@ def field_map(space: str, landmarks: np.ndarray) -> np.ndarray:
 
 
 def gain_from_theta(space: str, theta: np.ndarray, landmarks: np.ndarray) -> np.ndarray:
-    """The gain ``K`` (2, 2n) of the LP variables ``θ`` (see :func:`field_map`); field space uses Lemma 3."""
+    """The gain ``K`` (2, 2n) of the LP variables ``θ`` (see :func:`field_map`); field space uses Lemma 3.
+
+    Parameters
+    ----------
+    space : {"field", "full", "diag", "scalar"}
+        The variable space ``θ`` lives in (:func:`field_map`). In field space ``θ = vec([M, a])``
+        and the gain is the minimum-norm one that realises the field (:func:`min_norm_gain`).
+    theta : ndarray, shape (n_θ,)
+        The LP variables: 6 numbers in field space, 4n, 2n or n in the gain spaces.
+    landmarks : ndarray, shape (n, 2)
+        Positions of the cell's landmarks (map units); only their number matters in the gain
+        spaces.
+
+    Returns
+    -------
+    ndarray, shape (2, 2n)
+        ``K``, with ``u = K y`` and ``y = stack(l_k − x)``; block ``k`` is columns ``2k, 2k + 1``.
+
+    Raises
+    ------
+    ValueError
+        If ``space`` is none of the four.
+    ArtifactError
+        In field space, if all landmarks coincide (:func:`min_norm_gain`).
+    """
     n = len(landmarks)
     if space == "field":
         m00, m01, a0, m10, m11, a1 = theta.tolist()
@@ -194,12 +221,16 @@ def min_norm_gain(M: np.ndarray, a: np.ndarray, landmarks: np.ndarray) -> np.nda
     Parameters
     ----------
     M : ndarray, shape (2, 2)
+        The field's linear part (1/s).
     a : ndarray, shape (2,)
+        The field's constant part (map units/s).
     landmarks : ndarray, shape (n, 2)
+        Positions of the landmarks the gain reads (map units), ``n ≥ 2``.
 
     Returns
     -------
     ndarray, shape (2, 2n)
+        ``K* = [K_1 … K_n]``, with ``u = K* y`` and ``y = stack(l_k − x)``.
 
     Raises
     ------
@@ -268,7 +299,24 @@ class CellLp:
 
     ``x[:n_theta]`` are the variables ``θ``; ``x[n_theta:n_theta + n_h]`` the CBF slacks
     ``S_h``; ``x[n_theta + n_h]`` the CLF slack ``S_V``; further columns are multipliers
-    (dual form) or the least-violation variables ``t``.
+    (dual form) or the least-violation variables ``t``. The LP reads: minimise ``cost @ x``
+    subject to ``row_lower <= A x <= row_upper`` and ``col_lower <= x <= col_upper``.
+
+    Attributes
+    ----------
+    cost : ndarray, shape (n,)
+        Objective coefficients of the ``n`` columns (the weights ``w_h``, ``w_v`` on the slacks
+        or on ``t``, zero elsewhere).
+    A_indptr, A_indices, A_values : ndarray, shapes (m + 1,), (nnz,), (nnz,)
+        The constraint matrix ``A`` (m, n) in CSR form (:func:`~bearnav_cli.lp.dense_to_csr`).
+    row_lower, row_upper : ndarray, shape (m,)
+        Row bounds; ``-INF`` / ``INF`` where a row is one-sided, equal on equality rows.
+    col_lower, col_upper : ndarray, shape (n,)
+        Column bounds (``θ`` free, slacks ``<= 0`` unless least violation, multipliers ``>= 0``).
+    n_theta : int
+        Number of variables ``θ`` (the first columns).
+    n_h : int
+        Number of barrier rows, hence of CBF slacks after ``θ``.
     """
 
     cost: np.ndarray
@@ -305,6 +353,36 @@ class LpTemplate:
     bounds are shared by every :meth:`instantiate` call, so κ halvings cost a few vector
     operations. ``vertex_rows`` (vertex form only), shape ``((n_h + 1)·p, n_θ)``, is the dense
     ``θ`` block of the barrier and CLF rows, used to re-check a gain at the vertices.
+
+    Attributes
+    ----------
+    cost : ndarray, shape (n,)
+        Objective coefficients of the ``n`` columns, as in :class:`CellLp`.
+    A_indptr, A_indices, A_values : ndarray, shapes (m + 1,), (nnz,), (nnz,)
+        The constraint matrix (m, n) in CSR form, shared by every instance.
+    col_lower, col_upper : ndarray, shape (n,)
+        Column bounds, shared by every instance.
+    lower : ndarray, shape (m,)
+        Lower row bounds of the inequality rows (``-INF`` for one-sided rows, ``-u_max`` on the
+        box rows of the vertex form).
+    equality : ndarray of bool, shape (m,) or None
+        Rows whose lower bound equals their upper bound (the dual form's equalities); None when
+        there are none (vertex form).
+    rhs_h : ndarray
+        Upper bounds of the ``c_h``-scaled block, before scaling (``h_k(v_q)`` in the vertex
+        form; ``(−n_k, q_k)`` per barrier in the dual form).
+    rhs_v : ndarray
+        Upper bounds of the ``c_v``-scaled block, before scaling (``−V(v_q)`` per vertex in the
+        vertex form; ``(z, zᵀx_j)`` in the dual form).
+    rhs_const : ndarray
+        Upper bounds of the remaining rows (``u_max`` on the box rows, ``INF`` on the
+        least-violation rows).
+    n_theta : int
+        Number of variables ``θ`` (the first columns).
+    n_h : int
+        Number of barrier rows; with none the ``c_h`` block is empty and ``c_h`` is ignored.
+    vertex_rows : ndarray, shape ((n_h + 1)·p, n_θ) or None
+        Dense ``θ`` block of the barrier and CLF rows (vertex form only).
     """
 
     cost: np.ndarray
@@ -416,6 +494,25 @@ def vertex_template(problem: CellProblem, L: np.ndarray, u_max: float | None, w_
     Groups ``g`` in order: the ``h`` barrier rows (``d = −n_k``), the CLF (``d = z``), then
     the box as two ranged groups ``−u_max ≤ e_iᵀu ≤ u_max``. Row ``g·p + q`` reads
     ``d_gᵀu(v_q) − S_g ≤ r_g − ρ_gᵀv_q``, that is ``c_h·h_k(v_q)``, ``−c_v·V(v_q)`` or ``u_max``.
+
+    Parameters
+    ----------
+    problem : CellProblem
+        The cell: vertices ``v_q``, barrier rows, exit direction ``z`` and point ``x_j``.
+    L : ndarray, shape (2, 3, n_θ)
+        The variable map ``[M, a] = L θ`` (:func:`field_map`); :data:`FIELD_MAP` itself takes
+        the batched field-space builder (:func:`field_vertex_templates`).
+    u_max : float or None
+        Input bound ``|u_i| ≤ u_max`` (map units/s); None drops the box rows.
+    w_h, w_v : float
+        Objective weights of the CBF slacks ``S_h`` and of the CLF slack ``S_V``.
+    least_violation : bool
+        Free slacks and minimise ``Σ w·max(S, 0)`` instead (§5.3).
+
+    Returns
+    -------
+    LpTemplate
+        With ``vertex_rows`` set, for re-checking a gain at the vertices.
     """
     if L is FIELD_MAP and not least_violation:
         return _field_vertex_template(problem, u_max, w_h, w_v)
@@ -505,9 +602,11 @@ def field_vertex_templates(vertices: np.ndarray, vertex_offsets: np.ndarray, cbf
     vertices : ndarray, shape (P, 2)
         Every cell's CCW vertices; cell ``c`` owns rows ``vertex_offsets[c]:vertex_offsets[c + 1]``.
     vertex_offsets : ndarray of int, shape (C + 1,)
+        Start of each cell's vertices in ``vertices``, and their total ``P`` last.
     cbf_n, cbf_q : ndarray, shapes (H, 2), (H,)
         Barrier rows ``h = n @ x + q``; cell ``c`` owns rows ``cbf_offsets[c]:cbf_offsets[c + 1]``.
     cbf_offsets : ndarray of int, shape (C + 1,)
+        Start of each cell's barrier rows in ``cbf_n``, ``cbf_q``, and their total ``H`` last.
     z, x_j : ndarray, shape (C, 2)
         Exit direction and exit point per cell.
     cells : sequence of int
@@ -584,6 +683,24 @@ def dual_template(problem: CellProblem, L: np.ndarray, u_max: float | None, w_h:
 
     Groups: the ``h`` barrier rows (``d = −n_k``), the CLF (``d = z``), then the four box
     sides ``e_r``, each with its own multipliers ``λ_g ≥ 0`` (``m`` each).
+
+    Parameters
+    ----------
+    problem : CellProblem
+        The cell; the dual form uses its half-planes ``A x ≤ b`` instead of its vertices.
+    L : ndarray, shape (2, 3, n_θ)
+        The variable map ``[M, a] = L θ`` (:func:`field_map`).
+    u_max : float or None
+        Input bound ``|u_i| ≤ u_max`` (map units/s); None drops the four box groups.
+    w_h, w_v : float
+        Objective weights of the CBF slacks ``S_h`` and of the CLF slack ``S_V``.
+    least_violation : bool
+        Free slacks and minimise ``Σ w·max(S, 0)`` instead (§5.3).
+
+    Returns
+    -------
+    LpTemplate
+        Three rows per group (two equalities, one inequality), ``vertex_rows`` None.
     """
     A, b = problem.A, problem.b
     m = len(b)
@@ -653,6 +770,7 @@ def vertex_lp(problem: CellProblem, L: np.ndarray, c_h: float, c_v: float, u_max
     Parameters
     ----------
     problem : CellProblem
+        The cell's data.
     L : ndarray, shape (2, 3, n_θ)
         From :func:`field_map`.
     c_h, c_v : float
@@ -677,19 +795,72 @@ def dual_lp(problem: CellProblem, L: np.ndarray, c_h: float, c_v: float, u_max: 
             w_h: float = 1.0, w_v: float = 1.0, least_violation: bool = False) -> CellLp:  # fmt: skip
     """The dual form of (P): multipliers ``λ_g ≥ 0`` per group instead of vertex rows (§5.2).
 
-    Same parameters as :func:`vertex_lp`. Rows per group ``g``: ``A_xᵀλ_g + Mᵀd_g = ρ_g``
-    (two equalities) and ``b_xᵀλ_g + d_gᵀa − S_g ≤ r_g``. Columns after the slacks: ``λ_g``
-    (m each, ``m`` = number of cell rows), group by group.
+    Rows per group ``g``: ``A_xᵀλ_g + Mᵀd_g = ρ_g`` (two equalities) and
+    ``b_xᵀλ_g + d_gᵀa − S_g ≤ r_g``. Columns after the slacks: ``λ_g`` (m each, ``m`` =
+    number of cell rows), group by group.
+
+    Parameters
+    ----------
+    problem : CellProblem
+        The cell's data; its half-planes ``A x ≤ b`` give the multipliers' rows.
+    L : ndarray, shape (2, 3, n_θ)
+        From :func:`field_map`.
+    c_h, c_v : float
+        Barrier and Lyapunov constants (1/s); ``c_h`` is unused without barrier rows.
+    u_max : float or None
+        Input box (map units/s); ``None`` drops the four box groups.
+    w_h, w_v : float
+        Objective weights of the CBF and CLF slacks.
+    least_violation : bool
+        Free slacks and minimise ``Σ w·max(S, 0)`` instead (§5.3).
+
+    Returns
+    -------
+    CellLp
     """
     return dual_template(problem, L, u_max, w_h, w_v, least_violation).instantiate(c_h, c_v)
 
 
 def vertex_lp_field(problem: CellProblem, c_h: float, c_v: float, u_max: float | None, **kw) -> CellLp:
-    """Field-space vertex form: ``θ = vec([M, a])`` (row-major), 6 + n_h + 1 variables."""
+    """Field-space vertex form: ``θ = vec([M, a])`` (row-major), 6 + n_h + 1 variables.
+
+    Parameters
+    ----------
+    problem : CellProblem
+        The cell's data.
+    c_h, c_v : float
+        Barrier and Lyapunov constants (1/s).
+    u_max : float or None
+        Input box (map units/s); ``None`` drops the input rows.
+    **kw
+        ``w_h``, ``w_v`` and ``least_violation`` of :func:`vertex_lp`.
+
+    Returns
+    -------
+    CellLp
+    """
     return vertex_lp(problem, FIELD_MAP, c_h, c_v, u_max, **kw)
 
 
 def vertex_lp_gain(problem: CellProblem, c_h: float, c_v: float, u_max: float | None, structure: str = "full",
                    **kw) -> CellLp:  # fmt: skip
-    """Gain-space vertex form for a gain structure (``full``, ``diag`` or ``scalar``)."""
+    """Gain-space vertex form for a gain structure (``full``, ``diag`` or ``scalar``).
+
+    Parameters
+    ----------
+    problem : CellProblem
+        The cell's data; its landmarks fix the gain's size (2, 2n).
+    c_h, c_v : float
+        Barrier and Lyapunov constants (1/s).
+    u_max : float or None
+        Input box (map units/s); ``None`` drops the input rows.
+    structure : {"full", "diag", "scalar"}
+        Which gain entries are variables (:func:`field_map`).
+    **kw
+        ``w_h``, ``w_v`` and ``least_violation`` of :func:`vertex_lp`.
+
+    Returns
+    -------
+    CellLp
+    """
     return vertex_lp(problem, field_map(structure, problem.landmarks), c_h, c_v, u_max, **kw)

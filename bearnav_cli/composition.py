@@ -56,9 +56,14 @@ class Composition:
     coverage : float
         ``area(D ∩ F_m) / area(F_m)`` recomputed (exact polygon areas).
     stored_coverage : float
+        The coverage the plan's cells record (``cells.free_coverage``), to compare with ``coverage``.
     time_bound : float
         The worst-case time to the goal at ``speed`` (s), :func:`time_bound`.
     speed : float
+        The closed-loop speed the time bound assumes (map units/s).
+    notes : list of str
+        Problems that are not per-cell failures (a stored ``δ*`` that differs from the
+        recomputed one); :attr:`problems` lists them after the failing checks.
     regions : CoverageRegions or None
         The split of ``F_m`` the coverage was measured on (:func:`coverage_regions`).
     """
@@ -208,13 +213,21 @@ def world_violations(plan: Plan, space: FreeSpace) -> list[int]:
 
 
 class CoverageRegions(NamedTuple):
-    """The free space the cells must cover, split (ALGORITHMS §11.1, §11.5; :func:`coverage_regions`)."""
+    """The free space the cells must cover, split (ALGORITHMS §11.1, §11.5; :func:`coverage_regions`).
 
-    #: ``F_m`` less its parts that no cell meets (:func:`bearnav_cli.funnel.reached_parts`).
+    Attributes
+    ----------
+    domain : shapely geometry
+        ``F_m`` of the goal's free component less its parts that no cell meets
+        (:func:`bearnav_cli.funnel.reached_parts`), map units.
+    uncovered : shapely geometry
+        ``domain \\ D``: free space of the domain that no cell (no certificate) covers.
+    unreached : shapely geometry
+        The parts of ``F_m`` cut off from every cell by passages narrower than ``2m``.
+    """
+
     domain: shapely.Geometry
-    #: ``domain \ D``: free space no certificate covers.
     uncovered: shapely.Geometry
-    #: The parts of ``F_m`` cut off from every cell by passages narrower than ``2m``.
     unreached: shapely.Geometry
 
 
@@ -238,7 +251,19 @@ def coverage_margin(artifact: Cells | Plan) -> float:
 def coverage_regions(cells: Cells, space: FreeSpace | None = None, margin: float | None = None) -> CoverageRegions:
     """``F_m`` of the goal's free component, what of it the cells reach, and what they leave uncovered.
 
-    ``margin`` is ``m`` (default: :func:`coverage_margin` of ``cells``).
+    Parameters
+    ----------
+    cells : Cells
+        The decomposition (or a plan's ``cells``); its map gives the goal, bounds and obstacles.
+    space : FreeSpace, optional
+        The free space of ``cells.map`` (built from the map when None); pass it to reuse one.
+    margin : float, optional
+        The barrier margin ``m`` of ``F_m`` (map units); default :func:`coverage_margin` of
+        ``cells``.
+
+    Returns
+    -------
+    CoverageRegions
     """
     map_ = cells.map
     space = FreeSpace.from_map(map_) if space is None else space

@@ -53,7 +53,17 @@ class InvalidParamsError(BearnavError, ValueError):
 
 
 class ArtifactError(BearnavError, ValueError):
-    """An artifact file is missing, unreadable, of the wrong type, corrupted, tampered with or meaningless."""
+    """An artifact file is missing, unreadable, of the wrong type, corrupted, tampered with or meaningless.
+
+    Parameters
+    ----------
+    message : str
+        What is wrong, in a few words.
+    file : str, optional
+        The artifact file; :meth:`located` adds it when the raiser did not know it.
+    field : str, optional
+        The entry or key inside the artifact, e.g. ``cell_offsets`` or ``manifest.kind``.
+    """
 
     def __init__(self, message: str, *, file: str | None = None, field: str | None = None):
         self.file = file

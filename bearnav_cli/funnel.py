@@ -125,7 +125,24 @@ class ObstaclePieces:
 
 def inset_walls(free_bounds: np.ndarray, ends: np.ndarray, margin: float) -> tuple[np.ndarray, np.ndarray]:
     """The four walls of ``B_r`` as rows ``A x ≤ b``, each moved ``min(margin, d/2)`` inward (``d`` the
-    segment's distance from that wall), shapes (4, 2), (4,)."""
+    segment's distance from that wall).
+
+    Parameters
+    ----------
+    free_bounds : ndarray, shape (4,)
+        ``B_r`` as ``(xmin, ymin, xmax, ymax)`` (map units).
+    ends : ndarray, shape (2, 2) or (1, 2)
+        The segment ``[x_i, x_j]`` the cell holds, or the goal ``[g]`` (map units).
+    margin : float
+        The barrier margin ``m`` (map units): the most a wall moves inward.
+
+    Returns
+    -------
+    A : ndarray, shape (4, 2)
+        Outward unit normals of the left, right, bottom and top wall.
+    b : ndarray, shape (4,)
+        The moved walls' offsets, so that the segment stays strictly inside when it is inside ``B_r``.
+    """
     xmin, ymin, xmax, ymax = free_bounds
     ends = np.asarray(ends, float).reshape(-1, 2)
     A = np.array([[-1.0, 0.0], [1.0, 0.0], [0.0, -1.0], [0.0, 1.0]])
@@ -191,6 +208,7 @@ class Region:
     Attributes
     ----------
     polygon : ndarray, shape (p, 2)
+        The cell's CCW vertices (map units).
     A, b : ndarray, shapes (p, 2), (p,)
         ``A[q]`` is the outward unit normal of the edge ``v_q → v_{q+1}``.
     exit_row : int
@@ -207,7 +225,29 @@ class Region:
 
 
 def exit_row_index(A: np.ndarray, b: np.ndarray, z: np.ndarray, x_j: np.ndarray, tol: float) -> int:
-    """Index of the exit row ``−z·x ≤ −z·x_j`` among a cell's rows: normal ``−z``, through ``x_j``."""
+    """Index of the exit row ``−z·x ≤ −z·x_j`` among a cell's rows: normal ``−z``, through ``x_j``.
+
+    Parameters
+    ----------
+    A, b : ndarray, shapes (p, 2), (p,)
+        The cell's rows ``A x ≤ b`` with unit normals.
+    z : ndarray, shape (2,)
+        Unit exit direction ``unit(x_i − x_j)``.
+    x_j : ndarray, shape (2,)
+        The exit point, the parent node (map units).
+    tol : float
+        Map tolerance (map units); a row passes through ``x_j`` when ``|A_k·x_j − b_k| ≤ 1000·tol``.
+
+    Returns
+    -------
+    int
+        Among the rows through ``x_j`` with ``A_k·(−z) > 1 − 1e-9``, the one best aligned with ``−z``.
+
+    Raises
+    ------
+    ValueError
+        If no such row is left (the exit face was cut away).
+    """
     score = A @ -z
     on_line = np.abs(A @ x_j - b) <= 1e3 * tol
     candidates = np.flatnonzero(on_line & (score > 1.0 - 1e-9))
@@ -229,14 +269,15 @@ def funnel_region(
     Parameters
     ----------
     pieces : ObstaclePieces
+        The convex pieces of ``O`` the cell must keep off, with their spatial index.
     free_bounds : ndarray, shape (4,)
-        ``B_r``.
+        ``B_r`` as ``(xmin, ymin, xmax, ymax)`` (map units).
     ends : ndarray, shape (2, 2) or (1, 2)
         ``[x_i, x_j]`` (child, parent) for an edge cell; ``[g]`` for the goal cell.
     margin : float
         The barrier margin ``m`` (map units).
     tol : float
-        Map tolerance.
+        Map tolerance (map units) of the clips.
     start : ndarray, shape (p, 2), optional
         A convex polygon to start from instead of ``B_r`` (``funnel-local``: the §4.1 cell).
 
@@ -267,6 +308,26 @@ def funnel_region(
 def necked(region: Region, x_i: np.ndarray, x_j: np.ndarray, parent: Region, inset: float, tol: float) -> Region:
     """``region`` with neck rows when its exit face is not inside ``parent ⊖ inset`` (§11.5 step 2).
 
+    Parameters
+    ----------
+    region : Region
+        The cell of the edge ``[x_i, x_j]`` (:func:`funnel_region`).
+    x_i, x_j : ndarray, shape (2,)
+        The edge's child and parent node (map units); ``z = unit(x_i − x_j)``.
+    parent : Region
+        The parent node's cell, whose erosion by ``inset`` must hold the exit face.
+    inset : float
+        The exit inset ``δ_e`` (map units).
+    tol : float
+        Map tolerance (map units) of the clips; the neck ends are moved ``100·tol`` inside the
+        eroded parent so that rounding cannot put the face's ends outside it.
+
+    Returns
+    -------
+    Region
+        ``region`` itself when its exit face already lies in ``parent ⊖ inset``; else the region
+        clipped by the two :func:`neck_rows`, ``necked`` True.
+
     Raises
     ------
     ValueError
@@ -291,12 +352,43 @@ def necked(region: Region, x_i: np.ndarray, x_j: np.ndarray, parent: Region, ins
 
 
 def depth(A: np.ndarray, b: np.ndarray, point: np.ndarray) -> float:
-    """``min_k (b_k − A_k·point)``: how deep a point lies in ``{A x ≤ b}`` (map units; < 0 outside)."""
+    """``min_k (b_k − A_k·point)``: how deep a point lies in ``{A x ≤ b}`` (map units; < 0 outside).
+
+    Parameters
+    ----------
+    A, b : ndarray, shapes (p, 2), (p,)
+        A convex polygon's rows with unit normals (then the depth is the distance to the boundary).
+    point : array_like, shape (2,)
+        The point (map units).
+
+    Returns
+    -------
+    float
+    """
     return float(np.min(b - A @ np.asarray(point, float)))
 
 
 def exit_interval(A: np.ndarray, b: np.ndarray, x_j: np.ndarray, w: np.ndarray, inset: float) -> tuple[float, float]:
-    """``[t_a, t_b]`` with ``(P ⊖ inset) ∩ {x_j + t·w} = {x_j + t·w : t_a ≤ t ≤ t_b}`` (empty: ``t_a > t_b``)."""
+    """``[t_a, t_b]`` with ``(P ⊖ inset) ∩ {x_j + t·w} = {x_j + t·w : t_a ≤ t ≤ t_b}`` (empty: ``t_a > t_b``).
+
+    Parameters
+    ----------
+    A, b : ndarray, shapes (p, 2), (p,)
+        The rows of the (parent) polygon ``P``, unit normals, so that ``P ⊖ inset`` is
+        ``{A x ≤ b − inset}``.
+    x_j : ndarray, shape (2,)
+        A point of the line (the exit point, map units).
+    w : ndarray, shape (2,)
+        The line's unit direction (the exit direction turned by +90°).
+    inset : float
+        The erosion ``δ_e`` (map units).
+
+    Returns
+    -------
+    t_a, t_b : float
+        Signed distances along ``w`` from ``x_j`` (map units); ``±inf`` where the line is
+        unbounded in ``P``, ``(inf, −inf)`` when it misses ``P ⊖ inset``.
+    """
     slope = A @ w
     room = b - inset - A @ x_j
     lo, hi = -math.inf, math.inf
@@ -316,7 +408,25 @@ def neck_rows(x_j: np.ndarray, z: np.ndarray, t_a: float, t_b: float, angle: flo
 
     ``w`` is ``z`` turned by +90°. Their lines make the angle ψ with ``z`` and open away from the
     exit, so the exit face becomes ``[a, b]``, and ``x_j`` and the whole edge stay strictly inside
-    when ``t_a < 0 < t_b``. Returns ``A`` (2, 2) and ``b`` (2,).
+    when ``t_a < 0 < t_b``.
+
+    Parameters
+    ----------
+    x_j : ndarray, shape (2,)
+        The exit point (map units).
+    z : ndarray, shape (2,)
+        Unit exit direction, into the cell.
+    t_a, t_b : float
+        Where the exit face is to end along ``w``, from ``x_j`` (map units); ``t_a < t_b``.
+    angle : float
+        ψ, the angle between each neck line and ``z`` (rad); :data:`NECK_ANGLE` by default.
+
+    Returns
+    -------
+    A : ndarray, shape (2, 2)
+        Outward unit normals of the rows through ``a`` and through ``b``.
+    b : ndarray, shape (2,)
+        Their offsets: ``A x ≤ b``.
     """
     w = np.array([-z[1], z[0]])
     c, s = math.cos(angle), math.sin(angle)
@@ -330,7 +440,21 @@ def coverage_domain(free_region: shapely.Geometry, free_bounds: np.ndarray, obst
                     margin: float) -> shapely.Geometry:  # fmt: skip
     """``F_m``: the free points at distance at least ``m`` from ``O`` and from the walls of ``B_r`` (§11.1).
 
-    ``free_region`` is the part of ``B_r \\ O`` to cover (the goal's component).
+    Parameters
+    ----------
+    free_region : shapely geometry
+        The part of ``B_r \\ O`` to cover (the goal's component of the free space).
+    free_bounds : ndarray, shape (4,)
+        ``B_r`` as ``(xmin, ymin, xmax, ymax)`` (map units).
+    obstacles : shapely geometry
+        The inflated obstacles ``O`` (may be empty).
+    margin : float
+        ``m`` (map units).
+
+    Returns
+    -------
+    shapely geometry
+        ``F_m``, possibly several polygons.
     """
     inner = shapely.buffer(shapely.box(*free_bounds), -margin, join_style="mitre")
     grown = shapely.buffer(obstacles, margin) if not obstacles.is_empty else obstacles
@@ -383,7 +507,7 @@ def cell_tolerance(M: np.ndarray, normals: np.ndarray, sigma_h: np.ndarray, z: n
     z : ndarray, shape (2,) or None
         Exit direction; ``None`` for the goal cell (no (L2)).
     sigma_v : float or None
-        Margin of (L2) (``−S_V``).
+        Margin of (L2) (``−S_V``), map units / s; ``None`` with ``z``.
 
     Returns
     -------
@@ -404,7 +528,19 @@ def cell_tolerance(M: np.ndarray, normals: np.ndarray, sigma_h: np.ndarray, z: n
 
 
 def plan_tolerance_of(tolerance: np.ndarray, exit_inset: float) -> float:
-    """``δ* = min(min_c δ_c, δ_e / 2)`` (ALGORITHMS §11.4), map units."""
+    """``δ* = min(min_c δ_c, δ_e / 2)`` (ALGORITHMS §11.4), map units.
+
+    Parameters
+    ----------
+    tolerance : ndarray, shape (C,)
+        ``δ_c`` of each cell (map units); NaN entries (cells without a certificate) are ignored.
+    exit_inset : float
+        ``δ_e`` (map units).
+
+    Returns
+    -------
+    float
+    """
     finite = np.asarray(tolerance, float)
     finite = finite[~np.isnan(finite)]
     return float(min(finite.min(initial=math.inf), 0.5 * exit_inset))

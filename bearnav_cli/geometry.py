@@ -55,6 +55,15 @@ def from_shapely(geometry: shapely.Geometry) -> tuple[Polygon, ...]:
 def circle_polygon(center: tuple[float, float], radius: float, segments: int = CIRCLE_SEGMENTS) -> np.ndarray:
     """Regular ``segments``-gon that contains the disc (vertices at ``r / cos(π/segments)``).
 
+    Parameters
+    ----------
+    center : tuple of float
+        ``(x, y)`` of the disc's centre (map units).
+    radius : float
+        The disc's radius ``r`` (map units); the polygon's edges touch the circle.
+    segments : int
+        Number of vertices, :data:`CIRCLE_SEGMENTS` by default; the first lies at angle 0.
+
     Returns
     -------
     ndarray, shape (segments, 2)
@@ -96,6 +105,21 @@ class FreeSpace:
 
     Build it with :meth:`from_map`. All inputs are arrays of points in map units;
     all outputs are numpy arrays.
+
+    Attributes
+    ----------
+    bounds : ndarray, shape (4,)
+        ``B_r`` as ``(xmin, ymin, xmax, ymax)``: the map's bounds shrunk by the robot radius, the
+        walls every robot query (free points, segments, clearance, starts) uses (map units).
+    tol : float
+        The map's geometric tolerance ``1e-9·D`` (map units).
+    obstacles : shapely geometry
+        Union of the inflated obstacles ``O`` (prepared), or ``O`` grown further by
+        :meth:`with_clearance`.
+    raw_obstacles : shapely geometry
+        Union of the obstacles as drawn, before inflation (prepared): what blocks line of sight.
+    sight_bounds : ndarray, shape (4,)
+        The map's own bounds ``B`` (map units), where landmarks live and sight lines run.
     """
 
     bounds: np.ndarray
@@ -152,7 +176,7 @@ class FreeSpace:
 
     @cached_property
     def box(self) -> shapely.Polygon:
-        """The bounds ``B`` as a polygon."""
+        """The robot's bounds ``B_r`` (:attr:`bounds`) as a polygon."""
         return shapely.box(*self.bounds)
 
     @cached_property
@@ -340,6 +364,7 @@ def landmark_coverage(map_: Map, space: FreeSpace, cells: int = 100,
     Parameters
     ----------
     map_ : Map
+        The map: its landmarks, and its diagonal ``D`` for the grid spacing.
     space : FreeSpace
         Built from ``map_``.
     cells : int
@@ -425,8 +450,11 @@ def clip(polygon: np.ndarray, normal: np.ndarray, offset: float, tol: float) -> 
     Parameters
     ----------
     polygon : ndarray, shape (p, 2)
+        The convex polygon, CCW (map units).
     normal : ndarray, shape (2,)
+        Normal of the half-plane's boundary line, pointing out of the kept side (any length).
     offset : float
+        Right-hand side of ``normal · x <= offset`` (map units times ``‖normal‖``).
     tol : float
         Map tolerance (map units).
 
@@ -471,6 +499,7 @@ def drop_collinear(polygon: np.ndarray, tol: float) -> np.ndarray:
     Parameters
     ----------
     polygon : ndarray, shape (p, 2)
+        The convex polygon, CCW (map units).
     tol : float
         Map tolerance (map units).
 
@@ -509,7 +538,22 @@ def polygon_rows(polygon: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def point_polygon_distance(point: np.ndarray, polygon: np.ndarray, A: np.ndarray, b: np.ndarray) -> float:
-    """Exact distance from a point to a convex polygon (0 inside), map units."""
+    """Exact distance from a point to a convex polygon (0 inside), map units.
+
+    Parameters
+    ----------
+    point : ndarray, shape (2,)
+        The point (map units).
+    polygon : ndarray, shape (p, 2)
+        The convex polygon's vertices, in the order of its edges ``v_q → v_{q+1}``.
+    A, b : ndarray, shapes (p, 2), (p,)
+        The same polygon as ``{x : A x ≤ b}`` (:func:`polygon_rows`), for the inside test.
+
+    Returns
+    -------
+    float
+        The distance to the nearest point of the nearest edge; 0 when ``A @ point ≤ b``.
+    """
     if np.all(A @ point <= b):
         return 0.0
     start = polygon

@@ -112,6 +112,7 @@ def dense_to_csr(matrix: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray
     Parameters
     ----------
     matrix : ndarray, shape (m, n)
+        The dense matrix; converted to float64.
 
     Returns
     -------
@@ -120,6 +121,7 @@ def dense_to_csr(matrix: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray
     indices : ndarray of int32, shape (nnz,)
         Column of each entry, increasing within a row.
     values : ndarray of float64, shape (nnz,)
+        The non-zero entries, row after row.
     """
     matrix = np.asarray(matrix, dtype=float)
     n_rows, n_cols = matrix.shape
@@ -254,7 +256,30 @@ def _i32(a: np.ndarray) -> np.ndarray:
 
 
 def highs_lp(n, m, cost, indptr, indices, values, row_lower, row_upper, col_lower, col_upper) -> highspy.HighsLp:
-    """A ``highspy.HighsLp`` holding the LP (matrix row-wise, ``MatrixFormat.kRowwise``)."""
+    """A ``highspy.HighsLp`` holding the LP (matrix row-wise, ``MatrixFormat.kRowwise``).
+
+    The fallback of :meth:`LpSolver.solve` for a highspy whose ``passModel`` takes no raw arrays;
+    the arguments are those of :meth:`LpSolver.solve` with the sizes first.
+
+    Parameters
+    ----------
+    n : int
+        Number of columns (variables).
+    m : int
+        Number of rows (constraints).
+    cost : ndarray, shape (n,)
+        Objective coefficients (minimised).
+    indptr, indices, values : ndarray, shapes (m + 1,), (nnz,), (nnz,)
+        The constraint matrix, row-wise (:func:`dense_to_csr`).
+    row_lower, row_upper : ndarray, shape (m,)
+        Row bounds; ``-INF``/``INF`` for a missing side.
+    col_lower, col_upper : ndarray, shape (n,)
+        Column bounds, same convention.
+
+    Returns
+    -------
+    highspy.HighsLp
+    """
     lp = highspy.HighsLp()
     lp.num_col_ = n
     lp.num_row_ = m

@@ -158,6 +158,7 @@ def camera_headings(arrays: PlanArrays, points: Any) -> np.ndarray:
     Parameters
     ----------
     arrays : PlanArrays
+        The plan's run-time arrays (cells, fields, ranks, tree).
     points : array_like, shape (P, 2)
         Positions (map units).
 
@@ -359,6 +360,7 @@ class PerceptionCoverage:
     landmarks : ndarray, shape (L, 2)
         The landmarks evaluated (map units).
     landmark_ids : tuple of str, length L
+        Their ids (the map's, or ``"0"``, ``"1"``, ... when none were given).
     fov_deg, noise_deg, max_range, min_spread_deg : float
         The camera (degrees, degrees, map units, degrees).
     error_target : float or None
@@ -428,6 +430,7 @@ def evaluate(grid: EvaluationGrid, landmarks: Any, landmark_ids: Any = None, *, 
     Parameters
     ----------
     grid : EvaluationGrid
+        The points, their camera headings and the plan's free space (:func:`evaluation_grid`).
     landmarks : array_like, shape (L, 2)
         Landmark positions (map units).
     landmark_ids : sequence of str, length L, optional

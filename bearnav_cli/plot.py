@@ -93,9 +93,29 @@ def plot_map(ax: plt.Axes, map_: Map, *, landmarks: bool = True, starts: bool = 
              walls: bool = True) -> plt.Axes:  # fmt: skip
     """Bounds, inflated and raw obstacles, landmarks, goal and starts.
 
-    ``labels``: landmark ids for every landmark (True), none (False) or only those that fit
-    without covering another label or landmark (None). ``walls`` shades the band within the
-    robot radius of the bounds, which the centre of the robot cannot enter either.
+    Also sets the limits (the bounds with a 2 % pad of the diagonal) and an equal aspect.
+
+    Parameters
+    ----------
+    ax : matplotlib.axes.Axes
+        The axes to draw into (map units on both axes).
+    map_ : Map
+        The map to draw.
+    landmarks : bool
+        Draw the landmarks (red triangles) and, per ``labels``, their ids.
+    starts : bool
+        Draw the map's starts (white circles).
+    labels : bool or None
+        Landmark ids for every landmark (True), none (False) or only those that fit without
+        covering another label or landmark (None, :func:`label_landmarks`).
+    walls : bool
+        Shade the band within the robot radius of the bounds, which the centre of the robot
+        cannot enter either.
+
+    Returns
+    -------
+    matplotlib.axes.Axes
+        ``ax``.
     """
     xmin, ymin, xmax, ymax = map_.bounds
     ax.plot([xmin, xmax, xmax, xmin, xmin], [ymin, ymin, ymax, ymax, ymin], color="black", lw=1.2)
@@ -128,7 +148,21 @@ def label_landmarks(ax: plt.Axes, map_: Map, *, every: bool = False) -> list:
 
     Each label tries the four corners around its landmark and takes the first whose text box
     meets no earlier label and no landmark marker (in display space, as the axes stand now: call
-    it after the layout is settled). Returns the text artists.
+    it after the layout is settled). Labels an earlier call wrote are removed first.
+
+    Parameters
+    ----------
+    ax : matplotlib.axes.Axes
+        The axes to draw into (map units on both axes).
+    map_ : Map
+        The map whose ``landmark_ids`` are written at its ``landmarks``.
+    every : bool
+        Label every landmark, at its first corner, even where labels collide.
+
+    Returns
+    -------
+    list of matplotlib.text.Annotation
+        The label artists (gid ``landmark-label``).
     """
     for text in [t for t in ax.texts if t.get_gid() == "landmark-label"]:
         text.remove()
@@ -231,7 +265,10 @@ def plot_cells(ax: plt.Axes, cells: Cells, status: np.ndarray | None = None, *, 
 
     Parameters
     ----------
+    ax : matplotlib.axes.Axes
+        The axes to draw into (map units on both axes).
     cells : Cells
+        The decomposition (or a plan's ``cells``) to draw.
     status : ndarray, shape (C,), optional
         Synthesis status of each cell (a plan's ``status``); status 2 or 3 is always highlighted.
     color_by : {"rank", "tolerance", "status"}, optional
@@ -249,6 +286,11 @@ def plot_cells(ax: plt.Axes, cells: Cells, status: np.ndarray | None = None, *, 
         Write each cell's index inside its active region (funnel) or at its centroid (paper).
     colorbar, legend : bool
         Add a colour bar (rank, tolerance) and legend entries.
+
+    Returns
+    -------
+    matplotlib.axes.Axes
+        ``ax``.
     """
     if color_by is None:
         color_by = "rank" if cells.is_funnel else ("status" if status is not None else "")
@@ -314,7 +356,9 @@ def plot_uncovered(ax: plt.Axes, cells: Cells, uncovered: shapely.Geometry,
     Parameters
     ----------
     ax : Axes
+        The axes to draw into (map units on both axes).
     cells : Cells
+        The cells; their ``free_coverage`` goes into the legend label.
     uncovered : shapely geometry
         The reached part of ``F_m`` less the cells.
     unreached : shapely geometry, optional
@@ -364,7 +408,23 @@ def _line_in_polygon(normal: np.ndarray, offset: float, A: np.ndarray, b: np.nda
 
 
 def plot_barriers(ax: plt.Axes, cells: Cells, *, color: str = "#e6550d") -> plt.Axes:
-    """Every barrier line ``h(x) = 0``, clipped to its cell."""
+    """Every barrier line ``h(x) = 0``, clipped to its cell.
+
+    Parameters
+    ----------
+    ax : matplotlib.axes.Axes
+        The axes to draw into (map units on both axes).
+    cells : Cells
+        The cells whose barrier rows (``cells.barrier(c)``) are drawn; a line that misses its
+        cell is skipped.
+    color : str
+        Matplotlib colour of the dashed lines.
+
+    Returns
+    -------
+    matplotlib.axes.Axes
+        ``ax``.
+    """
     segments = []
     for c in range(cells.n_cells):
         A, b = cells.rows(c)
@@ -409,7 +469,22 @@ def field_samples(plan: Plan, *, arrows: int = 28) -> tuple[np.ndarray, np.ndarr
 
 
 def plot_field(ax: plt.Axes, plan: Plan, *, arrows: int = 28) -> plt.Axes:
-    """Unit arrows of the field a robot runs (:func:`field_samples`), based at free points in the cells."""
+    """Unit arrows of the field a robot runs (:func:`field_samples`), based at free points in the cells.
+
+    Parameters
+    ----------
+    ax : matplotlib.axes.Axes
+        The axes to draw into (map units on both axes).
+    plan : Plan
+        The plan whose runtime policy is sampled.
+    arrows : int
+        Grid points along the longer side of ``B_r``; each arrow is 0.6 grid steps long.
+
+    Returns
+    -------
+    matplotlib.axes.Axes
+        ``ax``.
+    """
     points, directions = field_samples(plan, arrows=arrows)
     if len(points):
         fb = plan.map.free_bounds
@@ -422,7 +497,31 @@ def plot_field(ax: plt.Axes, plan: Plan, *, arrows: int = 28) -> plt.Axes:
 
 def plot_tree(ax: plt.Axes, tree: Tree | Cells | Simulation, *, color: str = "#1f77b4", lw: float = 0.8,
               alpha: float = 1.0, nodes: bool = False, label: str | None = "tree") -> plt.Axes:
-    """Tree edges (child → parent) and, optionally, its nodes (nodes added by densification in orange)."""
+    """Tree edges (child → parent) and, optionally, its nodes (nodes added by densification in orange).
+
+    Parameters
+    ----------
+    ax : matplotlib.axes.Axes
+        The axes to draw into (map units on both axes).
+    tree : Tree, Cells or Simulation
+        Anything with ``nodes`` (N, 2) and ``parent`` (N,); ``node_added`` (N,), when present,
+        marks the densification nodes.
+    color : str
+        Matplotlib colour of the edges and of the original nodes.
+    lw : float
+        Edge width (points).
+    alpha : float
+        Opacity of edges and nodes.
+    nodes : bool
+        Also draw the nodes.
+    label : str or None
+        Legend label of the edges; None for no legend entry.
+
+    Returns
+    -------
+    matplotlib.axes.Axes
+        ``ax``.
+    """
     if len(tree.nodes) > 1:
         segments = _edges(tree.nodes, tree.parent)
         ax.add_collection(LineCollection(segments, colors=color, linewidths=lw, alpha=alpha, zorder=4, label=label))
@@ -436,7 +535,22 @@ def plot_tree(ax: plt.Axes, tree: Tree | Cells | Simulation, *, color: str = "#1
 
 
 def plot_samples(ax: plt.Axes, tree: Tree | Cells, *, color: str = "#ff7f0e") -> plt.Axes:
-    """The collision samples kept by RRT* (random ones and border pseudo-samples)."""
+    """The collision samples kept by RRT* (random ones and border pseudo-samples).
+
+    Parameters
+    ----------
+    ax : matplotlib.axes.Axes
+        The axes to draw into (map units on both axes).
+    tree : Tree or Cells
+        Anything with ``collision_samples``, shape (S, 2), map units.
+    color : str
+        Matplotlib colour of the crosses.
+
+    Returns
+    -------
+    matplotlib.axes.Axes
+        ``ax``.
+    """
     if len(tree.collision_samples):
         ax.scatter(*tree.collision_samples.T, s=3, marker="x", linewidths=0.6, color=color, zorder=3,
                    label="collision samples")
@@ -456,7 +570,22 @@ def plot_sim_background(ax: plt.Axes, sim: Simulation) -> plt.Axes:
 
 
 def plot_trajectories(ax: plt.Axes, sim: Simulation, *, limit: int = 400) -> plt.Axes:
-    """Every run's path coloured by its outcome, with its start (circle) and end (cross); at most ``limit`` runs."""
+    """Every run's path coloured by its outcome, with its start (circle) and end (cross); at most ``limit`` runs.
+
+    Parameters
+    ----------
+    ax : matplotlib.axes.Axes
+        The axes to draw into (map units on both axes).
+    sim : Simulation
+        The runs; colours follow :data:`OUTCOME_COLORS`, and only failed runs get an end cross.
+    limit : int
+        Largest number of runs drawn (the first ones); runs without a trajectory are skipped.
+
+    Returns
+    -------
+    matplotlib.axes.Axes
+        ``ax``.
+    """
     shown = set()
     for r in range(min(len(sim.outcome), limit)):
         path = sim.trajectory(r)
@@ -501,8 +630,19 @@ def _frame(map_: Map, title: str, *, legend_rows: int = 0, landmarks: bool = Tru
 def save_animation(sim: Simulation, path: str, *, frames: int = 80, limit: int = 60) -> None:
     """Write a GIF of the runs (at most ``limit``) advancing together, ``frames`` frames.
 
-    Each frame shows every run's path so far and its current position; the frames are
-    evenly spaced in time up to the longest run.
+    Each frame shows every run's path so far and its current position (and heading, when every
+    shown run records one); the frames are evenly spaced in time up to the longest run.
+
+    Parameters
+    ----------
+    sim : Simulation
+        The runs, drawn over its cells and tree (:func:`plot_sim_background`).
+    path : str
+        The GIF file to write (Pillow writer, 12 frames/s, 60 dpi).
+    frames : int
+        Number of frames.
+    limit : int
+        Largest number of runs animated (the first ones).
     """
     from matplotlib.animation import FuncAnimation, PillowWriter
 
@@ -669,6 +809,7 @@ def plot_perception(ax: plt.Axes, coverage: Any, *, free: bool = True, landmarks
     Parameters
     ----------
     ax : Axes
+        The axes to draw into (map units on both axes).
     coverage : PerceptionCoverage
         :func:`bearnav_cli.perception.perception_coverage` (duck-typed: ``points`` (P, 2),
         ``in_domain``, ``in_free`` and ``holds`` (P,) bool, ``fraction_domain``, ``fraction_free``,
@@ -716,6 +857,7 @@ def plot_tags(ax: plt.Axes, proposal: Any, *, failures: bool = True, labels: boo
     Parameters
     ----------
     ax : Axes
+        The axes to draw into (map units on both axes).
     proposal : TagProposal
         :func:`bearnav_cli.tags.propose_tags` (duck-typed: ``ids``, ``positions`` (K, 2),
         ``normals`` (K, 2), ``uncoverable`` (U, 2), ``before`` and ``after`` coverages as
@@ -767,7 +909,21 @@ def plot_tags(ax: plt.Axes, proposal: Any, *, failures: bool = True, labels: boo
 
 
 def tags_figure(proposal: Any, map_: Map, title: str | None = None) -> plt.Figure:
-    """Where to glue the proposed tags on the map (:func:`plot_map` without its tags, then :func:`plot_tags`)."""
+    """Where to glue the proposed tags on the map (:func:`plot_map` without its tags, then :func:`plot_tags`).
+
+    Parameters
+    ----------
+    proposal : TagProposal
+        The proposal of :func:`bearnav_cli.tags.propose_tags` (its ``ids`` and placements).
+    map_ : Map
+        The map the tags are proposed for, drawn underneath.
+    title : str, optional
+        Figure title; default ``"<map name>: where to glue <n> new tags"``.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
     fig, ax = _frame(map_, title or f"{map_.name}: where to glue {len(proposal.ids)} new tags", legend_rows=3,
                      landmarks=False)  # fmt: skip
     plot_tags(ax, proposal)

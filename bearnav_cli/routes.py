@@ -32,9 +32,22 @@ def sample_starts(space: FreeSpace, goal: np.ndarray, count: int, rng: np.random
     Rejection sampling in the component's bounding box, in batches; deterministic for a
     given generator state.
 
+    Parameters
+    ----------
+    space : FreeSpace
+        The map's free space; a start is kept when it is strictly free
+        (:meth:`FreeSpace.points_strictly_free`) and in the goal's component.
+    goal : ndarray, shape (2,)
+        The goal (map units), which picks the component (:meth:`FreeSpace.component_of`).
+    count : int
+        Number of starts wanted; 0 (or an empty component) returns none.
+    rng : numpy.random.Generator
+        The source of the uniform draws; advanced by the call.
+
     Returns
     -------
     ndarray, shape (count, 2)
+        Starts in map units, in the order drawn.
     """
     region = space.component_of(goal)
     if count == 0 or region.is_empty:
@@ -102,8 +115,11 @@ def route_lengths(space: FreeSpace, goal: np.ndarray, starts: np.ndarray) -> np.
     Parameters
     ----------
     space : FreeSpace
+        The map's free space; the graph is built on the goal's component of ``B \\ O``.
     goal : ndarray, shape (2,)
+        The goal (map units), the source of the Dijkstra search.
     starts : ndarray, shape (R, 2)
+        Start positions (map units).
 
     Returns
     -------

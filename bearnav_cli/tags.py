@@ -197,6 +197,7 @@ def candidates(map_: Any, width: float, space: Any = None) -> Candidates:
     Parameters
     ----------
     map_ : Map
+        The map: its walls, raw obstacles and existing tags.
     width : float
         Tag width (map units).
     space : FreeSpace, optional
@@ -318,8 +319,13 @@ class TagProposal:
     candidates : Candidates
         Every candidate considered.
     params : Params
+        The parameters the proposal was made with.
     tag_width : float
         The tag width used (map units).
+    stats : dict
+        Counts of the search: ``candidates`` (candidates seen from some evaluation point),
+        ``domain_points`` (grid points of ``D``), ``pairs`` (visible point × candidate pairs) and
+        ``greedy`` (tags the greedy chose before pruning). Not compared by ``==``.
     """
 
     ids: tuple
@@ -503,6 +509,8 @@ def propose_tags(plan: Any, params: Params = Params()) -> TagProposal:
     plan : Plan
         A ``bearnav.plan/2`` plan.
     params : Params
+        The camera (field of view, range, noise, ``θ_min``), the error target, the tag width,
+        the evaluation grid's spacing, the tag budget and pruning.
 
     Returns
     -------
@@ -583,6 +591,7 @@ def map_spec_with_tags(spec: dict, proposal: TagProposal) -> dict:
     spec : dict
         The map description the plan was made from.
     proposal : TagProposal
+        The tags to add (:func:`propose_tags`): their ``ids`` and ``positions``.
 
     Returns
     -------

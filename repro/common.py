@@ -130,6 +130,8 @@ def rotate_map(map_: Map, degrees: float, center: tuple[float, float]) -> Map:
         obstacles=tuple(turn(p) for p in map_.obstacles),
         raw_obstacles=tuple(turn(p) for p in map_.raw_obstacles),
         landmarks=rotate_points(map_.landmarks, degrees, c),
+        # a tag turns with its wall (NaN, a free-standing tag, stays NaN)
+        landmark_facing=map_.landmark_facing + math.radians(degrees),
         starts=rotate_points(map_.starts, degrees, c),
     )
 

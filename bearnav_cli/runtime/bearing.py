@@ -171,9 +171,22 @@ def in_field_of_view(x: Any, heading: Any, landmarks: Any, fov: float, *, tol: f
 def check_camera(fov_deg: Any, noise_deg: Any, min_spread_deg: Any = 2.0) -> None:
     """Raise :class:`InvalidParamsError` naming the field for a camera outside its ranges.
 
-    ``fov_deg`` in ``(0, 360]`` (degrees), ``noise_deg`` finite and ``≥ 0`` (degrees, 1σ),
-    ``min_spread_deg`` (``θ_min`` of §6.2) in ``(0, 90]`` degrees; booleans are not numbers.
-    The one check of ``bearnav simulate``, ``bearnav tags`` and the perception report.
+    The one check of ``bearnav simulate``, ``bearnav tags`` and the perception report; booleans
+    are not numbers.
+
+    Parameters
+    ----------
+    fov_deg : float
+        Horizontal field of view (degrees), in ``(0, 360]``; the error names field ``fov``.
+    noise_deg : float
+        Bearing noise, 1σ (degrees), finite and ``≥ 0``.
+    min_spread_deg : float
+        ``θ_min`` of §6.2 (degrees), in ``(0, 90]``; the error names ``min_spread_deg``.
+
+    Raises
+    ------
+    InvalidParamsError
+        For the first value out of its range, naming its field.
     """
 
     def number(value: Any) -> bool:
@@ -408,6 +421,27 @@ def fix_variance(bearings: Any, visible: Any, landmarks: Any, x_hat: Any, sigma:
     ``σ·d`` at distance ``d``, so the information of the fix is ``Σ_k P_k/(σ d_k)²``; the
     inverse of its smallest eigenvalue bounds the variance. Two nearly parallel bearings,
     or landmarks far away, give a large one.
+
+    Parameters
+    ----------
+    bearings : array_like, shape (R, L, 2)
+        World-frame unit bearings ``β_k`` (entries of invisible landmarks are ignored).
+    visible : array_like of bool, shape (R, L)
+        Landmarks each robot's fix uses.
+    landmarks : array_like, shape (L, 2)
+        Landmark positions (map units).
+    x_hat : array_like, shape (R, 2)
+        The fixes ``x̂`` (map units), for the distances ``d_k = ‖l_k − x̂‖``.
+    sigma : float
+        Bearing noise ``σ``, 1σ (rad).
+    tol : float
+        Geometric tolerance (map units): distances below it count as ``tol``.
+
+    Returns
+    -------
+    ndarray, shape (R,)
+        ``σ² / λ_min(Σ_k P_k/d_k²)`` (map units²); about ``σ²/1e-300`` where fewer than two
+        visible bearings span the plane.
     """
     beta, vis = np.asarray(bearings, float), np.asarray(visible, bool)
     d = _points(landmarks)[None] - _points(x_hat)[:, None, :]
@@ -417,7 +451,32 @@ def fix_variance(bearings: Any, visible: Any, landmarks: Any, x_hat: Any, sigma:
 
 
 def scaled_output(x_hat: Any, landmarks: Any, fixed: Any, tol: float) -> np.ndarray:
-    """``ỹ_k = (l_k − x̂)/max(‖l_f − x̂‖, tol)`` for every landmark, shape (R, 2L) (§6.2)."""
+    """``ỹ_k = (l_k − x̂)/max(‖l_f − x̂‖, tol)`` for every landmark (§6.2).
+
+    The output the gains read when the position is known (or estimated) instead of measured: near
+    ``l_f`` only the speed changes.
+
+    Parameters
+    ----------
+    x_hat : array_like, shape (R, 2)
+        Positions ``x̂`` (map units).
+    landmarks : array_like, shape (L, 2)
+        Landmark positions (map units).
+    fixed : int or array_like of int, shape (R,)
+        Fixed landmark ``f`` of each robot's cell (``fixed_landmark[c]``).
+    tol : float
+        Geometric tolerance (map units), the smallest divisor.
+
+    Returns
+    -------
+    ndarray, shape (R, 2L)
+        ``stack(ỹ_k)`` per robot (dimensionless).
+
+    Raises
+    ------
+    ValueError
+        If ``fixed`` is neither a scalar nor of shape (R,).
+    """
     x = _points(x_hat)
     return _scaled(x, _points(landmarks), _per_robot(fixed, len(x), np.int64, "fixed"), tol).reshape(len(x), -1)
 

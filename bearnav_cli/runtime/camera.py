@@ -361,9 +361,25 @@ def tag_rotation_world(facing: float) -> np.ndarray:
 
 
 def tag_corners_world(position: Any, facing: float, size: float, height: float) -> np.ndarray:
-    """The four corners (3-D world points, AprilTag order) of an upright tag; shape (4, 3).
+    """The four corners (3-D world points, AprilTag order) of an upright tag.
 
-    ``size`` is the edge of the black square (map units), ``height`` that of its centre.
+    Parameters
+    ----------
+    position : array_like, shape (2,)
+        The tag's centre on the map (map units).
+    facing : float
+        Direction its printed face looks toward (rad, world frame); see :func:`tag_rotation_world`.
+    size : float
+        Edge of the black square (map units).
+    height : float
+        Height of the tag's centre above the floor (map units).
+
+    Returns
+    -------
+    ndarray, shape (4, 3)
+        World points ``(x, y, z)`` (map units) in AprilTag order: bottom left, bottom right, top
+        right, top left as a viewer facing the tag sees them (tag frame ``(−s, +s)``, ``(+s, +s)``,
+        ``(+s, −s)``, ``(−s, −s)`` with ``s = size/2``, ``y`` down).
     """
     centre = np.array([*np.asarray(position, float).reshape(2), height])
     s = 0.5 * size
@@ -374,8 +390,27 @@ def tag_corners_world(position: Any, facing: float, size: float, height: float) 
 def project_world(intrinsics: Intrinsics, mount: Mount, x: Any, heading: float, points: Any) -> tuple:
     """Pixels and optical depth of world points seen by a robot at ``x`` (map units) with yaw ``heading``.
 
-    Returns ``(pixels (n, 2), depth (n,))``; pixels of points behind the camera (``depth <= 0``) are
-    meaningless. For tests and simulations (a robot never knows its true pose).
+    For tests and simulations (a robot never knows its true pose).
+
+    Parameters
+    ----------
+    intrinsics : Intrinsics
+        The camera's pinhole model with lens distortion, which maps optical-frame points to pixels.
+    mount : Mount
+        Where the camera sits on the robot.
+    x : array_like, shape (2,)
+        The robot's position on the floor (map units).
+    heading : float
+        The robot's yaw (rad, world frame, counter-clockwise from ``+x``).
+    points : array_like, shape (n, 3)
+        World points ``(x, y, z)`` (map units), e.g. from :func:`tag_corners_world`.
+
+    Returns
+    -------
+    pixels : ndarray, shape (n, 2)
+        Image coordinates (pixels); meaningless for points behind the camera.
+    depth : ndarray, shape (n,)
+        Optical depth ``z`` in the camera frame (map units); ``<= 0`` behind the camera.
     """
     p = np.asarray(points, float).reshape(-1, 3)
     origin = np.array([*np.asarray(x, float).reshape(2), 0.0])
@@ -477,6 +512,7 @@ class Observation:
     bearings : ndarray, shape (L, 2)
         World-frame unit bearing of each landmark (zero rows where not visible).
     visible : ndarray of bool, shape (L,)
+        Landmarks with an accepted detection in this image.
     heading : float or None
         The robot heading used (rad): the compass's if given, else from the tag poses (the circular
         mean of the per-tag headings that agree, :data:`HEADING_AGREEMENT`); None without either.
@@ -520,8 +556,12 @@ def observe(detections: Any, intrinsics: Intrinsics, mount: Mount, tags: TagMap,
     Parameters
     ----------
     detections : iterable of Detection
+        What the AprilTag detector found in the image (corner pixels, optionally a pose).
     intrinsics : Intrinsics
+        The camera that took the image: its pinhole model (with lens distortion) turns corner
+        pixels into rays, and its image size bounds the corners (:data:`CORNER_SLACK`).
     mount : Mount
+        Where the camera sits on the robot: turns camera rays into robot-frame bearings.
     tags : TagMap
         The plan's landmarks (:meth:`TagMap.from_plan`), in the order of the Controller's rows.
     heading : float, optional

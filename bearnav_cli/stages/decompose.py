@@ -594,6 +594,8 @@ def run(tree: Tree, params: Params = Params(), progress: Callable[[int, int], No
     tree : Tree
         The simplified tree (node 0 at the goal) with its collision samples.
     params : Params
+        Cell mode, barrier rows, margins and coverage target; a ``None`` barrier margin is
+        ``0.01·D`` of the tree's map, a ``None`` exit inset derives from it.
     progress : callable, optional
         ``progress(done, total)`` every few cells.
 

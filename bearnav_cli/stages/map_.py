@@ -64,7 +64,21 @@ class Params:
 
 @dataclass(frozen=True)
 class GridSource:
-    """An occupancy grid as read from disk: the map_server YAML and the image bytes."""
+    """An occupancy grid as read from disk: the map_server YAML and the image bytes.
+
+    Attributes
+    ----------
+    meta : dict
+        The parsed map_server YAML (``image``, ``resolution``, ``origin``, ``negate``,
+        ``occupied_thresh``, ``free_thresh``, ``mode``), checked by
+        :func:`bearnav_cli.occupancy.grid_obstacles`.
+    image : bytes
+        The content of the image file (PGM or PNG).
+    file : str
+        The YAML file's name, for error messages.
+    image_name : str
+        The image file's resolved path, for error messages.
+    """
 
     meta: dict
     image: bytes
@@ -86,6 +100,9 @@ class MapSource:
         Hash of every byte read (map, grid YAML, image): the map stage's input hash.
     grid : GridSource, optional
         The occupancy grid referenced by ``occupancy:``.
+    extra : dict
+        Free-form data a caller attaches to the source; the map stage does not read it (empty by
+        default).
     """
 
     spec: dict
@@ -217,7 +234,9 @@ def infer_facing(points: np.ndarray, bounds: np.ndarray, raw: shapely.Geometry, 
     Parameters
     ----------
     points : ndarray, shape (L, 2)
+        Tag positions (map units).
     bounds : ndarray, shape (4,)
+        The map's bounds ``(xmin, ymin, xmax, ymax)`` (map units): their edges are walls too.
     raw : shapely geometry
         The raw (not inflated) obstacles.
     tol : float
@@ -226,6 +245,7 @@ def infer_facing(points: np.ndarray, bounds: np.ndarray, raw: shapely.Geometry, 
     Returns
     -------
     ndarray, shape (L,)
+        Facing of each point (rad), NaN for a free-standing tag.
     """
     xmin, ymin, xmax, ymax = (float(v) for v in bounds)
     rings = [np.array([[xmin, ymin], [xmax, ymin], [xmax, ymax], [xmin, ymax]])]

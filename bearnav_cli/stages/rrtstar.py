@@ -83,7 +83,25 @@ class Params:
 
 
 def rewiring_radius(n: int, free_area: float, step: float) -> float:
-    """Paper B's radius ``r(n) = min(γ·(ln n / n)^(1/3), η)``, ``γ = √(6·A_free/π)``; ``r(1) = 0``."""
+    """Paper B's radius ``r(n) = min(γ·(ln n / n)^(1/3), η)``, ``γ = √(6·A_free/π)``; ``r(1) = 0``.
+
+    The radius within which a new node looks for a cheaper parent and rewires its neighbours
+    (ALGORITHMS §2).
+
+    Parameters
+    ----------
+    n : int
+        Number of nodes in the tree.
+    free_area : float
+        ``A_free``, the area of the free space (map units²).
+    step : float
+        The steering step ``η`` (map units), an upper bound of the radius.
+
+    Returns
+    -------
+    float
+        ``r(n)`` in map units.
+    """
     if n <= 1:
         return 0.0
     gamma = math.sqrt(6.0 * free_area / math.pi)

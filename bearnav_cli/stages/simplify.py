@@ -124,7 +124,23 @@ def bfs_levels(parent: np.ndarray) -> list[np.ndarray]:
 
 
 def tree_costs(nodes: np.ndarray, parent: np.ndarray, levels: list[np.ndarray]) -> np.ndarray:
-    """Path length to the root of every node, shape (N,), computed level by level."""
+    """Path length to the root of every node, computed level by level.
+
+    Parameters
+    ----------
+    nodes : ndarray, shape (N, 2)
+        Node positions (map units); node 0 is the root (the goal).
+    parent : ndarray of int, shape (N,)
+        Parent of each node, ``-1`` at the root.
+    levels : list of ndarray of int
+        The tree's breadth-first levels (:func:`bfs_levels` of ``parent``); a node's parent lies
+        on the level before it, so its cost is final when the node is reached.
+
+    Returns
+    -------
+    ndarray, shape (N,)
+        Sum of the edge lengths from each node to the root (map units); 0 at the root.
+    """
     cost = np.zeros(len(nodes))
     for level in levels[1:]:
         d = nodes[level] - nodes[parent[level]]
@@ -316,10 +332,11 @@ def count_crossings(nodes: np.ndarray, parent: np.ndarray, tol: float) -> tuple[
     Parameters
     ----------
     nodes : ndarray, shape (N, 2)
+        Node positions (map units); the edges are ``nodes[i] → nodes[parent[i]]``.
     parent : ndarray of int, shape (N,)
         ``-1`` at node 0 only.
     tol : float
-        The map's tolerance.
+        The map's tolerance (map units).
 
     Returns
     -------

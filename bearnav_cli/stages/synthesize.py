@@ -165,10 +165,17 @@ def vertex_margins(K, landmarks, vertices, z, x_j, cbf_n, cbf_q, c_h, c_v, u_max
     K : ndarray, shape (2, 2n)
         Gain over ``landmarks`` (the full ``gain[c]`` with all map landmarks works too).
     landmarks : ndarray, shape (n, 2)
+        Positions of the landmarks ``K`` reads (map units).
     vertices : ndarray, shape (p, 2)
+        The cell's vertices ``v_q`` (map units).
     z, x_j : ndarray, shape (2,)
+        Unit exit direction (into the cell) and exit point (map units): ``V(x) = zᵀ(x − x_j)``.
     cbf_n, cbf_q : ndarray, shapes (h, 2), (h,)
-    c_h, c_v, u_max : float
+        Barrier rows ``h_k(x) = n_kᵀx + q_k``; there may be none.
+    c_h, c_v : float
+        Barrier and Lyapunov constants (1/s).
+    u_max : float
+        Input bound (map units/s).
 
     Returns
     -------
@@ -181,7 +188,29 @@ def vertex_margins(K, landmarks, vertices, z, x_j, cbf_n, cbf_q, c_h, c_v, u_max
 
 
 def field_margins(M, a, vertices, z, x_j, cbf_n, cbf_q, c_h, c_v, u_max) -> Margins:
-    """:func:`vertex_margins` of the affine field ``u(x) = a − M x`` itself (shapes (2, 2), (2,))."""
+    """:func:`vertex_margins` of the affine field ``u(x) = a − M x`` itself.
+
+    Parameters
+    ----------
+    M : ndarray, shape (2, 2)
+        The field's linear part (1/s).
+    a : ndarray, shape (2,)
+        The field's constant part (map units/s).
+    vertices : ndarray, shape (p, 2)
+        The cell's vertices ``v_q`` (map units), where ``u_q = a − M v_q`` is evaluated.
+    z, x_j : ndarray, shape (2,)
+        Unit exit direction (into the cell) and exit point (map units): ``V(x) = zᵀ(x − x_j)``.
+    cbf_n, cbf_q : ndarray, shapes (h, 2), (h,)
+        Barrier rows ``h_k(x) = n_kᵀx + q_k``; with none, ``cbf`` is NaN.
+    c_h, c_v : float
+        Barrier and Lyapunov constants (1/s).
+    u_max : float
+        Input bound (map units/s).
+
+    Returns
+    -------
+    Margins
+    """
     V = np.asarray(vertices, float)
     cbf_n = np.asarray(cbf_n, float).reshape(-1, 2)
     U = a - V @ M.T  # u at each vertex, (p, 2)
@@ -205,6 +234,8 @@ class CellSolution:
     Attributes
     ----------
     status : CellStatus
+        Certified at the first ``κ``, relaxed (after halvings), not certified (least violation)
+        or solver failure.
     K : ndarray, shape (2, 2n)
         Gain over the problem's landmarks: ``u(x) = K @ (landmarks − x).ravel()``.
     c_h, c_v : float
@@ -236,7 +267,22 @@ class CellSolution:
 def cell_constants(problem: CellProblem, kappa: float, u_max: float) -> tuple[float, float]:
     """``(c_h, c_v)`` of §5.3: ``c_v = κ u_max / max_q V(v_q)``, ``c_h = κ u_max / max(δ, max −h)``.
 
-    ``δ = 0.05·diam(X)``; ``c_h`` is NaN without barrier rows.
+    ``δ = 0.05·diam(X)`` (:data:`DELTA_FRACTION`); ``c_h`` is NaN without barrier rows.
+
+    Parameters
+    ----------
+    problem : CellProblem
+        The cell: its vertices, barrier rows, exit direction ``z`` and exit point ``x_j``.
+    kappa : float
+        ``κ_h = κ_v`` (dimensionless, §5.3): at ``κ = 1`` the decay terms ``c_v V`` and ``c_h h`` at
+        their worst vertex ask for the whole input bound ``u_max``.
+    u_max : float
+        Input bound (map units/s).
+
+    Returns
+    -------
+    c_h, c_v : float
+        Barrier and Lyapunov constants (1/s).
 
     Raises
     ------
@@ -277,6 +323,7 @@ class PreparedCell:
     Attributes
     ----------
     problem : CellProblem
+        The cell's data.
     space : str
         Variable space: ``field`` for the full gain, else the gain structure.
     L : ndarray, shape (2, 3, n_θ)
@@ -304,16 +351,36 @@ class PreparedCell:
 
 @dataclass(frozen=True)
 class SolveOutcome:
-    """What the κ loop of :func:`solve_prepared` ended with."""
+    """What the κ loop of :func:`solve_prepared` ended with.
+
+    Attributes
+    ----------
+    status : CellStatus
+        Certified (first ``κ``), relaxed (after halvings), not certified (the least-violation LP
+        solved) or solver failure.
+    result : LpResult
+        The last LP solved.
+    row_upper : ndarray, shape (m,)
+        Upper row bounds of the checker's rows (:attr:`PreparedCell.checker`) with the final
+        constants, for re-checking the gain at the vertices.
+    c_h, c_v : float
+        The final barrier and Lyapunov constants (1/s); ``c_h`` NaN without barrier rows.
+    kappa : float
+        The final ``κ``.
+    attempts : int
+        LPs solved, the least-violation solve included.
+    lemma4_terms : tuple of float, optional
+        Funnel cells: ``(min_k h_k(x_j), diam(P))`` of Lemma 4 (map units); None otherwise.
+    """
 
     status: CellStatus
     result: LpResult
-    row_upper: np.ndarray  # of the checker's rows, with the final constants
+    row_upper: np.ndarray
     c_h: float
     c_v: float
     kappa: float
     attempts: int
-    lemma4_terms: tuple[float, float] | None = None  # funnel cells: (min_k h_k(x_j), diam)
+    lemma4_terms: tuple[float, float] | None = None
 
 
 def _checked_v_max(v_max: float) -> float:
@@ -472,7 +539,25 @@ def _funnel_sweep(prepared: PreparedCell, params: Params, solver: LpSolver, fixe
 def solve_prepared(prepared: PreparedCell, params: Params, solver: LpSolver, funnel: bool = False) -> SolveOutcome:
     """SOLVE_CELL's loop (§5.3): halve ``κ`` while infeasible, then the least-violation LP.
 
-    ``funnel``: the cell is a funnel cell (ALGORITHMS §11.2), solved by :func:`_funnel_sweep`.
+    Without ``funnel``, the CLF slack is first bounded by ``S_V ≤ −clf_margin·u_max`` and, when
+    no ``κ`` allows that, by ``S_V ≤ 0``; a cell infeasible at every ``κ`` with either bound gets
+    the least-violation LP.
+
+    Parameters
+    ----------
+    prepared : PreparedCell
+        The cell's templates and constant scales (:func:`prepare_cell`).
+    params : Params
+        ``u_max``, ``kappa``, ``halvings``, ``clf_margin``, weights and LP form.
+    solver : LpSolver
+        The run's reused solver.
+    funnel : bool
+        The cell is a funnel cell (ALGORITHMS §11.2): ``c_h ≥ c_v``, ``κ`` halved until Lemma 4
+        holds, strict margins from ``ε_max``.
+
+    Returns
+    -------
+    SolveOutcome
     """
     u_max = params.u_max
     template = prepared.template
@@ -514,8 +599,22 @@ def solve_prepared(prepared: PreparedCell, params: Params, solver: LpSolver, fun
 def finish_cell(prepared: PreparedCell, outcome: SolveOutcome, recheck: bool = True) -> CellSolution:
     """The gain of the solved LP (Lemma 3 in field space; zero after a failure) and its re-checked margins.
 
-    ``recheck=False`` leaves the margins NaN for :func:`more_tolerant_all`, which re-checks every
-    cell's field at its vertices in one pass.
+    Parameters
+    ----------
+    prepared : PreparedCell
+        The cell that was solved.
+    outcome : SolveOutcome
+        What :func:`solve_prepared` ended with; a non-optimal LP turns the status into solver
+        failure with a zero gain.
+    recheck : bool
+        Re-check the margins at the vertices through the checker's rows. False leaves them NaN
+        for a certified or relaxed cell, for :func:`more_tolerant_all`, which re-checks every
+        cell's field at its vertices in one pass.
+
+    Returns
+    -------
+    CellSolution
+        ``tolerance`` NaN (only :func:`more_tolerant` sets it).
     """
     problem = prepared.problem
     status, result = outcome.status, outcome.result
@@ -537,6 +636,7 @@ def solve_cell(problem: CellProblem, params: Params, solver: LpSolver, funnel: b
     Parameters
     ----------
     problem : CellProblem
+        The cell's data.
     params : Params
         ``u_max``, ``kappa``, ``halvings``, weights, gain structure and LP form.
     solver : LpSolver
@@ -594,10 +694,15 @@ def goal_cell_solution(vertices: np.ndarray, goal: np.ndarray, landmarks: np.nda
     Parameters
     ----------
     vertices : ndarray, shape (p, 2)
+        The goal cell's vertices (map units).
     goal : ndarray, shape (2,)
+        ``g`` (map units), the field's equilibrium and the CLF's exit point.
     landmarks : ndarray, shape (n, 2)
+        Positions of the cell's landmarks (map units), over which ``K`` is written.
     cbf_n, cbf_q : ndarray, shapes (h, 2), (h,)
+        The goal cell's barrier rows ``h_k(x) = n_kᵀx + q_k``; there may be none.
     u_max : float
+        Input bound (map units/s): ``c`` makes ``‖u‖_∞`` reach it at the farthest vertex.
 
     Returns
     -------
@@ -628,6 +733,8 @@ def run(cells: Cells, params: Params = Params(), progress: Callable[[int, int], 
     cells : Cells
         The decomposition; cell ``c`` with ``parent[cell_node[c]] == -1`` is the goal cell.
     params : Params
+        ``u_max``, ``kappa``, ``halvings``, weights, gain structure, LP form, ``clf_margin``,
+        ``goal_tolerance`` and ``tolerant``.
     progress : callable, optional
         ``progress(done, total)`` about a hundred times while the LPs are solved (``total = C``;
         goal cells count as done from the start).
