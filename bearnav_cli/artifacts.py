@@ -58,6 +58,7 @@ from bearnav_cli.datatypes import (
     CELL_KEYS,
     PLAN_KEYS,
     SIMULATION_KEYS,
+    TREE_KEYS,
     Cells,
     Map,
     Plan,
@@ -66,19 +67,33 @@ from bearnav_cli.datatypes import (
     validate_artifact,
 )
 from bearnav_cli.errors import ArtifactError, FolderBusyError, OutputPathError
+from bearnav_cli.runtime.schema import ENTRIES, RETIRED_PLAN_SCHEMA, SCHEMAS, Entry
 
 
 @dataclass(frozen=True)
 class Kind:
     """One artifact type: its schema name, conventional file name, the stage that writes it and its entries.
 
-    ``entries`` maps each data key to ``(dtype kind, ndim)``; ``"U"`` is a 0-d JSON text.
+    Attributes
+    ----------
+    name : str
+        The kind (``"plan"``), as :data:`KINDS` and ``datatypes.INVARIANTS`` name it.
+    schema : str
+        The manifest's ``schema`` (``"bearnav.plan/2"``), from ``runtime.schema.SCHEMAS``.
+    filename : str
+        The conventional file name (``"plan.npz"``).
+    entries : dict of str to Entry
+        ``runtime.schema.ENTRIES[name]``: each data key's dtype, symbolic shape and meaning. The loader
+        requires each key with its dtype kind (``"U"``: a 0-d JSON text) and number of dimensions;
+        ``map.json``'s one entry is its document.
+    stage : str
+        The stage that writes it.
     """
 
     name: str
     schema: str
     filename: str
-    entries: dict[str, tuple[str, int]]
+    entries: dict[str, Entry]
     stage: str = ""
 
     @property
@@ -86,72 +101,26 @@ class Kind:
         return Path(self.filename).suffix
 
 
-_TREE_ENTRIES = {
-    "map": ("U", 0),
-    "nodes": ("f", 2),
-    "parent": ("i", 1),
-    "cost": ("f", 1),
-    "collision_samples": ("f", 2),
-}
-
-_CELL_ENTRIES = {
-    "map": ("U", 0),
-    "nodes": ("f", 2),
-    "parent": ("i", 1),
-    "collision_samples": ("f", 2),
-    "cell_node": ("i", 1),
-    "cell_A": ("f", 2),
-    "cell_b": ("f", 1),
-    "cell_row_offsets": ("i", 1),
-    "cell_vertices": ("f", 2),
-    "cell_vertex_offsets": ("i", 1),
-    "exit_point": ("f", 2),
-    "exit_dir": ("f", 2),
-    "cbf_A": ("f", 2),
-    "cbf_b": ("f", 1),
-    "cbf_offsets": ("i", 1),
-    "cell_landmarks": ("b", 2),
-    "fixed_landmark": ("i", 1),
-    "s_min": ("f", 1),
-    "s_max": ("f", 1),
-    "cell_flags": ("i", 1),
-    "certificate": ("U", 0),
-    "cell_exit_row": ("i", 1),
-    "cell_rank": ("f", 1),
-    "exit_inset": ("f", 0),
-    "node_added": ("b", 1),
-    "free_coverage": ("f", 0),
-}
-
-_PLAN_ENTRIES = {
-    **_CELL_ENTRIES,
-    "landmarks": ("f", 2),
-    "gain": ("f", 3),
-    "c_h": ("f", 1),
-    "c_v": ("f", 1),
-    "u_max": ("f", 1),
-    "margin_h": ("f", 1),
-    "margin_v": ("f", 1),
-    "status": ("i", 1),
-    "goal_tolerance": ("f", 0),
-    "tolerance": ("f", 1),
-    "plan_tolerance": ("f", 0),
-}
-
+#: Every artifact kind: its file and the stage that writes it here; its schema name and entries come
+#: from the one declaration, :mod:`bearnav_cli.runtime.schema`.
 KINDS: dict[str, Kind] = {
-    "map": Kind("map", "bearnav.map/1", "map.json", {}, "map"),
-    "tree": Kind("tree", "bearnav.tree/1", "tree.npz", _TREE_ENTRIES, "rrtstar"),
-    "simplified": Kind("simplified", "bearnav.simplified/1", "simplified.npz", _TREE_ENTRIES, "simplify"),
-    "cells": Kind("cells", "bearnav.cells/2", "cells.npz", _CELL_ENTRIES, "decompose"),
-    "plan": Kind("plan", "bearnav.plan/2", "plan.npz", _PLAN_ENTRIES, "synthesize"),
-    "simulation": Kind("simulation", "bearnav.sim/2", "sim.npz", {"map": ("U", 0), **SIMULATION_KEYS}, "simulate"),
+    name: Kind(name, SCHEMAS[name], filename, ENTRIES[name], stage)
+    for name, filename, stage in (
+        ("map", "map.json", "map"),
+        ("tree", "tree.npz", "rrtstar"),
+        ("simplified", "simplified.npz", "simplify"),
+        ("cells", "cells.npz", "decompose"),
+        ("plan", "plan.npz", "synthesize"),
+        ("simulation", "sim.npz", "simulate"),
+    )
 }
 
 
 #: Schemas of earlier versions, with what to do about a file that has one.
 RETIRED_SCHEMAS = {
     "bearnav.cells/1": "cells without composable certificates; re-run `bearnav plan MAP.yaml --force`",
-    "bearnav.plan/1": "per-cell certificates only; re-run `bearnav plan MAP.yaml --force` to get bearnav.plan/2",
+    RETIRED_PLAN_SCHEMA: "per-cell certificates only; re-run `bearnav plan MAP.yaml --force` to get "
+                         "bearnav.plan/2",
     "bearnav.sim/1": "runs without their loop constants; re-run `bearnav simulate PLAN.npz --force`",
 }
 
@@ -178,7 +147,18 @@ ARTIFACT_FORMAT = 3
 
 @dataclass(frozen=True)
 class Loaded:
-    """An artifact read from disk: the typed object, its manifest and where it came from."""
+    """An artifact read from disk: the typed object, its manifest and where it came from.
+
+    Attributes
+    ----------
+    artifact : Map, Tree, Cells, Plan or Simulation
+        The typed, checked artifact (every check of :func:`load` passed).
+    manifest : dict
+        Its manifest (DESIGN §3.1), as stored: ``schema``, ``stage``, ``params``, ``input``,
+        ``content_sha256``, ``key``, ...
+    path : Path
+        The file it was read from.
+    """
 
     artifact: Any
     manifest: dict
@@ -194,6 +174,7 @@ def canonical_json(value: Any) -> str:
 
 
 def sha256_text(text: str) -> str:
+    """SHA-256 of ``text`` encoded as UTF-8, as 64 lowercase hex digits."""
     return hashlib.sha256(text.encode()).hexdigest()
 
 
@@ -235,7 +216,27 @@ def content_hash(entries: dict[str, Any], kind: str | None = None) -> str:
 
 
 def cache_key(stage: str, stage_version: int, params: dict, input_hash: str) -> str:
-    """The freshness key: SHA-256 of the canonical JSON of what determines the output."""
+    """The freshness key: SHA-256 of the canonical JSON of what determines the output.
+
+    The key also covers :data:`ARTIFACT_FORMAT`, so a format change reruns every stage once.
+
+    Parameters
+    ----------
+    stage : str
+        The stage's name (``"rrtstar"``).
+    stage_version : int
+        The stage module's ``VERSION``, bumped when its algorithm changes.
+    params : dict
+        The stage's resolved parameters as plain JSON (:func:`params_dict`).
+    input_hash : str
+        The input artifact's content hash (its manifest's ``content_sha256``; for the map
+        stage, ``MapSource.sha256``, the hash of every byte it read).
+
+    Returns
+    -------
+    str
+        64 lowercase hex digits, stored as the manifest's ``key``.
+    """
     return sha256_text(
         canonical_json(
             {"stage": stage, "stage_version": stage_version, "params": params, "input": input_hash,
@@ -273,7 +274,36 @@ def make_manifest(
     elapsed_s: float,
     stats: dict | None = None,
 ) -> dict:
-    """Build the manifest of DESIGN §3.1 for ``artifact``, to be saved as ``kind``."""
+    """Build the manifest of DESIGN §3.1 for ``artifact``, to be saved as ``kind``.
+
+    Parameters
+    ----------
+    kind : str
+        A key of :data:`KINDS` (``"plan"``): gives the manifest's ``schema``.
+    artifact : Map, Tree, Cells, Plan or Simulation
+        The output, whose entries give ``content_sha256`` (:func:`content_hash`).
+    stage : str
+        The stage that made it (``"synthesize"``).
+    stage_version : int
+        That stage's ``VERSION`` (part of the cache key).
+    params : dict
+        The stage's resolved parameters as plain JSON (:func:`params_dict`).
+    input_path : str or None
+        The input file as given (provenance only; None for an input not read from a file).
+    input_hash : str
+        The input's content hash, stored as ``input.content_sha256`` and part of the key.
+    summary : str
+        The one-line summary the CLI prints for the stage.
+    elapsed_s : float
+        Wall-clock time of the stage (s), rounded to µs.
+    stats : dict, optional
+        The stage's statistics (``manifest.stats``; a simulation's metrics); empty by default.
+
+    Returns
+    -------
+    dict
+        Every field of :data:`MANIFEST_FIELDS`, with ``software`` from :func:`software_versions`.
+    """
     return {
         "schema": KINDS[kind].schema,
         "stage": stage,
@@ -343,12 +373,12 @@ def _from_entries(kind: str, entries: dict[str, Any], manifest: dict, check_map:
         return map_
     stats = dict(manifest.get("stats", {}))
     if kind in ("tree", "simplified"):
-        return Tree(map=map_, stats=stats, **{key: entries[key] for key in ("nodes", "parent", "cost",
-                                                                           "collision_samples")})
+        return Tree(map=map_, stats=stats, **{key: entries[key] for key in TREE_KEYS})
     if kind == "simulation":
         values = {key: entries[key] for key in SIMULATION_KEYS}
-        for key in ("speed", "dt", "eps_sw", "goal_tolerance"):
-            values[key] = float(values[key])
+        for key in SIMULATION_KEYS:
+            if KINDS[kind].entries[key].ndim == 0:
+                values[key] = float(values[key])
         return Simulation(map=map_, stats=stats, **values)
     cell_arrays = {key: entries[key] for key in CELL_KEYS}
     if kind == "cells":
@@ -524,6 +554,29 @@ def save(path: str | os.PathLike, artifact: Any, manifest: dict, on_commit: Call
     A simulation also writes ``sim.json`` (the metrics) next to ``sim.npz``; both are committed
     together. ``on_commit`` is called once every file is in place, before a held-back interrupt
     is delivered.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        Where to write (``plan.npz``, ``map.json`` ...); its folder must exist.
+    artifact : Map, Tree, Cells, Plan or Simulation
+        What to write; it must fit the manifest's schema and pass :func:`validate_artifact`.
+    manifest : dict
+        Its manifest (:func:`make_manifest`), stored as the npz's ``manifest`` entry or the
+        ``"manifest"`` object of ``map.json``.
+    on_commit : callable, optional
+        Called with no argument once every file is in place (``pipeline`` records that the
+        output is written).
+
+    Returns
+    -------
+    Path
+        ``path``.
+
+    Raises
+    ------
+    ArtifactError
+        The manifest's schema does not fit the artifact, or the artifact breaks an invariant.
     """
     kind = kind_of_schema(manifest.get("schema", ""))
     if kind is None or not isinstance(artifact, _TYPES[kind]):
@@ -580,6 +633,28 @@ def check_output_file(path: str | os.PathLike, suffixes: tuple[str, ...], option
     """Refuse an output path before any work: wrong extension, a folder, the input itself, an unwritable folder.
 
     Missing parent folders are fine (they are created when the file is written).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The output file the user asked for.
+    suffixes : tuple of str
+        Accepted extensions, lowercase with the dot (``(".npz",)``); the first is suggested
+        when ``path`` is a folder.
+    option : str or None, default "-o/--out"
+        The CLI option that gave ``path``, named in the error (None: none).
+    inputs : tuple of str or os.PathLike, default ()
+        Input files ``path`` must not be (compared with :func:`os.path.samefile`).
+
+    Returns
+    -------
+    Path
+        ``path`` as a :class:`~pathlib.Path`.
+
+    Raises
+    ------
+    OutputPathError
+        What is wrong with ``path``, naming it and ``option``.
     """
     path = Path(path)
     if path.is_dir():
@@ -599,7 +674,27 @@ def check_output_file(path: str | os.PathLike, suffixes: tuple[str, ...], option
 
 def check_output_folder(folder: str | os.PathLike, names: tuple[str, ...] = (),
                         option: str | None = "-o/--out") -> Path:  # fmt: skip
-    """Refuse an output folder before any work: a file there, a folder where one of ``names`` goes, unwritable."""
+    """Refuse an output folder before any work: a file there, a folder where one of ``names`` goes, unwritable.
+
+    Parameters
+    ----------
+    folder : str or os.PathLike
+        The output folder the user asked for; it need not exist yet.
+    names : tuple of str, default ()
+        File names the run will write in it (``"plan.npz"``); none of them may be a folder.
+    option : str or None, default "-o/--out"
+        The CLI option that gave ``folder``, named in the error (None: none).
+
+    Returns
+    -------
+    Path
+        ``folder`` as a :class:`~pathlib.Path`.
+
+    Raises
+    ------
+    OutputPathError
+        What is wrong with ``folder``, naming it and ``option``.
+    """
     folder = Path(folder)
     if folder.exists() and not folder.is_dir():
         raise OutputPathError("is a file, expected a folder", file=str(folder), option=option)
@@ -786,6 +881,10 @@ def _read_raw(path: Path) -> tuple[dict, dict[str, Any]]:
 
 
 def kind_of_schema(schema: Any) -> str | None:
+    """The kind (``"plan"``) whose current schema name is ``schema`` (``"bearnav.plan/2"``), or None.
+
+    A retired schema (:data:`RETIRED_SCHEMAS`) or any other value gives None.
+    """
     for kind in KINDS.values():
         if kind.schema == schema:
             return kind.name
@@ -857,8 +956,9 @@ def load(path: str | os.PathLike, expect: str | tuple[str, ...] | None = None) -
     manifest, entries = _read_raw(path)
     wanted = (expect,) if isinstance(expect, str) else expect
     kind = _check_manifest(manifest, path, wanted)
-    declared = KINDS[kind].entries if kind != "map" else {"map": ("U", 0)}
-    for key, (dtype_kind, ndim) in declared.items():
+    declared = KINDS[kind].entries
+    for key, entry in declared.items():
+        dtype_kind, ndim = entry.kind, entry.ndim
         if key not in entries:
             raise ArtifactError("missing entry", file=str(path), field=key)
         value = entries[key]
@@ -895,6 +995,23 @@ def fresh(path: str | os.PathLike, kind: str, key: str, input_hash: str) -> Load
     Fresh means: it loads (every check of :func:`load`), its manifest has ``key`` and names
     ``input_hash`` as its input's content hash, and, for a simulation, ``sim.json`` is there with
     the same manifest (the two are written, checked and called fresh together).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The existing output of the stage, if any.
+    kind : str
+        The kind it must be (``"plan"``), a key of :data:`KINDS`.
+    key : str
+        The cache key of the run about to happen (:func:`cache_key`).
+    input_hash : str
+        The current input's content hash.
+
+    Returns
+    -------
+    Loaded or None
+        The loaded artifact when it is fresh; None when it is missing, does not load, or was
+        made with another key or input.
     """
     path = Path(path)
     if not path.is_file():

@@ -35,25 +35,26 @@ if threading.current_thread() is threading.main_thread():
         _STARTUP_HANDLERS[_signum] = signal.signal(_signum, _interrupted_while_starting)
 
 import functools
-import hashlib
+import inspect
 import json
 import logging
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, List, Optional
+from typing import TYPE_CHECKING, Any, Callable, List, Optional
 
-import numpy as np
 import typer
-import yaml
 from rich.console import Console
-from rich.progress import BarColumn, Progress, ProgressColumn, TextColumn, TimeElapsedColumn
-from rich.table import Table
-from rich.text import Text
 
-from bearnav_cli import __version__, artifacts, pipeline
-from bearnav_cli.datatypes import CellFlag, Cells, CellStatus, Plan, cell_list
+from bearnav_cli import __version__
 from bearnav_cli.errors import BearnavError, InternalError, InvalidMapError, InvalidParamsError
-from bearnav_cli.stages import map_
-from bearnav_cli.stages.map_ import GridSource, MapSource
+
+# Start-up: numpy, scipy, shapely, yaml, the stages and the pipeline are imported by the commands
+# that use them, so that `bearnav --help` and `bearnav inspect` start at once (bench/README.md).
+if TYPE_CHECKING:
+    from rich.progress import Progress
+
+    from bearnav_cli import pipeline
+    from bearnav_cli.stages.map_ import GridSource, MapSource
 
 
 def _usage_metavar(make_metavar: Callable) -> Callable:
@@ -138,6 +139,8 @@ def _raise_interrupt(signum: int, frame: object) -> None:
 
 
 def _interrupt_message(command: str, exc: BaseException) -> str:
+    from bearnav_cli import pipeline
+
     word = "terminated" if isinstance(exc, Terminated) else "interrupted"
     stage = pipeline.ACTIVITY.stage
     if stage is None:
@@ -159,6 +162,8 @@ def handles_errors(command: Callable) -> Callable:
 
     @functools.wraps(command)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
+        from bearnav_cli import pipeline
+
         _setup_logging()
         pipeline.reset_activity()
         previous: dict[int, Any] = {}
@@ -223,6 +228,8 @@ def _read_bytes(path: Path, field: str | None = None, what: str = "file") -> byt
 
 
 def _read_yaml(path: Path) -> tuple[Any, bytes]:
+    import yaml
+
     data = _read_bytes(path)
     try:
         return yaml.safe_load(data), data
@@ -235,6 +242,8 @@ def _read_yaml(path: Path) -> tuple[Any, bytes]:
 
 def _grid_source(grid_yaml: Path, owner: str, field: str) -> tuple[GridSource, list[bytes]]:
     """Read a ROS map_server YAML and its image."""
+    from bearnav_cli.stages.map_ import GridSource
+
     if not grid_yaml.is_file():
         raise InvalidMapError(f"occupancy file {str(grid_yaml)!r} does not exist", file=owner, field=field)
     meta, meta_bytes = _read_yaml(grid_yaml)
@@ -253,6 +262,10 @@ def read_map_source(
     robot_radius: Optional[float] = None,
 ) -> MapSource:
     """Read a bearnav map YAML (or a bare ROS map_server YAML plus options) into a MapSource."""
+    import hashlib
+
+    from bearnav_cli.stages.map_ import MapSource
+
     spec, data = _read_yaml(path)
     if not isinstance(spec, dict):
         raise InvalidMapError("expected a mapping at the top level", file=str(path))
@@ -322,24 +335,42 @@ def _progress_factory(progress: Progress) -> Callable[[str], pipeline.Progress]:
     return make
 
 
-class _CountColumn(ProgressColumn):
-    """``done/total``, or nothing while the stage has not said how much there is (never ``0/None``)."""
+@functools.cache
+def _count_column() -> type:
+    """:class:`_CountColumn`, defined on first use: rich.progress is imported only by commands that show progress."""
+    from rich.progress import ProgressColumn
+    from rich.text import Text
 
-    def render(self, task: Any) -> Text:
-        if task.total is None:
-            return Text("")
-        return Text(f"{int(task.completed)}/{int(task.total)}")
+    class _CountColumn(ProgressColumn):
+        """``done/total``, or nothing while the stage has not said how much there is (never ``0/None``)."""
+
+        def render(self, task: Any) -> Text:
+            if task.total is None:
+                return Text("")
+            return Text(f"{int(task.completed)}/{int(task.total)}")
+
+    return _CountColumn
+
+
+def __getattr__(name: str) -> Any:
+    if name == "_CountColumn":
+        return _count_column()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def _progress_bar() -> Progress:
+    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
     return Progress(
-        TextColumn("{task.description:<10}"), BarColumn(), _CountColumn(),
+        TextColumn("{task.description:<10}"), BarColumn(), _count_column()(),
         TimeElapsedColumn(), console=err, transient=True, disable=_Quiet.enabled or not err.is_terminal,
     )
 
 
 def _outcome_failure(artifact: Any) -> str | None:
     """Why a finished run's result is not usable (exit 1), or None."""
+    from bearnav_cli.datatypes import CellFlag, Cells, CellStatus, cell_list
+
     cells = getattr(artifact, "cells", artifact)  # a Plan holds its Cells
     nodes = getattr(cells, "nodes", None)
     if nodes is not None and len(nodes) < 2:
@@ -369,7 +400,299 @@ def _finish(reports: list[pipeline.StageReport], as_json: bool) -> None:
         raise _fail(problem, EXIT_OUTCOME)
 
 
+# --------------------------------------------------------------------------- options from the Params
+
+
+#: The folder of the ``bearnav_cli`` package, whose sources describe the options.
+_PACKAGE = Path(__file__).resolve().parent
+#: The module of each command's ``Params`` (the stage table's, plus ``verify``).
+PARAMS_MODULES = {
+    "map": "bearnav_cli.stages.map_", "rrtstar": "bearnav_cli.stages.rrtstar",
+    "simplify": "bearnav_cli.stages.simplify", "decompose": "bearnav_cli.stages.decompose",
+    "synthesize": "bearnav_cli.stages.synthesize", "simulate": "bearnav_cli.stages.simulate",
+    "verify": "bearnav_cli.verify",
+}  # fmt: skip
+#: The off-switch of a flag when it is not ``--no-NAME``.
+FLAG_OFF = {("synthesize", "tolerant"): "--lp-field", ("simulate", "clamp_reverse"): "--allow-reverse"}
+_TYPES = {"int": int, "float": float, "str": str, "bool": bool}
+
+
+@dataclass(frozen=True)
+class ParamField:
+    """One field of a ``Params`` dataclass, as an option describes it.
+
+    Attributes
+    ----------
+    name : str
+    kind : type
+        int, float, str or bool (``None`` allowed when ``optional``).
+    optional : bool
+        The annotation is ``X | None``.
+    default : object
+        The dataclass's default.
+    doc : str
+        The field's entry under ``Attributes`` of the class docstring ("" when it has none).
+    choices : tuple of str
+        The allowed values the docstring's type declares (``{"skip", "extend"}``), or empty.
+    """
+
+    name: str
+    kind: type
+    optional: bool
+    default: Any
+    doc: str
+    choices: tuple[str, ...] = ()
+
+
+class _NotLiteral(Exception):
+    """A declaration the source reader cannot evaluate: the module is imported instead."""
+
+
+def _module_source(module: str) -> str:
+    parts = module.split(".")[1:]
+    path = _PACKAGE.joinpath(*parts).with_suffix(".py")
+    if not path.is_file():
+        path = _PACKAGE.joinpath(*parts, "__init__.py")
+    try:
+        return path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise _NotLiteral(module) from exc
+
+
+def _constant(module: str, name: str, depth: int = 0) -> Any:
+    """A module-level ``NAME = literal`` of ``module``, or of the bearnav module it imports NAME from."""
+    import ast
+    import re
+
+    source = _module_source(module)
+    match = re.search(rf"^{name}(?:[ \t]*:[^=\n]+)?[ \t]*=[ \t]*([^\n]+)$", source, re.M)
+    if match:
+        try:
+            return ast.literal_eval(match.group(1).split("  #")[0].strip())
+        except (ValueError, SyntaxError) as exc:
+            raise _NotLiteral(f"{module}.{name}") from exc
+    for origin, names in re.findall(r"^from (bearnav_cli[\w.]*) import (\([^)]*\)|[^\n]*)", source, re.M):
+        if depth < 3 and name in {n.strip() for n in names.strip("()").replace("\n", " ").split(",")}:
+            return _constant(origin, name, depth + 1)
+    raise _NotLiteral(f"{module}.{name}")
+
+
+def _annotation(text: str) -> tuple[type, bool]:
+    parts = [part.strip() for part in text.replace("Optional[", "").rstrip("]").split("|")]
+    optional = "None" in parts or text.startswith("Optional[")
+    kinds = [part for part in parts if part != "None"]
+    if len(kinds) != 1 or kinds[0] not in _TYPES:
+        raise _NotLiteral(text)
+    return _TYPES[kinds[0]], optional
+
+
+def _attribute_docs(doc: str) -> dict[str, tuple[str, tuple[str, ...]]]:
+    """``{field: (description, choices)}`` from the numpydoc ``Attributes`` section of a docstring."""
+    import inspect as inspect_
+    import re
+
+    lines = inspect_.cleandoc(doc or "").splitlines()
+    found: dict[str, tuple[str, tuple[str, ...]]] = {}
+    try:
+        start = next(i for i, line in enumerate(lines[:-1]) if line.strip() == "Attributes"
+                     and set(lines[i + 1].strip()) == {"-"}) + 2  # fmt: skip
+    except StopIteration:
+        return found
+    names: list[str] = []
+    text: list[str] = []
+    choices: tuple[str, ...] = ()
+
+    def close() -> None:
+        for one in names:
+            found[one] = (" ".join(text), choices)
+
+    for line in lines[start:]:
+        head = re.fullmatch(r"(\w+(?:, \w+)*)(?: : (.*))?", line)
+        if head and not line.startswith(" "):
+            close()
+            names, text = head.group(1).split(", "), []
+            kind = head.group(2) or ""
+            choices = tuple(re.findall(r'"([^"]+)"', kind)) if kind.startswith("{") else ()
+        elif line.startswith(" ") and names:
+            text.append(line.strip())
+        elif line.strip() and not line.startswith(" "):  # the next section
+            break
+    close()
+    return found
+
+
+@functools.cache
+def params_fields(command: str) -> tuple[ParamField, ...]:
+    """The fields of a command's ``Params``, read from its module's source without importing it.
+
+    Importing a stage imports numpy, shapely and scipy, which ``bearnav --help`` must not wait
+    for; the source says the same (``tests/test_cli_options.py`` compares the two). A declaration
+    the reader cannot evaluate (a default that is not a literal or a constant) falls back to
+    importing the module.
+    """
+    import ast
+    import re
+
+    module = PARAMS_MODULES[command]
+    try:
+        source = _module_source(module)
+        block = re.search(r"^class Params\b[^\n]*\n(?:[ \t]+[^\n]*\n|[ \t]*\n)*", source, re.M)
+        if block is None:
+            raise _NotLiteral(module)
+        (node,) = ast.parse(block.group(0)).body
+        docs = _attribute_docs(ast.get_docstring(node) or "")
+        fields = []
+        for item in node.body:
+            if not (isinstance(item, ast.AnnAssign) and isinstance(item.target, ast.Name)):
+                continue
+            if item.value is None:
+                raise _NotLiteral(f"{module}.Params.{item.target.id}: no default")
+            if isinstance(item.value, ast.Name):
+                default = _constant(module, item.value.id)
+            else:
+                try:
+                    default = ast.literal_eval(item.value)
+                except ValueError as exc:
+                    raise _NotLiteral(f"{module}.Params.{item.target.id}") from exc
+            kind, optional = _annotation(ast.unparse(item.annotation))
+            doc, choices = docs.get(item.target.id, ("", ()))
+            fields.append(ParamField(item.target.id, kind, optional, default, doc, choices))
+        return tuple(fields)
+    except (_NotLiteral, SyntaxError, ValueError):
+        return imported_params_fields(command)
+
+
+def imported_params_fields(command: str) -> tuple[ParamField, ...]:
+    """:func:`params_fields` from the imported dataclass (the slow way, and the check of the fast one)."""
+    import dataclasses as dataclasses_
+    import importlib
+    import typing
+
+    params_type = importlib.import_module(PARAMS_MODULES[command]).Params
+    hints = typing.get_type_hints(params_type)
+    docs = _attribute_docs(params_type.__doc__ or "")
+    fields = []
+    for field in dataclasses_.fields(params_type):
+        kinds = [k for k in typing.get_args(hints[field.name]) if k is not type(None)] or [hints[field.name]]
+        doc, choices = docs.get(field.name, ("", ()))
+        fields.append(ParamField(field.name, kinds[0], type(None) in typing.get_args(hints[field.name]),
+                                 field.default, doc, choices))  # fmt: skip
+    return tuple(fields)
+
+
+@functools.cache
+def option_names() -> dict[tuple[str, str], str]:
+    """``pipeline.OPTION_NAMES``, read from its source (importing ``pipeline`` imports every stage)."""
+    import ast
+    import re
+
+    match = re.search(r"^OPTION_NAMES = (\{[^\n]*\})$", _module_source("bearnav_cli.pipeline"), re.M)
+    if match is None:
+        from bearnav_cli import pipeline
+
+        return dict(pipeline.OPTION_NAMES)
+    return ast.literal_eval(match.group(1))
+
+
+def _option_name(command: str, name: str) -> str:
+    return option_names().get((command, name), "--" + name.replace("_", "-"))
+
+
+def _plain(text: str) -> str:
+    """A docstring's reST as help text: ``code`` and :role:`target` plain, ``[`` escaped for rich."""
+    import re
+
+    text = re.sub(r":\w+:`~[\w.]*\.(\w+)`", r"\1", text)
+    text = re.sub(r":\w+:`([^`]+)`", r"\1", text)
+    return text.replace("``", "").replace("[", r"\[")
+
+
+def _shown(value: Any) -> str:
+    return repr(value) if isinstance(value, str) else f"{value:g}" if isinstance(value, float) else str(value)
+
+
+def option_help(command: str, field: ParamField, *, with_default: bool = True, prefix: str = "") -> str:
+    """The help text of a field's option: its docstring's first sentence and the dataclass's default.
+
+    A default of None is described by the docstring's own words: the sentences up to the one that
+    says what ``None`` means. ``with_default=False`` leaves the default to typer (``[default: 200]``).
+    """
+    import re
+
+    sentences = re.split(r"(?<=\.)\s+(?=[A-Z`*(])", field.doc.strip()) if field.doc.strip() else [""]
+    count = 1
+    while count < len(sentences) and len(" ".join(sentences[:count])) < 40:  # "*paper* and funnel-local."
+        count += 1
+    if field.default is None:
+        count = max(count, next((i + 1 for i, s in enumerate(sentences) if "None" in s), 1))
+    text = _plain(" ".join(sentences[:count]))
+    text = text[:-1] if text.endswith(".") and not text.endswith("..") else text
+    notes = []
+    if field.choices:
+        notes.append("one of " + ", ".join(field.choices))
+    if with_default and field.default is not None:
+        if field.kind is bool:
+            name = _option_name(command, field.name)
+            shown = name if field.default else FLAG_OFF.get((command, field.name), "--no-" + name[2:])
+        else:
+            shown = _shown(field.default)
+        notes.append(f"default: {shown}")
+    return prefix + text + (f" ({'; '.join(notes)})" if notes else "") + "."
+
+
+def params_options(command: str, *, skip: tuple[str, ...] = (), only: tuple[str, ...] | None = None,
+                   defaults: bool = False, prefix: str = "") -> list[inspect.Parameter]:  # fmt: skip
+    """The typer options of a command's ``Params`` fields, as parameters of a command's signature.
+
+    The option is ``--field-name`` (``pipeline.OPTION_NAMES`` renames, such as ``--starts``), a
+    ``--name/--no-name`` flag for a bool (:data:`FLAG_OFF` names other off-switches), of the
+    field's type; the help is :func:`option_help`. A stage's options default to None, "not given",
+    so that the map's ``params:`` apply; ``defaults=True`` (``verify``, which has no map layer)
+    gives typer the dataclass's defaults instead. ``skip`` leaves fields without an option
+    (``params:`` only), ``only`` keeps just those fields.
+    """
+    options = []
+    for field in params_fields(command):
+        if field.name in skip or (only is not None and field.name not in only):
+            continue
+        name = _option_name(command, field.name)
+        declared = f"{name}/{FLAG_OFF.get((command, field.name), '--no-' + name[2:])}" if field.kind is bool else name
+        default = field.default if defaults else None
+        kind = field.kind if default is not None else Optional[field.kind]
+        help_text = option_help(command, field, with_default=not defaults, prefix=prefix)
+        options.append(inspect.Parameter(field.name, inspect.Parameter.KEYWORD_ONLY, annotation=kind,
+                                         default=typer.Option(default, declared, help=help_text)))  # fmt: skip
+    return options
+
+
+def with_options(*groups: list[inspect.Parameter], before: str = "force") -> Callable[[Callable], Callable]:
+    """Give a command the generated options: its signature (what typer reads) gains them before ``before``.
+
+    The command takes them as ``**options``, keyed by field name.
+    """
+
+    def decorate(command: Callable) -> Callable:
+        signature = inspect.signature(command, eval_str=True)
+        own = [p.replace(kind=inspect.Parameter.KEYWORD_ONLY) for p in signature.parameters.values()
+               if p.kind is not inspect.Parameter.VAR_KEYWORD]  # fmt: skip
+        at = next((i for i, p in enumerate(own) if p.name == before), len(own))
+        command.__signature__ = signature.replace(parameters=[*own[:at], *(p for g in groups for p in g), *own[at:]])
+        return command
+
+    return decorate
+
+
 # --------------------------------------------------------------------------- commands
+
+#: Fields without a command-line option, set in the map's ``params:`` only (docs/cli.md lists the
+#: stages'; ``verify.Params.dt`` follows simulate's).
+PARAMS_ONLY: dict[str, tuple[str, ...]] = {
+    "map": ("coverage_cells",), "rrtstar": (), "simplify": (), "decompose": (),
+    "synthesize": ("w_h", "w_v", "clf_margin"),
+    "simulate": ("min_spread_deg", "turn_first", "certified_heading", "look_on_purpose", "initial_heading",
+                 "max_fix_error", "goal_tolerance", "max_steps", "record_trajectories"),
+    "verify": ("dt",),
+}  # fmt: skip
 
 #: Where the words of the verify and simulate output are defined.
 WORDS_NOTE = 'lost, stall, left-cell events, approach, hold, certified, D, F_m: docs/cli.md "Words in the output"'
@@ -382,11 +705,10 @@ JSON = typer.Option(False, "--json", help="Print machine-readable JSON.")
 
 @app.command("map")
 @handles_errors
+@with_options(params_options("map", skip=PARAMS_ONLY["map"]), before="goal")
 def map_command(
     source: Path = MAP_ARG,
     out_path: Optional[Path] = typer.Option(None, "-o", "--out", help="Output (default plans/<name>/map.json)."),
-    unknown: Optional[str] = typer.Option(None, help="Unknown grid cells count as 'obstacle' (default) or 'free'."),
-    circle_segments: Optional[int] = typer.Option(None, help="Vertices of a polygonised circle (64)."),
     goal: Optional[str] = typer.Option(None, help="Goal X,Y (bare occupancy grids only)."),
     landmark: Optional[List[str]] = typer.Option(None, help="Landmark X,Y, repeatable (bare grids only)."),
     start: Optional[List[str]] = typer.Option(None, help="Start X,Y, repeatable (bare grids only)."),
@@ -394,16 +716,19 @@ def map_command(
     force: bool = FORCE,
     quiet: bool = QUIET,
     as_json: bool = JSON,
+    **options: Any,
 ) -> None:
     """Validate a map and write map.json.
 
     Example: bearnav map maps/kitchen.yaml -o /tmp/kitchen/map.json
     """
+    from bearnav_cli import pipeline
+
     _Quiet.enabled |= quiet
     goal_xy = _pair(goal, "--goal") if goal else None
     src = read_map_source(source, goal_xy, landmark, start, robot_radius)
     target = out_path or Path("plans") / str(src.spec.get("name", source.stem)) / "map.json"
-    report = pipeline.run_map(src, target, {"unknown": unknown, "circle_segments": circle_segments}, force)
+    report = pipeline.run_map(src, target, options, force)
     if not as_json:
         out.print(_report_line(report), highlight=False, soft_wrap=True)
     _finish([report], as_json)
@@ -411,127 +736,87 @@ def map_command(
 
 @app.command("rrtstar")
 @handles_errors
+@with_options(params_options("rrtstar", skip=PARAMS_ONLY["rrtstar"]))
 def rrtstar_command(
     map_json: Path = typer.Argument(..., metavar="MAP_JSON", help="map.json from `bearnav map`."),
     out_path: Optional[Path] = typer.Option(None, "-o", "--out", help="Output (default tree.npz next to the input)."),
-    iterations: Optional[int] = typer.Option(None, help="Random samples drawn (1500)."),
-    step: Optional[float] = typer.Option(None, help="Steering distance eta, map units (1.0)."),
-    seed: Optional[int] = typer.Option(None, help="Random seed (0)."),
-    collision_policy: Optional[str] = typer.Option(None, help="'skip' (default) or 'extend' after a collision sample."),
-    border_spacing: Optional[float] = typer.Option(None, help="Border pseudo-sample spacing (step/10; 0 = off)."),
-    clearance: Optional[float] = typer.Option(None, help="Least distance of edges from obstacles and walls (0.01 D)."),
     force: bool = FORCE,
     quiet: bool = QUIET,
     as_json: bool = JSON,
+    **options: Any,
 ) -> None:
     """Grow an RRT* tree rooted at the goal, keeping the collision samples.
 
     Example: bearnav rrtstar plans/kitchen/map.json --iterations 3000 --seed 1
     """
     _Quiet.enabled |= quiet
-    overrides = dict(
-        iterations=iterations, step=step, seed=seed, collision_policy=collision_policy,
-        border_spacing=border_spacing, clearance=clearance,
-    )
-    _run_one("rrtstar", map_json, out_path, overrides, force, as_json)
+    _run_one("rrtstar", map_json, out_path, options, force, as_json)
 
 
 @app.command("simplify")
 @handles_errors
+@with_options(params_options("simplify", skip=PARAMS_ONLY["simplify"]))
 def simplify_command(
     tree_npz: Path = typer.Argument(..., metavar="TREE_NPZ", help="tree.npz from `bearnav rrtstar`."),
     out_path: Optional[Path] = typer.Option(
         None, "-o", "--out", help="Output (default simplified.npz next to the input)."
     ),
-    max_rounds: Optional[int] = typer.Option(None, help="Rounds of PPR, CtL, RC, CtL at most (10)."),
-    ctl: Optional[str] = typer.Option(None, help="Leaves kept by cut-the-leaves: 'middle' (default) or 'extremes'."),
-    clearance: Optional[float] = typer.Option(None, help="Least distance of shortcuts from obstacles (0.01 D)."),
     force: bool = FORCE,
     quiet: bool = QUIET,
     as_json: bool = JSON,
+    **options: Any,
 ) -> None:
     """Simplify the tree: shortcuts, leaf cutting and crossing removal to a fixed point.
 
     Example: bearnav simplify plans/kitchen/tree.npz
     """
     _Quiet.enabled |= quiet
-    _run_one("simplify", tree_npz, out_path, dict(max_rounds=max_rounds, ctl=ctl, clearance=clearance), force, as_json)
+    _run_one("simplify", tree_npz, out_path, options, force, as_json)
 
 
 @app.command("decompose")
 @handles_errors
+@with_options(params_options("decompose", skip=PARAMS_ONLY["decompose"]))
 def decompose_command(
     tree_npz: Path = typer.Argument(..., metavar="SIMPLIFIED_NPZ", help="simplified.npz from `bearnav simplify`."),
     out_path: Optional[Path] = typer.Option(None, "-o", "--out", help="Output (default cells.npz next to the input)."),
-    cells: Optional[str] = typer.Option(
-        None, help="'funnel' (default: composable, ALGORITHMS §11), 'funnel-local' (+ bisectors) or 'paper' (§4)."
-    ),
-    exit_inset: Optional[float] = typer.Option(None, help="δ_e, exit faces inside the parent eroded by it (0.005 D)."),
-    coverage_target: Optional[float] = typer.Option(None, help="Densify until the cells cover this of F_m (0.99)."),
-    max_added_nodes: Optional[int] = typer.Option(None, help="At most this many leaves added by densification (200)."),
-    bisector_rule: Optional[str] = typer.Option(None, help="'crossing' (default) or 'parent' bisector rule."),
-    cbf_apex: Optional[str] = typer.Option(None, help="Barrier wedge apex: 'child' (default) or 'parent'."),
-    cbf_filter: Optional[str] = typer.Option(None, help="Samples a barrier may use: 'both', 'projection', 'cell'."),
-    n_landmarks: Optional[int] = typer.Option(None, help="Landmarks per cell controller (4)."),
-    barrier: Optional[str] = typer.Option(None, help="'corridor' (default: exact obstacles) or 'wedge' (samples)."),
-    barrier_margin: Optional[float] = typer.Option(None, help="Corridor rows' distance from obstacles (0.01 D)."),
     force: bool = FORCE,
     quiet: bool = QUIET,
     as_json: bool = JSON,
+    **options: Any,
 ) -> None:
     """Cut the free space into one convex cell per tree node: funnel cells that compose (default).
 
     Example: bearnav decompose plans/kitchen/simplified.npz --cells paper
     """
     _Quiet.enabled |= quiet
-    overrides = dict(
-        cells=cells, exit_inset=exit_inset, coverage_target=coverage_target, max_added_nodes=max_added_nodes,
-        bisector_rule=bisector_rule, cbf_apex=cbf_apex, cbf_filter=cbf_filter, n_landmarks=n_landmarks,
-        barrier=barrier, barrier_margin=barrier_margin,
-    )
-    _run_one("decompose", tree_npz, out_path, overrides, force, as_json)
+    _run_one("decompose", tree_npz, out_path, options, force, as_json)
 
 
 @app.command("synthesize")
 @handles_errors
+@with_options(params_options("synthesize", skip=PARAMS_ONLY["synthesize"]))
 def synthesize_command(
     cells_npz: Path = typer.Argument(..., metavar="CELLS_NPZ", help="cells.npz from `bearnav decompose`."),
     out_path: Optional[Path] = typer.Option(None, "-o", "--out", help="Output (default plan.npz next to the input)."),
-    u_max: Optional[float] = typer.Option(None, help="Input box |u_k| <= u_max, map units/s (1.0)."),
-    kappa: Optional[float] = typer.Option(None, help="Initial constant scale kappa of c_v and c_h (0.5)."),
-    halvings: Optional[int] = typer.Option(None, help="Halvings of kappa tried before giving up (6)."),
-    gain_structure: Optional[str] = typer.Option(None, help="'full' (default), 'diag' or 'scalar' gain blocks."),
-    lp_form: Optional[str] = typer.Option(None, help="'vertex' (default) or 'dual' form of the robust LP."),
-    goal_tolerance: Optional[float] = typer.Option(None, help="Success radius around the goal (0.01 D)."),
-    tolerant: Optional[bool] = typer.Option(
-        None, "--tolerant/--lp-field", help="Funnel cells: keep the field that tolerates more position error (on)."
-    ),
     force: bool = FORCE,
     quiet: bool = QUIET,
     as_json: bool = JSON,
+    **options: Any,
 ) -> None:
     """Synthesise a certified linear controller per cell (one robust LP each, HiGHS).
 
     Example: bearnav synthesize plans/kitchen/cells.npz --lp-form dual
     """
     _Quiet.enabled |= quiet
-    overrides = dict(
-        u_max=u_max, kappa=kappa, halvings=halvings, gain_structure=gain_structure, lp_form=lp_form,
-        goal_tolerance=goal_tolerance, tolerant=tolerant,
-    )
-    _run_one("synthesize", cells_npz, out_path, overrides, force, as_json)
+    _run_one("synthesize", cells_npz, out_path, options, force, as_json)
 
 
 @app.command("verify")
 @handles_errors
+@with_options(params_options("verify", skip=PARAMS_ONLY["verify"], defaults=True), before="tree")
 def verify_command(
     plan_npz: Path = typer.Argument(..., metavar="PLAN_NPZ", help="plan.npz from `bearnav synthesize`."),
-    starts: int = typer.Option(200, "--starts", help="Random free starts for the closed-loop check (0 = skip)."),
-    seed: int = typer.Option(0, help="Seed of the random starts."),
-    speed: Optional[float] = typer.Option(
-        None, help="Constant speed of the closed loop, map units/s (the map's params: simulate, else 0.1)."
-    ),
-    min_success: Optional[float] = typer.Option(None, help="Fail (exit 1) below this success rate, 0..1."),
     tree: Optional[Path] = typer.Option(None, help="tree.npz whose collision samples the plan must keep."),
     world: Optional[Path] = typer.Option(
         None, help="Another map YAML in the same frame: list the cells whose (C1) no longer holds there."
@@ -542,32 +827,34 @@ def verify_command(
     noise_deg: float = typer.Option(1.0, "--noise-deg", help="Bearing noise (1σ, degrees) of that report."),
     quiet: bool = QUIET,
     as_json: bool = JSON,
+    **options: Any,
 ) -> None:
     """Prove the composed certificate from the plan alone (no solver): every cell, coverage, δ*, the loop.
 
     Example: bearnav verify plans/kitchen/plan.npz --starts 500 --min-success 0.99
     """
-    from bearnav_cli import verify  # scipy.sparse and the closed loop: only for this command
+    from bearnav_cli import pipeline, verify  # scipy.sparse and the closed loop: only for this command
 
     _Quiet.enabled |= quiet
-    pipeline.check_value("verify", "n_starts", starts, "--starts")
-    pipeline.check_value("verify", "seed", seed, "--seed")
-    pipeline.check_value("verify", "speed", speed, "--speed")
-    pipeline.check_value("verify", "min_success", min_success, "--min-success")
+    for name, value in options.items():
+        pipeline.check_value("verify", name, value, pipeline.option_name("verify", name))
+    try:
+        params = verify.Params(**options)
+    except InvalidParamsError as exc:  # name the option the user typed
+        raise _fail(f"{pipeline.option_name('verify', exc.field or '')}: {exc.reason}", EXIT_INVALID) from None
+    starts = params.n_starts
     pipeline.ACTIVITY.stage = "verify"
     loaded = pipeline.load(plan_npz, "plan")
     samples = pipeline.load(tree, ("tree", "simplified")).artifact.collision_samples if tree else None
     plan = loaded.artifact
-    where_speed = "--speed" if speed is not None else "params.simulate.speed"
-    if speed is None:  # the speed the map simulates at (the paper maps' units are not metres)
-        speed = pipeline.resolve_params("simulate", plan.map.params).speed
+    where_speed = "--speed" if params.speed is not None else "params.simulate.speed"
+    speed = verify.loop_speed(plan, params)  # the speed verify.run drives at (the map's, else simulate's)
     pipeline.check_value("verify", "speed", speed, where_speed, plan.map.diagonal)
     if starts:
         loop = pipeline.resolve_params("simulate", {}, {"speed": speed, "measurement": "displacement",
                                                        "record_trajectories": False})  # fmt: skip
         pipeline.check_closed_loop(plan, loop, starts, "--starts", where_speed, record=False)
         pipeline.check_verify_starts(plan, starts)
-    params = verify.Params(n_starts=starts, seed=seed, speed=speed, min_success=min_success)
     world_map = _load_world(world) if world is not None else None
     seeing = None
     if fov is not None:  # checked before the closed loop runs
@@ -610,10 +897,14 @@ def verify_command(
 
 def _load_world(path: Path):
     """The normalised map of a ``--world`` YAML (validated like any map)."""
+    from bearnav_cli.stages import map_
+
     return map_.run(read_map_source(path))
 
 
 def _run_one(stage: str, source: Path, out_path: Optional[Path], overrides: dict, force: bool, as_json: bool) -> None:
+    from bearnav_cli import pipeline
+
     with _progress_bar() as progress:
         report = pipeline.run_stage(stage, source, out_path, overrides, force, _progress_factory(progress)(stage))
     if not as_json:
@@ -623,37 +914,12 @@ def _run_one(stage: str, source: Path, out_path: Optional[Path], overrides: dict
 
 @app.command("simulate")
 @handles_errors
+@with_options(params_options("simulate", skip=PARAMS_ONLY["simulate"]), before="min_success")
 def simulate_command(
     plan_npz: Path = typer.Argument(
         ..., metavar="PLAN_NPZ", help="plan.npz from `bearnav synthesize` or `bearnav plan`."
     ),
     out_path: Optional[Path] = typer.Option(None, "-o", "--out", help="Output (default sim.npz next to the plan)."),
-    starts: Optional[str] = typer.Option(
-        None, help="'map' (default), 'random:N' or \"x,y;x,y;...\" (quoted: the shell splits at ;)."
-    ),
-    dynamics: Optional[str] = typer.Option(None, help="'single' (default) or 'unicycle'."),
-    measurement: Optional[str] = typer.Option(None, help="'bearing' (default) or 'displacement'."),
-    fov: Optional[float] = typer.Option(None, help="Camera field of view, degrees (360)."),
-    noise_deg: Optional[float] = typer.Option(None, help="Bearing noise standard deviation, degrees (0)."),
-    range_: Optional[float] = typer.Option(None, "--range", help="Largest landmark distance seen, map units."),
-    occlusion: Optional[bool] = typer.Option(None, "--occlusion/--no-occlusion", help="Obstacles hide landmarks."),
-    reconstruction: Optional[str] = typer.Option(None, help="'lsq' (default), 'pair' or 'rescale'."),
-    dt: Optional[float] = typer.Option(None, help="Euler step, s (min(0.0025 D / v, 0.2))."),
-    speed: Optional[float] = typer.Option(None, help="Single-integrator speed, map units/s (0.1)."),
-    alpha: Optional[float] = typer.Option(None, help="Unicycle forward gain, map units/s (0.1)."),
-    beta: Optional[float] = typer.Option(None, help="Unicycle turn gain, rad/s (0.5)."),
-    clamp_reverse: Optional[bool] = typer.Option(
-        None, "--clamp-reverse/--allow-reverse", help="Unicycle never drives backwards."
-    ),
-    hold_time: Optional[float] = typer.Option(None, help="Seconds without a fix before looking around (2)."),
-    odometry: Optional[bool] = typer.Option(None, "--odometry/--no-odometry", help="Bridge gaps between fixes."),
-    odometry_noise: Optional[float] = typer.Option(
-        None, help="Wheel slip of the simulated robot, of the distance travelled (0.02 = 2%; 0: exact motion)."
-    ),
-    camera: Optional[str] = typer.Option(
-        None, help="'ideal' (default) or 'render' (draws frames and detects AprilTags; needs bearnav\\[camera])"
-    ),
-    seed: Optional[int] = typer.Option(None, help="Seed of the noise and of random starts (0)."),
     min_success: float = typer.Option(1.0, help="Exit 1 when fewer runs than this fraction reach the goal."),
     gif: Optional[Path] = typer.Option(None, help="Also write an animation of the runs (.gif)."),
     bag: Optional[Path] = typer.Option(
@@ -662,20 +928,18 @@ def simulate_command(
     force: bool = FORCE,
     quiet: bool = QUIET,
     as_json: bool = JSON,
+    **options: Any,
 ) -> None:
     """Drive robots with the plan's controllers from bearings: field of view, noise, unicycle.
 
     Example: bearnav simulate plans/kitchen/plan.npz --fov 60 --dynamics unicycle --starts random:200
     """
+    from bearnav_cli import artifacts, pipeline
+
     _Quiet.enabled |= quiet
     if not 0.0 <= min_success <= 1.0:
         raise _fail(f"--min-success: must lie in [0, 1], got {min_success}", EXIT_INVALID)
-    overrides = dict(
-        starts=starts, dynamics=dynamics, measurement=measurement, fov=fov, noise_deg=noise_deg, range=range_,
-        occlusion=occlusion, reconstruction=reconstruction, dt=dt, speed=speed, alpha=alpha, beta=beta,
-        clamp_reverse=clamp_reverse, hold_time=hold_time, odometry=odometry, odometry_noise=odometry_noise, seed=seed,
-        camera=camera,
-    )
+    overrides = options
     if gif is not None:  # before any work, like every output path
         artifacts.check_output_file(gif, (".gif",), "--gif", inputs=(plan_npz,))
     if bag is not None:  # before any work too: suffix, folder, rosbags installed
@@ -696,6 +960,8 @@ def simulate_command(
         shown = {"sim": str(report.path), "ran": report.ran, "metrics": metrics}
         out.print_json(json.dumps(shown if bag is None else dict(shown, bag=str(bag))))
     else:
+        from rich.table import Table
+
         out.print(_report_line(report), highlight=False, soft_wrap=True)
         table = Table(title=None, box=None, show_header=True, header_style="bold")
         table.add_column("metric")
@@ -743,8 +1009,15 @@ def _metric_rows(metrics: dict) -> list[tuple[str, str]]:
     return rows
 
 
+#: The options ``bearnav plan`` takes of each stage (to change the others for a whole plan: ``params:``).
+PLAN_OPTIONS = {
+    "map": ("unknown", "circle_segments"), "rrtstar": ("iterations", "step", "seed"), "decompose": ("cells",),
+}  # fmt: skip
+
+
 @app.command("plan")
 @handles_errors
+@with_options(*(params_options(stage, only=names, prefix=f"{stage}: ") for stage, names in PLAN_OPTIONS.items()))
 def plan_command(
     source: Path = typer.Argument(
         ..., metavar="MAP", help="Map YAML (bearnav format, or a bare ROS map_server YAML with --goal), or a map.json."
@@ -760,17 +1033,10 @@ def plan_command(
         None, metavar="X,Y", help="Start X,Y, map units, repeatable (bare grids only)."
     ),
     robot_radius: Optional[float] = typer.Option(None, help="Robot radius, map units (bare grids only; 0)."),
-    unknown: Optional[str] = typer.Option(None, help="Unknown grid cells count as 'obstacle' (default) or 'free'."),
-    circle_segments: Optional[int] = typer.Option(None, help="Vertices of a polygonised circle (64)."),
-    iterations: Optional[int] = typer.Option(None, help="RRT* iterations (map's params, else 1500)."),
-    step: Optional[float] = typer.Option(None, help="RRT* step, map units (map's params, else 1.0)."),
-    seed: Optional[int] = typer.Option(None, help="RRT* seed (map's params, else 0)."),
-    cells: Optional[str] = typer.Option(
-        None, help="Decompose: 'funnel' (default, ALGORITHMS §11), 'funnel-local' or 'paper' (§4) cells."
-    ),
     force: bool = FORCE,
     quiet: bool = QUIET,
     as_json: bool = JSON,
+    **options: Any,
 ) -> None:
     """Run every stage from the map to the last one, skipping fresh stages.
 
@@ -779,16 +1045,15 @@ def plan_command(
     Examples: bearnav plan maps/kitchen.yaml --seed 3;
     bearnav plan lab.yaml --goal 1,1 --landmark 0,2 --landmark 4,0 (a bare map_server YAML)
     """
+    from bearnav_cli import pipeline
+
     _Quiet.enabled |= quiet
+    cells = options["cells"]
     if cells is not None and cells not in CELL_KINDS:  # before any stage runs
         raise _fail(f"--cells: must be one of {', '.join(CELL_KINDS)}, got {cells!r}", EXIT_INVALID)
     map_options = {"--goal": goal, "--landmark": landmark, "--start": start, "--robot-radius": robot_radius,
-                   "--unknown": unknown, "--circle-segments": circle_segments}  # fmt: skip
-    overrides = {
-        "map": {"unknown": unknown, "circle_segments": circle_segments},
-        "rrtstar": {"iterations": iterations, "step": step, "seed": seed},
-        "decompose": {"cells": cells},
-    }
+                   **{_option_name("map", name): options[name] for name in PLAN_OPTIONS["map"]}}  # fmt: skip
+    overrides = {stage: {name: options[name] for name in names} for stage, names in PLAN_OPTIONS.items()}
     if source.is_dir():
         inside = source / "map.json"
         hint = f"; did you mean {inside}?" if inside.is_file() else " (give a map YAML or a map.json)"
@@ -839,6 +1104,8 @@ def inspect_command(
     Examples: bearnav inspect plans/kitchen/plan.npz;
     bearnav inspect plans/kitchen/plan.npz --cell 12
     """
+    from bearnav_cli import pipeline
+
     _Quiet.enabled |= quiet
     loaded = pipeline.load(artifact)
     manifest = loaded.manifest
@@ -886,6 +1153,10 @@ def _short_stats(stats: dict) -> dict:
 
 def _inspect_cell(path: Path, artifact: Any, c: int, as_json: bool) -> None:
     """``inspect --cell N``: one cell of a cells.npz or plan.npz, everything a user needs to find it."""
+    import numpy as np
+
+    from bearnav_cli.datatypes import CellFlag, Cells, CellStatus, Plan
+
     plan = artifact if isinstance(artifact, Plan) else None
     cells = plan.cells if plan is not None else artifact
     if not isinstance(cells, Cells):
@@ -971,7 +1242,10 @@ def tags_command(
 
     Example: bearnav tags plans/kitchen/plan.npz --fov 60 --noise-deg 1 -o kitchen_tags.yaml
     """
-    from bearnav_cli import composition, tags
+    import yaml
+
+    from bearnav_cli import artifacts, composition, pipeline, tags
+    from bearnav_cli.stages import map_
 
     _Quiet.enabled |= quiet
     out_path = out_path or plan_npz.parent / "map_tags.yaml"
@@ -1045,6 +1319,9 @@ def plot_command(
 
     Example: bearnav plot plans/kitchen/plan.npz -o plan.png --color-by tolerance --cell-numbers
     """
+    from bearnav_cli import artifacts, pipeline
+    from bearnav_cli.datatypes import Cells, Plan
+
     _Quiet.enabled |= quiet
     artifacts.check_output_file(out_path, FIGURE_SUFFIXES, "-o/--out", inputs=(artifact, *(also or [])))
     # matplotlib is slow to import: only here

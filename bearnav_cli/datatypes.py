@@ -2,8 +2,10 @@
 
 Each artifact is a frozen dataclass of numpy arrays plus a few scalars. The
 constructors check shapes and dtypes and make the arrays read-only, so an
-artifact cannot be changed after it is built. Serialisation lives in
-``artifacts.py``; this module knows nothing about files.
+artifact cannot be changed after it is built. The keys, dtypes and shapes come from the one
+schema declaration, :data:`bearnav_cli.runtime.schema.ENTRIES` (shared with the loader, the
+robot's run-time view and the docs test). Serialisation lives in ``artifacts.py``; this module
+knows nothing about files.
 """
 
 from __future__ import annotations
@@ -18,12 +20,13 @@ from typing import Any, Callable
 import numpy as np
 
 from bearnav_cli.errors import ArtifactError
+from bearnav_cli.runtime.schema import ENTRIES
 
 __all__ = [
     "CELL_KEYS", "cell_list", "CellFlag", "Cells", "CELLS_INVARIANTS", "CellStatus", "CERTIFICATES", "frozen_array",
     "Invariant", "INVARIANTS", "Map", "MAP_INVARIANTS", "Outcome", "Plan", "PLAN_INVARIANTS", "PLAN_KEYS", "Polygon",
     "ragged", "replace", "Simulation", "SIMULATION_INVARIANTS", "SIMULATION_KEYS", "Tree", "TREE_INVARIANTS",
-    "validate", "validate_artifact",
+    "TREE_KEYS", "validate", "validate_artifact",
 ]
 
 
@@ -56,6 +59,19 @@ def _shape_text(shape: tuple[int | None, ...]) -> str:
     return "(" + ", ".join("n" if s is None else str(s) for s in shape) + ")"
 
 
+def _freeze(obj: Any, kind: str, names: tuple[str, ...], dims: dict[str, int]) -> None:
+    """Replace each field of ``names`` on ``obj`` by a read-only array of the dtype and shape that
+    ``ENTRIES[kind]`` declares, the dimensions in ``dims`` filled in (the others match any length)."""
+    for name in names:
+        entry = ENTRIES[kind][name]
+        object.__setattr__(obj, name, frozen_array(getattr(obj, name), entry.numpy_dtype, entry.resolve(dims), name))
+
+
+def _data_keys(kind: str) -> tuple[str, ...]:
+    """The data entries of ``kind`` that its container holds as fields (all but the embedded ``map``)."""
+    return tuple(name for name in ENTRIES[kind] if name != "map")
+
+
 # --------------------------------------------------------------------------- meaning (checked on load)
 #
 # A content hash proves that a file is intact, not that it makes sense. Each artifact's schema
@@ -85,7 +101,24 @@ class Invariant:
 
 
 def validate(invariants: tuple[Invariant, ...], artifact: Any, prefix: str = "") -> None:
-    """Run ``invariants`` on ``artifact``; raise :class:`ArtifactError` naming the field of the first that fails."""
+    """Run ``invariants`` on ``artifact``; raise :class:`ArtifactError` naming the field of the first that fails.
+
+    Parameters
+    ----------
+    invariants : tuple of Invariant
+        The checks, run in order (``MAP_INVARIANTS``, ``INVARIANTS[kind]`` ...).
+    artifact : Map, Tree, Cells, Plan or Simulation
+        What each ``Invariant.check`` is called with.
+    prefix : str, default ""
+        Put before the failing field's name in the error (``"map."`` when checking the map
+        embedded in another artifact).
+
+    Raises
+    ------
+    ArtifactError
+        The first failing invariant's text, with ``field`` = ``prefix`` + its field (and
+        subfield, ``params.rrtstar.seed``).
+    """
     for invariant in invariants:
         problem = invariant.check(artifact)
         if problem is None:
@@ -462,14 +495,9 @@ class Tree:
     stats: dict = field(default_factory=dict, compare=False)
 
     def __post_init__(self) -> None:
-        nodes = frozen_array(self.nodes, float, (None, 2), "nodes")
-        n = len(nodes)
-        object.__setattr__(self, "nodes", nodes)
-        object.__setattr__(self, "parent", frozen_array(self.parent, np.int64, (n,), "parent"))
-        object.__setattr__(self, "cost", frozen_array(self.cost, float, (n,), "cost"))
-        object.__setattr__(
-            self, "collision_samples", frozen_array(self.collision_samples, float, (None, 2), "collision_samples")
-        )
+        _freeze(self, "tree", ("nodes",), {})
+        n = len(self.nodes)
+        _freeze(self, "tree", ("parent", "cost", "collision_samples"), {"N": n})
         if n == 0 or self.parent[0] != -1 or np.count_nonzero(self.parent == -1) != 1:
             raise ArtifactError("parent must be -1 exactly at node 0", field="parent")
         if np.any((self.parent < -1) | (self.parent >= n)):
@@ -485,12 +513,11 @@ class Tree:
 
     def arrays(self) -> dict[str, np.ndarray]:
         """The data entries of the artifact file (without ``manifest`` and ``map``)."""
-        return {
-            "nodes": self.nodes,
-            "parent": self.parent,
-            "cost": self.cost,
-            "collision_samples": self.collision_samples,
-        }
+        return {name: getattr(self, name) for name in TREE_KEYS}
+
+
+#: Data keys of ``tree.npz`` and ``simplified.npz`` besides ``map`` (DESIGN §3.2).
+TREE_KEYS = _data_keys("tree")
 
 
 def _tree_cost_problem(tree: Tree) -> str | None:
@@ -553,6 +580,34 @@ def ragged(coords: Any, offsets: Any, width: int | None, name: str, count: int, 
 
     Item ``c`` is ``coords[offsets[c]:offsets[c + 1]]``; ``offsets`` has ``count + 1``
     non-decreasing entries from 0 to ``len(coords)``.
+
+    Parameters
+    ----------
+    coords : array_like, shape (M,) or (M, width)
+        The rows of every item, concatenated (``cell_A`` rows, ``cell_vertices`` in map
+        units, ...); converted to ``dtype``.
+    offsets : array_like of int, shape (count + 1,)
+        Where each item's rows begin in ``coords``; converted to int64.
+    width : int or None
+        Columns of each row (2 for points and normals); None for a 1-d ``coords``.
+    name : str
+        The entry's name (``"cell_A"``), as the error names it (``"cell_A offsets"`` for
+        the offsets).
+    count : int
+        Number of items (C, the cells).
+    dtype : numpy dtype, default float
+        dtype of ``coords`` (float64 for coordinates, ``bool`` for flags).
+
+    Returns
+    -------
+    coords, offsets : ndarray
+        Read-only copies, ``coords`` of ``dtype`` and ``offsets`` of int64.
+
+    Raises
+    ------
+    ArtifactError
+        A wrong shape (of ``coords``, or ``offsets`` not of ``count + 1`` entries), or offsets
+        that do not rise from 0 to ``len(coords)``.
     """
     shape = (None,) if width is None else (None, width)
     coords = frozen_array(coords, dtype, shape, name)
@@ -560,17 +615,6 @@ def ragged(coords: Any, offsets: Any, width: int | None, name: str, count: int, 
     if offsets[0] != 0 or offsets[-1] != len(coords) or np.any(np.diff(offsets) < 0):
         raise ArtifactError("offsets must rise from 0 to the number of rows", field=f"{name} offsets")
     return coords, offsets
-
-
-#: Per-cell arrays shared by ``cells.npz`` and ``plan.npz``: name -> (dtype, trailing shape).
-_CELL_FIELDS = {
-    "cell_node": (np.int64, ()),
-    "exit_point": (float, (2,)),
-    "exit_dir": (float, (2,)),
-    "fixed_landmark": (np.int64, ()),
-    "s_min": (float, ()),
-    "s_max": (float, ()),
-}
 
 
 @dataclass(frozen=True, eq=False)  # arrays inside: identity equality, a hash that works
@@ -652,16 +696,14 @@ class Cells:
 
     def __post_init__(self) -> None:
         _check_cell_arrays(self)
-        c, n = len(self.cell_node), len(self.nodes)
+        dims = {"C": len(self.cell_node), "N": len(self.nodes)}
         put = object.__setattr__
-        put(self, "cell_flags", frozen_array(self.cell_flags, np.int64, (c,), "cell_flags"))
+        _freeze(self, "cells", ("cell_flags",), dims)
         put(self, "certificate", str(self.certificate))
         if self.certificate not in CERTIFICATES:
             raise ArtifactError(f"must be one of {', '.join(CERTIFICATES)}, got {self.certificate!r}",
                                 field="certificate")  # fmt: skip
-        put(self, "cell_exit_row", frozen_array(self.cell_exit_row, np.int64, (c,), "cell_exit_row"))
-        put(self, "cell_rank", frozen_array(self.cell_rank, float, (c,), "cell_rank"))
-        put(self, "node_added", frozen_array(self.node_added, bool, (n,), "node_added"))
+        _freeze(self, "cells", ("cell_exit_row", "cell_rank", "node_added"), dims)
         put(self, "exit_inset", float(self.exit_inset))
         put(self, "free_coverage", float(self.free_coverage))
         counts = np.diff(self.cell_row_offsets)
@@ -771,40 +813,30 @@ def _entry(value: Any) -> Any:
 #: ``Cells.certificate`` values (DESIGN §3.3).
 CERTIFICATES = ("funnel", "paper")
 
-#: Data keys common to ``cells.npz`` and ``plan.npz`` (DESIGN §3.2–3.3).
-CELL_KEYS = (
-    "nodes", "parent", "collision_samples", "cell_node", "cell_A", "cell_b", "cell_row_offsets",
-    "cell_vertices", "cell_vertex_offsets", "exit_point", "exit_dir", "cbf_A", "cbf_b", "cbf_offsets",
-    "cell_landmarks", "fixed_landmark", "s_min", "s_max", "cell_flags", "certificate", "cell_exit_row",
-    "cell_rank", "exit_inset", "node_added", "free_coverage",
-)  # fmt: skip
+#: Data keys common to ``cells.npz`` and ``plan.npz`` besides ``map`` (DESIGN §3.2–3.3).
+CELL_KEYS = _data_keys("cells")
 
 
 def _check_cell_arrays(obj: Any) -> None:
     """Shape, dtype and finiteness checks shared by :class:`Cells` and :class:`Plan`."""
-    nodes = frozen_array(obj.nodes, float, (None, 2), "nodes")
-    n = len(nodes)
-    object.__setattr__(obj, "nodes", nodes)
-    object.__setattr__(obj, "parent", frozen_array(obj.parent, np.int64, (n,), "parent"))
-    object.__setattr__(
-        obj, "collision_samples", frozen_array(obj.collision_samples, float, (None, 2), "collision_samples")
-    )
+    _freeze(obj, "cells", ("nodes",), {})
+    n = len(obj.nodes)
     c = len(np.asarray(obj.cell_node))
-    for name, (dtype, trailing) in _CELL_FIELDS.items():
-        object.__setattr__(obj, name, frozen_array(getattr(obj, name), dtype, (c, *trailing), name))
-    for coords, values, offsets, width in (
-        ("cell_A", "cell_b", "cell_row_offsets", 2),
-        ("cbf_A", "cbf_b", "cbf_offsets", 2),
+    dims = {"N": n, "C": c, "L": len(obj.map.landmarks)}
+    _freeze(obj, "cells", ("parent", "collision_samples", "cell_node", "exit_point", "exit_dir", "fixed_landmark",
+                           "s_min", "s_max"), dims)  # fmt: skip
+    for coords, values, offsets in (
+        ("cell_A", "cell_b", "cell_row_offsets"),
+        ("cbf_A", "cbf_b", "cbf_offsets"),
+        ("cell_vertices", None, "cell_vertex_offsets"),
     ):
-        a, off = ragged(getattr(obj, coords), getattr(obj, offsets), width, coords, c)
+        entry = ENTRIES["cells"][coords]
+        a, off = ragged(getattr(obj, coords), getattr(obj, offsets), entry.shape[1], coords, c, entry.numpy_dtype)
         object.__setattr__(obj, coords, a)
         object.__setattr__(obj, offsets, off)
-        object.__setattr__(obj, values, frozen_array(getattr(obj, values), float, (len(a),), values))
-    verts, voff = ragged(obj.cell_vertices, obj.cell_vertex_offsets, 2, "cell_vertices", c)
-    object.__setattr__(obj, "cell_vertices", verts)
-    object.__setattr__(obj, "cell_vertex_offsets", voff)
-    lm = frozen_array(obj.cell_landmarks, bool, (c, len(obj.map.landmarks)), "cell_landmarks")
-    object.__setattr__(obj, "cell_landmarks", lm)
+        if values is not None:
+            _freeze(obj, "cells", (values,), {entry.shape[0]: len(a)})
+    _freeze(obj, "cells", ("cell_landmarks",), dims)
     if n == 0 or obj.parent[0] != -1 or np.count_nonzero(obj.parent == -1) != 1:
         raise ArtifactError("parent must be -1 exactly at node 0", field="parent")
     if np.any((obj.cell_node < 0) | (obj.cell_node >= n)):
@@ -820,8 +852,7 @@ def _check_cell_arrays(obj: Any) -> None:
 
 
 #: Data keys that ``plan.npz`` adds to the cell keys (DESIGN §3.2–3.3).
-PLAN_KEYS = ("landmarks", "gain", "c_h", "c_v", "u_max", "margin_h", "margin_v", "status", "goal_tolerance",
-             "tolerance", "plan_tolerance")  # fmt: skip
+PLAN_KEYS = tuple(name for name in ENTRIES["plan"] if name not in ENTRIES["cells"])
 
 
 @dataclass(frozen=True, eq=False)  # arrays inside: identity equality, a hash that works
@@ -865,13 +896,10 @@ class Plan:
     stats: dict = field(default_factory=dict, compare=False)
 
     def __post_init__(self) -> None:
-        c, n_lm = self.cells.n_cells, len(self.cells.map.landmarks)
-        object.__setattr__(self, "gain", frozen_array(self.gain, float, (c, 2, 2 * n_lm), "gain"))
-        for name in ("c_h", "c_v", "u_max", "margin_h", "margin_v"):
-            object.__setattr__(self, name, frozen_array(getattr(self, name), float, (c,), name))
-        object.__setattr__(self, "status", frozen_array(self.status, np.int8, (c,), "status"))
+        dims = {"C": self.cells.n_cells, "L": len(self.cells.map.landmarks)}
+        _freeze(self, "plan", ("gain", "c_h", "c_v", "u_max", "margin_h", "margin_v", "status"), dims)
         object.__setattr__(self, "goal_tolerance", float(self.goal_tolerance))
-        object.__setattr__(self, "tolerance", frozen_array(self.tolerance, float, (c,), "tolerance"))
+        _freeze(self, "plan", ("tolerance",), dims)
         object.__setattr__(self, "plan_tolerance", float(self.plan_tolerance))
         for name in ("gain", "c_v", "u_max"):
             if not np.all(np.isfinite(getattr(self, name))):
@@ -890,8 +918,7 @@ class Plan:
     def arrays(self) -> dict[str, np.ndarray]:
         """The data entries of ``plan.npz`` (without ``manifest`` and ``map``): exactly DESIGN §3.2."""
         out = self.cells.arrays()
-        out.update({name: np.asarray(getattr(self, name)) for name in PLAN_KEYS if name != "landmarks"})
-        out["landmarks"] = self.landmarks
+        out.update({name: np.asarray(getattr(self, name)) for name in PLAN_KEYS})  # landmarks: the map's
         return out
 
 
@@ -927,19 +954,8 @@ class Outcome(enum.IntEnum):
     LOST = 4  # fewer than two usable landmarks for longer than hold_time
 
 
-#: Data keys of ``sim.npz`` besides ``map`` and ``manifest`` (dtype kind, ndim).
-SIMULATION_KEYS: dict[str, tuple[str, int]] = {
-    "starts": ("f", 2), "outcome": ("i", 1), "steps": ("i", 1), "time": ("f", 1), "path_length": ("f", 1),
-    "route_length": ("f", 1), "left_cell": ("i", 1), "approach_steps": ("i", 1), "hold_steps": ("i", 1),
-    "certified_steps": ("i", 1), "start_in_domain": ("b", 1), "min_clearance": ("f", 1),
-    "final_position": ("f", 2), "final_cell": ("i", 1), "max_steps": ("i", 1), "trajectory_coords": ("f", 2),
-    "trajectory_cells": ("i", 1), "trajectory_heading": ("f", 1), "trajectory_offsets": ("i", 1),
-    "nodes": ("f", 2), "parent": ("i", 1), "cell_vertices": ("f", 2), "cell_vertex_offsets": ("i", 1),
-    "cell_status": ("i", 1), "speed": ("f", 0), "dt": ("f", 0), "eps_sw": ("f", 0), "goal_tolerance": ("f", 0),
-}  # fmt: skip
-_SIM_SCALARS = ("speed", "dt", "eps_sw", "goal_tolerance")
-_SIM_PER_RUN = ("steps", "time", "path_length", "route_length", "left_cell", "approach_steps", "hold_steps",
-                "certified_steps", "start_in_domain", "min_clearance", "final_cell", "max_steps")  # fmt: skip
+#: Data keys of ``sim.npz`` besides ``map`` and ``manifest`` (DESIGN §3; ``ENTRIES["simulation"]``).
+SIMULATION_KEYS = _data_keys("simulation")
 
 
 @dataclass(frozen=True, eq=False)  # arrays inside: identity equality, a hash that works
@@ -1015,21 +1031,11 @@ class Simulation:
     stats: dict = field(default_factory=dict, compare=False)
 
     def __post_init__(self) -> None:
-        r = len(np.asarray(self.outcome))
-        dtypes = {"f": float, "i": np.int64, "b": bool}
-        for name, (kind, ndim) in SIMULATION_KEYS.items():
-            if name in _SIM_SCALARS:
+        arrays = tuple(name for name in SIMULATION_KEYS if ENTRIES["simulation"][name].ndim)
+        for name in SIMULATION_KEYS:
+            if name not in arrays:
                 object.__setattr__(self, name, float(getattr(self, name)))
-                continue
-            shape: tuple[int | None, ...] = (None, 2) if ndim == 2 else (None,)
-            if name in ("starts", "final_position"):
-                shape = (r, 2)
-            elif name in _SIM_PER_RUN:
-                shape = (r,)
-            elif name == "trajectory_offsets":
-                shape = (r + 1,)
-            dtype = np.int8 if name in ("outcome", "cell_status") else dtypes[kind]
-            object.__setattr__(self, name, frozen_array(getattr(self, name), dtype, shape, name))
+        _freeze(self, "simulation", arrays, {"R": len(np.asarray(self.outcome))})
         points = len(self.trajectory_coords)
         if len(self.trajectory_cells) != points or len(self.trajectory_heading) != points:
             raise ArtifactError("trajectory arrays differ in length", field="trajectory_cells")
@@ -1134,6 +1140,16 @@ INVARIANTS: dict[str, tuple[Invariant, ...]] = {
 
 def validate_artifact(kind: str, artifact: Any, check_map: bool = True) -> None:
     """Check what ``artifact`` (of ``kind``) means: its map's invariants, then its own.
+
+    Parameters
+    ----------
+    kind : {"map", "tree", "simplified", "cells", "plan", "simulation"}
+        The artifact's kind, a key of :data:`INVARIANTS`.
+    artifact : Map, Tree, Cells, Plan or Simulation
+        The artifact to check; a plan is checked as its ``cells``, then as a plan.
+    check_map : bool, default True
+        Also run :data:`MAP_INVARIANTS` on the map (its fields named ``map.…``); False when
+        the map was checked already (a loader that read it once).
 
     Raises
     ------

@@ -27,7 +27,7 @@ from bearnav_cli.errors import ArtifactError, InternalError, InvalidMapError, In
 from bearnav_cli.stages import decompose, map_, rrtstar, simplify, simulate, synthesize
 
 __all__ = [
-    "Activity", "ACTIVITY", "check_closed_loop", "check_map_params", "check_resources", "check_value",
+    "Activity", "ACTIVITY", "check_closed_loop", "check_map_params", "check_resources", "check_value", "compute",
     "check_verify_starts", "LIMITS", "load", "MAP_SUFFIXES", "MAX_BORDER_SAMPLES", "MAX_GRID_CELLS", "MAX_RUNS",
     "MAX_STEPS_PER_RUN", "option_name", "OPTION_NAMES", "plan", "Range", "reset_activity", "resolve_params",
     "RRT_BYTES_PER_GRID_CELL", "RRT_BYTES_PER_ITERATION", "RUN_BYTES", "run_map", "run_stage", "SEED", "SIMULATE",
@@ -40,7 +40,22 @@ Progress = Callable[[int, int], None]
 
 @dataclass(frozen=True)
 class Stage:
-    """One row of the stage table."""
+    """One row of the stage table.
+
+    Attributes
+    ----------
+    name : str
+        The stage's name (``"rrtstar"``), as the CLI, the manifests and ``params:`` name it.
+    module : ModuleType
+        Its module in :mod:`bearnav_cli.stages`: ``Params``, ``VERSION``, ``run`` and ``summary``.
+    input_kind : str or None
+        The artifact kind it reads (a key of :data:`bearnav_cli.artifacts.KINDS`); None for
+        ``map``, which reads a map description.
+    output_kind : str
+        The artifact kind it writes.
+    filename : str
+        The conventional file name of its output (``"tree.npz"``).
+    """
 
     name: str
     module: ModuleType
@@ -66,7 +81,25 @@ STAGE_BY_NAME = {stage.name: stage for stage in (*STAGES, SIMULATE)}
 
 @dataclass(frozen=True)
 class StageReport:
-    """What happened to one stage: ran or fresh, where, how long, and its summary."""
+    """What happened to one stage: ran or fresh, where, how long, and its summary.
+
+    Attributes
+    ----------
+    stage : str
+        The stage's name.
+    path : Path
+        Its output file.
+    ran : bool
+        True if it ran; False if a fresh output was kept.
+    elapsed_s : float
+        Wall-clock time of the run (s); 0 when it did not run.
+    summary : str
+        The one-line summary (the manifest's ``summary``).
+    artifact : Map, Tree, Cells, Plan or Simulation, optional
+        The output, as written or loaded (default None, for a report made without it).
+    manifest : dict, optional
+        The output's manifest (default None, for a report made without it).
+    """
 
     stage: str
     path: Path
@@ -96,6 +129,7 @@ ACTIVITY = Activity()
 
 
 def reset_activity() -> None:
+    """Forget the current stage (:data:`ACTIVITY`): nothing is running, nothing written."""
     ACTIVITY.stage, ACTIVITY.written = None, False
 
 
@@ -235,6 +269,7 @@ LIMITS: dict[str, dict[str, Range]] = {
         "hold_time": Range(0, 1e6, low_open=True),
         "max_fix_error": Range(0, 1e3, low_open=True, per_diagonal=True),
         "odometry_noise": Range(0, 1),
+        "odometry_drift": Range(0, 1),
         "dt": Range(0, 1e3, low_open=True),
         "goal_tolerance": Range(0, 1, low_open=True, per_diagonal=True),
         "max_steps": Range(1, MAX_STEPS_PER_RUN, integer=True),
@@ -258,7 +293,27 @@ def option_name(stage: str, name: str) -> str:
 
 
 def check_value(stage: str, name: str, value: Any, where: str, diagonal: float | None = None) -> None:
-    """Raise :class:`InvalidParamsError` (field ``where``) if ``value`` lies outside ``LIMITS[stage][name]``."""
+    """Raise :class:`InvalidParamsError` (field ``where``) if ``value`` lies outside ``LIMITS[stage][name]``.
+
+    Parameters
+    ----------
+    stage : str
+        The stage (``"rrtstar"``, ``"simulate"``, ``"verify"``), a key of :data:`LIMITS`.
+    name : str
+        The parameter's name (``"step"``); a name without an entry in :data:`LIMITS` is not checked.
+    value : Any
+        Its value (a number; anything else is an error); None is not checked.
+    where : str
+        Where the value came from, the error's field (``--step``, ``params.rrtstar.step``).
+    diagonal : float, optional
+        The map's diagonal (map units): with it, the limits given per diagonal are checked
+        too; without it, only the absolute ones.
+
+    Raises
+    ------
+    InvalidParamsError
+        The value lies outside the range, with the range's text.
+    """
     limit = LIMITS.get(stage, {}).get(name)
     if limit is None or value is None:
         return
@@ -333,6 +388,22 @@ def resolve_params(stage: str, map_params: dict | None, overrides: dict | None =
                    diagonal: float | None = None) -> Any:  # fmt: skip
     """Build the stage's frozen ``Params``: defaults, then the map's, then ``overrides``.
 
+    Parameters
+    ----------
+    stage : str
+        The stage's name, a key of :data:`STAGE_BY_NAME`.
+    map_params : dict or None
+        The map's ``params:`` section, stage name to options; only ``map_params[stage]`` is used.
+    overrides : dict, optional
+        Explicit values (the CLI options), name to value; a None value is left unset.
+    diagonal : float, optional
+        The map's diagonal (map units), to check the lengths given relative to it.
+
+    Returns
+    -------
+    Params
+        The stage module's ``Params``, each value converted to its default's type.
+
     Raises
     ------
     InvalidParamsError
@@ -344,7 +415,23 @@ def resolve_params(stage: str, map_params: dict | None, overrides: dict | None =
 
 
 def check_map_params(map_params: Any, file: str, diagonal: float | None = None) -> None:
-    """Reject unknown stage names and parameters, and bad values, in a map's ``params:`` section."""
+    """Reject unknown stage names and parameters, and bad values, in a map's ``params:`` section.
+
+    Parameters
+    ----------
+    map_params : Any
+        The map's ``params:`` value: it must be a mapping of stage name to options.
+    file : str
+        The map's file, named in the error.
+    diagonal : float, optional
+        The map's diagonal (map units), to check the lengths given relative to it (once the
+        map stage knows it).
+
+    Raises
+    ------
+    InvalidMapError
+        Naming the field (``params.rrtstar.seed``) and what is wrong.
+    """
     if not isinstance(map_params, dict):
         raise InvalidMapError("expected a mapping of stage name to options", file=file, field="params")
     for stage, options in map_params.items():
@@ -416,6 +503,33 @@ def check_closed_loop(plan: Any, sim: simulate.Params, runs: int, where_runs: st
     Each run may take ``max_steps`` steps, ``ceil(5·L/(v·dt)) + 1000`` by default with ``L`` at most
     ``D`` plus the largest cost-to-go in the plan; memory is about :data:`RUN_BYTES` per run plus,
     when trajectories are recorded, :data:`TRAJECTORY_POINT_BYTES` per step of a typical run.
+
+    Parameters
+    ----------
+    plan : Plan
+        The plan to run: its map's diagonal and its cells' ``cell_rank`` (cost-to-go, map
+        units) bound the route length ``L``.
+    sim : simulate.Params
+        The simulation's parameters; gives ``speed``/``alpha`` (map units / s), ``dt`` (s)
+        through :func:`simulate.settings`, and ``max_steps``.
+    runs : int
+        Number of closed-loop runs (starts).
+    where_runs : str
+        Where ``runs`` came from (``--starts``), the field of a too-many-runs or memory error.
+    where_speed : str
+        Where the speed came from (``--speed``, ``--alpha``), the field of a too-many-steps error.
+    record : bool
+        Whether trajectories are recorded (they dominate memory).
+    where_dt : str, optional
+        Where an explicit ``dt`` came from; named instead of ``where_speed`` when set.
+
+    Raises
+    ------
+    ResourceLimitError
+        A run may take more than :data:`MAX_STEPS_PER_RUN` steps, or the runs need more memory
+        than the budget (:func:`bearnav_cli.artifacts.memory_budget`).
+    InvalidParamsError
+        More than :data:`MAX_RUNS` runs.
     """
     settings = simulate.settings(plan, sim)
     diagonal = plan.map.diagonal
@@ -444,7 +558,22 @@ def check_closed_loop(plan: Any, sim: simulate.Params, runs: int, where_runs: st
 
 
 def check_verify_starts(plan: Any, n_starts: int, where: str = "--starts") -> None:
-    """``verify``'s starts: the closed loop's memory plus the route matrix (starts × free-space vertices)."""
+    """``verify``'s starts: the closed loop's memory plus the route matrix (starts × free-space vertices).
+
+    Parameters
+    ----------
+    plan : Plan
+        The plan verified: its map's obstacle vertices (plus the 4 corners) size the route matrix.
+    n_starts : int
+        Number of starts ``verify`` draws.
+    where : str, default "--starts"
+        The option that gave ``n_starts``, the error's field.
+
+    Raises
+    ------
+    ResourceLimitError
+        The starts need more memory than the budget, with how many fit.
+    """
     vertices = 4 + sum(len(p.exterior) + sum(len(h) for h in p.holes) for p in plan.map.obstacles)
     per_start = RUN_BYTES + 40 * vertices
     need = n_starts * per_start
@@ -454,7 +583,29 @@ def check_verify_starts(plan: Any, n_starts: int, where: str = "--starts") -> No
 
 
 def check_resources(stage: str, params: Any, where: dict[str, str], artifact: Any) -> None:
-    """The estimates that need the stage's input: RRT*'s grid, border samples and memory; the closed loop's."""
+    """The estimates that need the stage's input: RRT*'s grid, border samples and memory; the closed loop's.
+
+    Other stages are not checked.
+
+    Parameters
+    ----------
+    stage : str
+        The stage about to run (``"rrtstar"`` or ``"simulate"`` are checked).
+    params : Params
+        Its resolved parameters (:func:`resolve_params`).
+    where : dict of str to str
+        Where each parameter came from (``--step``, ``params.rrtstar.step``), the errors' fields;
+        its ``"_explicit"`` entry lists, comma-separated, the names not left at their default.
+    artifact : Map or Plan
+        The stage's input: the map for ``rrtstar``, the plan for ``simulate``.
+
+    Raises
+    ------
+    ResourceLimitError
+        A request over a limit or the memory budget, naming the option to change.
+    InvalidParamsError
+        More than :data:`MAX_RUNS` runs.
+    """
     if stage == "rrtstar":
         _check_rrtstar(params, artifact, where)
     elif stage == "simulate":
@@ -507,6 +658,93 @@ def load(path: str | Path, expect: str | tuple[str, ...] | None = None) -> artif
     return loaded
 
 
+# --------------------------------------------------------------------------- one stage, in memory or on files
+#
+# ``plan`` (files, freshness) and ``compute`` (memory) share these three steps of every stage.
+
+
+def _map_stage_params(source: map_.MapSource, overrides: dict | None) -> Any:
+    """The map stage's ``Params``: the YAML's ``params:`` checked against the stage table, then ``overrides``."""
+    map_params = source.spec.get("params", {}) if isinstance(source.spec, dict) else {}
+    check_map_params(map_params, source.file)
+    return resolve_params("map", map_params, overrides)
+
+
+def _stage_params(name: str, artifact: Any, overrides: dict | None) -> Any:
+    """The ``Params`` of stage ``name`` on its input ``artifact``: the defaults, the (embedded) map's ``params:``,
+    then ``overrides``, in range for the map's diagonal; then the resource estimates (:func:`check_resources`)."""
+    source_map: Map = artifact if isinstance(artifact, Map) else artifact.map
+    params, where = _resolve(name, source_map.params, overrides, source_map.diagonal)
+    check_resources(name, params, where, artifact)
+    return params
+
+
+def _execute(stage: Stage, payload: Any, params: Any, progress: Progress | None, file: str) -> Any:
+    """Run the stage; a new map's ``params:`` lengths are checked once its diagonal is known (``file`` names it)."""
+    result = stage.module.run(payload, params, progress=progress)
+    if isinstance(result, Map):
+        check_map_params(result.params, file, diagonal=result.diagonal)
+    return result
+
+
+#: The stages :func:`compute` can run, in order: ``plan``'s, then ``simulate``.
+_CHAIN: tuple[Stage, ...] = (*STAGES, SIMULATE)
+
+
+def compute(
+    source: map_.MapSource | Map,
+    through: str = "synthesize",
+    overrides: dict[str, dict] | None = None,
+    progress: Callable[[str], Progress | None] | None = None,
+) -> dict[str, Any]:
+    """Run the stages from the map through ``through`` in memory: ``plan`` without files, caches or locks.
+
+    Parameters resolve exactly as :func:`plan` resolves them (each stage's defaults, then the map's
+    ``params:``, then ``overrides``; ranges and resource estimates checked), so the artifacts are the
+    ones ``bearnav plan`` would write (the same content hashes). Invariants are checked where
+    artifacts are saved or loaded, not here.
+
+    Parameters
+    ----------
+    source : MapSource or Map
+        The map description (the map stage runs on it) or a normalised map (it does not).
+    through : str
+        The last stage to run: ``map``, ``rrtstar``, ``simplify``, ``decompose``, ``synthesize``
+        (default) or ``simulate``.
+    overrides : dict, optional
+        ``{stage: {param: value}}``, as the command line gives them.
+    progress : callable, optional
+        ``progress(stage_name)`` returns a progress callback for that stage, or None.
+
+    Returns
+    -------
+    dict
+        Every artifact made, by kind, in stage order: ``{"map": Map, "tree": Tree, "simplified": Tree,
+        "cells": Cells, "plan": Plan}`` (and ``"simulation"``) up to the output of ``through``.
+
+    Raises
+    ------
+    ValueError
+        ``through`` is not a stage name.
+    InvalidParamsError, InvalidMapError, ResourceLimitError
+        As :func:`plan` raises them.
+    """
+    names = [stage.name for stage in _CHAIN]
+    if through not in names:
+        raise ValueError(f"unknown stage {through!r}; expected one of {', '.join(names)}")
+    overrides = overrides or {}
+    if isinstance(source, Map):
+        artifact: Any = source
+    else:
+        artifact = _execute(_CHAIN[0], source, _map_stage_params(source, overrides.get("map")), None, source.file)
+    made = {_CHAIN[0].output_kind: artifact}
+    for stage in _CHAIN[1 : names.index(through) + 1]:
+        params = _stage_params(stage.name, artifact, overrides.get(stage.name))
+        artifact = _execute(stage, artifact, params, progress(stage.name) if progress else None, stage.name)
+        made[stage.output_kind] = artifact
+    return made
+
+
 def _run_and_save(
     stage: Stage,
     payload: Any,
@@ -527,10 +765,8 @@ def _run_and_save(
             summary = loaded.manifest.get("summary", "")
             return StageReport(stage.name, out, False, 0.0, summary, artifact, loaded.manifest)
     started = time.perf_counter()
-    result = stage.module.run(payload, params, progress=progress)
+    result = _execute(stage, payload, params, progress, input_path or str(out))
     elapsed = time.perf_counter() - started
-    if isinstance(result, Map):  # lengths in the map's params:, checked once its diagonal is known
-        check_map_params(result.params, input_path or str(out), diagonal=result.diagonal)
     summary = map_.summary(result, map_.listed_obstacles(payload)) if isinstance(result, Map) else \
         stage.module.summary(result)
     manifest = artifacts.make_manifest(
@@ -583,14 +819,29 @@ def _check_outputs(stage: Stage, out: Path, inputs: tuple[str | Path, ...] = ())
 
 
 def run_map(source: map_.MapSource, out: Path, overrides: dict | None = None, force: bool = False) -> StageReport:
-    """Run the map stage on a source read by the CLI and write ``map.json``."""
+    """Run the map stage on a source read by the CLI and write ``map.json``.
+
+    Parameters
+    ----------
+    source : map_.MapSource
+        The parsed map description, with its file name and input hash (``sha256``).
+    out : Path
+        The ``map.json`` to write; checked before any work, its folder locked while writing.
+    overrides : dict, optional
+        Explicit map-stage parameters (CLI options), over the description's ``params: map:``.
+    force : bool, default False
+        Run even if ``out`` is fresh (same cache key and input hash).
+
+    Returns
+    -------
+    StageReport
+        What happened: ran or kept, the map and its manifest.
+    """
     stage = STAGE_BY_NAME["map"]
     _begin("map")
     out = Path(out)
     _check_outputs(stage, out, (source.file,))
-    map_params = source.spec.get("params", {}) if isinstance(source.spec, dict) else {}
-    check_map_params(map_params, source.file)
-    params = resolve_params("map", map_params, overrides)
+    params = _map_stage_params(source, overrides)
     with artifacts.output_folder(out.parent):
         return _run_and_save(stage, source, params, out, source.file, source.sha256, force, None)
 
@@ -607,6 +858,27 @@ def run_stage(
 
     The output goes to ``out`` or, by default, the stage's conventional file name next to the
     input; it is checked before the input is read. A fresh output is kept unless ``force``.
+
+    Parameters
+    ----------
+    name : str
+        The stage (``"rrtstar"``, ``"simplify"``, ``"decompose"``, ``"synthesize"``,
+        ``"simulate"``), a key of :data:`STAGE_BY_NAME`.
+    input_path : Path
+        The input artifact, of the stage's ``input_kind``.
+    out : Path, optional
+        The output file; by default the stage's conventional file name next to the input.
+    overrides : dict, optional
+        Explicit parameters (CLI options), over the embedded map's ``params:`` and the defaults.
+    force : bool, default False
+        Run even if the output is fresh.
+    progress : callable, optional
+        ``progress(done, total)``, called by long stages.
+
+    Returns
+    -------
+    StageReport
+        What happened: ran or kept, the output and its manifest.
     """
     stage = STAGE_BY_NAME[name]
     _begin(name)
@@ -614,9 +886,7 @@ def run_stage(
     _check_outputs(stage, out, (input_path,))
     with artifacts.output_folder(out.parent):
         loaded = load(input_path, stage.input_kind)
-        source_map: Map = loaded.artifact if isinstance(loaded.artifact, Map) else loaded.artifact.map
-        params, where = _resolve(name, source_map.params, overrides, source_map.diagonal)
-        check_resources(name, params, where, loaded.artifact)
+        params = _stage_params(name, loaded.artifact, overrides)
         return _run_and_save(
             stage, loaded.artifact, params, out, str(input_path), loaded.manifest["content_sha256"], force, progress
         )

@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 import shapely
 
-from bearnav_cli import composition
+from bearnav_cli import composition, runtime
 from bearnav_cli.composition import Composition
 from bearnav_cli.datatypes import CellFlag, CellStatus, Map, Outcome, Plan, Simulation, cell_list
 from bearnav_cli.errors import ArtifactError, InvalidParamsError
@@ -43,7 +43,7 @@ from bearnav_cli.stages import simulate
 
 __all__ = ["CERTIFICATE_TOL", "CERTIFIED", "COVERAGE_TOL", "GOAL_FIELD_TOL", "UNIT_TOL", "Certificates", "Geometry",
            "Params", "Unreached", "VerifyReport", "certificate_problems", "certificates", "check_geometry",
-           "flagged_cells", "run", "unreached_regions"]  # fmt: skip
+           "flagged_cells", "loop_speed", "run", "unreached_regions"]  # fmt: skip
 
 log = logging.getLogger(__name__)
 
@@ -69,26 +69,48 @@ class Params:
         Random starts of the Monte-Carlo check (0 skips it).
     seed : int
         Seed of ``numpy.random.default_rng`` for the starts.
-    speed : float
-        ``v_ref`` of the closed loop (map units / s).
+    speed : float or None
+        ``v_ref`` of the closed loop (map units / s); ``None`` means the map's ``params: simulate:
+        speed``, else simulate's default (both resolved by :func:`loop_speed`).
     dt : float or None
         Euler step (s); ``None`` takes the simulate default.
     min_success : float or None
         Fail when the success rate is below this fraction (``None``: never on that ground).
+    dynamics : {"single", "unicycle"}
+        Robot of the closed loop: the single integrator the certificate is stated for, or the unicycle
+        (``α`` = the loop's speed, default ``β``, ``certified_heading`` on: it drives only within the
+        heading allowance that keeps it inside the certified conditions, ``runtime.step.heading_allowance``).
+        Both run with displacements and exact motion. A run from ``D`` **breaches** the certificate
+        when any of its steps is not certified (``runtime.ControlOutput.certified``: a funnel cell's
+        field followed, not a straight approach, on an exact estimate) or ends at a true position
+        outside every cell of ``D``; any breach or collision of a run from ``D`` fails verify.
     """
 
     n_starts: int = 200
     seed: int = 0
-    speed: float = 0.1
+    speed: float | None = None
     dt: float | None = None
     min_success: float | None = None
+    dynamics: str = "single"
 
     def __post_init__(self) -> None:
+        if self.dynamics not in runtime.DYNAMICS:
+            raise InvalidParamsError(f"must be one of {', '.join(runtime.DYNAMICS)}, got {self.dynamics!r}",
+                                     field="dynamics")  # fmt: skip
         if isinstance(self.n_starts, bool) or int(self.n_starts) != self.n_starts or self.n_starts < 0:
             raise InvalidParamsError(f"must be a non-negative integer, got {self.n_starts}", field="n_starts")
         if self.min_success is not None and not 0.0 <= self.min_success <= 1.0:
             raise InvalidParamsError(f"must lie in [0, 1], got {self.min_success}", field="min_success")
-        simulate.Params(speed=self.speed, dt=self.dt)  # same checks as the closed loop
+        simulate.Params(**({} if self.speed is None else {"speed": self.speed}), dt=self.dt)  # the loop's checks
+
+
+def loop_speed(plan: Plan, params: Params) -> float:
+    """The speed of the closed loop: ``params.speed``, else the map's ``params: simulate: speed``, else
+    simulate's default (the paper maps' units are not metres); ``bearnav verify`` and :func:`run` use it."""
+    if params.speed is not None:
+        return float(params.speed)
+    given = (plan.map.params or {}).get("simulate") or {}
+    return float(given.get("speed", simulate.Params().speed)) if isinstance(given, dict) else simulate.Params().speed
 
 
 # --------------------------------------------------------------------------- certificates
@@ -264,7 +286,19 @@ class Geometry:
 
 
 def check_geometry(plan: Plan, space: FreeSpace, tree_samples: np.ndarray | None = None) -> Geometry:
-    """Coverage, containment, barrier rows, free tree edges and unchanged samples."""
+    """Coverage, containment, barrier rows, free tree edges and unchanged samples (ALGORITHMS §8).
+
+    Parameters
+    ----------
+    plan : Plan
+        The plan checked: its cells (vertices, half-plane and barrier rows), tree and map.
+    space : FreeSpace
+        The free space of the plan's map: the bounds ``B`` the cells must cover (paper plans) and the
+        obstacles the tree edges must miss.
+    tree_samples : ndarray, shape (S, 2), optional
+        ``collision_samples`` of the ``tree.npz`` the plan came from, compared with the plan's
+        (map units); ``None``: not compared (``samples_unchanged`` is None).
+    """
     cells, map_ = plan.cells, plan.map
     tol = map_.tol
     box = space.box
@@ -336,8 +370,21 @@ class Unreached:
 
 
 def unreached_regions(plan: Plan, space: FreeSpace, regions: composition.CoverageRegions | None = None) -> Unreached:
-    """The parts of ``F_m`` the plan never reached (:func:`bearnav_cli.composition.coverage_regions` for funnels;
-    ``regions``: that split when already made, e.g. by :func:`bearnav_cli.composition.check`)."""
+    """The parts of ``F_m`` the plan never reached (:func:`bearnav_cli.composition.coverage_regions` for funnels).
+
+    Funnel plans: the parts of the goal's free component (eroded by the coverage margin ``m``) that no
+    cell meets; paper plans: the parts that no tree edge meets.
+
+    Parameters
+    ----------
+    plan : Plan
+        The plan: its cells (funnel) or tree edges (paper), its map and goal.
+    space : FreeSpace
+        The free space of the plan's map.
+    regions : CoverageRegions, optional
+        Funnel plans: the split of ``F_m`` when already made (``Composition.regions`` of
+        :func:`bearnav_cli.composition.check`); ``None``: computed here. Ignored for paper plans.
+    """
     map_ = plan.map
     margin = composition.coverage_margin(plan)
     component = space.component_of(map_.goal)
@@ -407,6 +454,7 @@ class VerifyReport:
     flagged : dict of str to list of int
         Cells flagged by decomposition, by flag name.
     geometry : Geometry
+        The geometric checks (:func:`check_geometry`).
     starts : ndarray, shape (R, 2)
         Monte-Carlo starts.
     rollouts : Simulation or None
@@ -417,9 +465,20 @@ class VerifyReport:
     route : ndarray, shape (R,)
         Shortest collision-free route length from each start.
     min_success : float or None
+        The success rate below which the plan fails (``Params.min_success``; None: never on that ground).
     skipped : str or None
         Why the Monte-Carlo check did not run.
     goal : ndarray, shape (2,)
+        The map's goal (map units), the reference of :attr:`straight`.
+    composition : Composition or None
+        The composed certificate's checks of a funnel plan (:func:`bearnav_cli.composition.check`);
+        None for paper plans.
+    world_cells : list of int or None
+        Cells that no longer hold (C1) in the ``world`` map given to :func:`run`; None without one.
+    unreached : Unreached or None
+        The free regions the tree never reached (:func:`unreached_regions`): no start is drawn there.
+    breaches : ndarray of bool, shape (R,), or None
+        Runs from ``D`` that breached the certificate (:class:`Params` ``dynamics`` defines it).
     """
 
     status: np.ndarray
@@ -440,6 +499,7 @@ class VerifyReport:
     composition: Composition | None = None
     world_cells: list[int] | None = None
     unreached: Unreached | None = None
+    breaches: np.ndarray | None = None
 
     # ------------------------------------------------------------- the composed certificate (§11)
     @property
@@ -549,6 +609,10 @@ class VerifyReport:
             if hit.size:
                 out.append(f"{hit.size} of {len(self.rollouts)} closed-loop runs collided (any collision fails, "
                            f"whatever --min-success says): starts {cell_list(hit)}")  # fmt: skip
+        if self.breaches is not None and self.breaches.any():
+            bad = np.flatnonzero(self.breaches)
+            out.append(f"{bad.size} runs from the certified domain breached it (a step not certified, or a true "
+                       f"position outside every cell): starts {cell_list(bad)}")  # fmt: skip
         if self.world_cells:
             out.append(f"{len(self.world_cells)} cells no longer hold in the world (C1: they leave B_r or meet an "
                        f"obstacle): {cell_list(self.world_cells)}")  # fmt: skip
@@ -588,6 +652,8 @@ class VerifyReport:
                 ok = self.rollouts.outcome == Outcome.SUCCESS
                 text += f"; from D {int(ok[d].sum())}/{int(d.sum())} reached the goal"
                 text += f", from outside D (uncertified) {int(ok[~d].sum())}/{int((~d).sum())}"
+                if self.breaches is not None:
+                    text += f", {int(self.breaches.sum())} breaches from D"
             return text + self._unreached_text() + ("; FAILED" if self.failed else "")
         text = f"{certified}/{n} cells certified, coverage {'ok' if self.geometry.coverage_ok else 'FAILS'}"
         if self.rollouts is not None:
@@ -663,7 +729,8 @@ class VerifyReport:
             mc.update(runs_from_domain=int(self.in_domain.sum()),
                       success_rate_in_domain=_finite_or_none([self.success_in_domain])[0],
                       success_rate_outside_domain=_finite_or_none([self.success_outside_domain])[0],
-                      certified_step_fraction=self.rollouts.certified_fraction)  # fmt: skip
+                      certified_step_fraction=self.rollouts.certified_fraction,
+                      breaches=None if self.breaches is None else int(self.breaches.sum()))  # fmt: skip
         out["monte_carlo"] = mc
         if self.composition is not None:
             comp = self.composition
@@ -695,7 +762,10 @@ def run(
     Parameters
     ----------
     plan : Plan
+        The plan to verify (``plan.npz``, with its embedded map).
     params : Params
+        The Monte-Carlo check: number of starts, seed, the loop's speed, ``dt`` and dynamics, and
+        ``min_success``.
     tree_samples : ndarray, shape (S, 2), optional
         ``collision_samples`` of the ``tree.npz`` the plan came from, to check they survived.
     world : Map, optional
@@ -717,7 +787,8 @@ def run(
         c_h_smax = plan.c_h / cells.s_max
     space = FreeSpace.from_map(plan.map)
     geometry = check_geometry(plan, space, tree_samples)
-    comp = composition.check(plan, params.speed, space) if plan.cells.is_funnel else None
+    speed = loop_speed(plan, params)
+    comp = composition.check(plan, speed, space) if plan.cells.is_funnel else None
     world_cells = None
     if world is not None:
         problem = composition.map_frame_problem(plan.map, world)
@@ -727,7 +798,7 @@ def run(
 
     unreached = unreached_regions(plan, space, comp.regions if comp is not None else None)
     starts = np.zeros((0, 2))
-    rollouts, skipped = None, None
+    rollouts, skipped, breaches = None, None, None
     if params.n_starts == 0:
         skipped = "n_starts is 0"
     else:
@@ -740,9 +811,18 @@ def run(
             starts = _reached_starts(space, plan.map.goal, params.n_starts, rng, unreached.avoid)
             # the certificates are stated for the displacement output and the exact motion of §7.1:
             # bearings and wheel slip are `bearnav simulate`'s job
-            sim = simulate.Params(speed=params.speed, dt=params.dt, measurement="displacement", odometry_noise=0.0,
+            sim = simulate.Params(speed=speed, alpha=speed, dt=params.dt, measurement="displacement",
+                                  odometry_noise=0.0, dynamics=params.dynamics, certified_heading=True,
                                   record_trajectories=False)  # fmt: skip
-            rollouts = simulate.rollout(plan, starts, sim, progress=progress)
+            arrays = PlanArrays.from_plan(plan)
+            breach = np.zeros(len(starts), bool)
+
+            def watch(runs: np.ndarray, x: np.ndarray, certified: np.ndarray) -> None:
+                if arrays.funnel:  # a step not certified, or a true position outside every cell of D
+                    breach[runs] |= ~certified | (runtime.least_rank_cell(arrays, x) < 0)
+
+            rollouts = simulate.rollout(plan, starts, sim, progress=progress, on_step=watch)
+            breaches = breach & rollouts.start_in_domain
     straight = np.hypot(*(starts - plan.map.goal).T) if len(starts) else np.zeros(0)
     route = route_lengths(space, plan.map.goal, starts) if len(starts) else np.zeros(0)
     report = VerifyReport(
@@ -764,6 +844,7 @@ def run(
         composition=comp,
         world_cells=world_cells,
         unreached=unreached,
+        breaches=breaches,
     )
     log.info("verify: %s", report.summary())
     return report

@@ -17,6 +17,7 @@ from typing import Any, Callable, Sequence
 
 import yaml
 
+from bearnav_cli import pipeline
 from bearnav_cli.datatypes import Map
 from bearnav_cli.stages import map_
 
@@ -41,18 +42,19 @@ def load_map(path: Path) -> Map:
     Map
     """
     spec = yaml.safe_load(path.read_text())
-    return map_.run(map_.MapSource(spec=spec, file=path.name, sha256="bench"))
+    return pipeline.compute(map_.MapSource(spec=spec, file=path.name, sha256="bench"), through="map")["map"]
 
 
 def run_stages(map_obj: Map, stages: Sequence[str]) -> Any:
-    """Run ``stages`` (names after ``map``, in order) in-process with the map's own parameters."""
-    from bearnav_cli import pipeline
+    """The output of the last of ``stages`` (the chain after ``map``, in order: ``("rrtstar", "simplify")``).
 
-    artifact: Any = map_obj
-    for name in stages:
-        stage = pipeline.STAGE_BY_NAME[name]
-        artifact = stage.module.run(artifact, pipeline.resolve_params(name, map_obj.params))
-    return artifact
+    A shorthand for :func:`bearnav_cli.pipeline.compute` (``plan``'s parameter resolution, in memory),
+    which new code calls directly.
+    """
+    chain = [stage.name for stage in (*pipeline.STAGES[1:], pipeline.SIMULATE)]
+    if not stages or list(stages) != chain[: len(stages)]:
+        raise ValueError(f"expected the stages {', '.join(chain)} from the first, got {list(stages)}")
+    return list(pipeline.compute(map_obj, through=stages[-1]).values())[-1]
 
 
 def timed(fn: Callable[..., Any], *args: Any, **kwargs: Any) -> tuple[float, Any]:

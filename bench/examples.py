@@ -22,31 +22,26 @@ Run from the repository root::
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import logging
 import time
 
 import numpy as np
-from common import REPO_DIR, machine_line, markdown_table, replace_section, run_stages
+from common import REPO_DIR, machine_line, markdown_table, replace_section
 
-from bearnav_cli import composition, verify
+from bearnav_cli import composition, pipeline, verify
 from bearnav_cli.cli import read_map_source
 from bearnav_cli.datatypes import CellStatus
-from bearnav_cli.stages import map_
 
 SECTION = "examples"
 MAPS = ("kitchen", "paper_sim_circles", "paper_b_circles", "storeroom")
 SEEDS = range(5)
-STAGES = ["rrtstar", "simplify", "decompose", "synthesize"]
 
 
 def measure(name: str, seed: int, starts: int) -> list:
     """One table row: the plan of ``name`` with RRT* seed ``seed`` and what verify proves of it."""
-    base = map_.run(read_map_source(REPO_DIR / "maps" / f"{name}.yaml"))
-    params = dict(base.params)
-    params["rrtstar"] = dict(params.get("rrtstar", {}), seed=seed)
+    base = pipeline.compute(read_map_source(REPO_DIR / "maps" / f"{name}.yaml"), through="map")["map"]
     started = time.perf_counter()
-    plan = run_stages(dataclasses.replace(base, params=params), STAGES)
+    plan = pipeline.compute(base, overrides={"rrtstar": {"seed": seed}})["plan"]
     elapsed = time.perf_counter() - started
     cells = plan.cells
     comp = composition.check(plan, verify.Params().speed)

@@ -266,13 +266,7 @@ class Prepared:
 
 def prepare(path: Path) -> Any:
     """map → rrtstar → simplify of a map file in-process with its parameters (grids as the CLI reads them)."""
-    source = read_map_source(path)
-    spec_params = source.spec.get("params", {}) if isinstance(source.spec, dict) else {}
-    map_obj = pipeline.STAGE_BY_NAME["map"].module.run(source, pipeline.resolve_params("map", spec_params))
-    artifact: Any = map_obj
-    for name in ("rrtstar", "simplify"):
-        artifact = pipeline.STAGE_BY_NAME[name].module.run(artifact, pipeline.resolve_params(name, map_obj.params))
-    return artifact
+    return pipeline.compute(read_map_source(path), through="simplify")["simplified"]
 
 
 def example_maps() -> list[Prepared]:

@@ -38,8 +38,9 @@ import sys
 import time
 
 import numpy as np
-from common import README, REPO_DIR, load_map, machine_line, markdown_table, replace_section, run_stages
+from common import README, REPO_DIR, load_map, machine_line, markdown_table, replace_section
 
+from bearnav_cli import pipeline
 from bearnav_cli.datatypes import Plan
 from bearnav_cli.stages import simulate
 
@@ -61,7 +62,7 @@ BUDGET_ROBOTS = 1000
 
 def kitchen_plan() -> Plan:
     """The kitchen map's plan, built in-process with the map's stage parameters."""
-    return run_stages(load_map(MAP), ("rrtstar", "simplify", "decompose", "synthesize"))
+    return pipeline.compute(load_map(MAP))["plan"]
 
 
 def per_robot_loop(plan: Plan, starts: np.ndarray, params: simulate.Params) -> tuple[np.ndarray, np.ndarray]:

@@ -49,10 +49,9 @@ from common import (
     machine_line,
     markdown_table,
     replace_section,
-    run_stages,
 )
 
-from bearnav_cli import cell_lp
+from bearnav_cli import cell_lp, pipeline
 from bearnav_cli import lp as lp_module
 from bearnav_cli.datatypes import Cells
 from bearnav_cli.stages import synthesize
@@ -80,7 +79,7 @@ class RecordingSolver(lp_module.LpSolver):
 
 def kitchen_cells() -> Cells:
     """The kitchen map's cells, built in-process with the map's stage parameters."""
-    return run_stages(load_map(MAP), ("rrtstar", "simplify", "decompose"))
+    return pipeline.compute(load_map(MAP), through="decompose")["cells"]
 
 
 def edge_problems(cells: Cells) -> list[cell_lp.CellProblem]:

@@ -188,3 +188,65 @@ def test_artifacts_compare_and_hash_without_raising(small_spec):
     assert a == a and a != b  # equal content, two objects: compare content hashes for content
     assert len({a, b, a}) == 2
     assert len({a.obstacles[0], b.obstacles[0]}) == 2  # polygons hash too
+
+
+# --------------------------------------------------------------------------- the one schema, pipeline.compute
+
+
+def test_compute_makes_what_plan_writes(small_spec, tmp_path):
+    """``pipeline.compute`` resolves parameters as ``plan`` does: the same artifacts, the same content hashes."""
+    from bearnav_cli.stages import map_
+
+    source = map_.MapSource(spec=small_spec, file="small.yaml", sha256="0")
+    overrides = {"rrtstar": {"seed": 3}, "synthesize": {"u_max": 0.8}}
+    reports = pipeline.plan(source, tmp_path / "small", overrides)
+    made = pipeline.compute(source, overrides=overrides)
+    assert list(made) == [stage.output_kind for stage in pipeline.STAGES]
+    for report in reports:
+        kind = pipeline.STAGE_BY_NAME[report.stage].output_kind
+        assert artifacts.content_hash(artifacts.entries_of(made[kind]), kind) == report.manifest["content_sha256"]
+    # from a normalised map, through any stage: only the artifacts up to it
+    partial = pipeline.compute(made["map"], through="simplify", overrides=overrides)
+    assert list(partial) == ["map", "tree", "simplified"] and partial["map"] is made["map"]
+    assert artifacts.entries_of(partial["simplified"]).keys() == artifacts.entries_of(made["simplified"]).keys()
+    with pytest.raises(ValueError, match="unknown stage"):
+        pipeline.compute(made["map"], through="plan")
+
+
+def test_every_artifact_has_the_dtypes_and_shapes_the_schema_declares(small_spec):
+    """The containers, the loader's table and the run-time view all read ``runtime.schema``."""
+    from bearnav_cli.runtime import PlanArrays, schema
+    from bearnav_cli.stages import map_
+
+    made = pipeline.compute(map_.MapSource(spec=small_spec, file="small.yaml", sha256="0"), through="simulate",
+                            overrides={"simulate": {"record_trajectories": True}})  # fmt: skip
+    plan = made["plan"]
+    cells = plan.cells
+    sizes = {
+        "N": len(cells.nodes), "C": cells.n_cells, "L": len(plan.landmarks), "S": len(cells.collision_samples),
+        "R": len(cells.cell_A), "V": len(cells.cell_vertices), "H": len(cells.cbf_A),
+    }  # fmt: skip
+    sim = made["simulation"]
+    sim_sizes = {"R": len(sim), "P": len(sim.trajectory_coords), "N": sizes["N"], "C": sizes["C"], "V": sizes["V"]}
+    tree = made["simplified"]
+    for kind, artifact, dims in (
+        ("tree", made["tree"], {"N": len(made["tree"].nodes), "S": len(made["tree"].collision_samples)}),
+        ("simplified", tree, {"N": len(tree.nodes), "S": len(tree.collision_samples)}),
+        ("cells", made["cells"], sizes),
+        ("plan", plan, sizes),
+        ("simulation", sim, sim_sizes),
+    ):
+        entries = artifacts.entries_of(artifact)
+        assert list(entries) == list(schema.ENTRIES[kind]), kind
+        assert artifacts.KINDS[kind].entries is schema.ENTRIES[kind]
+        for key, entry in schema.ENTRIES[kind].items():
+            value = entries[key]
+            if entry.dtype == "str":
+                assert isinstance(value, str), (kind, key)
+                continue
+            assert value.dtype == entry.numpy_dtype and value.shape == entry.resolve(dims), (kind, key)
+    view = PlanArrays.from_plan(plan)
+    for key in schema.RUNTIME_KEYS:
+        entry = schema.ENTRIES["plan"][key]
+        if entry.ndim:
+            assert getattr(view, key).dtype == entry.numpy_dtype and getattr(view, key).shape == entry.resolve(sizes)

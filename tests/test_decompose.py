@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 import shapely
 
-from bearnav_cli import barriers, geometry
+from bearnav_cli import barriers, geometry, pipeline
 from bearnav_cli.datatypes import CellFlag, Tree
 from bearnav_cli.errors import ArtifactError, InvalidParamsError
 from bearnav_cli.geometry import FreeSpace
-from bearnav_cli.stages import decompose, rrtstar, simplify
+from bearnav_cli.stages import decompose
 
 from .conftest import SMALL_MAP, build_map
 
@@ -25,7 +25,8 @@ PAPER = decompose.Params(cells="paper")
 
 @pytest.fixture(scope="module")
 def simplified(small_map):
-    return simplify.run(rrtstar.run(small_map, rrtstar.Params(iterations=600, step=1.0, seed=2)))
+    overrides = {"rrtstar": {"iterations": 600, "seed": 2}}
+    return pipeline.compute(small_map, through="simplify", overrides=overrides)["simplified"]
 
 
 @pytest.fixture(scope="module")

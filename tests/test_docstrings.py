@@ -42,29 +42,6 @@ import pytest
 
 import bearnav_cli
 
-#: Modules whose docstrings other engineers are completing while they edit them. This set must
-#: shrink to empty: whoever finishes a module's docstrings after those edits land removes it here.
-PENDING = {
-    "bearnav_cli.artifacts",
-    "bearnav_cli.datatypes",
-    "bearnav_cli.pipeline",
-    "bearnav_cli.verify",
-    "bearnav_cli.schema",
-    "bearnav_cli.runtime.schema",
-    "bearnav_cli.runtime.step",
-    "bearnav_cli.runtime.estimate",
-    "bearnav_cli.runtime.cell_policy",
-    "bearnav_cli.runtime.controller",
-    "bearnav_cli.runtime.plan_arrays",
-    "bearnav_cli.stages.simulate",
-    "bearnav_cli.world",
-    "bearnav_cli.world.camera",
-    "bearnav_cli.world.detect",
-    "bearnav_cli.world.motion",
-    "bearnav_cli.world.render",
-    "bearnav_cli.world.starts",
-}
-
 #: Modules not checked here: the entry point and the Typer app.
 SKIP = {"bearnav_cli.__main__", "bearnav_cli.cli"}
 
@@ -81,11 +58,6 @@ def _module_names() -> list[str]:
     for info in pkgutil.walk_packages(bearnav_cli.__path__, prefix=f"{bearnav_cli.__name__}."):
         names.append(info.name)
     return sorted(name for name in names if name not in SKIP)
-
-
-def _params() -> list:
-    pending = pytest.mark.xfail(strict=False, reason="docstrings being completed")
-    return [pytest.param(name, id=name, marks=[pending] if name in PENDING else []) for name in _module_names()]
 
 
 def _indent(line: str) -> int:
@@ -212,7 +184,7 @@ def test_modules_found():
     assert not SKIP & set(names)
 
 
-@pytest.mark.parametrize("module_name", _params())
+@pytest.mark.parametrize("module_name", _module_names())
 def test_docstrings(module_name):
     module = importlib.import_module(module_name)
     report = []

@@ -24,7 +24,7 @@ import numpy as np
 import pytest
 import shapely
 
-from bearnav_cli import artifacts, composition, verify
+from bearnav_cli import artifacts, composition, pipeline, verify
 from bearnav_cli.cell_lp import CellProblem, min_norm_gain
 from bearnav_cli.datatypes import CellStatus, Outcome, replace
 from bearnav_cli.errors import InvalidMapError
@@ -33,9 +33,8 @@ from bearnav_cli.lp import LpSolver
 from bearnav_cli.runtime import cell_policy
 from bearnav_cli.runtime.plan_arrays import PlanArrays
 from bearnav_cli.stages import decompose, simulate, synthesize
-from bench.common import run_stages
 from tests.conftest import build_map
-from tests.funnel_maps import ITERATIONS, PIPELINE, load_random_map_tool, random_spec
+from tests.funnel_maps import ITERATIONS, load_random_map_tool, random_spec
 
 SPEED = 0.5
 #: The random maps and RRT* seeds of the end-to-end test.
@@ -55,7 +54,7 @@ def _quiet(caplog):
 @functools.cache
 def make_plan(map_seed: int, rrt_seed: int = 0, iterations: int = ITERATIONS):
     """The plan of a random map (cached: several tests share a plan; artifacts are immutable)."""
-    return run_stages(build_map(random_spec(map_seed, iterations, rrt_seed)), PIPELINE)
+    return pipeline.compute(build_map(random_spec(map_seed, iterations, rrt_seed)))["plan"]
 
 
 def unit_rows(vertices: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -308,7 +307,7 @@ def test_random_map_end_to_end(map_seed, rrt_seed):
 
 def test_same_seed_same_plan():
     first = make_plan(5, 1)
-    again = run_stages(build_map(random_spec(5, ITERATIONS, 1)), PIPELINE)
+    again = pipeline.compute(build_map(random_spec(5, ITERATIONS, 1)))["plan"]
     assert first is not again
     h1 = artifacts.content_hash(artifacts.entries_of(first), "plan")
     h2 = artifacts.content_hash(artifacts.entries_of(again), "plan")
@@ -331,7 +330,7 @@ def test_random_map_tool(kind):
         if "start" in str(exc):
             pytest.skip(f"invalid random map (start): {exc}")
         raise
-    plan = run_stages(map_, PIPELINE)
+    plan = pipeline.compute(map_)["plan"]
     assert not np.isin(plan.status, [2, 3]).any()
     assert composition.check(plan, SPEED).ok
     check_free_and_inside(plan, spec)
@@ -343,7 +342,7 @@ def test_funnel_local_cells(map_seed):
     """``cells = funnel-local`` (the regions start from the §4.1 cells) composes as well."""
     spec = random_spec(map_seed, ITERATIONS, 0)
     spec["params"]["decompose"] = {"cells": "funnel-local"}
-    plan = run_stages(build_map(spec), PIPELINE)
+    plan = pipeline.compute(build_map(spec))["plan"]
     assert plan.cells.certificate == "funnel"
     assert not np.isin(plan.status, [2, 3]).any()
     assert composition.check(plan, SPEED).ok
@@ -511,7 +510,7 @@ def own_coverage(cells, map_) -> float:
 
 def test_densification():
     map_ = build_map(random_spec(1, ITERATIONS, 0))
-    tree = run_stages(map_, ["rrtstar", "simplify"])
+    tree = pipeline.compute(map_, through="simplify")["simplified"]
     n = len(tree.nodes)
     bare = decompose.run(tree, decompose.Params(max_added_nodes=0))
     dense = decompose.run(tree)
@@ -547,7 +546,7 @@ def test_densification_reaches_target_when_pocket_is_reachable():
     at 70%, while only its deep points were tried: a corridor behind a bend is now covered from its
     mouth inward)."""
     map_ = build_map(random_spec(3, ITERATIONS, 0))
-    tree = run_stages(map_, ["rrtstar", "simplify"])
+    tree = pipeline.compute(map_, through="simplify")["simplified"]
     cells = decompose.run(tree)
     # this map's big pocket is reached from points other than its pole (ALGORITHMS §11.5 step 3)
     assert len(np.flatnonzero(cells.node_added)) < decompose.Params().max_added_nodes
@@ -557,7 +556,7 @@ def test_densification_reaches_target_when_pocket_is_reachable():
 @pytest.mark.parametrize("map_seed", [1, 6, 11])
 def test_the_tolerant_field_never_lowers_a_cells_tolerance(map_seed):
     """synthesize(tolerant=True) keeps, per cell, whichever of the LP's and Lemma 4's fields tolerates more."""
-    cells = run_stages(build_map(random_spec(map_seed, ITERATIONS, 0)), ["rrtstar", "simplify", "decompose"])
+    cells = pipeline.compute(build_map(random_spec(map_seed, ITERATIONS, 0)), through="decompose")["cells"]
     lp_only = synthesize.run(cells, synthesize.Params(tolerant=False))
     tolerant = synthesize.run(cells, synthesize.Params())
     assert np.all(tolerant.tolerance >= lp_only.tolerance - 1e-12)
@@ -590,7 +589,7 @@ def test_free_space_behind_a_passage_narrower_than_2m_is_reported_not_covered(ca
     full = composition.coverage_domain(space.component_of(map_.goal), space.bounds, space.obstacles, margin)
     far = shapely.box(3.5, 0.5, 5.5, 2.5)  # the middle of the far room
     with caplog.at_level(logging.WARNING):
-        plan = run_stages(map_, PIPELINE)
+        plan = pipeline.compute(map_)["plan"]
     cells = plan.cells
     # no cell reaches the far room's F_m; the report counts it, and coverage is of the rest
     assert not any(shapely.Polygon(cells.vertices(c)).intersects(far) for c in range(cells.n_cells))
@@ -609,7 +608,7 @@ def test_free_space_behind_a_passage_narrower_than_2m_is_reported_not_covered(ca
 def test_landmarks_seen_from_funnel_witnesses_match_the_segment_test(map_seed):
     """decompose decides what a funnel cell sees through visibility regions; at every cell's witness
     points (its vertices and edge ends, all off the obstacles) that must equal ALGORITHMS §1's test."""
-    cells = run_stages(build_map(random_spec(map_seed, ITERATIONS, 0)), ["rrtstar", "simplify", "decompose"])
+    cells = pipeline.compute(build_map(random_spec(map_seed, ITERATIONS, 0)), through="decompose")["cells"]
     space = FreeSpace.from_map(cells.map)
     landmarks = cells.map.landmarks
     sight = space.visibility_regions(landmarks)
@@ -646,7 +645,7 @@ def test_verify_recomputes_coverage_with_the_margin_decompose_used():
     """A barrier margin given to decompose directly (the command line's --barrier-margin, not the
     map's params) travels with the plan, so verify's F_m is decompose's F_m."""
     map_ = build_map(random_spec(1, ITERATIONS, 0))
-    tree = run_stages(map_, ["rrtstar", "simplify"])
+    tree = pipeline.compute(map_, through="simplify")["simplified"]
     margin = 2.5 * DEFAULT_CLEARANCE * map_.diagonal
     cells = decompose.run(tree, decompose.Params(barrier_margin=margin))
     plan = synthesize.run(cells)

@@ -11,9 +11,11 @@ PACKAGE = Path(__file__).resolve().parents[1] / "bearnav_cli"
 #: except the pairs listed in SAME_LAYER_OK.
 LAYERS = {
     "errors": 0,
+    # the numpy-only package a robot installs: its modules import each other and errors only (checked below), so
+    # it sits just above errors; datatypes and artifacts read the one artifact schema from runtime/schema.py
+    "runtime": 0.5,
     "datatypes": 1,
     "geometry": 2, "lp": 2, "occupancy": 2,
-    "runtime": 2,  # the numpy-only package a robot installs: its modules import each other and errors only
     "cell_lp": 2.5, "routes": 2.5, "barriers": 2.5, "funnel": 2.5,  # build on lp and geometry
     "composition": 2.7,  # the §11.6 checks, on funnel and geometry; verify builds on it
     "perception": 2.8, "tags": 2.9,  # issue 11 analyses on runtime, geometry and composition (tags also on lp)

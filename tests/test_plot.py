@@ -18,13 +18,11 @@ import shapely  # noqa: E402
 from matplotlib import colors as mcolors  # noqa: E402
 from matplotlib.quiver import Quiver  # noqa: E402
 
-from bearnav_cli import composition, plot, runtime  # noqa: E402
+from bearnav_cli import composition, pipeline, plot, runtime  # noqa: E402
 from bearnav_cli.datatypes import CellStatus, replace  # noqa: E402
 from bearnav_cli.errors import InvalidParamsError  # noqa: E402
 from bearnav_cli.funnel import coverage_domain  # noqa: E402
 from bearnav_cli.geometry import DEFAULT_CLEARANCE, FreeSpace  # noqa: E402
-from bearnav_cli.stages import decompose, synthesize  # noqa: E402
-from bench.common import run_stages  # noqa: E402
 
 from .conftest import SMALL_MAP, build_map  # noqa: E402
 from .test_cli_errors import assert_one_line_error  # noqa: E402
@@ -33,13 +31,12 @@ from .test_cli_errors import assert_one_line_error  # noqa: E402
 @pytest.fixture(scope="module")
 def small_plan():
     """A funnel plan of the small test map, built in-process."""
-    return run_stages(build_map(SMALL_MAP), ["rrtstar", "simplify", "decompose", "synthesize"])
+    return pipeline.compute(build_map(SMALL_MAP))["plan"]
 
 
 @pytest.fixture(scope="module")
 def paper_plan():
-    simplified = run_stages(build_map(SMALL_MAP), ["rrtstar", "simplify"])
-    return synthesize.run(decompose.run(simplified, decompose.Params(cells="paper")))
+    return pipeline.compute(build_map(SMALL_MAP), overrides={"decompose": {"cells": "paper"}})["plan"]
 
 
 @pytest.fixture

@@ -92,22 +92,12 @@ def test_runtime_controller_and_simulation_give_the_same_commands(plans):
         assert command.tolist() == [v, omega]
 
 
-#: (map, fov) whose map starts do not all reach the goal with the default 2% wheel slip (issue 11 part 5):
-#: one run of four each (paper_sim_circles: a timeout at 90°, lost at 60°; paper_b_circles: a collision
-#: at 90° and at 60°). The controller's filter adds odometry errors up as independent per step
-#: (runtime.estimate.fuse), while wheel slip is mostly systematic: it trusts odometry too long.
-SLIP_FAILURES = {("paper_sim_circles", 90.0), ("paper_sim_circles", 60.0), ("paper_b_circles", 90.0),
-                 ("paper_b_circles", 60.0)}  # fmt: skip
-
-
 @pytest.mark.parametrize("slip", ["exact", "default"])
 @pytest.mark.parametrize("fov", [90.0, 60.0])
 @pytest.mark.parametrize("name", EXAMPLE_MAPS)
-def test_unicycle_reaches_the_goal_from_the_map_starts(plans, name, fov, slip, request):
+def test_unicycle_reaches_the_goal_from_the_map_starts(plans, name, fov, slip):
     """DESIGN §8: every map start reaches the goal; with the exact motion of §7.1 (the certificates'
-    model) and with the default wheel slip (known failures marked, not hidden)."""
-    if slip == "default" and (name, fov) in SLIP_FAILURES:
-        request.applymarker(pytest.mark.xfail(reason="1 of 4 map starts fails with 2% wheel slip", strict=False))
+    model) and with the default wheel slip."""
     plan, _ = plans[name]
     changes = {"odometry_noise": 0.0} if slip == "exact" else {}
     run = simulate.rollout(plan, plan.map.starts, params_for(plan, fov=fov, dynamics="unicycle", **changes))
@@ -115,9 +105,11 @@ def test_unicycle_reaches_the_goal_from_the_map_starts(plans, name, fov, slip, r
 
 
 def test_the_field_of_view_shows_with_the_default_wheel_slip(plans):
-    """A robot that loses its fix drives on odometry: exact odometry (no slip) makes a 60° camera's
-    paths those of a 360° one on paper_b_circles (up to rounding), although it spends over a thousand steps without a
-    fix; with the default slip the blind stretches drift and the paths differ."""
+    """A robot that loses its fix drives on odometry: on paper_b_circles a 60° camera spends over a
+    thousand steps without a fix and still reaches the goal from every start with exact odometry; with the
+    slip the blind stretches drift and the paths differ from a 360° camera's.
+    (Exact odometry no longer gives the 360° paths: the filter does not know its odometry is exact, its
+    error bound grows linearly with the distance, so a long blind stretch ends in a look-around.)"""
     plan, _ = plans["paper_b_circles"]
     slips = (("exact", {"odometry_noise": 0.0}), ("default", {}))
     runs = {(fov, slip): simulate.rollout(plan, plan.map.starts, params_for(plan, fov=fov, **changes))
@@ -127,7 +119,11 @@ def test_the_field_of_view_shows_with_the_default_wheel_slip(plans):
         return np.array_equal(a.trajectory_offsets, b.trajectory_offsets) and np.allclose(
             a.trajectory_coords, b.trajectory_coords, rtol=0.0, atol=1e-6 * plan.map.diagonal)  # fmt: skip
 
-    assert runs[(60.0, "exact")].hold_steps.sum() > 1000 and same(runs[(360.0, "exact")], runs[(60.0, "exact")])
+    assert runs[(60.0, "exact")].hold_steps.sum() > 1000
+    # a single integrator with a 60° camera and the default slip can end lost at a blind spot near the goal
+    # (no heading shows two tags there, and its error bound has outgrown blind_error): the other three arrive
+    for key, run in runs.items():
+        assert (run.outcome == Outcome.SUCCESS).sum() >= (3 if key == (60.0, "default") else 4), (key, run.counts())
     assert not same(runs[(360.0, "default")], runs[(60.0, "default")])
 
 

@@ -553,12 +553,12 @@ def test_run_rejects_a_cell_with_one_landmark(hand_cells):
 
 
 def test_pipeline_cells_are_certified_and_rechecked(small_spec):
-    from bearnav_cli.stages import decompose, rrtstar, simplify
+    from bearnav_cli import pipeline
     from tests.conftest import build_map
 
     map_ = build_map(small_spec)
-    cells = decompose.run(simplify.run(rrtstar.run(map_, rrtstar.Params(iterations=300, seed=1))))
-    plan = sy.run(cells)
+    made = pipeline.compute(map_, overrides={"rrtstar": {"iterations": 300, "seed": 1}})
+    cells, plan = made["cells"], made["plan"]
     assert CellStatus.SOLVER_FAILURE not in plan.status and plan.status[0] == CellStatus.GOAL
     landmarks = map_.landmarks
     for c in range(1, cells.n_cells):

@@ -24,9 +24,8 @@ from bearnav_cli import perception, pipeline, plot, tags
 from bearnav_cli.datatypes import replace
 from bearnav_cli.errors import InvalidParamsError
 from bearnav_cli.stages import decompose, synthesize
-from bench.common import run_stages
 from tests.conftest import build_map
-from tests.funnel_maps import ITERATIONS, PIPELINE, load_random_map_tool, random_spec
+from tests.funnel_maps import ITERATIONS, load_random_map_tool, random_spec
 
 #: Evaluation grid D/CELLS: coarser than the default D/100 to keep the file fast.
 CELLS = 60
@@ -51,7 +50,7 @@ def plan_of(source: str, seed: int, keep: int | None = None):
     spec = copy.deepcopy(spec_of(source, seed))
     if keep is not None:
         spec["landmarks"] = spec["landmarks"][:keep]
-    return run_stages(build_map(spec), PIPELINE)
+    return pipeline.compute(build_map(spec))["plan"]
 
 
 def params_for(plan, **changes) -> tags.Params:
@@ -131,7 +130,7 @@ def test_replanning_with_the_tags_keeps_the_cells():
     """ALGORITHMS Lemma 3: the fields do not depend on the landmarks, so only the gains change."""
     spec = spec_of("random", 1)
     map_ = build_map(spec)
-    tree = run_stages(map_, ["rrtstar", "simplify"])
+    tree = pipeline.compute(map_, through="simplify")["simplified"]
     params = pipeline.resolve_params("decompose", map_.params)
     cells = decompose.run(tree, params)
     plan = synthesize.run(cells, pipeline.resolve_params("synthesize", map_.params))

@@ -289,3 +289,43 @@ def test_every_example_map_reaches_the_goal_from_its_own_starts(example):
     params = pipeline.resolve_params("simulate", plan.map.params, {"record_trajectories": False})
     runs = simulate.rollout(plan, plan.map.starts, params)
     assert (runs.outcome == Outcome.SUCCESS).all(), runs.counts()
+
+
+# --------------------------------------------------------------------------- verify --dynamics unicycle
+
+
+def _small_funnel_plan() -> Plan:
+    from bearnav_cli import pipeline
+    from tests.conftest import build_map
+    from tests.funnel_maps import ITERATIONS, random_spec
+
+    return pipeline.compute(build_map(random_spec(2, ITERATIONS, 0)))["plan"]
+
+
+def test_the_unicycle_closed_loop_from_the_certified_domain_has_no_collision_and_no_breach():
+    """``dynamics="unicycle"`` (displacements, exact motion, certified_heading): every run from D reaches
+    the goal, every one of its steps is certified and every true position lies in some cell of D."""
+    plan = _small_funnel_plan()
+    report = verify.run(plan, verify.Params(n_starts=300, dynamics="unicycle"))
+    assert report.rollouts is not None and report.in_domain.sum() > 200
+    assert report.breaches is not None and not report.breaches.any()
+    assert report.outcome_counts["collision"] == 0 and report.success_in_domain == 1.0
+    assert not report.failed, report.reasons
+    assert report.to_json()["monte_carlo"]["breaches"] == 0 and "0 breaches from D" in report.summary()
+    with pytest.raises(InvalidParamsError) as err:
+        verify.Params(dynamics="car")
+    assert err.value.field == "dynamics"
+
+
+def test_a_breach_from_the_certified_domain_fails_verify(monkeypatch):
+    """A run from D with a true position outside every cell is a breach, and a breach fails verify (here
+    the domain test is made to say "outside" for every step)."""
+    plan = _small_funnel_plan()
+    import types
+
+    outside = lambda arrays, x: np.full(len(x), -1)  # noqa: E731
+    fake = types.SimpleNamespace(DYNAMICS=verify.runtime.DYNAMICS, least_rank_cell=outside)
+    monkeypatch.setattr(verify, "runtime", fake)  # verify's own domain test only (simulate keeps the real one)
+    report = verify.run(plan, verify.Params(n_starts=20, dynamics="unicycle"))
+    assert report.breaches.sum() == report.in_domain.sum() > 0
+    assert report.failed and any("breached" in why for why in report.reasons)

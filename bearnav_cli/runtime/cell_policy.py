@@ -48,7 +48,9 @@ def contains(arrays: PlanArrays, cell: np.ndarray, x: np.ndarray, tol: float | N
     Parameters
     ----------
     arrays : PlanArrays
+        The plan: each cell's half-plane rows ``A_c``, ``b_c`` (padded).
     cell : ndarray of int, shape (R,)
+        The cell each robot is tested against.
     x : ndarray, shape (R, 2)
         Positions (map units).
     tol : float, optional
@@ -86,7 +88,17 @@ def voronoi_owner(arrays: PlanArrays, x: np.ndarray) -> np.ndarray:
 
 
 def lyapunov(arrays: PlanArrays, cell: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """``V_c(x) = z_c·(x − x_j)``, shape (R,); identically 0 in the goal cell."""
+    """``V_c(x) = z_c·(x − x_j)``, shape (R,); identically 0 in the goal cell.
+
+    Parameters
+    ----------
+    arrays : PlanArrays
+        The plan: each cell's exit direction ``z_c`` and exit point ``x_j``.
+    cell : ndarray of int, shape (R,)
+        The cell of each robot.
+    x : ndarray, shape (R, 2)
+        Positions or their estimates (map units); ``V`` is in map units.
+    """
     c, p = _cells(arrays, cell), _points(x)
     return np.einsum("rk,rk->r", arrays.exit_dir[c], p - arrays.exit_point[c])
 
@@ -96,6 +108,15 @@ def barrier_values(arrays: PlanArrays, x: np.ndarray, where: np.ndarray | None =
 
     ``>= 0`` exactly when ``x`` lies in the cell's safe set. With ``where`` (bool, (R, C)) only
     those pairs are evaluated (a point lies in a handful of the C cells) and the rest are ``-inf``.
+
+    Parameters
+    ----------
+    arrays : PlanArrays
+        The plan: every cell's barrier rows ``h(x) = A x + b`` (padded).
+    x : ndarray, shape (R, 2)
+        Positions or their estimates (map units); ``h`` is in map units.
+    where : ndarray of bool, shape (R, C), optional
+        The (robot, cell) pairs to evaluate; default all.
     """
     p = _points(x)
     if where is None:
@@ -126,10 +147,14 @@ def locate(arrays: PlanArrays, x: np.ndarray, tol: float | None = None, eps_sw: 
     Parameters
     ----------
     arrays : PlanArrays
+        The plan: cells, barrier rows, exit points and route costs (funnel plans: cell ranks).
     x : ndarray, shape (R, 2)
         Positions or their estimates (map units).
     tol : float, optional
         Membership slack (map units); default ``arrays.tol``.
+    eps_sw : float
+        Switching radius (map units), paper plans: an edge cell whose exit point is within it is
+        no candidate either (the robot would switch at once); ignored for funnel plans.
     """
     p = _points(x)
     if arrays.funnel:  # ALGORITHMS §11.3: the containing cell of least rank (the Voronoi owner outside D)
@@ -170,6 +195,7 @@ def least_rank_cell(arrays: PlanArrays, x: np.ndarray, erosion: np.ndarray | flo
     Parameters
     ----------
     arrays : PlanArrays
+        The plan: cell rows, ranks and the spatial index of the cells (``cells_near``).
     x : ndarray, shape (R, 2)
         Positions or their estimates (map units).
     erosion : float or ndarray, shape (R,)
@@ -213,6 +239,7 @@ def funnel_update(arrays: PlanArrays, cell: np.ndarray, target: np.ndarray, x: n
     Parameters
     ----------
     arrays : PlanArrays
+        A funnel plan: its cells, their ranks, tree nodes and obstacle edges (for approaches).
     cell, target : ndarray of int, shape (R,)
         Current cell (``-1`` before the first update) and approach node (``-1`` for none).
     x : ndarray, shape (R, 2)
@@ -277,6 +304,7 @@ def switch(
     Parameters
     ----------
     arrays : PlanArrays
+        The plan: cells, their parents, exit points and directions, barrier rows.
     cell : ndarray of int, shape (R,)
         Active cell of each robot.
     x : ndarray, shape (R, 2)
@@ -316,7 +344,17 @@ def switch(
 
 
 def in_safe_set(arrays: PlanArrays, cell: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """Whether each robot lies in its cell's safe set (every barrier row ``h(x) >= 0``), shape (R,)."""
+    """Whether each robot lies in its cell's safe set (every barrier row ``h(x) >= 0``), shape (R,).
+
+    Parameters
+    ----------
+    arrays : PlanArrays
+        The plan: every cell's barrier rows ``h(x) = A x + b`` (padded).
+    cell : ndarray of int, shape (R,)
+        The cell of each robot.
+    x : ndarray, shape (R, 2)
+        Positions or their estimates (map units).
+    """
     c, p = _cells(arrays, cell), _points(x)
     rows = np.einsum("rqk,rk->rq", arrays.bar_A[c], p) + arrays.bar_b[c]
     return np.min(rows, axis=1, initial=math.inf) >= 0
@@ -336,6 +374,13 @@ def segments_clear(arrays: PlanArrays, a: np.ndarray, b: np.ndarray) -> np.ndarr
 
     Both endpoints are assumed free, so a segment meets the (closed) obstacles exactly when it
     crosses or touches one of their ring edges.
+
+    Parameters
+    ----------
+    arrays : PlanArrays
+        The plan: the free bounds and the ring edges of the inflated obstacles (``obstacle_edges``).
+    a, b : ndarray, shape (R, 2)
+        The segments' endpoints (map units).
     """
     a, b = _points(a), _points(b)
     lo, hi = arrays.free_bounds[:2], arrays.free_bounds[2:]
@@ -346,7 +391,14 @@ def segments_clear(arrays: PlanArrays, a: np.ndarray, b: np.ndarray) -> np.ndarr
 def edges_clear(edges: np.ndarray, a: np.ndarray, b: np.ndarray, ok: np.ndarray | None = None) -> np.ndarray:
     """Exact test that each segment ``[a_r, b_r]`` crosses or touches none of ``edges`` (E, 2, 2), shape (R,).
 
-    ``ok`` (R,): only those segments are tested (the others stay ``False``).
+    Parameters
+    ----------
+    edges : ndarray, shape (E, 2, 2)
+        The edges ``(start, end)`` to test against (map units).
+    a, b : ndarray, shape (R, 2)
+        The segments' endpoints (map units).
+    ok : ndarray of bool, shape (R,), optional
+        Only those segments are tested (the others stay ``False``); default all.
     """
     a, b = _points(a), _points(b)
     ok = np.ones(len(a), bool) if ok is None else np.array(ok, bool)
@@ -396,6 +448,15 @@ def approach_target(arrays: PlanArrays, x: np.ndarray, nearest: int = 8) -> np.n
     Among the ``nearest`` closest nodes (all nodes if none of those qualifies), the one with a
     clear straight segment from ``x`` and the shortest route ``‖x − x_n‖ + cost(n)``. The node
     lies strictly inside its own cell's safe set, so the robot is certified once it arrives.
+
+    Parameters
+    ----------
+    arrays : PlanArrays
+        The plan: tree nodes, their route costs to the goal and the inflated obstacle edges.
+    x : ndarray, shape (R, 2)
+        Positions or their estimates (map units).
+    nearest : int
+        How many of the closest nodes are tried first.
     """
     p = _points(x)
     out = np.full(len(p), -1, np.int64)
@@ -437,6 +498,7 @@ def update(
     Parameters
     ----------
     arrays : PlanArrays
+        The plan; ``arrays.funnel`` picks the policy.
     cell, target : ndarray of int, shape (R,)
         Current cell (``-1`` before the first update) and approach node (``-1`` for none).
     x : ndarray, shape (R, 2)
@@ -444,7 +506,10 @@ def update(
     eps_sw : float
         Switching and arrival radius (map units).
     tol : float, optional
-        Membership slack; default ``arrays.tol``.
+        Membership slack (map units); default ``arrays.tol``. Paper plans only.
+    erosion : float or ndarray, shape (R,), optional
+        Funnel plans: ``δ`` of each robot's estimate (map units), its error bound: membership is
+        tested on ``P ⊖ δ``; ``None``: 0. Ignored for paper plans.
 
     Returns
     -------
@@ -493,7 +558,10 @@ def apply_gain(arrays: PlanArrays, cell: np.ndarray, y: np.ndarray) -> np.ndarra
 
     Parameters
     ----------
+    arrays : PlanArrays
+        The plan: every cell's gain (C, 2, 2L), 1/s.
     cell : ndarray of int, shape (R,)
+        The cell whose gain each robot applies.
     y : ndarray, shape (R, 2L)
         The output: displacements to every landmark, or their bearing reconstruction
         scaled by the fixed landmark's distance (columns of unused landmarks are ignored,
@@ -504,7 +572,17 @@ def apply_gain(arrays: PlanArrays, cell: np.ndarray, y: np.ndarray) -> np.ndarra
 
 
 def field(arrays: PlanArrays, cell: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """The certified field ``u = gain[c] @ (landmarks − x).ravel()``, shape (R, 2), map units / s."""
+    """The certified field ``u = gain[c] @ (landmarks − x).ravel()``, shape (R, 2), map units / s.
+
+    Parameters
+    ----------
+    arrays : PlanArrays
+        The plan: landmarks and every cell's gain.
+    cell : ndarray of int, shape (R,)
+        The cell whose field each robot follows.
+    x : ndarray, shape (R, 2)
+        Positions (map units).
+    """
     return apply_gain(arrays, cell, displacement(arrays, x))
 
 
@@ -513,6 +591,15 @@ def affine_field(arrays: PlanArrays, cell: np.ndarray, x: np.ndarray) -> np.ndar
 
     Equal to :func:`field` up to rounding; the stall test (ALGORITHMS §7.2) uses it
     with the position estimate ``x̂`` whatever the output mode.
+
+    Parameters
+    ----------
+    arrays : PlanArrays
+        The plan: every cell's ``a_c`` (map units / s) and ``M_c`` (1/s).
+    cell : ndarray of int, shape (R,)
+        The cell whose field each robot follows.
+    x : ndarray, shape (R, 2)
+        Positions or their estimates (map units).
     """
     c, p = _cells(arrays, cell), _points(x)
     return arrays.field_a[c] - np.einsum("rij,rj->ri", arrays.field_M[c], p)

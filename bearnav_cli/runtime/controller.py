@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from bearnav_cli.runtime.plan_arrays import PlanArrays
-from bearnav_cli.runtime.step import ControlOutput, ControlSettings, ControlState, control, timing
+from bearnav_cli.runtime.step import SPEED, ControlOutput, ControlSettings, ControlState, control
 
 __all__ = ["Controller"]
 
@@ -27,7 +27,11 @@ class Controller:
     Parameters
     ----------
     arrays : PlanArrays
+        The plan's run-time arrays (:meth:`PlanArrays.from_npz`): cells, gains, barrier rows
+        and the tree the step follows.
     settings : ControlSettings
+        Constants of the step (period ``dt`` in s, switching radius ``eps_sw`` in map units,
+        dynamics, reconstruction, noise), as :meth:`ControlSettings.for_plan` builds them.
     heading : float
         Initial heading (rad) standing in for the last command until the first fix.
     """
@@ -39,24 +43,20 @@ class Controller:
         self.last: ControlOutput | None = None
 
     @classmethod
-    def from_plan(cls, path: str, *, speed: float = 0.1, dt: float | None = None, dynamics: str = "single",
+    def from_plan(cls, path: str, *, speed: float = SPEED, dt: float | None = None, dynamics: str = "single",
                   heading: float = 0.0, **options: Any) -> Controller:  # fmt: skip
         """Load ``plan.npz``; ``options`` are further :class:`ControlSettings` fields.
 
-        ``dt`` is the camera period (s); by default the simulation's, ``min(0.0025·D/v, 0.2)``
-        with ``v`` = ``speed`` (``alpha`` for the unicycle), and ``eps_sw`` defaults to
-        ``2·v·dt``, as in ``bearnav simulate``.
+        The settings come from :meth:`ControlSettings.for_plan`, the builder ``bearnav simulate``
+        uses, with the same defaults: ``dt`` is the camera period (s), by default the
+        simulation's, ``min(0.0025·D/v, 0.2)`` with ``v`` = ``speed`` (``alpha`` for the
+        unicycle), and ``eps_sw`` defaults to ``2·v·dt``. Pass ``bearing_sigma``, the camera's
+        angular noise (radians; default :data:`~bearnav_cli.runtime.step.BEARING_SIGMA`, 1°).
         """
         arrays = PlanArrays.from_npz(path)
-        v = options.get("alpha", 0.1) if dynamics == "unicycle" else speed
         diagonal = math.hypot(*(arrays.bounds[2:] - arrays.bounds[:2]))
-        dt, eps_sw, blind_error = timing(diagonal, v, dt)
-        options.setdefault("eps_sw", eps_sw)
-        options.setdefault("blind_error", blind_error)
-        # a real camera is never exact: with σ = 0 the filter would trust odometry over every
-        # noisy fix (set it to the camera's angular noise)
-        options.setdefault("bearing_sigma", math.radians(1.0))
-        return cls(arrays, ControlSettings(speed=speed, dt=dt, tol=arrays.tol, dynamics=dynamics, **options), heading)
+        settings = ControlSettings.for_plan(diagonal, arrays.tol, dynamics=dynamics, speed=speed, dt=dt, **options)
+        return cls(arrays, settings, heading)
 
     def command(self, bearings: np.ndarray, visible: np.ndarray, heading: float | None = None) -> np.ndarray:
         """The command for one camera frame.

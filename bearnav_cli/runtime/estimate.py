@@ -44,7 +44,43 @@ class Fix:
 
 def measure(arrays: PlanArrays, s: ControlSettings, bearings: np.ndarray, visible: np.ndarray,
             x_true: np.ndarray | None = None, displacements: np.ndarray | None = None) -> Fix:  # fmt: skip
-    """The position fix of one frame (see :func:`bearnav_cli.runtime.step.control` for the arguments)."""
+    """The position fix of one frame, for ``R`` robots (ALGORITHMS §6.2, §7.2).
+
+    Bearing mode: the ``lsq`` intersection of the visible bearing lines
+    (:func:`bearnav_cli.runtime.bearing.reconstruct`), whatever ``s.reconstruction`` is; with
+    ``s.bearing_sigma > 0`` its variance is :func:`bearnav_cli.runtime.bearing.fix_variance` and a
+    fix whose 3σ exceeds ``s.max_fix_error`` is not usable. Displacement mode: ``mean_k(l_k − d_k)``
+    of the measured ``displacements``, else the true position, always usable with variance 0.
+
+    Parameters
+    ----------
+    arrays : PlanArrays
+        The plan's run-time arrays: the fix is made against its ``landmarks`` (L, 2), and its
+        ``tol`` bounds the distances of the fix variance from below.
+    s : ControlSettings
+        Its ``measurement`` picks the mode; ``min_spread`` (rad) and ``tol`` (map units) decide
+        whether an ``lsq`` fix is usable, ``bearing_sigma`` (rad) gives its variance and
+        ``max_fix_error`` (map units) rejects the poor ones.
+    bearings : ndarray, shape (R, L, 2)
+        World-frame unit bearings from each robot to every landmark (ignored in displacement mode).
+    visible : ndarray of bool, shape (R, L)
+        Which landmarks each robot sees (only those enter the fix).
+    x_true : ndarray, shape (R, 2), optional
+        True positions (map units): the measurement in displacement mode when ``displacements``
+        is not given; ignored in bearing mode.
+    displacements : ndarray, shape (R, L, 2), optional
+        Measured ``l_k − x`` (map units) in displacement mode, for a world that differs from the
+        plan's: the fix is the position that fits them best against the plan's landmarks.
+
+    Returns
+    -------
+    Fix
+
+    Raises
+    ------
+    ValueError
+        Displacement mode with neither ``displacements`` nor ``x_true``.
+    """
     r = len(visible)
     if s.measurement == "displacement":
         if displacements is not None:
@@ -101,10 +137,31 @@ class Estimate:
 def fuse(s: ControlSettings, state: ControlState, fix: Fix) -> Estimate:
     """One step of the scalar Kalman filter that fuses fixes with odometry.
 
-    The prediction moves the last estimate by the last command (its variance grows with the
-    distance, ``odometry_drift`` per unit); a fix of variance σ_fix² corrects it, and a fix farther
+    The prediction moves the last estimate by the last command; its standard deviation grows
+    linearly with the distance, ``odometry_drift`` per unit (``σ ← σ + drift·ℓ`` for a step of length
+    ``ℓ``), because wheel slip is mostly systematic over a run (a scale and heading error: its error
+    grows like ``d``, not ``√d``). A fix of variance σ_fix² corrects it, and a fix farther
     than 3 standard deviations from the prediction is rejected. Noise-free (σ = 0) every fix is
     taken as it is.
+
+    Without a fix the robot still steers by the prediction for ``hold_time`` seconds, and after
+    that while its 3σ stays within ``blind_error``; with ``s.odometry`` off nothing is predicted
+    and only a fix lets the robot steer.
+
+    Parameters
+    ----------
+    s : ControlSettings
+        The filter's constants: ``dt`` (s), ``odometry`` (predict between fixes or not),
+        ``odometry_drift`` (σ per unit travelled), ``hold_time`` (s) and ``blind_error`` (map units).
+    state : ControlState
+        The previous step's estimate ``x_hat``, its variance ``var``, the last command's ``motion``
+        (map units / s, what the prediction integrates over ``dt``), ``known`` and ``hold``.
+    fix : Fix
+        This frame's fix from :func:`measure`.
+
+    Returns
+    -------
+    Estimate
     """
     measured, sigma_fix2 = fix.position, fix.variance
     fix = fix.usable.copy()
@@ -112,7 +169,10 @@ def fuse(s: ControlSettings, state: ControlState, fix: Fix) -> Estimate:
     predicted = state.x_hat + s.dt * state.motion
     recent = known & s.odometry  # a prediction exists; its variance says how far to trust it
     travelled = s.dt * np.hypot(state.motion[:, 0], state.motion[:, 1])
-    var_pred = state.var + (s.odometry_drift * travelled) ** 2
+    # wheel slip is mostly systematic (a per-run scale and heading error), so the odometry error
+    # since the last fix grows linearly with the distance: σ grows by drift·travelled per step
+    with np.errstate(invalid="ignore"):
+        var_pred = (np.sqrt(np.maximum(state.var, 0.0)) + s.odometry_drift * travelled) ** 2
     innovation = np.einsum("rk,rk->r", measured - predicted, measured - predicted)
     fix &= ~(recent & (innovation > 9.0 * (var_pred + sigma_fix2)))
     with np.errstate(invalid="ignore", divide="ignore"):

@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from bearnav_cli.errors import ArtifactError
+from bearnav_cli.runtime import schema
 
 __all__ = [
     "CHUNK", "INDEX_BINS", "PlanArrays", "ring_edges", "RUNTIME_KEYS", "tree_costs",
@@ -30,13 +31,17 @@ log = logging.getLogger(__name__)
 #: Largest number of robot × node distances computed at once by :func:`voronoi_owner`.
 CHUNK = 1 << 20
 
-#: ``plan.npz`` entries a robot needs (DESIGN §3.2).
-RUNTIME_KEYS = (
-    "landmarks", "nodes", "parent", "cell_node", "cell_A", "cell_b", "cell_row_offsets", "exit_point",
-    "exit_dir", "gain", "u_max", "goal_tolerance", "cell_landmarks", "fixed_landmark", "status",
-    "cbf_A", "cbf_b", "cbf_offsets", "certificate", "cell_rank", "tolerance", "plan_tolerance", "exit_inset",
-    "cell_vertices", "cell_vertex_offsets", "c_h", "c_v",
-)  # fmt: skip
+#: ``plan.npz`` entries a robot needs (DESIGN §3.2), as :mod:`bearnav_cli.runtime.schema` declares them.
+RUNTIME_KEYS = schema.RUNTIME_KEYS
+#: The declaration of ``plan.npz``: dtypes and symbolic shapes.
+_PLAN = schema.ENTRIES["plan"]
+#: Arrays of the view that ``plan.npz`` does not hold: derived from the embedded map on loading.
+_MAP_ARRAYS = {"bounds": (np.dtype(float), (4,)), "obstacle_edges": (np.dtype(float), None),
+               "sight_edges": (np.dtype(float), None)}  # fmt: skip
+#: Entries whose shape :meth:`PlanArrays._check_shapes` checks (the rest are checked where they are used).
+_CHECKED_SHAPES = ("landmarks", "nodes", "parent", "cell_node", "cell_A", "cell_b", "cell_row_offsets", "exit_point",
+                   "exit_dir", "gain", "u_max", "bounds", "cell_landmarks", "fixed_landmark", "status", "c_h",
+                   "c_v")  # fmt: skip
 
 #: The cell index of :class:`PlanArrays`: at most this many bins along each side of the bounds.
 INDEX_BINS = 32
@@ -52,73 +57,131 @@ def _readonly(value: Any, dtype: Any) -> np.ndarray:
 class PlanArrays:
     """The arrays of a plan that a controller needs at run time.
 
-    N tree nodes, C cells, L landmarks, R half-plane rows. Build it with
-    :meth:`from_npz` (a ``plan.npz`` file) or :meth:`from_plan` (a
-    :class:`~bearnav_cli.datatypes.Plan` in memory).
+    N tree nodes, C cells, L landmarks, R half-plane rows, H barrier rows, V cell vertices,
+    E (E') inflated (raw) obstacle edges. Build it with :meth:`from_npz` (a ``plan.npz`` file)
+    or :meth:`from_plan` (a :class:`~bearnav_cli.datatypes.Plan` in memory). Lengths are in
+    map units; every array is read-only.
 
     Attributes
     ----------
-    landmarks : ndarray, shape (L, 2)
-        Landmark positions (map units).
-    nodes : ndarray, shape (N, 2)
-        Tree nodes; the root (``parent == -1``) is the goal.
+    landmarks : ndarray of float64, shape (L, 2)
+        Landmark positions (map units), the embedded map's.
+    nodes : ndarray of float64, shape (N, 2)
+        Tree node positions (map units); the root (``parent == -1``) is the goal.
     parent : ndarray of int64, shape (N,)
-        Parent of each node, ``-1`` at the root.
+        Parent index of each node, ``-1`` exactly at the root.
     cell_node : ndarray of int64, shape (C,)
-        Node owning each cell; every node owns exactly one cell.
-    cell_A, cell_b : ndarray, shapes (R, 2), (R,)
-        Cell ``c`` is ``{x : A x <= b}`` over its rows ``cell_row_offsets[c]:cell_row_offsets[c + 1]``.
+        Node owning each cell; every node owns exactly one cell (so C == N).
+    cell_A : ndarray of float64, shape (R, 2)
+        Outward unit normals of the cells' half-planes (dimensionless): cell ``c`` is
+        ``{x : A x <= b}`` over its rows ``cell_row_offsets[c]:cell_row_offsets[c + 1]``.
+    cell_b : ndarray of float64, shape (R,)
+        Offsets of those half-planes (map units).
     cell_row_offsets : ndarray of int64, shape (C + 1,)
-    exit_point, exit_dir : ndarray, shape (C, 2)
-        ``x_j`` and the unit ``z`` into the cell: ``V(x) = z·(x − x_j)``; zeros for the goal cell.
-    gain : ndarray, shape (C, 2, 2L)
-        ``u = gain[c] @ y`` with ``y = (landmarks − x).ravel()`` (or its bearing reconstruction).
-    u_max : ndarray, shape (C,)
-        Input bound of each cell's certificate (map units / s).
+        Where each cell's rows of ``cell_A``/``cell_b`` begin (row indices, unitless); starts
+        at 0, every cell has at least one row.
+    exit_point : ndarray of float64, shape (C, 2)
+        ``x_j``, the parent node each cell drives to (map units); zeros for the goal cell.
+    exit_dir : ndarray of float64, shape (C, 2)
+        Unit ``z`` from the exit face into the cell (dimensionless): ``V(x) = z·(x − x_j)``;
+        zeros for the goal cell.
+    gain : ndarray of float64, shape (C, 2, 2L)
+        Affine gains (1/s): ``u = gain[c] @ y`` with ``y = (landmarks − x).ravel()`` (or its
+        bearing reconstruction), ``u`` in map units / s; unused landmarks' columns are zero.
+    u_max : ndarray of float64, shape (C,)
+        Input bound ``|u_k| <= u_max`` of each cell's certificate (map units / s).
     goal_tolerance : float
         Success radius around the goal (map units).
-    bounds : ndarray, shape (4,)
-        ``[xmin, ymin, xmax, ymax]``.
+    bounds : ndarray of float64, shape (4,)
+        ``[xmin, ymin, xmax, ymax]`` of the embedded map (map units).
     cell_landmarks : ndarray of bool, shape (C, L)
         Landmarks each cell's controller uses.
     fixed_landmark : ndarray of int64, shape (C,)
-        Landmark that rescales bearings in each cell.
+        Index of the landmark ``l_f`` that rescales bearings in each cell (ALGORITHMS §5.5).
     status : ndarray of int8, shape (C,)
-        Synthesis status of each cell (``CellStatus`` values).
-    cbf_A, cbf_b, cbf_offsets : ndarray, shapes (H, 2), (H,), (C + 1,)
-        Barrier rows ``h(x) = A x + b`` of each cell, safe where every ``h >= 0``.
-    obstacle_edges : ndarray, shape (E, 2, 2)
-        Every ring edge of the inflated obstacles (from the embedded map), for the exact
-        straight-line checks of :func:`approach_target`.
-    sight_edges : ndarray, shape (E', 2, 2)
-        Every ring edge of the raw obstacles: what hides a landmark (``cell_policy.in_sight``).
+        Synthesis status of each cell (``CellStatus`` values: 0 certified, 1 certified after
+        relaxing constants, 2 not certified, 3 solver failure, 4 goal cell).
+    cbf_A : ndarray of float64, shape (H, 2)
+        Barrier normals (dimensionless): ``h(x) = A x + b``, safe where every ``h >= 0``.
+    cbf_b : ndarray of float64, shape (H,)
+        Barrier offsets (map units).
+    cbf_offsets : ndarray of int64, shape (C + 1,)
+        Where each cell's barrier rows of ``cbf_A``/``cbf_b`` begin (row indices, unitless).
+    obstacle_edges : ndarray of float64, shape (E, 2, 2)
+        Every ring edge ``(start, end)`` of the inflated obstacles (map units, from the embedded
+        map), for the exact straight-line checks of :func:`approach_target`.
+    sight_edges : ndarray of float64, shape (E', 2, 2)
+        Every ring edge of the raw obstacles (map units): what hides a landmark
+        (``cell_policy.in_sight``).
     certificate : {"funnel", "paper"}
-        ``funnel``: the cells compose and the policy is ALGORITHMS §11.3's (least rank).
-    cell_rank : ndarray, shape (C,)
-        Rank of each cell (cost-to-go of its node).
-    tolerance : ndarray, shape (C,)
-        ``δ_c`` of each cell (NaN for ``paper``).
+        ``funnel``: the cells compose and the policy is ALGORITHMS §11.3's (least rank);
+        ``paper``: per-cell certificates only.
+    cell_rank : ndarray of float64, shape (C,)
+        Rank of each cell for the switching policy: the cost-to-go of its node (map units,
+        0 for the goal cell).
+    tolerance : ndarray of float64, shape (C,)
+        ``δ_c``, the position error each cell's certificate tolerates (map units; NaN for
+        ``paper``).
     plan_tolerance : float
-        ``δ*``: a step whose position error bound is at most this is certified (NaN for ``paper``).
+        ``δ* = min(min_c δ_c, δ_e/2)`` (map units): a step whose position error bound is at
+        most this is certified (NaN for ``paper``).
     exit_inset : float
-        ``δ_e`` (map units).
+        ``δ_e`` (map units): every exit face lies in the parent cell eroded by ``δ_e``
+        (0 for ``paper``).
     robot_radius : float
         ρ (map units): the walls of the straight-line checks are ``B_r``, the bounds less ρ.
-    cell_vertices, cell_vertex_offsets : ndarray, shapes (V, 2), (C + 1,)
-        The cells as polygons (their bounding boxes index them, see ``bin_cells``).
-    c_h, c_v : ndarray, shape (C,)
-        The certificate's constants (1/s; ``c_h`` NaN without barrier rows): the unicycle's
-        heading allowance (:func:`bearnav_cli.runtime.step.heading_allowance`) needs the margins.
-
-    Derived attributes (computed on construction): ``goal`` (2,), ``free_bounds`` (4,) ``B_r``,
-    ``tol`` (``1e-9·D``),
-    ``node_cell`` (N,) the cell of each node, ``parent_cell`` (C,) the cell a cell switches
-    to (``-1`` for the goal cell), ``field_a`` (C, 2) and ``field_M`` (C, 2, 2) with
-    ``gain[c] @ (landmarks − x).ravel() = field_a[c] − field_M[c] @ x``, and the rows padded
-    to ``row_A`` (C, P, 2), ``row_b`` (C, P) for vectorised membership tests, the barrier rows
-    padded the same way to ``bar_A`` (C, Q, 2), ``bar_b`` (C, Q) (padding rows ``0·x + inf``),
-    ``node_cost`` (N,): the tree route length from each node to the goal, and ``cost_to_go``
-    (C,): the same from each cell's exit point.
+    cell_vertices : ndarray of float64, shape (V, 2)
+        The cells as CCW polygons (map units); their bounding boxes build the cell index
+        (``bin_cells``).
+    cell_vertex_offsets : ndarray of int64, shape (C + 1,)
+        Where each cell's vertices in ``cell_vertices`` begin (vertex indices, unitless).
+    c_h : ndarray of float64, shape (C,)
+        Barrier constant of each cell's certificate (1/s; NaN without barrier rows).
+    c_v : ndarray of float64, shape (C,)
+        Lyapunov constant of each cell's certificate (1/s); with ``c_h``, what the unicycle's
+        heading allowance (:func:`bearnav_cli.runtime.step.heading_allowance`) needs.
+    goal : ndarray of float64, shape (2,)
+        Derived: the root node's position (map units).
+    bin_cells : ndarray of int64, shape (B, K)
+        Derived cell index, ``B = INDEX_BINS ** 2`` bins (row-major over ``bin_shape``): each
+        bin's candidate cells (those whose bounding box meets it) in (rank, index) order,
+        padded with ``-1``; K is the most cells of a bin (at least 1).
+    bin_origin : ndarray of float64, shape (2,)
+        Derived: lower-left corner ``(xmin, ymin)`` of the index grid (map units).
+    bin_size : ndarray of float64, shape (2,)
+        Derived: width and height of one index bin (map units).
+    bin_shape : tuple of int
+        Derived: ``(INDEX_BINS, INDEX_BINS)``, the bins along x and y (unitless).
+    free_bounds : ndarray of float64, shape (4,)
+        Derived: ``B_r``, ``bounds`` shrunk by ``robot_radius`` on every side (map units).
+    tol : float
+        Derived: ``1e-9·D``, D the diagonal of ``bounds`` (map units), the geometric
+        tolerance of the run-time tests.
+    node_cell : ndarray of int64, shape (N,)
+        Derived: the cell of each node (inverse of ``cell_node``).
+    parent_cell : ndarray of int64, shape (C,)
+        Derived: the cell a cell switches to, its parent node's cell (``-1`` for the goal cell).
+    field_a : ndarray of float64, shape (C, 2)
+        Derived constant term of each cell's affine field (map units / s):
+        ``gain[c] @ (landmarks − x).ravel() = field_a[c] − field_M[c] @ x``.
+    field_M : ndarray of float64, shape (C, 2, 2)
+        Derived linear term of that field (1/s), the sum of the 2×2 gain blocks.
+    row_A : ndarray of float64, shape (C, P, 2)
+        Derived: ``cell_A`` padded per cell to P, the most rows of a cell, for vectorised
+        membership tests (dimensionless; padding rows are ``0·x <= 0``).
+    row_b : ndarray of float64, shape (C, P)
+        Derived: ``cell_b`` padded the same way (map units; padding 0).
+    bar_A : ndarray of float64, shape (C, Q, 2)
+        Derived: ``cbf_A`` padded per cell to Q, the most barrier rows of a cell
+        (dimensionless; padding rows ``0·x + inf >= 0``).
+    bar_b : ndarray of float64, shape (C, Q)
+        Derived: ``cbf_b`` padded the same way (map units; padding ``inf``).
+    node_cost : ndarray of float64, shape (N,)
+        Derived: the tree route length from each node to the goal (map units,
+        :func:`tree_costs`).
+    cost_to_go : ndarray of float64, shape (C,)
+        Derived: the tree route length from each cell's exit point to the goal (map units;
+        0 for the goal cell).
     """
 
     landmarks: np.ndarray
@@ -172,19 +235,17 @@ class PlanArrays:
 
     def __post_init__(self) -> None:
         put = object.__setattr__
-        for name, dtype in (
-            ("landmarks", float), ("nodes", float), ("parent", np.int64), ("cell_node", np.int64),
-            ("cell_A", float), ("cell_b", float), ("cell_row_offsets", np.int64), ("exit_point", float),
-            ("exit_dir", float), ("gain", float), ("u_max", float), ("bounds", float), ("cell_landmarks", bool),
-            ("fixed_landmark", np.int64), ("status", np.int8), ("cbf_A", float), ("cbf_b", float),
-            ("cbf_offsets", np.int64), ("obstacle_edges", float), ("sight_edges", float), ("cell_rank", float),
-            ("tolerance", float),
-            ("cell_vertices", float), ("cell_vertex_offsets", np.int64), ("c_h", float), ("c_v", float),
-        ):  # fmt: skip
+        for name in RUNTIME_KEYS:
+            entry = _PLAN[name]
+            if entry.dtype == "str":
+                put(self, name, str(getattr(self, name)))
+            elif entry.ndim == 0:
+                put(self, name, float(getattr(self, name)))
+            else:
+                put(self, name, _readonly(getattr(self, name), entry.numpy_dtype))
+        for name, (dtype, _) in _MAP_ARRAYS.items():
             put(self, name, _readonly(getattr(self, name), dtype))
-        for name in ("goal_tolerance", "plan_tolerance", "exit_inset", "robot_radius"):
-            put(self, name, float(getattr(self, name)))
-        put(self, "certificate", str(self.certificate))
+        put(self, "robot_radius", float(self.robot_radius))
         r = max(0.0, self.robot_radius)
         put(self, "free_bounds", _readonly(self.bounds + np.array([r, r, -r, -r]), float))  # B_r (Map.free_bounds)
         n, c, n_lm = len(self.nodes), len(self.cell_node), len(self.landmarks)
@@ -257,13 +318,9 @@ class PlanArrays:
 
     def _check_shapes(self, n: int, c: int, n_lm: int) -> None:
         rows = int(self.cell_row_offsets[-1]) if len(self.cell_row_offsets) else -1
-        expected = {
-            "landmarks": (n_lm, 2), "nodes": (n, 2), "parent": (n,), "cell_node": (c,), "cell_A": (rows, 2),
-            "cell_b": (rows,), "cell_row_offsets": (c + 1,), "exit_point": (c, 2), "exit_dir": (c, 2),
-            "gain": (c, 2, 2 * n_lm), "u_max": (c,), "bounds": (4,), "cell_landmarks": (c, n_lm),
-            "fixed_landmark": (c,), "status": (c,), "c_h": (c,), "c_v": (c,),
-        }  # fmt: skip
-        for name, shape in expected.items():
+        dims = {"N": n, "C": c, "L": n_lm, "R": rows}
+        for name in _CHECKED_SHAPES:
+            shape = _MAP_ARRAYS[name][1] if name in _MAP_ARRAYS else _PLAN[name].resolve(dims)
             if getattr(self, name).shape != shape:
                 raise ArtifactError(f"expected shape {shape}, got {getattr(self, name).shape}", field=name)
         if self.cell_row_offsets[0] != 0 or np.any(np.diff(self.cell_row_offsets) < 1):
@@ -308,9 +365,9 @@ class PlanArrays:
         try:
             with np.load(path, allow_pickle=False) as data:
                 manifest = json.loads(str(data["manifest"][()])) if "manifest" in data.files else {}
-                if isinstance(manifest, dict) and manifest.get("schema") == "bearnav.plan/1":
-                    raise ArtifactError("is a bearnav.plan/1 plan, which this version no longer reads; re-run "
-                                        "`bearnav plan MAP.yaml --force`", file=str(path))  # fmt: skip
+                if isinstance(manifest, dict) and manifest.get("schema") == schema.RETIRED_PLAN_SCHEMA:
+                    raise ArtifactError(f"is a {schema.RETIRED_PLAN_SCHEMA} plan, which this version no longer reads; "
+                                        "re-run `bearnav plan MAP.yaml --force`", file=str(path))  # fmt: skip
                 missing = [key for key in (*RUNTIME_KEYS, "map") if key not in data.files]
                 if missing:
                     raise ArtifactError(f"missing entries {', '.join(missing)}", file=str(path))
@@ -336,9 +393,9 @@ class PlanArrays:
             )  # fmt: skip
         except (KeyError, TypeError, ValueError) as exc:
             raise ArtifactError("embedded map has no bounds or obstacles", file=file, field="map") from exc
-        for key in ("goal_tolerance", "plan_tolerance", "exit_inset"):
-            entries[key] = float(entries[key])
-        entries["certificate"] = str(entries["certificate"])
+        for key in RUNTIME_KEYS:
+            if _PLAN[key].ndim == 0:  # 0-d arrays in the file: a number, or the certificate's text
+                entries[key] = str(entries[key]) if _PLAN[key].dtype == "str" else float(entries[key])
         return cls(bounds=bounds, obstacle_edges=ring_edges(rings), sight_edges=ring_edges(sight), robot_radius=radius,
                    **entries)  # fmt: skip
 

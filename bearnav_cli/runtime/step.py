@@ -18,13 +18,22 @@ from dataclasses import dataclass
 import numpy as np
 
 from bearnav_cli.runtime import bearing
-from bearnav_cli.runtime.cell_policy import affine_field, apply_gain, displacement, in_sight, update
+from bearnav_cli.runtime.cell_policy import (
+    affine_field,
+    apply_gain,
+    displacement,
+    in_sight,
+    least_rank_cell,
+    update,
+)
 from bearnav_cli.runtime.estimate import Estimate, fuse, measure
 from bearnav_cli.runtime.plan_arrays import PlanArrays
 
 __all__ = [
-    "APPROACH_ALIGNMENT", "DYNAMICS", "MEASUREMENTS", "STALL_FIELD", "ControlOutput", "ControlSettings", "ControlState",
-    "best_view_heading", "control", "follow_fields", "heading_allowance", "look_around", "timing", "unicycle_command",
+    "ALPHA", "APPROACH_ALIGNMENT", "BEARING_SIGMA", "DYNAMICS", "MEASUREMENTS", "ODOMETRY_DRIFT", "SPEED",
+    "STALL_FIELD", "ControlOutput", "ControlSettings", "ControlState",
+    "best_view_heading", "carry_inside", "control", "follow_fields", "heading_allowance", "look_around", "timing",
+    "unicycle_command",
 ]  # fmt: skip
 
 log = logging.getLogger(__name__)
@@ -34,6 +43,18 @@ log = logging.getLogger(__name__)
 
 DYNAMICS = ("single", "unicycle")
 MEASUREMENTS = ("bearing", "displacement")
+#: Reference speed ``v_ref`` of the single integrator (map units / s): the one default of
+#: ``bearnav simulate``, ``bearnav verify`` and :class:`~bearnav_cli.runtime.Controller`.
+SPEED = 0.1
+#: Forward gain ``α`` of the unicycle (map units / s), likewise.
+ALPHA = 0.1
+#: Bearing noise (1σ, radians) the filter assumes when the caller does not know its camera's: 1°.
+#: Not 0: a filter that assumes exact bearings gives every fix zero variance, so after one fix the
+#: odometry's prediction (variance ``(odometry_drift·d)²``) rejects every later fix that errs by more
+#: than its 3σ: it trusts odometry over every noisy fix.
+BEARING_SIGMA = math.radians(1.0)
+#: Odometry error (1σ) per unit travelled that the filter assumes (its process noise): 5%.
+ODOMETRY_DRIFT = 0.05
 
 
 @dataclass(frozen=True)
@@ -51,6 +72,8 @@ class ControlSettings:
     tol : float
         Membership slack (map units), ``1e-9·D``.
     dynamics : {"single", "unicycle"}
+        The robot's model (§7.1): the single integrator ``ẋ = v_ref·unit(ũ)``, or the unicycle
+        driven by ``v = α cos e``, ``ω = β sin e`` toward the command's direction.
     alpha, beta : float
         Unicycle gains: ``v = α cos e`` (map units / s), ``ω = β sin e`` (rad / s).
     clamp_reverse : bool
@@ -61,6 +84,10 @@ class ControlSettings:
         ``bearing``: reconstruct ``ỹ`` and ``x̂`` from bearings (§6); ``displacement``: the
         true displacements, ``x̂ = x`` (paper B).
     reconstruction : {"lsq", "pair", "rescale"}
+        How the field's output ``ỹ`` is rebuilt from bearings (§6.2–6.4): ``lsq`` takes it at ``x̂``,
+        ``(l_k − x̂)/‖l_f − x̂‖``; ``pair`` and ``rescale`` reconstruct it from the bearings when every
+        robot that steers has a fix this step (from ``x̂`` otherwise, and where theirs is not usable).
+        ``x̂`` itself always comes from ``lsq``.
     min_spread : float
         ``θ_min`` of §6.2 (radians).
     hold_time : float
@@ -76,6 +103,11 @@ class ControlSettings:
         Without a fix, the robot keeps following the fields on odometry beyond ``hold_time``
         while its estimate's 3σ stays below this (map units; the barrier margin in
         ``bearnav simulate``); 0: ``hold_time`` only.
+    bearing_sigma : float
+        Bearing noise (1σ, radians) the filter assumes, :data:`BEARING_SIGMA` (1°) by default: a
+        filter that assumes exact bearings (0) trusts odometry over every noisy fix.
+    max_fix_error : float
+        Use a fix only if its predicted 3σ error is at most this (map units).
     certified_heading : bool
         Unicycle on a funnel plan: drive forward only while the heading error keeps the velocity
         inside every condition the cell's field meets at ``x̂`` (:func:`heading_allowance`), turn
@@ -94,7 +126,7 @@ class ControlSettings:
     eps_sw: float
     tol: float
     dynamics: str = "single"
-    alpha: float = 0.1
+    alpha: float = ALPHA
     beta: float = 0.5
     clamp_reverse: bool = False
     turn_first: bool = True
@@ -103,14 +135,41 @@ class ControlSettings:
     min_spread: float = bearing.DEFAULT_MIN_SPREAD
     hold_time: float = 2.0
     odometry: bool = True
-    odometry_drift: float = 0.05
+    odometry_drift: float = ODOMETRY_DRIFT
     blind_error: float = 0.0
-    bearing_sigma: float = 0.0
+    bearing_sigma: float = BEARING_SIGMA
     max_fix_error: float = math.inf
     certified_heading: bool = True
     fov: float = 2.0 * math.pi
     max_range: float = math.inf
     look_on_purpose: bool = False
+
+    @classmethod
+    def for_plan(cls, diagonal: float, tol: float, *, dynamics: str = "single", speed: float = SPEED,
+                 alpha: float = ALPHA, dt: float | None = None, bearing_sigma: float = BEARING_SIGMA,
+                 **fields: object) -> ControlSettings:  # fmt: skip
+        """The settings of a plan's loop: the one builder of ``bearnav simulate`` and :class:`Controller`.
+
+        ``dt`` defaults to ``min(0.0025·D/v, 0.2)``, ``eps_sw`` to ``2·v·dt`` and ``blind_error``
+        to ``0.01·D`` (:func:`timing`), with ``v`` = ``speed``, or ``alpha`` for the unicycle.
+        ``bearing_sigma`` (radians) is the noise the filter assumes, :data:`BEARING_SIGMA` (1°)
+        unless the caller knows its camera's: a robot passes its camera's angular noise, and
+        ``bearnav simulate`` the noise it draws (``noise_deg``; 0 for its exact default camera,
+        whose fixes are exact). ``fields`` are further fields of :class:`ControlSettings`.
+
+        Parameters
+        ----------
+        diagonal : float
+            ``D``, the diagonal of the map's bounds (map units).
+        tol : float
+            The plan's membership slack (``1e-9·D``).
+        """
+        v = alpha if dynamics == "unicycle" else speed
+        dt, eps_sw, blind_error = timing(diagonal, v, dt)
+        fields.setdefault("eps_sw", eps_sw)
+        fields.setdefault("blind_error", blind_error)
+        return cls(speed=speed, dt=dt, tol=tol, dynamics=dynamics, alpha=alpha, bearing_sigma=bearing_sigma,
+                   **fields)  # type: ignore[arg-type]  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -139,6 +198,9 @@ class ControlState:
         ``±1``: the direction of the current look-around.
     look : ndarray, shape (R,)
         The heading a look on purpose turns to (rad), NaN when none (:func:`look_around`).
+    scan_from : ndarray, shape (R,)
+        ``hold`` when the current look-around began (s): its clock, which starts when the scan does
+        (odometry may have carried the robot blind for much longer than ``hold_time`` before).
     """
 
     cell: np.ndarray
@@ -152,6 +214,7 @@ class ControlState:
     scanning: np.ndarray
     spin: np.ndarray
     look: np.ndarray
+    scan_from: np.ndarray
 
     @classmethod
     def initial(cls, heading: np.ndarray) -> ControlState:
@@ -160,7 +223,7 @@ class ControlState:
         r = len(h)
         return cls(np.full(r, -1, np.int64), np.full(r, -1, np.int64), np.column_stack([np.cos(h), np.sin(h)]),
                    np.zeros(r), np.zeros((r, 2)), np.zeros((r, 2)), np.zeros(r, bool), np.full(r, np.inf),
-                   np.zeros(r, bool), np.ones(r), np.full(r, np.nan))  # fmt: skip
+                   np.zeros(r, bool), np.ones(r), np.full(r, np.nan), np.zeros(r))  # fmt: skip
 
     def take(self, idx: np.ndarray) -> ControlState:
         """The state of the robots ``idx``."""
@@ -248,11 +311,15 @@ def control(
     Parameters
     ----------
     arrays : PlanArrays
+        The plan's run-time arrays: landmarks, cells, gains and barrier rows.
     settings : ControlSettings
+        The loop's constants (:meth:`ControlSettings.for_plan`).
     state : ControlState
+        What the robots remember from the previous step (:meth:`ControlState.initial` at the start).
     bearings : ndarray, shape (R, L, 2)
         World-frame unit bearings (ignored in displacement mode).
     visible : ndarray of bool, shape (R, L)
+        Which landmarks each robot's camera sees this frame (only those enter the fix).
     heading : ndarray, shape (R,)
         Yaw ``φ`` (rad) from the compass: the unicycle's heading, the single integrator's camera.
     x_true : ndarray, shape (R, 2), optional
@@ -267,7 +334,7 @@ def control(
     ControlOutput
     """
     s = settings
-    est = fuse(s, state, measure(arrays, s, bearings, visible, x_true, displacements))
+    est = carry_inside(arrays, s, state, fuse(s, state, measure(arrays, s, bearings, visible, x_true, displacements)))
     cell, target, last_dir, u, stalled, relocated = follow_fields(arrays, s, state, est, bearings, visible,
                                                                   displacements)  # fmt: skip
     holding = ~est.steer  # no position estimate this step
@@ -281,13 +348,53 @@ def control(
         forward, turn, motion = unicycle_command(s, direction, heading, holding, scanning, target, turn, allowed)
     # the estimate always moves on with the robot's own motion, steering with it or not
     new = ControlState(cell, target, last_dir, est.hold, np.where(est.known[:, None], est.x_hat, state.x_hat), motion,
-                       est.known, est.var, scanning, spin, look)  # fmt: skip
+                       est.known, est.var, scanning, spin, look,
+                       np.where(scanning & ~state.scanning, est.hold - s.dt, state.scan_from))  # fmt: skip
     # certified (§11.4): a funnel plan, driven by a certified cell's field (not a straight approach),
     # on an estimate whose error bound is within the plan's tolerance δ*
     certified = (arrays.funnel & est.steer & (target < 0) & (cell >= 0)
                  & (est.error_bound <= arrays.plan_tolerance + s.tol))  # fmt: skip
     return ControlOutput(velocity, forward, turn, scanning, new, est.fix, lost, stalled, relocated,
                          np.where(est.steer[:, None], est.x_hat, 0.0), certified)  # fmt: skip
+
+
+def carry_inside(arrays: PlanArrays, s: ControlSettings, state: ControlState, est: Estimate) -> Estimate:
+    """Odometry also carries a robot that lost its fix while its whole error ball lies in one funnel cell.
+
+    :func:`~bearnav_cli.runtime.estimate.fuse` stops blind travel once the estimate's 3σ exceeds
+    ``blind_error`` (after ``hold_time``). A robot in the middle of a large cell may still drive on:
+    where some cell eroded by the error bound holds ``x̂`` (``least_rank_cell`` with that erosion),
+    the true position lies (within 3σ) in that cell, which is free (C1). Robots approaching a node
+    and plans that are not funnels are left to ``fuse``'s rule.
+
+    Parameters
+    ----------
+    arrays : PlanArrays
+        The plan: only a funnel plan's cells (``arrays.funnel``) let a robot drive on this way.
+    s : ControlSettings
+        Only with ``s.odometry`` on (without it there is no estimate between fixes).
+    state : ControlState
+        The previous step's state: the robot must be following a cell (``cell >= 0``), not
+        approaching a node (``target == -1``).
+    est : Estimate
+        This step's estimate from :func:`~bearnav_cli.runtime.estimate.fuse`, with a finite
+        ``error_bound`` (map units).
+
+    Returns
+    -------
+    Estimate
+        ``est`` with ``steer`` also set for the robots whose eroded cell holds ``x̂``.
+    """
+    wait = ~est.steer & est.known & s.odometry & (state.cell >= 0) & (state.target < 0) & np.isfinite(est.error_bound)
+    if not arrays.funnel or not wait.any():
+        return est
+    idx = np.flatnonzero(wait)
+    inside = least_rank_cell(arrays, est.x_hat[idx], est.error_bound[idx]) >= 0
+    if not inside.any():
+        return est
+    steer = est.steer.copy()
+    steer[idx[inside]] = True
+    return dataclasses.replace(est, steer=steer)
 
 
 def follow_fields(arrays: PlanArrays, s: ControlSettings, state: ControlState, est: Estimate, bearings: np.ndarray,
@@ -297,6 +404,26 @@ def follow_fields(arrays: PlanArrays, s: ControlSettings, state: ControlState, e
     The policy is :func:`~bearnav_cli.runtime.cell_policy.update` (funnel cells eroded by the
     estimate's error bound, capped at δ*); the output ``ỹ`` is rebuilt for the cell's fixed
     landmark and ``ũ = gain[c] @ ỹ``, or ``x_n − x̂`` while approaching node ``n``.
+
+    Parameters
+    ----------
+    arrays : PlanArrays
+        The plan's run-time arrays: cells, gains, fixed landmarks and tree nodes.
+    s : ControlSettings
+        ``eps_sw`` and ``tol`` (map units) of the cell policy, ``measurement`` and
+        ``reconstruction`` (how ``ỹ`` is built), ``min_spread`` (rad) and ``bearing_sigma``.
+    state : ControlState
+        The previous step's ``cell``, ``target`` and ``last_dir``.
+    est : Estimate
+        This step's estimate: only the robots with ``steer`` get a command, at ``x_hat``; its
+        ``error_bound`` (capped at the plan's δ*) erodes a funnel plan's cells.
+    bearings : ndarray, shape (R, L, 2)
+        World-frame unit bearings, for the ``pair`` and ``rescale`` reconstructions of ``ỹ``.
+    visible : ndarray of bool, shape (R, L)
+        Which landmarks each robot sees.
+    displacements : ndarray, shape (R, L, 2), optional
+        Displacement mode in a world that differs from the plan's: the measured ``l_k − x``
+        (map units), used as the output as they are; default ``l_k − x̂``.
 
     Returns
     -------
@@ -357,6 +484,23 @@ def look_around(s: ControlSettings, state: ControlState, est: Estimate, last_dir
     shorter way to :func:`best_view_heading` at its estimate and stops there; if no fix comes, the
     revolution follows from there (lost after ``3π/β`` in all: half a turn, then a whole one).
 
+    Parameters
+    ----------
+    s : ControlSettings
+        ``odometry``, ``hold_time`` (s), ``beta`` (rad / s), ``dt`` (s), ``look_on_purpose`` and
+        ``fov`` (rad).
+    state : ControlState
+        The previous step's ``known``, ``scanning``, ``scan_from``, ``spin`` and ``look``.
+    est : Estimate
+        This step's estimate: the robots without ``steer`` look around; ``hold`` (s) is their clock.
+    last_dir : ndarray, shape (R, 2)
+        Unit direction of the last command (after :func:`follow_fields`): a look-around starts
+        turning toward it.
+    heading : ndarray, shape (R,)
+        The camera's heading ``φ`` (rad).
+    arrays : PlanArrays, optional
+        The plan, to look on purpose (:func:`best_view_heading`); ``None``: the revolution at once.
+
     Returns
     -------
     scanning, lost : ndarray of bool, shape (R,)
@@ -370,7 +514,10 @@ def look_around(s: ControlSettings, state: ControlState, est: Estimate, last_dir
     holding = ~est.steer
     if s.odometry:
         scanning = holding
-        scan_time = est.hold - np.where(state.known, s.hold_time, 0.0)
+        # a look-around's clock starts with it: odometry may have carried the robot blind for longer
+        # than hold_time (while its error bound stayed within blind_error)
+        begun = np.where(state.scanning, state.scan_from, est.hold - s.dt)
+        scan_time = est.hold - np.where(state.known, begun, 0.0)
     else:
         scanning = holding & (est.hold > s.hold_time)
         scan_time = est.hold - s.hold_time
@@ -410,6 +557,19 @@ def best_view_heading(arrays: PlanArrays, s: ControlSettings, x: np.ndarray, phi
     those, the one nearest to ``phi`` (the direction the robot was driving: a fix there lasts when
     it drives on), ties to the largest ``λ_min(Σ P_k / d_k²)`` (the smallest predicted fix
     variance, :func:`bearing.fix_variance`).
+
+    Parameters
+    ----------
+    arrays : PlanArrays
+        The plan's landmarks (L, 2) and the raw obstacle edges that hide them.
+    s : ControlSettings
+        The camera's ``fov`` (rad) and ``max_range`` (map units), and ``min_spread`` (rad).
+    x : ndarray, shape (R, 2)
+        Where each robot looks from: its position estimate (map units).
+    phi : ndarray, shape (R,)
+        The direction each robot was driving (rad): the heading preferred among the usable ones.
+    headings : int
+        How many evenly spaced candidate headings over ``[−π, π)`` are tried.
     """
     p = np.asarray(x, float).reshape(-1, 2)
     phi = np.asarray(phi, float).reshape(len(p))
@@ -453,6 +613,27 @@ def unicycle_command(s: ControlSettings, direction: np.ndarray, heading: np.ndar
     ``APPROACH_ALIGNMENT``. ``allowed`` (R,), from :func:`heading_allowance`: where it is below
     π the robot drives forward (never back) only while ``|e| < allowed``, else turns in place.
 
+    Parameters
+    ----------
+    s : ControlSettings
+        The gains ``alpha`` (map units / s) and ``beta`` (rad / s), ``turn_first`` and
+        ``clamp_reverse``.
+    direction : ndarray, shape (R, 2)
+        The unit command (``u``, or ``last_dir`` while holding); a zero row is no command.
+    heading : ndarray, shape (R,)
+        The unicycle's yaw ``φ`` (rad); ``e`` is the angle from it to ``direction``.
+    holding : ndarray of bool, shape (R,)
+        No position estimate this step: no forward motion, only the turn toward ``direction``.
+    scanning : ndarray of bool, shape (R,)
+        Looking around in place: no forward motion, and ``turn`` as given.
+    target : ndarray of int, shape (R,)
+        Approached node (``-1`` for none): a straight approach drives only within
+        ``APPROACH_ALIGNMENT`` of ``direction``.
+    turn : ndarray, shape (R,)
+        The look-around turn rate of :func:`look_around` (rad / s), used where ``scanning``.
+    allowed : ndarray, shape (R,), optional
+        The heading allowance (rad) of :func:`heading_allowance`; ``None``: §7.1's rule alone.
+
     Returns
     -------
     forward, turn : ndarray, shape (R,)
@@ -490,6 +671,17 @@ def heading_allowance(arrays: PlanArrays, cell: np.ndarray, x: np.ndarray, targe
 
     Returns ``π`` (no bound) for robots outside a funnel plan's cells, approaching a node, or where
     a margin is not positive at ``x`` (an estimate off its cell: the certificate says nothing there).
+
+    Parameters
+    ----------
+    arrays : PlanArrays
+        The plan: each cell's affine field, barrier rows, ``c_h``, ``c_v`` and exit (funnel plans).
+    cell : ndarray of int, shape (R,)
+        Active cell of each robot (``-1`` for none).
+    x : ndarray, shape (R, 2)
+        The position estimate ``x̂`` the field is evaluated at (map units).
+    target : ndarray of int, shape (R,)
+        Approached node (``-1`` for none): an approaching robot has no bound.
     """
     p = np.asarray(x, float).reshape(-1, 2)
     cell = np.asarray(cell, np.int64)
@@ -526,6 +718,15 @@ BLIND_ERROR_PER_DIAGONAL = 0.01
 
 def timing(diagonal: float, speed: float, dt: float | None = None) -> tuple[float, float, float]:
     """The loop constants of a map of diagonal ``D`` driven at ``speed`` (``α`` for the unicycle).
+
+    Parameters
+    ----------
+    diagonal : float
+        ``D``, the diagonal of the map's bounds (map units).
+    speed : float
+        ``v``: ``v_ref`` of the single integrator, or ``α`` of the unicycle (map units / s).
+    dt : float, optional
+        The control period (s) when the caller fixes it; ``None``: ``min(0.0025·D/speed, 0.2)``.
 
     Returns
     -------

@@ -23,6 +23,7 @@ from bearnav_cli.datatypes import Outcome, Simulation, replace
 from bearnav_cli.errors import InvalidParamsError
 from bearnav_cli.geometry import FreeSpace
 from bearnav_cli.runtime import ControlSettings, ControlState, PlanArrays, bearing
+from bearnav_cli.runtime.step import ALPHA, BEARING_SIGMA, ODOMETRY_DRIFT, SPEED
 from bearnav_cli.world import starts as world_starts
 from bearnav_cli.world.camera import CAMERAS, Camera, IdealCamera
 from bearnav_cli.world.motion import Base, Contact, initial_headings
@@ -108,10 +109,14 @@ class Params:
         (standard deviation, along and across the path) over a straight run of length ``d`` (per run
         a scale error and a heading bias, both ``N(0, σ²)``, plus per-step jitter of the same size:
         :class:`bearnav_cli.world.motion.Base`). 0 is the exact motion of §7.1 that the certificates
-        assume (``verify`` runs with it). The controller's filter assumes ``odometry_drift`` = 5% of
-        each step (:class:`~bearnav_cli.runtime.ControlSettings`): more than one step's slip (2σ =
-        4% rms), but it adds steps up as independent (σ like ``5%·√(d·step)``) while the per-run
-        slip adds up linearly, so after a few blind steps it is over-confident (``docs/choices.md``).
+        assume (``verify`` runs with it).
+    odometry_drift : float
+        Odometry error (1σ) per unit travelled that the controller's filter assumes, its process
+        noise (:class:`~bearnav_cli.runtime.ControlSettings`, default 0.05 = 5% of the distance
+        travelled). More than the slip (2σ = 4% rms per step, ``σ·d`` over a run), and added up
+        linearly, as the per-run slip adds up: :func:`bearnav_cli.runtime.estimate.fuse` grows the
+        estimate's σ by ``drift·ℓ`` per step of length ``ℓ`` (``σ ← σ + drift·ℓ``, so ``drift·d``
+        after ``d`` blind), and its 3σ covers the default slip over a hold (``docs/choices.md``).
     max_fix_error : float or None
         Use a noisy fix only if its predicted 3σ position error (from ``noise_deg`` and the
         bearing geometry, :func:`bearnav_cli.runtime.bearing.fix_variance`) is at most this (map units);
@@ -145,8 +150,8 @@ class Params:
     occlusion: bool = True
     reconstruction: str = "lsq"
     min_spread_deg: float = 2.0
-    speed: float = 0.1
-    alpha: float = 0.1
+    speed: float = SPEED
+    alpha: float = ALPHA
     beta: float = 0.5
     clamp_reverse: bool = False
     turn_first: bool = True
@@ -157,6 +162,7 @@ class Params:
     odometry: bool = True
     max_fix_error: float | None = None
     odometry_noise: float = 0.02
+    odometry_drift: float = ODOMETRY_DRIFT
     starts: str = "map"
     dt: float | None = None
     goal_tolerance: float | None = None
@@ -176,8 +182,10 @@ class Params:
             _positive(getattr(self, name), name, allow_none=False)
         for name in ("range", "dt", "goal_tolerance"):
             _positive(getattr(self, name), name)
-        if not (self.odometry_noise >= 0 and math.isfinite(self.odometry_noise)):
-            raise InvalidParamsError(f"must be zero or positive, got {self.odometry_noise}", field="odometry_noise")
+        for name in ("odometry_noise", "odometry_drift"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not (value >= 0 and math.isfinite(value)):
+                raise InvalidParamsError(f"must be zero or positive, got {value}", field=name)
         if self.initial_heading is not None and not math.isfinite(self.initial_heading):
             raise InvalidParamsError(f"must be finite, got {self.initial_heading}", field="initial_heading")
         if self.max_steps is not None and (
@@ -216,28 +224,53 @@ class Settings:
 
 
 def settings(plan, params: Params) -> Settings:
-    """Resolve :class:`Params` against a plan (``dt`` from the map's diagonal, the plan's tolerance)."""
+    """Resolve :class:`Params` against a plan (``dt`` from the map's diagonal, the plan's tolerance).
+
+    The control settings come from :meth:`ControlSettings.for_plan`, the builder the robot's
+    :class:`~bearnav_cli.runtime.Controller` uses; the filter assumes the bearing noise this
+    simulation draws (``noise_deg``; the exact default camera's fixes are exact), and with
+    ``camera="render"`` at least the Controller's default :data:`~bearnav_cli.runtime.step.BEARING_SIGMA`.
+    """
     v = params.alpha if params.dynamics == "unicycle" else params.speed
-    dt, eps_sw, blind_error = runtime.timing(plan.map.diagonal, v, params.dt)
     goal_tolerance = params.goal_tolerance if params.goal_tolerance is not None else float(plan.goal_tolerance)
-    control = ControlSettings(
-        speed=params.speed, dt=dt, eps_sw=eps_sw, tol=plan.map.tol, dynamics=params.dynamics, alpha=params.alpha,
-        beta=params.beta, clamp_reverse=params.clamp_reverse, turn_first=params.turn_first,
-        certified_heading=params.certified_heading, measurement=params.measurement,
-        reconstruction=params.reconstruction, min_spread=math.radians(params.min_spread_deg),
-        hold_time=params.hold_time, odometry=params.odometry,
-        blind_error=blind_error,
-        bearing_sigma=math.radians(params.noise_deg),
+    sigma = math.radians(params.noise_deg)
+    if params.camera == "render":
+        # a detector's bearings are never exact: the filter assumes what the robot's Controller
+        # does (a filter sure of its fixes rejects the slightly-off ones and gets lost: kitchen, 2 of 4)
+        sigma = max(sigma, BEARING_SIGMA)
+    control = ControlSettings.for_plan(
+        plan.map.diagonal, plan.map.tol, dynamics=params.dynamics, speed=params.speed, alpha=params.alpha,
+        dt=params.dt, bearing_sigma=sigma, beta=params.beta,
+        clamp_reverse=params.clamp_reverse, turn_first=params.turn_first, certified_heading=params.certified_heading,
+        measurement=params.measurement, reconstruction=params.reconstruction,
+        min_spread=math.radians(params.min_spread_deg), hold_time=params.hold_time, odometry=params.odometry,
+        odometry_drift=params.odometry_drift,
         max_fix_error=math.inf if params.max_fix_error is None else params.max_fix_error,
         fov=math.radians(params.fov), max_range=math.inf if params.range is None else float(params.range),
         look_on_purpose=params.look_on_purpose,
     )  # fmt: skip
-    return Settings(v, dt, eps_sw, goal_tolerance, plan.map.tol, control)
+    return Settings(v, control.dt, control.eps_sw, goal_tolerance, plan.map.tol, control)
 
 
 def step_limits(arrays: PlanArrays, starts: np.ndarray, s: Settings, params: Params,
                 routes: np.ndarray | None = None) -> np.ndarray:  # fmt: skip
-    """``max_steps`` of each run (ALGORITHMS §7.2), shape (R,); ``routes``: :func:`tree_routes` if known."""
+    """``max_steps`` of each run (ALGORITHMS §7.2), shape (R,).
+
+    ``params.max_steps`` for every run if given, else ``ceil(5·L_route/(v·dt)) + 1000``.
+
+    Parameters
+    ----------
+    arrays : PlanArrays
+        The plan's tree nodes and their route costs, for :func:`tree_routes`.
+    starts : ndarray, shape (R, 2)
+        Start positions (map units).
+    s : Settings
+        The loop's speed ``v`` (map units / s) and step ``dt`` (s).
+    params : Params
+        Its ``max_steps`` overrides the rule when given.
+    routes : ndarray, shape (R,), optional
+        ``L_route`` of each start (map units) when already computed by :func:`tree_routes`.
+    """
     if params.max_steps is not None:
         return np.full(len(starts), int(params.max_steps), np.int64)
     routes = tree_routes(arrays, starts) if routes is None else routes
@@ -374,6 +407,19 @@ def make_camera(plan, world, space: FreeSpace, params: Params) -> Camera | None:
     """The camera of :attr:`Params.camera` for robots in ``world`` (whose free space is ``space``),
     drawing from the stream ``[seed, 2]``; ``None`` for ``measurement="displacement"``.
 
+    Parameters
+    ----------
+    plan : Plan
+        The plan: its map's tolerance, and the map the rendered camera draws.
+    world : Map
+        The world the robots drive in (the plan's map, or a deformed one): the ideal camera sees
+        its landmarks.
+    space : FreeSpace
+        The free space of ``world``: its raw obstacles hide landmarks when ``params.occlusion``.
+    params : Params
+        ``measurement``, ``camera``, ``fov`` and ``noise_deg`` (degrees), ``range`` (map units),
+        ``occlusion`` and ``seed``.
+
     Raises
     ------
     InvalidParamsError
@@ -399,6 +445,23 @@ def start_loop(plan, starts: np.ndarray, params: Params = Params(), world=None) 
 
     Starts that are not free are already finished as collisions. The dict holds the ``arrays``,
     ``settings`` and ``routes`` (:func:`tree_routes`) of the runs.
+
+    Parameters
+    ----------
+    plan : Plan
+        The synthesised plan.
+    starts : ndarray, shape (R, 2)
+        Start positions (map units).
+    params : Params
+        The loop's parameters (its ``starts`` field is ignored here).
+    world : Map, optional
+        The world the robots drive in, as for :func:`rollout`; default the plan's map.
+
+    Raises
+    ------
+    InvalidParamsError
+        ``world`` has not as many landmarks as the plan, or the camera cannot be made
+        (:func:`make_camera`).
     """
     arrays = PlanArrays.from_plan(plan)
     world = plan.map if world is None else world
@@ -428,6 +491,7 @@ def rollout(
     params: Params = Params(),
     progress: Callable[[int, int], None] | None = None,
     world=None,
+    on_step: Callable[[np.ndarray, np.ndarray, np.ndarray], None] | None = None,
 ) -> Simulation:
     """Run the closed loop from every start at once.
 
@@ -446,6 +510,10 @@ def rollout(
         (paper B's deformation test): its obstacles stop them and hide landmarks, its
         landmark positions are what the camera sees. The controllers, cells and goal stay
         the plan's. Default: the plan's map.
+    on_step : callable, optional
+        ``on_step(runs, x, certified)`` after every step: the runs (int, (K,)) that moved, their true
+        positions after the step (K, 2) and whether that step was certified (bool, (K,)), e.g. for
+        ``verify`` to check every true position against the certified domain.
 
     Returns
     -------
@@ -457,7 +525,13 @@ def rollout(
     s, x0 = built["settings"], loop.x.copy()
     iteration = 0
     while active.size:
-        active = loop.step(active)
+        if on_step is None:
+            active = loop.step(active)
+        else:
+            steps, certified = loop.steps.copy(), loop.certified.copy()
+            active = loop.step(active)
+            moved = np.flatnonzero(loop.steps > steps)
+            on_step(moved, loop.x[moved], loop.certified[moved] > certified[moved])
         iteration += 1
         if progress is not None and iteration % PROGRESS_EVERY == 0:
             progress(len(x0) - len(active), len(x0))
@@ -552,6 +626,15 @@ def _finite_or_none(value: float) -> float | None:
 
 def run(plan, params: Params = Params(), progress: Callable[[int, int], None] | None = None) -> Simulation:
     """``bearnav simulate``: the starts of ``params.starts`` run through :func:`rollout`.
+
+    Parameters
+    ----------
+    plan : Plan
+        The synthesised plan (any object with the :class:`~bearnav_cli.datatypes.Plan` attributes).
+    params : Params
+        The loop's parameters; ``params.starts`` names the starts (:func:`resolve_starts`).
+    progress : callable, optional
+        ``progress(finished_runs, R)`` every few steps.
 
     Returns
     -------

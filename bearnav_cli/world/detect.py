@@ -77,6 +77,7 @@ def detect(image: np.ndarray, found: Any = None) -> list[Detection]:
     Parameters
     ----------
     image : ndarray of uint8, shape (H, W)
+        The grey frame (0 black, 255 white).
     found : cv2.aruco.ArucoDetector, optional
         A detector from :func:`detector` (made once and reused: building one is not free).
     """
@@ -95,8 +96,19 @@ def estimate_pose(detection: Detection, intrinsics: Intrinsics, tag_size: float)
     SQPnP is globally optimal; ``SOLVEPNP_IPPE_SQUARE``, made for markers, returned a wrong pose
     (reprojection error of tens of pixels) on exactly frontal noise-free rendered tags.
 
-    ``detection.corners`` must be in OpenCV's order (as :func:`detect` returns them); ``tag_size`` is
-    the black square's edge (metres).
+    Parameters
+    ----------
+    detection : Detection
+        The tag found; its ``corners`` (px) must be in OpenCV's order (as :func:`detect` returns them).
+    intrinsics : Intrinsics
+        The camera matrix (``fx``, ``fy``, ``cx``, ``cy``, px) and distortion the corners were seen with.
+    tag_size : float
+        Edge of the tag's black square (metres): the scale of the pose's translation.
+
+    Returns
+    -------
+    Detection
+        ``detection`` with its ``pose``, or ``detection`` unchanged when ``solvePnP`` fails.
     """
     cv2 = _cv2()
     s = 0.5 * float(tag_size)

@@ -22,7 +22,17 @@ __all__ = ["Base", "Contact", "initial_headings"]
 
 def initial_headings(arrays: PlanArrays, starts: np.ndarray, heading: float | None = None) -> np.ndarray:
     """The heading each run starts with (rad, shape (R,)): ``heading`` (rad) for all, or (``None``)
-    toward the exit point of the cell the start is located in (the goal in the goal cell), §7.1."""
+    toward the exit point of the cell the start is located in (the goal in the goal cell), §7.1.
+
+    Parameters
+    ----------
+    arrays : PlanArrays
+        The plan: its cells (:func:`bearnav_cli.runtime.locate`), exit points and goal.
+    starts : ndarray, shape (R, 2)
+        Start positions (map units).
+    heading : float, optional
+        One initial heading for every run (rad); ``None``: toward each start's cell exit.
+    """
     if heading is not None:
         return np.full(len(starts), float(heading))
     if not len(starts):
@@ -53,6 +63,9 @@ class Base:
     Parameters
     ----------
     dynamics : {"single", "unicycle"}
+        How a command moves the base (§7.1): the single integrator's ``x ← x + dt·u`` (its camera
+        looks along the last command), or the unicycle's ``x ← x + dt·v·(cos φ, sin φ)``,
+        ``φ ← φ + dt·ω``.
     dt : float
         Step (s).
     slip : float

@@ -142,6 +142,8 @@ class RenderedCamera:
     rng : numpy.random.Generator
         Source of the pixel noise.
     settings : RenderSettings, optional
+        How frames are drawn (image size, field of view, tag size, heights, noise, grey levels, the
+        heading's source); default :class:`RenderSettings`'s defaults.
     """
 
     def __init__(self, map_: Any, *, rng: np.random.Generator, settings: RenderSettings | None = None) -> None:

@@ -46,6 +46,16 @@ def resolve_starts(map_, spec: str, rng: np.random.Generator) -> np.ndarray:
     """The starts ``spec`` names in ``map_``, shape (R, 2); ``random:N`` draws them from ``rng``
     (uniform over the free space of the goal's component).
 
+    Parameters
+    ----------
+    map_ : Map
+        The map: its ``starts`` (for ``map``), bounds, obstacles and goal.
+    spec : str
+        ``map`` (the map's own starts), ``random:N`` or ``x,y;x,y;...`` (map units), as
+        :func:`parse_starts` reads it.
+    rng : numpy.random.Generator
+        Source of the ``random:N`` starts (not used by the other forms).
+
     Raises
     ------
     InvalidParamsError
