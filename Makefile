@@ -1,4 +1,4 @@
-# bearnav: `make demo` sets up .venv and plans the kitchen map; `make test` runs ruff and pytest;
+# bearnav: `make demo` sets up .venv and plans the kitchen map; `make test` runs ruff (lint, format) and pytest (a worker per CPU);
 # `make reproduce` redraws the papers' figures in docs/figures/ (only those whose inputs changed).
 PYTHON ?= python3
 VENV ?= .venv
@@ -26,7 +26,8 @@ demo: $(STAMP)
 
 test: $(STAMP)
 	$(BIN)/ruff check .
-	$(BIN)/python -m pytest
+	$(BIN)/ruff format --check .
+	$(BIN)/python -m pytest -n auto
 
 bench: $(STAMP)
 	$(BIN)/python -m pip install --quiet ompl

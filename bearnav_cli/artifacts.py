@@ -41,11 +41,36 @@ from typing import Any, Callable
 import numpy as np
 
 __all__ = [
-    "ARTIFACT_FORMAT", "atomic_output", "atomic_write", "cache_key", "canonical_json", "check_output_file",
-    "check_output_folder", "content_hash", "embedded_map_text", "entries_of", "fresh", "human_bytes", "Kind",
-    "kind_of_schema", "KINDS", "load", "Loaded", "make_manifest", "MANIFEST_FIELDS", "memory_budget", "metrics_path",
-    "output_files", "output_folder", "params_dict", "read_manifest", "remove_stale_temp_files", "RETIRED_SCHEMAS",
-    "save", "sha256_text", "software_versions",
+    "ARTIFACT_FORMAT",
+    "atomic_output",
+    "atomic_write",
+    "cache_key",
+    "canonical_json",
+    "check_output_file",
+    "check_output_folder",
+    "content_hash",
+    "embedded_map_text",
+    "entries_of",
+    "fresh",
+    "human_bytes",
+    "Kind",
+    "kind_of_schema",
+    "KINDS",
+    "load",
+    "Loaded",
+    "make_manifest",
+    "MANIFEST_FIELDS",
+    "memory_budget",
+    "metrics_path",
+    "output_files",
+    "output_folder",
+    "params_dict",
+    "read_manifest",
+    "remove_stale_temp_files",
+    "RETIRED_SCHEMAS",
+    "save",
+    "sha256_text",
+    "software_versions",
 ]
 
 try:  # POSIX; elsewhere output folders are not locked
@@ -119,8 +144,7 @@ KINDS: dict[str, Kind] = {
 #: Schemas of earlier versions, with what to do about a file that has one.
 RETIRED_SCHEMAS = {
     "bearnav.cells/1": "cells without composable certificates; re-run `bearnav plan MAP.yaml --force`",
-    RETIRED_PLAN_SCHEMA: "per-cell certificates only; re-run `bearnav plan MAP.yaml --force` to get "
-                         "bearnav.plan/2",
+    RETIRED_PLAN_SCHEMA: "per-cell certificates only; re-run `bearnav plan MAP.yaml --force` to get bearnav.plan/2",
     "bearnav.sim/1": "runs without their loop constants; re-run `bearnav simulate PLAN.npz --force`",
 }
 
@@ -969,7 +993,8 @@ def load(path: str | os.PathLike, expect: str | tuple[str, ...] | None = None) -
             raise ArtifactError(f"expected a {ndim}-d {dtype_kind} array, got a text", file=str(path), field=key)
         elif value.dtype.kind != dtype_kind or value.ndim != ndim:
             raise ArtifactError(
-                f"expected a {ndim}-d {dtype_kind} array, got a {value.ndim}-d {value.dtype} one", file=str(path),
+                f"expected a {ndim}-d {dtype_kind} array, got a {value.ndim}-d {value.dtype} one",
+                file=str(path),
                 field=key,
             )
     extra = sorted(set(entries) - set(declared))

@@ -18,7 +18,10 @@ import shapely
 from bearnav_cli.geometry import clip, convex_pieces, polygon_rows
 
 __all__ = [
-    "cbf_rows", "corridor_rows", "goal_cbf_rows", "wall_rows",
+    "cbf_rows",
+    "corridor_rows",
+    "goal_cbf_rows",
+    "wall_rows",
 ]
 
 log = logging.getLogger(__name__)

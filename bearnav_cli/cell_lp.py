@@ -38,9 +38,26 @@ from bearnav_cli.errors import ArtifactError
 from bearnav_cli.lp import INF, LpResult, LpSolver, dense_to_csr
 
 __all__ = [
-    "BOX_DIRECTIONS", "CellLp", "CellProblem", "COND_WARNING", "dual_lp", "dual_template", "FIELD_MAP", "field_map",
-    "field_vertex_templates", "FieldTemplates", "gain_from_theta", "gram_condition", "landmark_matrix", "LpTemplate",
-    "min_norm_gain", "theta_from_gain", "vertex_lp", "vertex_lp_field", "vertex_lp_gain", "vertex_template",
+    "BOX_DIRECTIONS",
+    "CellLp",
+    "CellProblem",
+    "COND_WARNING",
+    "dual_lp",
+    "dual_template",
+    "FIELD_MAP",
+    "field_map",
+    "field_vertex_templates",
+    "FieldTemplates",
+    "gain_from_theta",
+    "gram_condition",
+    "landmark_matrix",
+    "LpTemplate",
+    "min_norm_gain",
+    "theta_from_gain",
+    "vertex_lp",
+    "vertex_lp_field",
+    "vertex_lp_gain",
+    "vertex_template",
 ]
 
 log = logging.getLogger(__name__)

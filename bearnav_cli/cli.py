@@ -362,8 +362,13 @@ def _progress_bar() -> Progress:
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
     return Progress(
-        TextColumn("{task.description:<10}"), BarColumn(), _count_column()(),
-        TimeElapsedColumn(), console=err, transient=True, disable=_Quiet.enabled or not err.is_terminal,
+        TextColumn("{task.description:<10}"),
+        BarColumn(),
+        _count_column()(),
+        TimeElapsedColumn(),
+        console=err,
+        transient=True,
+        disable=_Quiet.enabled or not err.is_terminal,
     )
 
 
@@ -989,6 +994,7 @@ def simulate_command(
 
 def _metric_rows(metrics: dict) -> list[tuple[str, str]]:
     """The metrics table of ``bearnav simulate``: (name, formatted value) rows."""
+
     def num(value: Any, fmt: str) -> str:
         return "-" if value is None else format(value, fmt)
 
@@ -1292,8 +1298,9 @@ def tags_command(
         }))  # fmt: skip
     else:
         out.print(f"tags      {out_path}  {proposal.summary()}", highlight=False, soft_wrap=True)
-        out.print(f"wrote {out_path} and {figure}; re-plan with `bearnav plan {out_path}`", highlight=False,
-                  soft_wrap=True)
+        out.print(
+            f"wrote {out_path} and {figure}; re-plan with `bearnav plan {out_path}`", highlight=False, soft_wrap=True
+        )
     if not proposal.target_reached:
         raise typer.Exit(EXIT_OUTCOME)
 

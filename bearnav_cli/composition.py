@@ -202,8 +202,9 @@ def world_violations(plan: Plan, space: FreeSpace) -> list[int]:
     tol = plan.map.tol
     lo, hi = space.bounds[:2] - tol, space.bounds[2:] + tol
     polygons = cell_polygons(cells)
-    hits = shapely.intersects(space.obstacles, polygons) if not space.obstacles.is_empty else np.zeros(len(polygons),
-                                                                                                         bool)
+    hits = (
+        shapely.intersects(space.obstacles, polygons) if not space.obstacles.is_empty else np.zeros(len(polygons), bool)
+    )
     out = []
     for c in range(cells.n_cells):
         v = cells.vertices(c)

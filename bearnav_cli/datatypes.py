@@ -23,10 +23,33 @@ from bearnav_cli.errors import ArtifactError
 from bearnav_cli.runtime.schema import ENTRIES
 
 __all__ = [
-    "CELL_KEYS", "cell_list", "CellFlag", "Cells", "CELLS_INVARIANTS", "CellStatus", "CERTIFICATES", "frozen_array",
-    "Invariant", "INVARIANTS", "Map", "MAP_INVARIANTS", "Outcome", "Plan", "PLAN_INVARIANTS", "PLAN_KEYS", "Polygon",
-    "ragged", "replace", "Simulation", "SIMULATION_INVARIANTS", "SIMULATION_KEYS", "Tree", "TREE_INVARIANTS",
-    "TREE_KEYS", "validate", "validate_artifact",
+    "CELL_KEYS",
+    "cell_list",
+    "CellFlag",
+    "Cells",
+    "CELLS_INVARIANTS",
+    "CellStatus",
+    "CERTIFICATES",
+    "frozen_array",
+    "Invariant",
+    "INVARIANTS",
+    "Map",
+    "MAP_INVARIANTS",
+    "Outcome",
+    "Plan",
+    "PLAN_INVARIANTS",
+    "PLAN_KEYS",
+    "Polygon",
+    "ragged",
+    "replace",
+    "Simulation",
+    "SIMULATION_INVARIANTS",
+    "SIMULATION_KEYS",
+    "Tree",
+    "TREE_INVARIANTS",
+    "TREE_KEYS",
+    "validate",
+    "validate_artifact",
 ]
 
 
@@ -232,9 +255,7 @@ class Polygon:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "exterior", frozen_array(self.exterior, float, (None, 2), "exterior"))
-        object.__setattr__(
-            self, "holes", tuple(frozen_array(h, float, (None, 2), "holes") for h in self.holes)
-        )
+        object.__setattr__(self, "holes", tuple(frozen_array(h, float, (None, 2), "holes") for h in self.holes))
 
     def to_json(self) -> dict:
         return {"exterior": self.exterior.tolist(), "holes": [h.tolist() for h in self.holes]}
@@ -307,8 +328,11 @@ class Map:
             raise ArtifactError("contains infinity", field="landmark_facing")
         # degrees to 1e-9 in [0, 360), as map.json writes them: the JSON round trip is exact
         degrees = [math.nan if math.isnan(f) else _facing_degrees(f) for f in facing.tolist()]
-        object.__setattr__(self, "landmark_facing", frozen_array(np.radians(np.array(degrees, float)), float,
-                                                                 (len(self.landmarks),), "landmark_facing"))
+        object.__setattr__(
+            self,
+            "landmark_facing",
+            frozen_array(np.radians(np.array(degrees, float)), float, (len(self.landmarks),), "landmark_facing"),
+        )
         for name in ("bounds", "goal", "starts", "landmarks"):
             if not np.all(np.isfinite(getattr(self, name))):
                 raise ArtifactError("contains NaN or infinity", field=name)
@@ -372,8 +396,12 @@ class Map:
                 params=dict(data.get("params", {})),
                 source=dict(data.get("source", {})),
                 # maps written before tags had a facing: every tag free-standing
-                landmark_facing=np.radians(np.array([math.nan if lm.get("facing") is None else float(lm["facing"])
-                                                     for lm in data["landmarks"]], float)),
+                landmark_facing=np.radians(
+                    np.array(
+                        [math.nan if lm.get("facing") is None else float(lm["facing"]) for lm in data["landmarks"]],
+                        float,
+                    )
+                ),
             )
         except (KeyError, TypeError, ValueError, AttributeError) as exc:
             if isinstance(exc, ArtifactError):
@@ -845,8 +873,19 @@ def _check_cell_arrays(obj: Any) -> None:
         raise ArtifactError("landmark index out of range", field="fixed_landmark")
     if not np.array_equal(np.diff(obj.cell_row_offsets), np.diff(obj.cell_vertex_offsets)):
         raise ArtifactError("one row per polygon edge expected", field="cell_row_offsets")
-    for name in ("nodes", "collision_samples", "cell_A", "cell_b", "cell_vertices", "exit_point", "exit_dir",
-                 "cbf_A", "cbf_b", "s_min", "s_max"):
+    for name in (
+        "nodes",
+        "collision_samples",
+        "cell_A",
+        "cell_b",
+        "cell_vertices",
+        "exit_point",
+        "exit_dir",
+        "cbf_A",
+        "cbf_b",
+        "s_min",
+        "s_max",
+    ):
         if not np.all(np.isfinite(getattr(obj, name))):
             raise ArtifactError("contains NaN or infinity", field=name)
 

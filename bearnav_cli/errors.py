@@ -9,8 +9,14 @@ bearnav's own, does not.
 from __future__ import annotations
 
 __all__ = [
-    "ArtifactError", "BearnavError", "FolderBusyError", "InternalError", "InvalidMapError", "InvalidParamsError",
-    "OutputPathError", "ResourceLimitError",
+    "ArtifactError",
+    "BearnavError",
+    "FolderBusyError",
+    "InternalError",
+    "InvalidMapError",
+    "InvalidParamsError",
+    "OutputPathError",
+    "ResourceLimitError",
 ]
 
 

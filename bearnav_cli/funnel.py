@@ -402,8 +402,9 @@ def exit_interval(A: np.ndarray, b: np.ndarray, x_j: np.ndarray, w: np.ndarray, 
     return lo, hi
 
 
-def neck_rows(x_j: np.ndarray, z: np.ndarray, t_a: float, t_b: float, angle: float = NECK_ANGLE) -> tuple[np.ndarray,
-                                                                                                              np.ndarray]:
+def neck_rows(
+    x_j: np.ndarray, z: np.ndarray, t_a: float, t_b: float, angle: float = NECK_ANGLE
+) -> tuple[np.ndarray, np.ndarray]:
     """The two neck rows through ``a = x_j + t_a·w`` and ``b = x_j + t_b·w`` (ALGORITHMS §11.5 step 2).
 
     ``w`` is ``z`` turned by +90°. Their lines make the angle ψ with ``z`` and open away from the

@@ -18,9 +18,22 @@ import shapely
 from bearnav_cli.datatypes import Map, Polygon
 
 __all__ = [
-    "barrier_margin", "box_polygon", "BUFFER_QUAD_SEGS", "circle_polygon", "CIRCLE_SEGMENTS", "clip", "convex_pieces",
-    "DEFAULT_CLEARANCE", "drop_collinear", "FreeSpace", "from_shapely", "inflate", "landmark_coverage",
-    "point_polygon_distance", "polygon_rows", "to_shapely",
+    "barrier_margin",
+    "box_polygon",
+    "BUFFER_QUAD_SEGS",
+    "circle_polygon",
+    "CIRCLE_SEGMENTS",
+    "clip",
+    "convex_pieces",
+    "DEFAULT_CLEARANCE",
+    "drop_collinear",
+    "FreeSpace",
+    "from_shapely",
+    "inflate",
+    "landmark_coverage",
+    "point_polygon_distance",
+    "polygon_rows",
+    "to_shapely",
 ]
 
 #: Vertices of a polygonised circle (ALGORITHMS §1): the 64-gon circumscribes the disc.
@@ -224,17 +237,17 @@ class FreeSpace:
     def segments_free(self, starts: np.ndarray, ends: np.ndarray, *, known_in_box: bool = False) -> np.ndarray:
         """Exact segment test: each segment lies in ``B`` and does not touch ``O``.
 
-        Parameters
-        ----------
-        starts, ends : ndarray, shape (n, 2)
-            Segment endpoints (either may be a single point, broadcast against the other).
-    known_in_box : bool
-        The caller guarantees every endpoint lies in ``B`` (samples drawn in ``B``):
-        skip that check.
+            Parameters
+            ----------
+            starts, ends : ndarray, shape (n, 2)
+                Segment endpoints (either may be a single point, broadcast against the other).
+        known_in_box : bool
+            The caller guarantees every endpoint lies in ``B`` (samples drawn in ``B``):
+            skip that check.
 
-        Returns
-        -------
-        ndarray of bool, shape (n,)
+            Returns
+            -------
+            ndarray of bool, shape (n,)
         """
         a = np.asarray(starts, float).reshape(-1, 2)
         b = np.asarray(ends, float).reshape(-1, 2)

@@ -28,7 +28,13 @@ import highspy
 import numpy as np
 
 __all__ = [
-    "dense_to_csr", "highs_lp", "INF", "LpResult", "LpSolver", "LpStatus", "OPTIONS",
+    "dense_to_csr",
+    "highs_lp",
+    "INF",
+    "LpResult",
+    "LpSolver",
+    "LpStatus",
+    "OPTIONS",
 ]
 
 log = logging.getLogger(__name__)

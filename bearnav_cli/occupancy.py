@@ -20,7 +20,14 @@ import shapely
 from bearnav_cli.errors import InvalidMapError, InvalidParamsError
 
 __all__ = [
-    "classify", "decode_image", "FREE", "grid_obstacles", "MODES", "OCCUPIED", "UNKNOWN", "vectorize",
+    "classify",
+    "decode_image",
+    "FREE",
+    "grid_obstacles",
+    "MODES",
+    "OCCUPIED",
+    "UNKNOWN",
+    "vectorize",
 ]
 
 OCCUPIED, FREE, UNKNOWN = 1, 0, -1
@@ -167,9 +174,7 @@ def classify(
         ``field`` is ``mode``, ``free_thresh`` or ``occupied_thresh``.
     """
     if mode not in MODES:
-        raise InvalidMapError(
-            f"must be one of {', '.join(MODES)}, got {mode!r}", file=file, field="mode"
-        )
+        raise InvalidMapError(f"must be one of {', '.join(MODES)}, got {mode!r}", file=file, field="mode")
     free = _number(free_thresh, "free_thresh", file)
     occupied = _number(occupied_thresh, "occupied_thresh", file)
     for value, field in ((free, "free_thresh"), (occupied, "occupied_thresh")):
@@ -200,9 +205,7 @@ def classify(
     return out
 
 
-def vectorize(
-    blocked: np.ndarray, resolution: float, origin: tuple[float, float]
-) -> list[shapely.Polygon]:
+def vectorize(blocked: np.ndarray, resolution: float, origin: tuple[float, float]) -> list[shapely.Polygon]:
     """Turn a pixel mask into the exact union of its pixels, in world coordinates.
 
     Pixel (row ``r``, column ``c``) of an (H, W) mask covers
@@ -244,9 +247,7 @@ def vectorize(
     dx, dy = np.sign(ex - sx)[first] * 0.5, np.sign(ey - sy)[first] * 0.5
     inside = shapely.points((sx[first] + dx - dy) * res + ox, (sy[first] + dy + dx) * res + oy)
     shells = np.flatnonzero(shell)
-    hole, cand = shapely.STRtree(shapely.polygons(rings[shells])).query(
-        inside[~shell], predicate="within"
-    )
+    hole, cand = shapely.STRtree(shapely.polygons(rings[shells])).query(inside[~shell], predicate="within")
     pick = np.lexsort((area[shells][cand], hole))
     keep = pick[np.unique(hole[pick], return_index=True)[1]]
     owner = np.empty(area.size, dtype=np.int64)
@@ -407,9 +408,7 @@ def grid_obstacles(
         raise InvalidMapError("must be [x, y, yaw]", file=file, field="origin")
     ox, oy, yaw = (_number(v, "origin", file) for v in origin)
     if yaw != 0:
-        raise InvalidMapError(
-            "rotated grids (yaw != 0) are not supported", file=file, field="origin"
-        )
+        raise InvalidMapError("rotated grids (yaw != 0) are not supported", file=file, field="origin")
     negate = meta["negate"]
     if not isinstance(negate, int) or negate not in (0, 1):
         raise InvalidMapError(f"must be 0 or 1, got {negate!r}", file=file, field="negate")

@@ -27,11 +27,39 @@ from bearnav_cli.errors import ArtifactError, InternalError, InvalidMapError, In
 from bearnav_cli.stages import decompose, map_, rrtstar, simplify, simulate, synthesize
 
 __all__ = [
-    "Activity", "ACTIVITY", "check_closed_loop", "check_map_params", "check_resources", "check_value", "compute",
-    "check_verify_starts", "LIMITS", "load", "MAP_SUFFIXES", "MAX_BORDER_SAMPLES", "MAX_GRID_CELLS", "MAX_RUNS",
-    "MAX_STEPS_PER_RUN", "option_name", "OPTION_NAMES", "plan", "Range", "reset_activity", "resolve_params",
-    "RRT_BYTES_PER_GRID_CELL", "RRT_BYTES_PER_ITERATION", "RUN_BYTES", "run_map", "run_stage", "SEED", "SIMULATE",
-    "Stage", "STAGE_BY_NAME", "StageReport", "STAGES", "TRAJECTORY_POINT_BYTES",
+    "Activity",
+    "ACTIVITY",
+    "check_closed_loop",
+    "check_map_params",
+    "check_resources",
+    "check_value",
+    "compute",
+    "check_verify_starts",
+    "LIMITS",
+    "load",
+    "MAP_SUFFIXES",
+    "MAX_BORDER_SAMPLES",
+    "MAX_GRID_CELLS",
+    "MAX_RUNS",
+    "MAX_STEPS_PER_RUN",
+    "option_name",
+    "OPTION_NAMES",
+    "plan",
+    "Range",
+    "reset_activity",
+    "resolve_params",
+    "RRT_BYTES_PER_GRID_CELL",
+    "RRT_BYTES_PER_ITERATION",
+    "RUN_BYTES",
+    "run_map",
+    "run_stage",
+    "SEED",
+    "SIMULATE",
+    "Stage",
+    "STAGE_BY_NAME",
+    "StageReport",
+    "STAGES",
+    "TRAJECTORY_POINT_BYTES",
 ]
 
 #: ``progress(done, total)``, called by long stages.
@@ -462,7 +490,8 @@ def _too_big(what: str, need: float, where: str, fits: str) -> ResourceLimitErro
     budget = artifacts.memory_budget()
     return ResourceLimitError(
         f"{what} needs about {artifacts.human_bytes(need)} of memory, more than the "
-        f"{artifacts.human_bytes(budget)} a run may use (half of this machine's); {fits}", field=where
+        f"{artifacts.human_bytes(budget)} a run may use (half of this machine's); {fits}",
+        field=where,
     )
 
 
@@ -475,7 +504,8 @@ def _check_rrtstar(params: rrtstar.Params, map_: Map, where: dict[str, str]) -> 
         smallest = rrtstar.BUCKETS_PER_STEP * math.sqrt(width * height / MAX_GRID_CELLS)
         raise ResourceLimitError(
             f"{params.step:g} makes RRT*'s neighbour grid {grid:.3g} cells over {width:g} x {height:g} "
-            f"(limit {MAX_GRID_CELLS:.0e}); use at least {smallest:.3g}", field=where["step"]
+            f"(limit {MAX_GRID_CELLS:.0e}); use at least {smallest:.3g}",
+            field=where["step"],
         )
     border = 0 if params.border_spacing == 0 else 2 * (math.ceil(width / params.border_spacing)
                                                       + math.ceil(height / params.border_spacing))  # fmt: skip
@@ -486,7 +516,8 @@ def _check_rrtstar(params: rrtstar.Params, map_: Map, where: dict[str, str]) -> 
         hint = f"(step/10 = {params.border_spacing:g}) " if derived else ""
         raise ResourceLimitError(
             f"border pseudo-samples every {params.border_spacing:g} {hint}would be {border:,} points (limit "
-            f"{MAX_BORDER_SAMPLES:,}); use a --border-spacing of at least {smallest:.3g} (or 0: none)", field=field
+            f"{MAX_BORDER_SAMPLES:,}); use a --border-spacing of at least {smallest:.3g} (or 0: none)",
+            field=field,
         )
     fixed = grid * RRT_BYTES_PER_GRID_CELL + border * 64
     need = params.iterations * RRT_BYTES_PER_ITERATION + fixed
@@ -542,7 +573,8 @@ def check_closed_loop(plan: Any, sim: simulate.Params, runs: int, where_runs: st
         if steps > MAX_STEPS_PER_RUN:
             raise ResourceLimitError(
                 f"at speed {settings.speed:g} with dt = {settings.dt:.3g} s one run may take up to {steps:.3g} steps "
-                f"(limit {MAX_STEPS_PER_RUN:.0e}); raise the speed or dt", field=where_dt or where_speed
+                f"(limit {MAX_STEPS_PER_RUN:.0e}); raise the speed or dt",
+                field=where_dt or where_speed,
             )
     if runs > MAX_RUNS:
         raise InvalidParamsError(f"at most {MAX_RUNS:,} runs, got {runs:,}", field=where_runs)
@@ -635,7 +667,9 @@ def _check_artifact_path(path: Path, expect: str | tuple[str, ...] | None) -> No
         folder = Path("plans") / path.stem
         raise ArtifactError(
             f"is a map YAML, not an artifact: run `bearnav plan {path}` first (it writes {folder}/map.json ... "
-            f"{folder}/plan.npz), then give one of those", file=str(path))
+            f"{folder}/plan.npz), then give one of those",
+            file=str(path),
+        )
 
 
 def load(path: str | Path, expect: str | tuple[str, ...] | None = None) -> artifacts.Loaded:
@@ -767,8 +801,11 @@ def _run_and_save(
     started = time.perf_counter()
     result = _execute(stage, payload, params, progress, input_path or str(out))
     elapsed = time.perf_counter() - started
-    summary = map_.summary(result, map_.listed_obstacles(payload)) if isinstance(result, Map) else \
-        stage.module.summary(result)
+    summary = (
+        map_.summary(result, map_.listed_obstacles(payload))
+        if isinstance(result, Map)
+        else stage.module.summary(result)
+    )
     manifest = artifacts.make_manifest(
         stage.output_kind,
         result,

@@ -29,12 +29,43 @@ from bearnav_cli.datatypes import Cells, CellStatus, Map, Plan, Polygon, Simulat
 from bearnav_cli.errors import InvalidParamsError
 
 __all__ = [
-    "active_regions", "ADDED_COLOR", "AXIS_UNITS", "cell_polygons", "COLOR_BY", "EXISTING_TAG_COLOR", "EXIT_COLOR",
-    "field_samples", "figure_for", "INFLATED_COLOR", "label_landmarks", "map_handles", "OUTCOME_COLORS",
-    "OUTCOME_NAMES", "OUTLINE_COLOR", "PERCEPTION_FAIL_COLOR", "PERCEPTION_FAIL_FREE_COLOR", "plot_barriers",
-    "plot_cells", "plot_field", "plot_map", "plot_perception", "plot_samples", "plot_sim_background", "plot_tags",
-    "plot_trajectories", "plot_tree", "plot_uncovered", "PROPOSED_TAG_COLOR", "RAW_COLOR", "save_animation",
-    "save_figure", "STATUS_COLORS", "tags_figure", "UNCERTIFIED_COLOR", "UNCOVERED_COLOR", "UNREACHED_COLOR",
+    "active_regions",
+    "ADDED_COLOR",
+    "AXIS_UNITS",
+    "cell_polygons",
+    "COLOR_BY",
+    "EXISTING_TAG_COLOR",
+    "EXIT_COLOR",
+    "field_samples",
+    "figure_for",
+    "INFLATED_COLOR",
+    "label_landmarks",
+    "map_handles",
+    "OUTCOME_COLORS",
+    "OUTCOME_NAMES",
+    "OUTLINE_COLOR",
+    "PERCEPTION_FAIL_COLOR",
+    "PERCEPTION_FAIL_FREE_COLOR",
+    "plot_barriers",
+    "plot_cells",
+    "plot_field",
+    "plot_map",
+    "plot_perception",
+    "plot_samples",
+    "plot_sim_background",
+    "plot_tags",
+    "plot_trajectories",
+    "plot_tree",
+    "plot_uncovered",
+    "PROPOSED_TAG_COLOR",
+    "RAW_COLOR",
+    "save_animation",
+    "save_figure",
+    "STATUS_COLORS",
+    "tags_figure",
+    "UNCERTIFIED_COLOR",
+    "UNCOVERED_COLOR",
+    "UNREACHED_COLOR",
     "use_file_backend",
 ]
 
@@ -64,9 +95,7 @@ AXIS_UNITS = "map units"
 def _polygon_patch(polygon: Polygon, **style: Any) -> PathPatch:
     rings = [polygon.exterior, *polygon.holes]
     vertices = np.concatenate([np.vstack([r, r[:1]]) for r in rings])
-    codes = np.concatenate(
-        [[MplPath.MOVETO] + [MplPath.LINETO] * (len(r) - 1) + [MplPath.CLOSEPOLY] for r in rings]
-    )
+    codes = np.concatenate([[MplPath.MOVETO] + [MplPath.LINETO] * (len(r) - 1) + [MplPath.CLOSEPOLY] for r in rings])
     return PathPatch(MplPath(vertices, codes), **style)
 
 
@@ -130,8 +159,9 @@ def plot_map(ax: plt.Axes, map_: Map, *, landmarks: bool = True, starts: bool = 
         ax.scatter(*map_.landmarks.T, marker="^", s=40, color="#d62728", edgecolor="white", linewidths=0.5,
                    zorder=6, label="landmarks")  # fmt: skip
     if starts and len(map_.starts):
-        ax.scatter(*map_.starts.T, marker="o", s=36, facecolor="white", edgecolor="#1f77b4", zorder=6,
-                   label="map starts")
+        ax.scatter(
+            *map_.starts.T, marker="o", s=36, facecolor="white", edgecolor="#1f77b4", zorder=6, label="map starts"
+        )
     ax.scatter(*map_.goal, marker="*", s=180, color="#2ca02c", edgecolor="white", linewidths=0.5, zorder=7,
                label="goal")  # fmt: skip
     pad = 0.02 * map_.diagonal
@@ -333,8 +363,18 @@ def plot_cells(ax: plt.Axes, cells: Cells, status: np.ndarray | None = None, *, 
         for i, c in enumerate(bad):
             label = "uncertified cell (status 2/3)" if i == 0 else None
             ring = np.vstack([cells.vertices(c), cells.vertices(c)[:1]])
-            ax.add_patch(PathPatch(MplPath(ring, closed=True), facecolor="none", edgecolor=UNCERTIFIED_COLOR,
-                                   hatch="xxx", lw=1.6, zorder=3.3, gid=f"uncertified-cell-{c}", label=label))
+            ax.add_patch(
+                PathPatch(
+                    MplPath(ring, closed=True),
+                    facecolor="none",
+                    edgecolor=UNCERTIFIED_COLOR,
+                    hatch="xxx",
+                    lw=1.6,
+                    zorder=3.3,
+                    gid=f"uncertified-cell-{c}",
+                    label=label,
+                )
+            )
     if numbers:
         for c in range(cells.n_cells):
             region = regions[c] if regions is not None else None
@@ -495,8 +535,16 @@ def plot_field(ax: plt.Axes, plan: Plan, *, arrows: int = 28) -> plt.Axes:
     return ax
 
 
-def plot_tree(ax: plt.Axes, tree: Tree | Cells | Simulation, *, color: str = "#1f77b4", lw: float = 0.8,
-              alpha: float = 1.0, nodes: bool = False, label: str | None = "tree") -> plt.Axes:
+def plot_tree(
+    ax: plt.Axes,
+    tree: Tree | Cells | Simulation,
+    *,
+    color: str = "#1f77b4",
+    lw: float = 0.8,
+    alpha: float = 1.0,
+    nodes: bool = False,
+    label: str | None = "tree",
+) -> plt.Axes:
     """Tree edges (child → parent) and, optionally, its nodes (nodes added by densification in orange).
 
     Parameters
@@ -552,8 +600,9 @@ def plot_samples(ax: plt.Axes, tree: Tree | Cells, *, color: str = "#ff7f0e") ->
         ``ax``.
     """
     if len(tree.collision_samples):
-        ax.scatter(*tree.collision_samples.T, s=3, marker="x", linewidths=0.6, color=color, zorder=3,
-                   label="collision samples")
+        ax.scatter(
+            *tree.collision_samples.T, s=3, marker="x", linewidths=0.6, color=color, zorder=3, label="collision samples"
+        )
     return ax
 
 
@@ -653,7 +702,7 @@ def save_animation(sim: Simulation, path: str, *, frames: int = 80, limit: int =
     colors = [OUTCOME_COLORS[int(sim.outcome[r])] for r in runs]
     heads = ax.scatter(np.zeros(len(runs)), np.zeros(len(runs)), s=12, zorder=5, c=colors)
     offsets = sim.trajectory_offsets
-    headings = [np.asarray(sim.trajectory_heading[offsets[r]:offsets[r + 1]], float) for r in runs]
+    headings = [np.asarray(sim.trajectory_heading[offsets[r] : offsets[r + 1]], float) for r in runs]
     has_heading = all(len(h) == len(sim.trajectory(r)) for h, r in zip(headings, runs, strict=True)) and runs
     xmin, ymin, xmax, ymax = sim.map.bounds
     size = 0.03 * max(xmax - xmin, ymax - ymin)  # each robot's heading, an arrow this long
@@ -929,4 +978,3 @@ def tags_figure(proposal: Any, map_: Map, title: str | None = None) -> plt.Figur
     plot_tags(ax, proposal)
     fig.tight_layout()
     return fig
-

@@ -19,7 +19,8 @@ import shapely
 from bearnav_cli.geometry import FreeSpace
 
 __all__ = [
-    "route_lengths", "sample_starts",
+    "route_lengths",
+    "sample_starts",
 ]
 
 #: Candidate vertices tested per start and round when searching the shortest route.

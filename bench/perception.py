@@ -120,8 +120,17 @@ def main() -> None:
 
     table = markdown_table(
         ["map", "tags (own → after)", "own 1°", "own 2°", "after tags 1°", "after tags 2°"],
-        [[r["map"], f"{r['own_tags']} → {r['tags_after']}", cell(r["own_1"]), cell(r["own_2"]), cell(r["after_1"]),
-          cell(r["after_2"])] for r in rows],  # fmt: skip
+        [
+            [
+                r["map"],
+                f"{r['own_tags']} → {r['tags_after']}",
+                cell(r["own_1"]),
+                cell(r["own_2"]),
+                cell(r["after_1"]),
+                cell(r["after_2"]),
+            ]
+            for r in rows
+        ],  # fmt: skip
     )
     text = (f"{machine_line()}; {args.starts} starts in D per plan, 60° unicycle, default wheel slip; "
             f"`PYTHONPATH=.:bench python bench/perception.py`\n\n{table}")  # fmt: skip

@@ -82,8 +82,13 @@ def main() -> None:
     d.set_title(f"(d) {runs.counts()['success']}/{len(runs)} starts reach the goal "
                 "(single integrator, bearings, 360°)")  # fmt: skip
 
-    legend_below(a, [Patch(color=plot.RAW_COLOR, label="obstacles"),
-                     Patch(color=plot.INFLATED_COLOR, label="inflated by the robot radius")])
+    legend_below(
+        a,
+        [
+            Patch(color=plot.RAW_COLOR, label="obstacles"),
+            Patch(color=plot.INFLATED_COLOR, label="inflated by the robot radius"),
+        ],
+    )
     for ax in (b, c):
         legend_below(ax)
     legend_below(d, outcome_handles(runs))

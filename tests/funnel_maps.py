@@ -130,4 +130,3 @@ def load_random_map_tool():
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
-

@@ -176,8 +176,9 @@ def hand_plan(
         s_max=np.full(n, 20.0),
         cell_flags=np.zeros(n, np.int64),
         certificate="paper",
-        cell_exit_row=np.array([-1 if parent[c] < 0 else paper_exit_row(*rows[c], exit_dir[c], exit_point[c])
-                                for c in range(n)], np.int64),  # fmt: skip
+        cell_exit_row=np.array(
+            [-1 if parent[c] < 0 else paper_exit_row(*rows[c], exit_dir[c], exit_point[c]) for c in range(n)], np.int64
+        ),  # fmt: skip
         cell_rank=tree_costs(nodes, parent),
         exit_inset=0.0,
         node_added=np.zeros(n, bool),

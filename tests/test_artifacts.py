@@ -12,7 +12,16 @@ from bearnav_cli import artifacts, pipeline
 from bearnav_cli.errors import ArtifactError
 
 MANIFEST_FIELDS = {
-    "schema", "stage", "stage_version", "params", "input", "content_sha256", "key", "software", "summary", "elapsed_s",
+    "schema",
+    "stage",
+    "stage_version",
+    "params",
+    "input",
+    "content_sha256",
+    "key",
+    "software",
+    "summary",
+    "elapsed_s",
 }
 
 

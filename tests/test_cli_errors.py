@@ -47,8 +47,15 @@ def test_missing_file_and_yaml_syntax_error(cli, tmp_path):
 
 def write_grid(tmp_path, image_bytes: bytes, image: str = "grid.pgm") -> None:
     (tmp_path / image).write_bytes(image_bytes)
-    meta = {"image": image, "resolution": 0.1, "origin": [0.0, 0.0, 0.0], "negate": 0,
-            "occupied_thresh": 0.65, "free_thresh": 0.196, "mode": "trinary"}
+    meta = {
+        "image": image,
+        "resolution": 0.1,
+        "origin": [0.0, 0.0, 0.0],
+        "negate": 0,
+        "occupied_thresh": 0.65,
+        "free_thresh": 0.196,
+        "mode": "trinary",
+    }
     (tmp_path / "grid.yaml").write_text(yaml.safe_dump(meta))
 
 
@@ -58,8 +65,13 @@ def pgm(gray: np.ndarray) -> bytes:
 
 
 def occupancy_map(tmp_path) -> object:
-    spec = {"name": "grid", "occupancy": "grid.yaml", "goal": [0.5, 0.5],
-            "landmarks": [[0.0, 0.0], [4.0, 3.0], [0.0, 3.0]], "starts": [[3.5, 2.5]]}
+    spec = {
+        "name": "grid",
+        "occupancy": "grid.yaml",
+        "goal": [0.5, 0.5],
+        "landmarks": [[0.0, 0.0], [4.0, 3.0], [0.0, 3.0]],
+        "starts": [[3.5, 2.5]],
+    }
     path = tmp_path / "grid_map.yaml"
     path.write_text(yaml.safe_dump(spec))
     return path
@@ -90,12 +102,32 @@ def test_occupancy_map_end_to_end(cli, tmp_path):
 def test_bare_ros_yaml_needs_a_goal(cli, tmp_path):
     write_grid(tmp_path, pgm(np.full((30, 40), 254)))
     assert_one_line_error(cli("map", tmp_path / "grid.yaml"), "grid.yaml", "goal")
-    result = cli("map", tmp_path / "grid.yaml", "--goal", "0.5,0.5", "--landmark", "0,0", "--landmark", "4,3",
-                 "-o", tmp_path / "bare.json")
+    result = cli(
+        "map",
+        tmp_path / "grid.yaml",
+        "--goal",
+        "0.5,0.5",
+        "--landmark",
+        "0,0",
+        "--landmark",
+        "4,3",
+        "-o",
+        tmp_path / "bare.json",
+    )
     assert result.exit_code == 0, result.output
     # other options are another input: the map stage reruns (it used to report "fresh")
-    again = cli("map", tmp_path / "grid.yaml", "--goal", "0.5,0.5", "--landmark", "0,0", "--landmark", "3,3",
-                "-o", tmp_path / "bare.json")
+    again = cli(
+        "map",
+        tmp_path / "grid.yaml",
+        "--goal",
+        "0.5,0.5",
+        "--landmark",
+        "0,0",
+        "--landmark",
+        "3,3",
+        "-o",
+        tmp_path / "bare.json",
+    )
     assert again.exit_code == 0 and "fresh" not in again.output, again.output
     import json
 

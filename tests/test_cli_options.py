@@ -191,17 +191,18 @@ def test_importing_the_cli_imports_no_heavy_library():
             f"print(sorted(m for m in sys.modules if m.split('.')[0] in {set(heavy)!r}))")  # fmt: skip
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO, check=True)
     assert out.stdout.strip() == "[]", out.stdout
-    code = ("import bearnav_cli.cli, sys; "
-            "print(sorted(m for m in sys.modules if m.startswith('bearnav_cli.')))")
+    code = "import bearnav_cli.cli, sys; print(sorted(m for m in sys.modules if m.startswith('bearnav_cli.')))"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO, check=True)
     assert out.stdout.strip() == "['bearnav_cli.cli', 'bearnav_cli.errors']", out.stdout
 
 
 def test_help_builds_without_importing_the_stages():
-    code = ("import sys; from typer.testing import CliRunner; from bearnav_cli.cli import app; "
-            "r = CliRunner().invoke(app, ['simulate', '--help']); assert r.exit_code == 0, r.output; "
-            "assert '--odometry-drift' in r.output; "
-            "print(sorted(m for m in sys.modules if m.split('.')[0] in {'numpy', 'scipy', 'shapely'}))")
+    code = (
+        "import sys; from typer.testing import CliRunner; from bearnav_cli.cli import app; "
+        "r = CliRunner().invoke(app, ['simulate', '--help']); assert r.exit_code == 0, r.output; "
+        "assert '--odometry-drift' in r.output; "
+        "print(sorted(m for m in sys.modules if m.split('.')[0] in {'numpy', 'scipy', 'shapely'}))"
+    )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "[]", out.stdout

@@ -139,9 +139,7 @@ def rewrite_json(source: Path, target: Path, change: Callable[[dict], None], reh
     change(document)
     if rehashed and isinstance(document, dict) and isinstance(document.get("manifest"), dict):
         body = {k: v for k, v in document.items() if k != "manifest"}
-        document["manifest"]["content_sha256"] = artifacts.content_hash(
-            {"map": artifacts.canonical_json(body)}, "map"
-        )
+        document["manifest"]["content_sha256"] = artifacts.content_hash({"map": artifacts.canonical_json(body)}, "map")
     target.write_text(json.dumps(document))
     return target
 

@@ -15,17 +15,33 @@ LAYERS = {
     # it sits just above errors; datatypes and artifacts read the one artifact schema from runtime/schema.py
     "runtime": 0.5,
     "datatypes": 1,
-    "geometry": 2, "lp": 2, "occupancy": 2,
-    "cell_lp": 2.5, "routes": 2.5, "barriers": 2.5, "funnel": 2.5,  # build on lp and geometry
+    "geometry": 2,
+    "lp": 2,
+    "occupancy": 2,
+    "cell_lp": 2.5,
+    "routes": 2.5,
+    "barriers": 2.5,
+    "funnel": 2.5,  # build on lp and geometry
     "composition": 2.7,  # the §11.6 checks, on funnel and geometry; verify builds on it
-    "perception": 2.8, "tags": 2.9,  # issue 11 analyses on runtime, geometry and composition (tags also on lp)
+    "perception": 2.8,
+    "tags": 2.9,  # issue 11 analyses on runtime, geometry and composition (tags also on lp)
     "world": 2.95,  # the simulated world (camera, motion, rendering) the simulate stage drives robots in
-    "stages": 3, "verify": 3,
-    "artifacts": 4, "bag": 4.5, "pipeline": 5,
+    "stages": 3,
+    "verify": 3,
+    "artifacts": 4,
+    "bag": 4.5,
+    "pipeline": 5,
     "cli": 6,
 }
-EXTERNAL_ONLY_IN = {"highspy": {"lp"}, "matplotlib": {"plot"}, "yaml": {"cli"}, "typer": {"cli"}, "rich": {"cli"},
-                   "cv2": {"world"}, "rosbags": {"bag"}}
+EXTERNAL_ONLY_IN = {
+    "highspy": {"lp"},
+    "matplotlib": {"plot"},
+    "yaml": {"cli"},
+    "typer": {"cli"},
+    "rich": {"cli"},
+    "cv2": {"world"},
+    "rosbags": {"bag"},
+}
 
 
 def _modules():
@@ -100,7 +116,15 @@ def test_only_cli_prints():
 
 
 FILE_METHODS = {
-    "read_text", "read_bytes", "write_text", "write_bytes", "savez", "savez_compressed", "savefig", "mkdir", "unlink",
+    "read_text",
+    "read_bytes",
+    "write_text",
+    "write_bytes",
+    "savez",
+    "savez_compressed",
+    "savefig",
+    "mkdir",
+    "unlink",
 }
 
 

@@ -56,7 +56,9 @@ def test_inflation_contains_every_point_within_the_radius(small_spec):
 
 def test_free_area_of_a_box_with_one_circle():
     spec = {
-        "bounds": [0, 0, 10, 10], "goal": [1, 1], "landmarks": [[0, 0], [10, 10]],
+        "bounds": [0, 0, 10, 10],
+        "goal": [1, 1],
+        "landmarks": [[0, 0], [10, 10]],
         "obstacles": [{"circle": {"center": [5, 5], "radius": 2}}],
     }
     space = FreeSpace.from_map(build_map(spec))
@@ -70,16 +72,16 @@ def test_map_json_round_trips(small_spec):
 
 
 BAD_MAPS = [
-    (lambda s: s.update(goal=[0, 4]), "goal"),                      # on the boundary of B
-    (lambda s: s.update(goal=[4.5, 4.5]), "goal"),                  # inside an obstacle
-    (lambda s: s["starts"].append([11, 3]), "starts[2]"),           # outside the bounds
-    (lambda s: s["starts"].append([5, 4.1]), "starts[2]"),          # inside an inflated obstacle
-    (lambda s: s.update(landmarks=[[0, 8]]), "landmarks"),          # fewer than two
-    (lambda s: s["landmarks"].append([0, 8]), "landmarks[5]"),      # duplicate position
-    (lambda s: s["landmarks"].append([5, 4.5]), "landmarks[5]"),    # inside a raw obstacle
-    (lambda s: s["landmarks"].append([12, 4]), "landmarks[5]"),     # outside the bounds
-    (lambda s: s.update(colour="red"), "colour"),                   # unknown key
-    (lambda s: s.update(robot_radius="big"), "robot_radius"),       # wrong type
+    (lambda s: s.update(goal=[0, 4]), "goal"),  # on the boundary of B
+    (lambda s: s.update(goal=[4.5, 4.5]), "goal"),  # inside an obstacle
+    (lambda s: s["starts"].append([11, 3]), "starts[2]"),  # outside the bounds
+    (lambda s: s["starts"].append([5, 4.1]), "starts[2]"),  # inside an inflated obstacle
+    (lambda s: s.update(landmarks=[[0, 8]]), "landmarks"),  # fewer than two
+    (lambda s: s["landmarks"].append([0, 8]), "landmarks[5]"),  # duplicate position
+    (lambda s: s["landmarks"].append([5, 4.5]), "landmarks[5]"),  # inside a raw obstacle
+    (lambda s: s["landmarks"].append([12, 4]), "landmarks[5]"),  # outside the bounds
+    (lambda s: s.update(colour="red"), "colour"),  # unknown key
+    (lambda s: s.update(robot_radius="big"), "robot_radius"),  # wrong type
     (lambda s: s["obstacles"].append({"polygon": [[0, 0], [2, 2], [2, 0], [0, 2]]}), "obstacles[3].polygon"),
     (lambda s: s["obstacles"].append({"circle": {"center": [1, 1], "radius": -1}}), "obstacles[3].circle.radius"),
     (lambda s: s["obstacles"].append({"rectangle": [3, 3, 1, 1]}), "obstacles[3].rectangle"),

@@ -32,8 +32,9 @@ def cell_box(h, r0, r1, c0, c1, res=RES, origin=ORIGIN):
 def pixel_union(mask, res=RES, origin=ORIGIN):
     """The reference answer: the union of one box per blocked pixel."""
     rows, cols = np.nonzero(mask)
-    return shapely.union_all([cell_box(mask.shape[0], r, r + 1, c, c + 1, res, origin)
-                              for r, c in zip(rows, cols, strict=True)])
+    return shapely.union_all(
+        [cell_box(mask.shape[0], r, r + 1, c, c + 1, res, origin) for r, c in zip(rows, cols, strict=True)]
+    )
 
 
 def p5(gray, maxval=255, comment=b"# made by hand\n"):
@@ -238,8 +239,7 @@ def reference(p, negate, occupied, free):
 @pytest.mark.parametrize("negate", [False, True])
 @pytest.mark.parametrize("occupied,free", [(0.65, 0.196), (0.9, 0.1), (0.5, 0.25), (1.0, 0.0)])
 def test_trinary_thresholds_follow_the_formula(negate, occupied, free):
-    cells = classify(GRADIENT, None, negate=negate, occupied_thresh=occupied,
-                     free_thresh=free, mode="trinary")
+    cells = classify(GRADIENT, None, negate=negate, occupied_thresh=occupied, free_thresh=free, mode="trinary")
     assert cells.dtype == np.int8 and cells.shape == GRADIENT.shape
     expected = [reference(p, negate, occupied, free) for p in GRADIENT.ravel()]
     assert cells.ravel().tolist() == expected
@@ -268,8 +268,7 @@ def test_scale_mode_partial_and_transparent_cells_are_unknown():
 def test_raw_mode():
     values = np.array([[0, 1, 19, 20, 50, 65, 66, 99, 100, 101, 255]], dtype=np.float64)
     for negate in (False, True):  # raw ignores negate
-        cells = classify(values, None, negate=negate, occupied_thresh=0.65, free_thresh=0.196,
-                         mode="raw")
+        cells = classify(values, None, negate=negate, occupied_thresh=0.65, free_thresh=0.196, mode="raw")
         assert cells.tolist() == [[0, 0, 0, -1, -1, -1, 1, 1, 1, -1, -1]]
 
 
@@ -311,10 +310,10 @@ def test_grid_obstacles_scene_and_unknown_policy(scene):
     gray[0:3, 0:20] = 205  # and partly overlapping an obstacle
     unknown = (gray == 205).sum()
     data = png(gray)
-    as_obstacle, info = grid_obstacles(meta(image="map.png"), data, file="map.yaml",
-                                       image_name="map.png")
-    as_free, info_free = grid_obstacles(meta(image="map.png"), data, file="map.yaml",
-                                        image_name="map.png", unknown="free")
+    as_obstacle, info = grid_obstacles(meta(image="map.png"), data, file="map.yaml", image_name="map.png")
+    as_free, info_free = grid_obstacles(
+        meta(image="map.png"), data, file="map.yaml", image_name="map.png", unknown="free"
+    )
     assert info == info_free
     assert info["width"] == W and info["height"] == H
     assert info["resolution"] == RES and info["origin"] == list(ORIGIN)
@@ -329,9 +328,12 @@ def test_grid_obstacles_scene_and_unknown_policy(scene):
 def test_grid_obstacles_negate_and_defaults(scene):
     mask, _ = scene
     inverted = np.where(mask, 255, 0).astype(np.uint8)
-    polys, info = grid_obstacles(meta(negate=1, mode="trinary", occupied_thresh=0.65,
-                                      free_thresh=0.196), p2(inverted), file="m.yaml",
-                                 image_name="m.pgm")
+    polys, info = grid_obstacles(
+        meta(negate=1, mode="trinary", occupied_thresh=0.65, free_thresh=0.196),
+        p2(inverted),
+        file="m.yaml",
+        image_name="m.pgm",
+    )
     plain, _ = grid_obstacles(meta(), p5(255 - inverted), file="m.yaml", image_name="m.pgm")
     assert [p.wkt for p in polys] == [p.wkt for p in plain]
     assert info["occupied_cells"] == mask.sum() and info["unknown_cells"] == 0
@@ -380,6 +382,5 @@ def test_grid_obstacles_bad_image_and_bad_policy():
         grid_obstacles(meta(), b"P5\n4 3\n255\n\x00", file="map.yaml", image_name="map.pgm")
     assert err.value.field == "image" and err.value.file == "map.pgm"
     with pytest.raises(BearnavError) as err:
-        grid_obstacles(meta(), p5(np.zeros((3, 4))), file="map.yaml", image_name="map.pgm",
-                       unknown="maybe")
+        grid_obstacles(meta(), p5(np.zeros((3, 4))), file="map.yaml", image_name="map.pgm", unknown="maybe")
     assert err.value.field == "unknown"

@@ -103,9 +103,16 @@ def test_same_seed_same_content_other_seed_other(small_map):
     assert digest(5) != digest(5, "extend")
 
 
-@pytest.mark.parametrize("kwargs, field", [({"iterations": 0}, "iterations"), ({"step": 0.0}, "step"),
-                                           ({"step": -1.0}, "step"), ({"collision_policy": "keep"}, "collision_policy"),
-                                           ({"border_spacing": -0.1}, "border_spacing")])
+@pytest.mark.parametrize(
+    "kwargs, field",
+    [
+        ({"iterations": 0}, "iterations"),
+        ({"step": 0.0}, "step"),
+        ({"step": -1.0}, "step"),
+        ({"collision_policy": "keep"}, "collision_policy"),
+        ({"border_spacing": -0.1}, "border_spacing"),
+    ],
+)
 def test_bad_params_raise(kwargs, field):
     with pytest.raises(InvalidParamsError) as info:
         rrtstar.Params(**kwargs)
@@ -124,7 +131,10 @@ def test_bad_params_on_the_command_line(cli, write_map, small_spec, tmp_path, op
 
 def test_no_route_when_every_sample_hits_obstacles(cli, write_map, tmp_path):
     spec = {
-        "name": "pocket", "bounds": [0, 0, 10, 10], "goal": [0.5, 0.5], "landmarks": [[0, 0], [1, 0]],
+        "name": "pocket",
+        "bounds": [0, 0, 10, 10],
+        "goal": [0.5, 0.5],
+        "landmarks": [[0, 0], [1, 0]],
         "obstacles": [{"polygon": [[1, 0], [10, 0], [10, 10], [0, 10], [0, 1], [1, 1]]}],
         "params": {"rrtstar": {"iterations": 5, "seed": 1}},
     }

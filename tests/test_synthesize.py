@@ -277,8 +277,10 @@ def test_forms_agree_on_random_cells(solver, random_cells):
             assert np.ptp([r.objective for r in results]) <= 1e-7
         for structure in ("diag", "scalar"):
             L = cell_lp.field_map(structure, p.landmarks)
-            pair = [cell_lp.vertex_lp(p, L, c_h, c_v, 1.0).solve(solver),
-                    cell_lp.dual_lp(p, L, c_h, c_v, 1.0).solve(solver)]
+            pair = [
+                cell_lp.vertex_lp(p, L, c_h, c_v, 1.0).solve(solver),
+                cell_lp.dual_lp(p, L, c_h, c_v, 1.0).solve(solver),
+            ]
             assert pair[0].status is pair[1].status
             if pair[0].status is LpStatus.OPTIMAL:
                 assert abs(pair[0].objective - pair[1].objective) <= 1e-7

@@ -38,8 +38,19 @@ import numpy as np
 from bearnav_cli.errors import InvalidParamsError
 
 __all__ = [
-    "ANGLE_SLACK", "check_camera", "DEFAULT_MIN_SPREAD", "directions", "fix_variance", "in_field_of_view", "in_range",
-    "METHODS", "noisy_bearings", "reconstruct", "Reconstruction", "scaled_output", "wrap",
+    "ANGLE_SLACK",
+    "check_camera",
+    "DEFAULT_MIN_SPREAD",
+    "directions",
+    "fix_variance",
+    "in_field_of_view",
+    "in_range",
+    "METHODS",
+    "noisy_bearings",
+    "reconstruct",
+    "Reconstruction",
+    "scaled_output",
+    "wrap",
 ]
 
 #: Reconstruction methods of §6.2–6.4 (the first is the default).

@@ -26,9 +26,25 @@ import numpy as np
 from bearnav_cli.runtime.plan_arrays import CHUNK, PlanArrays
 
 __all__ = [
-    "affine_field", "apply_gain", "approach_target", "barrier_values", "contains", "displacement", "edges_clear",
-    "field", "funnel_update", "in_safe_set", "in_sight", "least_rank_cell", "locate", "lyapunov", "nearest_node",
-    "segments_clear", "switch", "update", "voronoi_owner",
+    "affine_field",
+    "apply_gain",
+    "approach_target",
+    "barrier_values",
+    "contains",
+    "displacement",
+    "edges_clear",
+    "field",
+    "funnel_update",
+    "in_safe_set",
+    "in_sight",
+    "least_rank_cell",
+    "locate",
+    "lyapunov",
+    "nearest_node",
+    "segments_clear",
+    "switch",
+    "update",
+    "voronoi_owner",
 ]
 
 # --------------------------------------------------------------------------- vectorised queries
@@ -480,7 +496,12 @@ def approach_target(arrays: PlanArrays, x: np.ndarray, nearest: int = 8) -> np.n
 
 
 def update(
-    arrays: PlanArrays, cell: np.ndarray, target: np.ndarray, x: np.ndarray, eps_sw: float, tol: float | None = None,
+    arrays: PlanArrays,
+    cell: np.ndarray,
+    target: np.ndarray,
+    x: np.ndarray,
+    eps_sw: float,
+    tol: float | None = None,
     erosion: np.ndarray | float | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """One control update of the cell policy for every robot.

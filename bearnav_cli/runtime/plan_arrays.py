@@ -23,7 +23,12 @@ from bearnav_cli.errors import ArtifactError
 from bearnav_cli.runtime import schema
 
 __all__ = [
-    "CHUNK", "INDEX_BINS", "PlanArrays", "ring_edges", "RUNTIME_KEYS", "tree_costs",
+    "CHUNK",
+    "INDEX_BINS",
+    "PlanArrays",
+    "ring_edges",
+    "RUNTIME_KEYS",
+    "tree_costs",
 ]
 
 log = logging.getLogger(__name__)

@@ -114,8 +114,10 @@ class Params:
             raise InvalidParamsError(f"must be zero or positive, got {self.exit_inset}", field="exit_inset")
         if isinstance(self.coverage_target, bool) or not 0.0 <= self.coverage_target <= 1.0:
             raise InvalidParamsError(f"must lie in [0, 1], got {self.coverage_target}", field="coverage_target")
-        if isinstance(self.max_added_nodes, bool) or not isinstance(self.max_added_nodes, int) or not (
-            0 <= self.max_added_nodes <= 100_000
+        if (
+            isinstance(self.max_added_nodes, bool)
+            or not isinstance(self.max_added_nodes, int)
+            or not (0 <= self.max_added_nodes <= 100_000)
         ):
             raise InvalidParamsError(f"must be an integer in [0, 100000], got {self.max_added_nodes!r}",
                                      field="max_added_nodes")  # fmt: skip
@@ -446,15 +448,19 @@ def _funnel_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) 
                     100 * unreached_area / full_domain.area, unreached_area, 2 * margin)  # fmt: skip
     after = 1.0 - uncovered_area / domain_area if domain_area > 0 else 1.0
     if after < params.coverage_target:
-        log.warning("the cells cover %.1f%% of F_m (target %.1f%%): %d pockets no node reaches with clearance%s",
-                    100 * after, 100 * params.coverage_target, len(unreachable),
-                    " and the max_added_nodes limit was reached" if len(added) >= params.max_added_nodes else "")
+        log.warning(
+            "the cells cover %.1f%% of F_m (target %.1f%%): %d pockets no node reaches with clearance%s",
+            100 * after,
+            100 * params.coverage_target,
+            len(unreachable),
+            " and the max_added_nodes limit was reached" if len(added) >= params.max_added_nodes else "",
+        )
     cbf = []
     for r in regions:
         keep = np.arange(len(r.b)) != r.exit_row
         cbf.append((-r.A[keep], r.b[keep]))  # h_k = b_k − A_k·x >= 0 inside the cell
     node_added = np.zeros(len(nodes), bool)
-    node_added[len(tree.nodes):] = True
+    node_added[len(tree.nodes) :] = True
     stats = {
         "exit_inset": inset,
         "barrier_margin": margin,  # m of F_m: verify recomputes the coverage with it

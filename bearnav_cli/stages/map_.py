@@ -38,8 +38,16 @@ log = logging.getLogger(__name__)
 
 #: Top-level keys of a bearnav map YAML.
 MAP_KEYS = (
-    "name", "description", "bounds", "robot_radius", "goal", "starts", "obstacles",
-    "landmarks", "occupancy", "params",
+    "name",
+    "description",
+    "bounds",
+    "robot_radius",
+    "goal",
+    "starts",
+    "obstacles",
+    "landmarks",
+    "occupancy",
+    "params",
 )
 
 
@@ -442,7 +450,13 @@ def _coverage_warning(map_: Map, space: FreeSpace, cells: int) -> None:
     log.warning(
         "fewer than 2 landmarks are in line of sight from %.1f%% of the free space, within "
         "x in [%.3g, %.3g], y in [%.3g, %.3g] (e.g. at (%.3g, %.3g))",
-        share, lo[0], hi[0], lo[1], hi[1], poor[0][0], poor[0][1],
+        share,
+        lo[0],
+        hi[0],
+        lo[1],
+        hi[1],
+        poor[0][0],
+        poor[0][1],
     )
 
 

@@ -24,8 +24,15 @@ from bearnav_cli.errors import InvalidParamsError
 from bearnav_cli.geometry import FreeSpace
 
 __all__ = [
-    "border_samples", "BRUTE_FORCE_NODES", "BUCKETS_PER_STEP", "Params", "POLICIES", "rewiring_radius", "run",
-    "summary", "VERSION",
+    "border_samples",
+    "BRUTE_FORCE_NODES",
+    "BUCKETS_PER_STEP",
+    "Params",
+    "POLICIES",
+    "rewiring_radius",
+    "run",
+    "summary",
+    "VERSION",
 ]
 
 VERSION = 1

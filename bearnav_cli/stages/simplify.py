@@ -45,8 +45,16 @@ from bearnav_cli.errors import ArtifactError, InvalidParamsError
 from bearnav_cli.geometry import FreeSpace
 
 __all__ = [
-    "bfs_levels", "count_crossings", "CTL_MODES", "MAX_FINISH_PASSES", "Params", "RECONNECT_NEIGHBOURS", "run",
-    "summary", "tree_costs", "VERSION",
+    "bfs_levels",
+    "count_crossings",
+    "CTL_MODES",
+    "MAX_FINISH_PASSES",
+    "Params",
+    "RECONNECT_NEIGHBOURS",
+    "run",
+    "summary",
+    "tree_costs",
+    "VERSION",
 ]
 
 VERSION = 2  # 2: finishing RC | CtL passes when max_rounds stops the loop; crossings_remaining

@@ -986,9 +986,7 @@ def _stats(cells: Cells, status, attempts, c_h, c_v, margin_v) -> dict:
         h_over_max = c_h / cells.s_max
     stats: dict = {"cells": int(cells.n_cells)}
     stats["status_counts"] = {s.name.lower(): int(np.count_nonzero(status == s)) for s in CellStatus}
-    stats["flagged"] = {
-        f.name.lower(): cells.flagged(f) for f in CellFlag if f != CellFlag.NONE
-    }
+    stats["flagged"] = {f.name.lower(): cells.flagged(f) for f in CellFlag if f != CellFlag.NONE}
     stats["c_tilde_h"] = [_json_number(v) for v in tilde_h]
     stats["c_tilde_v"] = [_json_number(v) for v in tilde_v]
     stats["c_h_over_s_max"] = [_json_number(v) for v in h_over_max]
