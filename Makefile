@@ -1,11 +1,12 @@
 # bearnav: `make demo` sets up .venv and plans the kitchen map; `make test` runs ruff (lint, format) and pytest (a worker per CPU);
-# `make reproduce` redraws the papers' figures in docs/figures/ (only those whose inputs changed).
+# `make reproduce` redraws the papers' figures in docs/figures/ (only those whose inputs changed);
+# `make runtime-wheel` writes the robot's numpy-only wheel into dist/.
 PYTHON ?= python3
 VENV ?= .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.bearnav-installed
 
-.PHONY: demo test lint bench clean reproduce
+.PHONY: demo test lint bench clean reproduce runtime-wheel
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -36,8 +37,13 @@ bench: $(STAMP)
 	$(BIN)/python bench/simulate.py --readme
 	$(BIN)/python bench/plan.py --readme
 
+# The robot's distribution, bearnav-runtime (numpy only): dist/bearnav_runtime-VERSION-py3-none-any.whl
+# (docs/runtime.md). Standard library only: no venv, build backend or network needed.
+runtime-wheel:
+	$(PYTHON) tools/build_runtime.py -o dist
+
 clean:
-	rm -rf plans/*/ .pytest_cache
+	rm -rf plans/*/ .pytest_cache dist/
 
 # --------------------------------------------------------------------------- reproduce (repro/)
 FIGURES := docs/figures

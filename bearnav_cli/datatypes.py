@@ -23,6 +23,9 @@ from bearnav_cli.errors import ArtifactError
 from bearnav_cli.runtime.schema import ENTRIES
 
 __all__ = [
+    "FrozenDict",
+    "freeze",
+    "thaw",
     "CELL_KEYS",
     "cell_list",
     "CellFlag",
@@ -51,6 +54,73 @@ __all__ = [
     "validate",
     "validate_artifact",
 ]
+
+
+class FrozenDict(dict):
+    """A ``dict`` that cannot change (issue 14.5): the ``stats`` and ``params`` of a frozen artifact.
+
+    It is a ``dict`` for every reader (``json.dumps``, ``==``, ``isinstance``); every mutating
+    method raises ``TypeError``. :func:`copy.copy` and :func:`copy.deepcopy` give plain, mutable
+    ``dict`` copies (:func:`thaw`), so a caller that wants to edit one edits its own copy.
+    """
+
+    __slots__ = ()
+
+    def _read_only(self, *args: Any, **kwargs: Any) -> None:
+        raise TypeError("an artifact's stats and params are read-only: copy them (dict(x)) to change them")
+
+    __setitem__ = __delitem__ = __ior__ = clear = pop = popitem = setdefault = update = _read_only  # type: ignore[assignment]
+
+    def __copy__(self) -> dict:
+        return dict(self)
+
+    def __deepcopy__(self, memo: dict) -> Any:
+        return thaw(self)
+
+    def __reduce__(self) -> tuple:
+        return (FrozenDict, (dict(self),))
+
+
+def freeze(value: Any) -> Any:
+    """``value`` with every dict in it (nested too) made a :class:`FrozenDict`; other values as they are.
+
+    Parameters
+    ----------
+    value : Any
+        A JSON-like value (dicts, lists, numbers, strings).
+
+    Returns
+    -------
+    Any
+        The same value, its dicts read-only (lists stay lists: they compare equal to JSON arrays).
+    """
+    if isinstance(value, dict):
+        return value if type(value) is FrozenDict and all(not isinstance(v, dict) or type(v) is FrozenDict
+                                                          for v in value.values()) else \
+            FrozenDict({k: freeze(v) for k, v in value.items()})  # fmt: skip
+    if isinstance(value, list):
+        return [freeze(v) for v in value]
+    return value
+
+
+def thaw(value: Any) -> Any:
+    """A plain, mutable deep copy of ``value`` (every :class:`FrozenDict` in it a ``dict``).
+
+    Parameters
+    ----------
+    value : Any
+        A JSON-like value, possibly frozen by :func:`freeze`.
+
+    Returns
+    -------
+    Any
+        The copy (YAML's safe dumper, for one, writes only plain dicts).
+    """
+    if isinstance(value, dict):
+        return {k: thaw(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [thaw(v) for v in value]
+    return value
 
 
 def frozen_array(value: Any, dtype: Any, shape: tuple[int | None, ...], name: str) -> np.ndarray:
@@ -313,6 +383,8 @@ class Map:
     landmark_facing: np.ndarray | None = None
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "params", freeze(dict(self.params)))
+        object.__setattr__(self, "source", freeze(dict(self.source)))
         object.__setattr__(self, "bounds", frozen_array(self.bounds, float, (4,), "bounds"))
         object.__setattr__(self, "goal", frozen_array(self.goal, float, (2,), "goal"))
         object.__setattr__(self, "starts", frozen_array(self.starts, float, (None, 2), "starts"))
@@ -372,8 +444,8 @@ class Map:
             ],
             "obstacles": [p.to_json() for p in self.obstacles],
             "raw_obstacles": [p.to_json() for p in self.raw_obstacles],
-            "params": self.params,
-            "source": self.source,
+            "params": thaw(self.params),
+            "source": thaw(self.source),
         }
 
     def to_json_text(self) -> str:
@@ -523,6 +595,7 @@ class Tree:
     stats: dict = field(default_factory=dict, compare=False)
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "stats", freeze(dict(self.stats)))
         _freeze(self, "tree", ("nodes",), {})
         n = len(self.nodes)
         _freeze(self, "tree", ("parent", "cost", "collision_samples"), {"N": n})
@@ -723,6 +796,7 @@ class Cells:
     stats: dict = field(default_factory=dict, compare=False)
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "stats", freeze(dict(self.stats)))
         _check_cell_arrays(self)
         dims = {"C": len(self.cell_node), "N": len(self.nodes)}
         put = object.__setattr__
@@ -935,6 +1009,7 @@ class Plan:
     stats: dict = field(default_factory=dict, compare=False)
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "stats", freeze(dict(self.stats)))
         dims = {"C": self.cells.n_cells, "L": len(self.cells.map.landmarks)}
         _freeze(self, "plan", ("gain", "c_h", "c_v", "u_max", "margin_h", "margin_v", "status"), dims)
         object.__setattr__(self, "goal_tolerance", float(self.goal_tolerance))
@@ -1070,6 +1145,7 @@ class Simulation:
     stats: dict = field(default_factory=dict, compare=False)
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "stats", freeze(dict(self.stats)))
         arrays = tuple(name for name in SIMULATION_KEYS if ENTRIES["simulation"][name].ndim)
         for name in SIMULATION_KEYS:
             if name not in arrays:

@@ -259,3 +259,28 @@ def test_every_artifact_has_the_dtypes_and_shapes_the_schema_declares(small_spec
         entry = schema.ENTRIES["plan"][key]
         if entry.ndim:
             assert getattr(view, key).dtype == entry.numpy_dtype and getattr(view, key).shape == entry.resolve(sizes)
+
+
+def test_an_artifacts_stats_and_params_are_read_only(small_spec):
+    """Issue 14.5: frozen artifacts hold read-only mappings; readers see plain dicts (JSON, ==)."""
+    import copy
+
+    from bearnav_cli import pipeline
+    from bearnav_cli.datatypes import FrozenDict
+    from tests.conftest import build_map
+
+    built = pipeline.compute(build_map(small_spec), through="simplify")
+    tree, map_ = built["simplified"], built["map"]
+    for mapping in (tree.stats, map_.params, map_.params["rrtstar"], map_.source):
+        assert isinstance(mapping, FrozenDict)
+        with pytest.raises(TypeError, match="read-only"):
+            mapping["x"] = 1
+        with pytest.raises(TypeError):
+            mapping.update(x=1)
+    assert map_.params == small_spec["params"] and json.loads(json.dumps(map_.params)) == small_spec["params"]
+    editable = copy.deepcopy(map_.params)
+    editable["rrtstar"]["seed"] = 9  # a copy is a plain dict, and the artifact does not change
+    assert (
+        type(editable["rrtstar"]) is dict and map_.params["rrtstar"]["seed"] == small_spec["params"]["rrtstar"]["seed"]
+    )
+    assert type(map_.to_json()["params"]) is dict  # what YAML and JSON writers get
