@@ -132,7 +132,7 @@ def main() -> None:
             for r in rows
         ],  # fmt: skip
     )
-    text = (f"{machine_line()}; {args.starts} starts in D per plan, 60° unicycle, default wheel slip; "
+    text = (f"{machine_line()} {args.starts} starts in D per plan, 60° unicycle, default wheel slip; "
             f"`PYTHONPATH=.:bench python bench/perception.py`\n\n{table}")  # fmt: skip
     print(text)
     if args.readme:

@@ -10,6 +10,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+
+# rosbags comes with the test extra (bearnav[ros]): a broken install fails here rather than skipping
+from rosbags.highlevel import AnyReader
 from typer.testing import CliRunner
 
 from bearnav_cli import artifacts, bag, pipeline
@@ -18,8 +21,6 @@ from bearnav_cli.errors import InvalidParamsError
 
 from .conftest import SMALL_MAP
 from .test_cli_errors import assert_one_line_error
-
-AnyReader = pytest.importorskip("rosbags.highlevel").AnyReader
 
 
 @pytest.fixture(scope="module")

@@ -5,18 +5,17 @@ from __future__ import annotations
 import math
 from types import SimpleNamespace
 
+# OpenCV comes with the test extra (bearnav[camera]): a broken install fails here rather than skipping
+import cv2  # noqa: F401
 import numpy as np
 import pytest
 
 from bearnav_cli.errors import InvalidParamsError
 from bearnav_cli.geometry import FreeSpace
 from bearnav_cli.runtime import Controller
+from bearnav_cli.world.render import RenderedCamera, RenderSettings
 
 from .conftest import build_map
-
-pytest.importorskip("cv2")
-
-from bearnav_cli.world.render import RenderedCamera, RenderSettings  # noqa: E402
 
 #: A 6 m × 4 m room with a block in the middle; tags on the walls and on the block.
 ROOM = {

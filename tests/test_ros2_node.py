@@ -18,13 +18,14 @@ import numpy as np
 import pytest
 import yaml
 
+# rosbags comes with the test extra (bearnav[ros]): a broken install fails here rather than skipping
+from rosbags import typesys
+
 from bearnav_cli import pipeline
 from bearnav_cli.cli import read_map_source
 from bearnav_cli.runtime import Controller, camera
 
 from .conftest import REPO, SMALL_MAP
-
-typesys = pytest.importorskip("rosbags.typesys")
 
 CONTRIB = REPO / "contrib" / "ros2"
 

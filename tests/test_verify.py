@@ -214,9 +214,7 @@ def test_params_are_checked():
 
 
 def kitchen_stages():
-    synthesize = pytest.importorskip("bearnav_cli.stages.synthesize")
-    decompose = pytest.importorskip("bearnav_cli.stages.decompose")
-    from bearnav_cli.stages import map_, rrtstar, simplify
+    from bearnav_cli.stages import decompose, map_, rrtstar, simplify, synthesize
 
     spec = yaml.safe_load(Path(REPO / "maps" / "kitchen.yaml").read_text())
     source = map_.MapSource(spec=spec, file="kitchen.yaml", sha256="0")

@@ -346,13 +346,15 @@ class _Loop:
         self.left[active] += out.relocated
         self.approach[active] += out.state.target >= 0
         self.held[active] += ~out.fix
-        self.certified[active] += out.certified
         ended = np.zeros(len(active), bool)
         for mask, outcome in ((out.lost, Outcome.LOST), (out.stalled, Outcome.STALL)):
             hit = mask & ~ended
             if hit.any():
                 self.finish(active[hit], outcome)
                 ended |= hit
+        # a certified step is one the robot takes: a run that ends lost or stalled here takes none
+        # (counting it broke `certified_steps <= steps` of sim.npz for every stalled run)
+        self.certified[active[~ended]] += out.certified[~ended]
         command = (out.velocity, out.forward, out.turn, out.scanning, out.fix)
         if ended.any():
             keep = ~ended
