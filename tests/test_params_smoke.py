@@ -23,7 +23,7 @@ import pytest
 
 from bearnav_cli import artifacts, cli, composition, pipeline, runtime, verify
 from bearnav_cli.datatypes import Outcome, Plan, Simulation
-from bearnav_cli.errors import ArtifactError
+from bearnav_cli.errors import ArtifactError, InvalidParamsError
 from bearnav_cli.geometry import FreeSpace
 from bearnav_cli.runtime import bearing
 from bearnav_cli.stages import decompose, map_, rrtstar, simplify, simulate, synthesize
@@ -67,10 +67,10 @@ XFAIL: dict[tuple[str, str, object], tuple[str, type[Exception]]] = {
         ArtifactError,
     ),
     ("decompose", "bisector_rule", "parent"): (
-        "cells=paper, bisector_rule=parent: decompose.run stops with a bare ValueError from funnel.exit_row_index "
-        "(via decompose._paper_layout), 'the exit row was cut away (the edge's exit face is empty)', where the "
-        "docstring promises a warning (funnel-local: ArtifactError 'nodes: cell of node 1: the exit row was cut away')",
-        ValueError,
+        "cells=paper, bisector_rule=parent: on this tree the rule cuts an exit face away, and decompose refuses it "
+        "with a one-line InvalidParamsError naming the cell (it used to be a bare ValueError, an internal error); "
+        "funnel-local refuses it with ArtifactError 'nodes: cell of node 1: the exit row was cut away'",
+        InvalidParamsError,
     ),
     ("decompose", "cbf_apex", "parent"): (
         "cells=paper, barrier=wedge, cbf_apex=parent (the paper's degenerate LP, documented to warn): synthesize "

@@ -76,7 +76,8 @@ class Params:
         Funnel: at most this many leaf nodes are added by densification.
     bisector_rule : {"crossing", "parent"}
         *paper* and ``funnel-local``. ``crossing`` drops every bisector that crosses the edge (the authors' code);
-        ``parent`` drops only the parent's (paper B's text; can cut the edge, warns).
+        ``parent`` drops only the parent's (paper B's text; can cut the edge, warns, and a tree where it cuts
+        an exit face away is refused with an error naming the cell).
     cbf_apex : {"child", "parent"}
         Apex of the barrier wedge; ``parent`` reproduces the paper's degenerate LP (warns).
     cbf_filter : {"both", "projection", "cell"}
@@ -582,7 +583,17 @@ def _paper_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) -
                 flags[c] |= CellFlag.SAMPLE_ON_EDGE
                 log.warning("cell %d: a collision sample on the edge line was skipped", c)
             z = (nodes[c] - nodes[j]) / np.hypot(*(nodes[c] - nodes[j]))
-            exit_row = exit_row_index(A, b, z, nodes[j], tol)
+            try:
+                exit_row = exit_row_index(A, b, z, nodes[j], tol)
+            except ValueError:
+                if params.bisector_rule != "parent":
+                    raise  # the crossing rule keeps every edge in its cell: a bug, not the input
+                # the paper's rule lets a third node's bisector cut the edge's exit face away (§4.2):
+                # there is no cell to certify, so the option is refused for this tree, in one line
+                raise InvalidParamsError(
+                    f"parent cut the exit face of cell {c} (edge {c} -> {j}) away on this tree; use crossing",
+                    field="bisector_rule",
+                ) from None
         regions.append((polygon, A, b, exit_row))
         cbf.append((normals, offsets))
     return _Layout(nodes, parent, np.array(tree.cost, float), regions, cbf, flags, np.zeros(n, bool),
