@@ -49,6 +49,7 @@ __all__ = [
     "check_output_file",
     "check_output_folder",
     "content_hash",
+    "copy_file",
     "embedded_map_text",
     "entries_of",
     "fresh",
@@ -399,11 +400,7 @@ def _from_entries(kind: str, entries: dict[str, Any], manifest: dict, check_map:
     if kind in ("tree", "simplified"):
         return Tree(map=map_, stats=stats, **{key: entries[key] for key in TREE_KEYS})
     if kind == "simulation":
-        values = {key: entries[key] for key in SIMULATION_KEYS}
-        for key in SIMULATION_KEYS:
-            if KINDS[kind].entries[key].ndim == 0:
-                values[key] = float(values[key])
-        return Simulation(map=map_, stats=stats, **values)
+        return Simulation(map=map_, stats=stats, **{key: entries[key] for key in SIMULATION_KEYS})
     cell_arrays = {key: entries[key] for key in CELL_KEYS}
     if kind == "cells":
         return Cells(map=map_, stats=stats, **cell_arrays)
@@ -543,6 +540,27 @@ def _write_all(files: list[tuple[Path, Callable[[io.BufferedWriter], None]]],
         for tmp, _ in written:
             tmp.unlink(missing_ok=True)
         raise
+
+
+def copy_file(source: str | os.PathLike, target: str | os.PathLike) -> bool:
+    """Copy ``source`` to ``target`` atomically, unless they are the same file.
+
+    Parameters
+    ----------
+    source, target : path-like
+        The file to copy and where it goes (replaced if it exists).
+
+    Returns
+    -------
+    bool
+        Whether a copy was written (False: ``target`` is ``source``).
+    """
+    source, target = Path(source), Path(target)
+    if target.exists() and os.path.samefile(source, target):
+        return False
+    data = source.read_bytes()
+    atomic_write(target, lambda f: f.write(data))
+    return True
 
 
 def atomic_write(path: str | os.PathLike, write: Callable[[io.BufferedWriter], None]) -> None:

@@ -115,6 +115,13 @@ def check_path(path: str | os.PathLike, option: str | None = "--bag") -> Path:
     ------
     OutputPathError, InvalidParamsError
     """
+    path = _checked_path(path, option)
+    _rosbags(option)
+    return path
+
+
+def _checked_path(path: str | os.PathLike, option: str | None) -> Path:
+    """:func:`check_path` without the rosbags check (:func:`write` imports rosbags once itself)."""
     path = Path(path)
     suffix = path.suffix.lower()
     if path.name in ("", ".", ".."):
@@ -142,7 +149,6 @@ def check_path(path: str | os.PathLike, option: str | None = "--bag") -> Path:
         if any(path.iterdir()) and not (path / "metadata.yaml").is_file():
             raise OutputPathError("is a folder but not a ROS 2 bag (no metadata.yaml); give a new name",
                                   file=str(path), option=option)  # fmt: skip
-    _rosbags(option)
     return path
 
 
@@ -264,7 +270,7 @@ def write(path: str | os.PathLike, sim: Simulation, *, t0_ns: int = 0, option: s
     OutputPathError, InvalidParamsError
         A refused path, or rosbags missing.
     """
-    path = check_path(path, option)
+    path = _checked_path(path, option)
     ros = _rosbags(option)
     store = ros["typestore"]
     types = store.types

@@ -453,6 +453,7 @@ class _NotLiteral(Exception):
     """A declaration the source reader cannot evaluate: the module is imported instead."""
 
 
+@functools.cache  # one read per module: each constant default would read its module again
 def _module_source(module: str) -> str:
     parts = module.split(".")[1:]
     path = _PACKAGE.joinpath(*parts).with_suffix(".py")

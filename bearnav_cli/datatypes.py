@@ -1285,5 +1285,20 @@ def validate_artifact(kind: str, artifact: Any, check_map: bool = True) -> None:
 
 
 def replace(artifact: Any, **changes: Any) -> Any:
-    """Shorthand for :func:`dataclasses.replace` (artifacts are immutable)."""
+    """:func:`dataclasses.replace` for artifacts (they are immutable); ``map=`` works on every one.
+
+    Parameters
+    ----------
+    artifact : Map, Tree, Cells, Plan or Simulation
+        The artifact to copy.
+    **changes
+        Fields to change; a :class:`Plan`'s ``map`` is its cells' (``map=`` replaces that).
+
+    Returns
+    -------
+    Any
+        The new artifact, checked by its type.
+    """
+    if isinstance(artifact, Plan) and "map" in changes:
+        changes["cells"] = dataclasses.replace(changes.get("cells", artifact.cells), map=changes.pop("map"))
     return dataclasses.replace(artifact, **changes)

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -22,7 +21,7 @@ from types import ModuleType
 from typing import Any, Callable
 
 from bearnav_cli import artifacts
-from bearnav_cli.datatypes import Map, Plan
+from bearnav_cli.datatypes import Map, replace
 from bearnav_cli.errors import ArtifactError, InternalError, InvalidMapError, InvalidParamsError, ResourceLimitError
 from bearnav_cli.stages import decompose, map_, rrtstar, simplify, simulate, synthesize
 
@@ -569,7 +568,7 @@ def check_closed_loop(plan: Any, sim: simulate.Params, runs: int, where_runs: st
     if sim.max_steps is not None:
         steps = int(sim.max_steps)  # its range is that of MAX_STEPS_PER_RUN
     else:
-        steps = math.ceil(5.0 * longest / per_step) + 1000 if per_step > 0 else math.inf
+        steps = int(simulate.step_limit(longest, settings))  # the rule each run gets, for the longest route
         if steps > MAX_STEPS_PER_RUN:
             raise ResourceLimitError(
                 f"at speed {settings.speed:g} with dt = {settings.dt:.3g} s one run may take up to {steps:.3g} steps "
@@ -841,10 +840,7 @@ def _with_current_params(loaded: artifacts.Loaded, payload: Any, out: Path) -> A
     current = payload.map if hasattr(payload, "map") else payload
     if isinstance(artifact, Map) or not isinstance(current, Map) or artifact.map.params == current.params:
         return artifact
-    if isinstance(artifact, Plan):  # a plan's map is its cells'
-        refreshed = dataclasses.replace(artifact, cells=dataclasses.replace(artifact.cells, map=current))
-    else:
-        refreshed = dataclasses.replace(artifact, map=current)
+    refreshed = replace(artifact, map=current)
     artifacts.save(out, refreshed, loaded.manifest)
     return refreshed
 
@@ -942,10 +938,8 @@ def _check_chain(reports: list[StageReport]) -> None:
 def _adopt_map(map_json: Path, target: Path) -> StageReport:
     """A ready ``map.json`` as the map stage's report, copied into the plan folder when it lies elsewhere."""
     loaded = load(map_json, "map")
-    if not (target.exists() and os.path.samefile(map_json, target)):
-        data = map_json.read_bytes()
-        artifacts.atomic_write(target, lambda f: f.write(data))
-        loaded = load(target, "map")
+    if artifacts.copy_file(map_json, target):  # the same bytes: what was loaded is what is there now
+        loaded = dataclasses.replace(loaded, path=target)
     _committed()
     manifest = loaded.manifest
     return StageReport("map", target, False, 0.0, manifest.get("summary", ""), loaded.artifact, manifest)

@@ -849,6 +849,13 @@ def _perception_legend(ax: plt.Axes) -> None:
                   fontsize=7, frameon=False)  # fmt: skip
 
 
+def _existing_tags(ax: plt.Axes, landmarks: Any, gid: str, label: str) -> None:
+    """The tags a map already has, as red triangles labelled ``label (count)``."""
+    lm = np.asarray(landmarks, float).reshape(-1, 2)
+    ax.scatter(lm[:, 0], lm[:, 1], marker="^", s=40, color=EXISTING_TAG_COLOR, edgecolor="white", linewidths=0.5,
+               zorder=6, gid=gid, label=f"{label} ({len(lm)})")  # fmt: skip
+
+
 def plot_perception(ax: plt.Axes, coverage: Any, *, free: bool = True, landmarks: bool = True,
                     legend: bool = True) -> plt.Axes:  # fmt: skip
     """Where the perception rule fails: small red marks over the plan (issue 11; compute with ``perception``).
@@ -860,8 +867,8 @@ def plot_perception(ax: plt.Axes, coverage: Any, *, free: bool = True, landmarks
     ax : Axes
         The axes to draw into (map units on both axes).
     coverage : PerceptionCoverage
-        :func:`bearnav_cli.perception.perception_coverage` (duck-typed: ``points`` (P, 2),
-        ``in_domain``, ``in_free`` and ``holds`` (P,) bool, ``fraction_domain``, ``fraction_free``,
+        :func:`bearnav_cli.perception.perception_coverage` (duck-typed: ``failing_domain`` and
+        ``failing_free`` (n, 2), ``fraction_domain``, ``fraction_free``, ``error_target``,
         ``landmarks`` (L, 2), ``fov_deg``, ``noise_deg``), so this module does not import it.
     free : bool
         Also mark the failing points of the free space outside ``D`` (orange dots).
@@ -875,23 +882,19 @@ def plot_perception(ax: plt.Axes, coverage: Any, *, free: bool = True, landmarks
     Axes
         Artists carry the gids ``perception-fail-domain``, ``perception-fail-free`` and ``perception-tags``.
     """
-    points, holds = np.asarray(coverage.points, float).reshape(-1, 2), np.asarray(coverage.holds, bool)
-    in_d, in_f = np.asarray(coverage.in_domain, bool), np.asarray(coverage.in_free, bool)
-    bad = points[in_d & ~holds]
+    bad = coverage.failing_domain  # what perception computed, not a second selection of it
     share = 1.0 - coverage.fraction_domain
-    target = getattr(coverage, "error_target", None)
+    target = coverage.error_target
     what = "fewer than 2 usable tags in view" if target is None else f"no fix within {target:g} in view"
     label = f"{what}, in D ({share:.1%} of D; {coverage.fov_deg:g}° camera)"
     ax.scatter(bad[:, 0], bad[:, 1], marker="x", s=6, lw=0.6, color=PERCEPTION_FAIL_COLOR, zorder=5.5,
                gid="perception-fail-domain", label=label)  # fmt: skip
     if free:
-        out = points[in_f & ~in_d & ~holds]
+        out = coverage.failing_free
         ax.scatter(out[:, 0], out[:, 1], marker=".", s=4, lw=0, color=PERCEPTION_FAIL_FREE_COLOR, zorder=5.4,
                    gid="perception-fail-free", label="the same, in F outside D")  # fmt: skip
     if landmarks:
-        lm = np.asarray(coverage.landmarks, float).reshape(-1, 2)
-        ax.scatter(lm[:, 0], lm[:, 1], marker="^", s=40, color=EXISTING_TAG_COLOR, edgecolor="white", linewidths=0.5,
-                   zorder=6, gid="perception-tags", label=f"tags ({len(lm)})")  # fmt: skip
+        _existing_tags(ax, coverage.landmarks, "perception-tags", "tags")
     if legend:
         _perception_legend(ax)
     return ax
@@ -928,21 +931,19 @@ def plot_tags(ax: plt.Axes, proposal: Any, *, failures: bool = True, labels: boo
     """
     if failures:
         plot_perception(ax, proposal.after, landmarks=False, legend=False)
-    old = np.asarray(proposal.before.landmarks, float).reshape(-1, 2)
-    ax.scatter(old[:, 0], old[:, 1], marker="^", s=40, color=EXISTING_TAG_COLOR, edgecolor="white", linewidths=0.5,
-               zorder=6, gid="existing-tags", label=f"existing tags ({len(old)})")  # fmt: skip
+    _existing_tags(ax, proposal.before.landmarks, "existing-tags", "existing tags")
     new = np.asarray(proposal.positions, float).reshape(-1, 2)
+    normals = np.asarray(proposal.normals, float).reshape(-1, 2)
     ax.scatter(new[:, 0], new[:, 1], marker="D", s=34, color=PROPOSED_TAG_COLOR, edgecolor="white", linewidths=0.6,
                zorder=6.5, gid="proposed-tags", label=f"proposed tags ({len(new)})")  # fmt: skip
     if len(new):
-        normals = np.asarray(proposal.normals, float).reshape(-1, 2)
         xmin, xmax = ax.get_xlim()
         scale = 0.02 * abs(xmax - xmin) if xmax != xmin else 0.1
         tips = new + scale * normals
         ax.add_collection(LineCollection(np.stack([new, tips], axis=1), colors=PROPOSED_TAG_COLOR, linewidths=1.0,
                                          zorder=6.4, gid="proposed-tag-facing"))  # fmt: skip
     if labels:
-        for name, p, n in zip(proposal.ids, new, np.asarray(proposal.normals, float).reshape(-1, 2), strict=True):
+        for name, p, n in zip(proposal.ids, new, normals, strict=True):
             ha = "left" if n[0] >= 0 else "right"
             va = "bottom" if n[1] >= 0 else "top"
             ax.annotate(str(name), p, xytext=(4 * np.sign(n[0]), 4 * np.sign(n[1])), textcoords="offset points",

@@ -42,7 +42,7 @@ import shapely
 
 from bearnav_cli import perception
 from bearnav_cli.errors import InvalidParamsError
-from bearnav_cli.geometry import FreeSpace
+from bearnav_cli.geometry import FreeSpace, box_polygon
 from bearnav_cli.lp import INF, LpSolver, LpStatus
 from bearnav_cli.perception import EvaluationGrid, PerceptionCoverage
 from bearnav_cli.runtime import bearing
@@ -144,11 +144,6 @@ class Candidates:
     on_wall: np.ndarray
 
 
-def _box_ring(bounds: np.ndarray) -> np.ndarray:
-    xmin, ymin, xmax, ymax = (float(v) for v in bounds)
-    return np.array([[xmin, ymin], [xmax, ymin], [xmax, ymax], [xmin, ymax]])
-
-
 def _edge_samples(ring: np.ndarray, width: float) -> tuple[np.ndarray, np.ndarray]:
     """Points ``width`` apart along each edge of a closed ring (the middle of a shorter edge), and each one's edge's
     left unit normal; shapes (n, 2), (n, 2)."""
@@ -209,7 +204,7 @@ def candidates(map_: Any, width: float, space: Any = None) -> Candidates:
     """
     if space is None:
         space = FreeSpace.from_map(map_)
-    rings = [(_box_ring(map_.bounds), True)]
+    rings = [(box_polygon(map_.bounds), True)]
     for poly in map_.raw_obstacles:
         rings += [(poly.exterior, False)] + [(h, False) for h in poly.holes]
     pts, nrm, wall = [np.zeros((0, 2))], [np.zeros((0, 2))], [np.zeros(0, bool)]

@@ -803,7 +803,7 @@ def run(
         skipped = "n_starts is 0"
     else:
         try:
-            PlanArrays.from_plan(plan)
+            arrays = PlanArrays.from_plan(plan)
         except ArtifactError as exc:
             skipped = f"malformed plan, no closed loop: {exc}"
         if skipped is None:
@@ -814,14 +814,13 @@ def run(
             sim = simulate.Params(speed=speed, alpha=speed, dt=params.dt, measurement="displacement",
                                   odometry_noise=0.0, dynamics=params.dynamics, certified_heading=True,
                                   record_trajectories=False)  # fmt: skip
-            arrays = PlanArrays.from_plan(plan)
             breach = np.zeros(len(starts), bool)
 
             def watch(runs: np.ndarray, x: np.ndarray, certified: np.ndarray) -> None:
                 if arrays.funnel:  # a step not certified, or a true position outside every cell of D
                     breach[runs] |= ~certified | (runtime.least_rank_cell(arrays, x) < 0)
 
-            rollouts = simulate.rollout(plan, starts, sim, progress=progress, on_step=watch)
+            rollouts = simulate.rollout(plan, starts, sim, progress=progress, on_step=watch, arrays=arrays, space=space)
             breaches = breach & rollouts.start_in_domain
     straight = np.hypot(*(starts - plan.map.goal).T) if len(starts) else np.zeros(0)
     route = route_lengths(space, plan.map.goal, starts) if len(starts) else np.zeros(0)

@@ -31,6 +31,7 @@ from typing import Any
 import numpy as np
 
 from bearnav_cli.errors import InvalidParamsError
+from bearnav_cli.runtime.bearing import wrap
 
 __all__ = [
     "BEHIND_MARGIN", "CORNER_SLACK", "Detection", "Intrinsics", "Mount", "Observation", "TagMap", "heading_from_tag",
@@ -543,7 +544,7 @@ def _mean_heading(headings: list[float]) -> float | None:
     if not headings:
         return None
     h = np.array(headings)
-    diff = np.abs(np.angle(np.exp(1j * (h[:, None] - h[None, :]))))
+    diff = np.abs(wrap(h[:, None] - h[None, :]))
     best = int(np.argmax((diff <= HEADING_AGREEMENT).sum(axis=1)))
     group = h[diff[best] <= HEADING_AGREEMENT]
     return float(np.angle(np.exp(1j * group).mean()))

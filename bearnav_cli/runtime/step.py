@@ -691,7 +691,7 @@ def heading_allowance(arrays: PlanArrays, cell: np.ndarray, x: np.ndarray, targe
         return out
     idx = np.flatnonzero(on)
     c, q = cell[idx], p[idx]
-    u = arrays.field_a[c] - np.einsum("rij,rj->ri", arrays.field_M[c], q)
+    u = affine_field(arrays, c, q)
     speed = np.hypot(u[:, 0], u[:, 1])
     A, b = arrays.bar_A[c], arrays.bar_b[c]  # padding rows: 0·x + inf
     h = np.einsum("rqi,ri->rq", A, q) + b

@@ -23,12 +23,14 @@ from bearnav_cli.errors import InvalidMapError
 from bearnav_cli.geometry import (
     CIRCLE_SEGMENTS,
     FreeSpace,
+    box_polygon,
     circle_polygon,
     from_shapely,
     inflate,
     landmark_coverage,
     to_shapely,
 )
+from bearnav_cli.runtime.plan_arrays import ring_edges
 
 __all__ = ["GridSource", "MAP_KEYS", "MapSource", "Params", "VERSION", "infer_facing", "listed_obstacles", "run",
            "spec_of", "summary"]  # fmt: skip
@@ -256,11 +258,11 @@ def infer_facing(points: np.ndarray, bounds: np.ndarray, raw: shapely.Geometry, 
         Facing of each point (rad), NaN for a free-standing tag.
     """
     xmin, ymin, xmax, ymax = (float(v) for v in bounds)
-    rings = [np.array([[xmin, ymin], [xmax, ymin], [xmax, ymax], [xmin, ymax]])]
+    rings = [(box_polygon(np.asarray(bounds, float)),)]
     for poly in shapely.get_parts(raw) if not raw.is_empty else ():
-        rings += [np.asarray(poly.exterior.coords)[:-1]] + [np.asarray(h.coords)[:-1] for h in poly.interiors]
-    a = np.concatenate(rings)
-    b = np.concatenate([np.roll(r, -1, axis=0) for r in rings])
+        rings.append((np.asarray(poly.exterior.coords)[:-1], *(np.asarray(h.coords)[:-1] for h in poly.interiors)))
+    edges = ring_edges(rings)
+    a, b = edges[:, 0], edges[:, 1]
     d = b - a
     length = np.hypot(d[:, 0], d[:, 1])
     a, b, d, length = a[length > 0], b[length > 0], d[length > 0], length[length > 0]

@@ -15,6 +15,7 @@ import logging
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -30,7 +31,8 @@ from bearnav_cli.world.motion import Base, Contact, initial_headings
 from bearnav_cli.world.starts import parse_starts
 
 __all__ = ["PROGRESS_EVERY", "PROGRESS_WINDOW", "Params", "Settings", "VERSION", "in_domain", "make_camera",
-           "metrics", "resolve_starts", "rollout", "run", "settings", "start_loop", "step_limits", "summary",
+           "metrics", "resolve_starts", "rollout", "run", "settings", "start_loop", "step_limit", "step_limits",
+           "summary",
            "tree_routes"]  # fmt: skip
 
 VERSION = 2
@@ -201,26 +203,33 @@ class Settings:
 
     Attributes
     ----------
+    goal_tolerance : float
+        Success radius (map units).
+    control : ControlSettings
+        What :func:`bearnav_cli.runtime.control` is called with; ``speed``, ``dt`` and ``eps_sw``
+        are read from it.
     speed : float
         The speed ``dt`` and ``eps_sw`` are scaled by: ``v_ref``, or ``α`` for the unicycle.
     dt : float
         Step (s).
     eps_sw : float
         Switching radius ``2·v·dt`` around the exit point (map units).
-    goal_tolerance : float
-        Success radius (map units).
-    tol : float
-        ``1e-9·D``, the membership slack of switching.
-    control : ControlSettings
-        What :func:`bearnav_cli.runtime.control` is called with.
     """
 
-    speed: float
-    dt: float
-    eps_sw: float
     goal_tolerance: float
-    tol: float
     control: ControlSettings
+
+    @property
+    def speed(self) -> float:
+        return self.control.alpha if self.control.dynamics == "unicycle" else self.control.speed
+
+    @property
+    def dt(self) -> float:
+        return self.control.dt
+
+    @property
+    def eps_sw(self) -> float:
+        return self.control.eps_sw
 
 
 def settings(plan, params: Params) -> Settings:
@@ -231,7 +240,6 @@ def settings(plan, params: Params) -> Settings:
     simulation draws (``noise_deg``; the exact default camera's fixes are exact), and with
     ``camera="render"`` at least the Controller's default :data:`~bearnav_cli.runtime.step.BEARING_SIGMA`.
     """
-    v = params.alpha if params.dynamics == "unicycle" else params.speed
     goal_tolerance = params.goal_tolerance if params.goal_tolerance is not None else float(plan.goal_tolerance)
     sigma = math.radians(params.noise_deg)
     if params.camera == "render":
@@ -249,7 +257,7 @@ def settings(plan, params: Params) -> Settings:
         fov=math.radians(params.fov), max_range=math.inf if params.range is None else float(params.range),
         look_on_purpose=params.look_on_purpose,
     )  # fmt: skip
-    return Settings(v, control.dt, control.eps_sw, goal_tolerance, plan.map.tol, control)
+    return Settings(goal_tolerance, control)
 
 
 def step_limits(arrays: PlanArrays, starts: np.ndarray, s: Settings, params: Params,
@@ -274,7 +282,20 @@ def step_limits(arrays: PlanArrays, starts: np.ndarray, s: Settings, params: Par
     if params.max_steps is not None:
         return np.full(len(starts), int(params.max_steps), np.int64)
     routes = tree_routes(arrays, starts) if routes is None else routes
-    return np.ceil(5.0 * routes / (s.speed * s.dt)).astype(np.int64) + 1000
+    return step_limit(routes, s).astype(np.int64)
+
+
+def step_limit(route_length: Any, s: Settings) -> np.ndarray:
+    """The step limit ``ceil(5·L_route/(v·dt)) + 1000`` of ALGORITHMS §7.2 (float, the shape of ``route_length``).
+
+    Parameters
+    ----------
+    route_length : array_like
+        Tree route lengths ``L_route`` (map units).
+    s : Settings
+        The loop's speed ``v`` (map units / s) and step ``dt`` (s).
+    """
+    return np.ceil(5.0 * np.asarray(route_length, float) / (s.speed * s.dt)) + 1000.0
 
 
 def tree_routes(arrays: PlanArrays, starts: np.ndarray) -> np.ndarray:
@@ -436,13 +457,14 @@ def make_camera(plan, world, space: FreeSpace, params: Params) -> Camera | None:
                                      field="camera")  # fmt: skip
         from bearnav_cli.world.render import RenderedCamera  # OpenCV, only when asked for
 
-        return RenderedCamera.for_plan(plan, fov=math.radians(params.fov), rng=rng)
+        return RenderedCamera.for_plan(plan, fov=math.radians(params.fov), rng=rng, space=space)
     return IdealCamera(space, world.landmarks, fov=math.radians(params.fov), noise=math.radians(params.noise_deg),
                        max_range=math.inf if params.range is None else float(params.range),
                        occlusion=params.occlusion, tol=plan.map.tol, rng=rng)  # fmt: skip
 
 
-def start_loop(plan, starts: np.ndarray, params: Params = Params(), world=None) -> tuple[_Loop, np.ndarray, dict]:
+def start_loop(plan, starts: np.ndarray, params: Params = Params(), world=None, *, arrays: PlanArrays | None = None,
+               space: FreeSpace | None = None) -> tuple[_Loop, np.ndarray, dict]:  # fmt: skip
     """The loop of :func:`rollout` before its first step: the loop, the runs to step and what it was built from.
 
     Starts that are not free are already finished as collisions. The dict holds the ``arrays``,
@@ -458,6 +480,10 @@ def start_loop(plan, starts: np.ndarray, params: Params = Params(), world=None) 
         The loop's parameters (its ``starts`` field is ignored here).
     world : Map, optional
         The world the robots drive in, as for :func:`rollout`; default the plan's map.
+    arrays : PlanArrays, optional
+        The plan's run-time view when the caller has built it (built here otherwise).
+    space : FreeSpace, optional
+        The free space of ``world`` when the caller has built it (built here otherwise).
 
     Raises
     ------
@@ -465,11 +491,11 @@ def start_loop(plan, starts: np.ndarray, params: Params = Params(), world=None) 
         ``world`` has not as many landmarks as the plan, or the camera cannot be made
         (:func:`make_camera`).
     """
-    arrays = PlanArrays.from_plan(plan)
+    arrays = PlanArrays.from_plan(plan) if arrays is None else arrays
     world = plan.map if world is None else world
     if len(world.landmarks) != len(arrays.landmarks):
         raise InvalidParamsError("the world must have the plan's landmarks (moved, not added)", field="world")
-    space = FreeSpace.from_map(world)
+    space = FreeSpace.from_map(world) if space is None else space
     s = settings(plan, params)
     x0 = np.array(starts, float).reshape(-1, 2)
     routes = tree_routes(arrays, x0)
@@ -494,6 +520,9 @@ def rollout(
     progress: Callable[[int, int], None] | None = None,
     world=None,
     on_step: Callable[[np.ndarray, np.ndarray, np.ndarray], None] | None = None,
+    *,
+    arrays: PlanArrays | None = None,
+    space: FreeSpace | None = None,
 ) -> Simulation:
     """Run the closed loop from every start at once.
 
@@ -516,6 +545,8 @@ def rollout(
         ``on_step(runs, x, certified)`` after every step: the runs (int, (K,)) that moved, their true
         positions after the step (K, 2) and whether that step was certified (bool, (K,)), e.g. for
         ``verify`` to check every true position against the certified domain.
+    arrays, space : PlanArrays, FreeSpace, optional
+        The plan's run-time view and the world's free space, when the caller has built them.
 
     Returns
     -------
@@ -523,7 +554,7 @@ def rollout(
         Outcome, figures and trajectory of every run, the loop constants, the plan's tree and
         cells; ``stats`` holds only the camera's ``report()`` (under ``camera``) if it has one.
     """
-    loop, active, built = start_loop(plan, starts, params, world)
+    loop, active, built = start_loop(plan, starts, params, world, arrays=arrays, space=space)
     s, x0 = built["settings"], loop.x.copy()
     iteration = 0
     while active.size:
@@ -603,7 +634,7 @@ def metrics(sim: Simulation) -> dict:
     ratio = (sim.path_length + finish)[done] / np.maximum(sim.route_length[done], 1e-300)
     return {
         "runs": n,
-        "success_rate": float(np.mean(done)) if n else None,
+        "success_rate": _finite_or_none(sim.success_rate),
         "outcomes": sim.counts(),
         "time_mean_s": mean(sim.time[done]),
         "time_max_s": float(np.max(sim.time[done])) if done.any() else None,

@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import time
 from dataclasses import dataclass
 from typing import Any
 
@@ -27,7 +26,7 @@ import numpy as np
 import shapely
 
 from bearnav_cli.errors import InvalidParamsError
-from bearnav_cli.geometry import FreeSpace
+from bearnav_cli.geometry import FreeSpace, box_polygon
 from bearnav_cli.runtime import bearing
 from bearnav_cli.runtime.camera import (
     Intrinsics,
@@ -38,6 +37,7 @@ from bearnav_cli.runtime.camera import (
     tag_corners_world,
     tag_number,
 )
+from bearnav_cli.runtime.plan_arrays import ring_edges
 from bearnav_cli.world import detect
 
 __all__ = ["D455_HFOV", "D455_VFOV", "RenderSettings", "RenderedCamera", "MAX_FOV"]
@@ -124,14 +124,6 @@ class RenderSettings:
         return Intrinsics.from_fov(self.width, self.height, self.hfov)
 
 
-def _rings(map_: Any) -> list[np.ndarray]:
-    xmin, ymin, xmax, ymax = (float(v) for v in map_.bounds)
-    rings = [np.array([[xmin, ymin], [xmax, ymin], [xmax, ymax], [xmin, ymax]])]
-    for poly in map_.raw_obstacles:
-        rings += [np.asarray(poly.exterior, float)] + [np.asarray(h, float) for h in poly.holes]
-    return rings
-
-
 class RenderedCamera:
     """A camera that draws each frame and detects the tags in it (the :class:`Camera` protocol).
 
@@ -144,9 +136,12 @@ class RenderedCamera:
     settings : RenderSettings, optional
         How frames are drawn (image size, field of view, tag size, heights, noise, grey levels, the
         heading's source); default :class:`RenderSettings`'s defaults.
+    space : FreeSpace, optional
+        The free space of ``map_`` when the caller has it (its raw obstacles hide tags); built otherwise.
     """
 
-    def __init__(self, map_: Any, *, rng: np.random.Generator, settings: RenderSettings | None = None) -> None:
+    def __init__(self, map_: Any, *, rng: np.random.Generator, settings: RenderSettings | None = None,
+                 space: FreeSpace | None = None) -> None:  # fmt: skip
         self.settings = s = settings or RenderSettings()
         self.map = map_
         self.rng = rng
@@ -164,13 +159,13 @@ class RenderedCamera:
         for k in np.flatnonzero(self.drawable):
             textures[k, 1:-1, 1:-1] = levels[detect.tag36h11_cells(int(self.tags.numbers[k]))]
         self.textures = textures
-        rings = _rings(map_)
-        self.seg_a = np.concatenate(rings)
-        self.seg_e = np.concatenate([np.roll(r, -1, axis=0) for r in rings]) - self.seg_a
+        # the walls: the bounds and every raw obstacle ring
+        edges = ring_edges([(box_polygon(map_.bounds),), *((p.exterior, *p.holes) for p in map_.raw_obstacles)])
+        self.seg_a, self.seg_e = edges[:, 0], edges[:, 1] - edges[:, 0]
         keep = np.hypot(*self.seg_e.T) > 0
         self.seg_a, self.seg_e = self.seg_a[keep], self.seg_e[keep]
         self.seg_shade = s.wall + 25.0 * np.cos(2.0 * np.arctan2(self.seg_e[:, 1], self.seg_e[:, 0]) + 0.6)
-        space = FreeSpace.from_map(map_)
+        space = FreeSpace.from_map(map_) if space is None else space
         self.sight = space.visibility_regions(np.asarray(map_.landmarks, float))
         self.tol = map_.tol
         self._detector = detect.detector()
@@ -185,18 +180,17 @@ class RenderedCamera:
                                                          "missed_small")}  # fmt: skip
         self.errors: list[float] = []
         self.heading_errors: list[float] = []
-        self.timing = {"render_s": 0.0, "detect_s": 0.0}
 
     @classmethod
-    def for_plan(cls, plan: Any, *, fov: float, rng: np.random.Generator,
-                 settings: RenderSettings | None = None) -> RenderedCamera:  # fmt: skip
+    def for_plan(cls, plan: Any, *, fov: float, rng: np.random.Generator, settings: RenderSettings | None = None,
+                 space: FreeSpace | None = None) -> RenderedCamera:  # fmt: skip
         """The rendered camera for ``bearnav simulate --camera render``: ``fov`` (rad) is ``--fov``."""
         if not (isinstance(fov, (int, float)) and math.isfinite(fov) and 0 < fov < MAX_FOV):
             given = f"{math.degrees(fov):g}" if isinstance(fov, (int, float)) else repr(fov)
             raise InvalidParamsError(f"--camera render is a pinhole camera: give --fov below 175 (the D455's colour "
                                      f"camera: 90), got {given}", field="fov")  # fmt: skip
         settings = dataclasses.replace(settings or RenderSettings(), hfov=float(fov))
-        return cls(plan.map, rng=rng, settings=settings)
+        return cls(plan.map, rng=rng, settings=settings, space=space)
 
     # ------------------------------------------------------------------ drawing
 
@@ -297,13 +291,8 @@ class RenderedCamera:
 
     def frame(self, x: Any, heading: float) -> tuple[np.ndarray, list]:
         """One frame and the detector's detections in it."""
-        start = time.perf_counter()
         img = self.render(x, heading)
-        middle = time.perf_counter()
-        found = detect.detect(img, self._detector)
-        self.timing["render_s"] += middle - start
-        self.timing["detect_s"] += time.perf_counter() - middle
-        return img, found
+        return img, detect.detect(img, self._detector)
 
     def expected(self, x: Any, heading: float) -> tuple[np.ndarray, np.ndarray]:
         """Which tags the frame should show whole (in view, in line of sight, front side) and their edge (px)."""
