@@ -29,12 +29,10 @@ import os
 import platform
 import re
 import signal
-import tempfile
 import threading
 import zipfile
 from collections.abc import Iterator
 from dataclasses import asdict, dataclass
-from importlib import metadata
 from pathlib import Path
 from typing import Any, Callable
 
@@ -272,6 +270,8 @@ def cache_key(stage: str, stage_version: int, params: dict, input_hash: str) -> 
 
 def software_versions() -> dict[str, str]:
     """Versions of the packages that shape results (provenance, not part of the key)."""
+    from importlib import metadata  # 10 ms (email, csv ...): only when a manifest is made, never to load
+
     versions = {"bearnav": __version__, "python": platform.python_version()}
     for package in ("numpy", "shapely", "scipy", "highspy"):
         try:
@@ -482,6 +482,8 @@ def _remove_empty(folders: list[Path]) -> None:
 
 def _temp_file(path: Path) -> tuple[int, Path]:
     """A new temp file next to ``path`` (same suffix at the end, so formats that go by it work)."""
+    import tempfile  # writing only: loading an artifact does not need it (nor random, shutil ...)
+
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.bearnav-{os.getpid()}-", suffix=f".tmp{path.suffix}",
                                dir=path.parent)  # fmt: skip
     umask = os.umask(0)

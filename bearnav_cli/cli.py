@@ -7,8 +7,8 @@ route), 2 usage, 3 invalid input (one line naming file, field or option and the 
 """
 
 # ruff: noqa: E402 - the SIGINT handler below must be in place before the slow imports that follow
-
-from __future__ import annotations
+# No `from __future__ import annotations`: typer reads the annotations of every command on every start,
+# and evaluating them from strings took 4 ms of it (the few names imported for type checking are quoted).
 
 import os
 import signal
@@ -37,20 +37,21 @@ if threading.current_thread() is threading.main_thread():
 import functools
 import inspect
 import json
-import logging
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable, List, Optional
 
 import typer
-from rich.console import Console
+from typer.core import TyperArgument, TyperCommand, TyperGroup
 
 from bearnav_cli import __version__
 from bearnav_cli.errors import BearnavError, InternalError, InvalidMapError, InvalidParamsError
 
-# Start-up: numpy, scipy, shapely, yaml, the stages and the pipeline are imported by the commands
-# that use them, so that `bearnav --help` and `bearnav inspect` start at once (bench/README.md).
+# Start-up: numpy, scipy, shapely, yaml, logging, rich (the consoles, progress bars, typer's rich help),
+# the stages and the pipeline are imported by the commands that use them, so that `bearnav --help`
+# and `bearnav inspect` start at once (bench/README.md "Start-up"; tests/test_cli_startup.py).
 if TYPE_CHECKING:
+    from rich.console import Console
     from rich.progress import Progress
 
     from bearnav_cli import pipeline
@@ -68,23 +69,120 @@ def _usage_metavar(make_metavar: Callable) -> Callable:
     return make
 
 
-try:
-    from typer.core import TyperArgument
+TyperArgument.make_metavar = _usage_metavar(TyperArgument.make_metavar)
 
-    TyperArgument.make_metavar = _usage_metavar(TyperArgument.make_metavar)
-except (ImportError, AttributeError):  # another typer: its own usage line
-    pass
 
-app = typer.Typer(
+def _format_help_text(command: Any, ctx: Any, formatter: Any) -> None:
+    """A command's docstring as help: each paragraph joined and wrapped to the terminal, except that an example
+    (a line starting ``bearnav``) starts a line of its own, as typer's rich help showed them."""
+    text = inspect.cleandoc(command.help or "").partition("\f")[0]
+    with formatter.indentation():
+        for paragraph in text.split("\n\n") if text else []:
+            lines: list[str] = []
+            for line in paragraph.splitlines():
+                if lines and not line.startswith("bearnav "):
+                    lines[-1] += " " + line
+                else:
+                    lines.append(line)
+            formatter.write_paragraph()
+            for line in lines:
+                formatter.write_text(line)
+
+
+class _Command(TyperCommand):
+    """A command whose ``--help`` is click's plain layout (typer's rich one imports rich.markdown and
+    pygments, 0.1 s of every ``--help``); usage errors keep typer's rich panel.
+
+    The options generated from a ``Params`` (:func:`with_options`) are made when the command's
+    :attr:`params` are first read (to parse its command line, print its help or complete it), so
+    that a start reads the ``Params`` sources of the command it runs only.
+    """
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        # typer's callback wraps the command (functools.update_wrapper): its attributes are the command's
+        self._generated = getattr(self.callback, "generated_options", None)
+
+    @property
+    def params(self) -> list[Any]:
+        if getattr(self, "_generated", None) is not None:
+            groups, before = self._generated
+            self._generated = None
+            made = [_click_option(parameter) for group in groups for parameter in group()]
+            at = next((i for i, param in enumerate(self._params) if param.name == before), len(self._params))
+            self._params[at:at] = made
+        return self._params
+
+    @params.setter
+    def params(self, value: list[Any]) -> None:
+        self._params = value
+
+    def format_help(self, ctx: Any, formatter: Any) -> None:
+        super(TyperCommand, self).format_help(ctx, formatter)  # click's, not typer's rich one
+
+    def format_help_text(self, ctx: Any, formatter: Any) -> None:
+        _format_help_text(self, ctx, formatter)
+
+
+class _Group(TyperGroup):
+    """The ``bearnav`` group, its ``--help`` plain as :class:`_Command`'s."""
+
+    def format_help(self, ctx: Any, formatter: Any) -> None:
+        super(TyperGroup, self).format_help(ctx, formatter)
+
+    def format_help_text(self, ctx: Any, formatter: Any) -> None:
+        _format_help_text(self, ctx, formatter)
+
+    def parse_args(self, ctx: Any, args: list[str]) -> list[str]:
+        if not args and self.no_args_is_help and not ctx.resilient_parsing:
+            # bare `bearnav`: click's error for it holds the help, and typer's rich error handler prints nothing
+            # (its rich help printed itself): print the plain help here, on stdout, and exit 2, as before
+            typer.echo(ctx.get_help(), color=ctx.color)
+            ctx.exit(2)
+        return super().parse_args(ctx, args)
+
+
+class _Typer(typer.Typer):
+    """typer.Typer whose commands are :class:`_Command` (plain ``--help``) unless told otherwise."""
+
+    def command(self, name: Optional[str] = None, *, cls: Optional[type] = None, **kwargs: Any) -> Callable:
+        return super().command(name, cls=cls or _Command, **kwargs)
+
+
+app = _Typer(
+    cls=_Group,
     add_completion=True,
     no_args_is_help=True,
+    # the plain help is as wide as the terminal, up to 120 columns (click's own limit is 80)
+    context_settings={"max_content_width": 120},
     help="Certified bearing-only navigation controllers from a 2-D map.\n\n"
     "Lengths are in map units; a default written '0.01 D' is 1% of D, the diagonal of the map's bounds. "
     "Maps: docs/maps.md; commands and the words of their output: docs/cli.md.\n\n"
     "Example: bearnav plan maps/kitchen.yaml",
 )
-out = Console()
-err = Console(stderr=True)
+
+
+class _Console:
+    """A rich Console made on first use: importing rich.console takes 20 ms that ``--help`` does not need.
+
+    Everything but :attr:`console` (the Console itself, for rich's own classes) is the Console's.
+    """
+
+    def __init__(self, stderr: bool = False) -> None:
+        self._stderr = stderr
+
+    @functools.cached_property
+    def console(self) -> "Console":
+        from rich.console import Console
+
+        return Console(stderr=self._stderr)
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.console, name)
+
+
+out = _Console()
+err = _Console(stderr=True)
 
 EXIT_OUTCOME, EXIT_INVALID, EXIT_INTERRUPTED, EXIT_TERMINATED = 1, 3, 130, 143
 #: A bug of bearnav's own, never the user's input (EX_SOFTWARE of sysexits.h).
@@ -97,18 +195,28 @@ class _Quiet:
     enabled = False
 
 
-class _WarningHandler(logging.Handler):
-    """Print library warnings as one line each on stderr."""
+@functools.cache
+def _warning_handler() -> type:
+    """:class:`_WarningHandler`, defined on first use: logging is imported by the commands, not by ``--help``."""
+    import logging
 
-    def emit(self, record: logging.LogRecord) -> None:
-        if not _Quiet.enabled or record.levelno >= logging.ERROR:
-            err.print(f"[yellow]warning:[/yellow] {record.getMessage()}", highlight=False, soft_wrap=True)
+    class _WarningHandler(logging.Handler):
+        """Print library warnings as one line each on stderr."""
+
+        def emit(self, record: logging.LogRecord) -> None:
+            if not _Quiet.enabled or record.levelno >= logging.ERROR:
+                err.print(f"[yellow]warning:[/yellow] {record.getMessage()}", highlight=False, soft_wrap=True)
+
+    return _WarningHandler
 
 
 def _setup_logging() -> None:
+    import logging
+
+    handler = _warning_handler()
     logger = logging.getLogger("bearnav_cli")
-    if not any(isinstance(h, _WarningHandler) for h in logger.handlers):
-        logger.addHandler(_WarningHandler(level=logging.WARNING))
+    if not any(isinstance(h, handler) for h in logger.handlers):
+        logger.addHandler(handler(level=logging.WARNING))
     logger.setLevel(logging.WARNING)
     logger.propagate = False
 
@@ -202,7 +310,7 @@ def handles_errors(command: Callable) -> Callable:
 
 def _print_version(value: bool) -> None:
     if value:
-        out.print(f"bearnav {__version__}", highlight=False)
+        typer.echo(f"bearnav {__version__}")  # plain text: no rich console to import
         raise typer.Exit(0)
 
 
@@ -240,7 +348,7 @@ def _read_yaml(path: Path) -> tuple[Any, bytes]:
         raise InvalidMapError(f"not valid YAML ({problem}{where})", file=str(path)) from exc
 
 
-def _grid_source(grid_yaml: Path, owner: str, field: str) -> tuple[GridSource, list[bytes]]:
+def _grid_source(grid_yaml: Path, owner: str, field: str) -> "tuple[GridSource, list[bytes]]":
     """Read a ROS map_server YAML and its image."""
     from bearnav_cli.stages.map_ import GridSource
 
@@ -260,7 +368,7 @@ def read_map_source(
     landmarks: Optional[List[str]] = None,
     starts: Optional[List[str]] = None,
     robot_radius: Optional[float] = None,
-) -> MapSource:
+) -> "MapSource":
     """Read a bearnav map YAML (or a bare ROS map_server YAML plus options) into a MapSource."""
     import hashlib
 
@@ -317,14 +425,14 @@ def _pair(text: str, option: str) -> list[float]:
 # --------------------------------------------------------------------------- output helpers
 
 
-def _report_line(report: pipeline.StageReport) -> str:
+def _report_line(report: "pipeline.StageReport") -> str:
     state = "ran  " if report.ran else "fresh"
     timing = f"{report.elapsed_s:6.2f} s" if report.ran else "       -"
     return f"{report.stage:<10} {state} {timing}  {report.path}  {report.summary}"
 
 
-def _progress_factory(progress: Progress) -> Callable[[str], pipeline.Progress]:
-    def make(stage: str) -> pipeline.Progress:
+def _progress_factory(progress: "Progress") -> "Callable[[str], pipeline.Progress]":
+    def make(stage: str) -> "pipeline.Progress":
         task = progress.add_task(stage, total=None)
 
         def update(done: int, total: int) -> None:
@@ -355,10 +463,12 @@ def _count_column() -> type:
 def __getattr__(name: str) -> Any:
     if name == "_CountColumn":
         return _count_column()
+    if name == "_WarningHandler":
+        return _warning_handler()
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
-def _progress_bar() -> Progress:
+def _progress_bar() -> "Progress":
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
     return Progress(
@@ -366,7 +476,7 @@ def _progress_bar() -> Progress:
         BarColumn(),
         _count_column()(),
         TimeElapsedColumn(),
-        console=err,
+        console=err.console,
         transient=True,
         disable=_Quiet.enabled or not err.is_terminal,
     )
@@ -393,7 +503,7 @@ def _outcome_failure(artifact: Any) -> str | None:
     return None
 
 
-def _finish(reports: list[pipeline.StageReport], as_json: bool) -> None:
+def _finish(reports: "list[pipeline.StageReport]", as_json: bool) -> None:
     if as_json:
         rows = [
             {"stage": r.stage, "ran": r.ran, "elapsed_s": r.elapsed_s, "path": str(r.path), "summary": r.summary}
@@ -605,12 +715,12 @@ def _option_name(command: str, name: str) -> str:
 
 
 def _plain(text: str) -> str:
-    """A docstring's reST as help text: ``code`` and :role:`target` plain, ``[`` escaped for rich."""
+    """A docstring's reST as help text: ``code`` and :role:`target` plain (the help is plain text, not rich markup)."""
     import re
 
     text = re.sub(r":\w+:`~[\w.]*\.(\w+)`", r"\1", text)
     text = re.sub(r":\w+:`([^`]+)`", r"\1", text)
-    return text.replace("``", "").replace("[", r"\[")
+    return text.replace("``", "")
 
 
 def _shown(value: Any) -> str:
@@ -671,21 +781,38 @@ def params_options(command: str, *, skip: tuple[str, ...] = (), only: tuple[str,
     return options
 
 
-def with_options(*groups: list[inspect.Parameter], before: str = "force") -> Callable[[Callable], Callable]:
-    """Give a command the generated options: its signature (what typer reads) gains them before ``before``.
+def with_options(
+    *groups: Callable[[], list[inspect.Parameter]], before: str = "force"
+) -> Callable[[Callable], Callable]:
+    """Give a command the generated options, among its own before ``before``.
 
-    The command takes them as ``**options``, keyed by field name.
+    Each group is called, for its options (:func:`params_options`), when the command's click
+    options are first read (:class:`_Command`), not when the program starts: typer reads the
+    command's own signature, less its ``**options``, in which the command takes the generated
+    ones, keyed by field name.
     """
 
     def decorate(command: Callable) -> Callable:
         signature = inspect.signature(command, eval_str=True)
         own = [p.replace(kind=inspect.Parameter.KEYWORD_ONLY) for p in signature.parameters.values()
                if p.kind is not inspect.Parameter.VAR_KEYWORD]  # fmt: skip
-        at = next((i for i, p in enumerate(own) if p.name == before), len(own))
-        command.__signature__ = signature.replace(parameters=[*own[:at], *(p for g in groups for p in g), *own[at:]])
+        command.__signature__ = signature.replace(parameters=own)
+        command.generated_options = (groups, before)
         return command
 
     return decorate
+
+
+def _click_option(parameter: inspect.Parameter) -> Any:
+    """The click option typer makes of a generated option (:func:`params_options`), as of a signature's."""
+    from typer.main import get_click_param
+    from typer.models import ParamMeta
+
+    option, convertor = get_click_param(ParamMeta(name=parameter.name, default=parameter.default,
+                                                  annotation=parameter.annotation))  # fmt: skip
+    if convertor is not None:  # typer converts paths and enums after parsing; a field is an int, float, str or bool
+        raise TypeError(f"option {parameter.name}: a {parameter.annotation} needs typer's conversion")
+    return option
 
 
 # --------------------------------------------------------------------------- commands
@@ -711,7 +838,7 @@ JSON = typer.Option(False, "--json", help="Print machine-readable JSON.")
 
 @app.command("map")
 @handles_errors
-@with_options(params_options("map", skip=PARAMS_ONLY["map"]), before="goal")
+@with_options(functools.partial(params_options, "map", skip=PARAMS_ONLY["map"]), before="goal")
 def map_command(
     source: Path = MAP_ARG,
     out_path: Optional[Path] = typer.Option(None, "-o", "--out", help="Output (default plans/<name>/map.json)."),
@@ -742,7 +869,7 @@ def map_command(
 
 @app.command("rrtstar")
 @handles_errors
-@with_options(params_options("rrtstar", skip=PARAMS_ONLY["rrtstar"]))
+@with_options(functools.partial(params_options, "rrtstar", skip=PARAMS_ONLY["rrtstar"]))
 def rrtstar_command(
     map_json: Path = typer.Argument(..., metavar="MAP_JSON", help="map.json from `bearnav map`."),
     out_path: Optional[Path] = typer.Option(None, "-o", "--out", help="Output (default tree.npz next to the input)."),
@@ -761,7 +888,7 @@ def rrtstar_command(
 
 @app.command("simplify")
 @handles_errors
-@with_options(params_options("simplify", skip=PARAMS_ONLY["simplify"]))
+@with_options(functools.partial(params_options, "simplify", skip=PARAMS_ONLY["simplify"]))
 def simplify_command(
     tree_npz: Path = typer.Argument(..., metavar="TREE_NPZ", help="tree.npz from `bearnav rrtstar`."),
     out_path: Optional[Path] = typer.Option(
@@ -782,7 +909,7 @@ def simplify_command(
 
 @app.command("decompose")
 @handles_errors
-@with_options(params_options("decompose", skip=PARAMS_ONLY["decompose"]))
+@with_options(functools.partial(params_options, "decompose", skip=PARAMS_ONLY["decompose"]))
 def decompose_command(
     tree_npz: Path = typer.Argument(..., metavar="SIMPLIFIED_NPZ", help="simplified.npz from `bearnav simplify`."),
     out_path: Optional[Path] = typer.Option(None, "-o", "--out", help="Output (default cells.npz next to the input)."),
@@ -801,7 +928,7 @@ def decompose_command(
 
 @app.command("synthesize")
 @handles_errors
-@with_options(params_options("synthesize", skip=PARAMS_ONLY["synthesize"]))
+@with_options(functools.partial(params_options, "synthesize", skip=PARAMS_ONLY["synthesize"]))
 def synthesize_command(
     cells_npz: Path = typer.Argument(..., metavar="CELLS_NPZ", help="cells.npz from `bearnav decompose`."),
     out_path: Optional[Path] = typer.Option(None, "-o", "--out", help="Output (default plan.npz next to the input)."),
@@ -820,7 +947,7 @@ def synthesize_command(
 
 @app.command("verify")
 @handles_errors
-@with_options(params_options("verify", skip=PARAMS_ONLY["verify"], defaults=True), before="tree")
+@with_options(functools.partial(params_options, "verify", skip=PARAMS_ONLY["verify"], defaults=True), before="tree")
 def verify_command(
     plan_npz: Path = typer.Argument(..., metavar="PLAN_NPZ", help="plan.npz from `bearnav synthesize`."),
     tree: Optional[Path] = typer.Option(None, help="tree.npz whose collision samples the plan must keep."),
@@ -920,7 +1047,7 @@ def _run_one(stage: str, source: Path, out_path: Optional[Path], overrides: dict
 
 @app.command("simulate")
 @handles_errors
-@with_options(params_options("simulate", skip=PARAMS_ONLY["simulate"]), before="min_success")
+@with_options(functools.partial(params_options, "simulate", skip=PARAMS_ONLY["simulate"]), before="min_success")
 def simulate_command(
     plan_npz: Path = typer.Argument(
         ..., metavar="PLAN_NPZ", help="plan.npz from `bearnav synthesize` or `bearnav plan`."
@@ -1024,7 +1151,12 @@ PLAN_OPTIONS = {
 
 @app.command("plan")
 @handles_errors
-@with_options(*(params_options(stage, only=names, prefix=f"{stage}: ") for stage, names in PLAN_OPTIONS.items()))
+@with_options(
+    *(
+        functools.partial(params_options, stage, only=names, prefix=f"{stage}: ")
+        for stage, names in PLAN_OPTIONS.items()
+    )
+)
 def plan_command(
     source: Path = typer.Argument(
         ..., metavar="MAP", help="Map YAML (bearnav format, or a bare ROS map_server YAML with --goal), or a map.json."

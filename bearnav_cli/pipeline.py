@@ -13,17 +13,23 @@ folder (:func:`bearnav_cli.artifacts.output_folder`), so two runs never mix thei
 from __future__ import annotations
 
 import dataclasses
+import importlib
 import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
 from types import ModuleType
-from typing import Any, Callable
+from typing import TYPE_CHECKING, Any, Callable
 
 from bearnav_cli import artifacts
 from bearnav_cli.datatypes import Map, replace
 from bearnav_cli.errors import ArtifactError, InternalError, InvalidMapError, InvalidParamsError, ResourceLimitError
-from bearnav_cli.stages import decompose, map_, rrtstar, simplify, simulate, synthesize
+
+# The stage modules (scipy, highspy and the algorithms) are imported when a stage is used, not with
+# the pipeline: loading an artifact (`bearnav inspect`) imports only the stages whose parameters its
+# map's ``params:`` sets, to check them (:attr:`Stage.module`).
+if TYPE_CHECKING:
+    from bearnav_cli.stages import map_, rrtstar, simulate
 
 __all__ = [
     "Activity",
@@ -73,21 +79,27 @@ class Stage:
     ----------
     name : str
         The stage's name (``"rrtstar"``), as the CLI, the manifests and ``params:`` name it.
-    module : ModuleType
-        Its module in :mod:`bearnav_cli.stages`: ``Params``, ``VERSION``, ``run`` and ``summary``.
+    module_name : str
+        Its module in :mod:`bearnav_cli.stages` (``"bearnav_cli.stages.rrtstar"``).
     input_kind : str or None
         The artifact kind it reads (a key of :data:`bearnav_cli.artifacts.KINDS`); None for
         ``map``, which reads a map description.
     output_kind : str
         The artifact kind it writes.
+    module : ModuleType
+        The module itself, imported on first use: ``Params``, ``VERSION``, ``run`` and ``summary``.
     filename : str
         The conventional file name of its output (``"tree.npz"``).
     """
 
     name: str
-    module: ModuleType
+    module_name: str
     input_kind: str | None
     output_kind: str
+
+    @property
+    def module(self) -> ModuleType:
+        return importlib.import_module(self.module_name)
 
     @property
     def filename(self) -> str:
@@ -95,14 +107,14 @@ class Stage:
 
 
 STAGES: tuple[Stage, ...] = (
-    Stage("map", map_, None, "map"),
-    Stage("rrtstar", rrtstar, "map", "tree"),
-    Stage("simplify", simplify, "tree", "simplified"),
-    Stage("decompose", decompose, "simplified", "cells"),
-    Stage("synthesize", synthesize, "cells", "plan"),
+    Stage("map", "bearnav_cli.stages.map_", None, "map"),
+    Stage("rrtstar", "bearnav_cli.stages.rrtstar", "map", "tree"),
+    Stage("simplify", "bearnav_cli.stages.simplify", "tree", "simplified"),
+    Stage("decompose", "bearnav_cli.stages.decompose", "simplified", "cells"),
+    Stage("synthesize", "bearnav_cli.stages.synthesize", "cells", "plan"),
 )
 #: Not part of ``plan``: run on a plan by ``bearnav simulate`` (maps may still set its ``params:``).
-SIMULATE = Stage("simulate", simulate, "plan", "simulation")
+SIMULATE = Stage("simulate", "bearnav_cli.stages.simulate", "plan", "simulation")
 STAGE_BY_NAME = {stage.name: stage for stage in (*STAGES, SIMULATE)}
 
 
@@ -495,6 +507,8 @@ def _too_big(what: str, need: float, where: str, fits: str) -> ResourceLimitErro
 
 
 def _check_rrtstar(params: rrtstar.Params, map_: Map, where: dict[str, str]) -> None:
+    from bearnav_cli.stages import rrtstar
+
     xmin, ymin, xmax, ymax = map_.bounds
     width, height = xmax - xmin, ymax - ymin
     cell = params.step / rrtstar.BUCKETS_PER_STEP
@@ -561,6 +575,8 @@ def check_closed_loop(plan: Any, sim: simulate.Params, runs: int, where_runs: st
     InvalidParamsError
         More than :data:`MAX_RUNS` runs.
     """
+    from bearnav_cli.stages import simulate
+
     settings = simulate.settings(plan, sim)
     diagonal = plan.map.diagonal
     longest = float(max(plan.cells.cell_rank.max(initial=0.0), 0.0)) + diagonal
@@ -640,6 +656,8 @@ def check_resources(stage: str, params: Any, where: dict[str, str], artifact: An
     if stage == "rrtstar":
         _check_rrtstar(params, artifact, where)
     elif stage == "simulate":
+        from bearnav_cli.stages import simulate
+
         spec = simulate.parse_starts(params.starts)
         runs = spec if isinstance(spec, int) else (len(artifact.map.starts) if isinstance(spec, str) else len(spec))
         speed_where = where["alpha"] if params.dynamics == "unicycle" else where["speed"]
@@ -800,11 +818,12 @@ def _run_and_save(
     started = time.perf_counter()
     result = _execute(stage, payload, params, progress, input_path or str(out))
     elapsed = time.perf_counter() - started
-    summary = (
-        map_.summary(result, map_.listed_obstacles(payload))
-        if isinstance(result, Map)
-        else stage.module.summary(result)
-    )
+    if isinstance(result, Map):
+        from bearnav_cli.stages import map_
+
+        summary = map_.summary(result, map_.listed_obstacles(payload))
+    else:
+        summary = stage.module.summary(result)
     manifest = artifacts.make_manifest(
         stage.output_kind,
         result,

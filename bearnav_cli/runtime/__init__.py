@@ -13,39 +13,40 @@
 same step.
 """
 
-from bearnav_cli.runtime import bearing, camera
-from bearnav_cli.runtime.camera import Detection, Intrinsics, Mount, Observation, TagMap, heading_from_tag, observe
-from bearnav_cli.runtime.cell_policy import (
-    affine_field,
-    apply_gain,
-    approach_target,
-    barrier_values,
-    contains,
-    displacement,
-    field,
-    funnel_update,
-    in_safe_set,
-    least_rank_cell,
-    locate,
-    lyapunov,
-    nearest_node,
-    segments_clear,
-    switch,
-    update,
-    voronoi_owner,
-)
-from bearnav_cli.runtime.controller import Controller
-from bearnav_cli.runtime.estimate import Estimate, Fix, fuse, measure
-from bearnav_cli.runtime.plan_arrays import RUNTIME_KEYS, PlanArrays, ring_edges, tree_costs
-from bearnav_cli.runtime.step import (
-    DYNAMICS,
-    MEASUREMENTS,
-    ControlOutput,
-    ControlSettings,
-    ControlState,
-    control,
-    timing,
-)
+import importlib
+from typing import Any
+
+#: Where each name of ``__all__`` is defined: the submodules are imported when a name is first used
+#: (PEP 562), so that reading ``runtime.schema`` (every artifact load) does not import the controller.
+_ORIGIN = {
+    **dict.fromkeys(("Detection", "Intrinsics", "Mount", "Observation", "TagMap", "heading_from_tag", "observe"),
+                    "camera"),
+    **dict.fromkeys(("affine_field", "apply_gain", "approach_target", "barrier_values", "contains", "displacement",
+                     "field", "funnel_update", "in_safe_set", "least_rank_cell", "locate", "lyapunov",
+                     "nearest_node", "segments_clear", "switch", "update", "voronoi_owner"), "cell_policy"),
+    "Controller": "controller",
+    **dict.fromkeys(("Estimate", "Fix", "fuse", "measure"), "estimate"),
+    **dict.fromkeys(("RUNTIME_KEYS", "PlanArrays", "ring_edges", "tree_costs"), "plan_arrays"),
+    **dict.fromkeys(("DYNAMICS", "MEASUREMENTS", "ControlOutput", "ControlSettings", "ControlState", "control",
+                     "timing"), "step"),
+}  # fmt: skip
+#: The submodules, also attributes of the package once imported (``runtime.step``, ``runtime.bearing``).
+_SUBMODULES = ("bearing", "camera", "cell_policy", "controller", "estimate", "plan_arrays", "schema", "step")
+
+
+def __getattr__(name: str) -> Any:
+    if name in _SUBMODULES:
+        return importlib.import_module(f"{__name__}.{name}")
+    if name in _ORIGIN:
+        value = getattr(importlib.import_module(f"{__name__}.{_ORIGIN[name]}"), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *__all__, *_SUBMODULES})
+
 
 __all__ = [
     "Controller", "ControlOutput", "ControlSettings", "ControlState", "DYNAMICS", "Detection", "Estimate", "Fix",

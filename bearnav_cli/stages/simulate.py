@@ -82,8 +82,12 @@ class Params:
         ``θ_min`` of §6.2 (degrees).
     speed : float
         Reference speed ``v_ref`` of the single integrator (map units / s).
-    alpha, beta : float
-        Unicycle forward gain (map units / s) and turn gain (rad / s).
+    alpha : float
+        Unicycle forward gain ``α`` (map units / s): it drives at ``v = α cos e``, ``e`` its heading
+        error (ALGORITHMS §7.1).
+    beta : float
+        Unicycle turn gain ``β`` (rad / s): it turns at ``ω = β sin e``; also the rate at which a
+        robot turns to look around (``hold_time``).
     clamp_reverse : bool
         Unicycle never drives backwards (``v >= 0``).
     turn_first : bool
