@@ -393,3 +393,33 @@ def test_no_nan_anywhere(scene, method):
             assert not rec.y[~rec.usable].any() and not rec.x_hat[~rec.usable].any()
     unit, dist = bearing.directions(x, landmarks)
     assert np.isfinite(unit).all() and np.isfinite(dist).all() and np.isfinite(beta).all()
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_refined_fix_has_the_variance_fix_variance_predicts(seed):
+    """Monte Carlo: the spread of the distance-weighted fix under angle noise is ``fix_variance``.
+
+    Tags at very different distances (two near, three far) are where the plain ``lsq`` fix, which
+    weighs every line alike, is several times noisier than that: the runtime refines it.
+    """
+    rng = np.random.default_rng(seed)
+    x = np.array([0.0, 0.0])
+    near = rng.uniform(0.0, 2.0 * np.pi)
+    angles = np.concatenate([[near, near + rng.uniform(0.4, 0.6) * np.pi], rng.uniform(0.0, 2.0 * np.pi, 3)])
+    dist = np.concatenate([rng.uniform(0.5, 1.0, 2), rng.uniform(8.0, 15.0, 3)])
+    lm = x + dist[:, None] * np.column_stack([np.cos(angles), np.sin(angles)])
+    sigma, n = math.radians(0.5), 20000
+    noisy = angles[None] + rng.normal(0.0, sigma, (n, len(lm)))
+    beta = np.stack([np.cos(noisy), np.sin(noisy)], axis=-1)
+    vis = np.ones((n, len(lm)), bool)
+    rec = bearing.reconstruct(beta, vis, lm, 0, method="lsq", min_spread=math.radians(2.0), tol=1e-9)
+    assert rec.usable.all()
+    refined = bearing.refine_fix(beta, vis, lm, rec.x_hat, 1e-9)
+    exact = np.column_stack([np.cos(angles), np.sin(angles)])
+    predicted = bearing.fix_variance(exact[None], vis[:1], lm, x[None], sigma, 1e-9)[0]
+    worst = np.linalg.eigvalsh(np.cov((refined - x).T))[-1]
+    assert predicted == pytest.approx(worst, rel=0.08)
+    plain = np.linalg.eigvalsh(np.cov((rec.x_hat - x).T))[-1]
+    assert plain > 5.0 * predicted  # what the filter would have believed of the plain fix
+    # exact bearings: the refined fix is the exact point
+    np.testing.assert_allclose(bearing.refine_fix(exact[None], vis[:1], lm, x[None] + 0.3, 1e-9)[0], x, atol=1e-12)

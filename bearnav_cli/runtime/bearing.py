@@ -49,6 +49,7 @@ __all__ = [
     "noisy_bearings",
     "reconstruct",
     "Reconstruction",
+    "refine_fix",
     "scaled_output",
     "wrap",
 ]
@@ -425,12 +426,53 @@ def _projector_sum(beta: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, ...]:
     return a11, a22, a12, 0.5 * (a11 + a22) - np.hypot(0.5 * (a11 - a22), a12)
 
 
+def refine_fix(bearings: Any, visible: Any, landmarks: Any, x_hat: Any, tol: float, iterations: int = 2) -> np.ndarray:
+    """The distance-weighted intersection of the bearing lines, started from a fix, shape (R, 2).
+
+    ``lsq`` (§6.2) weighs every line alike, but angle noise moves a line by ``d_k·ε_k``: far
+    landmarks' lines wander most, and with landmarks at very different distances the plain
+    intersection is several times noisier than it need be (``tests/test_bearing.py``). Weighting
+    each line by ``1/d_k²`` (distances from the previous iterate, or from a given point)
+    minimises the angular residuals: the estimate of least variance, ``σ²(Σ_k P_k/d_k²)⁻¹``,
+    what :func:`fix_variance` predicts. Exact bearings give the exact point either way.
+
+    Parameters
+    ----------
+    bearings : array_like, shape (R, L, 2)
+        World-frame unit bearings ``β_k`` (entries of invisible landmarks are ignored).
+    visible : array_like of bool, shape (R, L)
+        Landmarks each robot's fix uses.
+    landmarks : array_like, shape (L, 2)
+        Landmark positions (map units).
+    x_hat : array_like, shape (R, 2)
+        The starting fixes (map units), e.g. :func:`reconstruct`'s ``lsq`` ``x_hat``.
+    tol : float
+        Geometric tolerance (map units): distances below it count as ``tol``.
+    iterations : int
+        Reweighting passes (each recomputes the distances at the last iterate).
+
+    Returns
+    -------
+    ndarray, shape (R, 2)
+        The refined fixes (map units); rows whose weighted system is singular keep ``x_hat``.
+    """
+    beta, vis = np.asarray(bearings, float), np.asarray(visible, bool)
+    lm, x = _points(landmarks), _points(x_hat).copy()
+    for _ in range(iterations):
+        d = lm[None] - x[:, None, :]
+        w = np.where(vis, 1.0 / np.maximum(np.einsum("rlk,rlk->rl", d, d), tol * tol), 0.0)
+        refined, ok = _intersection(beta, w, lm)
+        x = np.where(ok[:, None], refined, x)
+    return x
+
+
 def fix_variance(bearings: Any, visible: Any, landmarks: Any, x_hat: Any, sigma: float, tol: float) -> np.ndarray:
-    """Variance of an ``lsq`` fix in its worst direction (map units²), shape (R,).
+    """Variance of a bearing fix in its worst direction (map units²), shape (R,).
 
     A bearing with angle noise ``σ`` (radians) places the robot on its line to within
     ``σ·d`` at distance ``d``, so the information of the fix is ``Σ_k P_k/(σ d_k)²``; the
-    inverse of its smallest eigenvalue bounds the variance. Two nearly parallel bearings,
+    inverse of its smallest eigenvalue bounds the variance of the distance-weighted fix
+    (:func:`refine_fix`, what the runtime uses under noise). Two nearly parallel bearings,
     or landmarks far away, give a large one.
 
     Parameters
@@ -494,23 +536,29 @@ def scaled_output(x_hat: Any, landmarks: Any, fixed: Any, tol: float) -> np.ndar
 
 def _lsq(beta: np.ndarray, vis: np.ndarray, lm: np.ndarray, f: np.ndarray, threshold: float, tol: float):
     """§6.2. Returns ``(ỹ (R, L, 2), x̂ (R, 2), usable (R,))``; rows not usable hold finite garbage."""
-    w = vis.astype(float)
-    a11, a22, a12, lam_min = _projector_sum(beta, w)
-    count = vis.sum(axis=1)
-    # Solve about the centroid of the visible landmarks: far from the map origin, Σ P_k l_k
-    # would cancel most of its digits.
-    centre = (w @ lm) / np.maximum(count, 1)[:, None]
-    rel = lm[None, :, :] - centre[:, None, :]
-    rhs = np.sum(w[..., None] * (rel - beta * _dot(beta, rel)[..., None]), axis=1)
-    det = a11 * a22 - a12 * a12
-    solvable = (count >= 2) & (lam_min >= threshold) & (det > 0)
-    det = np.where(solvable, det, 1.0)
-    adj_rhs = np.stack([a22 * rhs[:, 0] - a12 * rhs[:, 1], a11 * rhs[:, 1] - a12 * rhs[:, 0]], axis=1)
-    x_hat = centre + adj_rhs / det[:, None]
+    lam_min = _projector_sum(beta, vis.astype(float))[3]
+    x_hat, ok = _intersection(beta, vis.astype(float), lm)
+    solvable = (vis.sum(axis=1) >= 2) & (lam_min >= threshold) & ok
     # Noise can put the intersection behind a camera: every visible landmark must lie ahead.
     ahead = _dot(beta, lm[None, :, :] - x_hat[:, None, :]) > 0
     usable = solvable & np.all(ahead | ~vis, axis=1)
     return _scaled(x_hat, lm, f, tol), x_hat, usable
+
+
+def _intersection(beta: np.ndarray, w: np.ndarray, lm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``argmin_x Σ_k w_k ‖P_k(x − l_k)‖²``, shape (R, 2), and where it is unique (R,); the rest hold garbage."""
+    a11, a22, a12, _ = _projector_sum(beta, w)
+    # Solve about the (weighted) centroid of the landmarks used: far from the map origin,
+    # Σ P_k l_k would cancel most of its digits.
+    total = np.sum(w, axis=1)
+    centre = (w @ lm) / np.where(total > 0, total, 1.0)[:, None]
+    rel = lm[None, :, :] - centre[:, None, :]
+    rhs = np.sum(w[..., None] * (rel - beta * _dot(beta, rel)[..., None]), axis=1)
+    det = a11 * a22 - a12 * a12
+    ok = det > 0
+    det = np.where(ok, det, 1.0)
+    adj_rhs = np.stack([a22 * rhs[:, 0] - a12 * rhs[:, 1], a11 * rhs[:, 1] - a12 * rhs[:, 0]], axis=1)
+    return centre + adj_rhs / det[:, None], ok
 
 
 def _inter(lm: np.ndarray, tol: float) -> tuple[np.ndarray, np.ndarray]:

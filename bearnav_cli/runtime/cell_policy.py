@@ -11,6 +11,7 @@ Numpy only. Everything is vectorised over ``R`` robots: positions are arrays of 
 - :func:`switch` — hand-over at the exit face and relocation (ALGORITHMS §7.3);
 - :func:`approach_target` / :func:`segments_clear` — the straight approach to a tree node
   from outside every safe set, and its exact segment test;
+- :func:`obstacle_clearance` — how far a point is from the inflated obstacles and the walls;
 - :func:`update` — the whole cell policy of one step;
 - :func:`apply_gain` / :func:`field` — ``u = gain[c] @ y``; with the displacement output
   ``y = (landmarks − x).ravel()`` this is the certified affine field.
@@ -30,6 +31,7 @@ __all__ = [
     "apply_gain",
     "approach_target",
     "barrier_values",
+    "cell_slack",
     "contains",
     "displacement",
     "edges_clear",
@@ -41,6 +43,7 @@ __all__ = [
     "locate",
     "lyapunov",
     "nearest_node",
+    "obstacle_clearance",
     "segments_clear",
     "switch",
     "update",
@@ -80,6 +83,27 @@ def contains(arrays: PlanArrays, cell: np.ndarray, x: np.ndarray, tol: float | N
     tol = arrays.tol if tol is None else tol
     lhs = np.einsum("rpk,rk->rp", arrays.row_A[c], p)
     return np.all(lhs <= arrays.row_b[c] + tol, axis=1)
+
+
+def cell_slack(arrays: PlanArrays, cell: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """How deep each point lies in its cell: ``min_k (b_k − A_kᵀx)`` over the cell's real rows, shape (R,).
+
+    Map units (rows are unit); negative outside the cell. ``x`` is in ``P_c ⊖ δ`` exactly where
+    this is at least ``δ``.
+
+    Parameters
+    ----------
+    arrays : PlanArrays
+        The plan: each cell's half-plane rows (padded; the padding rows do not count).
+    cell : ndarray of int, shape (R,)
+        The cell each point is measured in.
+    x : ndarray, shape (R, 2)
+        Points (map units).
+    """
+    c, p = _cells(arrays, cell), _points(x)
+    slack = arrays.row_b[c] - np.einsum("rpk,rk->rp", arrays.row_A[c], p)
+    real = np.arange(arrays.row_A.shape[1]) < np.diff(arrays.cell_row_offsets)[c][:, None]
+    return np.min(np.where(real, slack, math.inf), axis=1, initial=math.inf)
 
 
 def nearest_node(arrays: PlanArrays, x: np.ndarray) -> np.ndarray:
@@ -228,10 +252,7 @@ def least_rank_cell(arrays: PlanArrays, x: np.ndarray, erosion: np.ndarray | flo
         wanted &= arrays.cell_rank[np.maximum(cand, 0)] < np.asarray(below, float)[:, None]
     # only the real (robot, candidate) pairs: bins hold 16 cells on average but up to 75 (kitchen)
     r_idx, k_idx = np.nonzero(wanted)
-    c = cand[r_idx, k_idx]
-    slack = arrays.row_b[c] - np.einsum("npk,nk->np", arrays.row_A[c], p[r_idx])  # (n, P); padding rows: 0
-    real = np.arange(arrays.row_A.shape[1]) < np.diff(arrays.cell_row_offsets)[c][:, None]
-    inside = np.all(~real | (slack >= delta[r_idx, None] - arrays.tol), axis=1)
+    inside = cell_slack(arrays, cand[r_idx, k_idx], p[r_idx]) >= delta[r_idx] - arrays.tol
     # the first candidate that holds x: the least rank, then the lower index
     first = np.full(len(p), cand.shape[1], np.int64)
     np.minimum.at(first, r_idx[inside], k_idx[inside])
@@ -439,6 +460,60 @@ def edges_clear(edges: np.ndarray, a: np.ndarray, b: np.ndarray, ok: np.ndarray 
         )  # fmt: skip
         ok[s : s + step] &= ~np.any(proper | touch, axis=1)
     return ok
+
+
+def obstacle_clearance(arrays: PlanArrays, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Distance from each point to the nearest inflated obstacle edge or wall of ``B_r``, and the way away from it.
+
+    Exact (point-to-segment distances over every ring edge of ``arrays.obstacle_edges``, chunked).
+    A point outside ``B_r`` gets a negative clearance (minus its distance to ``B_r``); a point
+    inside an obstacle gets its distance to that obstacle's boundary, so a caller that must tell
+    free points apart tests membership separately. The distance to a segment or a wall's
+    half-plane is convex, so ``clearance(x + δ) ≥ clearance_k(x) + away_k·δ`` for the nearest
+    piece ``k``: moving along ``away`` never brings the point closer to that piece.
+
+    Parameters
+    ----------
+    arrays : PlanArrays
+        The plan: ``obstacle_edges`` (E, 2, 2) and ``free_bounds`` (``B_r``).
+    x : ndarray, shape (R, 2)
+        Points (map units).
+
+    Returns
+    -------
+    clearance : ndarray, shape (R,)
+        Map units.
+    away : ndarray, shape (R, 2)
+        Unit direction from the nearest point of the nearest piece to ``x`` (for a wall, its
+        inward normal); zero where ``x`` lies on it.
+    """
+    p = _points(x)
+    lo, hi = arrays.free_bounds[:2], arrays.free_bounds[2:]
+    walls = np.concatenate([p - lo, hi - p], axis=1)  # x − xmin, y − ymin, xmax − x, ymax − y
+    nearest_wall = np.argmin(walls, axis=1) if len(p) else np.zeros(0, np.int64)
+    out = walls[np.arange(len(p)), nearest_wall] if len(p) else np.zeros(0)
+    normals = np.array([[1.0, 0.0], [0.0, 1.0], [-1.0, 0.0], [0.0, -1.0]])
+    away = normals[nearest_wall] if len(p) else np.zeros((0, 2))
+    edges = arrays.obstacle_edges
+    if not len(edges) or not len(p):
+        return out, away
+    a, d = edges[:, 0], edges[:, 1] - edges[:, 0]
+    length2 = np.maximum(np.einsum("ek,ek->e", d, d), arrays.tol**2)
+    step = max(1, CHUNK // len(edges))
+    for s in range(0, len(p), step):
+        rel = p[s : s + step, None, :] - a[None]  # (r, E, 2)
+        t = np.clip(np.einsum("rek,ek->re", rel, d) / length2, 0.0, 1.0)
+        gap = rel - t[..., None] * d[None]  # from each edge's nearest point to x
+        dist2 = np.einsum("rek,rek->re", gap, gap)
+        k = np.argmin(dist2, axis=1)
+        rows = np.arange(len(k))
+        dist = np.sqrt(dist2[rows, k])
+        closer = dist < out[s : s + step]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            unit = np.where(dist[:, None] > 0, gap[rows, k] / dist[:, None], 0.0)
+        out[s : s + step] = np.where(closer, dist, out[s : s + step])
+        away[s : s + step] = np.where(closer[:, None], unit, away[s : s + step])
+    return out, away
 
 
 def in_sight(arrays: PlanArrays, x: np.ndarray) -> np.ndarray:

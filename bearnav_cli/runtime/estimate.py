@@ -43,14 +43,21 @@ class Fix:
 
 
 def measure(arrays: PlanArrays, s: ControlSettings, bearings: np.ndarray, visible: np.ndarray,
-            x_true: np.ndarray | None = None, displacements: np.ndarray | None = None) -> Fix:  # fmt: skip
+            x_true: np.ndarray | None = None, displacements: np.ndarray | None = None,
+            prior: np.ndarray | None = None) -> Fix:  # fmt: skip
     """The position fix of one frame, for ``R`` robots (ALGORITHMS §6.2, §7.2).
 
     Bearing mode: the ``lsq`` intersection of the visible bearing lines
-    (:func:`bearnav_cli.runtime.bearing.reconstruct`), whatever ``s.reconstruction`` is; with
-    ``s.bearing_sigma > 0`` its variance is :func:`bearnav_cli.runtime.bearing.fix_variance` and a
-    fix whose 3σ exceeds ``s.max_fix_error`` is not usable. Displacement mode: ``mean_k(l_k − d_k)``
-    of the measured ``displacements``, else the true position, always usable with variance 0.
+    (:func:`bearnav_cli.runtime.bearing.reconstruct`), whatever ``s.reconstruction`` is. With
+    ``s.bearing_sigma > 0`` it is refined to the distance-weighted intersection
+    (:func:`bearnav_cli.runtime.bearing.refine_fix`), its variance is
+    :func:`bearnav_cli.runtime.bearing.fix_variance`, and a fix whose 3σ exceeds
+    ``s.max_fix_error`` is not usable. Where a ``prior`` position is given, the weights and the
+    variance take their distances there, not at the fix: a fix that errs toward the landmarks
+    would otherwise claim a smaller variance, win more weight in the filter, and pull the
+    average of many fixes toward them (2 map units of bias beside a row of wall tags on
+    paper_sim at 2°). Displacement mode: ``mean_k(l_k − d_k)`` of the measured
+    ``displacements``, else the true position, always usable with variance 0.
 
     Parameters
     ----------
@@ -71,6 +78,9 @@ def measure(arrays: PlanArrays, s: ControlSettings, bearings: np.ndarray, visibl
     displacements : ndarray, shape (R, L, 2), optional
         Measured ``l_k − x`` (map units) in displacement mode, for a world that differs from the
         plan's: the fix is the position that fits them best against the plan's landmarks.
+    prior : ndarray, shape (R, 2), optional
+        Where each robot's filter predicts it is (map units; NaN rows: no prediction), for the
+        distances of a noisy fix's weights and variance.
 
     Returns
     -------
@@ -94,9 +104,23 @@ def measure(arrays: PlanArrays, s: ControlSettings, bearings: np.ndarray, visibl
         estimate = bearing.reconstruct(bearings, visible, arrays.landmarks, 0, method="lsq",
                                        min_spread=s.min_spread, tol=s.tol)  # fmt: skip
         measured, fix = estimate.x_hat, estimate.usable.copy()
+    at = measured
+    if s.measurement != "displacement" and s.bearing_sigma > 0 and fix.any():
+        # noisy bearings: the distance-weighted fix (exact bearings give the same point), weighed
+        # once at the prediction where there is one, else reweighted from the lsq fix
+        known = np.zeros(r, bool)
+        if prior is not None:
+            known = np.all(np.isfinite(np.asarray(prior, float).reshape(-1, 2)), axis=1)
+        measured, at = measured.copy(), measured.copy()
+        for rows, start, passes in ((fix & known, prior, 1), (fix & ~known, measured, 2)):
+            if rows.any():
+                at[rows] = np.asarray(start, float).reshape(-1, 2)[rows]
+                measured[rows] = bearing.refine_fix(bearings[rows], visible[rows], arrays.landmarks, at[rows], s.tol,
+                                                    iterations=passes)  # fmt: skip
+        at = np.where(known[:, None], at, measured)  # no prediction: the variance at the refined fix
     sigma_fix2 = np.zeros(r)
     if s.bearing_sigma > 0 and fix.any():
-        sigma_fix2[fix] = bearing.fix_variance(bearings[fix], visible[fix], arrays.landmarks, measured[fix],
+        sigma_fix2[fix] = bearing.fix_variance(bearings[fix], visible[fix], arrays.landmarks, at[fix],
                                                s.bearing_sigma, arrays.tol)  # fmt: skip
         fix &= sigma_fix2 <= (s.max_fix_error / 3.0) ** 2
     return Fix(measured, fix, sigma_fix2)
@@ -141,8 +165,10 @@ def fuse(s: ControlSettings, state: ControlState, fix: Fix) -> Estimate:
     linearly with the distance, ``odometry_drift`` per unit (``σ ← σ + drift·ℓ`` for a step of length
     ``ℓ``), because wheel slip is mostly systematic over a run (a scale and heading error: its error
     grows like ``d``, not ``√d``). A fix of variance σ_fix² corrects it, and a fix farther
-    than 3 standard deviations from the prediction is rejected. Noise-free (σ = 0) every fix is
-    taken as it is.
+    than 3 standard deviations from the prediction is rejected; a rejected fix widens the
+    prediction's variance to the gap (``3σ = ‖fix − prediction‖``), so an estimate that has
+    drifted off is not kept for sure: the next consistent fix passes and pulls it back. Noise-free
+    (σ = 0) every fix is taken as it is.
 
     Without a fix the robot still steers by the prediction for ``hold_time`` seconds, and after
     that while its 3σ stays within ``blind_error``; with ``s.odometry`` off nothing is predicted
@@ -174,7 +200,14 @@ def fuse(s: ControlSettings, state: ControlState, fix: Fix) -> Estimate:
     with np.errstate(invalid="ignore"):
         var_pred = (np.sqrt(np.maximum(state.var, 0.0)) + s.odometry_drift * travelled) ** 2
     innovation = np.einsum("rk,rk->r", measured - predicted, measured - predicted)
-    fix &= ~(recent & (innovation > 9.0 * (var_pred + sigma_fix2)))
+    rejected = fix & recent & (innovation > 9.0 * (var_pred + sigma_fix2))
+    fix &= ~rejected
+    # a usable fix this far off says the prediction may be as wrong as the gap between them: without
+    # this, an estimate that has drifted beyond its 3σ rejects every later fix while the robot stands
+    # (its variance grows only with motion) and stays wrong and sure of itself; with it, the next
+    # consistent fix passes the gate and pulls the estimate back
+    with np.errstate(invalid="ignore"):
+        var_pred = np.where(rejected, np.maximum(var_pred, innovation / 9.0), var_pred)
     with np.errstate(invalid="ignore", divide="ignore"):
         gain = np.where(recent & (var_pred + sigma_fix2 > 0), var_pred / (var_pred + sigma_fix2), 1.0)
     gain = np.where(np.isfinite(gain), gain, 1.0)

@@ -21,9 +21,11 @@ from bearnav_cli.runtime import bearing
 from bearnav_cli.runtime.cell_policy import (
     affine_field,
     apply_gain,
+    cell_slack,
     displacement,
     in_sight,
     least_rank_cell,
+    obstacle_clearance,
     update,
 )
 from bearnav_cli.runtime.estimate import Estimate, fuse, measure
@@ -32,8 +34,8 @@ from bearnav_cli.runtime.plan_arrays import PlanArrays
 __all__ = [
     "ALPHA", "APPROACH_ALIGNMENT", "BEARING_SIGMA", "DYNAMICS", "MEASUREMENTS", "ODOMETRY_DRIFT", "SPEED",
     "STALL_FIELD", "ControlOutput", "ControlSettings", "ControlState",
-    "best_view_heading", "carry_inside", "control", "follow_fields", "heading_allowance", "look_around", "timing",
-    "unicycle_command",
+    "best_view_heading", "carry_inside", "control", "error_ball_pace", "follow_fields", "heading_allowance",
+    "look_around", "steer_clear", "timing", "unicycle_command",
 ]  # fmt: skip
 
 log = logging.getLogger(__name__)
@@ -119,6 +121,11 @@ class ControlSettings:
         usable pair of tags is in view from its estimate (:func:`best_view_heading`), then, if that
         gives no fix, looks all around; off (the default: it did not do better, docs/choices.md) or
         a camera that sees all around: the revolution at once.
+    keep_clear : bool
+        A step the certificate does not cover (error bound above ``δ*``) is taken only while the
+        error ball, grown by the step, stays off the obstacles (:func:`error_ball_clear`); else the
+        robot waits in place for fixes that shrink it (turning to look when it has none). Off:
+        every step is taken.
     """
 
     speed: float
@@ -143,6 +150,7 @@ class ControlSettings:
     fov: float = 2.0 * math.pi
     max_range: float = math.inf
     look_on_purpose: bool = False
+    keep_clear: bool = True
 
     @classmethod
     def for_plan(cls, diagonal: float, tol: float, *, dynamics: str = "single", speed: float = SPEED,
@@ -263,6 +271,9 @@ class ControlOutput:
     certified : ndarray of bool, shape (R,)
         The step is covered by the composed certificate (ALGORITHMS §11.4): a funnel plan, a cell's
         field (not a straight approach), and an estimate whose error bound (3σ) is at most ``δ*``.
+    waiting : ndarray of bool, shape (R,)
+        Held in place because the error ball grown by any step would reach an obstacle
+        (:func:`error_ball_pace` is 0): the robot does not translate and waits for better fixes.
     """
 
     velocity: np.ndarray
@@ -276,6 +287,7 @@ class ControlOutput:
     relocated: np.ndarray
     x_hat: np.ndarray
     certified: np.ndarray
+    waiting: np.ndarray
 
 
 #: ``‖a − M x̂‖ < STALL_FIELD · u_max`` is a stall: the field has (almost) an equilibrium there.
@@ -334,18 +346,38 @@ def control(
     ControlOutput
     """
     s = settings
-    est = carry_inside(arrays, s, state, fuse(s, state, measure(arrays, s, bearings, visible, x_true, displacements)))
+    prior = np.where((state.known & s.odometry)[:, None], state.x_hat + s.dt * state.motion, np.nan)
+    fix = measure(arrays, s, bearings, visible, x_true, displacements, prior)
+    est = carry_inside(arrays, s, state, fuse(s, state, fix))
     cell, target, last_dir, u, stalled, relocated = follow_fields(arrays, s, state, est, bearings, visible,
                                                                   displacements)  # fmt: skip
+    if s.keep_clear:
+        pace, away = error_ball_pace(arrays, s, cell, est.x_hat, est.error_bound)
+        u = steer_clear(u, pace, away)
+    else:
+        pace = np.ones(len(cell))
+    waiting = est.steer & (pace <= 0.0)
+    if waiting.any():
+        # waiting with no fix this step: look for one (turning in place keeps the ball where it is)
+        est = dataclasses.replace(est, steer=est.steer & ~(waiting & ~est.fix))
     holding = ~est.steer  # no position estimate this step
     scanning, lost, spin, turn, look = look_around(s, state, est, last_dir, heading, arrays)
     direction = np.where(holding[:, None], last_dir, u)
-    velocity = s.speed * direction
+    velocity = np.where(est.steer, s.speed * pace, s.speed)[:, None] * direction
     velocity[scanning] = 0.0
     forward, motion = np.zeros(len(cell)), velocity.copy()
     if s.dynamics == "unicycle":
-        allowed = heading_allowance(arrays, cell, est.x_hat, target) if s.certified_heading else None
+        allowed = None
+        if s.certified_heading:
+            # the allowance keeps a certified step certified; a step beyond δ* has no certificate to
+            # keep (error_ball_pace keeps it clear whichever way it drives), and there the noise in
+            # x̂ turns the field's direction faster than a tight allowance lets the robot follow
+            allowed = heading_allowance(arrays, cell, est.x_hat, target)
+            if s.keep_clear:
+                allowed = np.where(est.error_bound <= arrays.plan_tolerance + s.tol, allowed, math.pi)
         forward, turn, motion = unicycle_command(s, direction, heading, holding, scanning, target, turn, allowed)
+        slow = np.where(est.steer, pace, 1.0)
+        forward, motion = forward * slow, motion * slow[:, None]
     # the estimate always moves on with the robot's own motion, steering with it or not
     new = ControlState(cell, target, last_dir, est.hold, np.where(est.known[:, None], est.x_hat, state.x_hat), motion,
                        est.known, est.var, scanning, spin, look,
@@ -355,7 +387,93 @@ def control(
     certified = (arrays.funnel & est.steer & (target < 0) & (cell >= 0)
                  & (est.error_bound <= arrays.plan_tolerance + s.tol))  # fmt: skip
     return ControlOutput(velocity, forward, turn, scanning, new, est.fix, lost, stalled, relocated,
-                         np.where(est.steer[:, None], est.x_hat, 0.0), certified)  # fmt: skip
+                         np.where(est.steer[:, None], est.x_hat, 0.0), certified, waiting)  # fmt: skip
+
+
+def error_ball_pace(arrays: PlanArrays, s: ControlSettings, cell: np.ndarray, x_hat: np.ndarray,
+                    error_bound: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """How fast each robot may drive without its error ball reaching an obstacle, and which way is away.
+
+    The true position lies within ``e`` (the estimate's error bound, 3σ) of ``x̂``, and a step at
+    the fraction ``p`` of full speed moves it by at most ``p·ℓ`` with ``ℓ = v·dt·(1 + odometry_drift)``
+    (``v`` = ``v_ref``, or ``α`` for the unicycle). So with ``k`` the clearance of ``x̂`` from the
+    inflated obstacles and the walls, every position the robot can be in during a step at
+    ``p = clip((k − e)/ℓ, 0, 1)`` is free, whichever way it drives. ``p = 0``: the robot waits for
+    fixes that shrink ``e`` (standing still adds no odometry error); a slower robot also drifts
+    less, so its filter settles to a smaller ``e``. A step the certificate covers (``e ≤ δ*`` on a
+    funnel plan, ALGORITHMS §11.4) is taken at full speed as it is, and so is every step on a
+    paper plan (which runs as the papers ran it). The cheap bound first: the slack of ``x̂`` in its
+    own funnel cell (cells are free, C1); the exact distance
+    (:func:`~bearnav_cli.runtime.cell_policy.obstacle_clearance`) only where that bound slows it.
+
+    Parameters
+    ----------
+    arrays : PlanArrays
+        The plan: cells, ``plan_tolerance`` (δ*), obstacle edges and ``B_r``.
+    s : ControlSettings
+        ``speed`` or ``alpha`` (map units / s), ``dt`` (s) and ``odometry_drift``.
+    cell : ndarray of int, shape (R,)
+        Each robot's active cell (``-1`` for none).
+    x_hat : ndarray, shape (R, 2)
+        Position estimates (map units).
+    error_bound : ndarray, shape (R,)
+        Their error bounds ``e`` (map units; ``inf`` before the first fix: pace 0).
+
+    Returns
+    -------
+    pace : ndarray, shape (R,)
+        The fraction of full speed allowed, in ``[0, 1]``.
+    away : ndarray, shape (R, 2)
+        Where the pace is below 1: the unit direction away from the nearest obstacle piece
+        (:func:`~bearnav_cli.runtime.cell_policy.obstacle_clearance`); zero elsewhere.
+    """
+    e = np.asarray(error_bound, float).reshape(-1)
+    away = np.zeros((len(e), 2))
+    if not arrays.funnel:  # paper plans run as the papers ran them
+        return np.ones(len(e)), away
+    pace = np.where(e <= arrays.plan_tolerance + s.tol, 1.0, 0.0)
+    step = (s.alpha if s.dynamics == "unicycle" else s.speed) * s.dt * (1.0 + s.odometry_drift)
+    todo = (pace < 1.0) & np.isfinite(e)
+    cell = np.asarray(cell, np.int64).reshape(-1)
+    quick = todo & (cell >= 0)
+    if quick.any():
+        idx = np.flatnonzero(quick)
+        pace[idx] = np.clip((cell_slack(arrays, cell[idx], x_hat[idx]) - e[idx]) / step, 0.0, 1.0)
+        todo[idx[pace[idx] >= 1.0]] = False
+    if todo.any():
+        idx = np.flatnonzero(todo)
+        clearance, away[idx] = obstacle_clearance(arrays, x_hat[idx])
+        pace[idx] = np.maximum(pace[idx], np.clip((clearance - e[idx]) / step, 0.0, 1.0))
+        away[idx[pace[idx] >= 1.0]] = 0.0
+    return pace, away
+
+
+def steer_clear(u: np.ndarray, pace: np.ndarray, away: np.ndarray) -> np.ndarray:
+    """The unit command bent away from the nearest obstacle as the pace drops, shape (R, 2).
+
+    ``u − (1 − p)·min(u·a, 0)·a + (1 − p)·a``, normalised: at full pace (``p = 1``) the command
+    is ``u``; below, its component toward the obstacle fades and a push along ``away`` grows, so a
+    robot slowed by its error ball (:func:`error_ball_pace`) also gains clearance, and its pace
+    recovers, instead of creeping along the obstacle. At ``p = 0`` the push dominates. Rows with
+    no command (``u = 0``) or no ``away`` stay as they are.
+
+    Parameters
+    ----------
+    u : ndarray, shape (R, 2)
+        Unit commands (zero rows: none).
+    pace : ndarray, shape (R,)
+        Allowed fraction of full speed, in ``[0, 1]``.
+    away : ndarray, shape (R, 2)
+        Unit directions away from the nearest obstacle piece (zero rows: no push).
+    """
+    w = (1.0 - np.asarray(pace, float))[:, None]
+    toward = np.minimum(np.einsum("rk,rk->r", u, away), 0.0)[:, None]
+    bent = u - w * toward * away + w * away
+    norm = np.hypot(bent[:, 0], bent[:, 1])
+    ok = (w[:, 0] > 0) & (norm > 0) & np.any(u != 0.0, axis=1) & np.any(away != 0.0, axis=1)
+    out = u.copy()
+    out[ok] = bent[ok] / norm[ok, None]
+    return out
 
 
 def carry_inside(arrays: PlanArrays, s: ControlSettings, state: ControlState, est: Estimate) -> Estimate:

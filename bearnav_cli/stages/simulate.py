@@ -100,6 +100,11 @@ class Params:
         Without a fix, first turn toward the nearest heading where the map promises a usable pair of
         tags (``runtime.step.best_view_heading``), then look all around; off (default): the
         revolution at once.
+    keep_clear : bool
+        On a funnel plan, a step beyond the certified tolerance ``δ*`` is slowed so that the
+        estimate's error ball (3σ), grown by the step, never reaches an obstacle, and bent away
+        from the nearest one as it slows (``runtime.step.error_ball_pace``); a robot that cannot
+        move waits for fixes. Off: full speed on any estimate.
     initial_heading : float or None
         Initial heading (degrees); ``None``: toward the active cell's exit point (the goal
         in the goal cell).
@@ -163,6 +168,7 @@ class Params:
     turn_first: bool = True
     certified_heading: bool = True
     look_on_purpose: bool = False
+    keep_clear: bool = True
     initial_heading: float | None = None
     hold_time: float = 2.0
     odometry: bool = True
@@ -259,7 +265,7 @@ def settings(plan, params: Params) -> Settings:
         odometry_drift=params.odometry_drift,
         max_fix_error=math.inf if params.max_fix_error is None else params.max_fix_error,
         fov=math.radians(params.fov), max_range=math.inf if params.range is None else float(params.range),
-        look_on_purpose=params.look_on_purpose,
+        look_on_purpose=params.look_on_purpose, keep_clear=params.keep_clear,
     )  # fmt: skip
     return Settings(goal_tolerance, control)
 
@@ -380,7 +386,8 @@ class _Loop:
         # a certified step is one the robot takes: a run that ends lost or stalled here takes none
         # (counting it broke `certified_steps <= steps` of sim.npz for every stalled run)
         self.certified[active[~ended]] += out.certified[~ended]
-        command = (out.velocity, out.forward, out.turn, out.scanning, out.fix)
+        # the no-progress window counts steps with a fix the robot drives on (not those it waits out)
+        command = (out.velocity, out.forward, out.turn, out.scanning, out.fix & ~out.waiting)
         if ended.any():
             keep = ~ended
             active, p, heading = active[keep], p[keep], heading[keep]
