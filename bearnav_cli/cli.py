@@ -503,12 +503,15 @@ def _outcome_failure(artifact: Any) -> str | None:
     return None
 
 
-def _finish(reports: "list[pipeline.StageReport]", as_json: bool) -> None:
+def _finish(reports: "list[pipeline.StageReport]", as_json: bool, extra: Optional[dict] = None) -> None:
+    """Print the reports' JSON rows (the last with ``extra`` fields) and exit 1 on a failed outcome."""
     if as_json:
         rows = [
             {"stage": r.stage, "ran": r.ran, "elapsed_s": r.elapsed_s, "path": str(r.path), "summary": r.summary}
             for r in reports
         ]
+        if rows and extra:
+            rows[-1].update(extra)
         out.print_json(json.dumps(rows))
     problem = _outcome_failure(reports[-1].artifact) if reports else None
     if problem:
@@ -836,6 +839,21 @@ QUIET = typer.Option(False, "--quiet", "-q", help="No progress bars or warnings.
 JSON = typer.Option(False, "--json", help="Print machine-readable JSON.")
 
 
+#: The option of each field a camera check names (``perception.check_params``, ``bearing.check_camera``).
+CAMERA_OPTIONS = {"fov": "--fov", "fov_deg": "--fov", "noise_deg": "--noise-deg", "range": "--range",
+                  "max_range": "--range"}  # fmt: skip
+
+
+def _check_camera(fov: float, noise_deg: float = 0.0, max_range: Optional[float] = None) -> None:
+    """``perception.check_params`` of a command's camera options; an error names the option (one line, exit 3)."""
+    from bearnav_cli import perception
+
+    try:
+        perception.check_params(fov, noise_deg, float("inf") if max_range is None else max_range)
+    except InvalidParamsError as exc:  # name the option the user typed
+        raise _fail(f"{CAMERA_OPTIONS.get(exc.field or '', exc.field)}: {exc.reason}", EXIT_INVALID) from None
+
+
 @app.command("map")
 @handles_errors
 @with_options(functools.partial(params_options, "map", skip=PARAMS_ONLY["map"]), before="goal")
@@ -846,6 +864,12 @@ def map_command(
     landmark: Optional[List[str]] = typer.Option(None, help="Landmark X,Y, repeatable (bare grids only)."),
     start: Optional[List[str]] = typer.Option(None, help="Start X,Y, repeatable (bare grids only)."),
     robot_radius: Optional[float] = typer.Option(None, help="Robot radius (bare grids only)."),
+    fov: Optional[float] = typer.Option(
+        None, "--fov", help="Also report where a camera of this field of view (degrees, (0, 360]) can fix itself."
+    ),
+    max_range: Optional[float] = typer.Option(
+        None, "--range", help="That camera's range, map units (default: unlimited)."
+    ),
     force: bool = FORCE,
     quiet: bool = QUIET,
     as_json: bool = JSON,
@@ -853,18 +877,38 @@ def map_command(
 ) -> None:
     """Validate a map and write map.json.
 
-    Example: bearnav map maps/kitchen.yaml -o /tmp/kitchen/map.json
+    Example: bearnav map maps/kitchen.yaml -o /tmp/kitchen/map.json --fov 60
     """
     from bearnav_cli import pipeline
 
     _Quiet.enabled |= quiet
+    if fov is None and max_range is not None:
+        raise _fail("--range: only with --fov (the camera it belongs to)", EXIT_INVALID)
+    if fov is not None:  # checked before anything is written
+        _check_camera(fov, 0.0, max_range)
     goal_xy = _pair(goal, "--goal") if goal else None
     src = read_map_source(source, goal_xy, landmark, start, robot_radius)
     target = out_path or Path("plans") / str(src.spec.get("name", source.stem)) / "map.json"
     report = pipeline.run_map(src, target, options, force)
+    seeing = None
+    if fov is not None:  # the map artifact is written already, without it
+        from bearnav_cli import perception
+
+        seeing = perception.heading_coverage(report.artifact, fov, float("inf") if max_range is None else max_range)
+    extra = None
+    if seeing is not None:
+        extra = {"perception": {"fov_deg": seeing.fov_deg, "range": max_range, "grid_points": len(seeing.points),
+                                "fraction_some_heading": seeing.fraction_some,
+                                "fraction_every_heading": seeing.fraction_every,
+                                "blind_points": len(seeing.blind)}}  # fmt: skip
     if not as_json:
         out.print(_report_line(report), highlight=False, soft_wrap=True)
-    _finish([report], as_json)
+        if seeing is not None:
+            camera = f"--fov {fov:g}" + (f" --range {max_range:g}" if max_range is not None else "")
+            hint = f"; after planning, `bearnav tags PLAN.npz {camera}` places tags where it fails"
+            out.print(f"  perception: {seeing.summary()}{hint if seeing.fraction_some < 1.0 else ''}",
+                      highlight=False, markup=False, soft_wrap=True)  # fmt: skip
+    _finish([report], as_json, extra)
 
 
 @app.command("rrtstar")
@@ -993,11 +1037,7 @@ def verify_command(
     if fov is not None:  # checked before the closed loop runs
         from bearnav_cli import perception
 
-        try:
-            perception.check_params(fov, noise_deg)
-        except InvalidParamsError as exc:
-            option = {"fov": "--fov", "fov_deg": "--fov", "noise_deg": "--noise-deg"}.get(exc.field, exc.field)
-            raise _fail(f"{option}: {exc.reason}", EXIT_INVALID) from None
+        _check_camera(fov, noise_deg)
     with _progress_bar() as progress:
         track = _progress_factory(progress)("verify")
         report = verify.run(plan, params, tree_samples=samples, progress=track, world=world_map)
@@ -1392,8 +1432,7 @@ def tags_command(
                                                                                         if p is not None))  # fmt: skip
     figure = figure or out_path.with_suffix(".png")
     artifacts.check_output_file(figure, FIGURE_SUFFIXES, "--figure")
-    options = {"fov": "--fov", "fov_deg": "--fov", "range": "--range", "max_range": "--range",
-               "noise_deg": "--noise-deg", "error_target": "--error-target", "max_tags": "--max-tags"}  # fmt: skip
+    options = {**CAMERA_OPTIONS, "error_target": "--error-target", "max_tags": "--max-tags"}
     try:
         params = tags.Params(fov_deg=fov, max_range=float("inf") if max_range is None else max_range,
                              noise_deg=noise_deg, error_target=error_target, max_tags=max_tags)  # fmt: skip
@@ -1453,6 +1492,15 @@ def plot_command(
         None, "--labels/--no-labels", help="Landmark ids: all, or none (default: those that do not collide)."
     ),
     cell_numbers: bool = typer.Option(False, "--cell-numbers", help="Write each cell's index where it is active."),
+    fov: Optional[float] = typer.Option(
+        None, "--fov", help="Mark where a camera of this field of view (degrees, (0, 360]) fails along a plan's field."
+    ),
+    noise_deg: Optional[float] = typer.Option(
+        None, "--noise-deg", help="Bearing noise (1σ, degrees) of that camera's predicted fix error (default 1)."
+    ),
+    max_range: Optional[float] = typer.Option(
+        None, "--range", help="That camera's range, map units (default: unlimited)."
+    ),
     quiet: bool = QUIET,
 ) -> None:
     """Draw an artifact: map, tree, collision samples, cells, the plan's field, simulated runs.
@@ -1464,6 +1512,12 @@ def plot_command(
 
     _Quiet.enabled |= quiet
     artifacts.check_output_file(out_path, FIGURE_SUFFIXES, "-o/--out", inputs=(artifact, *(also or [])))
+    if fov is None and (noise_deg is not None or max_range is not None):
+        given = "--noise-deg" if noise_deg is not None else "--range"
+        raise _fail(f"{given}: only with --fov (the camera it belongs to)", EXIT_INVALID)
+    noise_deg = 1.0 if noise_deg is None else noise_deg
+    if fov is not None:
+        _check_camera(fov, noise_deg, max_range)
     # matplotlib is slow to import: only here
     from bearnav_cli import composition
 
@@ -1476,13 +1530,24 @@ def plot_command(
     loaded = pipeline.load(artifact)
     background = [pipeline.load(p, ("tree", "simplified")).artifact for p in also or []]
     shown = loaded.artifact
+    seeing = None
+    if fov is not None:
+        if not isinstance(shown, Plan):
+            schema = loaded.manifest.get("schema", "not a plan")
+            raise _fail(f"--fov: {artifact} is {schema}, not a plan (bearnav.plan/2): the camera looks along "
+                        "the plan's field", EXIT_INVALID)  # fmt: skip
+        from bearnav_cli import perception
+
+        seeing = perception.perception_coverage(shown, fov, noise_deg, float("inf") if max_range is None else max_range)
     cells = shown.cells if isinstance(shown, Plan) else shown if isinstance(shown, Cells) else None
     coverage = (composition.coverage_regions(cells, margin=composition.coverage_margin(shown))
                 if cells is not None and cells.is_funnel else None)  # fmt: skip
     fig = plot.figure_for(shown, background=background, title=title, color_by=color_by, barriers=barriers,
-                          labels=labels, cell_numbers=cell_numbers, coverage=coverage)  # fmt: skip
+                          labels=labels, cell_numbers=cell_numbers, coverage=coverage, perception=seeing)  # fmt: skip
     with artifacts.atomic_output(out_path) as tmp:
         plot.save_figure(fig, str(tmp))
+    if seeing is not None:
+        out.print(f"perception: {seeing.summary()}", highlight=False, markup=False, soft_wrap=True)
     out.print(f"wrote {out_path}", highlight=False)
 
 

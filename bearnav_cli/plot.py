@@ -747,7 +747,8 @@ def _plan_title(map_: Map, cells: Cells, plan: Plan | None) -> str:
 
 def figure_for(artifact: Any, *, background: Sequence[Any] = (), title: str | None = None,
                color_by: str | None = None, barriers: bool = False, labels: bool | None = None,
-               cell_numbers: bool = False, arrows: int = 28, coverage: Any = None) -> plt.Figure:  # fmt: skip
+               cell_numbers: bool = False, arrows: int = 28, coverage: Any = None,
+               perception: Any = None) -> plt.Figure:  # fmt: skip
     """A figure with the layers that suit ``artifact``.
 
     Parameters
@@ -774,6 +775,9 @@ def figure_for(artifact: Any, *, background: Sequence[Any] = (), title: str | No
     coverage : CoverageRegions, optional
         :func:`bearnav_cli.composition.coverage_regions` of funnel cells: the uncovered free space
         is hatched (none without it).
+    perception : PerceptionCoverage, optional
+        :func:`bearnav_cli.perception.perception_coverage` of the plan: where the perception rule
+        fails is marked over it (:func:`plot_perception`, without a second copy of the tags).
     """
     if color_by is not None and color_by not in COLOR_BY:
         raise InvalidParamsError(f"must be one of {', '.join(COLOR_BY)}, got {color_by!r}", field="color_by")
@@ -781,7 +785,8 @@ def figure_for(artifact: Any, *, background: Sequence[Any] = (), title: str | No
     plan = artifact if isinstance(artifact, Plan) else None
     cells = plan.cells if plan is not None else artifact if isinstance(artifact, Cells) else None
     default_title = _plan_title(map_, cells, plan) if cells is not None else map_.name
-    fig, ax = _frame(map_, title or default_title, legend_rows=4 if cells is not None else 0)
+    rows = (4 if cells is not None else 0) + (1 if perception is not None else 0)
+    fig, ax = _frame(map_, title or default_title, legend_rows=rows)
     if isinstance(artifact, Simulation):
         plot_sim_background(ax, artifact)
         plot_trajectories(ax, artifact)
@@ -805,6 +810,8 @@ def figure_for(artifact: Any, *, background: Sequence[Any] = (), title: str | No
         plot_tree(ax, cells, nodes=True, lw=0.5, alpha=0.75, color="#2171b5", label="simplified tree")
         if plan is not None and arrows > 0:
             plot_field(ax, plan, arrows=arrows)
+    if perception is not None:
+        plot_perception(ax, perception, landmarks=False, legend=False)
     handles, _ = ax.get_legend_handles_labels()
     handles += map_handles(map_)
     if cells is not None:

@@ -205,3 +205,165 @@ def test_figure_marks_where_the_rule_fails():
     assert any(t == f"tags ({len(cov.landmarks)})" for t in labels)
     assert "map units" in ax.get_xlabel() and "map units" in ax.get_ylabel()
     plt.close(fig)
+
+
+# --------------------------------------------------------------------------- before a plan: any heading (map --fov)
+
+
+@functools.cache
+def random_map(seed: int):
+    return build_map(random_spec(seed, ITERATIONS))
+
+
+def _spec_with_landmarks(seed: int, keep) -> dict:
+    spec = random_spec(seed, ITERATIONS)
+    spec["landmarks"] = [spec["landmarks"][k] for k in keep]
+    return spec
+
+
+def _brute_force(space: FreeSpace, x, lm, fov_deg: float, max_range: float, headings) -> np.ndarray:
+    """Usable noise-free fix at each heading, from scratch: segment sight test, own field of view, eigvalsh."""
+    d = lm - x
+    dist = np.hypot(d[:, 0], d[:, 1])
+    reach = space.visible(np.repeat(x[None], len(lm), axis=0), lm) & (dist <= max_range)
+    theta = np.arctan2(d[:, 1], d[:, 0])
+    beta = d / dist[:, None]
+    proj = np.eye(2)[None] - beta[:, :, None] * beta[:, None, :]
+    out = []
+    for phi in headings:
+        seen = reach & ((np.abs(_wrap(theta - phi)) <= math.radians(fov_deg) / 2 + 1e-12) | (fov_deg >= 360))
+        lam = np.linalg.eigvalsh(proj[seen].sum(axis=0))[0] if seen.sum() >= 2 else 0.0
+        out.append(seen.sum() >= 2 and lam >= 1 - math.cos(math.radians(2.0)))
+    return np.array(out)
+
+
+def _own_critical_headings(space, x, lm, fov_deg, max_range):
+    """Per point, in plain loops: each reachable tag at the arc's clockwise edge, and between-event midpoints."""
+    d = lm - x
+    dist = np.hypot(d[:, 0], d[:, 1])
+    reach = space.visible(np.repeat(x[None], len(lm), axis=0), lm) & (dist <= max_range)
+    half = math.radians(fov_deg) / 2
+    theta = [math.atan2(d[k, 1], d[k, 0]) for k in range(len(lm)) if reach[k]]
+    edges = [t + half for t in theta]
+    events = sorted(((t + s * half) % (2 * math.pi)) for t in theta for s in (-1, 1))
+    mids = [(a + b) / 2 for a, b in zip(events, events[1:] + [events[0] + 2 * math.pi] if events else [], strict=False)]
+    return edges, mids
+
+
+@pytest.mark.parametrize("seed,fov,max_range", [(0, 60.0, math.inf), (1, 200.0, math.inf), (5, 270.0, math.inf),
+                                               (3, 300.0, 3.0)])  # fmt: skip
+def test_heading_coverage_matches_a_brute_force_over_headings(seed, fov, max_range):
+    map_ = random_map(seed)
+    cov = perception.heading_coverage(map_, fov, max_range, spacing=map_.diagonal / CELLS)
+    space = FreeSpace.from_map(map_)
+    lm = map_.landmarks
+    assert np.all(space.points_free(cov.points)) and len(cov.points)
+    assert cov.some.any() and not cov.some.all() and (cov.every.any() or fov < 180)
+    rng = np.random.default_rng(seed)
+    # points of each kind: no heading works, some but not every, every
+    kinds = (~cov.some, cov.some & ~cov.every, cov.every)
+    pick = np.concatenate([rng.permutation(np.flatnonzero(kind))[:12] for kind in kinds])
+    fine = np.linspace(-math.pi, math.pi, 360, endpoint=False)
+    for q in pick:
+        x = cov.points[q]
+        d = lm - x
+        reach = space.visible(np.repeat(x[None], len(lm), axis=0), lm) & (np.hypot(d[:, 0], d[:, 1]) <= max_range)
+        assert cov.reachable_count[q] == reach.sum()
+        on_fine = _brute_force(space, x, lm, fov, max_range, fine)
+        # a sample of headings: at most what some heading gives, at least what every heading gives
+        assert cov.some[q] >= on_fine.any() and cov.every[q] <= on_fine.all(), q
+        edges, mids = _own_critical_headings(space, x, lm, fov, max_range)
+        assert cov.some[q] == _brute_force(space, x, lm, fov, max_range, edges + list(fine)).any(), q
+        if cov.some[q]:
+            assert cov.every[q] == _brute_force(space, x, lm, fov, max_range, mids + list(fine)).all(), q
+    assert np.all(cov.every <= cov.some)  # every heading ⊆ some heading
+    assert cov.fraction_some == pytest.approx(np.mean(cov.some))
+    assert cov.fraction_every == pytest.approx(np.mean(cov.every))
+    assert len(cov.blind) == np.sum(~cov.some) and len(cov.heading_dependent) == np.sum(cov.some & ~cov.every)
+    assert f"{cov.fraction_some:.1%} of F with some heading" in cov.summary()
+
+
+def test_heading_coverage_grows_with_tags_camera_and_range():
+    seed = 2
+    spec = random_spec(seed, ITERATIONS)
+    n = len(spec["landmarks"])
+    maps = [build_map(_spec_with_landmarks(seed, range(k))) for k in (2, n // 2, n)]
+    s = maps[0].diagonal / CELLS
+    for fov in (60.0, 180.0):
+        covs = [perception.heading_coverage(m, fov, spacing=s) for m in maps]
+        for small, big in zip(covs, covs[1:], strict=False):
+            assert np.array_equal(small.points, big.points)  # the grid does not depend on the tags
+            assert np.all(small.some <= big.some) and np.all(small.every <= big.every)
+            assert small.fraction_some <= big.fraction_some and small.fraction_every <= big.fraction_every
+    full = maps[-1]
+    narrow = perception.heading_coverage(full, 60.0, spacing=s)
+    wide = perception.heading_coverage(full, 150.0, spacing=s)
+    short = perception.heading_coverage(full, 60.0, 0.3 * full.diagonal, spacing=s)
+    # a wider camera: every view of the narrow one lies in one of its views, and each of its views holds one
+    assert np.all(narrow.some <= wide.some) and np.all(narrow.every <= wide.every)
+    assert np.all(short.some <= narrow.some) and np.all(short.every <= narrow.every)
+    assert np.all(short.reachable_count <= narrow.reachable_count)
+    assert "range" in short.summary() and "range" not in narrow.summary()
+
+
+@pytest.mark.parametrize("seed", [0, 4])
+def test_at_360_degrees_some_heading_is_every_heading(seed):
+    map_ = random_map(seed)
+    cov = perception.heading_coverage(map_, 360.0, spacing=map_.diagonal / CELLS)
+    assert np.array_equal(cov.some, cov.every) and cov.fraction_some == cov.fraction_every
+    narrow = perception.heading_coverage(map_, 90.0, spacing=map_.diagonal / CELLS)
+    assert np.all(narrow.some <= cov.some) and np.all(narrow.every <= cov.every)
+
+
+def test_two_tags_far_apart_give_a_closed_form():
+    """Two tags: some heading works where both are in sight and 2° ≤ their angle ≤ min(fov, 178°); every, nowhere."""
+    spec = random_spec(1, ITERATIONS)
+    xmin, ymin, xmax, ymax = spec["bounds"]
+    spec["landmarks"] = [[xmin, ymin], [xmax, ymax]]  # two opposite corners
+    map_ = build_map(spec)
+    s = map_.diagonal / CELLS
+    space = FreeSpace.from_map(map_)
+    for fov in (60.0, 120.0, 360.0):
+        cov = perception.heading_coverage(map_, fov, spacing=s)
+        x = cov.points
+        d = map_.landmarks[None] - x[:, None]
+        both = np.all(space.visible(np.repeat(x, 2, axis=0), np.tile(map_.landmarks, (len(x), 1))).reshape(-1, 2),
+                      axis=1)  # fmt: skip
+        u = d / np.linalg.norm(d, axis=2)[..., None]
+        angle = np.degrees(np.arccos(np.clip(np.sum(u[:, 0] * u[:, 1], axis=1), -1, 1)))
+        expected = both & (angle >= 2.0) & (angle <= min(fov, 178.0))
+        clear = (np.abs(angle - 2.0) > 1e-6) & (np.abs(angle - fov) > 1e-6) & (np.abs(angle - 178.0) > 1e-6)
+        assert np.array_equal(cov.some[clear], expected[clear]), fov
+        if fov < 360:
+            assert not cov.every.any()  # some heading looks away from both
+        else:
+            assert np.array_equal(cov.every, cov.some)
+        assert np.all(cov.reachable_count[both] == 2) and np.all(cov.reachable_count[~both] < 2)
+        assert fov < 90 or expected.any()  # from inside the box the corners are at least 90° apart
+
+
+def test_heading_coverage_bounds_the_plans_rule():
+    """The plan's heading is one heading: its rule holds only where some heading works, and wherever every does."""
+    plan = random_plan(3)
+    s = spacing_of(plan)
+    for fov in (60.0, 120.0):
+        along = perception.perception_coverage(plan, fov, 1.0, spacing=s)
+        free = perception.heading_coverage(plan.map, fov, spacing=s)
+        assert np.array_equal(free.points, along.points[along.in_free])  # the same grid over F
+        holds, heading = along.holds[along.in_free], along.heading[along.in_free]
+        assert np.all(holds <= free.some)
+        assert np.all(free.every[~np.isnan(heading)] <= holds[~np.isnan(heading)])
+    default = perception.heading_coverage(plan.map, 60.0)
+    assert default.spacing == pytest.approx(plan.map.diagonal / perception.GRID_CELLS)
+
+
+@pytest.mark.parametrize(
+    "kwargs,field",
+    [({"fov_deg": 0}, "fov"), ({"fov_deg": 400}, "fov"), ({"max_range": -1}, "range"), ({"max_range": 0}, "range"),
+     ({"spacing": 0}, "spacing"), ({"min_spread_deg": 0}, "min_spread_deg")],
+)  # fmt: skip
+def test_heading_coverage_names_a_bad_parameter(kwargs, field):
+    args = {"fov_deg": 60.0, **kwargs}
+    with pytest.raises(InvalidParamsError) as info:
+        perception.heading_coverage(random_map(0), **args)
+    assert info.value.field == field
