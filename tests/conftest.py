@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import copy
+import functools
 import os
 from pathlib import Path
 
@@ -41,6 +42,26 @@ def small_spec() -> dict:
 def build_map(spec: dict, **params) -> map_.Map:
     """Run the map stage on a spec dict."""
     return map_.run(map_.MapSource(spec=spec, file="test.yaml", sha256="0"), map_.Params(**params))
+
+
+@functools.cache
+def random_plan(seed: int):
+    """The plan of ``funnel_maps.random_spec(seed)`` (computed in memory once per test process)."""
+    from bearnav_cli import pipeline
+    from tests.funnel_maps import ITERATIONS, random_spec
+
+    return pipeline.compute(build_map(random_spec(seed, ITERATIONS)))["plan"]
+
+
+@functools.cache
+def tool_plan(seed: int, kind: str):
+    """The plan of the shared random-map tool's map ``seed`` of ``kind`` (skipped without the tool)."""
+    from bearnav_cli import pipeline
+    from tests.funnel_maps import ITERATIONS, load_random_map_tool
+
+    spec, _ = load_random_map_tool().generate(seed, kind)
+    spec.setdefault("params", {})["rrtstar"] = {"iterations": ITERATIONS, "seed": 0}
+    return pipeline.compute(build_map(spec))["plan"]
 
 
 @pytest.fixture

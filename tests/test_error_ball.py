@@ -14,7 +14,6 @@ Properties, on small random maps (tests/funnel_maps.py and the shared random-map
 from __future__ import annotations
 
 import dataclasses
-import functools
 import logging
 import math
 
@@ -22,31 +21,17 @@ import numpy as np
 import pytest
 import shapely
 
-from bearnav_cli import pipeline
 from bearnav_cli.geometry import FreeSpace
 from bearnav_cli.runtime.cell_policy import least_rank_cell, obstacle_clearance
 from bearnav_cli.runtime.plan_arrays import PlanArrays
 from bearnav_cli.runtime.step import ControlSettings, error_ball_pace, steer_clear
 from bearnav_cli.stages import simulate
-from tests.conftest import build_map
-from tests.funnel_maps import ITERATIONS, load_random_map_tool, random_spec
+from tests.conftest import random_plan, tool_plan
 
 
 @pytest.fixture(autouse=True)
 def _quiet(caplog):
     caplog.set_level(logging.ERROR)  # random maps have blind spots: the map stage warns
-
-
-@functools.cache
-def random_plan(seed: int):
-    return pipeline.compute(build_map(random_spec(seed, ITERATIONS)))["plan"]
-
-
-@functools.cache
-def tool_plan(seed: int, kind: str):
-    spec, _ = load_random_map_tool().generate(seed, kind)
-    spec.setdefault("params", {})["rrtstar"] = {"iterations": ITERATIONS, "seed": 0}
-    return pipeline.compute(build_map(spec))["plan"]
 
 
 PLANS = {"random 1": lambda: random_plan(1), "random 4": lambda: random_plan(4),

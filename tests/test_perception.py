@@ -19,13 +19,13 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pytest
 
-from bearnav_cli import perception, pipeline, plot
+from bearnav_cli import perception, plot
 from bearnav_cli.errors import InvalidParamsError
 from bearnav_cli.geometry import FreeSpace
 from bearnav_cli.runtime import cell_policy
 from bearnav_cli.runtime.plan_arrays import PlanArrays
-from tests.conftest import build_map
-from tests.funnel_maps import ITERATIONS, load_random_map_tool, random_spec
+from tests.conftest import build_map, random_plan, tool_plan
+from tests.funnel_maps import ITERATIONS, random_spec
 
 #: Coarser than the default D/100, to keep the file fast; the rule does not depend on it.
 CELLS = 60
@@ -34,18 +34,6 @@ CELLS = 60
 @pytest.fixture(autouse=True)
 def _quiet(caplog):
     caplog.set_level(logging.ERROR)  # random maps have blind spots: the map stage warns
-
-
-@functools.cache
-def random_plan(seed: int):
-    return pipeline.compute(build_map(random_spec(seed, ITERATIONS)))["plan"]
-
-
-@functools.cache
-def tool_plan(seed: int, kind: str):
-    spec, _ = load_random_map_tool().generate(seed, kind)
-    spec.setdefault("params", {})["rrtstar"] = {"iterations": ITERATIONS, "seed": 0}
-    return pipeline.compute(build_map(spec))["plan"]
 
 
 def plans():
