@@ -363,7 +363,9 @@ def control(
     holding = ~est.steer  # no position estimate this step
     scanning, lost, spin, turn, look = look_around(s, state, est, last_dir, heading, arrays)
     direction = np.where(holding[:, None], last_dir, u)
-    velocity = np.where(est.steer, s.speed * pace, s.speed)[:, None] * direction
+    slow = np.where(est.steer, pace, 1.0)  # the error ball's pace, for robots that steer by an estimate
+    within = est.error_bound <= arrays.plan_tolerance + s.tol  # the estimate is good to δ* (§11.4)
+    velocity = (s.speed * slow)[:, None] * direction
     velocity[scanning] = 0.0
     forward, motion = np.zeros(len(cell)), velocity.copy()
     if s.dynamics == "unicycle":
@@ -374,9 +376,8 @@ def control(
             # x̂ turns the field's direction faster than a tight allowance lets the robot follow
             allowed = heading_allowance(arrays, cell, est.x_hat, target)
             if s.keep_clear:
-                allowed = np.where(est.error_bound <= arrays.plan_tolerance + s.tol, allowed, math.pi)
+                allowed = np.where(within, allowed, math.pi)
         forward, turn, motion = unicycle_command(s, direction, heading, holding, scanning, target, turn, allowed)
-        slow = np.where(est.steer, pace, 1.0)
         forward, motion = forward * slow, motion * slow[:, None]
     # the estimate always moves on with the robot's own motion, steering with it or not
     new = ControlState(cell, target, last_dir, est.hold, np.where(est.known[:, None], est.x_hat, state.x_hat), motion,
@@ -384,8 +385,7 @@ def control(
                        np.where(scanning & ~state.scanning, est.hold - s.dt, state.scan_from))  # fmt: skip
     # certified (§11.4): a funnel plan, driven by a certified cell's field (not a straight approach),
     # on an estimate whose error bound is within the plan's tolerance δ*
-    certified = (arrays.funnel & est.steer & (target < 0) & (cell >= 0)
-                 & (est.error_bound <= arrays.plan_tolerance + s.tol))  # fmt: skip
+    certified = arrays.funnel & est.steer & (target < 0) & (cell >= 0) & within
     return ControlOutput(velocity, forward, turn, scanning, new, est.fix, lost, stalled, relocated,
                          np.where(est.steer[:, None], est.x_hat, 0.0), certified, waiting)  # fmt: skip
 
