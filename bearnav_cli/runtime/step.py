@@ -122,10 +122,11 @@ class ControlSettings:
         gives no fix, looks all around; off (the default: it did not do better, docs/choices.md) or
         a camera that sees all around: the revolution at once.
     keep_clear : bool
-        A step the certificate does not cover (error bound above ``δ*``) is taken only while the
-        error ball, grown by the step, stays off the obstacles (:func:`error_ball_clear`); else the
-        robot waits in place for fixes that shrink it (turning to look when it has none). Off:
-        every step is taken.
+        A step the certificate does not cover (error bound above ``δ*``) is slowed so that the
+        error ball, grown by the step, stays off the obstacles (:func:`error_ball_pace`), and bent
+        away from the nearest one as it slows (:func:`steer_clear`); a robot that cannot move at
+        all waits in place for fixes that shrink the ball (turning to look when it has none). Off:
+        every step at full speed.
     """
 
     speed: float
