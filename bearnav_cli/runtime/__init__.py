@@ -48,11 +48,5 @@ def __dir__() -> list[str]:
     return sorted({*globals(), *__all__, *_SUBMODULES})
 
 
-__all__ = [
-    "Controller", "ControlOutput", "ControlSettings", "ControlState", "DYNAMICS", "Detection", "Estimate", "Fix",
-    "Intrinsics", "MEASUREMENTS", "Mount", "Observation", "PlanArrays", "TagMap", "camera", "heading_from_tag",
-    "observe", "RUNTIME_KEYS", "affine_field", "apply_gain", "approach_target", "barrier_values", "bearing",
-    "contains", "control", "displacement", "field", "funnel_update", "fuse", "in_safe_set", "least_rank_cell",
-    "locate", "lyapunov", "measure", "nearest_node", "ring_edges", "segments_clear", "switch", "timing",
-    "tree_costs", "update", "voronoi_owner",
-]  # fmt: skip
+#: Every name of ``_ORIGIN``, and the two submodules the package has always exported.
+__all__ = [*_ORIGIN, "bearing", "camera"]

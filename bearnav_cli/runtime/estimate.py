@@ -104,20 +104,20 @@ def measure(arrays: PlanArrays, s: ControlSettings, bearings: np.ndarray, visibl
         estimate = bearing.reconstruct(bearings, visible, arrays.landmarks, 0, method="lsq",
                                        min_spread=s.min_spread, tol=s.tol)  # fmt: skip
         measured, fix = estimate.x_hat, estimate.usable.copy()
-    at = measured
+    at = measured  # where a fix's variance takes its distances
     if s.measurement != "displacement" and s.bearing_sigma > 0 and fix.any():
         # noisy bearings: the distance-weighted fix (exact bearings give the same point), weighed
         # once at the prediction where there is one, else reweighted from the lsq fix
-        known = np.zeros(r, bool)
-        if prior is not None:
-            known = np.all(np.isfinite(np.asarray(prior, float).reshape(-1, 2)), axis=1)
-        measured, at = measured.copy(), measured.copy()
-        for rows, start, passes in ((fix & known, prior, 1), (fix & ~known, measured, 2)):
+        p = np.full((r, 2), np.nan) if prior is None else np.asarray(prior, float).reshape(-1, 2)
+        known = np.all(np.isfinite(p), axis=1)
+        start = np.where(known[:, None], p, measured)
+        refined = measured.copy()
+        for rows, passes in ((fix & known, 1), (fix & ~known, 2)):
             if rows.any():
-                at[rows] = np.asarray(start, float).reshape(-1, 2)[rows]
-                measured[rows] = bearing.refine_fix(bearings[rows], visible[rows], arrays.landmarks, at[rows], s.tol,
-                                                    iterations=passes)  # fmt: skip
-        at = np.where(known[:, None], at, measured)  # no prediction: the variance at the refined fix
+                refined[rows] = bearing.refine_fix(bearings[rows], visible[rows], arrays.landmarks, start[rows], s.tol,
+                                                   iterations=passes)  # fmt: skip
+        at = np.where(known[:, None], start, refined)  # no prediction: the variance at the refined fix
+        measured = refined
     sigma_fix2 = np.zeros(r)
     if s.bearing_sigma > 0 and fix.any():
         sigma_fix2[fix] = bearing.fix_variance(bearings[fix], visible[fix], arrays.landmarks, at[fix],

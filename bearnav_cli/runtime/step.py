@@ -153,6 +153,11 @@ class ControlSettings:
     look_on_purpose: bool = False
     keep_clear: bool = True
 
+    @property
+    def top_speed(self) -> float:
+        """The robot's full speed (map units / s): ``v_ref`` of the single integrator, or ``α`` of the unicycle."""
+        return self.alpha if self.dynamics == "unicycle" else self.speed
+
     @classmethod
     def for_plan(cls, diagonal: float, tol: float, *, dynamics: str = "single", speed: float = SPEED,
                  alpha: float = ALPHA, dt: float | None = None, bearing_sigma: float = BEARING_SIGMA,
@@ -412,7 +417,7 @@ def error_ball_pace(arrays: PlanArrays, s: ControlSettings, cell: np.ndarray, x_
     arrays : PlanArrays
         The plan: cells, ``plan_tolerance`` (δ*), obstacle edges and ``B_r``.
     s : ControlSettings
-        ``speed`` or ``alpha`` (map units / s), ``dt`` (s) and ``odometry_drift``.
+        ``top_speed`` (map units / s), ``dt`` (s) and ``odometry_drift``.
     cell : ndarray of int, shape (R,)
         Each robot's active cell (``-1`` for none).
     x_hat : ndarray, shape (R, 2)
@@ -433,7 +438,7 @@ def error_ball_pace(arrays: PlanArrays, s: ControlSettings, cell: np.ndarray, x_
     if not arrays.funnel:  # paper plans run as the papers ran them
         return np.ones(len(e)), away
     pace = np.where(e <= arrays.plan_tolerance + s.tol, 1.0, 0.0)
-    step = (s.alpha if s.dynamics == "unicycle" else s.speed) * s.dt * (1.0 + s.odometry_drift)
+    step = s.top_speed * s.dt * (1.0 + s.odometry_drift)
     todo = (pace < 1.0) & np.isfinite(e)
     cell = np.asarray(cell, np.int64).reshape(-1)
     quick = todo & (cell >= 0)

@@ -231,7 +231,7 @@ class Settings:
 
     @property
     def speed(self) -> float:
-        return self.control.alpha if self.control.dynamics == "unicycle" else self.control.speed
+        return self.control.top_speed
 
     @property
     def dt(self) -> float:
