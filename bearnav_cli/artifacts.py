@@ -91,7 +91,7 @@ from bearnav_cli.datatypes import (
     validate_artifact,
 )
 from bearnav_cli.errors import ArtifactError, FolderBusyError, OutputPathError
-from bearnav_cli.runtime.schema import ENTRIES, RETIRED_PLAN_SCHEMA, SCHEMAS, Entry
+from bearnav_cli.runtime.schema import ENTRIES, SCHEMAS, Entry
 
 
 @dataclass(frozen=True)
@@ -143,7 +143,10 @@ KINDS: dict[str, Kind] = {
 #: Schemas of earlier versions, with what to do about a file that has one.
 RETIRED_SCHEMAS = {
     "bearnav.cells/1": "cells without composable certificates; re-run `bearnav plan MAP.yaml --force`",
-    RETIRED_PLAN_SCHEMA: "per-cell certificates only; re-run `bearnav plan MAP.yaml --force` to get bearnav.plan/2",
+    "bearnav.plan/1": "per-cell certificates only; re-run `bearnav plan MAP.yaml --force` to get bearnav.plan/3",
+    "bearnav.cells/2": "one plan-wide exit inset; re-run `bearnav plan MAP.yaml --force` to get bearnav.cells/3",
+    "bearnav.plan/2": "one plan-wide exit inset and δ* of millimetres; re-run `bearnav plan MAP.yaml --force` to get "
+    "bearnav.plan/3 (per-cell insets and usable tolerances τ_c)",
     "bearnav.sim/1": "runs without their loop constants; re-run `bearnav simulate PLAN.npz --force`",
 }
 

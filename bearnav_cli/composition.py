@@ -5,12 +5,14 @@ Every check is finite and exact (shapely polygons, numpy at the vertices, no LP)
 - (C1) each cell lies in ``B_r`` and meets no obstacle;
 - (C2) each cell holds its edge, and ``x_j`` lies strictly inside every row but the exit row;
 - (C3) the exit row is ``−z·x ≤ −z·x_j``;
-- (C4) both ends of the exit face satisfy the parent cell's rows with slack ``≥ δ_e − tol``;
+- (C4) both ends of the exit face satisfy the parent cell's rows with slack ``≥ δ_e,c − tol``
+  (each cell's own inset, ALGORITHMS §12.3), and that least slack is recomputed;
 - the barrier rows are exactly the cell's non-exit rows (so (L1) is about the cell itself), and
   (L1)–(L3) hold at every vertex with ``σ_h ≥ 0`` and ``σ_v > 0`` (:mod:`bearnav_cli.verify`
   recomputes the values; this module checks the signs and the strictness);
-- ranks decrease along every exit; ``δ_c`` and ``δ*`` are recomputed;
-- the coverage ``area(F_m \\ D) / area(F_m)``, and the worst-case time to the goal.
+- ranks decrease along every exit; ``δ_c`` is recomputed, and no stored ``τ_c`` exceeds
+  ``min(δ_c, δ_e,c/2)`` (§12.8);
+- the coverage of ``F`` and of ``F_m`` (§12.7), and the worst-case time to the goal.
 
 :func:`check` returns a :class:`Composition`; its :attr:`Composition.problems` name each failing
 cell and check.
@@ -26,13 +28,12 @@ import numpy as np
 import shapely
 
 from bearnav_cli.datatypes import Cells, Map, Plan, cell_list
-from bearnav_cli.funnel import cell_tolerance, coverage_domain, plan_tolerance_of, reached_parts
+from bearnav_cli.funnel import cell_tolerance, coverage_domain, plan_tolerance_of, reached_parts, usable_tolerances
 from bearnav_cli.geometry import FreeSpace, barrier_margin
 
 __all__ = [
     "Composition", "CoverageRegions", "check", "coverage", "coverage_margin", "coverage_regions", "covered_fraction",
-    "time_bound",
-    "world_violations",
+    "time_bound", "tolerance_by_area", "world_violations",
 ]  # fmt: skip
 
 #: Relative agreement of a recomputed tolerance with the stored one.
@@ -48,15 +49,16 @@ class Composition:
     failures : dict of str to list of int
         For each check that fails somewhere, the cells where it fails (``c1_free``, ``c2_edge``,
         ``c3_exit_row``, ``c4_exit_contained``, ``barrier_rows``, ``l1_barrier``, ``l2_progress``,
-        ``rank``, ``tolerance``).
+        ``rank``, ``tolerance``, ``usable_tolerance``).
     tolerance : ndarray, shape (C,)
         ``δ_c`` recomputed.
     plan_tolerance : float
-        ``δ*`` recomputed.
+        ``min_c τ_c`` recomputed from the recomputed ``δ_c`` and the stored insets.
     coverage : float
         ``area(D ∩ F_m) / area(F_m)`` recomputed (exact polygon areas).
     stored_coverage : float
-        The coverage the plan's cells record (``cells.free_coverage``), to compare with ``coverage``.
+        The coverage the plan's cells record (``cells.free_coverage``, of ``F``), to compare with
+        ``coverage_free``.
     time_bound : float
         The worst-case time to the goal at ``speed`` (s), :func:`time_bound`.
     speed : float
@@ -66,6 +68,17 @@ class Composition:
         recomputed one); :attr:`problems` lists them after the failing checks.
     regions : CoverageRegions or None
         The split of ``F_m`` the coverage was measured on (:func:`coverage_regions`).
+    exit_inset : ndarray, shape (C,)
+        ``δ_e,c`` recomputed: the least slack of each exit face's ends in the parent's rows (map
+        units; NaN for the goal cell).
+    usable_tolerance : ndarray, shape (C,)
+        ``τ_c = min(δ_c, δ_e,c/2)`` from the recomputed ``δ_c`` and the stored insets.
+    coverage_free : float
+        ``area(D ∩ F) / area(F)`` over the reached part of ``F`` (ALGORITHMS §12.7).
+    free_regions : CoverageRegions or None
+        The split of ``F`` that ``coverage_free`` was measured on.
+    usable_by_area : dict
+        :func:`tolerance_by_area` of the recomputed ``τ_c``: minimum, p10, median, p90 (map units).
     """
 
     failures: dict[str, list[int]]
@@ -77,6 +90,11 @@ class Composition:
     speed: float
     notes: list[str] = field(default_factory=list)
     regions: CoverageRegions | None = None
+    exit_inset: np.ndarray | None = None
+    usable_tolerance: np.ndarray | None = None
+    coverage_free: float = math.nan
+    free_regions: CoverageRegions | None = None
+    usable_by_area: dict = field(default_factory=dict)
 
     @property
     def ok(self) -> bool:
@@ -89,12 +107,13 @@ class Composition:
             "c1_free": "(C1) cells not inside B_r or meeting an obstacle",
             "c2_edge": "(C2) cells that do not hold their edge strictly",
             "c3_exit_row": "(C3) cells whose exit row is not −z·x ≤ −z·x_j",
-            "c4_exit_contained": "(C4) cells whose exit face leaves the parent cell eroded by δ_e",
+            "c4_exit_contained": "(C4) cells whose exit face leaves the parent cell eroded by its own inset δ_e,c",
             "barrier_rows": "cells whose barrier rows are not their own non-exit rows",
             "l1_barrier": "(L1) cells with a negative barrier margin",
             "l2_progress": "(L2) cells without a strictly positive progress margin",
             "rank": "cells whose exit does not lead to a smaller rank",
             "tolerance": "cells whose stored tolerance δ_c differs from the recomputed one",
+            "usable_tolerance": "cells whose stored usable tolerance τ_c exceeds min(δ_c, δ_e,c/2)",
         }
         return [f"{len(v)} {words[k]}: {cell_list(v)}" for k, v in self.failures.items() if v] + self.notes
 
@@ -138,10 +157,11 @@ def check(plan: Plan, speed: float, space: FreeSpace | None = None) -> Compositi
     up = _parent_cells(plan)
     failures: dict[str, list[int]] = {k: [] for k in ("c1_free", "c2_edge", "c3_exit_row", "c4_exit_contained",
                                                       "barrier_rows", "l1_barrier", "l2_progress", "rank",
-                                                      "tolerance")}  # fmt: skip
+                                                      "tolerance", "usable_tolerance")}  # fmt: skip
     failures["c1_free"] = world_violations(plan, space)
     tolerance = np.zeros(cells.n_cells)
     inset = cells.exit_inset
+    slack = np.full(cells.n_cells, math.nan)  # δ_e,c recomputed
     for c in range(cells.n_cells):
         A, b = cells.rows(c)
         verts = cells.vertices(c)
@@ -176,7 +196,8 @@ def check(plan: Plan, speed: float, space: FreeSpace | None = None) -> Compositi
             continue
         face = verts[[k, (k + 1) % len(verts)]]
         A_j, b_j = cells.rows(j)
-        if np.min(b_j[None, :] - face @ A_j.T) < inset - 1e3 * tol:
+        slack[c] = float(np.min(b_j[None, :] - face @ A_j.T))
+        if not slack[c] >= inset[c] - 1e3 * tol:
             failures["c4_exit_contained"].append(c)
         sigma_v = -float(np.max(u @ z + plan.c_v[c] * ((verts - x_j) @ z)))
         if not sigma_v > 0:
@@ -187,13 +208,55 @@ def check(plan: Plan, speed: float, space: FreeSpace | None = None) -> Compositi
     stored = np.asarray(plan.tolerance, float)
     off = ~np.isclose(tolerance, stored, rtol=TOLERANCE_RTOL, atol=1e-12)
     failures["tolerance"] = np.flatnonzero(off).tolist()
-    plan_tolerance = plan_tolerance_of(tolerance, inset)
+    # §12.8: no stored τ_c above min(δ_c, δ_e,c/2), with δ_c recomputed and δ_e,c within its slack (C4)
+    usable = usable_tolerances(tolerance, inset)
+    above = ~(np.asarray(plan.usable_tolerance, float) <= usable * (1.0 + TOLERANCE_RTOL) + 1e-12)
+    failures["usable_tolerance"] = np.flatnonzero(above).tolist()
+    plan_tolerance = plan_tolerance_of(usable)
     notes = []
     if not math.isclose(plan_tolerance, plan.plan_tolerance, rel_tol=TOLERANCE_RTOL, abs_tol=1e-12):
-        notes.append(f"stored δ* {plan.plan_tolerance:.6g} differs from the recomputed {plan_tolerance:.6g}")
+        notes.append(f"stored plan tolerance {plan.plan_tolerance:.6g} differs from the recomputed min τ_c "
+                     f"{plan_tolerance:.6g}")  # fmt: skip
     regions = coverage_regions(cells, space, coverage_margin(plan))
+    free_regions = coverage_regions(cells, space, 0.0)
     return Composition(failures, tolerance, plan_tolerance, covered_fraction(regions), float(cells.free_coverage),
-                       time_bound(plan, speed), speed, notes, regions)  # fmt: skip
+                       time_bound(plan, speed), speed, notes, regions, slack, usable, covered_fraction(free_regions),
+                       free_regions, tolerance_by_area(cells, usable))  # fmt: skip
+
+
+#: The quantiles of :func:`tolerance_by_area`, by name.
+AREA_QUANTILES = {"p10": 0.1, "median": 0.5, "p90": 0.9}
+
+
+def tolerance_by_area(cells: Cells, usable: np.ndarray) -> dict[str, float]:
+    """The distribution of ``τ_c`` over ``D`` by area (ALGORITHMS §12.4): its minimum and quantiles, map units.
+
+    Each cell weighs by its own area (a point of several cells counts in each: the policy may
+    use any of them once the robot is in it). Cells without a finite ``τ_c`` are left out.
+
+    Parameters
+    ----------
+    cells : Cells
+        The cells (their polygons give the areas).
+    usable : ndarray, shape (C,)
+        ``τ_c`` of each cell (map units).
+
+    Returns
+    -------
+    dict
+        ``{"min", "p10", "median", "p90"}``; NaN values when no cell has a finite ``τ_c``.
+    """
+    tau = np.asarray(usable, float)
+    keep = np.isfinite(tau)
+    if not keep.any():
+        return {"min": math.nan, **{k: math.nan for k in AREA_QUANTILES}}
+    area = shapely.area(cell_polygons(cells))[keep]
+    order = np.argsort(tau[keep], kind="stable")
+    values, weight = tau[keep][order], np.cumsum(area[order])
+    out = {"min": float(values[0])}
+    for name, q in AREA_QUANTILES.items():
+        out[name] = float(values[min(int(np.searchsorted(weight, q * weight[-1])), len(values) - 1)])
+    return out
 
 
 def world_violations(plan: Plan, space: FreeSpace) -> list[int]:
@@ -268,7 +331,7 @@ def coverage_regions(cells: Cells, space: FreeSpace | None = None, margin: float
     """
     map_ = cells.map
     space = FreeSpace.from_map(map_) if space is None else space
-    margin = coverage_margin(cells) if margin is None else margin
+    margin = coverage_margin(cells) if margin is None else margin  # 0: the regions of F itself
     full = coverage_domain(space.component_of(map_.goal), space.bounds, space.obstacles, margin)
     union = shapely.union_all(cell_polygons(cells))
     domain, unreached = reached_parts(full, union)

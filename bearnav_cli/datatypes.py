@@ -20,6 +20,7 @@ from typing import Any, Callable
 import numpy as np
 
 from bearnav_cli.errors import ArtifactError
+from bearnav_cli.runtime.robot import ROBOT_DEFAULTS, ROBOT_KEYS, robot_parameters
 from bearnav_cli.runtime.schema import ENTRIES
 
 __all__ = [
@@ -346,7 +347,7 @@ class Map:
     bounds : ndarray, shape (4,)
         ``[xmin, ymin, xmax, ymax]`` in map units.
     robot_radius : float
-        Inflation radius ρ already applied to ``obstacles``.
+        The robot's radius ρ (map units); ``obstacles`` are inflated by ``ρ + λ`` (:attr:`planning_radius`).
     goal : ndarray, shape (2,)
         Goal position, the root of every tree.
     starts : ndarray, shape (S, 2)
@@ -356,7 +357,8 @@ class Map:
     landmarks : ndarray, shape (L, 2)
         Landmark positions.
     obstacles : tuple of Polygon
-        Configuration-space obstacles ``O`` (inflated by ``robot_radius``).
+        Configuration-space obstacles ``O`` the cells must avoid: the raw obstacles inflated by
+        :attr:`planning_radius` (``robot_radius``, plus the ``lookahead`` when there is one).
     raw_obstacles : tuple of Polygon
         Obstacles before inflation, used for line of sight.
     params : dict
@@ -367,6 +369,13 @@ class Map:
         Direction each tag's printed face looks toward (rad, counter-clockwise from +x, in
         ``[0, 2π)``); NaN for a free-standing tag seen from every side (the default). Stored to
         1e-9 degree, so that the map JSON (degrees) round-trips it exactly.
+    robot : dict
+        The map's ``robot:`` section (DESIGN §3.4) but its ``radius`` (that is ``robot_radius``):
+        ``lookahead``, ``bearing_error_deg``, ``compass_error_deg``, ``slip``, ``max_turn_rate``
+        and ``reverse``, every one filled in from
+        :data:`~bearnav_cli.runtime.robot.ROBOT_DEFAULTS` (a frozen mapping, as ``params``).
+        ``map.json`` writes only the values that differ from the defaults, and no ``robot`` key
+        when none does, so a map without a robot section keeps its content hash.
     """
 
     name: str
@@ -381,10 +390,17 @@ class Map:
     params: dict = field(default_factory=dict)
     source: dict = field(default_factory=dict)
     landmark_facing: np.ndarray | None = None
+    robot: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "params", freeze(dict(self.params)))
         object.__setattr__(self, "source", freeze(dict(self.source)))
+        given = dict(self.robot or {})
+        unknown = sorted(set(given) - set(ROBOT_KEYS) - {"radius"})
+        if unknown:
+            raise ArtifactError(f"unknown key {unknown[0]!r} (expected one of: {', '.join(ROBOT_KEYS)})",
+                                field="robot")  # fmt: skip
+        object.__setattr__(self, "robot", freeze(robot_parameters(given)))
         object.__setattr__(self, "bounds", frozen_array(self.bounds, float, (4,), "bounds"))
         object.__setattr__(self, "goal", frozen_array(self.goal, float, (2,), "goal"))
         object.__setattr__(self, "starts", frozen_array(self.starts, float, (None, 2), "starts"))
@@ -421,13 +437,24 @@ class Map:
         return 1e-9 * self.diagonal
 
     @property
-    def free_bounds(self) -> np.ndarray:
-        """``B_r``: the bounds shrunk by the robot radius, where the robot's centre may go (ALGORITHMS §11.1).
+    def lookahead(self) -> float:
+        """``λ`` (map units): the plan is made for the point ``λ`` ahead of a unicycle's axle (ALGORITHMS §12.6)."""
+        return float(self.robot["lookahead"])
 
-        The bounds are walls: a robot of radius ρ touches ``∂B`` with its centre on ``∂B_r``.
-        Shape (4,), ``[xmin + ρ, ymin + ρ, xmax − ρ, ymax − ρ]``.
+    @property
+    def planning_radius(self) -> float:
+        """``ρ + λ`` (map units): what ``obstacles`` and :attr:`free_bounds` are inflated and shrunk by."""
+        return float(self.robot_radius) + self.lookahead
+
+    @property
+    def free_bounds(self) -> np.ndarray:
+        """``B_r``: the bounds shrunk by the planning radius, where the planned point may go (ALGORITHMS §11.1).
+
+        The bounds are walls: a robot of radius ρ touches ``∂B`` with its centre on ``∂B_r``; with a
+        look-ahead λ the planned point is ``p`` and ``r = ρ + λ`` (:attr:`planning_radius`).
+        Shape (4,), ``[xmin + r, ymin + r, xmax − r, ymax − r]``.
         """
-        r = max(0.0, float(self.robot_radius))
+        r = max(0.0, self.planning_radius)
         return self.bounds + np.array([r, r, -r, -r])
 
     def to_json(self) -> dict:
@@ -446,7 +473,12 @@ class Map:
             "raw_obstacles": [p.to_json() for p in self.raw_obstacles],
             "params": thaw(self.params),
             "source": thaw(self.source),
+            **({"robot": self.robot_json()} if self.robot_json() else {}),
         }
+
+    def robot_json(self) -> dict:
+        """The ``robot`` object of ``map.json``: the robot parameters that differ from their defaults."""
+        return {key: value for key, value in thaw(self.robot).items() if value != ROBOT_DEFAULTS[key]}
 
     def to_json_text(self) -> str:
         """Canonical JSON text of :meth:`to_json` (sorted keys), as embedded in later artifacts."""
@@ -467,6 +499,7 @@ class Map:
                 raw_obstacles=tuple(Polygon.from_json(p) for p in data["raw_obstacles"]),
                 params=dict(data.get("params", {})),
                 source=dict(data.get("source", {})),
+                robot=dict(data.get("robot", {})),
                 # maps written before tags had a facing: every tag free-standing
                 landmark_facing=np.radians(
                     np.array(
@@ -540,9 +573,25 @@ def _map_bounds_problem(map_: Map) -> str | None:
     xmin, ymin, xmax, ymax = map_.bounds
     if not (xmin < xmax and ymin < ymax):
         return "needs xmin < xmax and ymin < ymax"
-    r = map_.robot_radius
+    r = map_.planning_radius
     if math.isfinite(r) and not (xmax - xmin > 2 * r and ymax - ymin > 2 * r):
         return f"leave no room for a robot of radius {r:g} (B_r is empty)"
+    return None
+
+
+def _map_robot_problem(map_: Map) -> tuple[str, str] | None:
+    """The robot section: finite, zero or positive numbers (angles below 90°, unknown ones None), ``reverse`` a bool."""
+    for key, value in map_.robot.items():
+        if key == "reverse":
+            if not isinstance(value, bool):
+                return key, f"expected true or false, got {value!r}"
+            continue
+        if value is None and ROBOT_DEFAULTS[key] is None:
+            continue
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
+            return key, f"expected a finite number, zero or positive, got {value!r}"
+        if key.endswith("_deg") and value >= 90:
+            return key, f"must be below 90 degrees, got {value:g}"
     return None
 
 
@@ -551,6 +600,8 @@ MAP_INVARIANTS: tuple[Invariant, ...] = (
     Invariant("name", "a non-empty name without path separators", _map_name_problem),
     Invariant("robot_radius", "finite, zero or positive",
               lambda m: _at_least([m.robot_radius], 0.0, "zero or positive")),
+    Invariant("robot", "finite, zero or positive parameters (angles below 90°), reverse true or false",
+              _map_robot_problem),
     Invariant("bounds", "xmin < xmax, ymin < ymax, wider and taller than the robot's diameter", _map_bounds_problem),
     Invariant("obstacles", "simple polygons: rings of 3 or more finite vertices, positive area",
               lambda m: _ring_problem(m.obstacles)),
@@ -757,12 +808,17 @@ class Cells:
         Index of the exit row among each cell's own rows (local, 0-based); ``-1`` for the goal cell.
     cell_rank : ndarray, shape (C,)
         Rank of the switching policy: the cost-to-go of the cell's node (0 for the goal cell).
-    exit_inset : float
-        ``δ_e``: every exit face lies in its parent cell eroded by this (map units; 0 for ``paper``).
+    exit_inset : ndarray, shape (C,)
+        ``δ_e,c``: cell c's exit face lies in its parent cell eroded by this (map units,
+        ALGORITHMS §12.3; 0 for ``paper``); NaN for the goal cell.
     node_added : ndarray of bool, shape (N,)
         Nodes added by densification (ALGORITHMS §11.5), not by the tree stages.
     free_coverage : float
-        ``area(D ∩ F_m) / area(F_m)`` as built (NaN for ``paper``: its cells are not a certified domain).
+        ``area(D) / area(F)`` of the reached part of ``F`` as built (ALGORITHMS §12.7; NaN for
+        ``paper``: its cells are not a certified domain).
+    lookahead : float
+        ``λ`` the cells were built for (map units, ALGORITHMS §12.6): the map's obstacles and
+        walls are inflated by ``ρ + λ``; 0 for a robot that is its own reference point.
     stats : dict
         Statistics for the manifest.
     """
@@ -790,9 +846,10 @@ class Cells:
     certificate: str
     cell_exit_row: np.ndarray
     cell_rank: np.ndarray
-    exit_inset: float
+    exit_inset: np.ndarray
     node_added: np.ndarray
     free_coverage: float
+    lookahead: float = 0.0
     stats: dict = field(default_factory=dict, compare=False)
 
     def __post_init__(self) -> None:
@@ -805,9 +862,9 @@ class Cells:
         if self.certificate not in CERTIFICATES:
             raise ArtifactError(f"must be one of {', '.join(CERTIFICATES)}, got {self.certificate!r}",
                                 field="certificate")  # fmt: skip
-        _freeze(self, "cells", ("cell_exit_row", "cell_rank", "node_added"), dims)
-        put(self, "exit_inset", float(self.exit_inset))
+        _freeze(self, "cells", ("cell_exit_row", "cell_rank", "node_added", "exit_inset"), dims)
         put(self, "free_coverage", float(self.free_coverage))
+        put(self, "lookahead", float(self.lookahead))
         counts = np.diff(self.cell_row_offsets)
         goal = self.parent[self.cell_node] == -1
         if np.any(self.cell_exit_row[goal] != -1) or np.any(
@@ -815,8 +872,14 @@ class Cells:
         ):
             raise ArtifactError("must index one of the cell's rows (-1 exactly for the goal cell)",
                                 field="cell_exit_row")  # fmt: skip
-        if not (np.all(np.isfinite(self.cell_rank)) and math.isfinite(self.exit_inset) and self.exit_inset >= 0):
-            raise ArtifactError("contains NaN, infinity or a negative inset", field="exit_inset")
+        if not np.all(np.isfinite(self.cell_rank)):
+            raise ArtifactError("contains NaN or infinity", field="cell_rank")
+        inset = self.exit_inset
+        if not (np.all(np.isnan(inset[goal])) and np.all(np.isfinite(inset[~goal]) & (inset[~goal] >= 0))):
+            raise ArtifactError("must be finite and zero or positive in every edge cell and NaN in the goal cell",
+                                field="exit_inset")  # fmt: skip
+        if not (math.isfinite(self.lookahead) and self.lookahead >= 0):
+            raise ArtifactError(f"must be finite and zero or positive, got {self.lookahead:g}", field="lookahead")
 
     @property
     def is_funnel(self) -> bool:
@@ -988,9 +1051,14 @@ class Plan:
         Success radius around the goal (map units).
     tolerance : ndarray, shape (C,)
         ``δ_c``, the position error each cell's certificate tolerates (ALGORITHMS §11.4, map
-        units); NaN where none (``paper`` cells).
+        units); ``+inf`` where the field is constant (``M = 0``: its margins do not depend on
+        the position); NaN where none (``paper`` cells).
+    usable_tolerance : ndarray, shape (C,)
+        ``τ_c = min(δ_c, δ_e,c / 2)`` (``δ_c`` in the goal cell), finite in every funnel cell:
+        the error radius under which the runtime may move in cell c (ALGORITHMS §12.3, map
+        units); NaN for ``paper``.
     plan_tolerance : float
-        ``δ* = min(min_c δ_c, δ_e / 2)`` (NaN for ``paper``).
+        ``min_c τ_c`` (NaN for ``paper``).
     stats : dict
         Statistics for the manifest.
     """
@@ -1005,6 +1073,7 @@ class Plan:
     status: np.ndarray
     goal_tolerance: float
     tolerance: np.ndarray
+    usable_tolerance: np.ndarray
     plan_tolerance: float
     stats: dict = field(default_factory=dict, compare=False)
 
@@ -1013,7 +1082,7 @@ class Plan:
         dims = {"C": self.cells.n_cells, "L": len(self.cells.map.landmarks)}
         _freeze(self, "plan", ("gain", "c_h", "c_v", "u_max", "margin_h", "margin_v", "status"), dims)
         object.__setattr__(self, "goal_tolerance", float(self.goal_tolerance))
-        _freeze(self, "plan", ("tolerance",), dims)
+        _freeze(self, "plan", ("tolerance", "usable_tolerance"), dims)
         object.__setattr__(self, "plan_tolerance", float(self.plan_tolerance))
         for name in ("gain", "c_v", "u_max"):
             if not np.all(np.isfinite(getattr(self, name))):
@@ -1041,7 +1110,10 @@ def _goal_tolerance_problem(plan: Plan) -> str | None:
     return None if math.isfinite(value) and value > 0 else f"must be finite and positive, got {value:g}"
 
 
-def _tolerance_problem(values: Any) -> str | None:
+def _tolerance_problem(values: Any, allow_inf: bool = False) -> str | None:
+    values = np.asarray(values, float)
+    if allow_inf:  # +inf is a constant field's δ_c; −inf is never a tolerance
+        values = np.where(values == np.inf, 0.0, values)
     return _at_least(values, 0.0, "zero or positive (or NaN)", allow_nan=True)
 
 
@@ -1053,8 +1125,11 @@ PLAN_INVARIANTS: tuple[Invariant, ...] = (
     Invariant("c_h", "zero or positive, or NaN (no barrier rows)", lambda p: _tolerance_problem(p.c_h)),
     Invariant("margin_h", "finite or NaN", lambda p: _finite_problem(p.margin_h, allow_nan=True)),
     Invariant("margin_v", "finite or NaN", lambda p: _finite_problem(p.margin_v, allow_nan=True)),
-    Invariant("tolerance", "zero or positive, or NaN", lambda p: _tolerance_problem(p.tolerance)),
-    Invariant("plan_tolerance", "zero or positive, or NaN", lambda p: _tolerance_problem([p.plan_tolerance])),
+    Invariant("tolerance", "zero or positive (+inf for a constant field), or NaN",
+              lambda p: _tolerance_problem(p.tolerance, allow_inf=True)),
+    Invariant("usable_tolerance", "finite and zero or positive, or NaN",
+              lambda p: _tolerance_problem(p.usable_tolerance)),
+    Invariant("plan_tolerance", "finite and zero or positive, or NaN", lambda p: _tolerance_problem([p.plan_tolerance])),
 )  # fmt: skip
 
 

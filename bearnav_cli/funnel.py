@@ -22,9 +22,10 @@ import shapely
 from bearnav_cli.geometry import box_polygon, clip, convex_pieces, drop_collinear, polygon_rows
 
 __all__ = [
-    "NECK_ANGLE", "PIECE_BATCH", "ObstaclePieces", "Region", "cell_tolerance", "coverage_domain", "depth",
-    "exit_interval", "exit_row_index", "funnel_region", "inset_walls", "neck_rows", "necked", "plan_tolerance_of",
-    "reached_parts",
+    "INSET_LIMIT", "INSET_SAMPLES", "NECK_ANGLE", "PIECE_BATCH", "NeckChoice", "ObstaclePieces", "Region", "best_neck",
+    "cell_tolerance", "coverage_domain", "depth", "exit_face", "exit_interval", "exit_sink", "exit_row_index",
+    "funnel_region", "inset_walls", "neck_choice", "neck_rows", "necked", "plan_tolerance_of", "reached_parts",
+    "usable_tolerances",
 ]  # fmt: skip
 
 #: ψ of the neck rows: the angle their lines make with the exit direction ``z`` (radians).
@@ -351,6 +352,128 @@ def necked(region: Region, x_i: np.ndarray, x_j: np.ndarray, parent: Region, ins
     return Region(polygon, A, b, exit_row_index(A, b, z, x_j, tol), True)
 
 
+#: Per-cell exit insets (ALGORITHMS §12.4): insets scored per pass, and the largest tried as a fraction of
+#: the exit point's depth in its parent (the face holds ``x_j``, so no inset can exceed that depth).
+INSET_SAMPLES = 24
+INSET_LIMIT = 0.98
+
+
+@dataclass(frozen=True)
+class NeckChoice:
+    """The necked cell of one edge for its chosen exit inset (ALGORITHMS §12.4).
+
+    Attributes
+    ----------
+    region : Region
+        The cell, necked when its exit face had to be narrowed.
+    inset : float
+        ``δ_e,c``: the least slack of the exit face's ends in the parent's rows (map units), at
+        least the inset the neck was built for.
+    sink_depth : float
+        ``h*``: the largest side depth of a point of the exit face (:func:`exit_sink`, map units),
+        twice what Lemma 6's field tolerates.
+    """
+
+    region: Region
+    inset: float
+    sink_depth: float
+
+    @property
+    def usable(self) -> float:
+        """``min(h*/2, δ_e,c/2)``: the ``τ_c`` Lemma 6's field gives this cell (map units)."""
+        return 0.5 * min(self.sink_depth, self.inset)
+
+
+def neck_choice(region: Region, x_i: np.ndarray, x_j: np.ndarray, parent: Region, inset: float,
+                tol: float) -> NeckChoice:  # fmt: skip
+    """``region`` necked for ``inset`` (:func:`necked`), with its actual inset and sink depth."""
+    cell = necked(region, x_i, x_j, parent, inset, tol)
+    z = (x_i - x_j) / math.hypot(*(x_i - x_j))
+    face = exit_face(cell.polygon, z, x_j)
+    slack = float(np.min(parent.b[None, :] - face @ parent.A.T))
+    keep = np.arange(len(cell.b)) != cell.exit_row
+    _, h_star = exit_sink(face, -cell.A[keep], cell.b[keep])
+    return NeckChoice(cell, slack, h_star)
+
+
+def best_neck(region: Region, x_i: np.ndarray, x_j: np.ndarray, parent: Region, tol: float,
+              samples: int = INSET_SAMPLES) -> NeckChoice:  # fmt: skip
+    """The exit inset of one edge cell that maximises ``τ_c = min(h*/2, δ_e,c/2)`` (ALGORITHMS §12.4).
+
+    A larger inset narrows the exit face (its neck) and so lowers ``h*``, while the face's slack
+    in the parent, ``δ_e,c``, grows with it. ``samples`` insets evenly spaced in
+    ``(0, INSET_LIMIT·depth(x_j, parent)]`` are scored at once, then as many again around the
+    best, and the best is built (:func:`neck_choice`; ties: the smaller inset). Scoring needs no
+    clipping: the neck rows pass through the ends ``a, b`` of the eroded parent's chord, so the
+    necked face is the face clipped to ``[a, b]``; along it every row is affine in the position
+    ``t``, so ``h*`` is the largest, over the face's ends and every crossing of two rows, of the
+    least row (a row that the clip makes redundant is never nearer than the boundary). The
+    synthesis never tolerates less than Lemma 6's field, so this ``τ_c`` bounds the plan's
+    from below.
+
+    Parameters
+    ----------
+    region : Region
+        The un-necked cell of the edge ``[x_i, x_j]``.
+    x_i, x_j : ndarray, shape (2,)
+        Child and parent node (map units).
+    parent : Region
+        The parent node's final cell.
+    tol : float
+        Map tolerance (map units).
+    samples : int
+        Insets scored per pass (two passes).
+
+    Returns
+    -------
+    NeckChoice
+    """
+    z = (x_i - x_j) / math.hypot(*(x_i - x_j))
+    w = np.array([-z[1], z[0]])
+    f0, f1 = np.sort((exit_face(region.polygon, z, x_j) - x_j) @ w)
+    keep = np.arange(len(region.b)) != region.exit_row
+    # the region's non-exit rows along the exit line x_j + t·w: h_k(t) = α_k + β_k t
+    alpha = region.b[keep] - region.A[keep] @ x_j
+    beta = -(region.A[keep] @ w)
+    slope, room0 = parent.A @ w, parent.b - parent.A @ x_j
+    up, down = slope > 1e-15, slope < -1e-15
+    cos = math.cos(NECK_ANGLE)
+    pad = 100.0 * tol  # as necked() pads the neck ends
+
+    def usable(insets: np.ndarray) -> np.ndarray:
+        room = room0[None, :] - insets[:, None]  # (K, p): the eroded parent's rows along the line
+        t_b = np.min(np.where(up, room / np.where(up, slope, 1.0), np.inf), axis=1) - pad
+        t_a = np.max(np.where(down, room / np.where(down, slope, 1.0), -np.inf), axis=1) + pad
+        necked_ = ~((t_a - pad <= f0) & (f1 <= t_b + pad))
+        lo, hi = np.where(necked_, np.maximum(f0, t_a), f0), np.where(necked_, np.minimum(f1, t_b), f1)
+        # rows (K, P + 2): the region's, then the necks c(t − t_a) and c(t_b − t) where necked
+        a = np.concatenate([np.broadcast_to(alpha, (len(insets), len(alpha))),
+                            np.where(necked_, -cos * t_a, np.inf)[:, None],
+                            np.where(necked_, cos * t_b, np.inf)[:, None]], axis=1)  # fmt: skip
+        b = np.concatenate([np.broadcast_to(beta, (len(insets), len(beta))),
+                            np.where(necked_, cos, 0.0)[:, None], np.where(necked_, -cos, 0.0)[:, None]], axis=1)  # fmt: skip
+        with np.errstate(divide="ignore", invalid="ignore"):
+            cross = (a[:, None, :] - a[:, :, None]) / (b[:, :, None] - b[:, None, :])  # (K, P+2, P+2)
+        cross = cross.reshape(len(insets), -1)
+        inside = np.isfinite(cross) & (cross > lo[:, None]) & (cross < hi[:, None])
+        t = np.concatenate([lo[:, None], hi[:, None], np.where(inside, cross, lo[:, None])], axis=1)
+        with np.errstate(invalid="ignore"):
+            h_star = np.max(np.min(a[:, None, :] + t[:, :, None] * b[:, None, :], axis=2), axis=1)
+        ends = np.stack([lo, hi], axis=1)  # (K, 2): the face's ends, slack in the parent's rows
+        slack = np.min(room0[None, None, :] - ends[:, :, None] * slope[None, None, :], axis=(1, 2))
+        return np.where(lo < hi, 0.5 * np.minimum(h_star, slack), -np.inf)
+
+    limit = INSET_LIMIT * depth(parent.A, parent.b, x_j)
+    grid = limit * np.arange(1, samples + 1) / samples
+    k = int(np.argmax(usable(grid)))
+    fine = grid[k] + (limit / samples) * np.linspace(-1.0, 1.0, samples + 2)[1:-1]
+    fine = fine[(fine > 0) & (fine <= limit)]
+    both = np.concatenate([grid, fine])
+    scores = usable(both)
+    best = both[np.lexsort((both, -scores))[0]]
+    return neck_choice(region, x_i, x_j, parent, float(best), tol)
+
+
 def depth(A: np.ndarray, b: np.ndarray, point: np.ndarray) -> float:
     """``min_k (b_k − A_k·point)``: how deep a point lies in ``{A x ≤ b}`` (map units; < 0 outside).
 
@@ -490,6 +613,63 @@ def reached_parts(domain: shapely.Geometry, covered: shapely.Geometry) -> tuple[
     return shapely.union_all(parts[met]), shapely.union_all(parts[~met])
 
 
+def exit_sink(face: np.ndarray, normals: np.ndarray, offsets: np.ndarray) -> tuple[np.ndarray, float]:
+    """The sink of Lemma 6 (ALGORITHMS §12.4): the point of the exit face of largest side depth.
+
+    ``h*(x) = min_k (n_k·x + q_k)`` over the cell's non-exit rows is concave and piecewise affine
+    along the face, so its maximum is at an end of the face or where two rows' values cross; every
+    such point is evaluated (exact, no search).
+
+    Parameters
+    ----------
+    face : ndarray, shape (2, 2)
+        The two ends of the exit face ``E_c`` (map units).
+    normals, offsets : ndarray, shapes (h, 2), (h,)
+        The non-exit rows as barriers, ``h_k(x) = n_k·x + q_k ≥ 0`` in the cell (unit normals,
+        so ``h_k`` is the distance to row k's line).
+
+    Returns
+    -------
+    sink : ndarray, shape (2,)
+        ``x*`` on the face (map units).
+    depth : float
+        ``h* = min_k h_k(x*)`` (map units); ``inf`` without rows.
+    """
+    face = np.asarray(face, float).reshape(2, 2)
+    n = np.asarray(normals, float).reshape(-1, 2)
+    if not len(n):
+        return face.mean(axis=0), math.inf
+    alpha = n @ face[0] + np.asarray(offsets, float).reshape(-1)  # h_k at t = 0
+    beta = n @ (face[1] - face[0])  # its slope along t ∈ [0, 1]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        cross = (alpha[None, :] - alpha[:, None]) / (beta[:, None] - beta[None, :])
+    t = np.concatenate([[0.0, 1.0], cross[np.isfinite(cross) & (cross > 0.0) & (cross < 1.0)]])
+    values = np.min(alpha[None, :] + t[:, None] * beta[None, :], axis=1)
+    best = int(np.argmax(values))
+    return face[0] + t[best] * (face[1] - face[0]), float(values[best])
+
+
+def exit_face(vertices: np.ndarray, z: np.ndarray, x_j: np.ndarray) -> np.ndarray:
+    """The two ends of a funnel cell's exit face ``E_c = P_c ∩ {z·(x − x_j) = 0}``, shape (2, 2).
+
+    Parameters
+    ----------
+    vertices : ndarray, shape (p, 2)
+        The cell's CCW vertices (map units); the exit face is one of its edges.
+    z, x_j : ndarray, shape (2,)
+        Unit exit direction into the cell and the exit point (map units).
+
+    Returns
+    -------
+    ndarray, shape (2, 2)
+        The two vertices nearest the exit line, in polygon order.
+    """
+    V = np.asarray(vertices, float).reshape(-1, 2)
+    gap = np.abs((V - x_j) @ z)
+    ends = np.sort(np.argsort(gap, kind="stable")[:2])
+    return V[ends]
+
+
 def cell_tolerance(M: np.ndarray, normals: np.ndarray, sigma_h: np.ndarray, z: np.ndarray | None,
                    sigma_v: float | None) -> float:  # fmt: skip
     """``δ_c = min(min_k σ_h,k / ‖Mᵀn_k‖, σ_v / ‖Mᵀz‖)`` of ALGORITHMS §11.4 (map units).
@@ -528,20 +708,40 @@ def cell_tolerance(M: np.ndarray, normals: np.ndarray, sigma_h: np.ndarray, z: n
         return float(np.min(np.where(gain > 0, sigma / gain, math.inf)))
 
 
-def plan_tolerance_of(tolerance: np.ndarray, exit_inset: float) -> float:
-    """``δ* = min(min_c δ_c, δ_e / 2)`` (ALGORITHMS §11.4), map units.
+def usable_tolerances(tolerance: np.ndarray, exit_inset: np.ndarray) -> np.ndarray:
+    """``τ_c = min(δ_c, δ_e,c / 2)`` of every cell (ALGORITHMS §12.3), shape (C,), map units.
 
     Parameters
     ----------
     tolerance : ndarray, shape (C,)
-        ``δ_c`` of each cell (map units); NaN entries (cells without a certificate) are ignored.
-    exit_inset : float
-        ``δ_e`` (map units).
+        ``δ_c`` of each cell (map units; ``+inf`` for a constant field, NaN without a certificate).
+    exit_inset : ndarray, shape (C,)
+        ``δ_e,c`` of each cell (map units); NaN for the goal cell, which has no exit: there
+        ``τ_c = δ_c``.
+
+    Returns
+    -------
+    ndarray, shape (C,)
+        NaN where ``δ_c`` is NaN.
+    """
+    half = 0.5 * np.asarray(exit_inset, float)
+    return np.fmin(np.asarray(tolerance, float), np.where(np.isnan(half), np.inf, half)) + np.where(
+        np.isnan(tolerance), np.nan, 0.0
+    )
+
+
+def plan_tolerance_of(usable: np.ndarray) -> float:
+    """``min_c τ_c`` over the cells with a tolerance (ALGORITHMS §12.3), map units; NaN when none has one.
+
+    Parameters
+    ----------
+    usable : ndarray, shape (C,)
+        ``τ_c`` of each cell (:func:`usable_tolerances`; NaN entries are ignored).
 
     Returns
     -------
     float
     """
-    finite = np.asarray(tolerance, float)
-    finite = finite[~np.isnan(finite)]
-    return float(min(finite.min(initial=math.inf), 0.5 * exit_inset))
+    values = np.asarray(usable, float)
+    values = values[~np.isnan(values)]
+    return float(values.min()) if len(values) else math.nan

@@ -644,9 +644,11 @@ class VerifyReport:
         certified = int(np.count_nonzero(np.isin(self.status, CERTIFIED))) - len(self.false_certificates)
         comp = self.composition
         if comp is not None:
+            tau = comp.usable_by_area
             text = (f"{certified}/{n} funnel cells certified, composition {'proved' if comp.ok else 'FAILS'}, "
-                    f"{100 * comp.coverage:.1f}% of F_m covered, tolerance δ* = {comp.plan_tolerance:.3g}, "
-                    f"time to goal ≤ {comp.time_bound:.4g} s")  # fmt: skip
+                    f"{100 * comp.coverage_free:.1f}% of F ({100 * comp.coverage:.1f}% of F_m) covered, usable "
+                    f"tolerance τ_c ≥ {comp.plan_tolerance:.3g} (by area: median {tau['median']:.3g}, 10% below "
+                    f"{tau['p10']:.3g}), time to goal ≤ {comp.time_bound:.4g} s")  # fmt: skip
             if self.rollouts is not None and len(self.rollouts):
                 d = self.in_domain
                 ok = self.rollouts.outcome == Outcome.SUCCESS
@@ -736,8 +738,10 @@ class VerifyReport:
             comp = self.composition
             out["composition"] = {
                 "proved": comp.ok, "failures": comp.failures, "problems": comp.problems,
-                "coverage": comp.coverage, "stored_coverage": comp.stored_coverage,
+                "coverage": comp.coverage, "coverage_free": comp.coverage_free,
+                "stored_coverage": comp.stored_coverage,
                 "plan_tolerance": _finite_or_none([comp.plan_tolerance])[0],
+                "usable_tolerance_by_area": comp.usable_by_area,
                 "time_bound_s": _finite_or_none([comp.time_bound])[0], "speed": comp.speed,
             }  # fmt: skip
         if self.world_cells is not None:

@@ -328,7 +328,7 @@ def compare_decompose(m: Prepared, rounds: int) -> dict[str, dict[str, Any]]:
             "s": float(np.median(times[name])),
             "cells": int(cells.n_cells),
             "before": stats.get("free_coverage_before"),
-            "after": stats.get("free_coverage"),
+            "after": stats.get("free_coverage_m"),
             "added": stats.get("added_nodes"),
         }
     return out
@@ -389,7 +389,7 @@ def decompose_text(maps: list[Prepared], skipped: list[str], rounds: int, target
         f"{'s' if rounds > 1 else ''}. *funnel, `max_added_nodes=0`*: the funnel cells of the tree's own edges; "
         f"*funnel (default)*: densified until the cells cover {target:.0%} of F_m (at most {limit} added leaf "
         'nodes), as `bearnav plan` runs it; *paper*: `cells="paper"` (ALGORITHMS §4, no coverage statistics). '
-        "Coverage is `area(F_m ∩ D) / area(F_m)` from `cells.stats` (`free_coverage_before`, `free_coverage`, "
+        "Coverage is `area(F_m ∩ D) / area(F_m)` from `cells.stats` (`free_coverage_before`, `free_coverage_m`, "
         f"`added_nodes`). Random maps from `{RANDOM_MAP.name}` (seeds tried in order per kind: {seeds}; the first "
         "that plans is used)."
     )

@@ -46,7 +46,7 @@ _MAP_ARRAYS = {"bounds": (np.dtype(float), (4,)), "obstacle_edges": (np.dtype(fl
 #: Entries whose shape :meth:`PlanArrays._check_shapes` checks (the rest are checked where they are used).
 _CHECKED_SHAPES = ("landmarks", "nodes", "parent", "cell_node", "cell_A", "cell_b", "cell_row_offsets", "exit_point",
                    "exit_dir", "gain", "u_max", "bounds", "cell_landmarks", "fixed_landmark", "status", "c_h",
-                   "c_v")  # fmt: skip
+                   "c_v", "exit_inset", "usable_tolerance")  # fmt: skip
 
 #: The cell index of :class:`PlanArrays`: at most this many bins along each side of the bounds.
 INDEX_BINS = 32
@@ -128,11 +128,18 @@ class PlanArrays:
         ``δ_c``, the position error each cell's certificate tolerates (map units; NaN for
         ``paper``).
     plan_tolerance : float
-        ``δ* = min(min_c δ_c, δ_e/2)`` (map units): a step whose position error bound is at
-        most this is certified (NaN for ``paper``).
-    exit_inset : float
-        ``δ_e`` (map units): every exit face lies in the parent cell eroded by ``δ_e``
-        (0 for ``paper``).
+        ``min_c τ_c`` (map units): a step whose position error bound is at most this is
+        certified in every cell (NaN for ``paper``).
+    exit_inset : ndarray of float64, shape (C,)
+        ``δ_e,c`` (map units): cell c's exit face lies in its parent cell eroded by ``δ_e,c``
+        (0 for ``paper``, NaN for the goal cell).
+    usable_tolerance : ndarray of float64, shape (C,)
+        ``τ_c = min(δ_c, δ_e,c/2)`` (map units, ALGORITHMS §12.3): a step in cell c whose
+        position error bound is at most this is certified (NaN for ``paper``).
+    lookahead : float
+        ``λ`` (map units, ALGORITHMS §12.6): the cells were built for the point ``λ`` ahead of
+        a unicycle's axle, with the obstacles inflated by ``ρ + λ``; 0 for a robot that is its
+        own reference point.
     robot_radius : float
         ρ (map units): the walls of the straight-line checks are ``B_r``, the bounds less ρ.
     cell_vertices : ndarray of float64, shape (V, 2)
@@ -214,7 +221,9 @@ class PlanArrays:
     cell_rank: np.ndarray
     tolerance: np.ndarray
     plan_tolerance: float
-    exit_inset: float
+    exit_inset: np.ndarray
+    usable_tolerance: np.ndarray
+    lookahead: float
     robot_radius: float
     cell_vertices: np.ndarray
     cell_vertex_offsets: np.ndarray
@@ -343,6 +352,22 @@ class PlanArrays:
         """Whether the plan's cells compose (ALGORITHMS §11): the least-rank policy applies."""
         return self.certificate == "funnel"
 
+    def tolerance_in(self, cell: np.ndarray) -> np.ndarray:
+        """``τ_c`` of each robot's active cell (ALGORITHMS §12.3), shape (R,), map units.
+
+        Parameters
+        ----------
+        cell : ndarray of int, shape (R,)
+            Active cells; ``-1`` (no cell) gets the plan's ``min_c τ_c``.
+
+        Returns
+        -------
+        ndarray, shape (R,)
+            NaN for ``paper`` plans.
+        """
+        cell = np.asarray(cell, np.int64).reshape(-1)
+        return np.where(cell >= 0, self.usable_tolerance[np.maximum(cell, 0)], self.plan_tolerance)
+
     @property
     def goal_cell(self) -> int:
         """The root's cell (no exit; the run ends on success there)."""
@@ -370,9 +395,11 @@ class PlanArrays:
         try:
             with np.load(path, allow_pickle=False) as data:
                 manifest = json.loads(str(data["manifest"][()])) if "manifest" in data.files else {}
-                if isinstance(manifest, dict) and manifest.get("schema") == schema.RETIRED_PLAN_SCHEMA:
-                    raise ArtifactError(f"is a {schema.RETIRED_PLAN_SCHEMA} plan, which this version no longer reads; "
-                                        "re-run `bearnav plan MAP.yaml --force`", file=str(path))  # fmt: skip
+                retired = manifest.get("schema") if isinstance(manifest, dict) else None
+                if retired in schema.RETIRED_PLAN_SCHEMAS:
+                    raise ArtifactError(f"is a {retired} plan, which this version no longer reads; re-run "
+                                        f"`bearnav plan MAP.yaml --force` to get {schema.SCHEMAS['plan']}",
+                                        file=str(path))  # fmt: skip
                 missing = [key for key in (*RUNTIME_KEYS, "map") if key not in data.files]
                 if missing:
                     raise ArtifactError(f"missing entries {', '.join(missing)}", file=str(path))

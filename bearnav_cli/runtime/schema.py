@@ -19,7 +19,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-__all__ = ["DIMENSIONS", "Entry", "ENTRIES", "RETIRED_PLAN_SCHEMA", "RUNTIME_KEYS", "SCHEMAS", "shape_text"]
+__all__ = ["DIMENSIONS", "Entry", "ENTRIES", "RETIRED_PLAN_SCHEMAS", "RUNTIME_KEYS", "SCHEMAS", "shape_text"]
 
 
 class Entry(NamedTuple):
@@ -84,13 +84,13 @@ SCHEMAS: dict[str, str] = {
     "map": "bearnav.map/1",
     "tree": "bearnav.tree/1",
     "simplified": "bearnav.simplified/1",
-    "cells": "bearnav.cells/2",
-    "plan": "bearnav.plan/2",
+    "cells": "bearnav.cells/3",
+    "plan": "bearnav.plan/3",
     "simulation": "bearnav.sim/2",
 }
 
-#: The plan schema this version refuses with a "re-run" message (``artifacts.RETIRED_SCHEMAS`` has the rest).
-RETIRED_PLAN_SCHEMA = "bearnav.plan/1"
+#: The plan schemas this version refuses with a "re-run" message (``artifacts.RETIRED_SCHEMAS`` has the rest).
+RETIRED_PLAN_SCHEMAS = ("bearnav.plan/1", "bearnav.plan/2")
 
 #: What the dimension names of each kind's shapes count.
 DIMENSIONS: dict[str, dict[str, str]] = {
@@ -143,9 +143,13 @@ _CELLS = {
                            "the goal cell"),
     "cell_rank": Entry("f8", ("C",), "rank of the switching policy: the cost-to-go of the cell's node (0 for the goal "
                        "cell); every exit lands in a cell of smaller rank"),
-    "exit_inset": Entry("f8", (), "δ_e: every exit face lies in the parent cell eroded by δ_e (0 for `paper`)"),
+    "exit_inset": Entry("f8", ("C",), "δ_e,c: cell c's exit face lies in its parent cell eroded by δ_e,c (ALGORITHMS "
+                        "§12.3; 0 for `paper`); NaN for the goal cell"),
     "node_added": Entry("bool", ("N",), "nodes added by densification (ALGORITHMS §11.5), not by the tree stages"),
-    "free_coverage": Entry("f8", (), "area(D ∩ F_m)/area(F_m) as built (`verify` recomputes it); NaN for `paper`"),
+    "free_coverage": Entry("f8", (), "area(D)/area(F) of the reached part of F as built (ALGORITHMS §12.7; `verify` "
+                           "recomputes it and that of F_m); NaN for `paper`"),
+    "lookahead": Entry("f8", (), "λ the cells were built for (ALGORITHMS §12.6): the obstacles and walls were inflated "
+                       "by ρ + λ; 0: the robot is its own reference point"),
 }  # fmt: skip
 
 _PLAN = {
@@ -161,8 +165,10 @@ _PLAN = {
                     "failure, 4 goal cell"),
     "goal_tolerance": Entry("f8", (), "success radius around the goal"),
     "tolerance": Entry("f8", ("C",), "δ_c, the position error each cell's certificate tolerates (ALGORITHMS §11.4); "
-                       "NaN where none"),
-    "plan_tolerance": Entry("f8", (), "δ* = min(min_c δ_c, δ_e/2) (NaN for `paper`)"),
+                       "+inf where the field is constant (M = 0); NaN where none"),
+    "usable_tolerance": Entry("f8", ("C",), "τ_c = min(δ_c, δ_e,c/2) (δ_c for the goal cell): the error radius under "
+                              "which the runtime may move in cell c (ALGORITHMS §12.3); NaN for `paper`"),
+    "plan_tolerance": Entry("f8", (), "min_c τ_c (NaN for `paper`)"),
     "landmarks": Entry("f8", ("L", 2), "landmark positions (the embedded map's)"),
 }  # fmt: skip
 
@@ -217,5 +223,6 @@ RUNTIME_KEYS: tuple[str, ...] = (
     "landmarks", "nodes", "parent", "cell_node", "cell_A", "cell_b", "cell_row_offsets", "exit_point",
     "exit_dir", "gain", "u_max", "goal_tolerance", "cell_landmarks", "fixed_landmark", "status",
     "cbf_A", "cbf_b", "cbf_offsets", "certificate", "cell_rank", "tolerance", "plan_tolerance", "exit_inset",
+    "usable_tolerance", "lookahead",
     "cell_vertices", "cell_vertex_offsets", "c_h", "c_v",
 )  # fmt: skip

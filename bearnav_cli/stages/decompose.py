@@ -23,13 +23,15 @@ from bearnav_cli.barriers import cbf_rows, corridor_rows, goal_cbf_rows, wall_ro
 from bearnav_cli.datatypes import CellFlag, Cells, Tree, cell_list
 from bearnav_cli.errors import ArtifactError, InvalidParamsError
 from bearnav_cli.funnel import (
+    INSET_LIMIT,
     ObstaclePieces,
     Region,
+    best_neck,
     coverage_domain,
     depth,
     exit_row_index,
     funnel_region,
-    necked,
+    neck_choice,
     reached_parts,
 )
 from bearnav_cli.geometry import (
@@ -67,9 +69,10 @@ class Params:
         starts each region from the §4.1 cell (bisector rows). ``paper``: the §4 cells with
         per-cell barrier rows, to reproduce the papers (the options below marked *paper* apply).
     exit_inset : float or None
-        ``δ_e`` (funnel): every exit face lies in its parent cell eroded by this (map units);
-        ``None`` means half the barrier margin, capped at half the smallest depth of a node in
-        its own cell.
+        ``δ_e,c`` (funnel): each cell's exit face lies in its parent cell eroded by its own inset
+        (map units, ALGORITHMS §12.4). ``None`` (default): per cell, the inset that maximises
+        ``τ_c = min(h*/2, δ_e,c/2)`` (``funnel.best_neck``); a number: that inset in every cell,
+        capped at 98% of the exit point's depth in its parent cell (warns).
     coverage_target : float
         Funnel: densify until the cells cover this fraction of ``F_m`` (ALGORITHMS §11.5 step 3).
     max_added_nodes : int
@@ -339,7 +342,7 @@ class _Layout:
     cbf: list  # (normals, offsets): h = n·x + q >= 0
     flags: np.ndarray
     node_added: np.ndarray
-    exit_inset: float = 0.0
+    exit_inset: np.ndarray | None = None  # (N,): δ_e,c by node, NaN at the root; None: 0 (paper)
     free_coverage: float = math.nan
     stats: dict | None = None
 
@@ -365,26 +368,31 @@ def _funnel_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) 
         except ValueError as exc:
             raise ArtifactError(f"cell of node {i}: {exc}", field="nodes") from exc
 
+    insets = {}  # δ_e,c of every edge cell, by node
+    capped = []
+
     def neck(region: Region, i: int, j: int) -> Region:
+        # §12.4: the inset that maximises τ_c = min(h*/2, δ_e,c/2), or the one the user fixed
         try:
-            return necked(region, nodes[i], nodes[j], regions[j], inset, tol)
-        except ValueError as exc:  # the inset is capped below every node's depth: a bug
+            if params.exit_inset is None:
+                choice = best_neck(region, nodes[i], nodes[j], regions[j], tol)
+            else:
+                room = INSET_LIMIT * depth(regions[j].A, regions[j].b, nodes[j])
+                if params.exit_inset > room:
+                    capped.append(i)
+                choice = neck_choice(region, nodes[i], nodes[j], regions[j], min(params.exit_inset, room), tol)
+        except ValueError as exc:  # x_j lies inside its parent's cell (C2): a bug
             raise ArtifactError(f"cell of node {i}: {exc}", field="exit_inset") from exc
+        insets[i] = choice.inset
+        return choice.region
 
     goal_start = goal_cell(nodes, free_bounds, tol) if local else None
     regions = [funnel_region(pieces, free_bounds, goal[None, :], margin, tol, goal_start)]
     regions += [region_of(i, int(parent[i]), nodes) for i in range(1, len(nodes))]
-    # δ_e: at most half the smallest depth of a node in its own (un-necked) cell; necks keep that depth
-    depths = np.array([depth(r.A, r.b, nodes[i]) for i, r in enumerate(regions)])
-    cap = 0.5 * float(depths.min())
-    inset = min(0.5 * margin if params.exit_inset is None else params.exit_inset, cap)
-    if params.exit_inset is not None and params.exit_inset > cap:
-        log.warning("exit_inset %.4g capped at %.4g (half the smallest depth of a node in its cell)",
-                    params.exit_inset, cap)  # fmt: skip
     for i in np.argsort(cost, kind="stable")[1:]:  # parents before children: their final cells exist
         regions[i] = neck(regions[i], i, parent[i])
 
-    # coverage of F_m, and densification (§11.5 step 3)
+    # coverage of F_m, and densification (§11.5 step 3); the coverage of F is measured at the end
     free = space.component_of(goal)
     full_domain = coverage_domain(free, free_bounds, space.obstacles, margin)
     covered = shapely.union_all([shapely.Polygon(r.polygon) for r in regions])
@@ -448,6 +456,11 @@ def _funnel_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) 
                     "a smaller decompose.barrier_margin or a wider passage would join it",
                     100 * unreached_area / full_domain.area, unreached_area, 2 * margin)  # fmt: skip
     after = 1.0 - uncovered_area / domain_area if domain_area > 0 else 1.0
+    # plan/3 stores the coverage of F (ALGORITHMS §12.7), over its parts the cells reach
+    covered = shapely.union_all([shapely.Polygon(r.polygon) for r in regions])
+    reached_free, _ = reached_parts(coverage_domain(free, free_bounds, space.obstacles, 0.0), covered)
+    free_after = 1.0 - float(shapely.difference(reached_free, covered).area) / reached_free.area \
+        if reached_free.area > 0 else 1.0  # fmt: skip
     if after < params.coverage_target:
         log.warning(
             "the cells cover %.1f%% of F_m (target %.1f%%): %d pockets no node reaches with clearance%s",
@@ -456,6 +469,10 @@ def _funnel_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) 
             len(unreachable),
             " and the max_added_nodes limit was reached" if len(added) >= params.max_added_nodes else "",
         )
+    if capped:
+        log.warning("exit_inset %.4g capped in %d cells at %.0f%% of their exit point's depth in the parent cell "
+                    "(first: node %d)", params.exit_inset, len(capped), 100 * INSET_LIMIT, capped[0])  # fmt: skip
+    exit_inset = np.array([math.nan] + [insets[i] for i in range(1, len(nodes))])
     cbf = []
     for r in regions:
         keep = np.arange(len(r.b)) != r.exit_row
@@ -463,11 +480,13 @@ def _funnel_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) 
     node_added = np.zeros(len(nodes), bool)
     node_added[len(tree.nodes) :] = True
     stats = {
-        "exit_inset": inset,
+        "exit_inset_min": float(np.min(exit_inset[1:])) if len(nodes) > 1 else None,
+        "exit_inset_median": float(np.median(exit_inset[1:])) if len(nodes) > 1 else None,
         "barrier_margin": margin,  # m of F_m: verify recomputes the coverage with it
         "necked_cells": [i for i, r in enumerate(regions) if r.necked],
         "free_coverage_before": before,
-        "free_coverage": after,
+        "free_coverage_m": after,
+        "free_coverage": free_after,
         "added_nodes": len(added),
         "unreachable_pockets": len(unreachable),
         "uncovered_area": uncovered_area,
@@ -476,7 +495,7 @@ def _funnel_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) 
         "obstacle_pieces": len(pieces),
     }
     return _Layout(nodes, parent, cost, [(r.polygon, r.A, r.b, r.exit_row) for r in regions], cbf,
-                   np.zeros(len(nodes), np.int64), node_added, inset, after, stats)  # fmt: skip
+                   np.zeros(len(nodes), np.int64), node_added, exit_inset, free_after, stats)  # fmt: skip
 
 
 def _seen(points: np.ndarray, cand: np.ndarray, nodes: np.ndarray, reach: FreeSpace, tol: float) -> np.ndarray:
@@ -731,9 +750,10 @@ def run(tree: Tree, params: Params = Params(), progress: Callable[[int, int], No
         certificate="funnel" if funnel else "paper",
         cell_exit_row=np.array([r[3] for r in layout.regions], np.int64),
         cell_rank=layout.cost,
-        exit_inset=layout.exit_inset,
+        exit_inset=np.where(np.arange(n) == 0, math.nan, 0.0) if layout.exit_inset is None else layout.exit_inset,
         node_added=layout.node_added,
         free_coverage=layout.free_coverage,
+        lookahead=getattr(map_, "lookahead", 0.0),
         stats=stats,
     )
 

@@ -41,7 +41,7 @@ from bearnav_cli.cell_lp import (
 )
 from bearnav_cli.datatypes import CellFlag, Cells, CellStatus, Plan
 from bearnav_cli.errors import ArtifactError, InvalidParamsError
-from bearnav_cli.funnel import cell_tolerance, plan_tolerance_of
+from bearnav_cli.funnel import cell_tolerance, exit_face, exit_sink, plan_tolerance_of, usable_tolerances
 from bearnav_cli.lp import LpResult, LpSolver, LpStatus
 
 __all__ = [
@@ -834,20 +834,24 @@ def run(cells: Cells, params: Params = Params(), progress: Callable[[int, int], 
     if cells.is_funnel:
         known = np.array([sol.tolerance for sol in solutions], float)
         delta = cell_tolerances(cells, gain, c_h, c_v, params.u_max, known)
-        plan_tolerance = plan_tolerance_of(delta, cells.exit_inset)
+        usable = usable_tolerances(delta, cells.exit_inset)
+        plan_tolerance = plan_tolerance_of(usable)
         stats["plan_tolerance"] = _json_number(plan_tolerance)
-        stats["tolerance_limited_by"] = int(np.nanargmin(delta)) if np.isfinite(delta).any() else None
+        stats["tolerance_limited_by"] = int(np.nanargmin(usable)) if np.isfinite(usable).any() else None
+        stats["constant_field_cells"] = np.flatnonzero(delta == np.inf).tolist()
+    else:
+        usable = np.full(C, np.nan)
     return Plan(cells=cells, gain=gain, c_h=c_h, c_v=c_v, u_max=np.full(C, params.u_max), margin_h=margin_h,
                 margin_v=margin_v, status=status, goal_tolerance=goal_tolerance, tolerance=delta,
-                plan_tolerance=plan_tolerance, stats=stats)  # fmt: skip
+                usable_tolerance=usable, plan_tolerance=plan_tolerance, stats=stats)  # fmt: skip
 
 
 def more_tolerant(solution: CellSolution, problem: CellProblem, u_max: float,
                   terms: tuple[float, float] | None = None) -> CellSolution:  # fmt: skip
-    """Of a certified funnel cell's LP field and Lemma 4's field, the one with the larger ``δ_c`` (§11.4).
+    """Of a certified funnel cell's LP field and Lemma 6's field, the one with the larger ``δ_c`` (§12.4).
 
     One cell of :func:`more_tolerant_all`; ``terms`` are Lemma 4's ``(min_k h_k(x_j), diam)`` when
-    already computed.
+    already computed (only ``diam`` is read).
     """
     return more_tolerant_all([solution], [problem], u_max, [terms])[0]
 
@@ -856,12 +860,15 @@ def more_tolerant_all(solutions: Sequence[CellSolution], problems: Sequence[Cell
                       terms: Sequence[tuple[float, float] | None] | None = None) -> list[CellSolution]:  # fmt: skip
     """:func:`more_tolerant` of many certified funnel cells at once (every cell's vertices and rows in one pass).
 
-    Lemma 4's field ``u = c(x_j − x) − εz`` with ``c = c_v`` has ``M = cI``, barrier margins at least
-    ``c·h_k(x_j) − ε`` and progress margin ``ε``, so it tolerates ``min(h_min − ε/c, ε/c)``; the best
-    ``ε = c·h_min/2`` (``h_min = min_k h_k(x_j)``), lowered to keep ``|u|_∞ ≤ c·diam + ε ≤ u_max``.
-    Both fields are re-checked at the vertices (the numbers of :func:`field_margins`) and their
-    ``δ_c`` is :func:`bearnav_cli.funnel.cell_tolerance`'s; each returned solution carries the chosen
-    gain, its margins and its ``δ_c``, with the same status and constants.
+    Lemma 6's field (ALGORITHMS §12.4) ``u = c(x* − x) − εz`` with ``c = c_v`` and its sink ``x*``
+    at the point of the exit face of largest side depth ``h*`` (:func:`~bearnav_cli.funnel.exit_sink`)
+    has ``M = cI``, barrier margins at least ``c·h* − ε`` and progress margin ``ε``, so it
+    tolerates ``min(h* − ε/c, ε/c)``; the best ``ε = c·h*/2``, lowered to keep
+    ``|u|_∞ ≤ c·diam + ε ≤ u_max``. Since ``x_j`` lies on the face, ``h* ≥ min_k h_k(x_j)``: it
+    never tolerates less than Lemma 4's field with its sink at ``x_j``. Both fields (the LP's and
+    Lemma 6's) are re-checked at the vertices (the numbers of :func:`field_margins`) and their
+    ``δ_c`` is :func:`bearnav_cli.funnel.cell_tolerance`'s; each returned solution carries the
+    chosen gain, its margins and its ``δ_c``, with the same status and constants.
 
     Parameters
     ----------
@@ -869,7 +876,7 @@ def more_tolerant_all(solutions: Sequence[CellSolution], problems: Sequence[Cell
         Certified funnel edge cells and their problems.
     u_max : float
     terms : sequence of length C, optional
-        Lemma 4's ``(h_min, diam)`` per cell (None: computed).
+        Lemma 4's ``(h_min, diam)`` per cell (None: computed); ``diam`` bounds the field.
 
     Returns
     -------
@@ -880,20 +887,23 @@ def more_tolerant_all(solutions: Sequence[CellSolution], problems: Sequence[Cell
         return []
     terms = [None] * C if terms is None else list(terms)
     terms = [_lemma4_terms(p) if t is None else t for p, t in zip(problems, terms, strict=True)]
-    h_min, diam = np.array(terms, float).T
+    diam = np.array([t[1] for t in terms], float)
+    sinks = [exit_sink(exit_face(p.vertices, p.z, p.x_j), p.cbf_n, p.cbf_q) for p in problems]
+    sink = np.array([x for x, _ in sinks], float).reshape(C, 2)
+    h_star = np.array([h for _, h in sinks], float)
     c_h = np.array([s.c_h for s in solutions], float)
     c = np.array([s.c_v for s in solutions], float)
-    eps = np.minimum(0.5 * c * h_min, 0.5 * (u_max - c * diam))
+    eps = np.minimum(0.5 * c * h_star, 0.5 * (u_max - c * diam))
     z = np.array([p.z for p in problems], float)
     x_j = np.array([p.x_j for p in problems], float)
-    # the two fields u = a − M x of every cell: the LP's (from its gain) and Lemma 4's
+    # the two fields u = a − M x of every cell: the LP's (from its gain) and Lemma 6's
     M = np.empty((2, C, 2, 2))
     a = np.empty((2, C, 2))
     for k, (sol, prob) in enumerate(zip(solutions, problems, strict=True)):
         M[0, k] = sol.K.reshape(2, -1, 2).sum(axis=1)
         a[0, k] = sol.K @ prob.landmarks.ravel()
     M[1] = c[:, None, None] * np.eye(2)
-    a[1] = c[:, None] * x_j - np.where(eps > 0, eps, 0.0)[:, None] * z
+    a[1] = c[:, None] * sink - np.where(eps > 0, eps, 0.0)[:, None] * z
     # ragged vertices and barrier rows, and every (vertex, row) pair of the same cell
     n_v = np.array([len(p.vertices) for p in problems])
     n_h = np.array([len(p.cbf_q) for p in problems])
@@ -938,7 +948,7 @@ def more_tolerant_all(solutions: Sequence[CellSolution], problems: Sequence[Cell
     # the LP's own solution sits on its bounds up to the solver's rounding
     valid = (cbf <= 1e-9 * u_max) & (clf < 0) & (peak - u_max <= 1e-9 * u_max)
     delta = np.where(valid & positive, delta, 0.0)
-    delta[1, ~(eps > 0)] = -np.inf  # Lemma 4's field exists only for ε > 0
+    delta[1, ~(eps > 0)] = -np.inf  # Lemma 6's field exists only for ε > 0
     out = []
     for k, (sol, prob) in enumerate(zip(solutions, problems, strict=True)):
         if not delta[1, k] > delta[0, k]:  # the LP's field, with its margins re-checked here
@@ -1005,8 +1015,10 @@ def summary(plan: Plan) -> str:
              CellStatus.GOAL: "goal"}  # fmt: skip
     text = f"{len(plan.status)} cells: " + ", ".join(f"{counts[s]} {words[s]}" for s in CellStatus)
     if plan.cells.is_funnel:
-        text += f"; funnel certificate, tolerance δ* = {plan.plan_tolerance:.3g}"
-        text += f", {100 * plan.cells.free_coverage:.1f}% of F_m covered"
+        finite = plan.usable_tolerance[np.isfinite(plan.usable_tolerance)]
+        median = float(np.median(finite)) if len(finite) else math.nan
+        text += f"; funnel certificate, usable tolerance τ_c ≥ {plan.plan_tolerance:.3g} (median {median:.3g})"
+        text += f", {100 * plan.cells.free_coverage:.1f}% of F covered"
     flags = plan.cells.cell_flags
     flagged = int(np.count_nonzero(flags))
     if flagged:
