@@ -219,6 +219,9 @@ def check(plan: Plan, speed: float, space: FreeSpace | None = None) -> Compositi
                      f"{plan_tolerance:.6g}")  # fmt: skip
     regions = coverage_regions(cells, space, coverage_margin(plan))
     free_regions = coverage_regions(cells, space, 0.0)
+    if not math.isclose(covered_fraction(free_regions), float(cells.free_coverage), rel_tol=1e-6, abs_tol=1e-9):
+        notes.append(f"stored coverage of F {cells.free_coverage:.6g} differs from the recomputed "
+                     f"{covered_fraction(free_regions):.6g}")  # fmt: skip
     return Composition(failures, tolerance, plan_tolerance, covered_fraction(regions), float(cells.free_coverage),
                        time_bound(plan, speed), speed, notes, regions, slack, usable, covered_fraction(free_regions),
                        free_regions, tolerance_by_area(cells, usable))  # fmt: skip

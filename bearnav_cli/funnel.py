@@ -386,7 +386,25 @@ class NeckChoice:
 
 def neck_choice(region: Region, x_i: np.ndarray, x_j: np.ndarray, parent: Region, inset: float,
                 tol: float) -> NeckChoice:  # fmt: skip
-    """``region`` necked for ``inset`` (:func:`necked`), with its actual inset and sink depth."""
+    """``region`` necked for ``inset`` (:func:`necked`), with its actual inset and sink depth.
+
+    Parameters
+    ----------
+    region : Region
+        The un-necked cell of the edge ``[x_i, x_j]``.
+    x_i, x_j : ndarray, shape (2,)
+        Child and parent node (map units).
+    parent : Region
+        The parent node's final cell.
+    inset : float
+        The inset the neck is built for (map units), below the depth of ``x_j`` in ``parent``.
+    tol : float
+        Map tolerance (map units).
+
+    Returns
+    -------
+    NeckChoice
+    """
     cell = necked(region, x_i, x_j, parent, inset, tol)
     z = (x_i - x_j) / math.hypot(*(x_i - x_j))
     face = exit_face(cell.polygon, z, x_j)

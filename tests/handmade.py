@@ -62,7 +62,7 @@ def first_cells(cells: Cells, count: int) -> Cells:
         cbf_offsets=cells.cbf_offsets[: count + 1], cell_landmarks=cells.cell_landmarks[:count],
         fixed_landmark=cells.fixed_landmark[:count], s_min=cells.s_min[:count], s_max=cells.s_max[:count],
         cell_flags=cells.cell_flags[:count], cell_exit_row=cells.cell_exit_row[:count],
-        cell_rank=cells.cell_rank[:count],
+        cell_rank=cells.cell_rank[:count], exit_inset=cells.exit_inset[:count],
     )  # fmt: skip
 
 
@@ -180,7 +180,7 @@ def hand_plan(
             [-1 if parent[c] < 0 else paper_exit_row(*rows[c], exit_dir[c], exit_point[c]) for c in range(n)], np.int64
         ),  # fmt: skip
         cell_rank=tree_costs(nodes, parent),
-        exit_inset=0.0,
+        exit_inset=np.where(parent < 0, np.nan, 0.0),
         node_added=np.zeros(n, bool),
         free_coverage=np.nan,
     )
@@ -195,6 +195,7 @@ def hand_plan(
         status=status,
         goal_tolerance=0.01 * map_.diagonal,
         tolerance=np.full(n, np.nan),
+        usable_tolerance=np.full(n, np.nan),
         plan_tolerance=np.nan,
     )
 

@@ -78,7 +78,7 @@ def test_pace_never_lets_the_error_ball_reach_an_obstacle(name):
     assert np.all((pace >= 0.0) & (pace <= 1.0))
     assert np.all(pace[::7] == 1.0)  # the certificate covers them: full speed
     step = s.alpha * s.dt * (1.0 + s.odometry_drift)
-    uncertified = e > arrays.plan_tolerance + s.tol
+    uncertified = e > arrays.tolerance_in(cell) + s.tol  # each cell's own τ_c (ALGORITHMS §12.3)
     moving = uncertified & (pace > 0)
     assert moving.any() and (uncertified & (pace == 0)).any() and (uncertified & (pace < 1) & (pace > 0)).any()
     # the ball of every position the robot can reach this step is free

@@ -279,7 +279,11 @@ def check_exits_and_ranks(plan) -> None:
         face = exit_face(v, z, x_j, 1e-9 * D)
         A_j, b_j = unit_rows(cells.vertices(j))
         slack = np.min(b_j[None, :] - face @ A_j.T)
-        assert slack >= inset - 1e-9 * D, f"cell {c}: exit face {slack:.3g} deep in its parent {j}, inset {inset:.3g}"
+        assert slack >= inset[c] - 1e-9 * D, (
+            f"cell {c}: exit face {slack:.3g} deep in its parent {j}, inset {inset[c]:.3g}"
+        )
+        # §12.3: the stored usable tolerance is within both of its bounds
+        assert plan.usable_tolerance[c] <= min(plan.tolerance[c], 0.5 * inset[c]) * (1 + 1e-12)
         assert cells.cell_rank[j] < cells.cell_rank[c], f"rank does not decrease from cell {c} to {j}"
 
 
@@ -522,15 +526,15 @@ def test_densification():
     assert np.all(dense.parent[added] < added)  # each leaf hangs from an earlier node
     before, after = own_coverage(bare, map_), own_coverage(dense, map_)
     assert after >= before
-    assert before == pytest.approx(bare.free_coverage, abs=1e-9)
+    assert before == pytest.approx(bare.stats["free_coverage_m"], abs=1e-9)
     assert before == pytest.approx(dense.stats["free_coverage_before"], abs=1e-9)
-    assert after == pytest.approx(dense.free_coverage, abs=1e-9)
+    assert after == pytest.approx(dense.stats["free_coverage_m"], abs=1e-9)
     assert after >= decompose.Params().coverage_target or len(added) == decompose.Params().max_added_nodes
     space = FreeSpace.from_map(map_)
     assert space.segments_free(dense.nodes[added], dense.nodes[dense.parent[added]]).all()
     capped = decompose.run(tree, decompose.Params(max_added_nodes=3))
     assert np.count_nonzero(capped.node_added) == min(3, len(added))
-    assert bare.free_coverage <= capped.free_coverage <= dense.free_coverage
+    assert bare.stats["free_coverage_m"] <= capped.stats["free_coverage_m"] <= dense.stats["free_coverage_m"]
     clear = space.with_clearance(space.planning_clearance(None, map_.goal, map_.diagonal))
     assert clear.segments_free(dense.nodes[added], dense.nodes[dense.parent[added]]).all()
     # ranks of the new leaves are their route lengths
@@ -550,7 +554,7 @@ def test_densification_reaches_target_when_pocket_is_reachable():
     cells = decompose.run(tree)
     # this map's big pocket is reached from points other than its pole (ALGORITHMS §11.5 step 3)
     assert len(np.flatnonzero(cells.node_added)) < decompose.Params().max_added_nodes
-    assert cells.free_coverage >= decompose.Params().coverage_target
+    assert cells.stats["free_coverage_m"] >= decompose.Params().coverage_target
 
 
 @pytest.mark.parametrize("map_seed", [1, 6, 11])
@@ -595,13 +599,13 @@ def test_free_space_behind_a_passage_narrower_than_2m_is_reported_not_covered(ca
     assert not any(shapely.Polygon(cells.vertices(c)).intersects(far) for c in range(cells.n_cells))
     assert cells.stats["unreached_area"] == pytest.approx(full.area - cells.stats["coverage_domain_area"], rel=1e-9)
     assert cells.stats["unreached_area"] >= far.area
-    assert cells.free_coverage >= decompose.Params().coverage_target
+    assert cells.stats["free_coverage_m"] >= decompose.Params().coverage_target
     assert "cut off from every cell by passages narrower than 2m" in caplog.text
     regions = composition.coverage_regions(cells, space)
     assert regions.unreached.area == pytest.approx(cells.stats["unreached_area"], rel=1e-9)
     assert shapely.difference(far, regions.unreached).area <= 1e-9 * far.area
     report = composition.check(plan, SPEED)
-    assert report.ok and report.coverage == pytest.approx(cells.free_coverage, rel=1e-9)
+    assert report.ok and report.coverage == pytest.approx(cells.stats["free_coverage_m"], rel=1e-9)
 
 
 @pytest.mark.parametrize("map_seed", [1, 4])
@@ -652,7 +656,7 @@ def test_verify_recomputes_coverage_with_the_margin_decompose_used():
     assert composition.coverage_margin(plan) == pytest.approx(margin)
     report = composition.check(plan, SPEED)
     assert report.ok, report.problems
-    assert report.coverage == pytest.approx(cells.free_coverage, rel=1e-9)
+    assert report.coverage == pytest.approx(cells.stats["free_coverage_m"], rel=1e-9)
     # and the default margin gives another F_m, so the test can tell them apart
     default = composition.coverage_regions(cells, margin=DEFAULT_CLEARANCE * map_.diagonal)
     assert default.domain.area != pytest.approx(composition.coverage_regions(cells).domain.area, rel=1e-6)

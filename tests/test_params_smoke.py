@@ -61,11 +61,6 @@ WITH = {
 SKIPPED = {("simulate", "camera", "render")}
 #: Real bugs these cases found (reported, not fixed here): (stage, field, value) -> the reason.
 XFAIL: dict[tuple[str, str, object], tuple[str, type[Exception]]] = {
-    ("decompose", "cells", "funnel-local"): (
-        "synthesize certifies funnel-local cell 31 of this map (status 0) with tolerance δ_c = inf: plan.npz fails "
-        "its own invariant 'tolerance: zero or positive, or NaN' (bearnav plan would stop with an InternalError)",
-        ArtifactError,
-    ),
     ("decompose", "bisector_rule", "parent"): (
         "cells=paper, bisector_rule=parent: on this tree the rule cuts an exit face away, and decompose refuses it "
         "with a one-line InvalidParamsError naming the cell (it used to be a bare ValueError, an internal error); "

@@ -81,7 +81,8 @@ def test_every_node_needs_a_cell(chain):
     with pytest.raises(ArtifactError, match="exactly one cell"):
         PlanArrays.from_plan(
             Plan(fewer, chain.gain[:2], chain.c_h[:2], chain.c_v[:2], chain.u_max[:2], chain.margin_h[:2],
-                 chain.margin_v[:2], chain.status[:2], chain.goal_tolerance, chain.tolerance[:2], chain.plan_tolerance)
+                 chain.margin_v[:2], chain.status[:2], chain.goal_tolerance, chain.tolerance[:2],
+                 chain.usable_tolerance[:2], chain.plan_tolerance)
         )  # fmt: skip
 
 

@@ -242,7 +242,7 @@ def test_bad_simulate_input_is_one_line_and_exit_3(plans, tmp_path, args, field)
 def test_simulate_refuses_a_plan_of_the_wrong_schema(plans, tmp_path):
     _, path = plans["kitchen"]
     result = CliRunner().invoke(app, ["simulate", str(path.with_name("tree.npz"))])
-    assert result.exit_code == 3 and "expected bearnav.plan/2" in result.output
+    assert result.exit_code == 3 and "expected bearnav.plan/3" in result.output
 
 
 def test_simulate_cli_table_json_and_exit_code(plans, tmp_path):

@@ -111,7 +111,7 @@ def test_removing_a_cell_makes_coverage_fail(chain):
     fewer = first_cells(chain.cells, 2)
     plan = Plan(fewer, chain.gain[:2], chain.c_h[:2], chain.c_v[:2], chain.u_max[:2], chain.margin_h[:2],
                 chain.margin_v[:2], chain.status[:2], chain.goal_tolerance, chain.tolerance[:2],
-                chain.plan_tolerance)  # fmt: skip
+                chain.usable_tolerance[:2], chain.plan_tolerance)  # fmt: skip
     report = verify.run(plan, FAST)
     assert report.failed and not report.geometry.coverage_ok
     assert report.geometry.uncovered_area == pytest.approx(3.0 * 8.0)  # cell 2 alone held 7 ≤ x ≤ 10
@@ -301,9 +301,12 @@ def _small_funnel_plan() -> Plan:
 
 
 def test_the_unicycle_closed_loop_from_the_certified_domain_has_no_collision_and_no_breach():
-    """``dynamics="unicycle"`` (displacements, exact motion, certified_heading): every run from D reaches
-    the goal, every one of its steps is certified and every true position lies in some cell of D."""
-    plan = _small_funnel_plan()
+    """``dynamics="unicycle"`` on a plan with a look-ahead (displacements, exact motion, ALGORITHMS §12.6):
+    every run from D reaches the goal, every one of its steps is certified and every true position of
+    its look-ahead point lies in some cell of D."""
+    from tests.test_lookahead import lookahead_plan
+
+    plan = lookahead_plan()
     report = verify.run(plan, verify.Params(n_starts=300, dynamics="unicycle"))
     assert report.rollouts is not None and report.in_domain.sum() > 200
     assert report.breaches is not None and not report.breaches.any()

@@ -892,8 +892,13 @@ def more_tolerant_all(solutions: Sequence[CellSolution], problems: Sequence[Cell
     sink = np.array([x for x, _ in sinks], float).reshape(C, 2)
     h_star = np.array([h for _, h in sinks], float)
     c_h = np.array([s.c_h for s in solutions], float)
-    c = np.array([s.c_v for s in solutions], float)
+    c_lp = np.array([s.c_v for s in solutions], float)
+    # Lemma 6 takes c ≤ c_v ≤ c_h, and c_v only sets the time bound: lower both where the input
+    # box binds (c·diam + ε ≤ u_max with ε = c·h*/2 needs c ≤ u_max/(diam + h*/2)), so that
+    # δ_c = h*/2 (the certificate of that field is stated with c_v = c)
+    c = np.minimum(c_lp, (1.0 - 1e-9) * u_max / (diam + h_star))
     eps = np.minimum(0.5 * c * h_star, 0.5 * (u_max - c * diam))
+    c_v = np.stack([c_lp, c])  # (2, C): the constant (L2) is checked with, per field
     z = np.array([p.z for p in problems], float)
     x_j = np.array([p.x_j for p in problems], float)
     # the two fields u = a − M x of every cell: the LP's (from its gain) and Lemma 6's
@@ -927,7 +932,7 @@ def more_tolerant_all(solutions: Sequence[CellSolution], problems: Sequence[Cell
         np.maximum.at(cbf, (slice(None), h_cell), row_max)
     clf = np.full((2, C), -np.inf)
     np.maximum.at(clf, (slice(None), v_cell), np.einsum("fpi,pi->fp", U, z[v_cell])
-                  + c[v_cell] * np.einsum("pi,pi->p", V - x_j[v_cell], z[v_cell]))  # fmt: skip
+                  + c_v[:, v_cell] * np.einsum("pi,pi->p", V - x_j[v_cell], z[v_cell]))  # fmt: skip
     peak = np.zeros((2, C))
     np.maximum.at(peak, (slice(None), v_cell), np.abs(U).max(axis=2))
     # δ_c = min over the barrier rows and the exit direction of margin / ‖Mᵀn‖ (funnel.cell_tolerance)
@@ -955,7 +960,7 @@ def more_tolerant_all(solutions: Sequence[CellSolution], problems: Sequence[Cell
             out.append(dataclasses.replace(sol, margin_h=float(cbf[0, k]) if n_h[k] else math.nan,
                                            margin_v=float(clf[0, k]), tolerance=float(delta[0, k])))  # fmt: skip
             continue
-        out.append(dataclasses.replace(sol, K=min_norm_gain(M[1, k], a[1, k], prob.landmarks),
+        out.append(dataclasses.replace(sol, K=min_norm_gain(M[1, k], a[1, k], prob.landmarks), c_v=float(c[k]),
                                        margin_h=float(cbf[1, k]) if n_h[k] else math.nan,
                                        margin_v=float(clf[1, k]), tolerance=float(delta[1, k])))  # fmt: skip
     return out
