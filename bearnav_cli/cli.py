@@ -368,8 +368,13 @@ def read_map_source(
     landmarks: Optional[List[str]] = None,
     starts: Optional[List[str]] = None,
     robot_radius: Optional[float] = None,
+    lookahead: Optional[float] = None,
 ) -> "MapSource":
-    """Read a bearnav map YAML (or a bare ROS map_server YAML plus options) into a MapSource."""
+    """Read a bearnav map YAML (or a bare ROS map_server YAML plus options) into a MapSource.
+
+    ``lookahead`` (``--lookahead``, any map) overrides the map's ``robot.lookahead``; like the bare
+    grid's options it is part of the input hash, so another value reruns the map stage.
+    """
     import hashlib
 
     from bearnav_cli.stages.map_ import MapSource
@@ -399,10 +404,15 @@ def read_map_source(
         spec["starts"] = [_pair(text, "--start") for text in starts or []]
         if robot_radius is not None:
             spec["robot_radius"] = robot_radius
+        if lookahead is not None:
+            spec["robot"] = {"lookahead": lookahead}
         # the options are part of the input: other options must make the map stage rerun
         blobs.append(json.dumps(spec, sort_keys=True).encode())
     else:
         spec.setdefault("name", path.stem)
+        if lookahead is not None and isinstance(spec.get("robot") or {}, dict):  # else the map stage names it
+            spec["robot"] = {**(spec.get("robot") or {}), "lookahead": lookahead}
+            blobs.append(json.dumps({"--lookahead": lookahead}).encode())
         if "occupancy" in spec:
             if not isinstance(spec["occupancy"], str):
                 raise InvalidMapError("expected a file name", file=str(path), field="occupancy")
@@ -837,6 +847,10 @@ MAP_ARG = typer.Argument(..., metavar="MAP", help="Map YAML (bearnav format, or 
 FORCE = typer.Option(False, "--force", help="Rerun even if the output is fresh.")
 QUIET = typer.Option(False, "--quiet", "-q", help="No progress bars or warnings.")
 JSON = typer.Option(False, "--json", help="Print machine-readable JSON.")
+LOOKAHEAD = typer.Option(
+    None, metavar="λ", help="Look-ahead λ, map units (any map; overrides the map's robot.lookahead): plan for the "
+    "point λ ahead of a unicycle's axle, obstacles inflated by the radius plus λ (docs/maps.md)."
+)  # fmt: skip
 
 
 #: The option of each field a camera check names (``perception.check_params``, ``bearing.check_camera``).
@@ -864,6 +878,7 @@ def map_command(
     landmark: Optional[List[str]] = typer.Option(None, help="Landmark X,Y, repeatable (bare grids only)."),
     start: Optional[List[str]] = typer.Option(None, help="Start X,Y, repeatable (bare grids only)."),
     robot_radius: Optional[float] = typer.Option(None, help="Robot radius (bare grids only)."),
+    lookahead: Optional[float] = LOOKAHEAD,
     fov: Optional[float] = typer.Option(
         None, "--fov", help="Also report where a camera of this field of view (degrees, (0, 360]) can fix itself."
     ),
@@ -887,7 +902,7 @@ def map_command(
     if fov is not None:  # checked before anything is written
         _check_camera(fov, 0.0, max_range)
     goal_xy = _pair(goal, "--goal") if goal else None
-    src = read_map_source(source, goal_xy, landmark, start, robot_radius)
+    src = read_map_source(source, goal_xy, landmark, start, robot_radius, lookahead)
     target = out_path or Path("plans") / str(src.spec.get("name", source.stem)) / "map.json"
     report = pipeline.run_map(src, target, options, force)
     seeing = None
@@ -1212,6 +1227,7 @@ def plan_command(
         None, metavar="X,Y", help="Start X,Y, map units, repeatable (bare grids only)."
     ),
     robot_radius: Optional[float] = typer.Option(None, help="Robot radius, map units (bare grids only; 0)."),
+    lookahead: Optional[float] = LOOKAHEAD,
     force: bool = FORCE,
     quiet: bool = QUIET,
     as_json: bool = JSON,
@@ -1231,6 +1247,7 @@ def plan_command(
     if cells is not None and cells not in CELL_KINDS:  # before any stage runs
         raise _fail(f"--cells: must be one of {', '.join(CELL_KINDS)}, got {cells!r}", EXIT_INVALID)
     map_options = {"--goal": goal, "--landmark": landmark, "--start": start, "--robot-radius": robot_radius,
+                   "--lookahead": lookahead,
                    **{_option_name("map", name): options[name] for name in PLAN_OPTIONS["map"]}}  # fmt: skip
     overrides = {stage: {name: options[name] for name in names} for stage, names in PLAN_OPTIONS.items()}
     if source.is_dir():
@@ -1246,7 +1263,7 @@ def plan_command(
         target = out_dir or source.parent
     else:
         goal_xy = _pair(goal, "--goal") if goal else None
-        src = read_map_source(source, goal_xy, landmark, start, robot_radius)
+        src = read_map_source(source, goal_xy, landmark, start, robot_radius, lookahead)
         target = out_dir or Path("plans") / str(src.spec.get("name", source.stem))
 
     def show(report: pipeline.StageReport) -> None:
@@ -1359,7 +1376,10 @@ def _inspect_cell(path: Path, artifact: Any, c: int, as_json: bool) -> None:
     if plan is not None:
         status = CellStatus(int(plan.status[c]))
         tol = float(plan.tolerance[c])
+        usable, inset = float(plan.usable_tolerance[c]), float(cells.exit_inset[c])
         info.update(status=status.name.lower(), status_code=int(status), tolerance=None if np.isnan(tol) else tol,
+                    usable_tolerance=None if np.isnan(usable) else usable,
+                    exit_inset=None if np.isnan(inset) else inset,
                     margin_h=float(plan.margin_h[c]), margin_v=float(plan.margin_v[c]))  # fmt: skip
     if as_json:
         out.print_json(json.dumps(info))
@@ -1376,6 +1396,11 @@ def _inspect_cell(path: Path, artifact: Any, c: int, as_json: bool) -> None:
     if plan is not None:
         tol_text = "none" if info["tolerance"] is None else f"{info['tolerance']:.4g} map units"
         lines.append(f"status    {info['status_code']} {info['status']}; δ_c (position error tolerated) {tol_text}")
+        if info["usable_tolerance"] is not None:
+            inset = info["exit_inset"]
+            inset_text = "no exit (goal cell)" if inset is None else f"exit inset δ_e,c {inset:.4g}"
+            lines.append(f"tolerance τ_c = min(δ_c, δ_e,c/2) = {info['usable_tolerance']:.4g} map units, the error "
+                         f"under which the robot may move here; {inset_text}")  # fmt: skip
     lines.append(f"vertices  {len(vertices)}, CCW: " + " ".join(point(p) for p in vertices))
     lines.append(f"rows      {len(A)}, the cell is {{x : a·x ≤ b}}; the exit row is {info['exit_row']}"
                  + (" (none: goal cell)" if info["exit_row"] < 0 else ""))  # fmt: skip
@@ -1540,8 +1565,8 @@ def plot_command(
 
         seeing = perception.perception_coverage(shown, fov, noise_deg, float("inf") if max_range is None else max_range)
     cells = shown.cells if isinstance(shown, Plan) else shown if isinstance(shown, Cells) else None
-    coverage = (composition.coverage_regions(cells, margin=composition.coverage_margin(shown))
-                if cells is not None and cells.is_funnel else None)  # fmt: skip
+    # plan/3 covers F (ALGORITHMS §12.7): hatch what of F no cell covers
+    coverage = composition.coverage_regions(cells, margin=0.0) if cells is not None and cells.is_funnel else None
     fig = plot.figure_for(shown, background=background, title=title, color_by=color_by, barriers=barriers,
                           labels=labels, cell_numbers=cell_numbers, coverage=coverage, perception=seeing)  # fmt: skip
     with artifacts.atomic_output(out_path) as tmp:

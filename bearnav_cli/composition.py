@@ -27,13 +27,13 @@ from typing import NamedTuple
 import numpy as np
 import shapely
 
-from bearnav_cli.datatypes import Cells, Map, Plan, cell_list
+from bearnav_cli.datatypes import Cells, Map, Plan, cell_list, tolerance_by_area
 from bearnav_cli.funnel import cell_tolerance, coverage_domain, plan_tolerance_of, reached_parts, usable_tolerances
 from bearnav_cli.geometry import FreeSpace, barrier_margin
 
 __all__ = [
     "Composition", "CoverageRegions", "check", "coverage", "coverage_margin", "coverage_regions", "covered_fraction",
-    "time_bound", "tolerance_by_area", "world_violations",
+    "time_bound", "world_violations",
 ]  # fmt: skip
 
 #: Relative agreement of a recomputed tolerance with the stored one.
@@ -225,41 +225,6 @@ def check(plan: Plan, speed: float, space: FreeSpace | None = None) -> Compositi
     return Composition(failures, tolerance, plan_tolerance, covered_fraction(regions), float(cells.free_coverage),
                        time_bound(plan, speed), speed, notes, regions, slack, usable, covered_fraction(free_regions),
                        free_regions, tolerance_by_area(cells, usable))  # fmt: skip
-
-
-#: The quantiles of :func:`tolerance_by_area`, by name.
-AREA_QUANTILES = {"p10": 0.1, "median": 0.5, "p90": 0.9}
-
-
-def tolerance_by_area(cells: Cells, usable: np.ndarray) -> dict[str, float]:
-    """The distribution of ``τ_c`` over ``D`` by area (ALGORITHMS §12.4): its minimum and quantiles, map units.
-
-    Each cell weighs by its own area (a point of several cells counts in each: the policy may
-    use any of them once the robot is in it). Cells without a finite ``τ_c`` are left out.
-
-    Parameters
-    ----------
-    cells : Cells
-        The cells (their polygons give the areas).
-    usable : ndarray, shape (C,)
-        ``τ_c`` of each cell (map units).
-
-    Returns
-    -------
-    dict
-        ``{"min", "p10", "median", "p90"}``; NaN values when no cell has a finite ``τ_c``.
-    """
-    tau = np.asarray(usable, float)
-    keep = np.isfinite(tau)
-    if not keep.any():
-        return {"min": math.nan, **{k: math.nan for k in AREA_QUANTILES}}
-    area = shapely.area(cell_polygons(cells))[keep]
-    order = np.argsort(tau[keep], kind="stable")
-    values, weight = tau[keep][order], np.cumsum(area[order])
-    out = {"min": float(values[0])}
-    for name, q in AREA_QUANTILES.items():
-        out[name] = float(values[min(int(np.searchsorted(weight, q * weight[-1])), len(values) - 1)])
-    return out
 
 
 def world_violations(plan: Plan, space: FreeSpace) -> list[int]:

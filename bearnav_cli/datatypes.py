@@ -24,6 +24,9 @@ from bearnav_cli.runtime.robot import ROBOT_DEFAULTS, ROBOT_KEYS, robot_paramete
 from bearnav_cli.runtime.schema import ENTRIES
 
 __all__ = [
+    "AREA_QUANTILES",
+    "cell_areas",
+    "tolerance_by_area",
     "FrozenDict",
     "freeze",
     "thaw",
@@ -913,19 +916,60 @@ class Cells:
         return {name: _entry(getattr(self, name)) for name in CELL_KEYS}
 
 
-def _cell_polygon_problem(cells: Cells) -> str | None:
-    """Each cell a counter-clockwise polygon of 3 or more vertices with positive area (shoelace)."""
+def cell_areas(cells: Cells) -> np.ndarray:
+    """The signed (shoelace) area of every cell polygon, shape (C,), map units² (positive when CCW)."""
     offsets, verts = cells.cell_vertex_offsets, cells.cell_vertices
-    counts = np.diff(offsets)
-    k = _first(counts < 3)
-    if k is not None:
-        return f"cell {k} has {int(counts[k])} vertices (at least 3 are needed)"
     if not len(verts):
-        return None
+        return np.zeros(len(offsets) - 1)
     following = np.arange(len(verts)) + 1
     following[offsets[1:] - 1] = offsets[:-1]
     x, y = verts[:, 0], verts[:, 1]
-    area = np.add.reduceat(x * y[following] - x[following] * y, offsets[:-1]) / 2
+    return np.add.reduceat(x * y[following] - x[following] * y, offsets[:-1]) / 2
+
+
+#: The quantiles of :func:`tolerance_by_area`, by name.
+AREA_QUANTILES = {"p10": 0.1, "median": 0.5, "p90": 0.9}
+
+
+def tolerance_by_area(cells: Cells, usable: np.ndarray) -> dict[str, float]:
+    """The distribution of ``τ_c`` over ``D`` by area (ALGORITHMS §12.4): its minimum and quantiles, map units.
+
+    Each cell weighs by its own area (a point of several cells counts in each: the policy may
+    use any of them once the robot is in it). Cells without a finite ``τ_c`` are left out.
+
+    Parameters
+    ----------
+    cells : Cells
+        The cells (their polygons give the areas).
+    usable : ndarray, shape (C,)
+        ``τ_c`` of each cell (map units).
+
+    Returns
+    -------
+    dict
+        ``{"min", "p10", "median", "p90"}``; NaN values when no cell has a finite ``τ_c``.
+    """
+    tau = np.asarray(usable, float)
+    keep = np.isfinite(tau)
+    if not keep.any():
+        return {"min": math.nan, **{k: math.nan for k in AREA_QUANTILES}}
+    order = np.argsort(tau[keep], kind="stable")
+    values, weight = tau[keep][order], np.cumsum(np.abs(cell_areas(cells))[keep][order])
+    out = {"min": float(values[0])}
+    for name, q in AREA_QUANTILES.items():
+        out[name] = float(values[min(int(np.searchsorted(weight, q * weight[-1])), len(values) - 1)])
+    return out
+
+
+def _cell_polygon_problem(cells: Cells) -> str | None:
+    """Each cell a counter-clockwise polygon of 3 or more vertices with positive area (shoelace)."""
+    counts = np.diff(cells.cell_vertex_offsets)
+    k = _first(counts < 3)
+    if k is not None:
+        return f"cell {k} has {int(counts[k])} vertices (at least 3 are needed)"
+    if not len(cells.cell_vertices):
+        return None
+    area = cell_areas(cells)
     k = _first(~(area > 0))
     return None if k is None else f"cell {k} is not a counter-clockwise polygon of positive area (area {area[k]:.3g})"
 
@@ -1129,7 +1173,8 @@ PLAN_INVARIANTS: tuple[Invariant, ...] = (
               lambda p: _tolerance_problem(p.tolerance, allow_inf=True)),
     Invariant("usable_tolerance", "finite and zero or positive, or NaN",
               lambda p: _tolerance_problem(p.usable_tolerance)),
-    Invariant("plan_tolerance", "finite and zero or positive, or NaN", lambda p: _tolerance_problem([p.plan_tolerance])),
+    Invariant("plan_tolerance", "finite and zero or positive, or NaN",
+              lambda p: _tolerance_problem([p.plan_tolerance])),
 )  # fmt: skip
 
 

@@ -469,7 +469,8 @@ def best_neck(region: Region, x_i: np.ndarray, x_j: np.ndarray, parent: Region, 
                             np.where(necked_, -cos * t_a, np.inf)[:, None],
                             np.where(necked_, cos * t_b, np.inf)[:, None]], axis=1)  # fmt: skip
         b = np.concatenate([np.broadcast_to(beta, (len(insets), len(beta))),
-                            np.where(necked_, cos, 0.0)[:, None], np.where(necked_, -cos, 0.0)[:, None]], axis=1)  # fmt: skip
+                            np.where(necked_, cos, 0.0)[:, None],
+                            np.where(necked_, -cos, 0.0)[:, None]], axis=1)  # fmt: skip
         with np.errstate(divide="ignore", invalid="ignore"):
             cross = (a[:, None, :] - a[:, :, None]) / (b[:, :, None] - b[:, None, :])  # (K, P+2, P+2)
         cross = cross.reshape(len(insets), -1)

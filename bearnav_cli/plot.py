@@ -25,7 +25,7 @@ from matplotlib.path import Path as MplPath
 from shapely.geometry.polygon import orient
 
 from bearnav_cli import runtime
-from bearnav_cli.datatypes import Cells, CellStatus, Map, Plan, Polygon, Simulation, Tree
+from bearnav_cli.datatypes import Cells, CellStatus, Map, Plan, Polygon, Simulation, Tree, tolerance_by_area
 from bearnav_cli.errors import InvalidParamsError
 
 __all__ = [
@@ -85,7 +85,7 @@ EXIT_COLOR = "#08306b"
 UNCERTIFIED_COLOR = "#d62728"
 UNCOVERED_COLOR = "#e6550d"
 ADDED_COLOR = "#e7298a"
-#: ``--color-by`` choices: the cell's rank (cost-to-go), its tolerance ``δ_c`` or its synthesis status.
+#: ``--color-by`` choices: the cell's rank (cost-to-go), its usable tolerance ``τ_c`` or its synthesis status.
 COLOR_BY = ("rank", "tolerance", "status")
 #: Parts of ``F_m`` that no cell reaches (cut off by passages narrower than ``2m``).
 UNREACHED_COLOR = "#969696"
@@ -148,7 +148,7 @@ def plot_map(ax: plt.Axes, map_: Map, *, landmarks: bool = True, starts: bool = 
     """
     xmin, ymin, xmax, ymax = map_.bounds
     ax.plot([xmin, xmax, xmax, xmin, xmin], [ymin, ymin, ymax, ymax, ymin], color="black", lw=1.2)
-    if walls and map_.robot_radius > 0:
+    if walls and map_.planning_radius > 0:
         band = shapely.difference(shapely.box(*map_.bounds), shapely.box(*map_.free_bounds))
         _add_geometry(ax, band, facecolor=INFLATED_COLOR, edgecolor="none", zorder=1)
     for poly in map_.obstacles:
@@ -273,16 +273,16 @@ def _cell_colors(cells: Cells, color_by: str, status: np.ndarray | None, toleran
         cmap = plt.get_cmap("viridis")
     elif color_by == "tolerance":
         if tolerance is None:
-            raise InvalidParamsError("tolerance needs a plan (cells.npz has no δ_c)", field="color_by")
+            raise InvalidParamsError("tolerance needs a plan (cells.npz has no τ_c)", field="color_by")
         values = np.asarray(tolerance, float)
         if not np.any(np.isfinite(values) & (values > 0)):
-            raise InvalidParamsError("tolerance needs a funnel plan (δ_c is NaN for paper cells)", field="color_by")
+            raise InvalidParamsError("tolerance needs a funnel plan (τ_c is NaN for paper cells)", field="color_by")
         finite = values[np.isfinite(values) & (values > 0)]
         values = np.clip(np.where(np.isnan(values), finite.min(), values), finite.min(), finite.max())
         lo, hi = float(finite.min()), float(finite.max())
         norm = mcolors.LogNorm(lo, hi) if hi > 3 * lo else mcolors.Normalize(lo, max(hi, lo * (1 + 1e-9)))
         cmap = mcolors.ListedColormap(plt.get_cmap("plasma")(np.linspace(0.08, 0.92, 256)))  # no near-black end
-        label = f"δ_c: position error the cell tolerates ({AXIS_UNITS})"
+        label = f"τ_c = min(δ_c, δ_e,c/2): error under which the robot may move ({AXIS_UNITS})"
     else:
         raise InvalidParamsError(f"must be one of {', '.join(COLOR_BY)}, got {color_by!r}", field="color_by")
     return cmap(norm(values)), ScalarMappable(norm=norm, cmap=cmap), label
@@ -400,16 +400,15 @@ def plot_uncovered(ax: plt.Axes, cells: Cells, uncovered: shapely.Geometry,
     cells : Cells
         The cells; their ``free_coverage`` goes into the legend label.
     uncovered : shapely geometry
-        The reached part of ``F_m`` less the cells.
+        The reached part of ``F`` less the cells.
     unreached : shapely geometry, optional
-        The parts of ``F_m`` no cell reaches (drawn in grey).
+        The parts of ``F`` no cell reaches (drawn in grey).
     """
     _add_geometry(ax, uncovered, facecolor="none", edgecolor=UNCOVERED_COLOR, hatch="////", lw=0.6,
-                  zorder=2.7, gid="uncovered", label=f"uncovered part of F_m ({1 - cells.free_coverage:.1%})"
-                  if math.isfinite(cells.free_coverage) else "uncovered part of F_m")  # fmt: skip
+                  zorder=2.7, gid="uncovered", label="uncovered part of F")  # fmt: skip
     if unreached is not None and not unreached.is_empty:
         _add_geometry(ax, unreached, facecolor="none", edgecolor=UNREACHED_COLOR, hatch="\\\\", lw=0.6,
-                      zorder=2.7, gid="unreached", label="F_m cut off by passages narrower than 2m")  # fmt: skip
+                      zorder=2.7, gid="unreached", label="free space no cell reaches")  # fmt: skip
     return ax
 
 
@@ -659,9 +658,11 @@ def plot_trajectories(ax: plt.Axes, sim: Simulation, *, limit: int = 400) -> plt
 
 
 def map_handles(map_: Map) -> list:
-    """Legend proxies for the raw obstacles and their inflation by the robot radius."""
-    return [Patch(color=RAW_COLOR, label="obstacles"),
-            Patch(color=INFLATED_COLOR, label=f"inflated by the robot radius ({map_.robot_radius:g})")]  # fmt: skip
+    """Legend proxies for the raw obstacles and their inflation by the robot radius (plus the look-ahead)."""
+    label = f"inflated by the robot radius ({map_.robot_radius:g})"
+    if map_.lookahead > 0:
+        label = f"inflated by radius + look-ahead ({map_.robot_radius:g} + {map_.lookahead:g})"
+    return [Patch(color=RAW_COLOR, label="obstacles"), Patch(color=INFLATED_COLOR, label=label)]
 
 
 def _frame(map_: Map, title: str, *, legend_rows: int = 0, landmarks: bool = True) -> tuple[plt.Figure, plt.Axes]:
@@ -736,9 +737,12 @@ def _plan_title(map_: Map, cells: Cells, plan: Plan | None) -> str:
     kind = "funnel" if cells.is_funnel else "paper"
     text = f"{map_.name}: {cells.n_cells} {kind} cells"
     if cells.is_funnel:
-        text += f" ({int(np.sum(cells.node_added))} added), cover {cells.free_coverage:.1%} of F_m"
+        f_m = cells.stats.get("free_coverage_m")
+        text += f" ({int(np.sum(cells.node_added))} added), cover {cells.free_coverage:.1%} of F"
+        text += f" ({f_m:.1%} of F_m)" if isinstance(f_m, float) else ""
     if plan is not None and math.isfinite(plan.plan_tolerance):
-        text += f", δ* = {plan.plan_tolerance:.3g}"
+        tau = tolerance_by_area(cells, plan.usable_tolerance)
+        text += f", τ_c ≥ {plan.plan_tolerance:.3g} (median by area {tau['median']:.3g})"
     if plan is not None:
         bad = int(np.isin(plan.status, [CellStatus.NOT_CERTIFIED, CellStatus.SOLVER_FAILURE]).sum())
         text += f", {bad} uncertified" if bad else ", all certified"
@@ -802,7 +806,7 @@ def figure_for(artifact: Any, *, background: Sequence[Any] = (), title: str | No
                   label="simplified tree" if simplified else "RRT* tree")  # fmt: skip
     if cells is not None:
         plot_cells(ax, cells, plan.status if plan is not None else None, color_by=color_by,
-                   tolerance=plan.tolerance if plan is not None else None, numbers=cell_numbers)  # fmt: skip
+                   tolerance=plan.usable_tolerance if plan is not None else None, numbers=cell_numbers)  # fmt: skip
         if cells.is_funnel and coverage is not None:
             plot_uncovered(ax, cells, coverage.uncovered, coverage.unreached)
         if barriers:

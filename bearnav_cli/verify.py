@@ -36,14 +36,14 @@ from bearnav_cli.composition import Composition
 from bearnav_cli.datatypes import CellFlag, CellStatus, Map, Outcome, Plan, Simulation, cell_list
 from bearnav_cli.errors import ArtifactError, InvalidParamsError
 from bearnav_cli.funnel import coverage_domain, reached_parts
-from bearnav_cli.geometry import FreeSpace
+from bearnav_cli.geometry import FreeSpace, inflate, to_shapely
 from bearnav_cli.routes import route_lengths, sample_starts
 from bearnav_cli.runtime import PlanArrays
 from bearnav_cli.stages import simulate
 
 __all__ = ["CERTIFICATE_TOL", "CERTIFIED", "COVERAGE_TOL", "GOAL_FIELD_TOL", "UNIT_TOL", "Certificates", "Geometry",
            "Params", "Unreached", "VerifyReport", "certificate_problems", "certificates", "check_geometry",
-           "flagged_cells", "loop_speed", "run", "unreached_regions"]  # fmt: skip
+           "check_lookahead", "flagged_cells", "loop_speed", "run", "unreached_regions"]  # fmt: skip
 
 log = logging.getLogger(__name__)
 
@@ -78,12 +78,16 @@ class Params:
         Fail when the success rate is below this fraction (``None``: never on that ground).
     dynamics : {"single", "unicycle"}
         Robot of the closed loop: the single integrator the certificate is stated for, or the unicycle
-        (``α`` = the loop's speed, default ``β``, ``certified_heading`` on: it drives only within the
-        heading allowance that keeps it inside the certified conditions, ``runtime.step.heading_allowance``).
-        Both run with displacements and exact motion. A run from ``D`` **breaches** the certificate
-        when any of its steps is not certified (``runtime.ControlOutput.certified``: a funnel cell's
-        field followed, not a straight approach, on an exact estimate) or ends at a true position
-        outside every cell of ``D``; any breach or collision of a run from ``D`` fails verify.
+        (``α`` = the loop's speed). On a plan with a look-ahead ``λ > 0`` the unicycle drives the point
+        ``p = x + λh`` as a single integrator (ALGORITHMS §12.6, Lemma 7), inside the certificate;
+        with ``λ = 0`` it follows §7.1's rules with ``certified_heading`` on (the heading allowance,
+        ``runtime.step.heading_allowance``), outside the certificate: its steps count as uncertified
+        and the report says so. Both run with displacements and exact motion. A run from ``D``
+        **breaches** the certificate when any of its steps is not certified
+        (``runtime.ControlOutput.certified``: a funnel cell's field followed, not a straight
+        approach, on an exact estimate; not checked for the unicycle without a look-ahead) or when
+        its true position (``p`` with a look-ahead) lies outside every cell of ``D`` after a step;
+        any breach or collision of a run from ``D`` fails verify.
     """
 
     n_starts: int = 200
@@ -479,6 +483,12 @@ class VerifyReport:
         The free regions the tree never reached (:func:`unreached_regions`): no start is drawn there.
     breaches : ndarray of bool, shape (R,), or None
         Runs from ``D`` that breached the certificate (:class:`Params` ``dynamics`` defines it).
+    lookahead_problems : tuple of str
+        What :func:`check_lookahead` found wrong (the plan's ``λ`` against its map's, the obstacles
+        against the raw ones inflated by ``ρ + λ``); each fails verify.
+    uncovered_dynamics : str or None
+        Why the closed loop's robot is outside the certificate (the unicycle on a plan without a
+        look-ahead), a note; None when it is inside.
     """
 
     status: np.ndarray
@@ -500,6 +510,8 @@ class VerifyReport:
     world_cells: list[int] | None = None
     unreached: Unreached | None = None
     breaches: np.ndarray | None = None
+    lookahead_problems: tuple[str, ...] = ()
+    uncovered_dynamics: str | None = None
 
     # ------------------------------------------------------------- the composed certificate (§11)
     @property
@@ -613,6 +625,7 @@ class VerifyReport:
             bad = np.flatnonzero(self.breaches)
             out.append(f"{bad.size} runs from the certified domain breached it (a step not certified, or a true "
                        f"position outside every cell): starts {cell_list(bad)}")  # fmt: skip
+        out.extend(self.lookahead_problems)
         if self.world_cells:
             out.append(f"{len(self.world_cells)} cells no longer hold in the world (C1: they leave B_r or meet an "
                        f"obstacle): {cell_list(self.world_cells)}")  # fmt: skip
@@ -623,15 +636,16 @@ class VerifyReport:
     @property
     def notes(self) -> list[str]:
         """What the report adds without failing: the free regions the tree never reached."""
+        out = [] if self.uncovered_dynamics is None else [self.uncovered_dynamics]
         u = self.unreached
         if u is None or not u.parts:
-            return []
+            return out
         where = "; ".join(f"({x:.3g}, {y:.3g}) {area:.3g}" for x, y, area in u.parts[:5])
         more = f" … ({len(u.parts)} in all)" if len(u.parts) > 5 else ""
         share = f" ({u.area / u.free_area:.1%} of the free space)" if u.free_area > 0 else ""
         regions = "1 free region" if len(u.parts) == 1 else f"{len(u.parts)} free regions"
-        return [f"{regions} the tree never reached, {u.area:.3g} map units²{share}, at (x, y) "
-                f"area: {where}{more}; no start was drawn there, the plan says nothing about them"]  # fmt: skip
+        return out + [f"{regions} the tree never reached, {u.area:.3g} map units²{share}, at (x, y) "
+                      f"area: {where}{more}; no start was drawn there, the plan says nothing about them"]  # fmt: skip
 
     @property
     def failed(self) -> bool:
@@ -754,6 +768,46 @@ class VerifyReport:
         return out
 
 
+def check_lookahead(plan: Plan) -> list[str]:
+    """The look-ahead checks of ALGORITHMS §12.8, exact, from the plan file: what is wrong (empty: nothing).
+
+    * ``lookahead``: the plan's ``λ`` (the one its cells were built for) equals its map's
+      ``robot.lookahead``, to the map tolerance;
+    * ``obstacles``: the plan's obstacles contain the raw obstacles inflated by ``ρ + λ``
+      (:func:`bearnav_cli.geometry.inflate`, the polygonal buffer the map stage uses), to the map
+      tolerance: an exact shapely ``covers`` of the inflated raw obstacles by the plan's obstacles
+      grown by ``tol``. With (C1) every cell then lies in the free space of a robot of radius
+      ``ρ + λ``, and the body of radius ``ρ`` around the axle ``x = p − λh`` of a look-ahead point
+      ``p`` in a cell touches no obstacle. The walls follow from ``B_r``, the bounds shrunk by
+      ``ρ + λ`` (``Map.free_bounds``), which (C1) checks the cells against.
+
+    Parameters
+    ----------
+    plan : Plan
+        The plan (its cells' ``lookahead`` and its embedded map).
+    """
+    problems = []
+    map_ = plan.map
+    built = float(plan.cells.lookahead)
+    if not abs(built - map_.lookahead) <= map_.tol:
+        problems.append(f"lookahead: the plan's λ = {built:g} differs from its map's robot.lookahead "
+                        f"{map_.lookahead:g} (the cells were built for another robot)")  # fmt: skip
+    radius = map_.planning_radius
+    raw = shapely.union_all([to_shapely(p) for p in map_.raw_obstacles]) if map_.raw_obstacles else None
+    if raw is not None and not raw.is_empty:
+        # only the part inside B matters: the walls of B_r keep the robot farther from the rest
+        wanted = shapely.intersection(inflate(raw, radius), shapely.box(*map_.bounds))
+        stored = shapely.union_all([to_shapely(p) for p in map_.obstacles]) if map_.obstacles else shapely.Polygon()
+        if not shapely.covers(shapely.buffer(stored, map_.tol), wanted):
+            missing = shapely.difference(wanted, shapely.buffer(stored, map_.tol))
+            free = shapely.difference(shapely.box(*map_.bounds), stored)
+            gap = shapely.distance(raw, free) if not free.is_empty else math.inf
+            problems.append(f"obstacles: the plan's obstacles do not contain the raw obstacles inflated by ρ + λ = "
+                            f"{radius:g} ({missing.area:.3g} map units² missing; a free point lies {gap:.6g} from a "
+                            f"raw obstacle)")  # fmt: skip
+    return problems
+
+
 def run(
     plan: Plan,
     params: Params = Params(),
@@ -819,15 +873,23 @@ def run(
                                   odometry_noise=0.0, dynamics=params.dynamics, certified_heading=True,
                                   record_trajectories=False)  # fmt: skip
             breach = np.zeros(len(starts), bool)
+            # the unicycle without a look-ahead is outside the certificate: no step of it is certified
+            steps_certified = params.dynamics != "unicycle" or arrays.lookahead > 0
 
             def watch(runs: np.ndarray, x: np.ndarray, certified: np.ndarray) -> None:
-                if arrays.funnel:  # a step not certified, or a true position outside every cell of D
-                    breach[runs] |= ~certified | (runtime.least_rank_cell(arrays, x) < 0)
+                if arrays.funnel:  # a step not certified, or a true position (p) outside every cell of D
+                    uncertified = ~certified if steps_certified else np.zeros(len(runs), bool)
+                    breach[runs] |= uncertified | (runtime.least_rank_cell(arrays, x) < 0)
 
             rollouts = simulate.rollout(plan, starts, sim, progress=progress, on_step=watch, arrays=arrays, space=space)
             breaches = breach & rollouts.start_in_domain
     straight = np.hypot(*(starts - plan.map.goal).T) if len(starts) else np.zeros(0)
     route = route_lengths(space, plan.map.goal, starts) if len(starts) else np.zeros(0)
+    uncovered = None
+    if params.dynamics == "unicycle" and plan.map.lookahead <= 0 and params.n_starts > 0:
+        uncovered = ("the unicycle on a plan without a look-ahead (λ = 0) is outside the certificate: its steps count "
+                     "as uncertified, and a breach is only a true position outside D; plan with `--lookahead λ`, "
+                     "λ ≥ α/ω_max, to drive it inside (ALGORITHMS §12.6)")  # fmt: skip
     report = VerifyReport(
         status=np.asarray(plan.status),
         certificates=cert,
@@ -848,6 +910,8 @@ def run(
         world_cells=world_cells,
         unreached=unreached,
         breaches=breaches,
+        lookahead_problems=tuple(check_lookahead(plan)),
+        uncovered_dynamics=uncovered,
     )
     log.info("verify: %s", report.summary())
     return report

@@ -38,7 +38,8 @@ def measure(name: str, seed: int) -> dict:
     by_area = composition.tolerance_by_area(cells, plan.usable_tolerance)
     finite = plan.tolerance[np.isfinite(plan.tolerance)]
     return {"min": plan.plan_tolerance, "median": by_area["median"], "delta": float(np.median(finite)),
-            "F": cells.free_coverage, "F_m": cells.stats.get("free_coverage_m", float("nan")), "s": seconds}  # fmt: skip
+            "F": cells.free_coverage, "F_m": cells.stats.get("free_coverage_m", float("nan")),
+            "s": seconds}  # fmt: skip
 
 
 def main() -> None:

@@ -17,7 +17,7 @@ import shapely
 
 from bearnav_cli.geometry import CIRCLE_SEGMENTS, circle_polygon
 
-__all__ = ["ITERATIONS", "PIPELINE", "load_random_map_tool", "random_spec"]
+__all__ = ["ITERATIONS", "PIPELINE", "cluttered_spec", "load_random_map_tool", "random_spec"]
 
 #: The stages after ``map`` that make a plan.
 PIPELINE = ["rrtstar", "simplify", "decompose", "synthesize"]
@@ -108,6 +108,54 @@ def random_spec(seed: int, iterations: int = 300, rrt_seed: int = 0) -> dict:
         "obstacles": obstacles,
         "landmarks": landmarks,
         "params": {"rrtstar": {"iterations": int(iterations), "seed": int(rrt_seed)}},
+    }
+
+
+def cluttered_spec(seed: int, iterations: int = 400) -> dict:
+    """A random cluttered map: many small obstacles and a small robot radius (issue 21's crash case).
+
+    Parameters
+    ----------
+    seed : int
+        Seeds the map itself (the tree's seed is 0).
+    iterations : int
+        ``params.rrtstar.iterations``.
+
+    Returns
+    -------
+    dict
+        A 6 × 6 box, robot radius 0.05, 20–28 small discs and rectangles that never cover the goal,
+        and 14 landmarks on the walls.
+    """
+    rng = np.random.default_rng(10_000 + seed)
+    W = H = 6.0
+    radius = 0.05
+    goal = [_round(rng.uniform(0.6, 1.4)), _round(rng.uniform(0.6, 1.4))]
+    rects, discs = [], []
+    for _ in range(int(rng.integers(20, 29))):
+        cx, cy = rng.uniform([0.4, 0.4], [W - 0.4, H - 0.4])
+        if math.hypot(cx - goal[0], cy - goal[1]) < 0.7:
+            continue
+        if rng.random() < 0.5:
+            w, h = rng.uniform(0.1, 0.45, 2)
+            rects.append([_round(cx - w / 2), _round(cy - h / 2), _round(cx + w / 2), _round(cy + h / 2)])
+        else:
+            discs.append(([_round(cx), _round(cy)], _round(rng.uniform(0.06, 0.22))))
+    ts = (np.arange(14) + rng.uniform(0.2, 0.8, 14)) / 14.0
+    landmarks = []
+    for k, t in enumerate(ts):
+        side, u = divmod(t * 4.0, 1.0)
+        landmarks.append([[u * W, 0.0], [W, u * H], [(1 - u) * W, H], [0.0, (1 - u) * H]][int(side)])
+    obstacles = [{"rectangle": r} for r in rects] + [{"circle": {"center": c, "radius": r}} for c, r in discs]
+    return {
+        "name": f"cluttered_{seed}",
+        "bounds": [0.0, 0.0, W, H],
+        "robot_radius": radius,
+        "goal": goal,
+        "starts": [],
+        "obstacles": obstacles,
+        "landmarks": [[_round(x), _round(y)] for x, y in landmarks],
+        "params": {"rrtstar": {"iterations": int(iterations), "seed": 0}},
     }
 
 

@@ -143,7 +143,8 @@ def test_inspect_imports_the_loader_and_numpy_only(plans):
     assert not found, found
     assert "numpy" in modules and "bearnav_cli.artifacts" in modules  # the check is the loader's, as before
     runtime = imported(modules, ("bearnav_cli.runtime",))
-    assert runtime == ["bearnav_cli.runtime", "bearnav_cli.runtime.schema"], runtime
+    # the schema, and the robot section's defaults the map type reads (numpy only, no controller)
+    assert runtime == ["bearnav_cli.runtime", "bearnav_cli.runtime.robot", "bearnav_cli.runtime.schema"], runtime
 
 
 def test_inspect_imports_the_stages_the_maps_params_name(plans):

@@ -89,6 +89,22 @@ BAD_MAPS = [
     (lambda s: s.update(bounds=[0, 0, -1, 5]), "bounds"),
     (lambda s: s["obstacles"].append({"rectangle": [-1, -1, 11, 9]}), "obstacles"),  # empty free space
     (lambda s: s["obstacles"].append({"rectangle": [6.5, 0, 7, 8]}), "starts[0]"),  # cut off from the goal
+    # the robot section (DESIGN §3.4)
+    (lambda s: s.update(robot={"lookahead": -0.1}), "robot.lookahead"),  # negative
+    (lambda s: s.update(robot={"lookahead": float("inf")}), "robot.lookahead"),  # not finite
+    (lambda s: s.update(robot={"lookahead": "far"}), "robot.lookahead"),  # wrong type
+    (lambda s: s.update(robot={"lookahead": 0.3}), "robot.lookahead"),  # the goal (0.5, 0.5) is no longer free
+    (lambda s: s.update(robot={"lookahead": 4.0}), "robot.lookahead"),  # nothing is free
+    (lambda s: (s["starts"].append([5, 5.4]), s.update(robot={"lookahead": 0.25})), "robot.lookahead"),  # a start
+    (lambda s: s.update(robot={"radius": 0.3}), "robot.radius"),  # differs from robot_radius
+    (lambda s: s.update(robot={"radius": -1}), "robot.radius"),
+    (lambda s: s.update(robot={"bearing_error_deg": 90}), "robot.bearing_error_deg"),  # a cone is convex below 90°
+    (lambda s: s.update(robot={"compass_error_deg": -1}), "robot.compass_error_deg"),
+    (lambda s: s.update(robot={"slip": float("nan")}), "robot.slip"),
+    (lambda s: s.update(robot={"max_turn_rate": -0.5}), "robot.max_turn_rate"),
+    (lambda s: s.update(robot={"reverse": "no"}), "robot.reverse"),
+    (lambda s: s.update(robot={"wheelbase": 0.3}), "robot.wheelbase"),  # unknown key
+    (lambda s: s.update(robot=[0.2]), "robot"),
 ]
 
 

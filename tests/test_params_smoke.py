@@ -23,7 +23,7 @@ import pytest
 
 from bearnav_cli import artifacts, cli, composition, pipeline, runtime, verify
 from bearnav_cli.datatypes import Outcome, Plan, Simulation
-from bearnav_cli.errors import ArtifactError, InvalidParamsError
+from bearnav_cli.errors import InvalidParamsError
 from bearnav_cli.geometry import FreeSpace
 from bearnav_cli.runtime import bearing
 from bearnav_cli.stages import decompose, map_, rrtstar, simplify, simulate, synthesize
@@ -80,6 +80,7 @@ TUPLES = {
     ("rrtstar", "collision_policy"): rrtstar.POLICIES,
     ("simplify", "ctl"): simplify.CTL_MODES,
     ("decompose", "cells"): decompose.CELL_MODES,
+    ("decompose", "cover"): decompose.COVER_DOMAINS,
     ("decompose", "bisector_rule"): decompose.BISECTOR_RULES,
     ("decompose", "cbf_apex"): decompose.CBF_APEXES,
     ("decompose", "cbf_filter"): decompose.CBF_FILTERS,

@@ -177,9 +177,10 @@ def test_colour_by_rank_tolerance_and_status(small_plan, draw):
     ax = draw(small_plan)
     assert len(ax.figure.axes) == 2 and "rank" in ax.figure.axes[1].get_ylabel()
     ax = draw(small_plan, color_by="tolerance")
-    assert "δ_c" in ax.figure.axes[1].get_ylabel()
+    assert "τ_c" in ax.figure.axes[1].get_ylabel()  # the usable tolerance (ALGORITHMS §12.3)
     lo, hi = ax.figure.axes[1].get_ylim()
-    assert lo == pytest.approx(small_plan.tolerance.min()) and hi == pytest.approx(small_plan.tolerance.max())
+    tau = small_plan.usable_tolerance
+    assert lo == pytest.approx(tau.min()) and hi == pytest.approx(tau.max())
     ax = draw(small_plan, color_by="status")
     assert len(ax.figure.axes) == 1 and "cells: certified" in legend_texts(ax)
     with pytest.raises(InvalidParamsError, match="color_by"):

@@ -10,6 +10,7 @@ and τ_c stays finite, and a tampered plan fails ``verify`` in that cell only.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 
 import numpy as np
@@ -197,3 +198,55 @@ def test_a_plan_2_file_names_the_command_that_rebuilds_it(tmp_path):
 
     with pytest.raises(ArtifactError, match=r"bearnav.plan/2.*bearnav plan MAP.yaml --force"):
         PlanArrays.from_npz(old)
+
+
+@functools.cache
+def cluttered_plan(seed: int):
+    from bearnav_cli import pipeline
+    from tests.conftest import build_map
+    from tests.funnel_maps import cluttered_spec
+
+    return pipeline.compute(build_map(cluttered_spec(seed, iterations=300)))["plan"]
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_cluttered_maps_plan_with_finite_usable_tolerances(seed):
+    """Many small obstacles and a small radius (issue 21's exit-70 case): every τ_c finite and positive,
+    a cell whose δ_c is +inf has a constant field and τ_c = δ_e,c/2, and the composition is proved."""
+    plan = cluttered_plan(seed)
+    assert np.all(np.isfinite(plan.usable_tolerance)) and np.all(plan.usable_tolerance > 0)
+    M = plan.gain.reshape(plan.cells.n_cells, 2, -1, 2).sum(axis=2)
+    for c in np.flatnonzero(plan.tolerance == math.inf):
+        assert np.allclose(M[c], 0.0, atol=1e-12), f"cell {c}: δ_c = inf but the field is not constant"
+        assert plan.usable_tolerance[c] == pytest.approx(0.5 * plan.cells.exit_inset[c])
+    comp = composition.check(plan, 0.1)
+    assert comp.ok, comp.problems
+
+
+@pytest.mark.parametrize("seed", [0, 2])
+def test_cover_F_reaches_into_the_band_along_the_walls(seed):
+    """ALGORITHMS §12.7: ``cover = F`` adds band leaves after F_m; the cells still compose, each band leaf
+    hangs from a node that is not a band leaf, and the recomputed coverage of F is the stored one."""
+    from bearnav_cli import pipeline
+    from bearnav_cli.stages import decompose
+    from tests.conftest import build_map
+    from tests.funnel_maps import ITERATIONS, random_spec
+
+    map_ = build_map(random_spec(seed, ITERATIONS))
+    tree = pipeline.compute(map_, through="simplify")["simplified"]
+    near = decompose.run(tree)
+    far = decompose.run(tree, decompose.Params(cover="F"))
+    band = far.stats["band_leaves"]
+    assert near.stats["band_leaves"] == 0 and band > 0
+    assert far.free_coverage > near.free_coverage
+    assert far.free_coverage >= decompose.Params().coverage_target or far.n_cells - len(tree.nodes) == 200
+    assert far.stats["free_coverage_m"] >= near.stats["free_coverage_m"] - 1e-12
+    first_band = far.n_cells - band
+    assert np.all(far.parent[first_band:] < first_band)  # never from another band leaf
+    from bearnav_cli.stages import synthesize
+
+    plan = synthesize.run(far)
+    comp = composition.check(plan, 0.1)
+    assert comp.ok, comp.problems
+    assert comp.coverage_free == pytest.approx(far.free_coverage, rel=1e-6)
+    assert np.all(np.isfinite(plan.usable_tolerance)) and np.all(plan.usable_tolerance > 0)

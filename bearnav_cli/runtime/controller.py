@@ -7,12 +7,14 @@ robots with, so what is simulated is what runs on the robot.
 
 from __future__ import annotations
 
+import json
 import math
 from typing import Any
 
 import numpy as np
 
 from bearnav_cli.runtime.plan_arrays import PlanArrays
+from bearnav_cli.runtime.robot import lookahead_point, robot_parameters
 from bearnav_cli.runtime.step import SPEED, ControlOutput, ControlSettings, ControlState, control
 
 __all__ = ["Controller"]
@@ -41,6 +43,7 @@ class Controller:
         self.settings = settings
         self.state = ControlState.initial(np.array([heading]))
         self.last: ControlOutput | None = None
+        self.heading = float(heading)  # the last heading given (rad): where the look-ahead point is
 
     @classmethod
     def from_plan(cls, path: str, *, speed: float = SPEED, dt: float | None = None, dynamics: str = "single",
@@ -52,8 +55,14 @@ class Controller:
         simulation's, ``min(0.0025·D/v, 0.2)`` with ``v`` = ``speed`` (``alpha`` for the
         unicycle), and ``eps_sw`` defaults to ``2·v·dt``. Pass ``bearing_sigma``, the camera's
         angular noise (radians; default :data:`~bearnav_cli.runtime.step.BEARING_SIGMA`, 1°).
+        A plan whose map says ``robot: {reverse: false}`` clamps ``v ≥ 0`` whatever
+        ``clamp_reverse`` says (the option can only add the clamp). On a plan with a look-ahead
+        ``λ > 0`` (``arrays.lookahead``) the unicycle drives the point ``λ`` ahead of its axle
+        (ALGORITHMS §12.6, docs/runtime.md).
         """
         arrays = PlanArrays.from_npz(path)
+        if not _may_reverse(path):
+            options["clamp_reverse"] = True
         diagonal = math.hypot(*(arrays.bounds[2:] - arrays.bounds[:2]))
         settings = ControlSettings.for_plan(diagonal, arrays.tol, dynamics=dynamics, speed=speed, dt=dt, **options)
         return cls(arrays, settings, heading)
@@ -87,6 +96,7 @@ class Controller:
         out = control(self.arrays, self.settings, self.state, np.asarray(bearings, float)[None],
                       np.asarray(visible, bool)[None], np.array([0.0 if heading is None else heading]))  # fmt: skip
         self.state, self.last = out.state, out
+        self.heading = 0.0 if heading is None else float(heading)
         if out.lost[0]:
             return np.zeros(2)
         if self.settings.dynamics == "unicycle":
@@ -106,9 +116,30 @@ class Controller:
         # robot looks around, and (0, 0) may well lie within the tolerance of a goal near the origin
         if not self.state.known[0]:
             return False
-        return bool(np.hypot(*(self.state.x_hat[0] - self.arrays.goal)) <= self.arrays.goal_tolerance)
+        return bool(np.hypot(*(self.position - self.arrays.goal)) <= self.arrays.goal_tolerance)
+
+    @property
+    def position(self) -> np.ndarray:
+        """The estimate of the point the plan is about, shape (2,) (map units; NaN before the first fix):
+        the axle's ``x̂``, or for a unicycle on a look-ahead plan ``p̂ = x̂ + λ(cos θ, sin θ)`` at the
+        last heading given (ALGORITHMS §12.6)."""
+        if not self.state.known[0]:
+            return np.full(2, np.nan)
+        lam = self.arrays.lookahead if self.settings.dynamics == "unicycle" else 0.0
+        return lookahead_point(self.state.x_hat, np.array([self.heading]), lam)[0]
 
     @property
     def cell(self) -> int:
         """The active cell (``-1`` before the first fix)."""
         return int(self.state.cell[0])
+
+
+def _may_reverse(path: str) -> bool:
+    """The ``reverse`` of the robot section of the map embedded in ``plan.npz`` (default: it may)."""
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            document = json.loads(str(data["map"][()]))
+    except (OSError, ValueError, KeyError):  # PlanArrays.from_npz has read this file: not reached in practice
+        return True
+    section = document.get("robot") if isinstance(document, dict) else None
+    return bool(robot_parameters(section if isinstance(section, dict) else None)["reverse"])

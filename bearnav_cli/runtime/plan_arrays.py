@@ -165,7 +165,7 @@ class PlanArrays:
     bin_shape : tuple of int
         Derived: ``(INDEX_BINS, INDEX_BINS)``, the bins along x and y (unitless).
     free_bounds : ndarray of float64, shape (4,)
-        Derived: ``B_r``, ``bounds`` shrunk by ``robot_radius`` on every side (map units).
+        Derived: ``B_r``, ``bounds`` shrunk by ``robot_radius + lookahead`` on every side (map units).
     tol : float
         Derived: ``1e-9·D``, D the diagonal of ``bounds`` (map units), the geometric
         tolerance of the run-time tests.
@@ -260,7 +260,7 @@ class PlanArrays:
         for name, (dtype, _) in _MAP_ARRAYS.items():
             put(self, name, _readonly(getattr(self, name), dtype))
         put(self, "robot_radius", float(self.robot_radius))
-        r = max(0.0, self.robot_radius)
+        r = max(0.0, self.robot_radius + self.lookahead)  # the cells' reference point keeps ρ + λ (§12.6)
         put(self, "free_bounds", _readonly(self.bounds + np.array([r, r, -r, -r]), float))  # B_r (Map.free_bounds)
         n, c, n_lm = len(self.nodes), len(self.cell_node), len(self.landmarks)
         self._check_shapes(n, c, n_lm)

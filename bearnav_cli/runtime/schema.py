@@ -174,7 +174,7 @@ _PLAN = {
 
 _SIMULATION = {
     "map": _MAP,
-    "starts": Entry("f8", ("R", 2), "start of each run"),
+    "starts": Entry("f8", ("R", 2), "start of each run (a look-ahead unicycle's point p, ALGORITHMS §12.6)"),
     "outcome": Entry("i1", ("R",), "0 success, 1 collision, 2 stall, 3 timeout, 4 lost"),
     "steps": Entry("i8", ("R",), "Euler steps"),
     "time": Entry("f8", ("R",), "seconds"),
@@ -186,12 +186,13 @@ _SIMULATION = {
     "certified_steps": Entry("i8", ("R",), "steps covered by the composed certificate (ALGORITHMS §11.4; 0 for "
                              "`paper` plans)"),
     "start_in_domain": Entry("bool", ("R",), "the start lies in the certified domain D (some funnel cell holds it)"),
-    "min_clearance": Entry("f8", ("R",), "smallest distance from the inflated obstacles and the walls"),
-    "final_position": Entry("f8", ("R", 2), "where each run ended"),
+    "min_clearance": Entry("f8", ("R",), "smallest distance of the body from the inflated obstacles and the walls"),
+    "final_position": Entry("f8", ("R", 2), "where each run ended (p for a look-ahead unicycle)"),
     "final_cell": Entry("i8", ("R",), "active cell at the end; -1 if the start was not free or never had a fix"),
     "max_steps": Entry("i8", ("R",), "step limit of the run"),
-    "trajectory_coords": Entry("f8", ("P", 2), "every run's positions, run r at offsets[r]:offsets[r+1] (start "
-                               "first; empty when not recorded)"),
+    "trajectory_coords": Entry("f8", ("P", 2), "every run's positions (p for a look-ahead unicycle: the axle is p − "
+                               "λ·(cos, sin)(heading)), run r at offsets[r]:offsets[r+1] (start first; empty when not "
+                               "recorded)"),
     "trajectory_cells": Entry("i8", ("P",), "active cell at each point"),
     "trajectory_heading": Entry("f8", ("P",), "camera heading at each point (rad)"),
     "trajectory_offsets": Entry("i8", ("R+1",), "where each run's points begin"),

@@ -30,6 +30,7 @@ from bearnav_cli.runtime.cell_policy import (
 )
 from bearnav_cli.runtime.estimate import Estimate, fuse, measure
 from bearnav_cli.runtime.plan_arrays import PlanArrays
+from bearnav_cli.runtime.robot import lookahead_command, lookahead_point
 
 __all__ = [
     "ALPHA", "APPROACH_ALIGNMENT", "BEARING_SIGMA", "DYNAMICS", "MEASUREMENTS", "ODOMETRY_DRIFT", "SPEED",
@@ -75,11 +76,13 @@ class ControlSettings:
         Membership slack (map units), ``1e-9·D``.
     dynamics : {"single", "unicycle"}
         The robot's model (§7.1): the single integrator ``ẋ = v_ref·unit(ũ)``, or the unicycle
-        driven by ``v = α cos e``, ``ω = β sin e`` toward the command's direction.
+        driven by ``v = α cos e``, ``ω = β sin e`` toward the command's direction; on a plan with a
+        look-ahead ``λ > 0`` (``arrays.lookahead``) the unicycle instead drives its point
+        ``p = x + λh(θ)`` as a single integrator at ``α`` (ALGORITHMS §12.6, :func:`control`).
     alpha, beta : float
         Unicycle gains: ``v = α cos e`` (map units / s), ``ω = β sin e`` (rad / s).
     clamp_reverse : bool
-        Unicycle: clamp ``v`` at 0 (never reverse).
+        Unicycle: clamp ``v`` at 0 (never reverse); on a look-ahead plan those steps are not certified.
     turn_first : bool
         Unicycle: ``v = α cos³ e`` (slow down to turn) instead of §7.1's ``α cos e``.
     measurement : {"bearing", "displacement"}
@@ -111,9 +114,10 @@ class ControlSettings:
     max_fix_error : float
         Use a fix only if its predicted 3σ error is at most this (map units).
     certified_heading : bool
-        Unicycle on a funnel plan: drive forward only while the heading error keeps the velocity
-        inside every condition the cell's field meets at ``x̂`` (:func:`heading_allowance`), turn
-        in place otherwise; off: §7.1's rule alone.
+        Unicycle on a funnel plan without a look-ahead: drive forward only while the heading error
+        keeps the velocity inside every condition the cell's field meets at ``x̂``
+        (:func:`heading_allowance`), turn in place otherwise; off: §7.1's rule alone. (The
+        look-ahead law replaces it.)
     fov, max_range : float
         The camera's full field of view (radians) and range (map units), for looking on purpose.
     look_on_purpose : bool
@@ -273,10 +277,13 @@ class ControlOutput:
     relocated : ndarray of bool, shape (R,)
         Left the cell through a side face this step (a ``left_cell`` event).
     x_hat : ndarray, shape (R, 2)
-        The position estimate used (measured or carried by odometry; zeros before the first fix).
+        The position estimate (measured or carried by odometry; zeros before the first fix): the
+        axle's; a look-ahead unicycle's policy ran at ``x̂ + λh(θ)``.
     certified : ndarray of bool, shape (R,)
         The step is covered by the composed certificate (ALGORITHMS §11.4): a funnel plan, a cell's
-        field (not a straight approach), and an estimate whose error bound (3σ) is at most ``δ*``.
+        field (not a straight approach), and an estimate whose error bound (3σ) is at most ``δ*``;
+        for a unicycle only as the look-ahead point of §12.6 (``λ > 0``) on a step the reverse
+        clamp left alone (never with ``λ = 0``).
     waiting : ndarray of bool, shape (R,)
         Held in place because the error ball grown by any step would reach an obstacle
         (:func:`error_ball_pace` is 0): the robot does not translate and waits for better fixes.
@@ -326,6 +333,13 @@ def control(
     integrator keeps ``last_dir``, the unicycle turns toward it) for ``hold_time``, then looks
     around the same way.
 
+    A unicycle on a plan with a look-ahead ``λ > 0`` (ALGORITHMS §12.6): the estimate is of the
+    axle ``x``; the policy (cells, switching, field, the error ball's pace) runs at
+    ``p̂ = x̂ + λh(θ)``, and the wanted velocity of ``p``, ``w = α·pace·unit(u)``, becomes
+    ``(v, ω) = (w·h, w·h^⊥/λ)`` (:func:`~bearnav_cli.runtime.robot.lookahead_command`, Lemma 7),
+    in place of §7.1's rule and the heading allowance. Without an estimate it turns in place as
+    before.
+
     Parameters
     ----------
     arrays : PlanArrays
@@ -354,8 +368,19 @@ def control(
     s = settings
     prior = np.where((state.known & s.odometry)[:, None], state.x_hat + s.dt * state.motion, np.nan)
     fix = measure(arrays, s, bearings, visible, x_true, displacements, prior)
-    est = carry_inside(arrays, s, state, fuse(s, state, fix))
-    cell, target, last_dir, u, stalled, relocated = follow_fields(arrays, s, state, est, bearings, visible,
+    body = fuse(s, state, fix)  # the estimate of the axle x (where the camera is)
+    lam = arrays.lookahead if s.dynamics == "unicycle" else 0.0
+    ahead = lam > 0.0  # ALGORITHMS §12.6: the policy runs at the look-ahead point p̂ = x̂ + λh(θ̂)
+    policy = s
+    if ahead:
+        body_est, phi = body, np.asarray(heading, float).reshape(len(state.cell))
+        body = dataclasses.replace(body, x_hat=lookahead_point(body.x_hat, phi, lam))
+        if displacements is not None:  # l_k − p = (l_k − x) − λh
+            displacements = displacements - lam * np.column_stack([np.cos(phi), np.sin(phi)])[:, None, :]
+        if s.reconstruction != "lsq":  # the bearings are taken at x, not at p: the output comes from p̂
+            policy = dataclasses.replace(s, reconstruction="lsq")
+    est = carry_inside(arrays, s, state, body)
+    cell, target, last_dir, u, stalled, relocated = follow_fields(arrays, policy, state, est, bearings, visible,
                                                                   displacements)  # fmt: skip
     if s.keep_clear:
         pace, away = error_ball_pace(arrays, s, cell, est.x_hat, est.error_bound)
@@ -367,14 +392,25 @@ def control(
         # waiting with no fix this step: look for one (turning in place keeps the ball where it is)
         est = dataclasses.replace(est, steer=est.steer & ~(waiting & ~est.fix))
     holding = ~est.steer  # no position estimate this step
-    scanning, lost, spin, turn, look = look_around(s, state, est, last_dir, heading, arrays)
+    # a look on purpose looks from the camera, on the axle
+    seen_from = dataclasses.replace(est, x_hat=body_est.x_hat) if ahead else est
+    scanning, lost, spin, turn, look = look_around(s, state, seen_from, last_dir, heading, arrays)
     direction = np.where(holding[:, None], last_dir, u)
     slow = np.where(est.steer, pace, 1.0)  # the error ball's pace, for robots that steer by an estimate
-    within = est.error_bound <= arrays.plan_tolerance + s.tol  # the estimate is good to δ* (§11.4)
+    within = est.error_bound <= arrays.tolerance_in(cell) + s.tol  # the estimate is good to τ_c (§12.3)
     velocity = (s.speed * slow)[:, None] * direction
     velocity[scanning] = 0.0
     forward, motion = np.zeros(len(cell)), velocity.copy()
-    if s.dynamics == "unicycle":
+    clamped = np.zeros(len(cell), bool)
+    if ahead:
+        # Lemma 7: p is a single integrator; w = α·pace·u moves it exactly (holding and looking
+        # around turn in place as below: the axle stays where it is)
+        forward, turn, motion = unicycle_command(s, direction, heading, holding, scanning, target, turn)
+        drive = np.flatnonzero(est.steer & ~scanning)
+        w = (s.alpha * slow[drive])[:, None] * direction[drive]
+        forward[drive], turn[drive], clamped[drive] = lookahead_command(w, phi[drive], lam, s.clamp_reverse)
+        motion = forward[:, None] * np.column_stack([np.cos(phi), np.sin(phi)])
+    elif s.dynamics == "unicycle":
         allowed = None
         if s.certified_heading:
             # the allowance keeps a certified step certified; a step beyond δ* has no certificate to
@@ -385,15 +421,19 @@ def control(
                 allowed = np.where(within, allowed, math.pi)
         forward, turn, motion = unicycle_command(s, direction, heading, holding, scanning, target, turn, allowed)
         forward, motion = forward * slow, motion * slow[:, None]
-    # the estimate always moves on with the robot's own motion, steering with it or not
-    new = ControlState(cell, target, last_dir, est.hold, np.where(est.known[:, None], est.x_hat, state.x_hat), motion,
+    # the estimate always moves on with the robot's own motion, steering with it or not; it is the axle's
+    x_hat = body_est.x_hat if ahead else est.x_hat
+    new = ControlState(cell, target, last_dir, est.hold, np.where(est.known[:, None], x_hat, state.x_hat), motion,
                        est.known, est.var, scanning, spin, look,
                        np.where(scanning & ~state.scanning, est.hold - s.dt, state.scan_from))  # fmt: skip
     # certified (§11.4): a funnel plan, driven by a certified cell's field (not a straight approach),
-    # on an estimate whose error bound is within the plan's tolerance δ*
-    certified = arrays.funnel & est.steer & (target < 0) & (cell >= 0) & within
+    # on an estimate whose error bound is within the plan's tolerance δ*; a unicycle only as the
+    # look-ahead point of §12.6 (λ > 0), and not on a step the reverse clamp changed
+    certified = arrays.funnel & est.steer & (target < 0) & (cell >= 0) & within & ~clamped
+    if s.dynamics == "unicycle" and not ahead:
+        certified = np.zeros(len(cell), bool)  # λ = 0: the heading rules keep it safe in practice, unproven
     return ControlOutput(velocity, forward, turn, scanning, new, est.fix, lost, stalled, relocated,
-                         np.where(est.steer[:, None], est.x_hat, 0.0), certified, waiting)  # fmt: skip
+                         np.where(est.steer[:, None], x_hat, 0.0), certified, waiting)  # fmt: skip
 
 
 def error_ball_pace(arrays: PlanArrays, s: ControlSettings, cell: np.ndarray, x_hat: np.ndarray,
@@ -415,7 +455,7 @@ def error_ball_pace(arrays: PlanArrays, s: ControlSettings, cell: np.ndarray, x_
     Parameters
     ----------
     arrays : PlanArrays
-        The plan: cells, ``plan_tolerance`` (δ*), obstacle edges and ``B_r``.
+        The plan: cells, ``usable_tolerance`` (τ_c), obstacle edges and ``B_r``.
     s : ControlSettings
         ``top_speed`` (map units / s), ``dt`` (s) and ``odometry_drift``.
     cell : ndarray of int, shape (R,)
@@ -437,7 +477,7 @@ def error_ball_pace(arrays: PlanArrays, s: ControlSettings, cell: np.ndarray, x_
     away = np.zeros((len(e), 2))
     if not arrays.funnel:  # paper plans run as the papers ran them
         return np.ones(len(e)), away
-    pace = np.where(e <= arrays.plan_tolerance + s.tol, 1.0, 0.0)
+    pace = np.where(e <= arrays.tolerance_in(cell) + s.tol, 1.0, 0.0)
     step = s.top_speed * s.dt * (1.0 + s.odometry_drift)
     todo = (pace < 1.0) & np.isfinite(e)
     cell = np.asarray(cell, np.int64).reshape(-1)

@@ -18,7 +18,7 @@ import numpy as np
 import shapely
 
 from bearnav_cli import occupancy
-from bearnav_cli.datatypes import Map
+from bearnav_cli.datatypes import Map, replace
 from bearnav_cli.errors import InvalidMapError
 from bearnav_cli.geometry import (
     CIRCLE_SEGMENTS,
@@ -31,6 +31,7 @@ from bearnav_cli.geometry import (
     to_shapely,
 )
 from bearnav_cli.runtime.plan_arrays import ring_edges
+from bearnav_cli.runtime.robot import ROBOT_DEFAULTS, ROBOT_KEYS
 
 __all__ = ["GridSource", "MAP_KEYS", "MapSource", "Params", "VERSION", "infer_facing", "listed_obstacles", "run",
            "spec_of", "summary"]  # fmt: skip
@@ -50,6 +51,7 @@ MAP_KEYS = (
     "landmarks",
     "occupancy",
     "params",
+    "robot",
 )
 
 
@@ -363,9 +365,8 @@ def run(source: MapSource, params: Params = Params(), progress: object = None) -
     if not (bounds[0] < bounds[2] and bounds[1] < bounds[3]):
         raise reader.fail("bounds", "needs xmin < xmax and ymin < ymax")
 
-    robot_radius = reader.number(spec.get("robot_radius", 0.0), "robot_radius")
-    if robot_radius < 0:
-        raise reader.fail("robot_radius", "must be zero or positive")
+    robot_radius, robot = _robot(reader, spec)
+    planning_radius = robot_radius + robot.get("lookahead", ROBOT_DEFAULTS["lookahead"])
 
     obstacles = spec.get("obstacles", [])
     if not isinstance(obstacles, list):
@@ -374,7 +375,7 @@ def run(source: MapSource, params: Params = Params(), progress: object = None) -
         _obstacle(reader, item, f"obstacles[{k}]", params.circle_segments) for k, item in enumerate(obstacles)
     )
     raw = shapely.union_all(raw_parts) if raw_parts else shapely.Polygon()
-    inflated = inflate(raw, robot_radius)
+    inflated = inflate(raw, planning_radius)
 
     if "goal" not in spec:
         raise reader.fail("goal", "missing")
@@ -400,25 +401,85 @@ def run(source: MapSource, params: Params = Params(), progress: object = None) -
         params=stage_params,
         source={"file": source.file, "sha256": source.sha256},
         landmark_facing=_facing(reader, given_facing, landmarks, bounds, raw, 1e-9 * math.dist(bounds[:2], bounds[2:])),
+        robot=robot,
     )
-    _validate(reader, map_, params)
+    if map_.lookahead > 0:
+        # the map must make sense for the body first (its errors name the field at fault), then for
+        # the look-ahead point: what only the larger inflation breaks is the look-ahead's fault
+        body = replace(map_, obstacles=from_shapely(inflate(raw, robot_radius)), robot={**robot, "lookahead": 0.0})
+        _validate(reader, body, params, warn=False)
+        _validate(reader, map_, params, culprit="robot.lookahead")
+    else:
+        _validate(reader, map_, params)
     return map_
 
 
-def _validate(reader: _Reader, map_: Map, params: Params) -> None:
-    """The consistency checks of ALGORITHMS §1 on a built map."""
+def _robot(reader: _Reader, spec: dict) -> tuple[float, dict]:
+    """The robot radius and the other parameters of the ``robot:`` section that the map gives.
+
+    ``robot_radius`` and ``robot.radius`` are two spellings of ρ (both given: they must agree).
+    Numbers must be finite, zero or positive, the angles below 90°; ``compass_error_deg`` and
+    ``max_turn_rate`` may be null (unknown, their default); ``reverse`` is true or false. The
+    defaults are :data:`~bearnav_cli.runtime.robot.ROBOT_DEFAULTS`.
+    """
+    section = spec.get("robot")
+    section = {} if section is None else reader.mapping(section, "robot", ROBOT_KEYS)
+    given: dict[str, Any] = {}
+    for key, value in section.items():
+        where = f"robot.{key}"
+        if key == "reverse":
+            if not isinstance(value, bool):
+                raise reader.fail(where, f"expected true or false, got {_describe(value)}")
+            given[key] = value
+            continue
+        if value is None and ROBOT_DEFAULTS[key] is None:  # explicitly unknown
+            given[key] = None
+            continue
+        number = reader.number(value, where)
+        if number < 0:
+            raise reader.fail(where, "must be zero or positive")
+        if key.endswith("_deg") and number >= 90:
+            raise reader.fail(where, f"must be below 90 degrees (a bearing cone is convex only then), got {number:g}")
+        given[key] = number
+    radius = reader.number(spec.get("robot_radius", ROBOT_DEFAULTS["radius"]), "robot_radius")
+    if radius < 0:
+        raise reader.fail("robot_radius", "must be zero or positive")
+    if "radius" in given:
+        if "robot_radius" in spec and given["radius"] != radius:
+            raise reader.fail("robot.radius", f"{given['radius']:g} differs from robot_radius {radius:g} (give one)")
+        radius = given.pop("radius")
+    return radius, given
+
+
+def _validate(reader: _Reader, map_: Map, params: Params, culprit: str | None = None, warn: bool = True) -> None:
+    """The consistency checks of ALGORITHMS §1 on a built map.
+
+    ``culprit`` names the field every free-space failure is blamed on (``robot.lookahead``: the map
+    passed these checks without it, so only the look-ahead's inflation can break them); ``warn``
+    off skips the landmark-coverage warning.
+    """
+    blame = "" if culprit is None else f" once the obstacles are inflated by ρ + λ = {map_.planning_radius:g}"
+
+    def fail(field: str, message: str) -> InvalidMapError:
+        return reader.fail(field if culprit is None else culprit, message + blame)
+
+    lo, hi = map_.free_bounds[:2], map_.free_bounds[2:]
+    if culprit is not None and not np.all(lo < hi):
+        raise fail("bounds", "the bounds leave no room for the look-ahead point")
     space = FreeSpace.from_map(map_)
     if space.free_area <= 0:
-        raise reader.fail("obstacles", "the free space is empty")
+        raise fail("obstacles", "the free space is empty")
     if not space.points_strictly_free(map_.goal)[0]:
-        raise reader.fail("goal", f"{map_.goal.tolist()} is not strictly inside the free space")
+        what = "the goal " if culprit else ""
+        raise fail("goal", f"{what}{map_.goal.tolist()} is not strictly inside the free space")
     component = space.component_of(map_.goal)
     for k, start in enumerate(map_.starts):
         where = f"starts[{k}]"
+        what = f"{where} " if culprit else ""
         if not space.points_strictly_free(start)[0]:
-            raise reader.fail(where, f"{start.tolist()} is not strictly inside the free space")
+            raise fail(where, f"{what}{start.tolist()} is not strictly inside the free space")
         if not component.intersects(shapely.Point(start)):
-            raise reader.fail(where, f"{start.tolist()} cannot reach the goal (another free component)")
+            raise fail(where, f"{what}{start.tolist()} cannot reach the goal (another free component)")
 
     L = len(map_.landmarks)
     if L < 2:
@@ -439,7 +500,8 @@ def _validate(reader: _Reader, map_: Map, params: Params) -> None:
             and shapely.distance(space.raw_obstacles.boundary, shapely.points(lm)) > map_.tol
         ):
             raise reader.fail(where, f"{lm.tolist()} lies inside an obstacle (a tag must be on its boundary)")
-    _coverage_warning(map_, space, params.coverage_cells)
+    if warn:
+        _coverage_warning(map_, space, params.coverage_cells)
 
 
 def _coverage_warning(map_: Map, space: FreeSpace, cells: int) -> None:
@@ -491,6 +553,7 @@ def spec_of(map_: Map) -> dict:
             for i, p, f in zip(map_.landmark_ids, map_.landmarks, map_.landmark_facing, strict=True)
         ],
         "params": {stage: dict(values) for stage, values in (map_.params or {}).items()},
+        **({"robot": map_.robot_json()} if map_.robot_json() else {}),
     }
 
 
@@ -507,6 +570,8 @@ def summary(map_: Map, listed: int | None = None) -> str:
     xmin, ymin, xmax, ymax = map_.bounds
     raw, inflated = len(map_.raw_obstacles), len(map_.obstacles)
     radius = f"robot radius {map_.robot_radius:g}"
+    if map_.lookahead > 0:
+        radius += f" + look-ahead {map_.lookahead:g}"
     if listed is None or (listed == raw == inflated):
         shapes = f"{inflated} obstacles ({radius})"
     else:

@@ -24,10 +24,11 @@ from bearnav_cli.datatypes import Outcome, Simulation, replace
 from bearnav_cli.errors import InvalidParamsError
 from bearnav_cli.geometry import FreeSpace
 from bearnav_cli.runtime import ControlSettings, ControlState, PlanArrays, bearing
+from bearnav_cli.runtime import robot as runtime_robot
 from bearnav_cli.runtime.step import ALPHA, BEARING_SIGMA, ODOMETRY_DRIFT, SPEED
 from bearnav_cli.world import starts as world_starts
 from bearnav_cli.world.camera import CAMERAS, Camera, IdealCamera
-from bearnav_cli.world.motion import Base, Contact, initial_headings
+from bearnav_cli.world.motion import Base, Contact, body_space, initial_headings
 from bearnav_cli.world.starts import parse_starts
 
 __all__ = ["PROGRESS_EVERY", "PROGRESS_WINDOW", "Params", "Settings", "VERSION", "in_domain", "make_camera",
@@ -64,7 +65,9 @@ class Params:
     Attributes
     ----------
     dynamics : {"single", "unicycle"}
-        Single integrator ``ẋ = v_ref·unit(ũ)`` or unicycle ``v = α cos e``, ``ω = β sin e``.
+        Single integrator ``ẋ = v_ref·unit(ũ)`` or unicycle ``v = α cos e``, ``ω = β sin e``; on a
+        plan with a look-ahead λ, the unicycle's point λ ahead driven as a single integrator
+        (ALGORITHMS §12.6, docs/runtime.md).
     measurement : {"bearing", "displacement"}
         What the controller is fed: bearings (reconstructed, §6) or true displacements.
     fov : float
@@ -89,13 +92,15 @@ class Params:
         Unicycle turn gain ``β`` (rad / s): it turns at ``ω = β sin e``; also the rate at which a
         robot turns to look around (``hold_time``).
     clamp_reverse : bool
-        Unicycle never drives backwards (``v >= 0``).
+        Unicycle never drives backwards (``v >= 0``); also set by the map's ``robot: {reverse: false}``.
+        On a look-ahead plan the clamped steps are not certified.
     turn_first : bool
         Unicycle forward speed ``α cos³ e`` instead of ALGORITHMS §7.1's ``α cos e``: far off its
         field it slows down to turn rather than sweep a wide arc past an obstacle corner.
     certified_heading : bool
-        Unicycle on a funnel plan: forward only within the heading allowance that keeps the
-        velocity inside the cell's certified conditions (``runtime.step.heading_allowance``).
+        Unicycle on a funnel plan without a look-ahead: forward only within the heading allowance
+        that keeps the velocity inside the cell's certified conditions
+        (``runtime.step.heading_allowance``); the look-ahead law replaces it.
     look_on_purpose : bool
         Without a fix, first turn toward the nearest heading where the map promises a usable pair of
         tags (``runtime.step.best_view_heading``), then look all around; off (default): the
@@ -134,7 +139,9 @@ class Params:
         ``None``: every usable fix.
     starts : str
         ``map`` (the map's starts), ``random:N`` (N uniform free starts in the goal's
-        component, seeded) or ``x,y;x,y;...``.
+        component, seeded), ``domain:N`` (N uniform starts in the certified domain ``D``, the union
+        of a funnel plan's cells, seeded) or ``x,y;x,y;...``. With a look-ahead unicycle
+        (ALGORITHMS §12.6) a start is the look-ahead point's; the axle begins ``λ`` behind it.
     dt : float or None
         Euler step (s); ``None`` means ``min(0.0025·D/v, 0.2)``, ``v = speed`` or ``alpha``.
     goal_tolerance : float or None
@@ -259,7 +266,8 @@ def settings(plan, params: Params) -> Settings:
     control = ControlSettings.for_plan(
         plan.map.diagonal, plan.map.tol, dynamics=params.dynamics, speed=params.speed, alpha=params.alpha,
         dt=params.dt, bearing_sigma=sigma, beta=params.beta,
-        clamp_reverse=params.clamp_reverse, turn_first=params.turn_first, certified_heading=params.certified_heading,
+        clamp_reverse=params.clamp_reverse or not plan.map.robot["reverse"], turn_first=params.turn_first,
+        certified_heading=params.certified_heading,
         measurement=params.measurement, reconstruction=params.reconstruction,
         min_spread=math.radians(params.min_spread_deg), hold_time=params.hold_time, odometry=params.odometry,
         odometry_drift=params.odometry_drift,
@@ -326,12 +334,15 @@ class _Loop:
 
     def __init__(self, arrays: PlanArrays, camera: Camera | None, base: Base, contact: Contact, starts: np.ndarray,
                  heading: np.ndarray, s: Settings, params: Params, limits: np.ndarray,
-                 world_landmarks: np.ndarray | None = None):  # fmt: skip
+                 world_landmarks: np.ndarray | None = None, lookahead: float = 0.0):  # fmt: skip
         r = len(starts)
         self.arrays, self.camera, self.base, self.contact = arrays, camera, base, contact
         self.s, self.params, self.limits = s, params, limits
-        self.x = starts.copy()
+        # λ of a unicycle on a look-ahead plan (ALGORITHMS §12.6): the world state is the axle x and
+        # the heading; the plan, the goal and what is recorded are about the point p = x + λh(φ)
+        self.lookahead = float(lookahead)
         self.phi = heading.copy()  # unicycle yaw; the single integrator's camera looks along its last command
+        self.x = runtime_robot.lookahead_point(starts, heading, -self.lookahead)  # the axle, λ behind p
         self.state = ControlState.initial(heading)
         self.outcome = np.full(r, RUNNING, np.int8)
         self.steps = np.zeros(r, np.int64)
@@ -351,6 +362,15 @@ class _Loop:
     def finish(self, runs: np.ndarray, outcome: Outcome) -> None:
         self.outcome[runs] = outcome
 
+    def reference(self, x: np.ndarray, heading: np.ndarray) -> np.ndarray:
+        """The point the plan is about: the axle ``x`` itself, or ``x + λh(φ)`` with a look-ahead, shape (R, 2)."""
+        return runtime_robot.lookahead_point(x, heading, self.lookahead)
+
+    @property
+    def position(self) -> np.ndarray:
+        """:meth:`reference` of every run now (R, 2): what the goal test, the record and the metrics use."""
+        return self.reference(self.x, self.phi)
+
     def measure(self, idx: np.ndarray, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """World-frame bearings (R, L, 2) and what the camera sees (R, L), ALGORITHMS §6.1."""
         if self.camera is None:  # displacement measurement: no camera
@@ -361,11 +381,12 @@ class _Loop:
     def step(self, active: np.ndarray) -> np.ndarray:
         """Advance the robots ``active`` by one step (ALGORITHMS §7.2); return those still running."""
         s, arrays, params = self.s, self.arrays, self.params
-        p = self.x[active]
-        arrived = np.hypot(*(p - arrays.goal).T) <= s.goal_tolerance
+        p = self.x[active]  # the axle, where the camera is and what the body's collisions are about
+        ref = self.reference(p, self.phi[active])
+        arrived = np.hypot(*(ref - arrays.goal).T) <= s.goal_tolerance
         if arrived.any():
             self.finish(active[arrived], Outcome.SUCCESS)
-            active, p = active[~arrived], p[~arrived]
+            active, p, ref = active[~arrived], p[~arrived], ref[~arrived]
             if not active.size:
                 return active
         bearings, seen = self.measure(active, p)
@@ -390,7 +411,7 @@ class _Loop:
         command = (out.velocity, out.forward, out.turn, out.scanning, out.fix & ~out.waiting)
         if ended.any():
             keep = ~ended
-            active, p, heading = active[keep], p[keep], heading[keep]
+            active, p, ref, heading = active[keep], p[keep], ref[keep], heading[keep]
             command = tuple(c[keep] for c in command)
             if not active.size:
                 return active
@@ -399,21 +420,22 @@ class _Loop:
                                              self.state.last_dir[active])  # fmt: skip
         free = self.contact.free(p, q)
         if params.record_trajectories:
-            self.trace.append((active, p, self.state.cell[active].copy(), heading))
+            self.trace.append((active, ref, self.state.cell[active].copy(), heading))
         self.x[active] = q
+        moved_to = self.reference(q, self.phi[active])
         self.steps[active] += 1
-        self.length[active] += np.hypot(*(q - p).T)
+        self.length[active] += np.hypot(*(moved_to - ref).T)
         self.contact.track(active, p, q)
         if not free.all():
             self.finish(active[~free], Outcome.COLLISION)
-            active, q, fix = active[free], q[free], fix[free]
+            active, moved_to, fix = active[free], moved_to[free], fix[free]
         # no-progress window (§7.2), over the steps with a fix: a robot holding still to turn is not stuck
         moved = active[fix]
         self.moving_steps[moved] += 1
         k = self.moving_steps[moved]
-        self.history[k % (PROGRESS_WINDOW + 1), moved] = q[fix]
+        self.history[k % (PROGRESS_WINDOW + 1), moved] = moved_to[fix]
         old = self.history[(k - PROGRESS_WINDOW) % (PROGRESS_WINDOW + 1), moved]
-        stuck = (k >= PROGRESS_WINDOW) & (np.hypot(*(q[fix] - old).T) < 2.0 * s.speed * s.dt)
+        stuck = (k >= PROGRESS_WINDOW) & (np.hypot(*(moved_to[fix] - old).T) < 2.0 * s.speed * s.dt)
         if stuck.any():
             self.finish(moved[stuck], Outcome.STALL)
             active = active[~np.isin(active, moved[stuck])]
@@ -429,7 +451,7 @@ class _Loop:
         if not self.params.record_trajectories:
             return np.zeros((0, 2)), np.zeros(0, np.int64), np.zeros(0), np.zeros(r + 1, np.int64)
         runs = np.concatenate([*(t[0] for t in self.trace), np.arange(r)])
-        points = np.concatenate([*(t[1] for t in self.trace), self.x]) if r else np.zeros((0, 2))
+        points = np.concatenate([*(t[1] for t in self.trace), self.position]) if r else np.zeros((0, 2))
         cells = np.concatenate([*(t[2] for t in self.trace), self.state.cell])
         heading = np.concatenate([*(t[3] for t in self.trace), self.phi])
         order = np.argsort(runs, kind="stable")  # steps were appended in time order
@@ -517,7 +539,12 @@ def start_loop(plan, starts: np.ndarray, params: Params = Params(), world=None, 
         heading[~blocked] = initial_headings(arrays, x0[~blocked], _radians(params.initial_heading))
     camera = make_camera(plan, world, space, params)
     base = Base(params.dynamics, s.dt, params.odometry_noise, len(x0), np.random.default_rng([params.seed, 3]))
-    loop = _Loop(arrays, camera, base, Contact(space, x0), x0, heading, s, params, limits, world.landmarks)
+    # a unicycle on a look-ahead plan: the starts are the look-ahead point's, and the body (radius ρ
+    # around the axle) is what hits things (ALGORITHMS §12.6)
+    lookahead = arrays.lookahead if params.dynamics == "unicycle" else 0.0
+    axle = runtime_robot.lookahead_point(x0, heading, -lookahead)
+    contact = Contact(body_space(world), axle) if lookahead > 0 else Contact(space, x0)
+    loop = _Loop(arrays, camera, base, contact, x0, heading, s, params, limits, world.landmarks, lookahead)
     if blocked.any():
         log.warning("%d starts are not free: counted as collisions", int(np.count_nonzero(blocked)))
         loop.finish(np.flatnonzero(blocked), Outcome.COLLISION)
@@ -542,7 +569,8 @@ def rollout(
     plan : Plan
         The synthesised plan (any object with the :class:`~bearnav_cli.datatypes.Plan` attributes).
     starts : ndarray, shape (R, 2)
-        Start positions (map units). A start that is not free ends at once as a collision.
+        Start positions (map units; a look-ahead unicycle's are its look-ahead point's, the axle
+        begins ``λ`` behind). A start that is not free ends at once as a collision.
     params : Params
         Its ``starts`` field is ignored here (see :func:`run`).
     progress : callable, optional
@@ -554,8 +582,9 @@ def rollout(
         the plan's. Default: the plan's map.
     on_step : callable, optional
         ``on_step(runs, x, certified)`` after every step: the runs (int, (K,)) that moved, their true
-        positions after the step (K, 2) and whether that step was certified (bool, (K,)), e.g. for
-        ``verify`` to check every true position against the certified domain.
+        positions after the step (K, 2; a look-ahead unicycle's look-ahead point ``x + λh``, the point
+        the plan is about) and whether that step was certified (bool, (K,)), e.g. for ``verify`` to
+        check every true position against the certified domain.
     arrays, space : PlanArrays, FreeSpace, optional
         The plan's run-time view and the world's free space, when the caller has built them.
 
@@ -566,7 +595,7 @@ def rollout(
         cells; ``stats`` holds only the camera's ``report()`` (under ``camera``) if it has one.
     """
     loop, active, built = start_loop(plan, starts, params, world, arrays=arrays, space=space)
-    s, x0 = built["settings"], loop.x.copy()
+    s, x0 = built["settings"], loop.position
     iteration = 0
     while active.size:
         if on_step is None:
@@ -575,7 +604,7 @@ def rollout(
             steps, certified = loop.steps.copy(), loop.certified.copy()
             active = loop.step(active)
             moved = np.flatnonzero(loop.steps > steps)
-            on_step(moved, loop.x[moved], loop.certified[moved] > certified[moved])
+            on_step(moved, loop.reference(loop.x[moved], loop.phi[moved]), loop.certified[moved] > certified[moved])
         iteration += 1
         if progress is not None and iteration % PROGRESS_EVERY == 0:
             progress(len(x0) - len(active), len(x0))
@@ -597,7 +626,7 @@ def rollout(
         certified_steps=loop.certified,
         start_in_domain=in_domain(built["arrays"], x0),
         min_clearance=loop.contact.clearance,
-        final_position=loop.x,
+        final_position=loop.position,
         final_cell=loop.state.cell,
         max_steps=loop.limits,
         trajectory_coords=coords,
@@ -628,9 +657,13 @@ def in_domain(arrays: PlanArrays, starts: np.ndarray) -> np.ndarray:
 
 
 def resolve_starts(plan, params: Params) -> np.ndarray:
-    """The starts of :attr:`Params.starts` for this plan, shape (R, 2) (``random:N`` from the stream
-    ``[seed, 1]``); see :func:`bearnav_cli.world.starts.resolve_starts`."""
-    return world_starts.resolve_starts(plan.map, params.starts, np.random.default_rng([params.seed, 1]))
+    """The starts of :attr:`Params.starts` for this plan, shape (R, 2) (``random:N`` and ``domain:N`` from the
+    stream ``[seed, 1]``); see :func:`bearnav_cli.world.starts.resolve_starts` and
+    :func:`~bearnav_cli.world.starts.domain_starts` (``domain:N``, uniform in the plan's cells)."""
+    rng = np.random.default_rng([params.seed, 1])
+    if isinstance(parse_starts(params.starts), world_starts.InDomain):
+        return world_starts.domain_starts(PlanArrays.from_plan(plan), int(parse_starts(params.starts)), rng)
+    return world_starts.resolve_starts(plan.map, params.starts, rng)
 
 
 def metrics(sim: Simulation) -> dict:

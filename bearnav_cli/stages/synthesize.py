@@ -39,7 +39,7 @@ from bearnav_cli.cell_lp import (
     theta_from_gain,
     vertex_template,
 )
-from bearnav_cli.datatypes import CellFlag, Cells, CellStatus, Plan
+from bearnav_cli.datatypes import CellFlag, Cells, CellStatus, Plan, tolerance_by_area
 from bearnav_cli.errors import ArtifactError, InvalidParamsError
 from bearnav_cli.funnel import cell_tolerance, exit_face, exit_sink, plan_tolerance_of, usable_tolerances
 from bearnav_cli.lp import LpResult, LpSolver, LpStatus
@@ -1020,9 +1020,9 @@ def summary(plan: Plan) -> str:
              CellStatus.GOAL: "goal"}  # fmt: skip
     text = f"{len(plan.status)} cells: " + ", ".join(f"{counts[s]} {words[s]}" for s in CellStatus)
     if plan.cells.is_funnel:
-        finite = plan.usable_tolerance[np.isfinite(plan.usable_tolerance)]
-        median = float(np.median(finite)) if len(finite) else math.nan
-        text += f"; funnel certificate, usable tolerance τ_c ≥ {plan.plan_tolerance:.3g} (median {median:.3g})"
+        by_area = tolerance_by_area(plan.cells, plan.usable_tolerance)
+        text += (f"; funnel certificate, usable tolerance τ_c ≥ {plan.plan_tolerance:.3g} (by area: median "
+                 f"{by_area['median']:.3g}, 10% below {by_area['p10']:.3g})")  # fmt: skip
         text += f", {100 * plan.cells.free_coverage:.1f}% of F covered"
     flags = plan.cells.cell_flags
     flagged = int(np.count_nonzero(flags))

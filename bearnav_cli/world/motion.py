@@ -12,12 +12,35 @@ smallest clearance.
 from __future__ import annotations
 
 import numpy as np
+import shapely
 
 from bearnav_cli import runtime
-from bearnav_cli.geometry import FreeSpace
+from bearnav_cli.geometry import FreeSpace, inflate, to_shapely
 from bearnav_cli.runtime import PlanArrays, bearing
 
-__all__ = ["Base", "Contact", "initial_headings"]
+__all__ = ["Base", "Contact", "body_space", "initial_headings"]
+
+
+def body_space(world) -> FreeSpace:
+    """The free space of the robot's body: the raw obstacles inflated by the robot radius ρ alone, ``B`` shrunk by ρ.
+
+    A unicycle on a look-ahead plan (ALGORITHMS §12.6) is planned for ``p = x + λh``, against the
+    obstacles inflated by ``ρ + λ`` (the map's ``obstacles``); what it must not hit is its body, the
+    disc of radius ρ around the axle ``x``. This is the space :class:`Contact` tests the axle's steps
+    against and measures its clearance in (the same inflation as the map stage's, with λ = 0).
+
+    Parameters
+    ----------
+    world : Map
+        The world: its raw obstacles, bounds, robot radius and tolerance.
+    """
+    raw = shapely.union_all([to_shapely(p) for p in world.raw_obstacles])
+    rho = max(0.0, float(world.robot_radius))
+    obstacles = inflate(raw, rho)
+    shapely.prepare(obstacles)
+    shapely.prepare(raw)
+    bounds = np.asarray(world.bounds, float)
+    return FreeSpace(bounds + np.array([rho, rho, -rho, -rho]), world.tol, obstacles, raw, bounds)
 
 
 def initial_headings(arrays: PlanArrays, starts: np.ndarray, heading: float | None = None) -> np.ndarray:

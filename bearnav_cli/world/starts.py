@@ -1,4 +1,4 @@
-"""Where the simulated robots start: the ``--starts`` forms ``map``, ``random:N`` and ``x,y;x,y;...``."""
+"""Where the simulated robots start: the ``--starts`` forms ``map``, ``random:N``, ``domain:N`` and ``x,y;x,y;...``."""
 
 from __future__ import annotations
 
@@ -11,13 +11,17 @@ from bearnav_cli.errors import InvalidParamsError
 from bearnav_cli.geometry import FreeSpace
 from bearnav_cli.routes import sample_starts
 
-__all__ = ["parse_starts", "resolve_starts"]
+__all__ = ["InDomain", "domain_starts", "parse_starts", "resolve_starts"]
 
-_RANDOM = re.compile(r"^random:(\d+)$")
+_RANDOM = re.compile(r"^(random|domain):(\d+)$")
+
+
+class InDomain(int):
+    """The count ``N`` of ``domain:N``: starts drawn uniformly in the certified domain ``D`` (:func:`domain_starts`)."""
 
 
 def parse_starts(spec: str) -> str | int | np.ndarray:
-    """``"map"``, the count of ``random:N``, or the explicit starts as an array (n, 2).
+    """``"map"``, the count of ``random:N`` (an :class:`InDomain` for ``domain:N``), or the explicit starts (n, 2).
 
     Raises
     ------
@@ -29,16 +33,16 @@ def parse_starts(spec: str) -> str | int | np.ndarray:
         return "map"
     match = _RANDOM.match(text)
     if match:
-        count = int(match.group(1))
+        count = int(match.group(2))
         if count < 1:
-            raise InvalidParamsError("random:N needs N >= 1", field="starts")
-        return count
+            raise InvalidParamsError(f"{match.group(1)}:N needs N >= 1", field="starts")
+        return InDomain(count) if match.group(1) == "domain" else count
     try:
         points = [[float(v) for v in item.split(",")] for item in text.split(";") if item.strip()]
     except ValueError:
         points = []
     if not points or any(len(p) != 2 or not all(math.isfinite(v) for v in p) for p in points):
-        raise InvalidParamsError(f"expected map, random:N or x,y;x,y;..., got {spec!r}", field="starts")
+        raise InvalidParamsError(f"expected map, random:N, domain:N or x,y;x,y;..., got {spec!r}", field="starts")
     return np.array(points, float)
 
 
@@ -74,3 +78,54 @@ def resolve_starts(map_, spec: str, rng: np.random.Generator) -> np.ndarray:
         if blocked[k]:
             raise InvalidParamsError(f"start {k} ({x:g}, {y:g}) is inside an obstacle", field="starts")
     return starts
+
+
+def domain_starts(arrays, count: int, rng: np.random.Generator) -> np.ndarray:
+    """``count`` starts drawn uniformly in the certified domain ``D`` (the union of a funnel plan's cells), (count, 2).
+
+    A cell is picked with probability proportional to its area, a point uniformly in it (rejection in
+    its bounding box), and the point is kept with probability ``1/k``, ``k`` the number of cells that
+    hold it: so the starts are uniform over the union, overlaps counted once. Deterministic for a
+    given generator state.
+
+    Parameters
+    ----------
+    arrays : PlanArrays
+        The plan's cells (``row_A``, ``row_b``, ``cell_vertices``); a funnel plan.
+    count : int
+        Number of starts (map units).
+    rng : numpy.random.Generator
+        The source of the draws; advanced by the call.
+
+    Raises
+    ------
+    InvalidParamsError
+        The plan is not a funnel plan (its cells certify nothing beyond themselves).
+    """
+    if not arrays.funnel:
+        raise InvalidParamsError("domain:N needs a funnel plan (its cells are the certified domain D)", field="starts")
+    vo = arrays.cell_vertex_offsets
+    lo = np.minimum.reduceat(arrays.cell_vertices, vo[:-1], axis=0)
+    hi = np.maximum.reduceat(arrays.cell_vertices, vo[:-1], axis=0)
+    area = np.zeros(arrays.n_cells)
+    for c in range(arrays.n_cells):  # shoelace
+        v = arrays.cell_vertices[vo[c] : vo[c + 1]]
+        area[c] = 0.5 * abs(np.dot(v[:, 0], np.roll(v[:, 1], -1)) - np.dot(v[:, 1], np.roll(v[:, 0], -1)))
+    found: list[np.ndarray] = []
+    need = int(count)
+    while need > 0:
+        batch = max(64, 4 * need)
+        cell = rng.choice(arrays.n_cells, size=batch, p=area / area.sum())
+        p = rng.uniform(lo[cell], hi[cell])
+        slack = arrays.tol
+        inside = np.all(np.einsum("rpk,rk->rp", arrays.row_A[cell], p) <= arrays.row_b[cell] + slack, axis=1)
+        p = p[inside]
+        holders = np.zeros(len(p), np.int64)
+        for k in range(0, len(p), 128):  # (points, cells, rows) in chunks
+            q = p[k : k + 128]
+            holders[k : k + 128] = np.all(np.einsum("cpk,rk->rcp", arrays.row_A, q) <= arrays.row_b[None] + slack,
+                                          axis=2).sum(axis=1)  # fmt: skip
+        keep = rng.uniform(size=len(p)) * np.maximum(holders, 1) < 1.0
+        found.append(p[keep][:need])
+        need -= len(found[-1])
+    return np.concatenate(found) if found else np.zeros((0, 2))

@@ -86,8 +86,10 @@ class BearnavNode(Node):
             AprilTagDetectionArray, self.param["detections_topic"], self.on_detections, qos_profile_sensor_data
         )  # best effort: matches any publisher
         self.create_timer(settings.period, self.watchdog)
+        lookahead = self.logic.controller.arrays.lookahead
         self.get_logger().info(f"bearnav: {len(self.logic.tags.numbers)} tags, {settings.dynamics}, "
-                               f"heading from {settings.heading_source}")  # fmt: skip
+                               f"heading from {settings.heading_source}"
+                               + (f", look-ahead {lookahead:g} m" if lookahead > 0 else ""))  # fmt: skip
 
     def publish(self, values: tuple) -> None:
         self.pub.publish(fill_twist(Twist(), values))
