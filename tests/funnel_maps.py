@@ -143,7 +143,7 @@ def cluttered_spec(seed: int, iterations: int = 400) -> dict:
             discs.append(([_round(cx), _round(cy)], _round(rng.uniform(0.06, 0.22))))
     ts = (np.arange(14) + rng.uniform(0.2, 0.8, 14)) / 14.0
     landmarks = []
-    for k, t in enumerate(ts):
+    for t in ts:
         side, u = divmod(t * 4.0, 1.0)
         landmarks.append([[u * W, 0.0], [W, u * H], [(1 - u) * W, H], [0.0, (1 - u) * H]][int(side)])
     obstacles = [{"rectangle": r} for r in rects] + [{"circle": {"center": c, "radius": r}} for c, r in discs]
