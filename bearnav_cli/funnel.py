@@ -23,9 +23,9 @@ from bearnav_cli.geometry import box_polygon, clip, convex_pieces, drop_collinea
 
 __all__ = [
     "INSET_LIMIT", "INSET_SAMPLES", "NECK_ANGLE", "PIECE_BATCH", "NeckChoice", "ObstaclePieces", "Region", "best_neck",
-    "cell_tolerance", "coverage_domain", "depth", "exit_face", "exit_interval", "exit_sink", "exit_row_index",
-    "funnel_region", "inset_walls", "neck_choice", "neck_rows", "necked", "plan_tolerance_of", "reached_parts",
-    "usable_tolerances",
+    "cell_tolerance", "coverage_domain", "depth", "exit_face", "exit_interval", "exit_sink", "exit_sinks",
+    "exit_row_index", "funnel_region", "inset_walls", "neck_choice", "neck_rows", "necked", "plan_tolerance_of",
+    "reached_parts", "usable_tolerances",
 ]  # fmt: skip
 
 #: ψ of the neck rows: the angle their lines make with the exit direction ``z`` (radians).
@@ -354,7 +354,7 @@ def necked(region: Region, x_i: np.ndarray, x_j: np.ndarray, parent: Region, ins
 
 #: Per-cell exit insets (ALGORITHMS §12.4): insets scored per pass, and the largest tried as a fraction of
 #: the exit point's depth in its parent (the face holds ``x_j``, so no inset can exceed that depth).
-INSET_SAMPLES = 24
+INSET_SAMPLES = 12
 INSET_LIMIT = 0.98
 
 
@@ -635,9 +635,7 @@ def reached_parts(domain: shapely.Geometry, covered: shapely.Geometry) -> tuple[
 def exit_sink(face: np.ndarray, normals: np.ndarray, offsets: np.ndarray) -> tuple[np.ndarray, float]:
     """The sink of Lemma 6 (ALGORITHMS §12.4): the point of the exit face of largest side depth.
 
-    ``h*(x) = min_k (n_k·x + q_k)`` over the cell's non-exit rows is concave and piecewise affine
-    along the face, so its maximum is at an end of the face or where two rows' values cross; every
-    such point is evaluated (exact, no search).
+    One cell of :func:`exit_sinks`.
 
     Parameters
     ----------
@@ -654,18 +652,51 @@ def exit_sink(face: np.ndarray, normals: np.ndarray, offsets: np.ndarray) -> tup
     depth : float
         ``h* = min_k h_k(x*)`` (map units); ``inf`` without rows.
     """
-    face = np.asarray(face, float).reshape(2, 2)
-    n = np.asarray(normals, float).reshape(-1, 2)
-    if not len(n):
-        return face.mean(axis=0), math.inf
-    alpha = n @ face[0] + np.asarray(offsets, float).reshape(-1)  # h_k at t = 0
-    beta = n @ (face[1] - face[0])  # its slope along t ∈ [0, 1]
+    face = np.asarray(face, float).reshape(1, 2, 2)
+    sink, depth_ = exit_sinks(face, np.asarray(normals, float).reshape(1, -1, 2), np.asarray(offsets).reshape(1, -1))
+    return sink[0], float(depth_[0])
+
+
+def exit_sinks(faces: np.ndarray, normals: np.ndarray, offsets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Lemma 6's sink of many cells at once: per cell, the point of its exit face of largest side depth.
+
+    ``h*(x) = min_k (n_k·x + q_k)`` over a cell's non-exit rows is concave and piecewise affine
+    along the face, so its maximum is at an end of the face or where two rows' values cross; every
+    such point is evaluated (exact, no search).
+
+    Parameters
+    ----------
+    faces : ndarray, shape (C, 2, 2)
+        The two ends of each cell's exit face (map units).
+    normals, offsets : ndarray, shapes (C, H, 2), (C, H)
+        Each cell's non-exit rows as barriers, ``h_k(x) = n_k·x + q_k ≥ 0`` in the cell (unit
+        normals); pad a cell with fewer rows with zero normals and ``+inf`` offsets.
+
+    Returns
+    -------
+    sinks : ndarray, shape (C, 2)
+        ``x*`` on each face (map units).
+    depths : ndarray, shape (C,)
+        ``h*`` (map units); ``inf`` for a cell without rows.
+    """
+    faces = np.asarray(faces, float).reshape(-1, 2, 2)
+    n = np.asarray(normals, float).reshape(len(faces), -1, 2)
+    q = np.asarray(offsets, float).reshape(len(faces), -1)
+    if not q.shape[1]:  # no rows: every point of the face is as deep (inf)
+        return faces.mean(axis=1), np.full(len(faces), np.inf)
+    alpha = np.einsum("chi,ci->ch", n, faces[:, 0]) + q  # h_k at t = 0
+    beta = np.einsum("chi,ci->ch", n, faces[:, 1] - faces[:, 0])  # its slope along t ∈ [0, 1]
     with np.errstate(divide="ignore", invalid="ignore"):
-        cross = (alpha[None, :] - alpha[:, None]) / (beta[:, None] - beta[None, :])
-    t = np.concatenate([[0.0, 1.0], cross[np.isfinite(cross) & (cross > 0.0) & (cross < 1.0)]])
-    values = np.min(alpha[None, :] + t[:, None] * beta[None, :], axis=1)
-    best = int(np.argmax(values))
-    return face[0] + t[best] * (face[1] - face[0]), float(values[best])
+        cross = (alpha[:, None, :] - alpha[:, :, None]) / (beta[:, :, None] - beta[:, None, :])
+    cross = cross.reshape(len(faces), -1)
+    cross = np.where(np.isfinite(cross) & (cross > 0.0) & (cross < 1.0), cross, 0.0)
+    t = np.concatenate([np.zeros((len(faces), 1)), np.ones((len(faces), 1)), cross], axis=1)
+    with np.errstate(invalid="ignore"):
+        values = np.min(alpha[:, None, :] + t[:, :, None] * beta[:, None, :], axis=2)
+    best = np.argmax(values, axis=1)
+    rows = np.arange(len(faces))
+    t_best = t[rows, best]
+    return faces[:, 0] + t_best[:, None] * (faces[:, 1] - faces[:, 0]), values[rows, best]
 
 
 def exit_face(vertices: np.ndarray, z: np.ndarray, x_j: np.ndarray) -> np.ndarray:

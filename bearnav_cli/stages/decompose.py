@@ -465,14 +465,14 @@ def _funnel_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) 
             if g.area > 0]  # fmt: skip
     free_before = 1.0 - sum(p[1] for p in band) / free_area if free_area > 0 else 1.0
     depth_q = WALL_LEAF_DEPTH * margin
-    offset = shapely.boundary(coverage_domain(free, free_bounds, space.obstacles, depth_q))
-    shapely.prepare(offset)
-    near_wall = space.with_clearance(0.5 * depth_q)
-    budget = params.max_added_nodes - len(added) if params.cover == "F" else 0
-    band = _densify(band, (1.0 - params.coverage_target) * free_area, budget,
-                    lambda g: _join_leaf(_band_candidates(g, offset), nodes, cost, near_wall, tol, n_eligible,
-                                         nearest=True),
-                    add_leaf)  # fmt: skip
+    if params.cover == "F":
+        offset = shapely.boundary(coverage_domain(free, free_bounds, space.obstacles, depth_q))
+        shapely.prepare(offset)
+        near_wall = space.with_clearance(0.5 * depth_q)
+        band = _densify(band, (1.0 - params.coverage_target) * free_area, params.max_added_nodes - len(added),
+                        lambda g: _join_leaf(_band_candidates(g, offset), nodes, cost, near_wall, tol, n_eligible,
+                                             nearest=True),
+                        add_leaf)  # fmt: skip
     band_unreachable = sum(1 for p in band if p[2])
     free_after = 1.0 - sum(p[1] for p in band) / free_area if free_area > 0 else 1.0
     if len(added) > in_fm:  # the added cells may meet parts of F no cell met before: measure again

@@ -41,7 +41,7 @@ from bearnav_cli.cell_lp import (
 )
 from bearnav_cli.datatypes import CellFlag, Cells, CellStatus, Plan, tolerance_by_area
 from bearnav_cli.errors import ArtifactError, InvalidParamsError
-from bearnav_cli.funnel import cell_tolerance, exit_face, exit_sink, plan_tolerance_of, usable_tolerances
+from bearnav_cli.funnel import cell_tolerance, exit_sinks, plan_tolerance_of, usable_tolerances
 from bearnav_cli.lp import LpResult, LpSolver, LpStatus
 
 __all__ = [
@@ -888,9 +888,7 @@ def more_tolerant_all(solutions: Sequence[CellSolution], problems: Sequence[Cell
     terms = [None] * C if terms is None else list(terms)
     terms = [_lemma4_terms(p) if t is None else t for p, t in zip(problems, terms, strict=True)]
     diam = np.array([t[1] for t in terms], float)
-    sinks = [exit_sink(exit_face(p.vertices, p.z, p.x_j), p.cbf_n, p.cbf_q) for p in problems]
-    sink = np.array([x for x, _ in sinks], float).reshape(C, 2)
-    h_star = np.array([h for _, h in sinks], float)
+    sink, h_star = _sinks(problems)
     c_h = np.array([s.c_h for s in solutions], float)
     c_lp = np.array([s.c_v for s in solutions], float)
     # Lemma 6 takes c ≤ c_v ≤ c_h, and c_v only sets the time bound: lower both where the input
@@ -964,6 +962,24 @@ def more_tolerant_all(solutions: Sequence[CellSolution], problems: Sequence[Cell
                                        margin_h=float(cbf[1, k]) if n_h[k] else math.nan,
                                        margin_v=float(clf[1, k]), tolerance=float(delta[1, k])))  # fmt: skip
     return out
+
+
+def _sinks(problems: Sequence[CellProblem]) -> tuple[np.ndarray, np.ndarray]:
+    """Lemma 6's sink ``x*`` (C, 2) and side depth ``h*`` (C,) of every cell (:func:`funnel.exit_sinks`)."""
+    C = len(problems)
+    H = max((len(p.cbf_q) for p in problems), default=0)
+    P = max(len(p.vertices) for p in problems)
+    normals, offsets = np.zeros((C, H, 2)), np.full((C, H), np.inf)
+    gap = np.full((C, P), np.inf)  # each vertex's distance from its exit line: the face's ends are the two nearest
+    vertices = np.zeros((C, P, 2))
+    for k, p in enumerate(problems):
+        h, v = len(p.cbf_q), len(p.vertices)
+        normals[k, :h], offsets[k, :h] = np.asarray(p.cbf_n, float).reshape(-1, 2), p.cbf_q
+        vertices[k, :v] = p.vertices
+        gap[k, :v] = np.abs((p.vertices - p.x_j) @ p.z)
+    ends = np.sort(np.argsort(gap, axis=1, kind="stable")[:, :2], axis=1)  # as exit_face picks them
+    faces = np.take_along_axis(vertices, ends[:, :, None], axis=1)
+    return exit_sinks(faces, normals, offsets)
 
 
 def cell_tolerances(cells: Cells, gain: np.ndarray, c_h: np.ndarray, c_v: np.ndarray, u_max: float,
