@@ -140,7 +140,10 @@ def safe_polygon(cells, c: int) -> shapely.Polygon:
 
 def test_corridor_safe_sets_keep_the_margin_from_every_obstacle(cells, small_map):
     """Every cell's safe set (cell ∩ barrier half-planes) contains its tree edge (or the goal) and
-    stays at least min(margin, d/2) away from the inflated obstacles and the walls (exact check)."""
+    stays at least min(margin, s·d) away from the inflated obstacles and the walls (exact check;
+    ``s = funnel.ROW_SHARE``, ALGORITHMS §11.5 has 1/2, docs/algorithms.md says why a quarter)."""
+    from bearnav_cli.funnel import ROW_SHARE
+
     space = FreeSpace.from_map(small_map)
     margin = 0.01 * small_map.diagonal
     walls = shapely.difference(shapely.box(*small_map.bounds).buffer(1.0), shapely.box(*small_map.bounds))
@@ -153,11 +156,11 @@ def test_corridor_safe_sets_keep_the_margin_from_every_obstacle(cells, small_map
         safe = safe_polygon(cells, c)
         assert not safe.is_empty
         segment = shapely.LineString(ends) if len(ends) == 2 else shapely.Point(ends[0])
-        # the rows may only be moved by half the segment's own distance from an obstacle
-        room = min(margin, 0.5 * shapely.distance(segment, space.obstacles))
+        # the rows may only be moved by a share of the segment's own distance from an obstacle
+        room = min(margin, ROW_SHARE * shapely.distance(segment, space.obstacles))
         assert shapely.distance(safe, space.obstacles) >= room - 1e-9
         if c > 0:
-            assert shapely.distance(safe, walls) >= min(margin, 0.5 * shapely.distance(segment, walls)) - 1e-9
+            assert shapely.distance(safe, walls) >= min(margin, ROW_SHARE * shapely.distance(segment, walls)) - 1e-9
         checked += len(n) > 0
     assert checked > cells.n_cells // 2
 

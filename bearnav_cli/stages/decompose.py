@@ -105,9 +105,10 @@ class Params:
         ``wedge``: ALGORITHMS §4.5–4.6 as written, lines through collision samples; its safe
         set overlaps the obstacles between samples.
     barrier_margin : float or None
-        ``corridor`` only: each row is moved ``min(margin, d/2)`` toward the edge (``d`` the
-        piece's distance from it), so the safe set keeps that distance from the obstacles
-        (map units); ``None`` means ``0.01·D``.
+        ``m``: a ``corridor`` barrier row is moved ``min(m, d/2)`` toward the edge (``d`` the
+        piece's distance from it), so the safe set keeps that distance from the obstacles; a
+        funnel cell's row keeps ``min(m, d/4)`` (``funnel.ROW_SHARE``), and ``F_m`` is the free
+        space at least ``m`` from ``O`` (map units); ``None`` means ``0.01·D``.
     """
 
     cells: str = "funnel"
@@ -453,7 +454,7 @@ def _funnel_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) 
                     100 * unreached_area / full_domain.area, unreached_area, 2 * margin)  # fmt: skip
     after = 1.0 - uncovered_area / domain_area if domain_area > 0 else 1.0
     # §12.7: the domain reaches the walls. The band within m of O stays outside every cell above;
-    # leaves a band depth q = WALL_LEAF_DEPTH·m from O get cells that keep only min(m, d/2) ≈ q/2
+    # leaves a band depth q = WALL_LEAF_DEPTH·m from O get cells that keep only min(m, s·d) ≈ q/4
     # from the piece beside them, so densifying F with them leaves a band of about q/2
     in_fm = len(added)
     n_eligible = len(nodes)
@@ -649,7 +650,8 @@ def _band_candidates(pocket: shapely.Geometry, offset: shapely.Geometry) -> np.n
 
     Points of ``offset`` (the curve at the band leaf depth ``q`` from ``O`` and the walls) inside the
     pocket, its middle first, then spread along it: a leaf there gets a cell that keeps only
-    ``min(m, d/2) ≈ q/2`` from the piece beside it, so its cell reaches that close to the wall.
+    ``min(m, s·d) ≈ q/4`` (``funnel.ROW_SHARE``) from the piece beside it, so its cell reaches that
+    close to the wall.
     """
     curve = shapely.intersection(pocket, offset)
     length = float(curve.length) if not curve.is_empty else 0.0
