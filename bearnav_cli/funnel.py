@@ -456,8 +456,14 @@ def best_neck(region: Region, x_i: np.ndarray, x_j: np.ndarray, parent: Region, 
     """
     z = (x_i - x_j) / math.hypot(*(x_i - x_j))
     w = np.array([-z[1], z[0]])
-    f0, f1 = np.sort((exit_face(region.polygon, z, x_j) - x_j) @ w)
+    face = exit_face(region.polygon, z, x_j)
     keep = np.arange(len(region.b)) != region.exit_row
+    # a face already deeper in the parent than its own side depth: any neck would only lower h*
+    slack0 = float(np.min(parent.b[None, :] - face @ parent.A.T))
+    h0 = exit_sink(face, -region.A[keep], region.b[keep])[1]
+    if slack0 >= h0:
+        return NeckChoice(region, slack0, h0)
+    f0, f1 = np.sort((face - x_j) @ w)
     # the region's non-exit rows along the exit line x_j + t·w: h_k(t) = α_k + β_k t
     alpha = region.b[keep] - region.A[keep] @ x_j
     beta = -(region.A[keep] @ w)

@@ -455,10 +455,10 @@ def _funnel_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) 
     after = 1.0 - uncovered_area / domain_area if domain_area > 0 else 1.0
     # §12.7: the domain reaches the walls. The band within m of O stays outside every cell above;
     # leaves a band depth q = WALL_LEAF_DEPTH·m from O get cells that keep only min(m, s·d) ≈ q/4
-    # from the piece beside them, so densifying F with them leaves a band of about q/2
+    # from the piece beside them, so densifying F with them leaves a band of about q/4
     in_fm = len(added)
     n_eligible = len(nodes)
-    covered = shapely.union_all([shapely.Polygon(r.polygon) for r in regions])
+    # ``covered`` is the union of every cell so far (recomputed above when leaves were added)
     whole_free = coverage_domain(free, free_bounds, space.obstacles, 0.0)
     reached_free, _ = reached_parts(whole_free, covered)
     free_area = float(reached_free.area)
