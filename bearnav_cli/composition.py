@@ -28,7 +28,14 @@ import numpy as np
 import shapely
 
 from bearnav_cli.datatypes import Cells, Map, Plan, cell_list, tolerance_by_area
-from bearnav_cli.funnel import cell_tolerance, coverage_domain, plan_tolerance_of, reached_parts, usable_tolerances
+from bearnav_cli.funnel import (
+    cell_tolerance,
+    coverage_domain,
+    depth,
+    plan_tolerance_of,
+    reached_parts,
+    usable_tolerances,
+)
 from bearnav_cli.geometry import FreeSpace, barrier_margin
 
 __all__ = [
@@ -196,7 +203,7 @@ def check(plan: Plan, speed: float, space: FreeSpace | None = None) -> Compositi
             continue
         face = verts[[k, (k + 1) % len(verts)]]
         A_j, b_j = cells.rows(j)
-        slack[c] = float(np.min(b_j[None, :] - face @ A_j.T))
+        slack[c] = depth(A_j, b_j, face)
         if not slack[c] >= inset[c] - 1e3 * tol:
             failures["c4_exit_contained"].append(c)
         sigma_v = -float(np.max(u @ z + plan.c_v[c] * ((verts - x_j) @ z)))

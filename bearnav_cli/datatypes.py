@@ -916,8 +916,12 @@ class Cells:
         return {name: _entry(getattr(self, name)) for name in CELL_KEYS}
 
 
-def cell_areas(cells: Cells) -> np.ndarray:
-    """The signed (shoelace) area of every cell polygon, shape (C,), map units² (positive when CCW)."""
+def cell_areas(cells: Cells | Any) -> np.ndarray:
+    """The signed (shoelace) area of every cell polygon, shape (C,), map units² (positive when CCW).
+
+    ``cells`` is anything with ``cell_vertices`` and ``cell_vertex_offsets`` (Cells, Plan's cells,
+    :class:`~bearnav_cli.runtime.plan_arrays.PlanArrays`).
+    """
     offsets, verts = cells.cell_vertex_offsets, cells.cell_vertices
     if not len(verts):
         return np.zeros(len(offsets) - 1)

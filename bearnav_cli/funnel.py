@@ -413,13 +413,14 @@ def neck_choice(region: Region, x_i: np.ndarray, x_j: np.ndarray, parent: Region
     -------
     NeckChoice
     """
-    cell = necked(region, x_i, x_j, parent, inset, tol)
-    z = (x_i - x_j) / math.hypot(*(x_i - x_j))
-    face = exit_face(cell.polygon, z, x_j)
-    slack = float(np.min(parent.b[None, :] - face @ parent.A.T))
+    return _scored(necked(region, x_i, x_j, parent, inset, tol), x_i, x_j, parent)
+
+
+def _scored(cell: Region, x_i: np.ndarray, x_j: np.ndarray, parent: Region) -> NeckChoice:
+    """``cell`` with its exit face's slack in ``parent`` and its sink depth ``h*``."""
+    face = exit_face(cell.polygon, (x_i - x_j) / math.hypot(*(x_i - x_j)), x_j)
     keep = np.arange(len(cell.b)) != cell.exit_row
-    _, h_star = exit_sink(face, -cell.A[keep], cell.b[keep])
-    return NeckChoice(cell, slack, h_star)
+    return NeckChoice(cell, depth(parent.A, parent.b, face), exit_sink(face, -cell.A[keep], cell.b[keep])[1])
 
 
 def best_neck(region: Region, x_i: np.ndarray, x_j: np.ndarray, parent: Region, tol: float,
@@ -454,46 +455,35 @@ def best_neck(region: Region, x_i: np.ndarray, x_j: np.ndarray, parent: Region, 
     -------
     NeckChoice
     """
+    # a face already deeper in the parent than its own side depth: any neck would only lower h*
+    bare = _scored(region, x_i, x_j, parent)
+    if bare.inset >= bare.sink_depth:
+        return bare
     z = (x_i - x_j) / math.hypot(*(x_i - x_j))
     w = np.array([-z[1], z[0]])
-    face = exit_face(region.polygon, z, x_j)
+    f0, f1 = np.sort((exit_face(region.polygon, z, x_j) - x_j) @ w)
     keep = np.arange(len(region.b)) != region.exit_row
-    # a face already deeper in the parent than its own side depth: any neck would only lower h*
-    slack0 = float(np.min(parent.b[None, :] - face @ parent.A.T))
-    h0 = exit_sink(face, -region.A[keep], region.b[keep])[1]
-    if slack0 >= h0:
-        return NeckChoice(region, slack0, h0)
-    f0, f1 = np.sort((face - x_j) @ w)
-    # the region's non-exit rows along the exit line x_j + t·w: h_k(t) = α_k + β_k t
-    alpha = region.b[keep] - region.A[keep] @ x_j
-    beta = -(region.A[keep] @ w)
     slope, room0 = parent.A @ w, parent.b - parent.A @ x_j
     up, down = slope > 1e-15, slope < -1e-15
-    cos = math.cos(NECK_ANGLE)
     pad = 100.0 * tol  # as necked() pads the neck ends
+    A_n, _ = neck_rows(x_j, z, 0.0, 0.0)  # the neck rows' normals; only their offsets depend on the inset
+    normals = np.vstack([-region.A[keep], -A_n])
+    offsets = np.concatenate([region.b[keep], [np.inf, np.inf]])
 
     def usable(insets: np.ndarray) -> np.ndarray:
-        room = room0[None, :] - insets[:, None]  # (K, p): the eroded parent's rows along the line
+        room = room0[None, :] - insets[:, None]  # (K, p): the eroded parent's rows along the exit line
         t_b = np.min(np.where(up, room / np.where(up, slope, 1.0), np.inf), axis=1) - pad
         t_a = np.max(np.where(down, room / np.where(down, slope, 1.0), -np.inf), axis=1) + pad
         necked_ = ~((t_a - pad <= f0) & (f1 <= t_b + pad))
         lo, hi = np.where(necked_, np.maximum(f0, t_a), f0), np.where(necked_, np.minimum(f1, t_b), f1)
-        # rows (K, P + 2): the region's, then the necks c(t − t_a) and c(t_b − t) where necked
-        a = np.concatenate([np.broadcast_to(alpha, (len(insets), len(alpha))),
-                            np.where(necked_, -cos * t_a, np.inf)[:, None],
-                            np.where(necked_, cos * t_b, np.inf)[:, None]], axis=1)  # fmt: skip
-        b = np.concatenate([np.broadcast_to(beta, (len(insets), len(beta))),
-                            np.where(necked_, cos, 0.0)[:, None],
-                            np.where(necked_, -cos, 0.0)[:, None]], axis=1)  # fmt: skip
-        with np.errstate(divide="ignore", invalid="ignore"):
-            cross = (a[:, None, :] - a[:, :, None]) / (b[:, :, None] - b[:, None, :])  # (K, P+2, P+2)
-        cross = cross.reshape(len(insets), -1)
-        inside = np.isfinite(cross) & (cross > lo[:, None]) & (cross < hi[:, None])
-        t = np.concatenate([lo[:, None], hi[:, None], np.where(inside, cross, lo[:, None])], axis=1)
-        with np.errstate(invalid="ignore"):
-            h_star = np.max(np.min(a[:, None, :] + t[:, :, None] * b[:, None, :], axis=2), axis=1)
-        ends = np.stack([lo, hi], axis=1)  # (K, 2): the face's ends, slack in the parent's rows
-        slack = np.min(room0[None, None, :] - ends[:, :, None] * slope[None, None, :], axis=(1, 2))
+        faces = x_j + np.stack([lo, hi], axis=1)[:, :, None] * w  # (K, 2, 2): the necked faces
+        q = np.broadcast_to(offsets, (len(insets), len(offsets))).copy()
+        # where necked, the neck rows through a = x_j + t_a·w and b = x_j + t_b·w (neck_rows)
+        q[:, -2] = np.where(necked_, A_n[0] @ x_j + t_a * (A_n[0] @ w), np.inf)
+        q[:, -1] = np.where(necked_, A_n[1] @ x_j + t_b * (A_n[1] @ w), np.inf)
+        h_star = exit_sinks(faces, np.broadcast_to(normals, (len(insets), *normals.shape)), q)[1]
+        slack = np.min(room0[None, None, :] - np.stack([lo, hi], axis=1)[:, :, None] * slope[None, None, :],
+                       axis=(1, 2))  # fmt: skip
         return np.where(lo < hi, 0.5 * np.minimum(h_star, slack), -np.inf)
 
     limit = INSET_LIMIT * depth(parent.A, parent.b, x_j)
@@ -510,6 +500,8 @@ def best_neck(region: Region, x_i: np.ndarray, x_j: np.ndarray, parent: Region, 
 def depth(A: np.ndarray, b: np.ndarray, point: np.ndarray) -> float:
     """``min_k (b_k − A_k·point)``: how deep a point lies in ``{A x ≤ b}`` (map units; < 0 outside).
 
+    Given several points (an exit face's two ends, say), the least depth of any of them.
+
     Parameters
     ----------
     A, b : ndarray, shapes (p, 2), (p,)
@@ -521,7 +513,7 @@ def depth(A: np.ndarray, b: np.ndarray, point: np.ndarray) -> float:
     -------
     float
     """
-    return float(np.min(b - A @ np.asarray(point, float)))
+    return float(np.min(b[None, :] - np.asarray(point, float).reshape(-1, 2) @ np.asarray(A).T))
 
 
 def exit_interval(A: np.ndarray, b: np.ndarray, x_j: np.ndarray, w: np.ndarray, inset: float) -> tuple[float, float]:
@@ -788,10 +780,8 @@ def usable_tolerances(tolerance: np.ndarray, exit_inset: np.ndarray) -> np.ndarr
     ndarray, shape (C,)
         NaN where ``δ_c`` is NaN.
     """
-    half = 0.5 * np.asarray(exit_inset, float)
-    return np.fmin(np.asarray(tolerance, float), np.where(np.isnan(half), np.inf, half)) + np.where(
-        np.isnan(tolerance), np.nan, 0.0
-    )
+    tolerance, half = np.asarray(tolerance, float), 0.5 * np.asarray(exit_inset, float)
+    return np.where(np.isnan(half), tolerance, np.minimum(tolerance, half))
 
 
 def plan_tolerance_of(usable: np.ndarray) -> float:

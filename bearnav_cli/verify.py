@@ -36,7 +36,7 @@ from bearnav_cli.composition import Composition
 from bearnav_cli.datatypes import CellFlag, CellStatus, Map, Outcome, Plan, Simulation, cell_list
 from bearnav_cli.errors import ArtifactError, InvalidParamsError
 from bearnav_cli.funnel import coverage_domain, reached_parts
-from bearnav_cli.geometry import FreeSpace, inflate, to_shapely
+from bearnav_cli.geometry import FreeSpace, inflate
 from bearnav_cli.routes import route_lengths, sample_starts
 from bearnav_cli.runtime import PlanArrays
 from bearnav_cli.stages import simulate
@@ -768,7 +768,7 @@ class VerifyReport:
         return out
 
 
-def check_lookahead(plan: Plan) -> list[str]:
+def check_lookahead(plan: Plan, space: FreeSpace | None = None) -> list[str]:
     """The look-ahead checks of ALGORITHMS §12.8, exact, from the plan file: what is wrong (empty: nothing).
 
     * ``lookahead``: the plan's ``λ`` (the one its cells were built for) equals its map's
@@ -785,6 +785,9 @@ def check_lookahead(plan: Plan) -> list[str]:
     ----------
     plan : Plan
         The plan (its cells' ``lookahead`` and its embedded map).
+    space : FreeSpace, optional
+        ``FreeSpace.from_map(plan.map)``, whose unions of the raw and the stored obstacles are
+        reused (built when None).
     """
     problems = []
     map_ = plan.map
@@ -793,11 +796,11 @@ def check_lookahead(plan: Plan) -> list[str]:
         problems.append(f"lookahead: the plan's λ = {built:g} differs from its map's robot.lookahead "
                         f"{map_.lookahead:g} (the cells were built for another robot)")  # fmt: skip
     radius = map_.planning_radius
-    raw = shapely.union_all([to_shapely(p) for p in map_.raw_obstacles]) if map_.raw_obstacles else None
-    if raw is not None and not raw.is_empty:
+    space = FreeSpace.from_map(map_) if space is None else space
+    raw, stored = space.raw_obstacles, space.obstacles
+    if map_.raw_obstacles and not raw.is_empty:
         # only the part inside B matters: the walls of B_r keep the robot farther from the rest
         wanted = shapely.intersection(inflate(raw, radius), shapely.box(*map_.bounds))
-        stored = shapely.union_all([to_shapely(p) for p in map_.obstacles]) if map_.obstacles else shapely.Polygon()
         if not shapely.covers(shapely.buffer(stored, map_.tol), wanted):
             missing = shapely.difference(wanted, shapely.buffer(stored, map_.tol))
             free = shapely.difference(shapely.box(*map_.bounds), stored)
@@ -910,7 +913,7 @@ def run(
         world_cells=world_cells,
         unreached=unreached,
         breaches=breaches,
-        lookahead_problems=tuple(check_lookahead(plan)),
+        lookahead_problems=tuple(check_lookahead(plan, space)),
         uncovered_dynamics=uncovered,
     )
     log.info("verify: %s", report.summary())

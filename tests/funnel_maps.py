@@ -98,9 +98,14 @@ def random_spec(seed: int, iterations: int = 300, rrt_seed: int = 0) -> dict:
         if any(math.hypot(p[0] - q[0], p[1] - q[1]) < 0.2 for q in landmarks):
             continue
         landmarks.append(p)
+    return _spec(f"funnel_random_{seed}", W, H, radius, goal, rects, discs, landmarks, iterations, rrt_seed)
+
+
+def _spec(name, W, H, radius, goal, rects, discs, landmarks, iterations, rrt_seed) -> dict:
+    """The map spec dict of a box ``W × H`` with rectangles, discs and landmarks (no starts)."""
     obstacles = [{"rectangle": r} for r in rects] + [{"circle": {"center": c, "radius": r}} for c, r in discs]
     return {
-        "name": f"funnel_random_{seed}",
+        "name": name,
         "bounds": [0.0, 0.0, W, H],
         "robot_radius": radius,
         "goal": goal,
@@ -146,17 +151,8 @@ def cluttered_spec(seed: int, iterations: int = 400) -> dict:
     for t in ts:
         side, u = divmod(t * 4.0, 1.0)
         landmarks.append([[u * W, 0.0], [W, u * H], [(1 - u) * W, H], [0.0, (1 - u) * H]][int(side)])
-    obstacles = [{"rectangle": r} for r in rects] + [{"circle": {"center": c, "radius": r}} for c, r in discs]
-    return {
-        "name": f"cluttered_{seed}",
-        "bounds": [0.0, 0.0, W, H],
-        "robot_radius": radius,
-        "goal": goal,
-        "starts": [],
-        "obstacles": obstacles,
-        "landmarks": [[_round(x), _round(y)] for x, y in landmarks],
-        "params": {"rrtstar": {"iterations": int(iterations), "seed": 0}},
-    }
+    landmarks = [[_round(x), _round(y)] for x, y in landmarks]
+    return _spec(f"cluttered_{seed}", W, H, radius, goal, rects, discs, landmarks, iterations, 0)
 
 
 #: The shared generator of maps nobody tuned: next to the repository (``../shared``), or at the

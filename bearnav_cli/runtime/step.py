@@ -281,7 +281,8 @@ class ControlOutput:
         axle's; a look-ahead unicycle's policy ran at ``x̂ + λh(θ)``.
     certified : ndarray of bool, shape (R,)
         The step is covered by the composed certificate (ALGORITHMS §11.4): a funnel plan, a cell's
-        field (not a straight approach), and an estimate whose error bound (3σ) is at most ``δ*``;
+        field (not a straight approach), and an estimate whose error bound (3σ) is at most the
+        active cell's usable tolerance ``τ_c`` (§12.3);
         for a unicycle only as the look-ahead point of §12.6 (``λ > 0``) on a step the reverse
         clamp left alone (never with ``λ = 0``).
     waiting : ndarray of bool, shape (R,)
@@ -368,18 +369,19 @@ def control(
     s = settings
     prior = np.where((state.known & s.odometry)[:, None], state.x_hat + s.dt * state.motion, np.nan)
     fix = measure(arrays, s, bearings, visible, x_true, displacements, prior)
-    body = fuse(s, state, fix)  # the estimate of the axle x (where the camera is)
+    axle = fuse(s, state, fix)  # the estimate of the axle x (where the camera is)
     lam = arrays.lookahead if s.dynamics == "unicycle" else 0.0
     ahead = lam > 0.0  # ALGORITHMS §12.6: the policy runs at the look-ahead point p̂ = x̂ + λh(θ̂)
-    policy = s
+    policy, reference = s, axle
     if ahead:
-        body_est, phi = body, np.asarray(heading, float).reshape(len(state.cell))
-        body = dataclasses.replace(body, x_hat=lookahead_point(body.x_hat, phi, lam))
+        phi = np.asarray(heading, float).reshape(len(state.cell))
+        unit_heading = np.column_stack([np.cos(phi), np.sin(phi)])
+        reference = dataclasses.replace(axle, x_hat=lookahead_point(axle.x_hat, phi, lam))
         if displacements is not None:  # l_k − p = (l_k − x) − λh
-            displacements = displacements - lam * np.column_stack([np.cos(phi), np.sin(phi)])[:, None, :]
+            displacements = displacements - lam * unit_heading[:, None, :]
         if s.reconstruction != "lsq":  # the bearings are taken at x, not at p: the output comes from p̂
             policy = dataclasses.replace(s, reconstruction="lsq")
-    est = carry_inside(arrays, s, state, body)
+    est = carry_inside(arrays, s, state, reference)
     cell, target, last_dir, u, stalled, relocated = follow_fields(arrays, policy, state, est, bearings, visible,
                                                                   displacements)  # fmt: skip
     if s.keep_clear:
@@ -393,7 +395,7 @@ def control(
         est = dataclasses.replace(est, steer=est.steer & ~(waiting & ~est.fix))
     holding = ~est.steer  # no position estimate this step
     # a look on purpose looks from the camera, on the axle
-    seen_from = dataclasses.replace(est, x_hat=body_est.x_hat) if ahead else est
+    seen_from = dataclasses.replace(est, x_hat=axle.x_hat) if ahead else est
     scanning, lost, spin, turn, look = look_around(s, state, seen_from, last_dir, heading, arrays)
     direction = np.where(holding[:, None], last_dir, u)
     slow = np.where(est.steer, pace, 1.0)  # the error ball's pace, for robots that steer by an estimate
@@ -409,7 +411,7 @@ def control(
         drive = np.flatnonzero(est.steer & ~scanning)
         w = (s.alpha * slow[drive])[:, None] * direction[drive]
         forward[drive], turn[drive], clamped[drive] = lookahead_command(w, phi[drive], lam, s.clamp_reverse)
-        motion = forward[:, None] * np.column_stack([np.cos(phi), np.sin(phi)])
+        motion = forward[:, None] * unit_heading
     elif s.dynamics == "unicycle":
         allowed = None
         if s.certified_heading:
@@ -422,12 +424,12 @@ def control(
         forward, turn, motion = unicycle_command(s, direction, heading, holding, scanning, target, turn, allowed)
         forward, motion = forward * slow, motion * slow[:, None]
     # the estimate always moves on with the robot's own motion, steering with it or not; it is the axle's
-    x_hat = body_est.x_hat if ahead else est.x_hat
+    x_hat = axle.x_hat if ahead else est.x_hat
     new = ControlState(cell, target, last_dir, est.hold, np.where(est.known[:, None], x_hat, state.x_hat), motion,
                        est.known, est.var, scanning, spin, look,
                        np.where(scanning & ~state.scanning, est.hold - s.dt, state.scan_from))  # fmt: skip
     # certified (§11.4): a funnel plan, driven by a certified cell's field (not a straight approach),
-    # on an estimate whose error bound is within the plan's tolerance δ*; a unicycle only as the
+    # on an estimate whose error bound is within the cell's τ_c; a unicycle only as the
     # look-ahead point of §12.6 (λ > 0), and not on a step the reverse clamp changed
     certified = arrays.funnel & est.steer & (target < 0) & (cell >= 0) & within & ~clamped
     if s.dynamics == "unicycle" and not ahead:

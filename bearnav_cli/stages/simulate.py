@@ -543,7 +543,7 @@ def start_loop(plan, starts: np.ndarray, params: Params = Params(), world=None, 
     # around the axle) is what hits things (ALGORITHMS §12.6)
     lookahead = arrays.lookahead if params.dynamics == "unicycle" else 0.0
     axle = runtime_robot.lookahead_point(x0, heading, -lookahead)
-    contact = Contact(body_space(world), axle) if lookahead > 0 else Contact(space, x0)
+    contact = Contact(body_space(world, space), axle) if lookahead > 0 else Contact(space, x0)
     loop = _Loop(arrays, camera, base, contact, x0, heading, s, params, limits, world.landmarks, lookahead)
     if blocked.any():
         log.warning("%d starts are not free: counted as collisions", int(np.count_nonzero(blocked)))
@@ -661,8 +661,9 @@ def resolve_starts(plan, params: Params) -> np.ndarray:
     stream ``[seed, 1]``); see :func:`bearnav_cli.world.starts.resolve_starts` and
     :func:`~bearnav_cli.world.starts.domain_starts` (``domain:N``, uniform in the plan's cells)."""
     rng = np.random.default_rng([params.seed, 1])
-    if isinstance(parse_starts(params.starts), world_starts.InDomain):
-        return world_starts.domain_starts(PlanArrays.from_plan(plan), int(parse_starts(params.starts)), rng)
+    spec = parse_starts(params.starts)
+    if isinstance(spec, world_starts.InDomain):
+        return world_starts.domain_starts(PlanArrays.from_plan(plan), int(spec), rng)
     return world_starts.resolve_starts(plan.map, params.starts, rng)
 
 

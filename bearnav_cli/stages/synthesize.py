@@ -41,7 +41,7 @@ from bearnav_cli.cell_lp import (
 )
 from bearnav_cli.datatypes import CellFlag, Cells, CellStatus, Plan, tolerance_by_area
 from bearnav_cli.errors import ArtifactError, InvalidParamsError
-from bearnav_cli.funnel import cell_tolerance, exit_sinks, plan_tolerance_of, usable_tolerances
+from bearnav_cli.funnel import cell_tolerance, exit_face, exit_sinks, plan_tolerance_of, usable_tolerances
 from bearnav_cli.lp import LpResult, LpSolver, LpStatus
 
 __all__ = [
@@ -968,17 +968,12 @@ def _sinks(problems: Sequence[CellProblem]) -> tuple[np.ndarray, np.ndarray]:
     """Lemma 6's sink ``x*`` (C, 2) and side depth ``h*`` (C,) of every cell (:func:`funnel.exit_sinks`)."""
     C = len(problems)
     H = max((len(p.cbf_q) for p in problems), default=0)
-    P = max(len(p.vertices) for p in problems)
-    normals, offsets = np.zeros((C, H, 2)), np.full((C, H), np.inf)
-    gap = np.full((C, P), np.inf)  # each vertex's distance from its exit line: the face's ends are the two nearest
-    vertices = np.zeros((C, P, 2))
+    normals, offsets = np.zeros((C, H, 2)), np.full((C, H), np.inf)  # padding rows: never the least
+    faces = np.empty((C, 2, 2))
     for k, p in enumerate(problems):
-        h, v = len(p.cbf_q), len(p.vertices)
+        h = len(p.cbf_q)
         normals[k, :h], offsets[k, :h] = np.asarray(p.cbf_n, float).reshape(-1, 2), p.cbf_q
-        vertices[k, :v] = p.vertices
-        gap[k, :v] = np.abs((p.vertices - p.x_j) @ p.z)
-    ends = np.sort(np.argsort(gap, axis=1, kind="stable")[:, :2], axis=1)  # as exit_face picks them
-    faces = np.take_along_axis(vertices, ends[:, :, None], axis=1)
+        faces[k] = exit_face(p.vertices, p.z, p.x_j)
     return exit_sinks(faces, normals, offsets)
 
 

@@ -15,13 +15,13 @@ import numpy as np
 import shapely
 
 from bearnav_cli import runtime
-from bearnav_cli.geometry import FreeSpace, inflate, to_shapely
+from bearnav_cli.geometry import FreeSpace, inflate
 from bearnav_cli.runtime import PlanArrays, bearing
 
 __all__ = ["Base", "Contact", "body_space", "initial_headings"]
 
 
-def body_space(world) -> FreeSpace:
+def body_space(world, space: FreeSpace | None = None) -> FreeSpace:
     """The free space of the robot's body: the raw obstacles inflated by the robot radius ρ alone, ``B`` shrunk by ρ.
 
     A unicycle on a look-ahead plan (ALGORITHMS §12.6) is planned for ``p = x + λh``, against the
@@ -33,12 +33,13 @@ def body_space(world) -> FreeSpace:
     ----------
     world : Map
         The world: its raw obstacles, bounds, robot radius and tolerance.
+    space : FreeSpace, optional
+        ``FreeSpace.from_map(world)``, whose union of the raw obstacles is reused (built when None).
     """
-    raw = shapely.union_all([to_shapely(p) for p in world.raw_obstacles])
+    raw = (FreeSpace.from_map(world) if space is None else space).raw_obstacles
     rho = max(0.0, float(world.robot_radius))
     obstacles = inflate(raw, rho)
     shapely.prepare(obstacles)
-    shapely.prepare(raw)
     bounds = np.asarray(world.bounds, float)
     return FreeSpace(bounds + np.array([rho, rho, -rho, -rho]), world.tol, obstacles, raw, bounds)
 

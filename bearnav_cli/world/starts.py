@@ -7,6 +7,7 @@ import re
 
 import numpy as np
 
+from bearnav_cli.datatypes import cell_areas
 from bearnav_cli.errors import InvalidParamsError
 from bearnav_cli.geometry import FreeSpace
 from bearnav_cli.routes import sample_starts
@@ -107,10 +108,7 @@ def domain_starts(arrays, count: int, rng: np.random.Generator) -> np.ndarray:
     vo = arrays.cell_vertex_offsets
     lo = np.minimum.reduceat(arrays.cell_vertices, vo[:-1], axis=0)
     hi = np.maximum.reduceat(arrays.cell_vertices, vo[:-1], axis=0)
-    area = np.zeros(arrays.n_cells)
-    for c in range(arrays.n_cells):  # shoelace
-        v = arrays.cell_vertices[vo[c] : vo[c + 1]]
-        area[c] = 0.5 * abs(np.dot(v[:, 0], np.roll(v[:, 1], -1)) - np.dot(v[:, 1], np.roll(v[:, 0], -1)))
+    area = np.abs(cell_areas(arrays))
     found: list[np.ndarray] = []
     need = int(count)
     while need > 0:
