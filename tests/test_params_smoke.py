@@ -91,6 +91,7 @@ TUPLES = {
     ("simulate", "measurement"): runtime.MEASUREMENTS,
     ("simulate", "reconstruction"): bearing.METHODS,
     ("simulate", "camera"): CAMERAS,
+    ("simulate", "estimator"): runtime.ESTIMATORS,
     ("verify", "dynamics"): runtime.DYNAMICS,
 }
 

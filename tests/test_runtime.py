@@ -228,7 +228,8 @@ def test_chain_runs_reach_the_goal(chain):
     assert np.all(np.abs(per_step - 1.0) < 0.1) and not np.allclose(per_step, 1.0)
     # ... exactly on it with the exact motion of §7.1
     out = simulate.rollout(chain, starts, EXACT)
-    assert isinstance(out, Simulation) and out.stats == {}  # the one type of a set of runs (sim.npz's)
+    # the one type of a set of runs (sim.npz's); its stats are the estimator's counts alone
+    assert isinstance(out, Simulation) and set(out.stats) == {"estimator"}
     assert out.outcome.tolist() == [Outcome.SUCCESS] * 5
     assert out.steps[-1] == 0 and out.path_length[-1] == 0.0  # starts inside the goal tolerance
     v_dt = out.speed * out.dt

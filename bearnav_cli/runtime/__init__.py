@@ -3,7 +3,8 @@
 - :mod:`~bearnav_cli.runtime.plan_arrays` — the run-time view of a plan (:class:`PlanArrays`);
 - :mod:`~bearnav_cli.runtime.bearing` — measurements, field of view, bearing reconstruction (§6);
 - :mod:`~bearnav_cli.runtime.cell_policy` — which cell's controller a robot uses (§7.3, §11.3);
-- :mod:`~bearnav_cli.runtime.estimate` — the fix and its fusion with odometry;
+- :mod:`~bearnav_cli.runtime.bounded` — convex sets that hold the robot (ALGORITHMS §12.2);
+- :mod:`~bearnav_cli.runtime.estimate` — the fix and its fusion with odometry, and the estimate sets;
 - :mod:`~bearnav_cli.runtime.robot` — the robot's parameters (the map's ``robot:`` section) and the
   look-ahead point of a unicycle (ALGORITHMS §12.6, Lemma 7);
 - :mod:`~bearnav_cli.runtime.step` — one control step for ``R`` robots (:func:`control`);
@@ -27,14 +28,25 @@ _ORIGIN = {
                      "field", "funnel_update", "in_safe_set", "least_rank_cell", "locate", "lyapunov",
                      "nearest_node", "segments_clear", "switch", "update", "voronoi_owner"), "cell_policy"),
     "Controller": "controller",
-    **dict.fromkeys(("Estimate", "Fix", "fuse", "measure"), "estimate"),
+    **dict.fromkeys(("Estimate", "Fix", "SetEstimate", "bounded_update", "fuse", "measure"), "estimate"),
     **dict.fromkeys(("RUNTIME_KEYS", "PlanArrays", "ring_edges", "tree_costs"), "plan_arrays"),
     **dict.fromkeys(("ROBOT_DEFAULTS", "lookahead_command", "lookahead_point"), "robot"),
-    **dict.fromkeys(("DYNAMICS", "MEASUREMENTS", "ControlOutput", "ControlSettings", "ControlState", "control",
+    **dict.fromkeys(("DYNAMICS", "ESTIMATORS", "MEASUREMENTS", "ControlOutput", "ControlSettings", "ControlState", "control",
                      "timing"), "step"),
 }  # fmt: skip
 #: The submodules, also attributes of the package once imported (``runtime.step``, ``runtime.bearing``).
-_SUBMODULES = ("bearing", "camera", "cell_policy", "controller", "estimate", "plan_arrays", "robot", "schema", "step")
+_SUBMODULES = (
+    "bearing",
+    "bounded",
+    "camera",
+    "cell_policy",
+    "controller",
+    "estimate",
+    "plan_arrays",
+    "robot",
+    "schema",
+    "step",
+)
 
 
 def __getattr__(name: str) -> Any:

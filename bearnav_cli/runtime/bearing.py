@@ -270,7 +270,11 @@ def noisy_bearings(x: Any, landmarks: Any, sigma: float, rng: np.random.Generato
         return unit
     if rng is None:
         raise InvalidParamsError("bearing noise needs a random generator", field="noise")
-    eps = rng.normal(0.0, sigma, size=unit.shape[:2])
+    return rotated(unit, rng.normal(0.0, sigma, size=unit.shape[:2]))
+
+
+def rotated(unit: np.ndarray, eps: np.ndarray) -> np.ndarray:
+    """Unit bearings ``unit`` (R, L, 2) turned counter-clockwise by the angles ``eps`` (R, L) rad."""
     c, s = np.cos(eps), np.sin(eps)
     return np.stack([c * unit[..., 0] - s * unit[..., 1], s * unit[..., 0] + c * unit[..., 1]], axis=-1)
 

@@ -20,7 +20,7 @@ if TYPE_CHECKING:
     from bearnav_cli.runtime.plan_arrays import PlanArrays
     from bearnav_cli.runtime.step import ControlSettings, ControlState
 
-__all__ = ["Estimate", "Fix", "fuse", "measure"]
+__all__ = ["Estimate", "Fix", "SetEstimate", "axle_bounds", "bounded_update", "fuse", "measure"]
 
 
 @dataclass(frozen=True)
@@ -225,3 +225,135 @@ def fuse(s: ControlSettings, state: ControlState, fix: Fix) -> Estimate:
     with np.errstate(invalid="ignore"):  # 3σ; 0 for exact fixes, inf before the first
         error_bound = np.where(np.isfinite(var), 3.0 * np.sqrt(np.maximum(var, 0.0)), np.inf)
     return Estimate(x_hat, var, fix, steer, known, hold, error_bound)
+
+
+@dataclass(frozen=True)
+class SetEstimate:
+    """The estimate sets after one step, ``R`` robots (ALGORITHMS §12.2, Lemma 5).
+
+    Attributes
+    ----------
+    vertices : ndarray, shape (R, W, 2)
+        ``X_t``, counter-clockwise convex polygons padded to :data:`~bearnav_cli.runtime.bounded.MAX_VERTICES`
+        (map units; :mod:`~bearnav_cli.runtime.bounded` reads only the first ``count`` of each).
+    count : ndarray of int64, shape (R,)
+        Vertices of each set.
+    x_hat : ndarray, shape (R, 2)
+        The estimate, a point of ``X_t`` (map units).
+    error : ndarray, shape (R,)
+        ``e_t = max_v ‖v − x̂_t‖`` (map units), exact: ``‖x_t − x̂_t‖ ≤ e_t`` whenever ``x_t ∈ X_t``.
+    inconsistent : ndarray of bool, shape (R,)
+        ``X_t⁻ ∩ ∩_k W_k`` was empty this step: a bound was broken; the set restarted from the bearing
+        sets alone (``B_r ∩ ∩_k W_k``), or stayed ``X_t⁻`` where those were empty too.
+    seen : ndarray of bool, shape (R,)
+        Some bearing entered the set this step.
+    """
+
+    vertices: np.ndarray
+    count: np.ndarray
+    x_hat: np.ndarray
+    error: np.ndarray
+    inconsistent: np.ndarray
+    seen: np.ndarray
+
+
+def bounded_update(arrays: PlanArrays, s: ControlSettings, state: ControlState, bearings: np.ndarray,
+                   visible: np.ndarray, x_true: np.ndarray | None = None) -> SetEstimate:  # fmt: skip
+    """One step of the bounded-error estimator for ``R`` robots (ALGORITHMS §12.2).
+
+    Predict: ``X_t⁻ = (X_{t−1} + d̂_t) ⊕ B(κ‖d̂_t‖ + ν)`` with ``d̂_t = dt·motion`` the last command's
+    displacement (rows moved outward, :func:`~bearnav_cli.runtime.bounded.grow`); a step that does not
+    translate (standing, or a unicycle turning about its axle) adds nothing. Update: ``X_t = X_t⁻ ∩
+    ∩_{k visible} W(l_k, φ̃_k)`` with the cones of half-angle ``η`` (``s.bearing_bound``). A robot
+    without a set yet (``state.known`` False) starts from ``B_r`` (:func:`axle_bounds`).
+    Displacement mode measures the position itself: ``X_t = {x}``, ``e_t = 0``.
+
+    Parameters
+    ----------
+    arrays : PlanArrays
+        The plan's ``landmarks``, ``free_bounds`` and ``tol``.
+    s : ControlSettings
+        ``dt`` (s), ``bearing_bound`` η (rad), ``slip`` κ, ``slip_floor`` ν (map units) and ``measurement``.
+    state : ControlState
+        The previous ``set_vertices``/``set_count``, ``motion`` (map units / s) and ``known``.
+    bearings : ndarray, shape (R, L, 2)
+        Measured world-frame unit bearings.
+    visible : ndarray of bool, shape (R, L)
+        Which landmarks each robot sees (only their cones clip the sets).
+    x_true : ndarray, shape (R, 2), optional
+        True positions: the measurement in displacement mode.
+
+    Returns
+    -------
+    SetEstimate
+    """
+    from bearnav_cli.runtime import bounded
+
+    r, tol = len(visible), arrays.tol
+    if s.measurement == "displacement":
+        if x_true is None:
+            raise ValueError("displacement measurement needs the true positions")
+        x = np.asarray(x_true, float).reshape(-1, 2)
+        vertices = np.repeat(x[:, None, :], bounded.MAX_VERTICES, axis=1)
+        return SetEstimate(vertices, np.ones(r, np.int64), x.copy(), np.zeros(r), np.zeros(r, bool), np.ones(r, bool))
+    d = s.dt * state.motion
+    travelled = np.hypot(d[:, 0], d[:, 1])
+    radius = np.where(travelled > 0.0, s.slip * travelled + s.slip_floor, 0.0)
+    start_v, start_n = bounded.box(axle_bounds(arrays), r)
+    known = state.known
+    vertices = np.where(known[:, None, None], bounded.translate(state.set_vertices, d), _width(start_v, state))
+    count = np.where(known, state.set_count, start_n)
+    moving = known & (radius > 0.0)
+    if moving.any():
+        grown_v, grown_n = bounded.grow(vertices[moving], count[moving], radius[moving], tol)
+        vertices = _store(vertices, moving, grown_v)
+        count = count.copy()
+        count[moving] = grown_n
+    angle = np.arctan2(bearings[..., 1], bearings[..., 0])
+    eta = s.bearing_bound
+    updated_v, updated_n = bounded.intersect_cones(vertices, count, arrays.landmarks, angle, visible, eta, tol)
+    inconsistent = (updated_n == 0) & (count > 0)
+    if inconsistent.any():
+        idx = np.flatnonzero(inconsistent)
+        fresh_v, fresh_n = bounded.intersect_cones(start_v[idx], start_n[idx], arrays.landmarks, angle[idx],
+                                                   visible[idx], eta, tol)  # fmt: skip
+        # the bearing sets alone, or the prediction where they are empty too
+        keep = fresh_n == 0
+        fresh_v = _fit(fresh_v, updated_v.shape[1])
+        updated_v = _fit(updated_v, max(updated_v.shape[1], fresh_v.shape[1], vertices.shape[1]))
+        fresh_v = _fit(fresh_v, updated_v.shape[1])
+        fresh_v[keep] = _fit(vertices[idx[keep]], updated_v.shape[1])
+        fresh_n[keep] = count[idx[keep]]
+        updated_v[idx], updated_n = fresh_v, updated_n.copy()
+        updated_n[idx] = fresh_n
+    x_hat, error = bounded.centre(updated_v, updated_n)
+    return SetEstimate(
+        _fit(updated_v, bounded.MAX_VERTICES), updated_n, x_hat, error, inconsistent, visible.any(axis=1)
+    )
+
+
+def axle_bounds(arrays: PlanArrays) -> np.ndarray:
+    """``B_r`` of the robot's own centre: the bounds shrunk by its radius ρ alone, ``[xmin, ymin, xmax, ymax]``.
+
+    Not ``free_bounds`` (shrunk by ``ρ + λ``): a look-ahead unicycle's axle may come within ρ of a wall.
+    """
+    rho = arrays.robot_radius
+    return np.asarray(arrays.bounds, float) + np.array([rho, rho, -rho, -rho])
+
+
+def _fit(vertices: np.ndarray, width: int) -> np.ndarray:
+    """Padded to (or cut to) ``width`` vertices: the stored sets all have one width."""
+    if vertices.shape[1] >= width:
+        return vertices[:, :width].copy()
+    return np.concatenate([vertices, np.repeat(vertices[:, :1], width - vertices.shape[1], axis=1)], axis=1)
+
+
+def _width(vertices: np.ndarray, state: ControlState) -> np.ndarray:
+    return _fit(vertices, state.set_vertices.shape[1])
+
+
+def _store(vertices: np.ndarray, rows: np.ndarray, values: np.ndarray) -> np.ndarray:
+    width = max(vertices.shape[1], values.shape[1])
+    out = _fit(vertices, width)
+    out[rows] = _fit(values, width)
+    return out

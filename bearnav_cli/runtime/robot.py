@@ -27,7 +27,8 @@ __all__ = ["ROBOT_DEFAULTS", "ROBOT_KEYS", "lookahead_command", "lookahead_point
 #: - ``lookahead`` λ (map units): the point ``p = x + λh(θ)`` a unicycle is planned and driven for;
 #:   the obstacles are inflated by ``ρ + λ``;
 #: - ``bearing_error_deg`` η_cam (degrees), ``compass_error_deg`` ψ (degrees, no default: None),
-#:   ``slip`` κ (fraction of the distance travelled), ``max_turn_rate`` ω_max (rad/s, no default:
+#:   ``slip`` κ (fraction of the distance travelled), ``slip_floor`` ν (map units per step that
+#:   translates; no value: ``1e-4·D``), ``max_turn_rate`` ω_max (rad/s, no default:
 #:   None): the error bounds and limits of ALGORITHMS §12.1, stored for the bounded-error runtime;
 #: - ``reverse``: whether the base may drive backwards (False: the runtime clamps ``v ≥ 0``).
 ROBOT_DEFAULTS: dict[str, Any] = {
@@ -36,6 +37,7 @@ ROBOT_DEFAULTS: dict[str, Any] = {
     "bearing_error_deg": 0.2,
     "compass_error_deg": None,
     "slip": 0.03,
+    "slip_floor": None,
     "max_turn_rate": None,
     "reverse": True,
 }
@@ -55,7 +57,8 @@ def robot_parameters(section: Mapping[str, Any] | None = None) -> dict[str, Any]
     Returns
     -------
     dict
-        ``lookahead``, ``bearing_error_deg``, ``compass_error_deg``, ``slip``, ``max_turn_rate``, ``reverse``.
+        ``lookahead``, ``bearing_error_deg``, ``compass_error_deg``, ``slip``, ``slip_floor``, ``max_turn_rate``,
+        ``reverse``.
     """
     given = dict(section or {})
     return {key: given.get(key, default) for key, default in ROBOT_DEFAULTS.items() if key != "radius"}

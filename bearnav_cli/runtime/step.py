@@ -28,14 +28,15 @@ from bearnav_cli.runtime.cell_policy import (
     obstacle_clearance,
     update,
 )
-from bearnav_cli.runtime.estimate import Estimate, fuse, measure
+from bearnav_cli.runtime.bounded import MAX_VERTICES, one_look_bound
+from bearnav_cli.runtime.estimate import Estimate, axle_bounds, bounded_update, fuse, measure
 from bearnav_cli.runtime.plan_arrays import PlanArrays
-from bearnav_cli.runtime.robot import lookahead_command, lookahead_point
+from bearnav_cli.runtime.robot import ROBOT_DEFAULTS, lookahead_command, lookahead_point
 
 __all__ = [
     "ALPHA", "APPROACH_ALIGNMENT", "BEARING_SIGMA", "DYNAMICS", "MEASUREMENTS", "ODOMETRY_DRIFT", "SPEED",
     "STALL_FIELD", "ControlOutput", "ControlSettings", "ControlState",
-    "best_view_heading", "carry_inside", "control", "error_ball_pace", "follow_fields", "heading_allowance",
+    "ESTIMATORS", "LOOK_HEADINGS", "best_bound_heading", "best_view_heading", "bounded_control", "carry_inside", "control", "error_ball_pace", "follow_fields", "heading_allowance",
     "look_around", "steer_clear", "timing", "unicycle_command",
 ]  # fmt: skip
 
@@ -58,6 +59,12 @@ ALPHA = 0.1
 BEARING_SIGMA = math.radians(1.0)
 #: Odometry error (1σ) per unit travelled that the filter assumes (its process noise): 5%.
 ODOMETRY_DRIFT = 0.05
+#: The estimators of the control step: bounded-error sets (ALGORITHMS §12.2) or the scalar filter.
+ESTIMATORS = ("kalman", "set")
+#: ``ν = SLIP_FLOOR_PER_DIAGONAL · D``, the odometry bound's floor per step (ALGORITHMS §12.1).
+SLIP_FLOOR_PER_DIAGONAL = 1e-4
+#: Headings tried when a look chooses where to turn (ALGORITHMS §12.5).
+LOOK_HEADINGS = 36
 
 
 @dataclass(frozen=True)
@@ -130,7 +137,22 @@ class ControlSettings:
         error ball, grown by the step, stays off the obstacles (:func:`error_ball_pace`), and bent
         away from the nearest one as it slows (:func:`steer_clear`); a robot that cannot move at
         all waits in place for fixes that shrink the ball (turning to look when it has none). Off:
-        every step at full speed.
+        every step at full speed. (Only the ``kalman`` estimator, and starts outside ``D``.)
+    estimator : {"kalman", "set"}
+        ``set``: the bounded-error sets of ALGORITHMS §12.2 and the certified policy of §12.3 — drive
+        only while ``e_t + κℓ + ν ≤ τ_c``, else stop and look (§12.5, :func:`bounded_control`);
+        ``kalman`` (the default until plans are made live, docs/runtime.md): the scalar filter of
+        :func:`~bearnav_cli.runtime.estimate.fuse` with the pace rule.
+    bearing_bound : float
+        ``η`` (rad): the bound on every world-frame bearing error the set estimator assumes
+        (``η_cam + ψ``, ALGORITHMS §12.1).
+    heading_bound : float
+        ``ψ`` (rad): the bound on the heading error; a look-ahead point ``λ`` ahead errs by at most
+        ``2λ sin(ψ/2)`` more than the axle.
+    slip : float
+        ``κ``: odometry errs by at most ``κ‖d̂‖ + ν`` over a step that translates by ``d̂``.
+    slip_floor : float
+        ``ν`` (map units), ``1e-4·D`` from :meth:`for_plan`.
     """
 
     speed: float
@@ -156,6 +178,11 @@ class ControlSettings:
     max_range: float = math.inf
     look_on_purpose: bool = False
     keep_clear: bool = True
+    estimator: str = "kalman"
+    bearing_bound: float = math.radians(ROBOT_DEFAULTS["bearing_error_deg"])
+    heading_bound: float = 0.0
+    slip: float = ROBOT_DEFAULTS["slip"]
+    slip_floor: float = 0.0
 
     @property
     def top_speed(self) -> float:
@@ -186,6 +213,7 @@ class ControlSettings:
         dt, eps_sw, blind_error = timing(diagonal, v, dt)
         fields.setdefault("eps_sw", eps_sw)
         fields.setdefault("blind_error", blind_error)
+        fields.setdefault("slip_floor", SLIP_FLOOR_PER_DIAGONAL * diagonal)
         return cls(speed=speed, dt=dt, tol=tol, dynamics=dynamics, alpha=alpha, bearing_sigma=bearing_sigma,
                    **fields)  # type: ignore[arg-type]  # fmt: skip
 
@@ -219,6 +247,12 @@ class ControlState:
     scan_from : ndarray, shape (R,)
         ``hold`` when the current look-around began (s): its clock, which starts when the scan does
         (odometry may have carried the robot blind for much longer than ``hold_time`` before).
+    set_vertices : ndarray, shape (R, W, 2)
+        The set estimator's ``X_t`` (ALGORITHMS §12.2), padded convex polygons (map units).
+    set_count : ndarray of int64, shape (R,)
+        Their vertex counts.
+    resume : ndarray, shape (R,)
+        The heading a look-ahead unicycle turns back to after a look (rad; NaN: none).
     """
 
     cell: np.ndarray
@@ -233,6 +267,9 @@ class ControlState:
     spin: np.ndarray
     look: np.ndarray
     scan_from: np.ndarray
+    set_vertices: np.ndarray
+    set_count: np.ndarray
+    resume: np.ndarray
 
     @classmethod
     def initial(cls, heading: np.ndarray) -> ControlState:
@@ -241,7 +278,8 @@ class ControlState:
         r = len(h)
         return cls(np.full(r, -1, np.int64), np.full(r, -1, np.int64), np.column_stack([np.cos(h), np.sin(h)]),
                    np.zeros(r), np.zeros((r, 2)), np.zeros((r, 2)), np.zeros(r, bool), np.full(r, np.inf),
-                   np.zeros(r, bool), np.ones(r), np.full(r, np.nan), np.zeros(r))  # fmt: skip
+                   np.zeros(r, bool), np.ones(r), np.full(r, np.nan), np.zeros(r),
+                   np.zeros((r, MAX_VERTICES, 2)), np.zeros(r, np.int64), np.full(r, np.nan))  # fmt: skip
 
     def take(self, idx: np.ndarray) -> ControlState:
         """The state of the robots ``idx``."""
@@ -288,6 +326,14 @@ class ControlOutput:
     waiting : ndarray of bool, shape (R,)
         Held in place because the error ball grown by any step would reach an obstacle
         (:func:`error_ball_pace` is 0): the robot does not translate and waits for better fixes.
+    looking : ndarray of bool, shape (R,)
+        Stopped to look (ALGORITHMS §12.5): the robot does not translate this step (looking around,
+        waiting, or a look-ahead unicycle turning back to its heading before the look).
+    error_bound : ndarray, shape (R,)
+        The bound on the error of the point the policy ran at (map units): ``e_t`` of the set (plus
+        ``2λ sin(ψ/2)`` for a look-ahead point), or the filter's 3σ.
+    inconsistent : ndarray of bool, shape (R,)
+        The set estimator found its set empty this step (a bound was broken, §12.2).
     """
 
     velocity: np.ndarray
@@ -302,6 +348,9 @@ class ControlOutput:
     x_hat: np.ndarray
     certified: np.ndarray
     waiting: np.ndarray
+    looking: np.ndarray
+    error_bound: np.ndarray
+    inconsistent: np.ndarray
 
 
 #: ``‖a − M x̂‖ < STALL_FIELD · u_max`` is a stall: the field has (almost) an equilibrium there.
@@ -367,6 +416,8 @@ def control(
     ControlOutput
     """
     s = settings
+    if s.estimator == "set":
+        return bounded_control(arrays, s, state, bearings, visible, heading, x_true)
     prior = np.where((state.known & s.odometry)[:, None], state.x_hat + s.dt * state.motion, np.nan)
     fix = measure(arrays, s, bearings, visible, x_true, displacements, prior)
     axle = fuse(s, state, fix)  # the estimate of the axle x (where the camera is)
@@ -427,7 +478,8 @@ def control(
     x_hat = axle.x_hat if ahead else est.x_hat
     new = ControlState(cell, target, last_dir, est.hold, np.where(est.known[:, None], x_hat, state.x_hat), motion,
                        est.known, est.var, scanning, spin, look,
-                       np.where(scanning & ~state.scanning, est.hold - s.dt, state.scan_from))  # fmt: skip
+                       np.where(scanning & ~state.scanning, est.hold - s.dt, state.scan_from),
+                       state.set_vertices, state.set_count, state.resume)  # fmt: skip
     # certified (§11.4): a funnel plan, driven by a certified cell's field (not a straight approach),
     # on an estimate whose error bound is within the cell's τ_c; a unicycle only as the
     # look-ahead point of §12.6 (λ > 0), and not on a step the reverse clamp changed
@@ -435,7 +487,218 @@ def control(
     if s.dynamics == "unicycle" and not ahead:
         certified = np.zeros(len(cell), bool)  # λ = 0: the heading rules keep it safe in practice, unproven
     return ControlOutput(velocity, forward, turn, scanning, new, est.fix, lost, stalled, relocated,
-                         np.where(est.steer[:, None], x_hat, 0.0), certified, waiting)  # fmt: skip
+                         np.where(est.steer[:, None], x_hat, 0.0), certified, waiting, scanning | waiting,
+                         est.error_bound, np.zeros(len(cell), bool))  # fmt: skip
+
+
+def bounded_control(arrays: PlanArrays, s: ControlSettings, state: ControlState, bearings: np.ndarray,
+                    visible: np.ndarray, heading: np.ndarray, x_true: np.ndarray | None = None) -> ControlOutput:  # fmt: skip
+    """One step of the certified policy of ALGORITHMS §12.3 on the estimate sets of §12.2, for ``R`` robots.
+
+    The set ``X_t`` and its estimate ``x̂`` with error ``e`` come from
+    :func:`~bearnav_cli.runtime.estimate.bounded_update`; a look-ahead unicycle's policy runs at
+    ``p̂ = x̂ + λh(θ)`` with the error ``e + 2λ sin(ψ/2)``. Then, for each robot:
+
+    - **in a cell** (the least-rank cell ``k`` with ``p̂ ∈ P_k ⊖ e``, switched to only at lower rank,
+      :func:`~bearnav_cli.runtime.cell_policy.update` with erosion ``e``): it **moves** with the cell's
+      field only while ``e + κℓ + ν ≤ τ_c`` (``ℓ = v·dt``); every such step is certified;
+    - **maybe in one** (some cell holds ``p̂`` but none eroded by ``e``), or in a cell with too large
+      an ``e``: it **stops and looks** (§12.5) — it turns toward the heading from which the plan's
+      landmarks promise the smallest one-look bound (:func:`best_bound_heading`), then, if that was
+      not enough, once all around; after that it is ``lost`` (stuck looking). A look-ahead unicycle
+      remembers its heading when a look begins and turns back to it before it moves again (``p``
+      swings around the axle while it looks), unless it may move where it is;
+    - **outside every cell** (a start in ``F \\ D``): the uncertified rules of the ``kalman``
+      estimator — a straight approach to a node at the error ball's pace (:func:`error_ball_pace`,
+      :func:`steer_clear`), waiting and looking where that pace is 0.
+
+    Parameters
+    ----------
+    arrays : PlanArrays
+        The plan's run-time arrays.
+    s : ControlSettings
+        The loop's constants, with ``estimator == "set"`` and the error model (``bearing_bound``,
+        ``heading_bound``, ``slip``, ``slip_floor``).
+    state : ControlState
+        What the robots remember, their sets ``set_vertices``/``set_count`` among it.
+    bearings : ndarray, shape (R, L, 2)
+        World-frame unit bearings.
+    visible : ndarray of bool, shape (R, L)
+        Which landmarks each robot sees.
+    heading : ndarray, shape (R,)
+        Yaw (rad) from the compass.
+    x_true : ndarray, shape (R, 2), optional
+        True positions, in displacement mode (``X_t = {x}``).
+
+    Returns
+    -------
+    ControlOutput
+    """
+    r = len(state.cell)
+    sets = bounded_update(arrays, s, state, bearings, visible, x_true)
+    phi = np.asarray(heading, float).reshape(r)
+    lam = arrays.lookahead if s.dynamics == "unicycle" else 0.0
+    ahead = lam > 0.0
+    swing = 2.0 * lam * math.sin(0.5 * s.heading_bound) if ahead else 0.0
+    reference = lookahead_point(sets.x_hat, phi, lam) if ahead else sets.x_hat
+    known = state.known | sets.seen  # a set narrower than B_r
+    error = np.where(known, sets.error + swing, np.inf)
+    # κℓ + ν of one step; a measured displacement knows the position itself at every step (paper B, and
+    # verify's loop with the exact motion of §7.1): no odometry enters the estimate
+    margin = 0.0 if s.measurement == "displacement" else s.slip * s.top_speed * s.dt + s.slip_floor
+    est = Estimate(reference, error**2 / 9.0, sets.seen, known & np.isfinite(error), known,
+                   np.where(known, state.hold, 0.0), error)  # fmt: skip
+    cell, target, last_dir, u, stalled, relocated = follow_fields(arrays, s, state, est, bearings, visible)
+    in_cell = (cell >= 0) & (target < 0) & known
+    tau = arrays.tolerance_in(cell)
+    move = in_cell & (error + margin <= tau + s.tol)
+    if arrays.funnel:
+        # a cell holds p̂ but none eroded by e: look while a look may tell which (e too large for the
+        # cell that holds p̂); with e that small the robot sits at the edge of D, and approaches a node
+        holder = np.where(known & ~in_cell, least_rank_cell(arrays, reference), -1)
+        undecided = (holder >= 0) & (error + margin > arrays.tolerance_in(holder) + s.tol)
+    else:
+        undecided = np.zeros(r, bool)
+        move = in_cell
+    # undecided robots have not chosen a cell: they look before any approach
+    cell, target = np.where(undecided, -1, cell), np.where(undecided, -1, target)
+    outside = known & ~in_cell & ~undecided
+    pace = np.where(move, 1.0, 0.0)
+    if arrays.funnel:
+        # at the edge of D (a cell holds p̂, e is small, no cell eroded by e does): that cell's field,
+        # uncertified, at the error ball's pace; it leads deeper into the cell, where the switch applies
+        edge = np.flatnonzero(outside & (holder >= 0))
+        if len(edge):
+            field = affine_field(arrays, holder[edge], reference[edge])
+            norm = np.hypot(field[:, 0], field[:, 1])
+            ok = norm > 0
+            u[edge] = np.where(ok[:, None], field / np.where(ok, norm, 1.0)[:, None], 0.0)
+            cell[edge], target[edge] = holder[edge], -1
+            last_dir[edge[ok]] = u[edge[ok]]
+    if outside.any():
+        idx = np.flatnonzero(outside)
+        pace_out, away = error_ball_pace(arrays, s, cell[idx], reference[idx], error[idx])
+        u[idx] = steer_clear(u[idx], pace_out, away)
+        pace[idx] = pace_out
+    resume = state.resume.copy()
+    # after a look a look-ahead unicycle's p has swung around the axle: only a certified step goes
+    # from there; anything else waits until it has turned back
+    pending = np.isfinite(resume) if ahead else np.zeros(r, bool)
+    if pending.any() and arrays.funnel:
+        # a swung p found in a cell of higher rank than the one it left is no progress: turn back first
+        had = state.cell >= 0
+        worse = pending & had & (cell >= 0) & (arrays.cell_rank[np.maximum(cell, 0)] >
+                                               arrays.cell_rank[np.maximum(state.cell, 0)])  # fmt: skip
+        move &= ~worse
+    drive = (move | (outside & (pace > 0.0) & ~pending)) & np.any(u != 0.0, axis=1)
+    back = np.zeros(r, bool)
+    if ahead:
+        resume[drive] = np.nan
+        returning = ~drive & known & pending
+        if returning.any():  # the look is over when e would let it move where it was (or it was outside D)
+            idx = np.flatnonzero(returning)
+            there = lookahead_point(sets.x_hat[idx], resume[idx], lam)
+            k = least_rank_cell(arrays, there) if arrays.funnel else np.full(len(idx), -1)
+            back[idx[(k < 0) | (error[idx] + margin <= arrays.tolerance_in(k) + s.tol)]] = True
+        # the swung p says nothing about the cell the robot will drive in: it keeps the one it had
+        cell[returning], target[returning], relocated[returning] = state.cell[returning], state.target[returning], False
+    hold = np.where(drive, 0.0, np.where(known, state.hold + s.dt, 0.0))
+    looker = Estimate(sets.x_hat, est.var, est.fix, drive | back, known, hold, error)
+    scanning, lost, spin, turn, look = look_around(s, state, looker, last_dir, heading, arrays)
+    if ahead:
+        starting = scanning & ~state.scanning & ~np.isfinite(resume)
+        resume[starting] = phi[starting]
+        if back.any():
+            gap = bearing.wrap(resume[back] - phi[back])
+            turn[back] = np.clip(gap / s.dt, -s.beta, s.beta)
+            arrived = np.abs(gap) <= s.beta * s.dt * 1e-6 + 1e-12
+            resume[np.flatnonzero(back)[arrived]] = np.nan
+    holding = ~drive
+    direction = np.where(drive[:, None], u, last_dir)
+    velocity = (s.speed * np.where(drive, pace, 0.0))[:, None] * direction
+    forward, motion = np.zeros(r), velocity.copy()
+    clamped = np.zeros(r, bool)
+    if ahead:
+        forward, turn_cmd, motion = unicycle_command(s, direction, heading, holding, scanning, target, turn)
+        turn = np.where(scanning | back, turn, turn_cmd)
+        idx = np.flatnonzero(drive)
+        w = (s.alpha * pace[idx])[:, None] * direction[idx]
+        forward[idx], turn[idx], clamped[idx] = lookahead_command(w, phi[idx], lam, s.clamp_reverse)
+        forward[~drive] = 0.0
+        motion = forward[:, None] * np.column_stack([np.cos(phi), np.sin(phi)])
+    elif s.dynamics == "unicycle":
+        allowed = heading_allowance(arrays, cell, reference, target) if s.certified_heading else None
+        forward, turn_cmd, motion = unicycle_command(s, direction, heading, holding, scanning, target, turn, allowed)
+        # a robot that may not move only turns (to look, or toward its field)
+        forward, motion = forward * pace, motion * pace[:, None]
+        turn = np.where(scanning, turn, turn_cmd)
+    velocity[~drive] = 0.0
+    new = ControlState(cell, target, last_dir, hold, np.where(known[:, None], sets.x_hat, state.x_hat), motion,
+                       known, est.var, scanning, spin, look,
+                       np.where(scanning & ~state.scanning, hold - s.dt, state.scan_from),
+                       sets.vertices, sets.count, resume)  # fmt: skip
+    certified = arrays.funnel & move & drive & ~clamped
+    if s.dynamics == "unicycle" and not ahead:
+        certified = np.zeros(r, bool)  # λ = 0: the unicycle is not the single integrator of the certificate
+    looking = known & ~drive
+    return ControlOutput(velocity, forward, turn, scanning, new, sets.seen, lost & ~drive, stalled & drive,
+                         relocated, np.where(known[:, None], reference, 0.0), certified, looking & ~scanning & ~back,
+                         looking | ~known, error, sets.inconsistent)  # fmt: skip
+
+
+def best_bound_heading(arrays: PlanArrays, s: ControlSettings, x: np.ndarray, phi: np.ndarray,
+                       headings: int = LOOK_HEADINGS) -> np.ndarray:  # fmt: skip
+    """The camera heading at ``x`` whose view promises the smallest one-look bound ``ε``, shape (R,) rad.
+
+    Among ``headings`` evenly spaced headings, the landmarks in the field of view, in range and in
+    line of sight from ``x`` (``cell_policy.in_sight``) give
+    :func:`~bearnav_cli.runtime.bounded.one_look_bound` at ``η = s.bearing_bound``; the least ``ε``
+    wins, ties to the smallest turn from ``phi`` (ALGORITHMS §12.5). NaN where no heading sees a
+    landmark.
+
+    Parameters
+    ----------
+    arrays : PlanArrays
+        The plan's landmarks, sight edges and bounds.
+    s : ControlSettings
+        ``fov`` (rad), ``max_range`` (map units) and ``bearing_bound`` (rad).
+    x : ndarray, shape (R, 2)
+        Where each robot looks from (its estimate, map units).
+    phi : ndarray, shape (R,)
+        Its heading now (rad).
+    headings : int
+        Candidate headings over ``[−π, π)``.
+    """
+    p = np.asarray(x, float).reshape(-1, 2)
+    phi = np.asarray(phi, float).reshape(len(p))
+    visible = views(arrays, s, p, headings)  # (R, H, L)
+    r, h, n_lm = visible.shape
+    eps = one_look_bound(np.repeat(p, h, axis=0), arrays.landmarks, visible.reshape(r * h, n_lm), s.bearing_bound,
+                         axle_bounds(arrays), arrays.tol).reshape(r, h)  # fmt: skip
+    theta = np.linspace(-math.pi, math.pi, h, endpoint=False)
+    turn = np.abs(bearing.wrap(theta[None, :] - phi[:, None]))
+    eps = np.where(visible.any(axis=2), eps, np.inf)
+    best = np.lexsort((turn, eps), axis=1)[:, 0] if eps.size else np.zeros(len(p), np.int64)
+    out = theta[best]
+    out[~np.isfinite(eps).any(axis=1)] = np.nan
+    return out
+
+
+def views(arrays: PlanArrays, s: ControlSettings, x: np.ndarray, headings: int) -> np.ndarray:
+    """Which landmarks a camera at ``x`` sees at each of ``headings`` evenly spaced headings, (R, H, L).
+
+    In the field of view ``s.fov`` around the heading, within ``s.max_range`` and in line of sight
+    (``cell_policy.in_sight``); heading ``k`` is ``−π + 2πk/H``.
+    """
+    p = np.asarray(x, float).reshape(-1, 2)
+    d = arrays.landmarks[None] - p[:, None, :]
+    seen = in_sight(arrays, p)
+    if math.isfinite(s.max_range):
+        seen &= np.einsum("rlk,rlk->rl", d, d) <= s.max_range**2
+    theta = np.linspace(-math.pi, math.pi, headings, endpoint=False)
+    angle = np.arctan2(d[..., 1], d[..., 0])
+    in_view = np.abs(bearing.wrap(angle[:, None, :] - theta[None, :, None])) <= 0.5 * s.fov + 1e-12
+    return in_view & seen[:, None, :]
 
 
 def error_ball_pace(arrays: PlanArrays, s: ControlSettings, cell: np.ndarray, x_hat: np.ndarray,
@@ -608,7 +871,11 @@ def follow_fields(arrays: PlanArrays, s: ControlSettings, state: ControlState, e
     if not est.steer.any():
         return cell, target, last_dir, u, stalled, relocated
     idx = np.flatnonzero(est.steer)
-    erosion = np.minimum(est.error_bound[idx], arrays.plan_tolerance) if arrays.funnel else None
+    # the filter's 3σ is capped at δ* (beyond it nothing is certified anyway); a set's e_t is a bound
+    erosion = None
+    if arrays.funnel:
+        erosion = est.error_bound[idx] if s.estimator == "set" else np.minimum(est.error_bound[idx],
+                                                                                arrays.plan_tolerance)  # fmt: skip
     c, t, moved = update(arrays, cell[idx], target[idx], x_hat[idx], s.eps_sw, s.tol, erosion)
     cell[idx], target[idx], relocated[idx] = c, t, moved
     f = arrays.fixed_landmark[c]
@@ -687,7 +954,9 @@ def look_around(s: ControlSettings, state: ControlState, est: Estimate, last_dir
     else:
         scanning = holding & (est.hold > s.hold_time)
         scan_time = est.hold - s.hold_time
-    purposeful = s.look_on_purpose and arrays is not None and s.fov < 2.0 * math.pi
+    # the set estimator always looks on purpose: toward the least one-look bound (ALGORITHMS §12.5)
+    bounded = s.estimator == "set"
+    purposeful = (s.look_on_purpose or bounded) and arrays is not None and s.fov < 2.0 * math.pi
     budget = (3.0 if purposeful else 2.0) * math.pi / s.beta
     lost = scanning & (scan_time > budget)
     phi = np.asarray(heading, float).reshape(len(holding))
@@ -699,7 +968,8 @@ def look_around(s: ControlSettings, state: ControlState, est: Estimate, last_dir
     if purposeful and starting.any() and np.all(np.isfinite(est.x_hat[starting])):
         idx = np.flatnonzero(starting)
         want = np.arctan2(last_dir[idx, 1], last_dir[idx, 0])  # where the robot was driving
-        look[idx] = best_view_heading(arrays, s, est.x_hat[idx], want)
+        aim = best_bound_heading if bounded else best_view_heading
+        look[idx] = aim(arrays, s, est.x_hat[idx], phi[idx] if bounded else want)
     turn = np.where(scanning, spin * s.beta, 0.0)
     aiming = scanning & np.isfinite(look)
     if aiming.any():

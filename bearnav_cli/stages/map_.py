@@ -418,8 +418,8 @@ def _robot(reader: _Reader, spec: dict) -> tuple[float, dict]:
     """The robot radius and the other parameters of the ``robot:`` section that the map gives.
 
     ``robot_radius`` and ``robot.radius`` are two spellings of ρ (both given: they must agree).
-    Numbers must be finite, zero or positive, the angles below 90°; ``compass_error_deg`` and
-    ``max_turn_rate`` may be null (unknown, their default); ``reverse`` is true or false. The
+    Numbers must be finite, zero or positive, the angles below 90°; ``compass_error_deg``,
+    ``slip_floor`` and ``max_turn_rate`` may be null (unknown, their default); ``reverse`` is true or false. The
     defaults are :data:`~bearnav_cli.runtime.robot.ROBOT_DEFAULTS`.
     """
     section = spec.get("robot")

@@ -24,6 +24,7 @@ from bearnav_cli.datatypes import Outcome, Simulation, replace
 from bearnav_cli.errors import InvalidParamsError
 from bearnav_cli.geometry import FreeSpace
 from bearnav_cli.runtime import ControlSettings, ControlState, PlanArrays, bearing
+from bearnav_cli.runtime import bounded as runtime_bounded
 from bearnav_cli.runtime import robot as runtime_robot
 from bearnav_cli.runtime.step import ALPHA, BEARING_SIGMA, ODOMETRY_DRIFT, SPEED
 from bearnav_cli.world import starts as world_starts
@@ -158,6 +159,26 @@ class Params:
         Seeds the bearing noise, the wheel slip and the random starts (separate streams).
     record_trajectories : bool
         Keep every robot's trajectory (``verify`` turns this off).
+    estimator : {"kalman", "set"}
+        How the robot knows where it is: ``set``, the bounded-error sets of ALGORITHMS §12.2 with the
+        certified policy of §12.3 (it drives only while its error bound is within the cell's usable
+        tolerance, and stops to look otherwise); ``kalman``, the scalar filter with the pace rule.
+    noise_bound_deg : float or None
+        Bounded noise instead of ``noise_deg`` (degrees, in [0, 45)): every bearing error uniform
+        in ``[−η, η]`` and every odometry error within ``κ‖d̂‖ + ν`` (ALGORITHMS §12.8); the set
+        estimator assumes this ``η`` unless ``bearing_error_deg`` is given.
+    noise_worst : bool
+        Every error at its bound (``noise_bound_deg``, else the bound the robot assumes), turned so that the truth lies nearer to
+        the nearest obstacle than the estimate says (bearings, and odometry pushed toward it).
+    bearing_error_deg : float or None
+        ``η_cam`` the set estimator assumes (degrees); ``None``: the map's ``robot.bearing_error_deg``
+        (default 0.2), or ``noise_bound_deg`` when that is given.
+    compass_error_deg : float or None
+        ``ψ`` (degrees), added to the bearing bound (``η = η_cam + ψ``); ``None``: the map's.
+    slip : float or None
+        ``κ``, the odometry bound's fraction of each step; ``None``: the map's ``robot.slip`` (0.03).
+    slip_floor : float or None
+        ``ν`` (map units per step that translates); ``None``: the map's, else ``1e-4·D``.
     """
 
     dynamics: str = "single"
@@ -189,10 +210,18 @@ class Params:
     camera: str = "ideal"
     seed: int = 0
     record_trajectories: bool = True
+    estimator: str = "kalman"
+    noise_bound_deg: float | None = None
+    noise_worst: bool = False
+    bearing_error_deg: float | None = None
+    compass_error_deg: float | None = None
+    slip: float | None = None
+    slip_floor: float | None = None
 
     def __post_init__(self) -> None:
         for name, allowed in (("dynamics", runtime.DYNAMICS), ("measurement", runtime.MEASUREMENTS),
-                              ("reconstruction", bearing.METHODS), ("camera", CAMERAS)):  # fmt: skip
+                              ("reconstruction", bearing.METHODS), ("camera", CAMERAS),
+                              ("estimator", runtime.ESTIMATORS)):  # fmt: skip
             if getattr(self, name) not in allowed:
                 raise InvalidParamsError(f"must be one of {', '.join(allowed)}, got {getattr(self, name)!r}",
                                          field=name)  # fmt: skip
@@ -211,6 +240,23 @@ class Params:
             isinstance(self.max_steps, bool) or int(self.max_steps) != self.max_steps or self.max_steps < 1
         ):
             raise InvalidParamsError(f"must be a positive integer, got {self.max_steps}", field="max_steps")
+        if self.noise_bound_deg is not None:
+            value = self.noise_bound_deg
+            if isinstance(value, bool) or not (math.isfinite(value) and 0.0 <= value < 45.0):
+                raise InvalidParamsError(f"must be a bound in degrees in [0, 45), got {value}", field="noise_bound_deg")
+            if self.noise_deg:
+                raise InvalidParamsError("give either a bound (noise_bound_deg) or a Gaussian noise_deg, not both",
+                                         field="noise_bound_deg")  # fmt: skip
+        if self.noise_worst and self.noise_deg:
+            raise InvalidParamsError("the worst case is of bounded errors, not of a Gaussian noise_deg",
+                                     field="noise_worst")  # fmt: skip
+        for name in ("bearing_error_deg", "compass_error_deg", "slip", "slip_floor"):
+            value = getattr(self, name)
+            if value is not None and (isinstance(value, bool) or not (math.isfinite(value) and value >= 0.0)):
+                raise InvalidParamsError(f"must be zero or positive, got {value}", field=name)
+        if (self.bearing_error_deg or 0.0) + (self.compass_error_deg or 0.0) >= 45.0:
+            raise InvalidParamsError("the bearing error bound (camera plus compass) must be below 45 degrees",
+                                     field="bearing_error_deg")  # fmt: skip
         parse_starts(self.starts)  # syntax only; positions are checked against the map in run()
 
 
@@ -274,8 +320,36 @@ def settings(plan, params: Params) -> Settings:
         max_fix_error=math.inf if params.max_fix_error is None else params.max_fix_error,
         fov=math.radians(params.fov), max_range=math.inf if params.range is None else float(params.range),
         look_on_purpose=params.look_on_purpose, keep_clear=params.keep_clear,
+        **error_model(plan.map, params),
     )  # fmt: skip
     return Settings(goal_tolerance, control)
+
+
+def error_model(map_, params: Params) -> dict:
+    """The bounds the set estimator assumes (ALGORITHMS §12.1), as :class:`ControlSettings` fields.
+
+    Each comes from ``params`` where given, else from the map's ``robot:`` section: ``η = η_cam + ψ``
+    (``bearing_error_deg`` plus ``compass_error_deg``; a simulation with ``noise_bound_deg`` and no
+    ``bearing_error_deg`` of its own assumes that bound, which is what its world draws), ``ψ``, ``κ``
+    (``slip``) and ``ν`` (``slip_floor``; default ``1e-4·D``).
+    """
+    robot = map_.robot
+    compass = params.compass_error_deg if params.compass_error_deg is not None else robot["compass_error_deg"]
+    camera = params.bearing_error_deg
+    if camera is None:
+        camera = params.noise_bound_deg if params.noise_bound_deg is not None else robot["bearing_error_deg"]
+        if params.noise_bound_deg is not None:
+            compass = 0.0  # the world's bound is the world-frame one: camera and heading together
+    fields = {
+        "estimator": params.estimator,
+        "bearing_bound": math.radians(camera + (compass or 0.0)),
+        "heading_bound": math.radians(compass or 0.0),
+        "slip": robot["slip"] if params.slip is None else params.slip,
+    }
+    floor = robot.get("slip_floor") if params.slip_floor is None else params.slip_floor
+    if floor is not None:
+        fields["slip_floor"] = floor
+    return fields
 
 
 def step_limits(arrays: PlanArrays, starts: np.ndarray, s: Settings, params: Params,
@@ -352,6 +426,14 @@ class _Loop:
         self.approach = np.zeros(r, np.int64)
         self.held = np.zeros(r, np.int64)
         self.certified = np.zeros(r, np.int64)
+        # ALGORITHMS §12.8's counts: steps that translated, looks begun and steps spent looking, empty
+        # sets, and steps on which the truth lay outside the estimate's set (or beyond its bound)
+        self.moved = np.zeros(r, np.int64)
+        self.looks = np.zeros(r, np.int64)
+        self.look_steps = np.zeros(r, np.int64)
+        self.inconsistencies = np.zeros(r, np.int64)
+        self.violations = np.zeros(r, np.int64)
+        self.was_looking = np.zeros(r, bool)
         self.history = np.zeros((PROGRESS_WINDOW + 1, r, 2))  # ring buffer of positions, by moving steps
         self.history[0] = starts
         self.trace: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
@@ -407,8 +489,9 @@ class _Loop:
         # a certified step is one the robot takes: a run that ends lost or stalled here takes none
         # (counting it broke `certified_steps <= steps` of sim.npz for every stalled run)
         self.certified[active[~ended]] += out.certified[~ended]
+        self.count_estimates(active, p, ref, out)
         # the no-progress window counts steps with a fix the robot drives on (not those it waits out)
-        command = (out.velocity, out.forward, out.turn, out.scanning, out.fix & ~out.waiting)
+        command = (out.velocity, out.forward, out.turn, out.scanning, out.fix & ~out.looking)
         if ended.any():
             keep = ~ended
             active, p, ref, heading = active[keep], p[keep], ref[keep], heading[keep]
@@ -445,6 +528,35 @@ class _Loop:
             active = active[~late]
         return active
 
+    def count_estimates(self, active: np.ndarray, axle: np.ndarray, ref: np.ndarray, out) -> None:
+        """Add one step of §12.8's counts for the runs ``active``: looks, moves, empty sets, violations.
+
+        A violation is a step on which the truth lies outside what the estimator claims: outside the
+        set ``X_t`` (the axle's, for the set estimator), or farther from ``x̂`` than its 3σ (the filter).
+        """
+        translated = np.any(out.velocity != 0.0, axis=1) | (out.forward != 0.0)
+        self.moved[active] += translated
+        looking = out.looking
+        self.looks[active] += looking & ~self.was_looking[active]
+        self.look_steps[active] += looking
+        self.was_looking[active] = looking
+        self.inconsistencies[active] += out.inconsistent
+        known = out.state.known
+        if self.s.control.estimator == "set":
+            inside = runtime_bounded.contains(out.state.set_vertices, out.state.set_count, axle,
+                                              10.0 * self.arrays.tol)  # fmt: skip
+        else:
+            with np.errstate(invalid="ignore"):
+                inside = np.hypot(*(ref - out.x_hat).T) <= out.error_bound + 10.0 * self.arrays.tol
+            known = known & np.isfinite(out.error_bound) & np.any(out.x_hat != 0.0, axis=1)
+        self.violations[active] += known & ~inside
+
+    def estimate_counts(self) -> dict:
+        """The totals of :meth:`count_estimates` over every run, for the metrics."""
+        return {"moved_steps": int(self.moved.sum()), "looks": int(self.looks.sum()),
+                "look_steps": int(self.look_steps.sum()), "inconsistencies": int(self.inconsistencies.sum()),
+                "containment_violations": int(self.violations.sum())}  # fmt: skip
+
     def trajectories(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Coords, cells, headings and offsets of every run (departure points, then the final point)."""
         r = len(self.x)
@@ -459,7 +571,8 @@ class _Loop:
         return points[order], cells[order], heading[order], offsets
 
 
-def make_camera(plan, world, space: FreeSpace, params: Params) -> Camera | None:
+def make_camera(plan, world, space: FreeSpace, params: Params, bound: float | None = None,
+                toward: Callable[[np.ndarray], np.ndarray] | None = None) -> Camera | None:  # fmt: skip
     """The camera of :attr:`Params.camera` for robots in ``world`` (whose free space is ``space``),
     drawing from the stream ``[seed, 2]``; ``None`` for ``measurement="displacement"``.
 
@@ -473,8 +586,13 @@ def make_camera(plan, world, space: FreeSpace, params: Params) -> Camera | None:
     space : FreeSpace
         The free space of ``world``: its raw obstacles hide landmarks when ``params.occlusion``.
     params : Params
-        ``measurement``, ``camera``, ``fov`` and ``noise_deg`` (degrees), ``range`` (map units),
-        ``occlusion`` and ``seed``.
+        ``measurement``, ``camera``, ``fov`` and ``noise_deg`` or ``noise_bound_deg`` (degrees),
+        ``noise_worst``, ``range`` (map units), ``occlusion`` and ``seed``.
+    bound : float, optional
+        The world's bound on every bearing error (rad): errors uniform within it, or at it with
+        ``toward`` (:func:`world_bound`); ``None``: ``noise_deg``'s Gaussian.
+    toward : callable, optional
+        :func:`nearest_obstacle` of the plan, for ``noise_worst``.
 
     Raises
     ------
@@ -493,7 +611,26 @@ def make_camera(plan, world, space: FreeSpace, params: Params) -> Camera | None:
         return RenderedCamera.for_plan(plan, fov=math.radians(params.fov), rng=rng, space=space)
     return IdealCamera(space, world.landmarks, fov=math.radians(params.fov), noise=math.radians(params.noise_deg),
                        max_range=math.inf if params.range is None else float(params.range),
-                       occlusion=params.occlusion, tol=plan.map.tol, rng=rng)  # fmt: skip
+                       occlusion=params.occlusion, tol=plan.map.tol, rng=rng, bound=bound,
+                       toward=toward if params.noise_worst else None)  # fmt: skip
+
+
+def world_bound(params: Params, s: Settings) -> float | None:
+    """The bound on the simulated world's bearing errors (rad): ``noise_bound_deg``; with ``noise_worst``
+    alone the bound the robot assumes (``η``); ``None``: Gaussian ``noise_deg``."""
+    if params.noise_bound_deg is not None:
+        return math.radians(params.noise_bound_deg)
+    return s.control.bearing_bound if params.noise_worst else None
+
+
+def nearest_obstacle(arrays: PlanArrays) -> Callable[[np.ndarray], np.ndarray]:
+    """``toward(x)``: the unit direction from each point (R, 2) toward its nearest inflated obstacle or wall
+    (``runtime.cell_policy.obstacle_clearance``), what the worst-case errors push toward."""
+
+    def toward(x: np.ndarray) -> np.ndarray:
+        return -runtime.cell_policy.obstacle_clearance(arrays, x)[1]
+
+    return toward
 
 
 def start_loop(plan, starts: np.ndarray, params: Params = Params(), world=None, *, arrays: PlanArrays | None = None,
@@ -537,8 +674,13 @@ def start_loop(plan, starts: np.ndarray, params: Params = Params(), world=None, 
     heading = np.zeros(len(x0))
     if (~blocked).any():
         heading[~blocked] = initial_headings(arrays, x0[~blocked], _radians(params.initial_heading))
-    camera = make_camera(plan, world, space, params)
-    base = Base(params.dynamics, s.dt, params.odometry_noise, len(x0), np.random.default_rng([params.seed, 3]))
+    toward = nearest_obstacle(arrays) if params.noise_worst else None
+    bound = world_bound(params, s)
+    camera = make_camera(plan, world, space, params, bound, toward)
+    # bounded noise: the odometry errs within the bound the robot assumes, κ‖d̂‖ + ν (ALGORITHMS §12.8)
+    slip_bound = None if bound is None else (s.control.slip, s.control.slip_floor)
+    base = Base(params.dynamics, s.dt, params.odometry_noise, len(x0), np.random.default_rng([params.seed, 3]),
+                slip_bound, toward)  # fmt: skip
     # a unicycle on a look-ahead plan: the starts are the look-ahead point's, and the body (radius ρ
     # around the axle) is what hits things (ALGORITHMS §12.6)
     lookahead = arrays.lookahead if params.dynamics == "unicycle" else 0.0
@@ -642,7 +784,10 @@ def rollout(
         dt=s.dt,
         eps_sw=s.eps_sw,
         goal_tolerance=s.goal_tolerance,
-        stats={"camera": report()} if callable(report) else {},
+        stats={
+            "estimator": {"name": s.control.estimator, **loop.estimate_counts()},
+            **({"camera": report()} if callable(report) else {}),
+        },
     )
 
 
@@ -675,6 +820,7 @@ def metrics(sim: Simulation) -> dict:
     def mean(values: np.ndarray) -> float | None:
         return float(np.mean(values)) if len(values) else None
 
+    counts = sim.stats.get("estimator", {})
     finish = np.hypot(*(sim.final_position - sim.map.goal).T)  # the last straight bit into the goal ball
     ratio = (sim.path_length + finish)[done] / np.maximum(sim.route_length[done], 1e-300)
     return {
@@ -690,12 +836,27 @@ def metrics(sim: Simulation) -> dict:
         "runs_with_left_cell": int(np.count_nonzero(sim.left_cell > 0)),
         "runs_with_approach": int(np.count_nonzero(sim.approach_steps > 0)),
         "hold_time_total_s": float(sim.hold_steps.sum() * sim.dt),
-        "certified_step_fraction": sim.certified_fraction,
+        "certified_step_fraction": _moving_fraction(sim),
+        "estimator": counts.get("name"),
+        "containment_violations": counts.get("containment_violations"),
+        "inconsistencies": counts.get("inconsistencies"),
+        "looks_per_run": counts["looks"] / n if n and "looks" in counts else None,
+        "look_time_mean_s": (counts["look_steps"] * sim.dt / counts["looks"]) if counts.get("looks") else None,
+        "look_time_total_s": counts.get("look_steps", 0) * sim.dt,
         "runs_from_certified_domain": int(np.count_nonzero(sim.start_in_domain)),
         "success_rate_in_domain": _finite_or_none(sim.success_rate_of(sim.start_in_domain)),
         "success_rate_outside_domain": _finite_or_none(sim.success_rate_of(~sim.start_in_domain)),
         "dt": sim.dt,
     }
+
+
+def _moving_fraction(sim: Simulation) -> float:
+    """Certified steps over the steps that translated (ALGORITHMS §12.3: a look is not a step taken);
+    over every step where the run did not count its moves."""
+    moved = sim.stats.get("estimator", {}).get("moved_steps")
+    if moved is None:
+        return sim.certified_fraction
+    return float(sim.certified_steps.sum() / max(1, moved))
 
 
 def _finite_or_none(value: float) -> float | None:

@@ -10,6 +10,7 @@ real AprilTag detector on them (``--camera render``).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import Protocol
 
 import numpy as np
@@ -70,12 +71,20 @@ class IdealCamera:
         Slack of the field-of-view test (map units).
     rng : numpy.random.Generator
         Source of the noise (one angle per robot and landmark each step, seen or not).
+    bound : float, optional
+        ``η`` (rad): bounded errors instead of ``noise`` — each uniform in ``[−η, η]`` (ALGORITHMS §12.8).
+    toward : callable, optional
+        With ``bound``, the worst case: ``toward(x)`` (R, 2) is the unit direction from each robot
+        toward its nearest obstacle, and every error is ``±η``, the sign that moves the bearing's
+        line (and so the estimate) away from it.
     """
 
     def __init__(self, space: FreeSpace, landmarks: np.ndarray, *, fov: float, noise: float, max_range: float,
-                 occlusion: bool, tol: float, rng: np.random.Generator) -> None:  # fmt: skip
+                 occlusion: bool, tol: float, rng: np.random.Generator, bound: float | None = None,
+                 toward: Callable[[np.ndarray], np.ndarray] | None = None) -> None:  # fmt: skip
         self.landmarks = np.asarray(landmarks, float).reshape(-1, 2)
         self.fov, self.noise, self.max_range, self.tol, self.rng = fov, noise, max_range, tol, rng
+        self.bound, self.toward = bound, toward
         # one prepared region per landmark: a point query instead of a segment test per sight line
         self.sight = space.visibility_regions(self.landmarks) if occlusion else None
 
@@ -88,4 +97,16 @@ class IdealCamera:
             for k in np.flatnonzero(seen.any(axis=0)):
                 rows = np.flatnonzero(seen[:, k])
                 seen[rows, k] = shapely.intersects_xy(self.sight[k], x[rows, 0], x[rows, 1])
-        return bearing.noisy_bearings(x, self.landmarks, self.noise, self.rng), seen
+        if self.bound is None:
+            return bearing.noisy_bearings(x, self.landmarks, self.noise, self.rng), seen
+        unit = bearing.directions(x, self.landmarks)[0]
+        if self.toward is None:  # every error uniform within the bound (ALGORITHMS §12.8)
+            eps = self.rng.uniform(-self.bound, self.bound, size=unit.shape[:2])
+        else:
+            # the worst case: every error at the bound, turned so that the bearing's line moves away
+            # from the nearest obstacle, so the estimate lies on the far side and the truth nearer to it
+            # than the robot believes (turning by +η moves the apparent point along (sin φ, −cos φ))
+            push = self.toward(x)  # (R, 2) unit, toward the nearest obstacle
+            shift = unit[..., 1] * push[:, None, 0] - unit[..., 0] * push[:, None, 1]
+            eps = np.where(shift > 0.0, -self.bound, self.bound)
+        return bearing.rotated(unit, eps), seen

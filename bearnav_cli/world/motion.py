@@ -11,6 +11,8 @@ smallest clearance.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 import shapely
 
@@ -98,11 +100,25 @@ class Base:
         ``R``: the per-run errors are drawn for every run at once.
     rng : numpy.random.Generator
         Source of the per-run errors, then of each step's jitter.
+    bound : tuple of float, optional
+        ``(κ, ν)``: bounded slip instead of ``slip`` — every step errs by at most ``κ‖d̂‖ + ν``
+        (ALGORITHMS §12.8, :meth:`bounded_error`); ``None``: the Gaussian slip above.
+    toward : callable, optional
+        With ``bound``, the worst case: ``toward(x)`` (R, 2), the unit direction toward each robot's
+        nearest obstacle, and every error at the bound along it.
     """
 
-    def __init__(self, dynamics: str, dt: float, slip: float, runs: int, rng: np.random.Generator) -> None:
+    def __init__(self, dynamics: str, dt: float, slip: float, runs: int, rng: np.random.Generator,
+                 bound: tuple[float, float] | None = None,
+                 toward: Callable[[np.ndarray], np.ndarray] | None = None) -> None:  # fmt: skip
         self.dynamics, self.dt, self.slip, self.rng = dynamics, float(dt), float(slip), rng
-        if self.slip > 0:
+        self.bound, self.toward = bound, toward
+        if bound is not None:
+            # bounded slip: per run a fixed error direction and size in the robot's frame, per step a
+            # jitter, mixed and kept within κ‖d̂‖ + ν (the worst case ignores them)
+            angle, size = rng.uniform(-np.pi, np.pi, runs), np.sqrt(rng.uniform(0.0, 1.0, runs))
+            self.scale_error, self.heading_bias = size * np.cos(angle), size * np.sin(angle)
+        elif self.slip > 0:
             errors = self.slip * rng.standard_normal((runs, 2))
             self.scale_error, self.heading_bias = errors[:, 0].copy(), errors[:, 1].copy()
         else:
@@ -135,8 +151,10 @@ class Base:
         look = np.where(scanning, bearing.wrap(heading + self.dt * turn), np.arctan2(last_dir[:, 1], last_dir[:, 0]))
         return self.dt * velocity, look
 
-    def slipped(self, runs: np.ndarray, move: np.ndarray) -> np.ndarray:
-        """The true displacements (R, 2) of commanded displacements ``move`` of robots ``runs``."""
+    def slipped(self, runs: np.ndarray, move: np.ndarray, x: np.ndarray | None = None) -> np.ndarray:
+        """The true displacements (R, 2) of commanded displacements ``move`` of robots ``runs`` at ``x``."""
+        if self.bound is not None and len(runs):
+            return move + self.bounded_error(runs, move, x)
         if self.slip <= 0 or not len(runs):
             return move
         jitter = self.slip * self.rng.standard_normal((len(runs), 2))
@@ -153,7 +171,27 @@ class Base:
         See :meth:`commanded` for the arguments; the displacement is then :meth:`slipped`.
         """
         move, look = self.commanded(x, heading, velocity, forward, turn, scanning, last_dir)
-        return x + self.slipped(runs, move), look
+        return x + self.slipped(runs, move, x), look
+
+    def bounded_error(self, runs: np.ndarray, move: np.ndarray, x: np.ndarray | None) -> np.ndarray:
+        """An odometry error within ``κ‖d̂‖ + ν`` for each displacement ``move`` (R, 2); 0 where it is 0.
+
+        Uniform: ``0.7·(per-run error) + 0.3·(per-step jitter)``, both in the unit disc of the
+        robot's frame, times the bound. Worst (``toward``): the bound itself, toward the nearest
+        obstacle of ``x``.
+        """
+        kappa, floor = self.bound
+        length = np.hypot(move[:, 0], move[:, 1])
+        size = np.where(length > 0.0, kappa * length + floor, 0.0)
+        if self.toward is not None and x is not None:
+            return size[:, None] * self.toward(x)
+        angle, radius = self.rng.uniform(-np.pi, np.pi, len(runs)), np.sqrt(self.rng.uniform(0.0, 1.0, len(runs)))
+        along = 0.7 * self.scale_error[runs] + 0.3 * radius * np.cos(angle)
+        across = 0.7 * self.heading_bias[runs] + 0.3 * radius * np.sin(angle)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            unit = np.where(length[:, None] > 0, move / length[:, None], 0.0)
+        normal = np.column_stack([-unit[:, 1], unit[:, 0]])
+        return size[:, None] * (along[:, None] * unit + across[:, None] * normal)
 
 
 class Contact:

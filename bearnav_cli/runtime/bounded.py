@@ -1,0 +1,446 @@
+"""Bounded-error estimation: convex sets that always hold the robot (ALGORITHMS §12.1, §12.2, Lemma 5).
+
+Numpy only. A batch of ``R`` convex polygons is a padded vertex array ``vertices`` (R, W, 2),
+counter-clockwise, with ``count`` (R,) vertices each (rows past ``count`` are padding and never
+read); ``count == 0`` is the empty set. Every operation takes and returns that pair, for all the
+robots at once:
+
+- :func:`box` — the bounds ``B_r`` every set starts from;
+- :func:`cone_rows` — the bearing set ``W(l, φ̃)``: two half-planes through the landmark;
+- :func:`clip` — intersection with one half-plane per polygon (Sutherland–Hodgman);
+- :func:`grow` — every row moved outward by a radius, corners bevelled where sharp: a polygon that
+  contains the Minkowski sum with the disc (the odometry bound of the prediction);
+- :func:`intersect_cones` — clip by the cones of every visible bearing;
+- :func:`centre` — the estimate ``x̂`` (a point of the set) and its exact error radius
+  ``e = max_v ‖v − x̂‖``;
+- :func:`diameter` and :func:`one_look_bound` — the static bound ``ε(x, S) = diam K(x, S)`` of
+  §12.2 that looking (§12.5) and ``bearnav verify``'s liveness use;
+- :func:`contains` — whether points lie in their sets (the simulator's containment count).
+
+Every clip keeps a slack of ``tol`` (``1e-9·D``) on the outside, so round-off never empties a set
+that holds the truth: the sets are outer approximations, as Lemma 5 needs.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+__all__ = ["MAX_VERTICES", "box", "centre", "clip", "cone_rows", "contains", "diameter", "grow",
+           "intersect_cones", "one_look_bound", "translate"]  # fmt: skip
+
+#: Widest vertex array kept: a set with more vertices is merged down (outward) to this many. The
+#: cones of a dozen bearings give a polygon of at most 24 sides; a set rarely has more than 12.
+MAX_VERTICES = 48
+#: ``x̂`` is refined by this many Bădoiu–Clarkson steps toward the centre of the smallest circle
+#: around the vertices (the error radius is exact for whatever point results).
+CENTRE_STEPS = 16
+
+
+def box(bounds: np.ndarray, r: int) -> tuple[np.ndarray, np.ndarray]:
+    """``r`` copies of the rectangle ``bounds = [xmin, ymin, xmax, ymax]`` (map units), counter-clockwise."""
+    x0, y0, x1, y1 = (float(v) for v in np.asarray(bounds, float).reshape(4))
+    corners = np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]])
+    return np.broadcast_to(corners, (r, 4, 2)).copy(), np.full(r, 4, np.int64)
+
+
+def translate(vertices: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """The sets moved by ``d`` (R, 2) map units (padding moves too; it is never read)."""
+    return vertices + np.asarray(d, float)[:, None, :]
+
+
+def _valid(vertices: np.ndarray, count: np.ndarray) -> np.ndarray:
+    return np.arange(vertices.shape[1])[None, :] < count[:, None]
+
+
+def _next_index(vertices: np.ndarray, count: np.ndarray) -> np.ndarray:
+    j = np.arange(vertices.shape[1])[None, :]
+    return np.where(j + 1 < count[:, None], j + 1, 0)
+
+
+def _compact(candidates: np.ndarray, keep: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The kept candidates of every row moved to the front, in order, and their numbers."""
+    count = keep.sum(axis=1).astype(np.int64)
+    width = max(int(count.max(initial=0)), 1)
+    order = np.argsort(~keep, axis=1, kind="stable")[:, :width]
+    return np.take_along_axis(candidates, order[..., None], axis=1), count
+
+
+def clip(vertices: np.ndarray, count: np.ndarray, a: np.ndarray, b: np.ndarray,
+         tol: float = 0.0) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """Each polygon intersected with its half-plane ``{y : a·y ≤ b + tol}`` (Sutherland–Hodgman).
+
+    Parameters
+    ----------
+    vertices : ndarray, shape (R, W, 2)
+        Counter-clockwise convex polygons, padded (map units).
+    count : ndarray of int, shape (R,)
+        Their vertex counts.
+    a : ndarray, shape (R, 2)
+        Row normals (any length; ``0`` with ``b ≥ 0`` keeps the polygon).
+    b : ndarray, shape (R,)
+        Row offsets (map units when ``a`` is a unit vector).
+    tol : float
+        Slack on the outside (map units, in the units of ``a·y``).
+
+    Returns
+    -------
+    vertices : ndarray, shape (R, W', 2)
+    count : ndarray of int64, shape (R,)
+        At most one more vertex than before; 0 where the polygon lies wholly outside.
+    """
+    valid = _valid(vertices, count)
+    s = vertices[..., 0] * a[:, 0, None] + vertices[..., 1] * a[:, 1, None] - (np.asarray(b, float) + tol)[:, None]
+    s = np.where(valid, s, 0.0)
+    cut = np.flatnonzero(np.any(s > 0.0, axis=1))
+    if len(cut) < len(vertices):  # most rows lie inside their half-plane: only the others are clipped
+        if not len(cut):
+            return vertices, count
+        sub_v, sub_n = _clip_rows(vertices[cut], count[cut], s[cut], valid[cut])
+        width = max(vertices.shape[1], sub_v.shape[1])
+        out, out_count = _pad(vertices, width, copy=True), count.copy()
+        out[cut], out_count[cut] = _pad(sub_v, width), sub_n
+        return out, out_count
+    return _clip_rows(vertices, count, s, valid)
+
+
+def _clip_rows(vertices: np.ndarray, count: np.ndarray, s: np.ndarray,
+               valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """:func:`clip` of rows whose signed row values ``s`` (R, W) are known (positive: outside)."""
+    nxt = _next_index(vertices, count)
+    rows = np.arange(len(vertices))[:, None]
+    following = vertices[rows, nxt]
+    s_next = s[rows, nxt]
+    inside = s <= 0.0
+    crossing = valid & (inside != (s_next <= 0.0))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = np.where(crossing, s / (s - s_next), 0.0)
+    point = vertices + t[..., None] * (following - vertices)
+    candidates = np.stack([vertices, point], axis=2).reshape(len(vertices), -1, 2)
+    keep = np.stack([valid & inside, crossing], axis=2).reshape(len(vertices), -1)
+    return _compact(candidates, keep)
+
+
+def _dedupe(vertices: np.ndarray, count: np.ndarray, tol: float) -> tuple[np.ndarray, np.ndarray]:
+    """Drop every vertex within ``tol`` of the next one (a move of at most ``tol``)."""
+    if not len(vertices):
+        return vertices, count
+    valid = _valid(vertices, count)
+    nxt = _next_index(vertices, count)
+    gap = vertices - np.take_along_axis(vertices, nxt[..., None], axis=1)
+    close = np.hypot(gap[..., 0], gap[..., 1]) <= tol
+    # the last of a run of equal vertices stays (a lone vertex is never dropped)
+    keep = valid & ~(close & (count[:, None] > 1))
+    keep[(keep.sum(axis=1) == 0) & (count > 0), 0] = True
+    return _compact(vertices, keep)
+
+
+def _normals(vertices: np.ndarray, count: np.ndarray) -> np.ndarray:
+    """Outward unit normals of the edges ``v_j → v_{j+1}`` of counter-clockwise polygons, (R, W, 2)."""
+    edge = np.take_along_axis(vertices, _next_index(vertices, count)[..., None], axis=1) - vertices
+    length = np.hypot(edge[..., 0], edge[..., 1])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        n = np.stack([edge[..., 1], -edge[..., 0]], axis=-1) / length[..., None]
+    return np.where(np.isfinite(n), n, 0.0)
+
+
+def _area(vertices: np.ndarray, count: np.ndarray) -> np.ndarray:
+    nxt = np.take_along_axis(vertices, _next_index(vertices, count)[..., None], axis=1)
+    cross = vertices[..., 0] * nxt[..., 1] - vertices[..., 1] * nxt[..., 0]
+    return 0.5 * np.sum(np.where(_valid(vertices, count), cross, 0.0), axis=1)
+
+
+def grow(vertices: np.ndarray, count: np.ndarray, radius: np.ndarray,
+         tol: float = 0.0) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """Each polygon with every row moved outward by its ``radius``: it contains ``X ⊕ B(radius)``.
+
+    At a corner whose edge normals turn by ``φ`` the offset rows meet ``r/cos(φ/2)`` from the
+    vertex; where ``φ > π/2`` (a sharp corner: thin cones meet at them) a bevel row tangent to the
+    disc around the vertex cuts the corner off, so no offset vertex lies farther than ``r/cos(φ/4) ≤ 1.31r`` from
+    its vertex. Polygons with fewer than three vertices, or no area, become
+    their bounding box grown by ``radius``.
+
+    Parameters
+    ----------
+    vertices : ndarray, shape (R, W, 2)
+        Counter-clockwise convex polygons, padded (map units).
+    count : ndarray of int, shape (R,)
+        Their vertex counts.
+    radius : ndarray, shape (R,)
+        ``r ≥ 0`` (map units); 0 leaves the polygon as it is.
+    tol : float
+        Vertices closer than this are merged first (map units).
+    """
+    radius = np.asarray(radius, float).reshape(len(vertices))
+    vertices, count = _dedupe(vertices, count, tol)
+    valid = _valid(vertices, count)
+    flat = (count < 3) | (np.abs(_area(vertices, count)) <= max(tol, 1e-300) ** 2)
+    n = _normals(vertices, count)
+    j = np.arange(vertices.shape[1])[None, :]
+    before = np.where(j == 0, np.maximum(count[:, None] - 1, 0), j - 1)
+    previous = np.take_along_axis(n, before[..., None], axis=1)  # the normal of the edge into each vertex
+    cos_turn = np.clip(np.einsum("rwk,rwk->rw", previous, n), -1.0, 1.0)
+    sharp = cos_turn < 0.0
+    r = radius[:, None, None]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        mitre = vertices + r * (previous + n) / (1.0 + cos_turn)[..., None]
+        # the bevel: the row of normal m = unit(n_prev + n) at distance r; it meets the two offset rows
+        # at r·tan(φ/4) from the offset points along the edges (φ the turn of the normals)
+        quarter = np.tan(0.25 * np.arccos(cos_turn))[..., None]
+        along_prev = np.stack([-previous[..., 1], previous[..., 0]], axis=-1)  # edge direction of n_prev
+        along = np.stack([-n[..., 1], n[..., 0]], axis=-1)
+        first = vertices + r * previous + r * quarter * along_prev
+        second = vertices + r * n - r * quarter * along
+    corner = np.where(sharp[..., None], first, mitre)
+    candidates = np.stack([corner, second], axis=2).reshape(len(vertices), -1, 2)
+    keep = np.stack([valid, valid & sharp], axis=2).reshape(len(vertices), -1)
+    out, out_count = _compact(candidates, keep)
+    if flat.any():
+        idx = np.flatnonzero(flat & (count > 0))
+        if len(idx):
+            v = np.where(valid[idx, :, None], vertices[idx], np.nan)
+            lo, hi = np.nanmin(v, axis=1) - radius[idx, None], np.nanmax(v, axis=1) + radius[idx, None]
+            rect = np.stack([lo, np.column_stack([hi[:, 0], lo[:, 1]]), hi, np.column_stack([lo[:, 0], hi[:, 1]])],
+                            axis=1)  # fmt: skip
+            if out.shape[1] < 4:
+                out = np.concatenate([out, np.repeat(out[:, :1], 4 - out.shape[1], axis=1)], axis=1)
+            out[idx, :4], out_count[idx] = rect, 4
+    still = radius <= 0.0  # no growth: the deduplicated polygon as it was
+    if still.any():
+        width = max(out.shape[1], vertices.shape[1])
+        out = _pad(out, width)
+        out[still] = _pad(vertices, width)[still]
+        out_count[still] = count[still]
+    return _reduce(out, out_count)
+
+
+def _pad(vertices: np.ndarray, width: int, copy: bool = False) -> np.ndarray:
+    if vertices.shape[1] >= width:
+        return vertices.copy() if copy else vertices
+    return np.concatenate([vertices, np.repeat(vertices[:, :1], width - vertices.shape[1], axis=1)], axis=1)
+
+
+def _reduce(vertices: np.ndarray, count: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Sets of more than :data:`MAX_VERTICES` vertices merged down, outward: the shortest edge whose two
+    neighbouring rows meet beyond it is replaced by that meeting point, until few enough remain."""
+    over = np.flatnonzero(count > MAX_VERTICES)
+    for i in over:  # rare: one polygon at a time
+        poly = list(vertices[i, : count[i]])
+        while len(poly) > MAX_VERTICES:
+            p = np.array(poly)
+            k = len(p)
+            edge = np.roll(p, -1, axis=0) - p
+            length = np.hypot(edge[:, 0], edge[:, 1])
+            best = None
+            for j in np.argsort(length):
+                a0, a1 = p[(j - 1) % k], p[j]  # the row before edge j
+                b0, b1 = p[(j + 1) % k], p[(j + 2) % k]  # the row after it
+                da, db = a1 - a0, b1 - b0
+                denom = da[0] * db[1] - da[1] * db[0]
+                if denom <= 1e-15 * (np.hypot(*da) * np.hypot(*db)):  # the rows turn by π or more: no apex
+                    continue
+                t = ((b0[0] - a0[0]) * db[1] - (b0[1] - a0[1]) * db[0]) / denom
+                if t < 1.0:
+                    continue
+                best = (j, a0 + t * da)
+                break
+            if best is None:
+                break
+            j, apex = best
+            poly[j] = apex
+            del poly[(j + 1) % k]
+        vertices[i, : len(poly)], count[i] = poly, len(poly)
+    width = max(int(count.max(initial=0)), 1)
+    return vertices[:, :width], count
+
+
+def cone_rows(landmarks: np.ndarray, angle: np.ndarray, eta: float) -> tuple[np.ndarray, np.ndarray]:
+    """The two half-planes ``a·y ≤ b`` of each bearing set ``W(l, φ̃)`` (ALGORITHMS §12.2).
+
+    ``W(l, φ̃) = {y : |wrap(angle(l − y) − φ̃)| ≤ η}`` is the cone with apex ``l`` around
+    ``−(cos φ̃, sin φ̃)`` of half-angle ``η < π/2``: the intersection of
+    ``(−sin(φ̃−η), cos(φ̃−η))·(y − l) ≤ 0`` and ``(sin(φ̃+η), −cos(φ̃+η))·(y − l) ≤ 0``.
+
+    Parameters
+    ----------
+    landmarks : ndarray, shape (..., 2)
+        Apexes ``l`` (map units).
+    angle : ndarray, shape (...)
+        Measured world-frame bearing angles ``φ̃`` from the robot to ``l`` (rad).
+    eta : float
+        Half-angle ``η`` (rad, in [0, π/2)).
+
+    Returns
+    -------
+    a : ndarray, shape (..., 2, 2)
+        Unit normals of the two rows.
+    b : ndarray, shape (..., 2)
+        Their offsets ``a·l`` (map units).
+    """
+    lo, hi = angle - eta, angle + eta
+    a = np.stack([np.stack([-np.sin(lo), np.cos(lo)], axis=-1), np.stack([np.sin(hi), -np.cos(hi)], axis=-1)],
+                 axis=-2)  # fmt: skip
+    b = np.einsum("...qk,...k->...q", a, np.asarray(landmarks, float))
+    return a, b
+
+
+def intersect_cones(vertices: np.ndarray, count: np.ndarray, landmarks: np.ndarray, angle: np.ndarray,
+                    visible: np.ndarray, eta: float, tol: float = 0.0) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """Every set clipped by the bearing cones of the landmarks its robot sees (§12.2's update).
+
+    The robots are clipped together, one visible bearing of each per round (a robot with fewer
+    bearings sits out the later rounds).
+
+    Parameters
+    ----------
+    vertices : ndarray, shape (R, W, 2)
+        Counter-clockwise convex polygons, padded (map units).
+    count : ndarray of int, shape (R,)
+        Their vertex counts.
+    landmarks : ndarray, shape (L, 2)
+        Landmark positions (map units).
+    angle : ndarray, shape (R, L)
+        Measured world-frame bearing angles (rad); only the visible ones are read.
+    visible : ndarray of bool, shape (R, L)
+        Which landmarks each robot sees.
+    eta : float
+        The bearing error bound (rad).
+    tol : float
+        Outside slack of every clip (map units).
+    """
+    visible = np.asarray(visible, bool)
+    if not visible.any():
+        return vertices, count
+    a, b = cone_rows(np.broadcast_to(landmarks, (*visible.shape, 2)), angle, eta)  # (R, L, 2, 2), (R, L, 2)
+    vertices, count = vertices.copy(), count.copy()  # the caller's sets stay as they were
+    order = np.argsort(~visible, axis=1, kind="stable")  # each robot's visible landmarks first
+    seen = visible.sum(axis=1)
+    rows = np.arange(len(visible))
+    for k in range(int(seen.max())):
+        who = rows[seen > k]
+        lm = order[who, k]
+        sub_v, sub_n = vertices[who], count[who]
+        for q in range(2):
+            sub_v, sub_n = clip(sub_v, sub_n, a[who, lm, q], b[who, lm, q], tol)
+        width = max(vertices.shape[1], sub_v.shape[1])
+        vertices = _pad(vertices, width)
+        vertices[who] = _pad(sub_v, width)
+        count[who] = sub_n
+    return _reduce(*_dedupe(vertices, count, tol))
+
+
+def centre(vertices: np.ndarray, count: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The estimate ``x̂`` in each set and its exact error radius ``e = max_v ‖v − x̂‖`` (§12.2).
+
+    ``x̂`` approaches the centre of the smallest circle around the vertices (Bădoiu–Clarkson steps
+    from their mean; the better of that and the midpoint of the farthest pair is kept). Every step
+    moves toward a vertex, so ``x̂`` stays in the convex set; ``e`` is exact for the ``x̂`` returned,
+    which is all Lemma 5's ``‖x − x̂‖ ≤ e`` needs.
+
+    Returns
+    -------
+    x_hat : ndarray, shape (R, 2)
+        Map units; NaN for empty sets.
+    error : ndarray, shape (R,)
+        Map units; ``inf`` for empty sets.
+    """
+    r = len(vertices)
+    valid = _valid(vertices, count)
+    empty = count <= 0
+    weight = valid / np.maximum(count, 1)[:, None]
+    c = np.einsum("rw,rwk->rk", weight, vertices)
+
+    def farthest(point: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        d = vertices - point[:, None, :]
+        dist = np.where(valid, np.hypot(d[..., 0], d[..., 1]), -1.0)
+        j = np.argmax(dist, axis=1)
+        return dist[np.arange(r), j], j
+
+    for k in range(CENTRE_STEPS):
+        _, j = farthest(c)
+        c = c + (vertices[np.arange(r), j] - c) / (k + 2.0)
+    e, _ = farthest(c)
+    # the farthest pair's midpoint: the optimum when the smallest circle rests on two vertices
+    dist2 = np.einsum(
+        "rwvk,rwvk->rwv", vertices[:, :, None] - vertices[:, None], vertices[:, :, None] - vertices[:, None]
+    )
+    dist2 = np.where(valid[:, :, None] & valid[:, None, :], dist2, -1.0)
+    flat = np.argmax(dist2.reshape(r, -1), axis=1)
+    i, j = np.divmod(flat, vertices.shape[1])
+    mid = 0.5 * (vertices[np.arange(r), i] + vertices[np.arange(r), j])
+    e_mid, _ = farthest(mid)
+    better = e_mid < e
+    c[better], e[better] = mid[better], e_mid[better]
+    c[empty], e[empty] = np.nan, np.inf
+    return c, e
+
+
+def diameter(vertices: np.ndarray, count: np.ndarray) -> np.ndarray:
+    """The largest distance between two vertices of each set (R,) map units; ``inf`` for empty sets."""
+    valid = _valid(vertices, count)
+    d = vertices[:, :, None] - vertices[:, None]
+    dist2 = np.where(valid[:, :, None] & valid[:, None, :], np.einsum("rwvk,rwvk->rwv", d, d), 0.0)
+    out = np.sqrt(np.max(dist2.reshape(len(vertices), -1), axis=1, initial=0.0))
+    return np.where(count > 0, out, np.inf)
+
+
+def one_look_bound(x: np.ndarray, landmarks: np.ndarray, visible: np.ndarray, eta: float, bounds: np.ndarray,
+                   tol: float = 0.0) -> np.ndarray:  # fmt: skip
+    """The static bound ``ε(x, S) = diam K(x, S)`` of one look, shape (R,) map units (ALGORITHMS §12.2).
+
+    ``K(x, S) = B_r ∩ ∩_{k∈S} cone(l_k, φ_k(x), 2η)``: a robot at ``x`` that sees ``S`` with
+    bearing errors within ``η`` has its set inside ``K``, so its error after the look is at most
+    ``ε``. With fewer than two well-spread bearings ``K`` reaches the bounds and ``ε`` is large.
+
+    Parameters
+    ----------
+    x : ndarray, shape (R, 2)
+        Where the robot is (map units).
+    landmarks : ndarray, shape (L, 2)
+        Landmark positions (map units).
+    visible : ndarray of bool, shape (R, L)
+        ``S``: which landmarks it sees from ``x``.
+    eta : float
+        The bearing error bound (rad).
+    bounds : ndarray, shape (4,)
+        ``B_r`` (map units).
+    tol : float
+        Outside slack of the clips (map units).
+    """
+    p = np.asarray(x, float).reshape(-1, 2)
+    d = np.asarray(landmarks, float)[None] - p[:, None, :]
+    angle = np.arctan2(d[..., 1], d[..., 0])
+    vertices, count = box(bounds, len(p))
+    vertices, count = intersect_cones(vertices, count, landmarks, angle, visible, min(2.0 * eta, 0.5 * math.pi - 1e-9),
+                                      tol)  # fmt: skip
+    return diameter(vertices, count)
+
+
+def contains(vertices: np.ndarray, count: np.ndarray, x: np.ndarray, tol: float = 0.0) -> np.ndarray:
+    """Whether each point lies in its set (within ``tol`` of every edge), shape (R,).
+
+    Parameters
+    ----------
+    vertices : ndarray, shape (R, W, 2)
+        Counter-clockwise convex polygons, padded (map units).
+    count : ndarray of int, shape (R,)
+        Their vertex counts (1 or 2: a point or a segment, within ``tol``; 0: contains nothing).
+    x : ndarray, shape (R, 2)
+        One point per set (map units).
+    tol : float
+        Slack (map units).
+    """
+    p = np.asarray(x, float).reshape(-1, 2)
+    valid = _valid(vertices, count)
+    n = _normals(vertices, count)
+    s = np.einsum("rwk,rwk->rw", n, p[:, None, :] - vertices)
+    inside = np.all(np.where(valid, s <= tol, True), axis=1)
+    if np.any(count < 3):  # points and segments: the distance to the vertices' hull
+        few = np.flatnonzero((count > 0) & (count < 3))
+        for i in few:
+            a, b = vertices[i, 0], vertices[i, count[i] - 1]
+            ab = b - a
+            t = np.clip(np.dot(p[i] - a, ab) / max(np.dot(ab, ab), 1e-300), 0.0, 1.0)
+            inside[i] = np.hypot(*(p[i] - a - t * ab)) <= tol
+    return inside & (count > 0)
