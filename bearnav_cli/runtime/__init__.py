@@ -31,8 +31,8 @@ _ORIGIN = {
     **dict.fromkeys(("Estimate", "Fix", "SetEstimate", "bounded_update", "fuse", "measure"), "estimate"),
     **dict.fromkeys(("RUNTIME_KEYS", "PlanArrays", "ring_edges", "tree_costs"), "plan_arrays"),
     **dict.fromkeys(("ROBOT_DEFAULTS", "lookahead_command", "lookahead_point"), "robot"),
-    **dict.fromkeys(("DYNAMICS", "ESTIMATORS", "MEASUREMENTS", "ControlOutput", "ControlSettings", "ControlState", "control",
-                     "timing"), "step"),
+    **dict.fromkeys(("DYNAMICS", "ESTIMATORS", "MEASUREMENTS", "ControlOutput", "ControlSettings", "ControlState",
+                     "bounded_control", "control", "timing"), "step"),
 }  # fmt: skip
 #: The submodules, also attributes of the package once imported (``runtime.step``, ``runtime.bearing``).
 _SUBMODULES = (

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from bearnav_cli.runtime import bearing
+from bearnav_cli.runtime.bounded import MAX_VERTICES, one_look_bound
 from bearnav_cli.runtime.cell_policy import (
     affine_field,
     apply_gain,
@@ -28,7 +29,6 @@ from bearnav_cli.runtime.cell_policy import (
     obstacle_clearance,
     update,
 )
-from bearnav_cli.runtime.bounded import MAX_VERTICES, one_look_bound
 from bearnav_cli.runtime.estimate import Estimate, axle_bounds, bounded_update, fuse, measure
 from bearnav_cli.runtime.plan_arrays import PlanArrays
 from bearnav_cli.runtime.robot import ROBOT_DEFAULTS, lookahead_command, lookahead_point
@@ -36,7 +36,8 @@ from bearnav_cli.runtime.robot import ROBOT_DEFAULTS, lookahead_command, lookahe
 __all__ = [
     "ALPHA", "APPROACH_ALIGNMENT", "BEARING_SIGMA", "DYNAMICS", "MEASUREMENTS", "ODOMETRY_DRIFT", "SPEED",
     "STALL_FIELD", "ControlOutput", "ControlSettings", "ControlState",
-    "ESTIMATORS", "LOOK_HEADINGS", "best_bound_heading", "best_view_heading", "bounded_control", "carry_inside", "control", "error_ball_pace", "follow_fields", "heading_allowance",
+    "ESTIMATORS", "LOOK_HEADINGS", "best_bound_heading", "best_view_heading", "bounded_control",
+    "carry_inside", "control", "error_ball_pace", "follow_fields", "heading_allowance",
     "look_around", "steer_clear", "timing", "unicycle_command",
 ]  # fmt: skip
 
@@ -492,7 +493,8 @@ def control(
 
 
 def bounded_control(arrays: PlanArrays, s: ControlSettings, state: ControlState, bearings: np.ndarray,
-                    visible: np.ndarray, heading: np.ndarray, x_true: np.ndarray | None = None) -> ControlOutput:  # fmt: skip
+                    visible: np.ndarray, heading: np.ndarray,
+                    x_true: np.ndarray | None = None) -> ControlOutput:  # fmt: skip
     """One step of the certified policy of ALGORITHMS §12.3 on the estimate sets of §12.2, for ``R`` robots.
 
     The set ``X_t`` and its estimate ``x̂`` with error ``e`` come from

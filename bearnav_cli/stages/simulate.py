@@ -168,8 +168,9 @@ class Params:
         in ``[−η, η]`` and every odometry error within ``κ‖d̂‖ + ν`` (ALGORITHMS §12.8); the set
         estimator assumes this ``η`` unless ``bearing_error_deg`` is given.
     noise_worst : bool
-        Every error at its bound (``noise_bound_deg``, else the bound the robot assumes), turned so that the truth lies nearer to
-        the nearest obstacle than the estimate says (bearings, and odometry pushed toward it).
+        Every error at its bound (``noise_bound_deg``, else the bound the robot assumes), turned
+        so that the truth lies nearer to the nearest obstacle than the estimate says (bearings, and
+        odometry pushed toward it).
     bearing_error_deg : float or None
         ``η_cam`` the set estimator assumes (degrees); ``None``: the map's ``robot.bearing_error_deg``
         (default 0.2), or ``noise_bound_deg`` when that is given.
