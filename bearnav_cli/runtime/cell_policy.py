@@ -263,7 +263,8 @@ def least_rank_cell(arrays: PlanArrays, x: np.ndarray, erosion: np.ndarray | flo
 
 
 def funnel_update(arrays: PlanArrays, cell: np.ndarray, target: np.ndarray, x: np.ndarray, eps_sw: float,
-                  erosion: np.ndarray | float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
+                  erosion: np.ndarray | float = 0.0,
+                  keep: np.ndarray | float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
     """The composition policy of ALGORITHMS §11.3 for every robot (funnel plans).
 
     The active cell is kept while the robot is in it; whenever it lies in a cell of smaller rank
@@ -285,6 +286,9 @@ def funnel_update(arrays: PlanArrays, cell: np.ndarray, target: np.ndarray, x: n
         Arrival radius of a straight approach (map units).
     erosion : float or ndarray, shape (R,)
         ``δ`` of each robot's estimate (map units): membership is tested on ``P ⊖ δ``.
+    keep : float or ndarray, shape (R,), optional
+        The robot stays in its cell while ``x`` lies in it grown by this (map units); default the
+        membership slack ``arrays.tol``.
 
     Returns
     -------
@@ -301,7 +305,8 @@ def funnel_update(arrays: PlanArrays, cell: np.ndarray, target: np.ndarray, x: n
     relocated = np.zeros(len(c), bool)
     if following.any():
         idx = np.flatnonzero(following)
-        here = contains(arrays, c[idx], p[idx], arrays.tol)
+        grown = np.broadcast_to(np.asarray(0.0 if keep is None else keep, float), (len(p),))[idx]
+        here = cell_slack(arrays, c[idx], p[idx]) >= -grown - arrays.tol
         lower = best[idx] >= 0
         out = idx[~here & ~lower]  # left its cell with no smaller rank holding it: any cell that does
         if len(out):
@@ -578,6 +583,7 @@ def update(
     eps_sw: float,
     tol: float | None = None,
     erosion: np.ndarray | float | None = None,
+    keep: np.ndarray | float | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """One control update of the cell policy for every robot.
 
@@ -606,6 +612,10 @@ def update(
     erosion : float or ndarray, shape (R,), optional
         Funnel plans: ``δ`` of each robot's estimate (map units), its error bound: membership is
         tested on ``P ⊖ δ``; ``None``: 0. Ignored for paper plans.
+    keep : float or ndarray, shape (R,), optional
+        Funnel plans: a robot keeps its cell while ``x`` lies in it grown by this (map units): a
+        bounded estimate within ``e`` of a robot that the certificate keeps in its cell may lie up to
+        ``e`` outside it (ALGORITHMS §12.3); ``None``: the membership slack ``tol``.
 
     Returns
     -------
@@ -614,7 +624,7 @@ def update(
         Robots found outside their cell and relocated (``left_cell`` events).
     """
     if arrays.funnel:
-        return funnel_update(arrays, cell, target, x, eps_sw, 0.0 if erosion is None else erosion)
+        return funnel_update(arrays, cell, target, x, eps_sw, 0.0 if erosion is None else erosion, keep)
     c, t, p = _cells(arrays, cell).copy(), _cells(arrays, target).copy(), _points(x)
     relocated = np.zeros(len(c), bool)
     fresh = c < 0

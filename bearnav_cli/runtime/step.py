@@ -37,7 +37,7 @@ __all__ = [
     "ALPHA", "APPROACH_ALIGNMENT", "BEARING_SIGMA", "DYNAMICS", "MEASUREMENTS", "ODOMETRY_DRIFT", "SPEED",
     "STALL_FIELD", "ControlOutput", "ControlSettings", "ControlState",
     "ESTIMATORS", "LOOK_HEADINGS", "best_bound_heading", "best_view_heading", "bounded_control",
-    "carry_inside", "control", "error_ball_pace", "follow_fields", "heading_allowance",
+    "bend_inward", "carry_inside", "certified_pace", "control", "error_ball_pace", "follow_fields", "heading_allowance",
     "look_around", "steer_clear", "timing", "unicycle_command",
 ]  # fmt: skip
 
@@ -550,14 +550,22 @@ def bounded_control(arrays: PlanArrays, s: ControlSettings, state: ControlState,
     margin = 0.0 if s.measurement == "displacement" else s.slip * s.top_speed * s.dt + s.slip_floor
     est = Estimate(reference, error**2 / 9.0, sets.seen, known & np.isfinite(error), known,
                    np.where(known, state.hold, 0.0), error)  # fmt: skip
-    cell, target, last_dir, u, stalled, relocated = follow_fields(arrays, s, state, est, bearings, visible)
+    # the truth is in the active cell (Theorem 2), so its estimate may lie up to e outside it; not after a
+    # look-ahead unicycle's look swung p around the axle: then p̂ must lie in a cell eroded by e
+    swung = np.isfinite(state.resume) if ahead else np.zeros(r, bool)
+    keep = np.where(swung, -error, error)
+    cell, target, last_dir, u, stalled, relocated = follow_fields(arrays, s, state, est, bearings, visible,
+                                                                  keep=keep)  # fmt: skip
     in_cell = (cell >= 0) & (target < 0) & known
     tau = arrays.tolerance_in(cell)
     move = in_cell & (error + margin <= tau + s.tol)
     if arrays.funnel:
-        # a cell holds p̂ but none eroded by e: look while a look may tell which (e too large for the
-        # cell that holds p̂); with e that small the robot sits at the edge of D, and approaches a node
-        holder = np.where(known & ~in_cell, least_rank_cell(arrays, reference), -1)
+        # a cell grown by e holds p̂ (the robot may be in it) but none eroded by e does: look while a
+        # look may tell which (e too large for that cell); with e that small the robot sits at the edge
+        # of a cell, and drives on that cell's field, uncertified, until the switch applies
+        holder = np.full(r, -1, np.int64)
+        open_ = np.flatnonzero(known & ~in_cell)
+        holder[open_] = least_rank_cell(arrays, reference[open_], -error[open_])
         undecided = (holder >= 0) & (error + margin > arrays.tolerance_in(holder) + s.tol)
     else:
         undecided = np.zeros(r, bool)
@@ -566,6 +574,19 @@ def bounded_control(arrays: PlanArrays, s: ControlSettings, state: ControlState,
     cell, target = np.where(undecided, -1, cell), np.where(undecided, -1, target)
     outside = known & ~in_cell & ~undecided
     pace = np.where(move, 1.0, 0.0)
+    if arrays.funnel and move.any():
+        idx = np.flatnonzero(move)
+        step_len = s.top_speed * s.dt
+        # the motion's own error, and a look-ahead point's Euler error λ(ωdt)²/2 ≤ ℓ²/2λ (|ω| ≤ α/λ)
+        wobble = margin + (step_len**2 / (2.0 * lam) if ahead else 0.0)
+        pace[idx] = certified_pace(arrays, cell[idx], reference[idx], error[idx], u[idx], step_len, wobble)
+        slow = idx[pace[idx] < 1.0]
+        if len(slow):  # near a face the field may slide along it: bend it inward just enough, if that helps
+            bent = bend_inward(arrays, cell[slow], reference[slow], error[slow], u[slow], step_len, wobble)
+            better = certified_pace(arrays, cell[slow], reference[slow], error[slow], bent, step_len, wobble)
+            take = better > pace[slow]
+            u[slow[take]], pace[slow[take]] = bent[take], better[take]
+        move[idx] = pace[idx] > 0.0
     if arrays.funnel:
         # at the edge of D (a cell holds p̂, e is small, no cell eroded by e does): that cell's field,
         # uncertified, at the error ball's pace; it leads deeper into the cell, where the switch applies
@@ -621,8 +642,10 @@ def bounded_control(arrays: PlanArrays, s: ControlSettings, state: ControlState,
     forward, motion = np.zeros(r), velocity.copy()
     clamped = np.zeros(r, bool)
     if ahead:
-        forward, turn_cmd, motion = unicycle_command(s, direction, heading, holding, scanning, target, turn)
-        turn = np.where(scanning | back, turn, turn_cmd)
+        # a look-ahead unicycle that does not drive turns only to look or to turn back: any other turn
+        # would swing p unrecorded (a look records the heading it turns back to)
+        forward = np.zeros(r)
+        turn = np.where(scanning | back, turn, 0.0)
         idx = np.flatnonzero(drive)
         w = (s.alpha * pace[idx])[:, None] * direction[idx]
         forward[idx], turn[idx], clamped[idx] = lookahead_command(w, phi[idx], lam, s.clamp_reverse)
@@ -646,6 +669,92 @@ def bounded_control(arrays: PlanArrays, s: ControlSettings, state: ControlState,
     return ControlOutput(velocity, forward, turn, scanning, new, sets.seen, lost & ~drive, stalled & drive,
                          relocated, np.where(known[:, None], reference, 0.0), certified, looking & ~scanning & ~back,
                          looking | ~known, error, sets.inconsistent)  # fmt: skip
+
+
+def certified_pace(arrays: PlanArrays, cell: np.ndarray, x_hat: np.ndarray, error: np.ndarray,
+                   direction: np.ndarray, step: float, disturbance: float) -> np.ndarray:  # fmt: skip
+    """The largest fraction of a step that keeps the truth in its cell's barrier set, shape (R,) in [0, 1].
+
+    The discrete-time part of Theorem 2 (ALGORITHMS §12.3), done exactly: the true position ``x``
+    lies within ``e`` of ``x̂`` and, by induction, in the cell (every barrier row ``h_k = A_k·x + b_k
+    ≥ 0``); a step at the fraction ``p`` moves it by ``pℓ·d`` plus an error of at most ``w``
+    (``κpℓ + ν``, and for a look-ahead point the Euler error ``ℓ²/2λ``). Row ``k`` stays satisfied if
+
+    - the step moves inward fast enough: ``pℓ (A_k·d) ≥ w`` (then ``h_k`` does not decrease), or
+    - the row is far enough whichever way: ``h_k(x̂) − e ≥ pℓ + w``.
+
+    The first holds for every ``p`` once ``A_k·d ≥ w/ℓ`` (with ``w`` at ``p = 1``, an upper bound); the
+    second bounds ``p``. The pace is the least bound over the rows that need it (0: no step is safe).
+    The exit row is not a barrier: crossing it is the progress the cell is for.
+
+    Parameters
+    ----------
+    arrays : PlanArrays
+        The plan's barrier rows ``bar_A``, ``bar_b`` (padding rows are ``0·x + inf``).
+    cell : ndarray of int, shape (R,)
+        Active cells (all ``>= 0``).
+    x_hat : ndarray, shape (R, 2)
+        Estimates of the point the plan is about (map units).
+    error : ndarray, shape (R,)
+        Their error bounds ``e`` (map units).
+    direction : ndarray, shape (R, 2)
+        Unit step directions.
+    step : float
+        ``ℓ``, a full step's length (map units).
+    disturbance : float
+        ``w``: the bound on a step's motion error at full length (map units).
+    """
+    c = np.asarray(cell, np.int64)
+    A, b = arrays.bar_A[c], arrays.bar_b[c]
+    with np.errstate(invalid="ignore"):
+        h = np.einsum("rqi,ri->rq", A, x_hat) + b
+    inward = np.einsum("rqi,ri->rq", A, direction)
+    free = ~np.isfinite(b) | (step * inward >= disturbance)
+    with np.errstate(invalid="ignore"):
+        room = (h - error[:, None] - disturbance) / step
+    bound = np.where(free, 1.0, np.clip(room, 0.0, 1.0))
+    return np.min(bound, axis=1, initial=1.0)
+
+
+def bend_inward(arrays: PlanArrays, cell: np.ndarray, x_hat: np.ndarray, error: np.ndarray, direction: np.ndarray,
+                step: float, disturbance: float) -> np.ndarray:  # fmt: skip
+    """The unit step directions turned toward the inside of the faces that :func:`certified_pace` finds near, (R, 2).
+
+    For every barrier row ``k`` within reach (``h_k(x̂) − e < ℓ + w``) that the step does not leave
+    fast enough (``A_k·d < w/ℓ``), the direction gains ``(w/ℓ − A_k·d + 0.01)·A_k``; the sum is
+    normalised. The exit direction is kept: a bend that would stop the progress (``z·d' ≥ 0`` in a cell
+    with an exit) gives the field's direction back. Safety does not rest on the bend: the step it
+    gives is taken only at :func:`certified_pace`'s pace, which checks every row exactly.
+
+    Parameters
+    ----------
+    arrays : PlanArrays
+        The plan's barrier rows and exit directions.
+    cell : ndarray of int, shape (R,)
+        Active cells.
+    x_hat : ndarray, shape (R, 2)
+        Estimates (map units).
+    error : ndarray, shape (R,)
+        Their error bounds (map units).
+    direction : ndarray, shape (R, 2)
+        The field's unit directions.
+    step, disturbance : float
+        ``ℓ`` and ``w`` as in :func:`certified_pace` (map units).
+    """
+    c = np.asarray(cell, np.int64)
+    A, b = arrays.bar_A[c], arrays.bar_b[c]
+    with np.errstate(invalid="ignore"):
+        h = np.einsum("rqi,ri->rq", A, x_hat) + b
+    inward = np.einsum("rqi,ri->rq", A, direction)
+    need = np.isfinite(b) & (h - error[:, None] < step + disturbance) & (inward < disturbance / step)
+    gain = np.where(need, disturbance / step - inward + 0.01, 0.0)
+    bent = direction + np.einsum("rq,rqi->ri", gain, np.where(np.isfinite(b)[..., None], A, 0.0))
+    norm = np.hypot(bent[:, 0], bent[:, 1])
+    out = np.where(norm[:, None] > 0, bent / np.where(norm > 0, norm, 1.0)[:, None], direction)
+    exit_ = arrays.parent_cell[c] >= 0
+    stops = exit_ & (np.einsum("ri,ri->r", arrays.exit_dir[c], out) >= 0.0)
+    out[stops] = direction[stops]
+    return out
 
 
 def best_bound_heading(arrays: PlanArrays, s: ControlSettings, x: np.ndarray, phi: np.ndarray,
@@ -829,7 +938,8 @@ def carry_inside(arrays: PlanArrays, s: ControlSettings, state: ControlState, es
 
 
 def follow_fields(arrays: PlanArrays, s: ControlSettings, state: ControlState, est: Estimate, bearings: np.ndarray,
-                  visible: np.ndarray, displacements: np.ndarray | None = None) -> tuple[np.ndarray, ...]:  # fmt: skip
+                  visible: np.ndarray, displacements: np.ndarray | None = None,
+                  keep: np.ndarray | None = None) -> tuple[np.ndarray, ...]:  # fmt: skip
     """The cell policy and the unit command of every robot that has an estimate (ALGORITHMS §7.2, §11.3).
 
     The policy is :func:`~bearnav_cli.runtime.cell_policy.update` (funnel cells eroded by the
@@ -855,6 +965,9 @@ def follow_fields(arrays: PlanArrays, s: ControlSettings, state: ControlState, e
     displacements : ndarray, shape (R, L, 2), optional
         Displacement mode in a world that differs from the plan's: the measured ``l_k − x``
         (map units), used as the output as they are; default ``l_k − x̂``.
+    keep : ndarray, shape (R,), optional
+        A robot keeps its cell while ``x̂`` lies in it grown by this (map units; negative: eroded);
+        default the set estimator's error bound (``cell_policy.update``), or ``tol``.
 
     Returns
     -------
@@ -878,7 +991,12 @@ def follow_fields(arrays: PlanArrays, s: ControlSettings, state: ControlState, e
     if arrays.funnel:
         erosion = est.error_bound[idx] if s.estimator == "set" else np.minimum(est.error_bound[idx],
                                                                                 arrays.plan_tolerance)  # fmt: skip
-    c, t, moved = update(arrays, cell[idx], target[idx], x_hat[idx], s.eps_sw, s.tol, erosion)
+    # a bounded estimate of a robot its cell's certificate keeps inside may stray up to e outside it
+    if keep is not None:
+        keep = np.asarray(keep, float)[idx]
+    elif arrays.funnel and s.estimator == "set":
+        keep = est.error_bound[idx]
+    c, t, moved = update(arrays, cell[idx], target[idx], x_hat[idx], s.eps_sw, s.tol, erosion, keep)
     cell[idx], target[idx], relocated[idx] = c, t, moved
     f = arrays.fixed_landmark[c]
     if s.measurement == "displacement":
