@@ -37,8 +37,8 @@ __all__ = [
     "ALPHA", "APPROACH_ALIGNMENT", "BEARING_SIGMA", "DYNAMICS", "MEASUREMENTS", "ODOMETRY_DRIFT", "SPEED",
     "STALL_FIELD", "ControlOutput", "ControlSettings", "ControlState",
     "ESTIMATORS", "LOOK_HEADINGS", "best_bound_heading", "best_view_heading", "bounded_control",
-    "bend_inward", "carry_inside", "certified_pace", "control", "error_ball_pace", "follow_fields", "heading_allowance",
-    "look_around", "steer_clear", "timing", "unicycle_command",
+    "bend_inward", "carry_inside", "certified_pace", "control", "error_ball_pace", "follow_fields",
+    "heading_allowance", "look_around", "steer_clear", "timing", "unicycle_command", "views",
 ]  # fmt: skip
 
 log = logging.getLogger(__name__)
@@ -782,7 +782,7 @@ def best_bound_heading(arrays: PlanArrays, s: ControlSettings, x: np.ndarray, ph
     """
     p = np.asarray(x, float).reshape(-1, 2)
     phi = np.asarray(phi, float).reshape(len(p))
-    visible = views(arrays, s, p, headings)  # (R, H, L)
+    visible = views(arrays, p, s.fov, s.max_range, headings)  # (R, H, L)
     r, h, n_lm = visible.shape
     eps = one_look_bound(np.repeat(p, h, axis=0), arrays.landmarks, visible.reshape(r * h, n_lm), s.bearing_bound,
                          axle_bounds(arrays), arrays.tol).reshape(r, h)  # fmt: skip
@@ -795,20 +795,33 @@ def best_bound_heading(arrays: PlanArrays, s: ControlSettings, x: np.ndarray, ph
     return out
 
 
-def views(arrays: PlanArrays, s: ControlSettings, x: np.ndarray, headings: int) -> np.ndarray:
+def views(arrays: PlanArrays, x: np.ndarray, fov: float, max_range: float, headings: int) -> np.ndarray:
     """Which landmarks a camera at ``x`` sees at each of ``headings`` evenly spaced headings, (R, H, L).
 
-    In the field of view ``s.fov`` around the heading, within ``s.max_range`` and in line of sight
-    (``cell_policy.in_sight``); heading ``k`` is ``−π + 2πk/H``.
+    In the field of view ``fov`` (rad) around the heading, within ``max_range`` (map units; ``inf``:
+    any) and in line of sight (``cell_policy.in_sight``); heading ``k`` is ``−π + 2πk/H``.
+
+    Parameters
+    ----------
+    arrays : PlanArrays
+        The plan's landmarks and the raw obstacle edges that hide them.
+    x : ndarray, shape (R, 2)
+        Camera positions (map units).
+    fov : float
+        Full field of view (rad).
+    max_range : float
+        Range (map units).
+    headings : int
+        ``H``.
     """
     p = np.asarray(x, float).reshape(-1, 2)
     d = arrays.landmarks[None] - p[:, None, :]
     seen = in_sight(arrays, p)
-    if math.isfinite(s.max_range):
-        seen &= np.einsum("rlk,rlk->rl", d, d) <= s.max_range**2
+    if math.isfinite(max_range):
+        seen &= np.einsum("rlk,rlk->rl", d, d) <= max_range**2
     theta = np.linspace(-math.pi, math.pi, headings, endpoint=False)
     angle = np.arctan2(d[..., 1], d[..., 0])
-    in_view = np.abs(bearing.wrap(angle[:, None, :] - theta[None, :, None])) <= 0.5 * s.fov + 1e-12
+    in_view = np.abs(bearing.wrap(angle[:, None, :] - theta[None, :, None])) <= 0.5 * fov + 1e-12
     return in_view & seen[:, None, :]
 
 
