@@ -1,0 +1,201 @@
+"""Bounded-error estimation (ALGORITHMS §12.2, Lemma 5) and the certified policy of §12.3.
+
+The convex-set operations of :mod:`bearnav_cli.runtime.bounded` are checked against shapely on
+random polygons; Lemma 5 (the set always holds the truth) and the static bound on random bearing
+geometries with errors drawn within their bounds; and the closed loop of ``estimator = set`` on the
+project's random maps, with uniform and worst-case bounded noise: no collision, the truth never
+outside its set, and every certified step ending inside the certified domain.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import shapely
+
+from bearnav_cli.runtime import PlanArrays, bounded, least_rank_cell
+from bearnav_cli.stages import simulate
+from tests.conftest import random_plan
+
+
+def random_polygons(seed: int, r: int = 60, points: int = 10) -> tuple[np.ndarray, np.ndarray]:
+    """``r`` random convex polygons (hulls of Gaussian points), counter-clockwise and padded."""
+    rng = np.random.default_rng(seed)
+    vertices, count = np.zeros((r, points, 2)), np.zeros(r, np.int64)
+    for i in range(r):
+        hull = shapely.convex_hull(shapely.multipoints(rng.normal(size=(points, 2)) * rng.uniform(0.1, 3.0)))
+        ring = np.asarray(shapely.orient_polygons(hull).exterior.coords)[:-1]
+        vertices[i, : len(ring)], count[i] = ring, len(ring)
+    return vertices, count
+
+
+def polygon(vertices: np.ndarray, count: np.ndarray, i: int) -> shapely.Polygon:
+    return shapely.Polygon(vertices[i, : count[i]]) if count[i] >= 3 else shapely.Polygon()
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_clip_is_the_intersection_with_the_half_plane(seed):
+    vertices, count = random_polygons(seed)
+    rng = np.random.default_rng(seed + 10)
+    a = rng.normal(size=(len(count), 2))
+    b = rng.normal(size=len(count))
+    out, n = bounded.clip(vertices, count, a, b)
+    for i in range(len(count)):
+        unit = a[i] / np.linalg.norm(a[i])
+        origin, along, big = unit * b[i] / np.linalg.norm(a[i]), np.array([-unit[1], unit[0]]), 1e3
+        half = shapely.Polygon([origin + along * big, origin - along * big, origin - along * big - unit * big,
+                                origin + along * big - unit * big])  # fmt: skip
+        expected = polygon(vertices, count, i).intersection(half)
+        assert abs(polygon(out, n, i).area - expected.area) <= 1e-9 * max(1.0, expected.area)
+        if n[i] >= 3:
+            assert shapely.Polygon(out[i, : n[i]]).exterior.is_ccw
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_grow_contains_the_minkowski_sum_and_stays_close(seed):
+    vertices, count = random_polygons(seed)
+    radius = np.random.default_rng(seed + 20).uniform(0.0, 0.5, len(count))
+    out, n = bounded.grow(vertices, count, radius, 1e-12)
+    for i in range(len(count)):
+        grown = polygon(out, n, i)
+        exact = polygon(vertices, count, i).buffer(radius[i], quad_segs=64)
+        assert grown.buffer(1e-9).contains(exact)
+        # a mitre of a right angle is the farthest an offset vertex lies: r(√2 − 1) beyond the disc
+        assert shapely.hausdorff_distance(grown, exact) <= (math.sqrt(2.0) - 1.0 + 1e-6) * radius[i] + 1e-9
+        assert grown.exterior.is_ccw
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_centre_lies_in_the_set_and_its_radius_is_exact(seed):
+    vertices, count = random_polygons(seed)
+    x_hat, error = bounded.centre(vertices, count)
+    for i in range(len(count)):
+        poly = polygon(vertices, count, i)
+        assert poly.buffer(1e-9).contains(shapely.Point(x_hat[i]))
+        far = np.max(np.hypot(*(vertices[i, : count[i]] - x_hat[i]).T))
+        assert error[i] == pytest.approx(far, rel=1e-12)
+        assert error[i] <= 1.1 * shapely.minimum_bounding_radius(poly)
+
+
+def test_the_bearing_cone_is_the_set_of_points_within_eta():
+    rng = np.random.default_rng(5)
+    landmark, angle, eta = np.array([1.0, 2.0]), 0.7, math.radians(3.0)
+    a, b = bounded.cone_rows(landmark, np.array(angle), eta)
+    y = landmark + rng.uniform(-5, 5, size=(4000, 2))
+    inside = np.all(y @ a.T <= b + 1e-12, axis=1)
+    d = landmark - y
+    error = np.abs(np.angle(np.exp(1j * (np.arctan2(d[:, 1], d[:, 0]) - angle))))
+    assert np.array_equal(inside, error <= eta)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_lemma_5_and_the_static_bound(seed):
+    """Bearings within η of the truth give a set that holds the truth, no wider than ε(x, S)."""
+    rng = np.random.default_rng(seed)
+    r, n_lm, eta = 200, 6, math.radians(rng.choice([0.1, 0.25, 1.0]))
+    landmarks = rng.uniform(0, 10, size=(n_lm, 2))
+    x = rng.uniform(0.5, 9.5, size=(r, 2))
+    visible = rng.random((r, n_lm)) < 0.6
+    d = landmarks[None] - x[:, None]
+    truth = np.arctan2(d[..., 1], d[..., 0])
+    measured = truth + rng.uniform(-eta, eta, size=truth.shape)
+    bounds = np.array([0.0, 0.0, 10.0, 10.0])
+    vertices, count = bounded.box(bounds, r)
+    vertices, count = bounded.intersect_cones(vertices, count, landmarks, measured, visible, eta, 1e-9)
+    assert np.all(count > 0)
+    assert bounded.contains(vertices, count, x, 1e-9).all()
+    static = bounded.one_look_bound(x, landmarks, visible, eta, bounds, 1e-9)
+    assert np.all(bounded.diameter(vertices, count) <= static * (1 + 1e-7) + 1e-7)  # both clipped with slack
+    # the prediction: moved by the measured displacement and grown by its bound, it holds the truth again
+    move = rng.normal(size=(r, 2)) * 0.1
+    kappa, floor = 0.03, 1e-3
+    size = kappa * np.hypot(*move.T) + floor
+    slip = rng.normal(size=(r, 2))
+    slip *= (size * rng.uniform(0, 1, r) / np.hypot(*slip.T))[:, None]
+    predicted, n = bounded.grow(bounded.translate(vertices, move), count, size, 1e-12)
+    assert bounded.contains(predicted, n, x + move + slip, 1e-9).all()
+
+
+def test_cones_of_inconsistent_bearings_empty_the_set():
+    landmarks = np.array([[0.0, 0.0], [10.0, 0.0]])
+    vertices, count = bounded.box(np.array([-20.0, -20.0, 20.0, 20.0]), 1)
+    # both landmarks seen in the same direction: no point lies in both cones
+    vertices, count = bounded.intersect_cones(vertices, count, landmarks, np.array([[0.0, math.pi]]),
+                                              np.ones((1, 2), bool), math.radians(1.0))  # fmt: skip
+    assert count[0] == 0
+    x_hat, error = bounded.centre(vertices, count)
+    assert np.isnan(x_hat).all() and np.isinf(error).all()
+
+
+LOOP_CASES = [(seed, worst, fov) for seed in (1, 4) for worst in (False, True) for fov in (360.0, 60.0)]
+
+
+@pytest.mark.parametrize("seed,worst,fov", LOOP_CASES)
+def test_the_set_estimator_keeps_the_truth_and_the_certificate(seed, worst, fov):
+    """estimator = set under bounded noise: no collision, no step with the truth outside its set, no empty set,
+    and every certified step ends in the certified domain D (Theorem 2, in discrete time)."""
+    plan = random_plan(seed)
+    arrays = PlanArrays.from_plan(plan)
+    params = simulate.Params(estimator="set", noise_bound_deg=0.25, noise_worst=worst, fov=fov,
+                             starts="domain:12", seed=seed, record_trajectories=False)  # fmt: skip
+    outside = []
+
+    def watch(runs, x, certified):
+        left = certified & (least_rank_cell(arrays, x) < 0)
+        outside.extend(runs[left].tolist())
+
+    sim = simulate.rollout(plan, simulate.resolve_starts(plan, params), params, on_step=watch, arrays=arrays)
+    counts = sim.stats["estimator"]
+    assert counts["containment_violations"] == 0 and counts["inconsistencies"] == 0
+    assert sim.counts()["collision"] == 0
+    assert not outside
+    assert sim.certified_steps.sum() > 0
+    assert sim.certified_steps.sum() <= counts["moved_steps"]
+
+
+def test_a_broken_bound_is_counted_not_a_crash():
+    """Gaussian noise far beyond the assumed bound: empty sets are counted and the runs end normally."""
+    plan = random_plan(1)
+    params = simulate.Params(estimator="set", noise_deg=3.0, bearing_error_deg=0.05, starts="domain:6",
+                             record_trajectories=False)  # fmt: skip
+    sim = simulate.run(plan, params)
+    assert sim.stats["inconsistencies"] > 0
+    assert sim.stats["containment_violations"] >= 0
+    assert len(sim) == 6
+
+
+@pytest.mark.parametrize("value", [-0.1, math.inf, 45.0, math.nan])
+def test_a_bad_noise_bound_names_the_field(value):
+    from bearnav_cli.errors import InvalidParamsError
+
+    with pytest.raises(InvalidParamsError) as info:
+        simulate.Params(noise_bound_deg=value)
+    assert info.value.field == "noise_bound_deg"
+
+
+@pytest.mark.parametrize("worst", [False, True])
+def test_the_look_ahead_unicycle_under_the_set_estimator(worst):
+    """A look-ahead unicycle (ALGORITHMS §12.6) with a 60° camera: the look swings its point around the axle,
+    and still no certified step ends outside D, the truth never leaves its set, nothing collides."""
+    from bearnav_cli import pipeline
+    from tests.conftest import build_map
+    from tests.funnel_maps import ITERATIONS, random_spec
+
+    spec = random_spec(4, ITERATIONS)
+    spec["robot"] = {"lookahead": 0.1}
+    plan = pipeline.compute(build_map(spec))["plan"]
+    arrays = PlanArrays.from_plan(plan)
+    assert arrays.lookahead == pytest.approx(0.1)
+    params = simulate.Params(estimator="set", dynamics="unicycle", noise_bound_deg=0.25, noise_worst=worst, fov=60.0,
+                             starts="domain:10", record_trajectories=False)  # fmt: skip
+    outside = []
+
+    def watch(runs, x, certified):
+        outside.extend(runs[certified & (least_rank_cell(arrays, x) < 0)].tolist())
+
+    sim = simulate.rollout(plan, simulate.resolve_starts(plan, params), params, on_step=watch, arrays=arrays)
+    assert sim.stats["estimator"]["containment_violations"] == 0
+    assert sim.counts()["collision"] == 0 and not outside
+    assert sim.certified_steps.sum() > 0
