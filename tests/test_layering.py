@@ -24,6 +24,7 @@ LAYERS = {
     "funnel": 2.5,  # build on lp and geometry
     "composition": 2.7,  # the §11.6 checks, on funnel and geometry; verify builds on it
     "perception": 2.8,
+    "liveness": 2.8,  # ALGORITHMS §12.5 on runtime and datatypes; verify reports it, cli passes it to plot
     "tags": 2.9,  # issue 11 analyses on runtime, geometry and composition (tags also on lp)
     "world": 2.95,  # the simulated world (camera, motion, rendering) the simulate stage drives robots in
     "stages": 3,
