@@ -1194,7 +1194,16 @@ def _metric_rows(metrics: dict) -> list[tuple[str, str]]:
         ("left-cell events", str(metrics["left_cell_events"])),
         ("runs with an approach", str(metrics["runs_with_approach"])),
         ("hold time total (s)", num(metrics["hold_time_total_s"], ".1f")),
+        ("certified moving steps", num(metrics.get("certified_step_fraction"), ".1%")),
     ]
+    if metrics.get("estimator") == "set":  # ALGORITHMS §12.8: how the bounded-error robot spent its time
+        rows += [
+            ("success from D", num(metrics.get("success_rate_in_domain"), ".1%")),
+            ("looks per run", num(metrics.get("looks_per_run"), ".1f")),
+            ("mean look (s)", num(metrics.get("look_time_mean_s"), ".2f")),
+            ("truth outside its set (steps)", str(metrics.get("containment_violations"))),
+            ("empty sets (broken bounds)", str(metrics.get("inconsistencies"))),
+        ]
     return rows
 
 

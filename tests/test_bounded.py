@@ -147,7 +147,7 @@ def test_the_set_estimator_keeps_the_truth_and_the_certificate(seed, worst, fov)
         outside.extend(runs[left].tolist())
 
     sim = simulate.rollout(plan, simulate.resolve_starts(plan, params), params, on_step=watch, arrays=arrays)
-    counts = sim.stats["estimator"]
+    counts = sim.stats["estimator_counts"]
     assert counts["containment_violations"] == 0 and counts["inconsistencies"] == 0
     assert sim.counts()["collision"] == 0
     assert not outside
@@ -196,6 +196,6 @@ def test_the_look_ahead_unicycle_under_the_set_estimator(worst):
         outside.extend(runs[certified & (least_rank_cell(arrays, x) < 0)].tolist())
 
     sim = simulate.rollout(plan, simulate.resolve_starts(plan, params), params, on_step=watch, arrays=arrays)
-    assert sim.stats["estimator"]["containment_violations"] == 0
+    assert sim.stats["estimator_counts"]["containment_violations"] == 0
     assert sim.counts()["collision"] == 0 and not outside
     assert sim.certified_steps.sum() > 0

@@ -229,7 +229,7 @@ def test_chain_runs_reach_the_goal(chain):
     # ... exactly on it with the exact motion of §7.1
     out = simulate.rollout(chain, starts, EXACT)
     # the one type of a set of runs (sim.npz's); its stats are the estimator's counts alone
-    assert isinstance(out, Simulation) and set(out.stats) == {"estimator"}
+    assert isinstance(out, Simulation) and set(out.stats) == {"estimator_counts"}
     assert out.outcome.tolist() == [Outcome.SUCCESS] * 5
     assert out.steps[-1] == 0 and out.path_length[-1] == 0.0  # starts inside the goal tolerance
     v_dt = out.speed * out.dt

@@ -786,7 +786,7 @@ def rollout(
         eps_sw=s.eps_sw,
         goal_tolerance=s.goal_tolerance,
         stats={
-            "estimator": {"name": s.control.estimator, **loop.estimate_counts()},
+            "estimator_counts": {"name": s.control.estimator, **loop.estimate_counts()},
             **({"camera": report()} if callable(report) else {}),
         },
     )
@@ -821,7 +821,7 @@ def metrics(sim: Simulation) -> dict:
     def mean(values: np.ndarray) -> float | None:
         return float(np.mean(values)) if len(values) else None
 
-    counts = sim.stats.get("estimator", {})
+    counts = sim.stats.get("estimator_counts", {})
     finish = np.hypot(*(sim.final_position - sim.map.goal).T)  # the last straight bit into the goal ball
     ratio = (sim.path_length + finish)[done] / np.maximum(sim.route_length[done], 1e-300)
     return {
@@ -854,7 +854,7 @@ def metrics(sim: Simulation) -> dict:
 def _moving_fraction(sim: Simulation) -> float:
     """Certified steps over the steps that translated (ALGORITHMS §12.3: a look is not a step taken);
     over every step where the run did not count its moves."""
-    moved = sim.stats.get("estimator", {}).get("moved_steps")
+    moved = sim.stats.get("estimator_counts", {}).get("moved_steps")
     if moved is None:
         return sim.certified_fraction
     return float(sim.certified_steps.sum() / max(1, moved))
