@@ -56,13 +56,18 @@ class Controller:
         unicycle), and ``eps_sw`` defaults to ``2·v·dt``. Pass ``bearing_sigma``, the camera's
         angular noise (radians; default :data:`~bearnav_cli.runtime.step.BEARING_SIGMA`, 1°).
         A plan whose map says ``robot: {reverse: false}`` clamps ``v ≥ 0`` whatever
-        ``clamp_reverse`` says (the option can only add the clamp). On a plan with a look-ahead
+        ``clamp_reverse`` says (the option can only add the clamp). The bounds of the set estimator
+        (``estimator="set"``: ``bearing_bound``, ``heading_bound``, ``slip``, ``slip_floor``) default to
+        the map's robot section (:func:`error_model`). On a plan with a look-ahead
         ``λ > 0`` (``arrays.lookahead``) the unicycle drives the point ``λ`` ahead of its axle
         (ALGORITHMS §12.6, docs/runtime.md).
         """
         arrays = PlanArrays.from_npz(path)
-        if not _may_reverse(path):
+        robot = _robot(path)
+        if not robot["reverse"]:
             options["clamp_reverse"] = True
+        # the set estimator's bounds are the robot's (the map's robot section) unless given
+        options = {**error_model(robot), **options}
         diagonal = math.hypot(*(arrays.bounds[2:] - arrays.bounds[:2]))
         settings = ControlSettings.for_plan(diagonal, arrays.tol, dynamics=dynamics, speed=speed, dt=dt, **options)
         return cls(arrays, settings, heading)
@@ -134,12 +139,24 @@ class Controller:
         return int(self.state.cell[0])
 
 
-def _may_reverse(path: str) -> bool:
-    """The ``reverse`` of the robot section of the map embedded in ``plan.npz`` (default: it may)."""
+def _robot(path: str) -> dict:
+    """The robot parameters of the map embedded in ``plan.npz`` (``runtime.robot.robot_parameters``; defaults
+    where the file says nothing)."""
     try:
         with np.load(path, allow_pickle=False) as data:
             document = json.loads(str(data["map"][()]))
     except (OSError, ValueError, KeyError):  # PlanArrays.from_npz has read this file: not reached in practice
-        return True
+        return robot_parameters(None)
     section = document.get("robot") if isinstance(document, dict) else None
-    return bool(robot_parameters(section if isinstance(section, dict) else None)["reverse"])
+    return robot_parameters(section if isinstance(section, dict) else None)
+
+
+def error_model(robot: dict) -> dict:
+    """The set estimator's bounds (ALGORITHMS §12.1) from robot parameters, as :class:`ControlSettings` fields:
+    ``bearing_bound = η_cam + ψ`` and ``heading_bound = ψ`` (rad), ``slip`` κ, and ``slip_floor`` ν where given."""
+    compass = robot.get("compass_error_deg") or 0.0
+    fields = {"bearing_bound": math.radians(robot["bearing_error_deg"] + compass),
+              "heading_bound": math.radians(compass), "slip": robot["slip"]}  # fmt: skip
+    if robot.get("slip_floor") is not None:
+        fields["slip_floor"] = robot["slip_floor"]
+    return fields

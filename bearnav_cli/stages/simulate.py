@@ -25,6 +25,7 @@ from bearnav_cli.errors import InvalidParamsError
 from bearnav_cli.geometry import FreeSpace
 from bearnav_cli.runtime import ControlSettings, ControlState, PlanArrays, bearing
 from bearnav_cli.runtime import bounded as runtime_bounded
+from bearnav_cli.runtime import controller as runtime_controller
 from bearnav_cli.runtime import robot as runtime_robot
 from bearnav_cli.runtime.step import ALPHA, BEARING_SIGMA, ODOMETRY_DRIFT, SPEED
 from bearnav_cli.world import starts as world_starts
@@ -334,23 +335,15 @@ def error_model(map_, params: Params) -> dict:
     ``bearing_error_deg`` of its own assumes that bound, which is what its world draws), ``ψ``, ``κ``
     (``slip``) and ``ν`` (``slip_floor``; default ``1e-4·D``).
     """
-    robot = map_.robot
-    compass = params.compass_error_deg if params.compass_error_deg is not None else robot["compass_error_deg"]
-    camera = params.bearing_error_deg
-    if camera is None:
-        camera = params.noise_bound_deg if params.noise_bound_deg is not None else robot["bearing_error_deg"]
-        if params.noise_bound_deg is not None:
-            compass = 0.0  # the world's bound is the world-frame one: camera and heading together
-    fields = {
-        "estimator": params.estimator,
-        "bearing_bound": math.radians(camera + (compass or 0.0)),
-        "heading_bound": math.radians(compass or 0.0),
-        "slip": robot["slip"] if params.slip is None else params.slip,
-    }
-    floor = robot.get("slip_floor") if params.slip_floor is None else params.slip_floor
-    if floor is not None:
-        fields["slip_floor"] = floor
-    return fields
+    robot = dict(map_.robot)
+    for key in ("bearing_error_deg", "compass_error_deg", "slip", "slip_floor"):
+        if getattr(params, key) is not None:
+            robot[key] = getattr(params, key)
+    if params.noise_bound_deg is not None and params.bearing_error_deg is None:
+        # the world's bound is the world-frame one, camera and heading together
+        robot["bearing_error_deg"] = params.noise_bound_deg
+        robot["compass_error_deg"] = params.compass_error_deg
+    return {"estimator": params.estimator, **runtime_controller.error_model(robot)}
 
 
 def step_limits(arrays: PlanArrays, starts: np.ndarray, s: Settings, params: Params,

@@ -42,6 +42,7 @@ PARAMETERS = {
     "hold_time": 2.0,
     "period": 0.1,
     "bearing_sigma": 0.017453292519943295,
+    "estimator": "kalman",
     "heading_source": "imu",
     "yaw_offset": 0.0,
     "family": "",

@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from bearnav_cli.errors import InvalidParamsError
-from bearnav_cli.runtime import Controller, camera
+from bearnav_cli.runtime import ESTIMATORS, Controller, camera
 
 __all__ = [
     "BearnavLogic", "HEADING_SOURCES", "Settings", "Step", "camera_yaw", "detections_from_msg", "fill_twist",
@@ -193,6 +193,7 @@ class Settings:
     hold_time: float = 2.0
     period: float = 0.1
     bearing_sigma: float = math.radians(1.0)
+    estimator: str = "kalman"
     heading_source: str = "imu"
     yaw_offset: float = 0.0
     family: str = ""
@@ -204,13 +205,17 @@ class Settings:
         if self.heading_source not in HEADING_SOURCES:
             raise InvalidParamsError(f"expected one of {', '.join(HEADING_SOURCES)}, got {self.heading_source!r}",
                                      field="heading_source")  # fmt: skip
+        if self.estimator not in ESTIMATORS:
+            raise InvalidParamsError(f"expected one of {', '.join(ESTIMATORS)}, got {self.estimator!r}",
+                                     field="estimator")  # fmt: skip
         if not self.period > 0:
             raise InvalidParamsError(f"the camera period must be positive (s), got {self.period}", field="period")
 
     def controller(self) -> Controller:
         return Controller.from_plan(self.plan, speed=self.speed, dt=self.period, dynamics=self.dynamics,
                                     alpha=self.alpha, beta=self.beta, clamp_reverse=self.clamp_reverse,
-                                    hold_time=self.hold_time, bearing_sigma=self.bearing_sigma)  # fmt: skip
+                                    hold_time=self.hold_time, bearing_sigma=self.bearing_sigma,
+                                    estimator=self.estimator)  # fmt: skip
 
 
 @dataclass
