@@ -1055,7 +1055,12 @@ def verify_command(
         _check_camera(fov, noise_deg)
     with _progress_bar() as progress:
         track = _progress_factory(progress)("verify")
-        report = verify.run(plan, params, tree_samples=samples, progress=track, world=world_map)
+        try:
+            report = verify.run(plan, params, tree_samples=samples, progress=track, world=world_map)
+        except InvalidParamsError as exc:  # a liveness option only the map refuses (--live-resolution against D)
+            if exc.field not in options:
+                raise
+            raise _fail(f"{pipeline.option_name('verify', exc.field)}: {exc.reason}", EXIT_INVALID) from None
     if fov is not None:
         seeing = perception.perception_coverage(plan, fov, noise_deg)
     if as_json:
@@ -1519,7 +1524,10 @@ def plot_command(
     also: Optional[List[Path]] = typer.Option(None, "--also", help="Tree artifact drawn faintly underneath."),
     title: Optional[str] = typer.Option(None, help="Figure title."),
     color_by: Optional[str] = typer.Option(
-        None, "--color-by", help="Cell fill: rank, tolerance (δ_c) or status (default: rank; status for paper plans)."
+        None,
+        "--color-by",
+        help="Cell fill: rank, tolerance (τ_c), status, or live (ALGORITHMS §12.5: red where a "
+        "cell is not live) (default: rank; status for paper plans).",
     ),
     barriers: bool = typer.Option(False, "--barriers", help="Also draw every barrier line h = 0."),
     labels: Optional[bool] = typer.Option(
@@ -1535,6 +1543,15 @@ def plot_command(
     max_range: Optional[float] = typer.Option(
         None, "--range", help="That camera's range, map units (default: unlimited)."
     ),
+    live_fov: Optional[float] = typer.Option(
+        None, "--live-fov", help="With --color-by live: the camera's field of view, degrees, (0, 360] (default 60)."
+    ),
+    bearing_error_deg: Optional[float] = typer.Option(
+        None,
+        "--bearing-error-deg",
+        help="With --color-by live: the bearing error bound η, degrees, (0, 45) "
+        "(default: the map's robot.bearing_error_deg plus compass_error_deg).",
+    ),  # fmt: skip
     quiet: bool = QUIET,
 ) -> None:
     """Draw an artifact: map, tree, collision samples, cells, the plan's field, simulated runs.
@@ -1573,15 +1590,34 @@ def plot_command(
         from bearnav_cli import perception
 
         seeing = perception.perception_coverage(shown, fov, noise_deg, float("inf") if max_range is None else max_range)
+    live = None
+    if color_by == "live" or live_fov is not None or bearing_error_deg is not None:
+        if color_by != "live":
+            given = "--live-fov" if live_fov is not None else "--bearing-error-deg"
+            raise _fail(f"{given}: only with --color-by live (the liveness it measures)", EXIT_INVALID)
+        if not isinstance(shown, Plan) or not shown.cells.is_funnel:
+            schema = loaded.manifest.get("schema", "not a plan")
+            raise _fail(f"--color-by live: {artifact} is {schema}, not a funnel plan: liveness needs its usable "
+                        "tolerances τ_c", EXIT_INVALID)  # fmt: skip
+        from bearnav_cli import liveness
+
+        names = {"eta_deg": "--bearing-error-deg", "fov_deg": "--live-fov"}
+        try:
+            live = liveness.measure(shown, bearing_error_deg, 60.0 if live_fov is None else live_fov)
+        except InvalidParamsError as exc:
+            raise _fail(f"{names.get(exc.field or '', exc.field)}: {exc.reason}", EXIT_INVALID) from None
     cells = shown.cells if isinstance(shown, Plan) else shown if isinstance(shown, Cells) else None
     # plan/3 covers F (ALGORITHMS §12.7): hatch what of F no cell covers
     coverage = composition.coverage_regions(cells, margin=0.0) if cells is not None and cells.is_funnel else None
     fig = plot.figure_for(shown, background=background, title=title, color_by=color_by, barriers=barriers,
-                          labels=labels, cell_numbers=cell_numbers, coverage=coverage, perception=seeing)  # fmt: skip
+                          labels=labels, cell_numbers=cell_numbers, coverage=coverage, perception=seeing,
+                          liveness=live)  # fmt: skip
     with artifacts.atomic_output(out_path) as tmp:
         plot.save_figure(fig, str(tmp))
     if seeing is not None:
         out.print(f"perception: {seeing.summary()}", highlight=False, markup=False, soft_wrap=True)
+    if live is not None:
+        out.print(live.summary(), highlight=False, markup=False, soft_wrap=True)
     out.print(f"wrote {out_path}", highlight=False)
 
 

@@ -48,8 +48,8 @@ from bearnav_cli.datatypes import Plan
 from bearnav_cli.errors import InvalidParamsError
 from bearnav_cli.runtime import PlanArrays, bounded, estimate, robot, step
 
-__all__ = ["HEADINGS", "MAX_ETA_DEG", "POINTS_PER_CELL", "RESOLUTION_PER_DIAGONAL", "SHRINK", "SHRINK_STEPS",
-           "VERTEX_INSET", "Liveness", "default_resolution", "measure"]  # fmt: skip
+__all__ = ["HEADINGS", "MAX_ETA_DEG", "MAX_GRID_POINTS", "POINTS_PER_CELL", "RESOLUTION_PER_DIAGONAL", "SHRINK",
+           "SHRINK_STEPS", "VERTEX_INSET", "Liveness", "default_resolution", "measure"]  # fmt: skip
 
 #: Headings of the minimum over headings for a camera narrower than 360° (every 10°).
 HEADINGS = step.LOOK_HEADINGS
@@ -65,6 +65,8 @@ SHRINK = 0.9
 SHRINK_STEPS = 12
 #: Largest ``η*_c`` reported (degrees): the 2η cones stay below 90°.
 MAX_ETA_DEG = 22.5
+#: Most grid points (summed over the cells) a measurement may take: about 1 kB each.
+MAX_GRID_POINTS = 2_000_000
 #: Point-heading rows per batch of the one-look bound (memory: about 10 kB a row).
 _ROWS = 1 << 14
 #: Points per batch of the visibility masks.
@@ -289,19 +291,37 @@ def _views(arrays: PlanArrays, points: np.ndarray, fov: float, max_range: float,
 
 
 def _bounds_of(arrays: PlanArrays, x: np.ndarray, visible: np.ndarray, eta: np.ndarray) -> np.ndarray:
-    """``ε(x, S)`` of every row (M,) map units, each row at its own ``η`` (rad), in batches."""
+    """``ε(x, S)`` of every row (M,) map units, each row at its own ``η`` (rad), in batches.
+
+    ``runtime.bounded.one_look_bound`` for a row each, with its own cone half-angle ``2η``: the box
+    ``B_r`` clipped (``bounded.clip``) by the two half-planes of every visible landmark's cone
+    (``bounded.cone_rows``'s rows, written out here for an ``η`` per row), then its diameter.
+    """
     out = np.empty(len(x))
     box = estimate.axle_bounds(arrays)
     half = np.minimum(2.0 * np.asarray(eta, float), 0.5 * math.pi - 1e-9)
+    landmarks = np.asarray(arrays.landmarks, float)
     for start in range(0, len(x), _ROWS):
         sl = slice(start, start + _ROWS)
-        p = x[sl]
-        d = arrays.landmarks[None] - p[:, None, :]
-        angle = np.arctan2(d[..., 1], d[..., 0])
+        p, vis, h = x[sl], visible[sl], half[sl]
         vertices, count = bounded.box(box, len(p))
-        # the cone half-angle per row: cone_rows broadcasts angle (R, L) ± eta (R, 1)
-        vertices, count = bounded.intersect_cones(vertices, count, arrays.landmarks, angle, visible[sl],
-                                                  half[sl, None], arrays.tol)  # type: ignore[arg-type]  # fmt: skip
+        order = np.argsort(~vis, axis=1, kind="stable")  # each row's visible landmarks first
+        seen = vis.sum(axis=1)
+        for k in range(int(seen.max(initial=0))):
+            who = np.flatnonzero(seen > k)
+            lm = landmarks[order[who, k]]
+            d = lm - p[who]
+            angle = np.arctan2(d[:, 1], d[:, 0])
+            lo, hi = angle - h[who], angle + h[who]
+            sub_v, sub_n = vertices[who], count[who]
+            for a in (np.column_stack([-np.sin(lo), np.cos(lo)]), np.column_stack([np.sin(hi), -np.cos(hi)])):
+                sub_v, sub_n = bounded.clip(sub_v, sub_n, a, np.einsum("rk,rk->r", a, lm), arrays.tol)
+            width = max(vertices.shape[1], sub_v.shape[1])
+            grown = np.zeros((len(vertices), width, 2))
+            grown[:, : vertices.shape[1]] = vertices
+            grown[who, : sub_v.shape[1]] = sub_v
+            grown[who, sub_v.shape[1] :] = 0.0
+            vertices, count[who] = grown, sub_n
         out[sl] = bounded.diameter(vertices, count)
     return out
 
@@ -398,18 +418,24 @@ def measure(plan: Plan, eta_deg: float | None = None, fov_deg: float = 60.0, kap
     if resolution is None:
         resolution = default_resolution(arrays, diagonal)
     resolution = _number(resolution, "resolution", low=1e-6 * diagonal, high=diagonal)
+    polygons = _polygons(arrays)
+    lam = float(arrays.lookahead)
+    cover = sum(float(p.area) + float(p.length) * lam + math.pi * lam**2 for p in polygons)
+    if cover / resolution**2 > MAX_GRID_POINTS:
+        finest = math.sqrt(cover / MAX_GRID_POINTS)
+        raise InvalidParamsError(f"a grid of {resolution:g} map units would take about {cover / resolution**2:.3g} "
+                                 f"points (at most {MAX_GRID_POINTS:,}): give {finest:.3g} or more",
+                                 field="resolution")  # fmt: skip
 
     eta = math.radians(eta_deg)
     fov = math.radians(fov_deg)
     dt = step.timing(diagonal, speed)[0]
     step_len = speed * dt
-    lam = float(arrays.lookahead)
     swing = 2.0 * lam * math.sin(0.5 * math.radians(compass)) if lam > 0 else 0.0
     tau = np.asarray(arrays.usable_tolerance, float)
     margin = tau - kappa * step_len - nu - swing
     n_cells = len(tau)
 
-    polygons = _polygons(arrays)
     origin = np.asarray(arrays.bounds, float)[:2]
     points, pair_cell, pair_point = _samples(polygons, lam, resolution, origin)
     row_point, row_vis = _views(arrays, points, fov, max_range, headings)

@@ -85,8 +85,11 @@ EXIT_COLOR = "#08306b"
 UNCERTIFIED_COLOR = "#d62728"
 UNCOVERED_COLOR = "#e6550d"
 ADDED_COLOR = "#e7298a"
-#: ``--color-by`` choices: the cell's rank (cost-to-go), its usable tolerance ``τ_c`` or its synthesis status.
-COLOR_BY = ("rank", "tolerance", "status")
+#: ``--color-by`` choices: the cell's rank (cost-to-go), its usable tolerance ``τ_c``, its synthesis status,
+#: or whether it is live (ALGORITHMS §12.5, a ``liveness.Liveness`` the caller measured).
+COLOR_BY = ("rank", "tolerance", "status", "live")
+#: The fills of ``--color-by live``.
+LIVE_COLORS = {True: "#74c476", False: "#de2d26"}
 #: Parts of ``F_m`` that no cell reaches (cut off by passages narrower than ``2m``).
 UNREACHED_COLOR = "#969696"
 AXIS_UNITS = "map units"
@@ -260,8 +263,13 @@ def active_regions(cells: Cells) -> list[shapely.Geometry]:
     return regions
 
 
-def _cell_colors(cells: Cells, color_by: str, status: np.ndarray | None, tolerance: np.ndarray | None):
+def _cell_colors(cells: Cells, color_by: str, status: np.ndarray | None, tolerance: np.ndarray | None,
+                 live: np.ndarray | None = None):  # fmt: skip
     """``(face colours (C, 4), mappable or None, colour-bar label)`` of the cells."""
+    if color_by == "live":
+        if live is None or len(live) != cells.n_cells:
+            raise InvalidParamsError("live needs a funnel plan's liveness (liveness.measure)", field="color_by")
+        return np.array([mcolors.to_rgba(LIVE_COLORS[bool(v)]) for v in live]), None, ""
     if color_by == "status":
         if status is None:
             raise InvalidParamsError("status needs a plan (cells.npz has no synthesis status)", field="color_by")
@@ -290,7 +298,8 @@ def _cell_colors(cells: Cells, color_by: str, status: np.ndarray | None, toleran
 
 def plot_cells(ax: plt.Axes, cells: Cells, status: np.ndarray | None = None, *, color_by: str | None = None,
                tolerance: np.ndarray | None = None, fill: float = 0.45, exit_faces: bool = True,
-               numbers: bool = False, colorbar: bool = True, legend: bool = True) -> plt.Axes:  # fmt: skip
+               numbers: bool = False, colorbar: bool = True, legend: bool = True,
+               live: np.ndarray | None = None) -> plt.Axes:  # fmt: skip
     """Cells: thin outlines, exit faces, a fill by ``color_by`` and uncertified cells hatched red.
 
     Parameters
@@ -301,8 +310,9 @@ def plot_cells(ax: plt.Axes, cells: Cells, status: np.ndarray | None = None, *, 
         The decomposition (or a plan's ``cells``) to draw.
     status : ndarray, shape (C,), optional
         Synthesis status of each cell (a plan's ``status``); status 2 or 3 is always highlighted.
-    color_by : {"rank", "tolerance", "status"}, optional
-        Fill colour; default ``rank`` for funnel cells, else ``status`` when given (else outlines only).
+    color_by : {"rank", "tolerance", "status", "live"}, optional
+        Fill colour; default ``rank`` for funnel cells, else ``status`` when given (else outlines only);
+        ``live``: green where the cell is live, red where it is not (``live``).
         Each point is filled once, with the colour of its least-rank cell (:func:`active_regions`, where
         the funnel policy drives with that cell); paper cells by status fill each status's union, the
         worst on top.
@@ -316,6 +326,8 @@ def plot_cells(ax: plt.Axes, cells: Cells, status: np.ndarray | None = None, *, 
         Write each cell's index inside its active region (funnel) or at its centroid (paper).
     colorbar, legend : bool
         Add a colour bar (rank, tolerance) and legend entries.
+    live : ndarray of bool, shape (C,), optional
+        Whether each cell is live (``liveness.Liveness.live``), for ``color_by="live"``.
 
     Returns
     -------
@@ -326,7 +338,7 @@ def plot_cells(ax: plt.Axes, cells: Cells, status: np.ndarray | None = None, *, 
         color_by = "rank" if cells.is_funnel else ("status" if status is not None else "")
     regions = active_regions(cells) if cells.is_funnel else None
     if color_by:
-        faces, mappable, label = _cell_colors(cells, color_by, status, tolerance)
+        faces, mappable, label = _cell_colors(cells, color_by, status, tolerance, live)
         if regions is not None or color_by != "status":
             for c, region in enumerate(regions if regions is not None else active_regions(cells)):
                 _add_geometry(ax, region, facecolor=faces[c], alpha=fill, edgecolor="white", lw=0.5, zorder=0.5)
@@ -342,6 +354,9 @@ def plot_cells(ax: plt.Axes, cells: Cells, status: np.ndarray | None = None, *, 
             for value in sorted({int(s) for s in status}):
                 name = CellStatus(value).name.lower().replace("_", " ")
                 ax.fill([], [], color=STATUS_COLORS[CellStatus(value)], alpha=fill, label=f"cells: {name}")
+        if color_by == "live" and legend:
+            for value, name in ((True, "live"), (False, "not live (a look may not let it move on)")):
+                ax.fill([], [], color=LIVE_COLORS[value], alpha=fill, label=f"cells: {name}")
         if mappable is not None and colorbar:
             bar = ax.figure.colorbar(mappable, ax=ax, fraction=0.04, pad=0.015, shrink=0.9)
             bar.set_label(label, fontsize=8)
@@ -752,7 +767,7 @@ def _plan_title(map_: Map, cells: Cells, plan: Plan | None) -> str:
 def figure_for(artifact: Any, *, background: Sequence[Any] = (), title: str | None = None,
                color_by: str | None = None, barriers: bool = False, labels: bool | None = None,
                cell_numbers: bool = False, arrows: int = 28, coverage: Any = None,
-               perception: Any = None) -> plt.Figure:  # fmt: skip
+               perception: Any = None, liveness: Any = None) -> plt.Figure:  # fmt: skip
     """A figure with the layers that suit ``artifact``.
 
     Parameters
@@ -766,8 +781,9 @@ def figure_for(artifact: Any, *, background: Sequence[Any] = (), title: str | No
         Trees drawn faintly underneath (e.g. the RRT* tree under its simplification).
     title : str, optional
         Figure title (default: map name and a one-line summary).
-    color_by : {"rank", "tolerance", "status"}, optional
-        Cell fill (:func:`plot_cells`); default rank for funnel cells, status for paper plans.
+    color_by : {"rank", "tolerance", "status", "live"}, optional
+        Cell fill (:func:`plot_cells`); default rank for funnel cells, status for paper plans; ``live``
+        needs ``liveness``.
     barriers : bool
         Also draw every barrier line ``h = 0`` (for funnel cells these are the cell edges).
     labels : bool, optional
@@ -782,6 +798,9 @@ def figure_for(artifact: Any, *, background: Sequence[Any] = (), title: str | No
     perception : PerceptionCoverage, optional
         :func:`bearnav_cli.perception.perception_coverage` of the plan: where the perception rule
         fails is marked over it (:func:`plot_perception`, without a second copy of the tags).
+    liveness : Liveness, optional
+        :func:`bearnav_cli.liveness.measure` of the plan, for ``color_by="live"``; its summary is the
+        default title.
     """
     if color_by is not None and color_by not in COLOR_BY:
         raise InvalidParamsError(f"must be one of {', '.join(COLOR_BY)}, got {color_by!r}", field="color_by")
@@ -789,6 +808,8 @@ def figure_for(artifact: Any, *, background: Sequence[Any] = (), title: str | No
     plan = artifact if isinstance(artifact, Plan) else None
     cells = plan.cells if plan is not None else artifact if isinstance(artifact, Cells) else None
     default_title = _plan_title(map_, cells, plan) if cells is not None else map_.name
+    if liveness is not None and color_by == "live":
+        default_title = f"{map_.name}: " + liveness.summary().replace("; ", "\n")
     rows = (4 if cells is not None else 0) + (1 if perception is not None else 0)
     fig, ax = _frame(map_, title or default_title, legend_rows=rows)
     if isinstance(artifact, Simulation):
@@ -806,7 +827,8 @@ def figure_for(artifact: Any, *, background: Sequence[Any] = (), title: str | No
                   label="simplified tree" if simplified else "RRT* tree")  # fmt: skip
     if cells is not None:
         plot_cells(ax, cells, plan.status if plan is not None else None, color_by=color_by,
-                   tolerance=plan.usable_tolerance if plan is not None else None, numbers=cell_numbers)  # fmt: skip
+                   tolerance=plan.usable_tolerance if plan is not None else None, numbers=cell_numbers,
+                   live=None if liveness is None else liveness.live)  # fmt: skip
         if cells.is_funnel and coverage is not None:
             plot_uncovered(ax, cells, coverage.uncovered, coverage.unreached)
         if barriers:

@@ -37,6 +37,8 @@ from bearnav_cli.datatypes import CellFlag, CellStatus, Map, Outcome, Plan, Simu
 from bearnav_cli.errors import ArtifactError, InvalidParamsError
 from bearnav_cli.funnel import coverage_domain, reached_parts
 from bearnav_cli.geometry import FreeSpace, inflate
+from bearnav_cli.liveness import Liveness
+from bearnav_cli.liveness import measure as measure_liveness
 from bearnav_cli.routes import route_lengths, sample_starts
 from bearnav_cli.runtime import PlanArrays
 from bearnav_cli.stages import simulate
@@ -88,6 +90,22 @@ class Params:
         approach, on an exact estimate; not checked for the unicycle without a look-ahead) or when
         its true position (``p`` with a look-ahead) lies outside every cell of ``D`` after a step;
         any breach or collision of a run from ``D`` fails verify.
+    bearing_error_deg : float or None
+        ``η`` of the liveness report (degrees, in (0, 45)): the bound on every world-frame bearing error;
+        ``None`` means the map's ``robot: bearing_error_deg`` plus ``compass_error_deg`` (0.2° by default).
+    live_fov : float or None
+        Measure liveness (ALGORITHMS §12.5) for a camera of this field of view (degrees, in (0, 360]).
+        ``None`` skips it. On a grid per cell, ``ε_c^look`` (the worst over the cell of the best one-look
+        bound over the headings), the live cells (``ε_c^look < τ_c − κℓ − ν``), the live fraction of ``D``
+        and the certified bearing error ``η*``: a measurement at a stated resolution, not a proof, that
+        never fails verify (:func:`bearnav_cli.liveness.measure`).
+    slip : float or None
+        ``κ`` of the liveness report (in [0, 1)): odometry errs by at most ``κ`` of a step plus the floor
+        ``ν``. ``None`` means the map's ``robot: slip`` (0.03 by default); ``ν`` is the map's
+        ``robot: slip_floor``, else ``1e-4·D``.
+    live_resolution : float or None
+        Grid spacing of the liveness report (map units, > 0). ``None`` means about 25 points in the
+        median cell, at most ``0.01·D`` (:func:`bearnav_cli.liveness.default_resolution`).
     """
 
     n_starts: int = 200
@@ -96,6 +114,10 @@ class Params:
     dt: float | None = None
     min_success: float | None = None
     dynamics: str = "single"
+    bearing_error_deg: float | None = None
+    live_fov: float | None = None
+    slip: float | None = None
+    live_resolution: float | None = None
 
     def __post_init__(self) -> None:
         if self.dynamics not in runtime.DYNAMICS:
@@ -106,6 +128,21 @@ class Params:
         if self.min_success is not None and not 0.0 <= self.min_success <= 1.0:
             raise InvalidParamsError(f"must lie in [0, 1], got {self.min_success}", field="min_success")
         simulate.Params(**({} if self.speed is None else {"speed": self.speed}), dt=self.dt)  # the loop's checks
+        for name, low, high, closed in (("bearing_error_deg", 0.0, 45.0, (False, False)),
+                                        ("live_fov", 0.0, 360.0, (False, True)),
+                                        ("slip", 0.0, 1.0, (True, False)),
+                                        ("live_resolution", 0.0, math.inf, (False, False))):  # fmt: skip
+            value = getattr(self, name)
+            if value is None:
+                continue
+            number = isinstance(value, (int, float)) and not isinstance(value, bool)
+            inside = number and (value >= low if closed[0] else value > low) and (
+                value <= high if closed[1] else value < high)  # fmt: skip
+            if not inside:
+                interval = f"{'[' if closed[0] else '('}{low:g}, {high:g}{']' if closed[1] else ')'}"
+                raise InvalidParamsError(f"must lie in {interval}, got {value!r}", field=name)
+            if name != "live_fov" and self.live_fov is None:
+                raise InvalidParamsError("only with live_fov (the liveness report it belongs to)", field=name)
 
 
 def loop_speed(plan: Plan, params: Params) -> float:
@@ -489,6 +526,11 @@ class VerifyReport:
     uncovered_dynamics : str or None
         Why the closed loop's robot is outside the certificate (the unicycle on a plan without a
         look-ahead), a note; None when it is inside.
+    liveness : Liveness or None
+        The liveness measurement of ALGORITHMS §12.5 (:func:`bearnav_cli.liveness.measure`) when
+        :class:`Params` ``live_fov`` asks for it; a note, never a failure.
+    liveness_note : str or None
+        Why liveness was asked for but not measured (a paper plan), a note.
     """
 
     status: np.ndarray
@@ -512,6 +554,8 @@ class VerifyReport:
     breaches: np.ndarray | None = None
     lookahead_problems: tuple[str, ...] = ()
     uncovered_dynamics: str | None = None
+    liveness: Liveness | None = None
+    liveness_note: str | None = None
 
     # ------------------------------------------------------------- the composed certificate (§11)
     @property
@@ -635,8 +679,12 @@ class VerifyReport:
 
     @property
     def notes(self) -> list[str]:
-        """What the report adds without failing: the free regions the tree never reached."""
+        """What the report adds without failing: the robot outside the certificate, liveness, unreached regions."""
         out = [] if self.uncovered_dynamics is None else [self.uncovered_dynamics]
+        if self.liveness is not None:
+            out.append(self.liveness.summary())
+        if self.liveness_note is not None:
+            out.append(self.liveness_note)
         u = self.unreached
         if u is None or not u.parts:
             return out
@@ -764,6 +812,8 @@ class VerifyReport:
             u = self.unreached
             out["unreached"] = {"area": u.area, "free_area": u.free_area,
                                 "parts": [{"point": [x, y], "area": a} for x, y, a in u.parts]}  # fmt: skip
+        if self.liveness is not None:
+            out["liveness"] = self.liveness.to_json()
         out["notes"] = self.notes
         return out
 
@@ -809,6 +859,22 @@ def check_lookahead(plan: Plan, space: FreeSpace | None = None) -> list[str]:
                             f"{radius:g} ({missing.area:.3g} map units² missing; a free point lies {gap:.6g} from a "
                             f"raw obstacle)")  # fmt: skip
     return problems
+
+
+def _liveness(plan: Plan, params: Params, speed: float) -> tuple[Liveness | None, str | None]:
+    """The liveness report :class:`Params` asks for, at the loop's speed, or why there is none (a note)."""
+    if params.live_fov is None:
+        return None, None
+    if not plan.cells.is_funnel:
+        return None, "liveness: not measured, a paper plan has no usable tolerance τ_c (ALGORITHMS §12.5)"
+    names = {"eta_deg": "bearing_error_deg", "fov_deg": "live_fov", "kappa": "slip", "resolution": "live_resolution"}
+    try:
+        return measure_liveness(plan, params.bearing_error_deg, params.live_fov, kappa=params.slip, speed=speed,
+                                resolution=params.live_resolution), None  # fmt: skip
+    except InvalidParamsError as exc:  # a value only the map can refuse (the grid against D): the user's option
+        if exc.field in names:
+            raise InvalidParamsError(exc.reason, field=names[exc.field]) from None
+        return None, f"liveness: not measured, {exc.field}: {exc.reason}"
 
 
 def run(
@@ -858,6 +924,7 @@ def run(
         world_cells = composition.world_violations(plan, FreeSpace.from_map(world))
 
     unreached = unreached_regions(plan, space, comp.regions if comp is not None else None)
+    live, live_note = _liveness(plan, params, speed)
     starts = np.zeros((0, 2))
     rollouts, skipped, breaches = None, None, None
     if params.n_starts == 0:
@@ -915,6 +982,8 @@ def run(
         breaches=breaches,
         lookahead_problems=tuple(check_lookahead(plan, space)),
         uncovered_dynamics=uncovered,
+        liveness=live,
+        liveness_note=live_note,
     )
     log.info("verify: %s", report.summary())
     return report
