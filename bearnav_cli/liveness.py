@@ -162,8 +162,8 @@ class Liveness:
 
         deg = math.degrees(1.0)
         return {
-            "eta_deg": math.degrees(self.eta),
-            "fov_deg": math.degrees(self.fov),
+            "eta_deg": round(math.degrees(self.eta), 12),
+            "fov_deg": round(math.degrees(self.fov), 12),
             "max_range": None if math.isinf(self.max_range) else self.max_range,
             "kappa": self.kappa,
             "nu": self.nu,
