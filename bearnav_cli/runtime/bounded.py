@@ -440,12 +440,16 @@ def one_look_bound(x: np.ndarray, landmarks: np.ndarray, visible: np.ndarray, et
 
 
 def contains(vertices: np.ndarray, count: np.ndarray, x: np.ndarray, tol: float = 0.0) -> np.ndarray:
-    """Whether each point lies in its set (within ``tol`` of every edge), shape (R,).
+    """Whether each point lies in its set, or within ``tol`` of its boundary, shape (R,).
+
+    The even-odd crossing test, not the half-planes of the edges: repeated growth and clipping leave
+    chains of very short edges whose directions round-off may turn a little backward, and one such
+    edge's half-plane would exclude points of the set.
 
     Parameters
     ----------
     vertices : ndarray, shape (R, W, 2)
-        Counter-clockwise convex polygons, padded (map units).
+        Convex polygons, padded (map units).
     count : ndarray of int, shape (R,)
         Their vertex counts (1 or 2: a point or a segment, within ``tol``; 0: contains nothing).
     x : ndarray, shape (R, 2)
@@ -455,14 +459,18 @@ def contains(vertices: np.ndarray, count: np.ndarray, x: np.ndarray, tol: float 
     """
     p = np.asarray(x, float).reshape(-1, 2)
     valid = _valid(vertices, count)
-    n = _normals(vertices, count)
-    s = np.einsum("rwk,rwk->rw", n, p[:, None, :] - vertices)
-    inside = np.all(np.where(valid, s <= tol, True), axis=1)
-    if np.any(count < 3):  # points and segments: the distance to the vertices' hull
-        few = np.flatnonzero((count > 0) & (count < 3))
-        for i in few:
-            a, b = vertices[i, 0], vertices[i, count[i] - 1]
-            ab = b - a
-            t = np.clip(np.dot(p[i] - a, ab) / max(np.dot(ab, ab), 1e-300), 0.0, 1.0)
-            inside[i] = np.hypot(*(p[i] - a - t * ab)) <= tol
-    return inside & (count > 0)
+    a = vertices
+    b = vertices[np.arange(len(vertices))[:, None], _next_index(vertices, count)]
+    px, py = p[:, 0, None], p[:, 1, None]
+    straddles = valid & ((a[..., 1] > py) != (b[..., 1] > py))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        cross_x = a[..., 0] + (py - a[..., 1]) * (b[..., 0] - a[..., 0]) / (b[..., 1] - a[..., 1])
+    inside = (np.count_nonzero(straddles & (px < cross_x), axis=1) % 2) == 1
+    edge = b - a
+    length2 = np.einsum("rwk,rwk->rw", edge, edge)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = np.clip(np.einsum("rwk,rwk->rw", p[:, None, :] - a, edge) / length2, 0.0, 1.0)
+    t = np.where(length2 > 0, t, 0.0)
+    gap = p[:, None, :] - (a + t[..., None] * edge)
+    near = np.any(valid & (np.hypot(gap[..., 0], gap[..., 1]) <= tol), axis=1)
+    return (inside | near) & (count > 0)
