@@ -367,30 +367,28 @@ def centre(vertices: np.ndarray, count: np.ndarray) -> tuple[np.ndarray, np.ndar
     error : ndarray, shape (R,)
         Map units; ``inf`` for empty sets.
     """
+    vertices = vertices[:, : max(int(count.max(initial=0)), 1)]  # the padding past the widest set
     r = len(vertices)
+    rows = np.arange(r)
     valid = _valid(vertices, count)
     empty = count <= 0
     weight = valid / np.maximum(count, 1)[:, None]
     c = np.einsum("rw,rwk->rk", weight, vertices)
+    vx, vy = vertices[..., 0], vertices[..., 1]
 
     def farthest(point: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        d = vertices - point[:, None, :]
-        dist = np.where(valid, np.hypot(d[..., 0], d[..., 1]), -1.0)
-        j = np.argmax(dist, axis=1)
-        return dist[np.arange(r), j], j
+        dist2 = np.where(valid, (vx - point[:, 0, None]) ** 2 + (vy - point[:, 1, None]) ** 2, -1.0)
+        j = np.argmax(dist2, axis=1)
+        return np.sqrt(np.maximum(dist2[rows, j], 0.0)), j  # empty sets: e is set to inf below
 
     for k in range(CENTRE_STEPS):
         _, j = farthest(c)
-        c = c + (vertices[np.arange(r), j] - c) / (k + 2.0)
-    e, _ = farthest(c)
-    # the farthest pair's midpoint: the optimum when the smallest circle rests on two vertices
-    dist2 = np.einsum(
-        "rwvk,rwvk->rwv", vertices[:, :, None] - vertices[:, None], vertices[:, :, None] - vertices[:, None]
-    )
-    dist2 = np.where(valid[:, :, None] & valid[:, None, :], dist2, -1.0)
-    flat = np.argmax(dist2.reshape(r, -1), axis=1)
-    i, j = np.divmod(flat, vertices.shape[1])
-    mid = 0.5 * (vertices[np.arange(r), i] + vertices[np.arange(r), j])
+        c = c + (vertices[rows, j] - c) / (k + 2.0)
+    e, j = farthest(c)
+    # a far pair's midpoint (the farthest vertex from x̂, then the farthest from it): the optimum when
+    # the smallest circle rests on two vertices
+    _, i = farthest(vertices[rows, j])
+    mid = 0.5 * (vertices[rows, i] + vertices[rows, j])
     e_mid, _ = farthest(mid)
     better = e_mid < e
     c[better], e[better] = mid[better], e_mid[better]
