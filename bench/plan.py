@@ -64,8 +64,9 @@ TARGET_S, AIM_S, DESIGN_S = 1.5, 1.0, 2.0
 DECOMPOSE_ROUNDS = 5
 #: The example maps of the decompose table.
 EXAMPLE_MAPS = (REPO_DIR / "maps" / "kitchen.yaml", REPO_DIR / "maps" / "storeroom.yaml")
-#: The random map generator (``random_map.py SEED --kind KIND -o FILE``).
-RANDOM_MAP = Path(os.environ.get("BEARNAV_RANDOM_MAP", "/work/shared/tools/random_map.py"))
+#: The random map generator (``random_map.py SEED --kind KIND -o FILE``): ``BEARNAV_RANDOM_MAP``, else next to
+#: the repository (``../shared/tools``).
+RANDOM_MAP = Path(os.environ.get("BEARNAV_RANDOM_MAP") or REPO_DIR.parent / "shared" / "tools" / "random_map.py")
 #: Random maps: per kind, the seeds tried in order; the first one that plans is used.
 RANDOM_SEEDS = {"clutter": (1, 2, 3, 4, 5), "rooms": (1, 2, 3, 4, 5), "grid": (1, 2, 3, 4, 5)}
 STAGE_FILES = tuple((stage.name, stage.filename) for stage in pipeline.STAGES)

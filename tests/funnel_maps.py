@@ -10,6 +10,7 @@ the map stage uses (so that a tag put on a disc lies exactly on its boundary).
 from __future__ import annotations
 
 import math
+import os
 from pathlib import Path
 
 import numpy as np
@@ -155,11 +156,10 @@ def cluttered_spec(seed: int, iterations: int = 400) -> dict:
     return _spec(f"cluttered_{seed}", W, H, radius, goal, rects, discs, landmarks, iterations, 0)
 
 
-#: The shared generator of maps nobody tuned: next to the repository (``../shared``), or at the
-#: workplace's own location for a clone made elsewhere; absent on some machines.
-RANDOM_MAP_TOOL = next((p for p in (Path(__file__).resolve().parents[2] / "shared" / "tools" / "random_map.py",
-                                    Path("/work/shared/tools/random_map.py")) if p.exists()),
-                       Path("/work/shared/tools/random_map.py"))  # fmt: skip
+#: The shared generator of maps nobody tuned: next to the repository (``../shared``), or where the
+#: environment variable ``BEARNAV_RANDOM_MAP_TOOL`` says (a clone made elsewhere); absent on some machines.
+RANDOM_MAP_TOOL = Path(os.environ.get("BEARNAV_RANDOM_MAP_TOOL")
+                       or Path(__file__).resolve().parents[2] / "shared" / "tools" / "random_map.py")  # fmt: skip
 
 
 def load_random_map_tool():
