@@ -48,7 +48,7 @@ clean:
 # --------------------------------------------------------------------------- reproduce (repro/)
 FIGURES := docs/figures
 REPRO_FIGURES := $(FIGURES)/kitchen_paper.png $(FIGURES)/kitchen_unicycle.png $(FIGURES)/paper_b.png \
-	$(FIGURES)/robustness.png
+	$(FIGURES)/kitchen_sets.png $(FIGURES)/robustness.png
 PLAN_SRC := $(wildcard bearnav_cli/*.py bearnav_cli/stages/*.py bearnav_cli/runtime/*.py)
 # What every figure script runs besides its own file: a change to the closed loop or the
 # drawing code redraws every figure.
@@ -73,6 +73,9 @@ $(FIGURES)/kitchen_paper.png: repro/kitchen_figure.py $(REPRO_LIB) \
 	$(BIN)/python $< $(filter %.npz,$^) -o $@
 
 $(FIGURES)/kitchen_unicycle.png: repro/kitchen_unicycle.py $(REPRO_LIB) plans/kitchen/plan.npz
+	$(BIN)/python $< $(filter %.npz,$^) -o $@
+
+$(FIGURES)/kitchen_sets.png: repro/kitchen_sets.py $(REPRO_LIB) plans/kitchen/plan.npz
 	$(BIN)/python $< $(filter %.npz,$^) -o $@
 
 $(FIGURES)/paper_b.png: repro/paper_b.py $(REPRO_LIB) plans/paper_b_circles/plan.npz

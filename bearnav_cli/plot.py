@@ -48,6 +48,7 @@ __all__ = [
     "PERCEPTION_FAIL_FREE_COLOR",
     "plot_barriers",
     "plot_cells",
+    "plot_estimate_trace",
     "plot_field",
     "plot_map",
     "plot_perception",
@@ -623,6 +624,48 @@ def plot_samples(ax: plt.Axes, tree: Tree | Cells, *, color: str = "#ff7f0e") ->
 #: Trajectory colour of each run outcome (``sim.npz`` ``outcome``).
 OUTCOME_COLORS = {0: "#2ca25f", 1: "#de2d26", 2: "#fd8d3c", 3: "#756bb1", 4: "#636363"}
 OUTCOME_NAMES = {0: "success", 1: "collision", 2: "stall", 3: "timeout", 4: "lost"}
+
+
+def plot_estimate_trace(ax: plt.Axes, trace: Any, *, cmap: str = "viridis", scale: float = 1.0) -> plt.Axes:
+    """One run's estimate sets along its path (``simulate.estimate_trace``), coloured by their error radius.
+
+    Parameters
+    ----------
+    ax : matplotlib.axes.Axes
+        The axes to draw into (map units on both axes).
+    trace : EstimateTrace
+        The recorded sets, the true positions and the error radii.
+    cmap : str
+        Colour map of the error radius ``e`` (a colour bar is added).
+    scale : float
+        Each set drawn enlarged by this factor about its estimate (sets of centimetres vanish on a
+        map of metres); the legend says so when it is not 1.
+
+    Returns
+    -------
+    matplotlib.axes.Axes
+        ``ax``.
+    """
+    norm = mcolors.Normalize(vmin=0.0, vmax=float(np.max(trace.error)) if len(trace.error) else 1.0)
+    colours = plt.get_cmap(cmap)
+    ax.plot(*trace.truth.T, color="0.2", lw=0.8, zorder=4, label="true path")
+    label = "estimate sets" + (f" (drawn {scale:g}× enlarged)" if scale != 1.0 else "")
+    for k in range(len(trace.error)):
+        ring = trace.set_coords[trace.set_offsets[k] : trace.set_offsets[k + 1]]
+        if len(ring) >= 3:
+            ring = trace.x_hat[k] + scale * (ring - trace.x_hat[k])
+            colour = colours(norm(trace.error[k]))
+            patch = _add_geometry(ax, shapely.Polygon(ring), facecolor=colour, alpha=0.55, edgecolor=colour, lw=0.4,
+                                  zorder=5)  # fmt: skip
+            if patch is not None and label:
+                patch.set_label(label)
+                label = ""
+    looked = trace.looking
+    if looked.any():
+        ax.plot(*trace.truth[looked].T, "o", ms=2.5, mfc="none", mec="#d62728", zorder=6, label="stopped to look")
+    bar = plt.colorbar(ScalarMappable(norm=norm, cmap=colours), ax=ax, fraction=0.04, pad=0.02)
+    bar.set_label(f"error radius e ({AXIS_UNITS})")
+    return ax
 
 
 def plot_sim_background(ax: plt.Axes, sim: Simulation) -> plt.Axes:

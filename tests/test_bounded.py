@@ -199,3 +199,30 @@ def test_the_look_ahead_unicycle_under_the_set_estimator(worst):
     assert sim.stats["estimator_counts"]["containment_violations"] == 0
     assert sim.counts()["collision"] == 0 and not outside
     assert sim.certified_steps.sum() > 0
+
+
+def test_an_estimate_trace_holds_the_truth_and_draws(tmp_path):
+    """``simulate.estimate_trace`` records sets that hold the truth within their error radius; the plot draws them."""
+    from bearnav_cli import plot
+
+    plan = random_plan(1)
+    params = simulate.Params(estimator="set", fov=60.0, noise_bound_deg=0.25, record_trajectories=False)
+    start = simulate.resolve_starts(plan, simulate.Params(starts="domain:1", seed=3))[0]
+    trace = simulate.estimate_trace(plan, start, params, every=5)
+    k = len(trace.error)
+    assert k > 0 and len(trace.set_offsets) == k + 1 and trace.set_offsets[-1] == len(trace.set_coords)
+    for i in range(k):
+        ring = trace.set_coords[trace.set_offsets[i] : trace.set_offsets[i + 1]]
+        assert shapely.Polygon(ring).buffer(1e-7).contains(shapely.Point(trace.truth[i]))
+        assert np.hypot(*(trace.truth[i] - trace.x_hat[i])) <= trace.error[i] + 1e-9
+    plot.use_file_backend()
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots()
+    plot.plot_estimate_trace(ax, trace, scale=10.0)
+    assert len(ax.patches) >= 1
+    plt.close(fig)
+    from bearnav_cli.errors import InvalidParamsError
+
+    with pytest.raises(InvalidParamsError):
+        simulate.estimate_trace(plan, start, simulate.Params(estimator="kalman"))

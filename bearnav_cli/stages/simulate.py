@@ -33,7 +33,8 @@ from bearnav_cli.world.camera import CAMERAS, Camera, IdealCamera
 from bearnav_cli.world.motion import Base, Contact, body_space, initial_headings
 from bearnav_cli.world.starts import parse_starts
 
-__all__ = ["PROGRESS_EVERY", "PROGRESS_WINDOW", "Params", "Settings", "VERSION", "in_domain", "make_camera",
+__all__ = ["PROGRESS_EVERY", "PROGRESS_WINDOW", "EstimateTrace", "Params", "Settings", "VERSION", "estimate_trace",
+           "in_domain", "make_camera",
            "metrics", "resolve_starts", "rollout", "run", "settings", "start_loop", "step_limit", "step_limits",
            "summary",
            "tree_routes"]  # fmt: skip
@@ -783,6 +784,83 @@ def rollout(
             **({"camera": report()} if callable(report) else {}),
         },
     )
+
+
+@dataclass(frozen=True, eq=False)
+class EstimateTrace:
+    """One run's estimate sets along its path (ALGORITHMS §12.2), every ``every`` steps: what a figure draws.
+
+    Attributes
+    ----------
+    truth : ndarray, shape (K, 2)
+        The true position of the axle (the point the set is about) at each recorded step (map units).
+    x_hat : ndarray, shape (K, 2)
+        The estimate there (map units).
+    error : ndarray, shape (K,)
+        Its error radius ``e`` (map units).
+    set_coords : ndarray, shape (V, 2)
+        The sets' vertices, one after another (map units; shapely's ragged layout).
+    set_offsets : ndarray of int64, shape (K + 1,)
+        Where each recorded set's vertices begin in ``set_coords``.
+    looking : ndarray of bool, shape (K,)
+        The robot was looking (not driving) at that step.
+    outcome : int
+        The run's :class:`~bearnav_cli.datatypes.Outcome`.
+    """
+
+    truth: np.ndarray
+    x_hat: np.ndarray
+    error: np.ndarray
+    set_coords: np.ndarray
+    set_offsets: np.ndarray
+    looking: np.ndarray
+    outcome: int
+
+
+def estimate_trace(plan, start: np.ndarray, params: Params, every: int = 10) -> EstimateTrace:
+    """Run one robot from ``start`` with ``params`` (``estimator="set"``) and record its sets every ``every`` steps.
+
+    Parameters
+    ----------
+    plan : Plan
+        The plan.
+    start : ndarray, shape (2,)
+        The start (map units).
+    params : Params
+        The loop's parameters; its ``estimator`` must be ``"set"``.
+    every : int
+        Record one step in this many (and the last).
+
+    Raises
+    ------
+    InvalidParamsError
+        ``params.estimator`` is not ``"set"``.
+    """
+    if params.estimator != "set":
+        raise InvalidParamsError("a trace of estimate sets needs estimator set", field="estimator")
+    loop, active, _ = start_loop(plan, np.asarray(start, float).reshape(1, 2), params)
+    truth, x_hat, error, sets, looking = [], [], [], [], []
+    step = 0
+    while active.size:
+        axle = loop.x[0].copy()
+        active = loop.step(active)
+        step += 1
+        if step % every and active.size:
+            continue
+        st = loop.state
+        n = int(st.set_count[0])
+        if n == 0:
+            continue
+        x, e = runtime_bounded.centre(st.set_vertices[:1], st.set_count[:1])
+        truth.append(axle)
+        x_hat.append(x[0])
+        error.append(e[0])
+        sets.append(st.set_vertices[0, :n].copy())
+        looking.append(bool(loop.was_looking[0]))
+    offsets = np.concatenate([[0], np.cumsum([len(v) for v in sets])]).astype(np.int64)
+    return EstimateTrace(np.array(truth).reshape(-1, 2), np.array(x_hat).reshape(-1, 2), np.array(error),
+                         np.concatenate(sets) if sets else np.zeros((0, 2)), offsets, np.array(looking, bool),
+                         int(loop.outcome[0]))  # fmt: skip
 
 
 def in_domain(arrays: PlanArrays, starts: np.ndarray) -> np.ndarray:
