@@ -291,38 +291,13 @@ def _views(arrays: PlanArrays, points: np.ndarray, fov: float, max_range: float,
 
 
 def _bounds_of(arrays: PlanArrays, x: np.ndarray, visible: np.ndarray, eta: np.ndarray) -> np.ndarray:
-    """``ε(x, S)`` of every row (M,) map units, each row at its own ``η`` (rad), in batches.
-
-    ``runtime.bounded.one_look_bound`` for a row each, with its own cone half-angle ``2η``: the box
-    ``B_r`` clipped (``bounded.clip``) by the two half-planes of every visible landmark's cone
-    (``bounded.cone_rows``'s rows, written out here for an ``η`` per row), then its diameter.
-    """
+    """``ε(x, S)`` of every row (M,) map units, each row at its own ``η`` (rad): ``runtime.bounded.one_look_bound``
+    in batches of :data:`_ROWS` rows."""
     out = np.empty(len(x))
     box = estimate.axle_bounds(arrays)
-    half = np.minimum(2.0 * np.asarray(eta, float), 0.5 * math.pi - 1e-9)
-    landmarks = np.asarray(arrays.landmarks, float)
     for start in range(0, len(x), _ROWS):
         sl = slice(start, start + _ROWS)
-        p, vis, h = x[sl], visible[sl], half[sl]
-        vertices, count = bounded.box(box, len(p))
-        order = np.argsort(~vis, axis=1, kind="stable")  # each row's visible landmarks first
-        seen = vis.sum(axis=1)
-        for k in range(int(seen.max(initial=0))):
-            who = np.flatnonzero(seen > k)
-            lm = landmarks[order[who, k]]
-            d = lm - p[who]
-            angle = np.arctan2(d[:, 1], d[:, 0])
-            lo, hi = angle - h[who], angle + h[who]
-            sub_v, sub_n = vertices[who], count[who]
-            for a in (np.column_stack([-np.sin(lo), np.cos(lo)]), np.column_stack([np.sin(hi), -np.cos(hi)])):
-                sub_v, sub_n = bounded.clip(sub_v, sub_n, a, np.einsum("rk,rk->r", a, lm), arrays.tol)
-            width = max(vertices.shape[1], sub_v.shape[1])
-            grown = np.zeros((len(vertices), width, 2))
-            grown[:, : vertices.shape[1]] = vertices
-            grown[who, : sub_v.shape[1]] = sub_v
-            grown[who, sub_v.shape[1] :] = 0.0
-            vertices, count[who] = grown, sub_n
-        out[sl] = bounded.diameter(vertices, count)
+        out[sl] = bounded.one_look_bound(x[sl], arrays.landmarks, visible[sl], eta[sl], box, arrays.tol)
     return out
 
 

@@ -99,8 +99,8 @@ def clip(vertices: np.ndarray, count: np.ndarray, a: np.ndarray, b: np.ndarray,
             return vertices, count
         sub_v, sub_n = _clip_rows(vertices[cut], count[cut], s[cut], valid[cut])
         width = max(vertices.shape[1], sub_v.shape[1])
-        out, out_count = _pad(vertices, width, copy=True), count.copy()
-        out[cut], out_count[cut] = _pad(sub_v, width), sub_n
+        out, out_count = fit(vertices, width).copy(), count.copy()
+        out[cut], out_count[cut] = fit(sub_v, width), sub_n
         return out, out_count
     return _clip_rows(vertices, count, s, valid)
 
@@ -209,15 +209,22 @@ def grow(vertices: np.ndarray, count: np.ndarray, radius: np.ndarray,
     still = radius <= 0.0  # no growth: the deduplicated polygon as it was
     if still.any():
         width = max(out.shape[1], vertices.shape[1])
-        out = _pad(out, width)
-        out[still] = _pad(vertices, width)[still]
+        out = fit(out, width)
+        out[still] = fit(vertices, width)[still]
         out_count[still] = count[still]
     return _reduce(out, out_count)
 
 
-def _pad(vertices: np.ndarray, width: int, copy: bool = False) -> np.ndarray:
-    if vertices.shape[1] >= width:
-        return vertices.copy() if copy else vertices
+def fit(vertices: np.ndarray, width: int) -> np.ndarray:
+    """The padded vertex arrays made ``width`` wide (R, width, 2): cut, or padded with each row's first vertex.
+
+    The padding is never read (only the first ``count`` vertices are); the input itself comes back
+    when it has that width already.
+    """
+    if vertices.shape[1] > width:
+        return vertices[:, :width]
+    if vertices.shape[1] == width:
+        return vertices
     return np.concatenate([vertices, np.repeat(vertices[:, :1], width - vertices.shape[1], axis=1)], axis=1)
 
 
@@ -255,7 +262,7 @@ def _reduce(vertices: np.ndarray, count: np.ndarray) -> tuple[np.ndarray, np.nda
     return vertices[:, :width], count
 
 
-def cone_rows(landmarks: np.ndarray, angle: np.ndarray, eta: float) -> tuple[np.ndarray, np.ndarray]:
+def cone_rows(landmarks: np.ndarray, angle: np.ndarray, eta: float | np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The two half-planes ``a·y ≤ b`` of each bearing set ``W(l, φ̃)`` (ALGORITHMS §12.2).
 
     ``W(l, φ̃) = {y : |wrap(angle(l − y) − φ̃)| ≤ η}`` is the cone with apex ``l`` around
@@ -268,8 +275,8 @@ def cone_rows(landmarks: np.ndarray, angle: np.ndarray, eta: float) -> tuple[np.
         Apexes ``l`` (map units).
     angle : ndarray, shape (...)
         Measured world-frame bearing angles ``φ̃`` from the robot to ``l`` (rad).
-    eta : float
-        Half-angle ``η`` (rad, in [0, π/2)).
+    eta : float or ndarray, shape (...)
+        Half-angle ``η`` (rad, in [0, π/2)), one or one per bearing.
 
     Returns
     -------
@@ -286,7 +293,8 @@ def cone_rows(landmarks: np.ndarray, angle: np.ndarray, eta: float) -> tuple[np.
 
 
 def intersect_cones(vertices: np.ndarray, count: np.ndarray, landmarks: np.ndarray, angle: np.ndarray,
-                    visible: np.ndarray, eta: float, tol: float = 0.0) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+                    visible: np.ndarray, eta: float | np.ndarray,
+                    tol: float = 0.0) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
     """Every set clipped by the bearing cones of the landmarks its robot sees (§12.2's update).
 
     The robots are clipped together, one visible bearing of each per round (a robot with fewer
@@ -304,8 +312,8 @@ def intersect_cones(vertices: np.ndarray, count: np.ndarray, landmarks: np.ndarr
         Measured world-frame bearing angles (rad); only the visible ones are read.
     visible : ndarray of bool, shape (R, L)
         Which landmarks each robot sees.
-    eta : float
-        The bearing error bound (rad).
+    eta : float or ndarray, shape (R,)
+        The bearing error bound (rad), one or one per robot.
     tol : float
         Outside slack of every clip (map units).
     """
@@ -315,7 +323,8 @@ def intersect_cones(vertices: np.ndarray, count: np.ndarray, landmarks: np.ndarr
     # the caller's sets stay as they were; the padding past the widest set is dropped
     vertices, count = vertices[:, : max(int(count.max(initial=0)), 1)].copy(), count.copy()
     rob, lm = np.nonzero(visible)  # the (robot, landmark) pairs, robot by robot
-    a, b = cone_rows(np.asarray(landmarks, float)[lm], np.asarray(angle, float)[rob, lm], eta)  # (P, 2, 2), (P, 2)
+    eta_pairs = np.broadcast_to(np.asarray(eta, float), (len(visible),))[rob]
+    a, b = cone_rows(np.asarray(landmarks, float)[lm], np.asarray(angle, float)[rob, lm], eta_pairs)  # (P, 2, 2)
     # a cone that holds every vertex now holds the set after every other clip too (clips only shrink
     # it): only the cones that cut it are applied, one per robot per round
     s = np.einsum("pqk,pwk->pqw", a, vertices[rob]) - (b + tol)[..., None]
@@ -332,22 +341,8 @@ def intersect_cones(vertices: np.ndarray, count: np.ndarray, landmarks: np.ndarr
         for q in range(2):
             sub_v, sub_n = clip(sub_v, sub_n, a[sel, q], b[sel, q], tol)
         width = max(vertices.shape[1], sub_v.shape[1])
-        vertices = _pad(vertices, width)
-        vertices[who] = _pad(sub_v, width)
-        count[who] = sub_n
-    return _reduce(*_dedupe(vertices, count, tol))
-    order = np.argsort(~visible, axis=1, kind="stable")  # each robot's cutting landmarks first
-    seen = visible.sum(axis=1)
-    rows = np.arange(len(visible))
-    for k in range(int(seen.max())):
-        who = rows[seen > k]
-        lm = order[who, k]
-        sub_v, sub_n = vertices[who], count[who]
-        for q in range(2):
-            sub_v, sub_n = clip(sub_v, sub_n, a[who, lm, q], b[who, lm, q], tol)
-        width = max(vertices.shape[1], sub_v.shape[1])
-        vertices = _pad(vertices, width)
-        vertices[who] = _pad(sub_v, width)
+        vertices = fit(vertices, width)
+        vertices[who] = fit(sub_v, width)
         count[who] = sub_n
     return _reduce(*_dedupe(vertices, count, tol))
 
@@ -405,8 +400,8 @@ def diameter(vertices: np.ndarray, count: np.ndarray) -> np.ndarray:
     return np.where(count > 0, out, np.inf)
 
 
-def one_look_bound(x: np.ndarray, landmarks: np.ndarray, visible: np.ndarray, eta: float, bounds: np.ndarray,
-                   tol: float = 0.0) -> np.ndarray:  # fmt: skip
+def one_look_bound(x: np.ndarray, landmarks: np.ndarray, visible: np.ndarray, eta: float | np.ndarray,
+                   bounds: np.ndarray, tol: float = 0.0) -> np.ndarray:  # fmt: skip
     """The static bound ``ε(x, S) = diam K(x, S)`` of one look, shape (R,) map units (ALGORITHMS §12.2).
 
     ``K(x, S) = B_r ∩ ∩_{k∈S} cone(l_k, φ_k(x), 2η)``: a robot at ``x`` that sees ``S`` with
@@ -421,8 +416,8 @@ def one_look_bound(x: np.ndarray, landmarks: np.ndarray, visible: np.ndarray, et
         Landmark positions (map units).
     visible : ndarray of bool, shape (R, L)
         ``S``: which landmarks it sees from ``x``.
-    eta : float
-        The bearing error bound (rad).
+    eta : float or ndarray, shape (R,)
+        The bearing error bound (rad), one or one per point.
     bounds : ndarray, shape (4,)
         ``B_r`` (map units).
     tol : float
@@ -432,8 +427,8 @@ def one_look_bound(x: np.ndarray, landmarks: np.ndarray, visible: np.ndarray, et
     d = np.asarray(landmarks, float)[None] - p[:, None, :]
     angle = np.arctan2(d[..., 1], d[..., 0])
     vertices, count = box(bounds, len(p))
-    vertices, count = intersect_cones(vertices, count, landmarks, angle, visible, min(2.0 * eta, 0.5 * math.pi - 1e-9),
-                                      tol)  # fmt: skip
+    half = np.minimum(2.0 * np.asarray(eta, float), 0.5 * math.pi - 1e-9)  # the 2η cones around the truth
+    vertices, count = intersect_cones(vertices, count, landmarks, angle, visible, half, tol)
     return diameter(vertices, count)
 
 
