@@ -296,40 +296,34 @@ def bounded_update(arrays: PlanArrays, s: ControlSettings, state: ControlState, 
         x = np.asarray(x_true, float).reshape(-1, 2)
         vertices = np.repeat(x[:, None, :], bounded.MAX_VERTICES, axis=1)
         return SetEstimate(vertices, np.ones(r, np.int64), x.copy(), np.zeros(r), np.zeros(r, bool), np.ones(r, bool))
+    width = bounded.MAX_VERTICES  # every stored set has this width (operations cap their counts at it)
     d = s.dt * state.motion
     travelled = np.hypot(d[:, 0], d[:, 1])
     radius = np.where(travelled > 0.0, s.slip * travelled + s.slip_floor, 0.0)
     start_v, start_n = bounded.box(axle_bounds(arrays), r)
     known = state.known
-    vertices = np.where(known[:, None, None], bounded.translate(state.set_vertices, d), _width(start_v, state))
+    vertices = np.where(known[:, None, None], bounded.translate(state.set_vertices, d), bounded.fit(start_v, width))
     count = np.where(known, state.set_count, start_n)
-    moving = known & (radius > 0.0)
-    if moving.any():
-        grown_v, grown_n = bounded.grow(vertices[moving], count[moving], radius[moving], tol)
-        vertices = _store(vertices, moving, grown_v)
-        count = count.copy()
-        count[moving] = grown_n
+    moving = np.flatnonzero(known & (radius > 0.0))
+    if len(moving):
+        grown_v, count[moving] = bounded.grow(vertices[moving], count[moving], radius[moving], tol)
+        vertices[moving] = bounded.fit(grown_v, width)
     angle = np.arctan2(bearings[..., 1], bearings[..., 0])
     eta = s.bearing_bound
     updated_v, updated_n = bounded.intersect_cones(vertices, count, arrays.landmarks, angle, visible, eta, tol)
+    updated_v, updated_n = bounded.fit(updated_v, width).copy(), updated_n.copy()
     inconsistent = (updated_n == 0) & (count > 0)
     if inconsistent.any():
+        # the bearing sets alone, or the prediction where they are empty too
         idx = np.flatnonzero(inconsistent)
         fresh_v, fresh_n = bounded.intersect_cones(start_v[idx], start_n[idx], arrays.landmarks, angle[idx],
                                                    visible[idx], eta, tol)  # fmt: skip
-        # the bearing sets alone, or the prediction where they are empty too
-        keep = fresh_n == 0
-        fresh_v = _fit(fresh_v, updated_v.shape[1])
-        updated_v = _fit(updated_v, max(updated_v.shape[1], fresh_v.shape[1], vertices.shape[1]))
-        fresh_v = _fit(fresh_v, updated_v.shape[1])
-        fresh_v[keep] = _fit(vertices[idx[keep]], updated_v.shape[1])
-        fresh_n[keep] = count[idx[keep]]
-        updated_v[idx], updated_n = fresh_v, updated_n.copy()
-        updated_n[idx] = fresh_n
+        fresh_v = bounded.fit(fresh_v, width).copy()
+        empty = fresh_n == 0
+        fresh_v[empty], fresh_n[empty] = vertices[idx[empty]], count[idx[empty]]
+        updated_v[idx], updated_n[idx] = fresh_v, fresh_n
     x_hat, error = bounded.centre(updated_v, updated_n)
-    return SetEstimate(
-        _fit(updated_v, bounded.MAX_VERTICES), updated_n, x_hat, error, inconsistent, visible.any(axis=1)
-    )
+    return SetEstimate(updated_v, updated_n, x_hat, error, inconsistent, visible.any(axis=1))
 
 
 def axle_bounds(arrays: PlanArrays) -> np.ndarray:
@@ -339,21 +333,3 @@ def axle_bounds(arrays: PlanArrays) -> np.ndarray:
     """
     rho = arrays.robot_radius
     return np.asarray(arrays.bounds, float) + np.array([rho, rho, -rho, -rho])
-
-
-def _fit(vertices: np.ndarray, width: int) -> np.ndarray:
-    """Padded to (or cut to) ``width`` vertices: the stored sets all have one width."""
-    if vertices.shape[1] >= width:
-        return vertices[:, :width].copy()
-    return np.concatenate([vertices, np.repeat(vertices[:, :1], width - vertices.shape[1], axis=1)], axis=1)
-
-
-def _width(vertices: np.ndarray, state: ControlState) -> np.ndarray:
-    return _fit(vertices, state.set_vertices.shape[1])
-
-
-def _store(vertices: np.ndarray, rows: np.ndarray, values: np.ndarray) -> np.ndarray:
-    width = max(vertices.shape[1], values.shape[1])
-    out = _fit(vertices, width)
-    out[rows] = _fit(values, width)
-    return out
