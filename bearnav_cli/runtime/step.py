@@ -547,7 +547,8 @@ def bounded_control(arrays: PlanArrays, s: ControlSettings, state: ControlState,
     error = np.where(known, sets.error + swing, np.inf)
     # κℓ + ν of one step; a measured displacement knows the position itself at every step (paper B, and
     # verify's loop with the exact motion of §7.1): no odometry enters the estimate
-    margin = 0.0 if s.measurement == "displacement" else s.slip * s.top_speed * s.dt + s.slip_floor
+    step_len = s.top_speed * s.dt  # ℓ
+    margin = 0.0 if s.measurement == "displacement" else s.slip * step_len + s.slip_floor
     est = Estimate(reference, error**2 / 9.0, sets.seen, known & np.isfinite(error), known,
                    np.where(known, state.hold, 0.0), error)  # fmt: skip
     # the truth is in the active cell (Theorem 2), so its estimate may lie up to e outside it; not after a
@@ -576,7 +577,6 @@ def bounded_control(arrays: PlanArrays, s: ControlSettings, state: ControlState,
     pace = np.where(move, 1.0, 0.0)
     if arrays.funnel and move.any():
         idx = np.flatnonzero(move)
-        step_len = s.top_speed * s.dt
         # the motion's own error, and a look-ahead point's Euler error λ(ωdt)²/2 ≤ ℓ²/2λ (|ω| ≤ α/λ)
         wobble = margin + (step_len**2 / (2.0 * lam) if ahead else 0.0)
         pace[idx] = certified_pace(arrays, cell[idx], reference[idx], error[idx], u[idx], step_len, wobble)
@@ -644,12 +644,10 @@ def bounded_control(arrays: PlanArrays, s: ControlSettings, state: ControlState,
     if ahead:
         # a look-ahead unicycle that does not drive turns only to look or to turn back: any other turn
         # would swing p unrecorded (a look records the heading it turns back to)
-        forward = np.zeros(r)
         turn = np.where(scanning | back, turn, 0.0)
         idx = np.flatnonzero(drive)
         w = (s.alpha * pace[idx])[:, None] * direction[idx]
         forward[idx], turn[idx], clamped[idx] = lookahead_command(w, phi[idx], lam, s.clamp_reverse)
-        forward[~drive] = 0.0
         motion = forward[:, None] * np.column_stack([np.cos(phi), np.sin(phi)])
     elif s.dynamics == "unicycle":
         allowed = heading_allowance(arrays, cell, reference, target) if s.certified_heading else None
@@ -657,7 +655,6 @@ def bounded_control(arrays: PlanArrays, s: ControlSettings, state: ControlState,
         # a robot that may not move only turns (to look, or toward its field)
         forward, motion = forward * pace, motion * pace[:, None]
         turn = np.where(scanning, turn, turn_cmd)
-    velocity[~drive] = 0.0
     new = ControlState(cell, target, last_dir, hold, np.where(known[:, None], sets.x_hat, state.x_hat), motion,
                        known, est.var, scanning, spin, look,
                        np.where(scanning & ~state.scanning, hold - s.dt, state.scan_from),
