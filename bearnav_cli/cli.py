@@ -242,8 +242,28 @@ class Terminated(KeyboardInterrupt):
     """SIGTERM, turned into an exception so that temp files are removed on the way out."""
 
 
+_SIGNALLED: list[int] = []  # the signals that reached the running command, in order
+
+
 def _raise_interrupt(signum: int, frame: object) -> None:
+    _SIGNALLED.append(signum)
     raise KeyboardInterrupt if signum == signal.SIGINT else Terminated
+
+
+def _as_interrupt(exc: BaseException) -> KeyboardInterrupt | None:
+    """The interrupt behind ``exc``, when a signal reached the command while it raised.
+
+    A signal that lands inside an extension module's import comes out as that import's
+    ``ImportError: initialization failed`` (pybind11 wraps it): the user still pressed Ctrl-C.
+    """
+    seen: BaseException | None = exc
+    while seen is not None:
+        if isinstance(seen, KeyboardInterrupt):
+            return seen
+        seen = seen.__cause__ or seen.__context__
+    if _SIGNALLED:
+        return KeyboardInterrupt() if _SIGNALLED[-1] == signal.SIGINT else Terminated()
+    return None
 
 
 def _interrupt_message(command: str, exc: BaseException) -> str:
@@ -256,6 +276,11 @@ def _interrupt_message(command: str, exc: BaseException) -> str:
     if pipeline.ACTIVITY.written:
         return f"{word}; {stage} was written, nothing after it"
     return f"{word}; nothing written for {stage}"
+
+
+def _interrupted(command: str, exc: KeyboardInterrupt) -> typer.Exit:
+    err.print(_interrupt_message(command, exc), highlight=False, soft_wrap=True, markup=False)
+    return typer.Exit(EXIT_TERMINATED if isinstance(exc, Terminated) else EXIT_INTERRUPTED)
 
 
 def handles_errors(command: Callable) -> Callable:
@@ -274,6 +299,7 @@ def handles_errors(command: Callable) -> Callable:
 
         _setup_logging()
         pipeline.reset_activity()
+        _SIGNALLED.clear()
         previous: dict[int, Any] = {}
         if threading.current_thread() is threading.main_thread():
             for signum in (signal.SIGINT, signal.SIGTERM):
@@ -288,13 +314,14 @@ def handles_errors(command: Callable) -> Callable:
         except BearnavError as exc:
             raise _fail(str(exc).replace("[", r"\["), EXIT_INVALID) from None
         except KeyboardInterrupt as exc:
-            message = _interrupt_message(name, exc)
-            err.print(message, highlight=False, soft_wrap=True, markup=False)
-            raise typer.Exit(EXIT_TERMINATED if isinstance(exc, Terminated) else EXIT_INTERRUPTED) from None
+            raise _interrupted(name, exc) from None
         except MemoryError:
             stage = pipeline.ACTIVITY.stage or name
             raise _fail(f"out of memory in {stage}; nothing written for it (ask for less)", EXIT_INVALID) from None
         except Exception as exc:  # noqa: BLE001 - the last guard: one line, never a traceback
+            interrupt = _as_interrupt(exc)
+            if interrupt is not None:
+                raise _interrupted(name, interrupt) from None
             if os.environ.get("BEARNAV_TRACEBACK"):
                 raise
             stage = pipeline.ACTIVITY.stage or name

@@ -107,6 +107,20 @@ def test_sigint_inside_a_stage_names_it_and_writes_nothing_for_it(tmp_path, monk
     assert hashes(folder) == reference
 
 
+def test_sigint_inside_an_extension_import_is_an_interrupt_not_an_internal_error(tmp_path, monkeypatch, built):
+    # pybind11 turns a KeyboardInterrupt raised while its module initialises into
+    # "ImportError: initialization failed" (raised from it); CI once hit this inside highspy's import
+    def import_interrupted(*args, **kwargs):
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt as exc:
+            raise ImportError("initialization failed") from exc
+
+    monkeypatch.setattr(synthesize, "run", import_interrupted)
+    result = plan_small(tmp_path / "p")
+    assert_clean_failure(result, 130, ("interrupted; nothing written for synthesize",))
+
+
 def test_sigint_while_an_artifact_is_written_leaves_no_temp_file(tmp_path, monkeypatch, built):
     def half_then_interrupt(handle, **arrays):
         handle.write(b"PK\x03\x04 half an archive")
