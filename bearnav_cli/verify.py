@@ -300,6 +300,10 @@ class Geometry:
         Cells that do not contain their node and exit point (the goal cell: the goal).
     bad_barriers : tuple of int
         Cells with a barrier normal not of unit norm, or ``h(x_j) <= 0`` in an edge cell.
+    rows_not_polygon : tuple of int
+        Cells whose half-plane rows ``cell_A x ≤ cell_b`` (what the runtime tests) are not exactly
+        the polygon of their stored vertices (where the certificate was checked): see
+        :func:`rows_not_polygon`.
     blocked_edges : tuple of int
         Child nodes whose tree edge to the parent is not free.
     samples_unchanged : bool or None
@@ -311,6 +315,7 @@ class Geometry:
     cells_outside_bounds: tuple[int, ...]
     edges_outside_cell: tuple[int, ...]
     bad_barriers: tuple[int, ...]
+    rows_not_polygon: tuple[int, ...]
     blocked_edges: tuple[int, ...]
     samples_unchanged: bool | None
 
@@ -321,9 +326,48 @@ class Geometry:
             and not self.cells_outside_bounds
             and not self.edges_outside_cell
             and not self.bad_barriers
+            and not self.rows_not_polygon
             and not self.blocked_edges
             and self.samples_unchanged is not False
         )
+
+
+def rows_not_polygon(cells: Any, tol: float) -> tuple[int, ...]:
+    """Cells whose rows are not exactly the polygon of their vertices (vectorised over all rows).
+
+    The certificate is checked at the stored vertices; the runtime decides which cell holds a
+    point with the rows. The two are one set when row ``q`` is the unit-normal line of edge
+    ``v_q → v_{q+1}`` (both ends on it within ``tol``) and every vertex of the cell meets every row
+    of the cell within ``tol``: each row is then a supporting line of the polygon along its own edge,
+    which also proves the polygon convex. One row per edge is already an invariant of the cells.
+
+    Parameters
+    ----------
+    cells : Cells
+        ``cell_A``, ``cell_b``, ``cell_row_offsets``, ``cell_vertices``, ``cell_vertex_offsets``.
+    tol : float
+        Geometric tolerance (map units).
+    """
+    A, b, verts = cells.cell_A, cells.cell_b, cells.cell_vertices
+    offsets = cells.cell_vertex_offsets
+    count = np.diff(offsets)
+    owner = np.repeat(np.arange(len(count)), count)
+    index = np.arange(len(verts))
+    following = np.where(index + 1 < offsets[owner + 1], index + 1, offsets[owner])
+    unit = np.abs(np.hypot(A[:, 0], A[:, 1]) - 1.0) <= UNIT_TOL
+    on_line = (np.abs(np.einsum("ij,ij->i", A, verts) - b) <= tol) & (
+        np.abs(np.einsum("ij,ij->i", A, verts[following]) - b) <= tol
+    )
+    bad = ~(unit & on_line)
+    width = int(count.max(initial=0))
+    slot = index - offsets[owner]
+    padded = np.full((len(count), width, 2), np.nan)
+    padded[owner, slot] = verts
+    # every row against every vertex of its own cell (padding is NaN and never fails)
+    lhs = np.einsum("rk,rwk->rw", A, padded[owner])
+    with np.errstate(invalid="ignore"):
+        bad |= np.any(lhs > (b + tol)[:, None], axis=1)
+    return tuple(int(c) for c in np.unique(owner[bad]))
 
 
 def check_geometry(plan: Plan, space: FreeSpace, tree_samples: np.ndarray | None = None) -> Geometry:
@@ -378,6 +422,7 @@ def check_geometry(plan: Plan, space: FreeSpace, tree_samples: np.ndarray | None
         cells_outside_bounds=tuple(outside),
         edges_outside_cell=tuple(off_edge),
         bad_barriers=tuple(bad_rows),
+        rows_not_polygon=rows_not_polygon(cells, tol),
         blocked_edges=tuple(int(i) for i in children[~free]),
         samples_unchanged=unchanged,
     )
@@ -646,6 +691,11 @@ class VerifyReport:
             (g.cells_outside_bounds, "cells reach outside the bounds"),
             (g.edges_outside_cell, "cells do not contain their edge"),
             (g.bad_barriers, "cells have a barrier row that is not unit-norm or not positive at x_j"),
+            (
+                g.rows_not_polygon,
+                "cells have half-plane rows that are not their polygon (the runtime reads the rows, "
+                "the certificate was checked on the polygon)",
+            ),
             (g.blocked_edges, "tree edges (by child node) are not free"),
         ):
             if cells:
@@ -771,6 +821,7 @@ class VerifyReport:
                 "cells_outside_bounds": list(g.cells_outside_bounds),
                 "edges_outside_cell": list(g.edges_outside_cell),
                 "bad_barriers": list(g.bad_barriers),
+                "rows_not_polygon": list(g.rows_not_polygon),
                 "blocked_edges": list(g.blocked_edges),
                 "samples_unchanged": g.samples_unchanged,
             },

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import copy
+import fcntl
 import functools
 import os
 from pathlib import Path
@@ -42,6 +43,31 @@ def small_spec() -> dict:
 def build_map(spec: dict, **params) -> map_.Map:
     """Run the map stage on a spec dict."""
     return map_.run(map_.MapSource(spec=spec, file="test.yaml", sha256="0"), map_.Params(**params))
+
+
+EXAMPLE_MAPS = ("kitchen", "storeroom", "paper_sim_circles", "paper_b_circles")
+
+
+def example_plan(name: str, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """``plan.npz`` of ``maps/NAME.yaml`` planned by the pipeline as ``bearnav plan`` does (read only).
+
+    Planned once per test run, not once per worker: under pytest-xdist the workers share the
+    run's temp root, and a file lock makes the first worker plan while the others wait for it.
+    """
+    from bearnav_cli import pipeline
+    from bearnav_cli.cli import read_map_source
+
+    base = tmp_path_factory.getbasetemp()
+    root = (base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base) / "example-plans"
+    root.mkdir(exist_ok=True)
+    folder = root / name
+    with open(root / f"{name}.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file closes
+        done = folder / "planned"
+        if not done.exists():
+            pipeline.plan(read_map_source(REPO / "maps" / f"{name}.yaml"), folder)
+            done.touch()
+    return folder / "plan.npz"
 
 
 @functools.cache

@@ -16,7 +16,7 @@ from bearnav_cli.errors import InvalidParamsError
 from bearnav_cli.geometry import FreeSpace
 from bearnav_cli.stages import simulate
 
-from .conftest import REPO
+from .conftest import EXAMPLE_MAPS, REPO, example_plan
 from .handmade import cell_polygons, first_cells, hand_map, hand_plan
 
 FAST = verify.Params(n_starts=40, seed=3)
@@ -251,19 +251,14 @@ def test_kitchen_plan_is_certified_and_covers_the_map(kitchen):
     assert np.all(report.rollouts.path_length[done] + finish >= routes[done] - 1e-9)  # routes are shortest
 
 
-EXAMPLE_MAPS = ("kitchen", "storeroom", "paper_sim_circles", "paper_b_circles")
-
-
 @pytest.fixture(scope="module", params=EXAMPLE_MAPS)
 def example(request, tmp_path_factory):
     """Every example map planned by the pipeline (as `bearnav plan` does) and verified from 200 random starts."""
     from bearnav_cli import artifacts, pipeline
-    from bearnav_cli.cli import read_map_source
 
-    out = tmp_path_factory.mktemp(request.param)
-    pipeline.plan(read_map_source(REPO / "maps" / f"{request.param}.yaml"), out)
-    plan = artifacts.load(out / "plan.npz").artifact
-    tree = artifacts.load(out / "tree.npz").artifact
+    path = example_plan(request.param, tmp_path_factory)
+    plan = artifacts.load(path).artifact
+    tree = artifacts.load(path.with_name("tree.npz")).artifact
     # at the map's own speed, as `bearnav verify` drives it (the paper maps' units are not metres)
     speed = pipeline.resolve_params("simulate", plan.map.params).speed
     return plan, verify.run(plan, verify.Params(n_starts=200, speed=speed), tree_samples=tree.collision_samples)
@@ -330,3 +325,50 @@ def test_a_breach_from_the_certified_domain_fails_verify(monkeypatch):
     report = verify.run(plan, verify.Params(n_starts=20, dynamics="unicycle"))
     assert report.breaches.sum() == report.in_domain.sum() > 0
     assert report.failed and any("breached" in why for why in report.reasons)
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_rows_widened_behind_the_polygon_fail_verify_in_that_cell(seed):
+    # the hostile edit of issue 27: a cell's rows pushed out by 0.2, its vertices (where the
+    # certificate is checked) and every margin kept; the runtime would take points outside the
+    # certified polygon as inside the cell
+    from bearnav_cli.runtime import PlanArrays, cell_policy
+
+    from .conftest import random_plan
+
+    plan = random_plan(seed)
+    cells = plan.cells
+    assert verify.rows_not_polygon(cells, plan.map.tol) == ()  # what the planner writes passes
+    c = int(np.flatnonzero(cells.parent[cells.cell_node] >= 0)[len(cells.cell_node) // 2])
+    r0, r1 = cells.cell_row_offsets[c], cells.cell_row_offsets[c + 1]
+    widened = cells.cell_b.copy()
+    widened[r0:r1] += 0.2
+    edited = replace(plan, cells=replace(cells, cell_b=widened))
+    assert verify.rows_not_polygon(edited.cells, plan.map.tol) == (c,)
+    report = verify.run(edited, verify.Params(n_starts=0))
+    assert report.failed and report.geometry.rows_not_polygon == (c,)
+    assert any("rows that are not their polygon" in r and str(c) in r for r in report.reasons)
+    # the point the runtime would misplace: beyond an edge of the polygon, inside the widened rows
+    verts = cells.vertices(c)
+    A, b = cells.rows(c)
+    outside = 0.5 * (verts[0] + verts[1]) + 0.1 * A[0]
+    arrays = PlanArrays.from_plan(edited)
+    assert cell_policy.contains(arrays, np.array([c]), outside[None, :]).all()
+
+
+def test_rows_of_a_non_convex_polygon_fail_even_when_each_lies_on_its_edge():
+    # a dart: every row is the unit-normal line of its own edge, but the reflex vertex breaks a row
+    from bearnav_cli.geometry import polygon_rows
+
+    dart = np.array([[0.0, 0.0], [4.0, 0.0], [2.0, 1.0], [4.0, 4.0], [0.0, 4.0]])
+    A, b = polygon_rows(dart)
+
+    class Dart:
+        cell_A, cell_b, cell_vertices = A, b, dart
+        cell_vertex_offsets = cell_row_offsets = np.array([0, 5])
+
+    assert verify.rows_not_polygon(Dart, 1e-9) == (0,)
+    square = dart[[0, 1, 3, 4]]
+    Dart.cell_A, Dart.cell_b = polygon_rows(square)
+    Dart.cell_vertices, Dart.cell_vertex_offsets = square, np.array([0, 4])
+    assert verify.rows_not_polygon(Dart, 1e-9) == ()
