@@ -509,10 +509,12 @@ def _too_big(what: str, need: float, where: str, fits: str) -> ResourceLimitErro
 def _check_rrtstar(params: rrtstar.Params, map_: Map, where: dict[str, str]) -> None:
     from bearnav_cli.stages import rrtstar
 
-    xmin, ymin, xmax, ymax = map_.bounds
+    xmin, ymin, xmax, ymax = (float(v) for v in map_.bounds)  # Python floats overflow to inf quietly
     width, height = xmax - xmin, ymax - ymin
     cell = params.step / rrtstar.BUCKETS_PER_STEP
-    grid = math.ceil(width / cell) * math.ceil(height / cell)
+    # in floats first: a tiny step makes counts beyond any float (or inf), and those are refused
+    rough = (width / cell) * (height / cell)
+    grid = math.ceil(width / cell) * math.ceil(height / cell) if rough <= MAX_GRID_CELLS else rough
     if grid > MAX_GRID_CELLS:
         smallest = rrtstar.BUCKETS_PER_STEP * math.sqrt(width * height / MAX_GRID_CELLS)
         raise ResourceLimitError(
@@ -520,15 +522,17 @@ def _check_rrtstar(params: rrtstar.Params, map_: Map, where: dict[str, str]) -> 
             f"(limit {MAX_GRID_CELLS:.0e}); use at least {smallest:.3g}",
             field=where["step"],
         )
+    rough = 0.0 if params.border_spacing == 0 else 2.0 * (width + height) / params.border_spacing
     border = 0 if params.border_spacing == 0 else 2 * (math.ceil(width / params.border_spacing)
-                                                      + math.ceil(height / params.border_spacing))  # fmt: skip
+                                                      + math.ceil(height / params.border_spacing)) \
+        if rough <= 2 * MAX_BORDER_SAMPLES else rough  # fmt: skip
     if border > MAX_BORDER_SAMPLES:
         smallest = 2 * (width + height) / MAX_BORDER_SAMPLES
         derived = "border_spacing" not in where.get("_explicit", "").split(",")
         field = where["step"] if derived else where["border_spacing"]
         hint = f"(step/10 = {params.border_spacing:g}) " if derived else ""
         raise ResourceLimitError(
-            f"border pseudo-samples every {params.border_spacing:g} {hint}would be {border:,} points (limit "
+            f"border pseudo-samples every {params.border_spacing:g} {hint}would be {border:,.0f} points (limit "
             f"{MAX_BORDER_SAMPLES:,}); use a --border-spacing of at least {smallest:.3g} (or 0: none)",
             field=field,
         )

@@ -260,25 +260,12 @@ def certificate_problems(plan: Plan, cert: Certificates) -> dict[int, str]:
 
 
 def flagged_cells(plan: Plan) -> dict[str, list[int]]:
-    """Cells flagged by decomposition (ALGORITHMS §5.4–5.5), by flag name.
+    """Cells flagged by decomposition (ALGORITHMS §5.4–5.5), by flag name, from the ``cell_flags`` bits.
 
-    Taken from the lists the stages wrote into ``plan.stats`` (``stats["flagged"][name]`` as
-    synthesize writes it, or ``stats[name]`` as decompose does) when present, else from the
-    ``cell_flags`` bits.
+    Only hashed data: the manifest's ``stats`` lists (which synthesize writes from the same bits)
+    are not covered by the content hash, so an edit there must not change what verify says.
     """
-    stats = plan.stats if isinstance(plan.stats, dict) else {}
-    nested = stats.get("flagged") if isinstance(stats.get("flagged"), dict) else {}
-    out = {}
-    for flag in CellFlag:
-        if flag == CellFlag.NONE:
-            continue
-        name = flag.name.lower()
-        listed = nested.get(name, stats.get(name))
-        if isinstance(listed, list):
-            out[name] = [int(c) for c in listed]
-        else:
-            out[name] = plan.cells.flagged(flag)
-    return out
+    return {flag.name.lower(): plan.cells.flagged(flag) for flag in CellFlag if flag != CellFlag.NONE}
 
 
 # --------------------------------------------------------------------------- geometry

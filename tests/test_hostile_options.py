@@ -43,6 +43,9 @@ OPTION_CASES = [
     ("rrtstar", "map", ["--iterations", str(10**12)], "--iterations"),
     ("rrtstar", "map", ["--iterations", str(10**7 + 1)], "--iterations"),
     ("rrtstar", "map", ["--step", "1e-4"], "--step"),
+    ("rrtstar", "map", ["--step", "1e-300"], "--step"),  # a grid count beyond any float (was exit 70)
+    ("rrtstar", "map", ["--step", "1e-320"], "--step"),
+    ("rrtstar", "map", ["--step", "1e-300", "--border-spacing", "1e-310"], "--"),
     ("rrtstar", "map", ["--step", "0"], "--step"),
     ("rrtstar", "map", ["--step", "-1"], "--step"),
     ("rrtstar", "map", ["--step", "1e300"], "--step"),

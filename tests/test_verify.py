@@ -372,3 +372,15 @@ def test_rows_of_a_non_convex_polygon_fail_even_when_each_lies_on_its_edge():
     Dart.cell_A, Dart.cell_b = polygon_rows(square)
     Dart.cell_vertices, Dart.cell_vertex_offsets = square, np.array([0, 4])
     assert verify.rows_not_polygon(Dart, 1e-9) == ()
+
+
+def test_verify_reads_flags_from_the_hashed_bits_not_the_manifest_stats():
+    # the manifest's stats are outside the content hash: an edit there (issue 27: "invalid literal
+    # for int()" was exit 70) must change nothing verify says
+    from .conftest import random_plan
+
+    plan = random_plan(1)
+    honest = verify.flagged_cells(plan)
+    edited = replace(plan, stats={**plan.stats, "flagged": {"blind_spot": ["x", "y"]}, "few_landmarks": "z"})
+    assert verify.flagged_cells(edited) == honest
+    assert honest["blind_spot"] == plan.cells.flagged(CellFlag.BLIND_SPOT)
