@@ -235,3 +235,48 @@ def test_a_bad_facing_is_one_line_from_the_cli(cli, write_map):
     result = cli("map", write_map(spec), "-o", "m.json")
     assert result.exit_code == 3
     assert "landmarks[2].facing" in result.output and len(result.output.strip().splitlines()) == 1
+
+
+CORNERS = [[10.0, 10.0], [20.0, 10.0], [20.0, 20.0], [10.0, 20.0]]
+
+
+@pytest.mark.parametrize(
+    "kwargs, field",
+    [
+        ({"tag_id": math.nan}, "tag_id"),
+        ({"tag_id": "seven"}, "tag_id"),
+        ({"tag_id": 3.5}, "tag_id"),
+        ({"tag_id": -1}, "tag_id"),
+        ({"corners": [["a", "b"]] * 4}, "corners"),
+        ({"corners": [[1.0, 2.0], [3.0]]}, "corners"),
+        ({"pose": (np.eye(3) * 2.0, np.ones(3))}, "pose"),  # a scaling, not a rotation
+        ({"pose": (np.diag([1.0, 1.0, -1.0]), np.ones(3))}, "pose"),  # a reflection
+        ({"pose": (np.eye(3), np.full(3, 1.5e308))}, "pose"),  # finite, but its length is not
+        ({"pose": (np.eye(3), [1.0, math.nan, 0.0])}, "pose"),
+        ({"pose": (np.eye(3), ["x", 0.0, 0.0])}, "pose"),
+    ],
+)
+def test_a_bad_detection_is_one_clear_error_naming_the_field(kwargs, field):
+    # issue 27 item 8: these gave a bare ValueError, a NaN bearing marked visible, or a heading from
+    # a matrix that is not a rotation
+    args = {"tag_id": 7, "corners": CORNERS, **kwargs}
+    with pytest.raises(InvalidParamsError) as info:
+        Detection(**args)
+    assert info.value.field == field
+
+
+def test_a_good_pose_and_a_whole_float_id_are_kept():
+    det = Detection(7.0, CORNERS, (_rz(0.4), [0.1, 0.2, 3.0]))
+    assert det.tag_id == 7 and isinstance(det.tag_id, int)
+    assert np.allclose(det.pose[0], _rz(0.4))
+
+
+def test_a_far_pose_gives_a_finite_bearing_or_none():
+    intr, mount = Intrinsics.from_fov(640, 480, math.radians(60.0)), Mount.forward(height=0.3)
+    for t in ([1e300, 0.0, 0.0], [0.0, 0.0, 1e300], np.full(3, 1e300), [1e-300, 0.0, 0.0]):
+        det = Detection(int(NUMBERS[0]), [[300.0, 220.0], [340.0, 220.0], [340.0, 260.0], [300.0, 260.0]],
+                        (np.eye(3), t))  # fmt: skip
+        with np.errstate(all="raise"):  # no RuntimeWarning either
+            obs = observe([det], intr, mount, _tags(), heading=HEADING)
+        assert np.isfinite(obs.bearings).all()
+        assert not obs.visible.any() or np.isclose(np.linalg.norm(obs.bearings[obs.visible], axis=1), 1.0).all()

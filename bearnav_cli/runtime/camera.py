@@ -34,7 +34,7 @@ from bearnav_cli.errors import InvalidParamsError
 from bearnav_cli.runtime.bearing import wrap
 
 __all__ = [
-    "BEHIND_MARGIN", "CORNER_SLACK", "Detection", "Intrinsics", "Mount", "Observation", "TagMap", "heading_from_tag",
+    "BEHIND_MARGIN", "CORNER_SLACK", "ROTATION_TOL", "Detection", "Intrinsics", "Mount", "Observation", "TagMap", "heading_from_tag",
     "observe", "project_world", "tag_corners_world", "tag_number", "tag_pose_from_opencv", "tag_rotation_world",
 ]  # fmt: skip
 
@@ -48,6 +48,10 @@ BEHIND_MARGIN = math.radians(10.0)
 CORNER_SLACK = 0.5
 #: Per-tag headings that agree within this (rad) are averaged; one that disagrees is left out.
 HEADING_AGREEMENT = math.radians(10.0)
+#: How far a pose's ``camera_R_tag`` may be from a rotation (``‖RᵀR − I‖_max`` and ``|det R − 1|``): a
+#: detector's rotation is orthonormal to float precision; a matrix further off is not a rotation, and
+#: the heading taken from it would mean nothing.
+ROTATION_TOL = 1e-6
 #: Distortion models of ``sensor_msgs/CameraInfo`` understood (both are the Brown–Conrady model).
 DISTORTION_MODELS = ("plumb_bob", "rational_polynomial")
 
@@ -491,17 +495,39 @@ class Detection:
     pose: tuple | None = None
 
     def __post_init__(self) -> None:
-        corners = np.array(self.corners, float)
+        corners = _numbers(self.corners, "corners")
         if corners.shape != (4, 2):
             raise InvalidParamsError(f"expected 4 corners (4, 2), got shape {corners.shape}", field="corners")
         corners.flags.writeable = False
         object.__setattr__(self, "corners", corners)
-        object.__setattr__(self, "tag_id", int(self.tag_id))
+        tag_id = self.tag_id
+        if isinstance(tag_id, (bool, np.bool_)) or not isinstance(tag_id, (int, np.integer, float, np.floating)) \
+                or not (math.isfinite(tag_id) and float(tag_id).is_integer() and tag_id >= 0):  # fmt: skip
+            raise InvalidParamsError(f"expected a whole number 0 or more, got {tag_id!r}", field="tag_id")
+        object.__setattr__(self, "tag_id", int(tag_id))
         if self.pose is not None:
-            r, t = (np.array(v, float) for v in self.pose)
+            if not isinstance(self.pose, (tuple, list)) or len(self.pose) != 2:
+                raise InvalidParamsError("expected (camera_R_tag (3, 3), camera_t_tag (3,))", field="pose")
+            r, t = (_numbers(v, "pose") for v in self.pose)
             if r.shape != (3, 3) or t.reshape(-1).shape != (3,):
                 raise InvalidParamsError("expected (camera_R_tag (3, 3), camera_t_tag (3,))", field="pose")
-            object.__setattr__(self, "pose", (r, t.reshape(3)))
+            t = t.reshape(3)
+            with np.errstate(over="ignore", invalid="ignore"):
+                off = max(float(np.max(np.abs(r.T @ r - np.eye(3)))), abs(float(np.linalg.det(r)) - 1.0))
+                rng = math.hypot(*t)  # scaled: no overflow for a far but finite tag
+            if not off <= ROTATION_TOL:
+                raise InvalidParamsError(f"camera_R_tag is not a rotation (off by {off:.3g})", field="pose")
+            if not math.isfinite(rng):
+                raise InvalidParamsError("camera_t_tag must be finite, with a finite length (m)", field="pose")
+            object.__setattr__(self, "pose", (r, t))
+
+
+def _numbers(value: Any, name: str) -> np.ndarray:
+    """``value`` as a float array, or the project's one-line error naming ``name`` (text, ragged lists)."""
+    try:
+        return np.array(value, float)
+    except (TypeError, ValueError):
+        raise InvalidParamsError(f"expected numbers, got {value!r:.60}", field=name) from None
 
 
 @dataclass(frozen=True, eq=False)
@@ -633,10 +659,10 @@ def observe(detections: Any, intrinsics: Intrinsics, mount: Mount, tags: TagMap,
         for (k, det), r in zip(accepted, ray, strict=True):
             v = mount.rotation @ r
             if det.pose is not None and np.all(np.isfinite(det.pose[1])):
-                v = mount.translation + v * float(np.linalg.norm(det.pose[1]))
+                v = mount.translation + v * math.hypot(*det.pose[1])
             w = (world_r_robot @ v)[:2]
             norm = math.hypot(w[0], w[1])
-            if norm < 1e-12:  # straight up or down: no direction on the floor
+            if not 1e-12 <= norm < math.inf:  # straight up or down: no direction on the floor
                 continue
             b = w / norm
             f = tags.facing[k]
