@@ -34,8 +34,9 @@ from bearnav_cli.errors import InvalidParamsError
 from bearnav_cli.runtime.bearing import wrap
 
 __all__ = [
-    "BEHIND_MARGIN", "CORNER_SLACK", "ROTATION_TOL", "Detection", "Intrinsics", "Mount", "Observation", "TagMap", "heading_from_tag",
-    "observe", "project_world", "tag_corners_world", "tag_number", "tag_pose_from_opencv", "tag_rotation_world",
+    "BEHIND_MARGIN", "CORNER_SLACK", "ROTATION_TOL", "Detection", "Intrinsics", "Mount", "Observation", "TagMap",
+    "heading_from_tag", "observe", "project_world", "tag_corners_world", "tag_number", "tag_pose_from_opencv",
+    "tag_rotation_world",
 ]  # fmt: skip
 
 #: A detection is rejected as seen from behind when its world bearing points past the tag's plane,
