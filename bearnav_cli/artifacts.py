@@ -29,6 +29,7 @@ import os
 import platform
 import re
 import signal
+import stat
 import threading
 import zipfile
 from collections.abc import Iterator
@@ -40,6 +41,7 @@ import numpy as np
 
 __all__ = [
     "ARTIFACT_FORMAT",
+    "read_input",
     "atomic_output",
     "atomic_write",
     "cache_key",
@@ -846,17 +848,49 @@ _NPY_MAGIC = b"\x93NUMPY"
 _ZIP_MAGIC = (b"PK\x03\x04", b"PK\x05\x06")
 
 
-def _read_file(path: Path) -> bytes:
-    if path.is_dir():
-        raise ArtifactError("is a folder, not an artifact file", file=str(path))
+def read_input(path: str | os.PathLike, error: Callable[..., Exception] = ArtifactError, what: str = "file",
+               field: str | None = None) -> bytes:  # fmt: skip
+    """The bytes of an input file: a regular file no larger than :func:`memory_budget`, or one clear error.
+
+    A device (``/dev/zero``), a FIFO or a socket is refused from its ``stat`` without opening it
+    (reading one never ends, or blocks for ever), and so is a file larger than a run may hold.
+
+    Parameters
+    ----------
+    path : path-like
+    error : callable
+        The error class raised, called as ``error(message, file=path, field=field)``
+        (:class:`~bearnav_cli.errors.ArtifactError` or :class:`~bearnav_cli.errors.InvalidMapError`).
+    what : str
+        What the file is, for the message (``"file"``, ``"image"``).
+    field : str, optional
+        The field that named the file (a map's ``image``), for the message.
+    """
+    path = Path(path)
+    where = {"file": str(path), "field": field}
+    try:
+        info = path.stat()
+    except FileNotFoundError:
+        raise error(f"no such {what}", **where) from None
+    except OSError as exc:
+        raise error(f"cannot read the {what} ({exc.strerror or exc})", **where) from None
+    if stat.S_ISDIR(info.st_mode):
+        raise error(f"is a folder, not a{'n' if what[0] in 'aeiou' else ''} {what}", **where)
+    if not stat.S_ISREG(info.st_mode):
+        raise error("not a regular file (a device, FIFO or socket): bearnav reads only files", **where)
+    budget = memory_budget()
+    if info.st_size > budget:
+        raise error(f"{human_bytes(info.st_size)}, more than the {human_bytes(budget)} a run may use", **where)
     try:
         return path.read_bytes()
-    except FileNotFoundError:
-        raise ArtifactError("no such file", file=str(path)) from None
     except PermissionError:
-        raise ArtifactError("cannot read the file (permission denied)", file=str(path)) from None
+        raise error(f"cannot read the {what} (permission denied)", **where) from None
     except OSError as exc:
-        raise ArtifactError(f"cannot read the file ({exc.strerror or exc})", file=str(path)) from None
+        raise error(f"cannot read the {what} ({exc.strerror or exc})", **where) from None
+
+
+def _read_file(path: Path) -> bytes:
+    return read_input(path, ArtifactError)
 
 
 def _parse_json(path: Path, data: bytes) -> tuple[dict, dict[str, Any]]:

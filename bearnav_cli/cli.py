@@ -356,10 +356,9 @@ def main(
 
 
 def _read_bytes(path: Path, field: str | None = None, what: str = "file") -> bytes:
-    try:
-        return path.read_bytes()
-    except OSError as exc:
-        raise InvalidMapError(f"cannot read {what} ({exc.strerror or exc})", file=str(path), field=field) from exc
+    from bearnav_cli import artifacts
+
+    return artifacts.read_input(path, InvalidMapError, what, field)
 
 
 def _read_yaml(path: Path) -> tuple[Any, bytes]:

@@ -151,6 +151,11 @@ def _unreadable(src: Path, dst: Path) -> Path:
     return dst
 
 
+def _fifo(src: Path, dst: Path) -> Path:
+    os.mkfifo(dst)  # reading it would block for ever: refused from its stat, never opened
+    return dst
+
+
 def _manifest(change: Callable[[dict], Any], rehashed: bool = False) -> Callable[[Path, Path], Path]:
     """A manifest edit of an npz (``change`` may return a raw replacement of the manifest entry)."""
 
@@ -227,6 +232,7 @@ DAMAGES: dict[str, Damage] = {
     "folder": Damage(_folder, ALL_KINDS, ("folder",)),
     "missing": Damage(_missing, ALL_KINDS, ("no such file",)),
     "unreadable": Damage(_unreadable, ALL_KINDS, ("permission",)),
+    "fifo": Damage(_fifo, ALL_KINDS, ("regular file",)),
     "no-manifest": Damage(_without_manifest, NPZ_KINDS, ("manifest",)),
     "manifest-not-json": Damage(_manifest(lambda m: np.array("{not json")), NPZ_KINDS, ("manifest",)),
     "manifest-a-list": Damage(_manifest(lambda m: np.array("[1, 2]")), NPZ_KINDS, ("manifest",)),

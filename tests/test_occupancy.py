@@ -384,3 +384,23 @@ def test_grid_obstacles_bad_image_and_bad_policy():
     with pytest.raises(BearnavError) as err:
         grid_obstacles(meta(), p5(np.zeros((3, 4))), file="map.yaml", image_name="map.pgm", unknown="maybe")
     assert err.value.field == "unknown"
+
+
+@pytest.mark.parametrize("special", ["device", "fifo", "folder"])
+def test_a_grid_image_that_is_not_a_regular_file_is_one_line_naming_it(cli, tmp_path, special):
+    """Issue 27 item 5: ``image: /dev/zero`` ran out of memory and a FIFO hung for ever."""
+    import os
+
+    target = {"device": "/dev/zero", "fifo": str(tmp_path / "map.pgm"), "folder": str(tmp_path / "pics")}[special]
+    if special == "fifo":
+        os.mkfifo(target)
+    elif special == "folder":
+        os.mkdir(target)
+    grid = tmp_path / "grid.yaml"
+    grid.write_text(f"image: {target}\nresolution: 0.05\norigin: [0, 0, 0]\nnegate: 0\n"
+                    "occupied_thresh: 0.65\nfree_thresh: 0.2\n")  # fmt: skip
+    result = cli("map", grid, "--goal", "1,1", "-o", tmp_path / "map.json")
+    assert result.exit_code == 3, result.output
+    line = result.output.strip()
+    assert len(line.splitlines()) == 1 and target in line and "image" in line, line
+    assert not (tmp_path / "map.json").exists()
