@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import contextlib
 import errno
+import functools
 import hashlib
 import io
 import json
@@ -491,10 +492,28 @@ def _temp_file(path: Path) -> tuple[int, Path]:
 
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.bearnav-{os.getpid()}-", suffix=f".tmp{path.suffix}",
                                dir=path.parent)  # fmt: skip
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; an artifact is as readable as any other file
+    # mkstemp makes 0600; an artifact is as readable as any other file. fchmod on the descriptor:
+    # a chmod by path could reach another file swapped in under that name in a shared folder
+    os.fchmod(fd, 0o666 & ~_umask())
     return fd, Path(tmp)
+
+
+@functools.cache
+def _umask() -> int:
+    """The process's umask, read without changing it where Linux shows it (``/proc/self/status``).
+
+    Elsewhere it is read the only portable way, by setting and restoring it, once per process.
+    """
+    try:
+        with open("/proc/self/status", encoding="ascii", errors="replace") as status:
+            for line in status:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    except (OSError, ValueError, IndexError):
+        pass
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
 
 
 def _write_temp(path: Path, write: Callable[[io.BufferedWriter], None]) -> Path:
