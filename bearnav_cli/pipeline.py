@@ -15,6 +15,7 @@ from __future__ import annotations
 import dataclasses
 import importlib
 import math
+import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -800,6 +801,20 @@ def compute(
     return made
 
 
+def _relative_to_output(input_path: str | None, out: Path) -> str | None:
+    """The input's path as the manifest records it: relative to the output's folder.
+
+    An artifact shared with others then reveals no absolute path of the machine that made it, and
+    stays right when its folder moves together with its inputs.
+    """
+    if input_path is None:
+        return None
+    try:
+        return os.path.relpath(os.path.abspath(input_path), os.path.abspath(out.parent))
+    except ValueError:  # another drive (Windows): no relative path exists
+        return input_path
+
+
 def _run_and_save(
     stage: Stage,
     payload: Any,
@@ -834,7 +849,7 @@ def _run_and_save(
         stage=stage.name,
         stage_version=stage.module.VERSION,
         params=params_json,
-        input_path=input_path,
+        input_path=_relative_to_output(input_path, out),
         input_hash=input_hash,
         summary=summary,
         elapsed_s=elapsed,

@@ -303,3 +303,16 @@ def test_a_written_file_has_the_umasks_mode_and_the_umask_is_left_alone(tmp_path
     finally:
         os.umask(old)
         artifacts._umask.cache_clear()
+
+
+def test_manifests_record_the_input_relative_to_the_artifact(cli, write_map, small_spec, tmp_path):
+    """Issue 27 (security): a shared artifact does not reveal the absolute paths of the machine that made it."""
+    import os
+
+    path = write_map(small_spec)
+    out = tmp_path / "deep" / "p"
+    assert cli("-q", "plan", os.path.abspath(path), "-o", out).exit_code == 0
+    for name, source in (("map.json", path), ("tree.npz", out / "map.json"), ("plan.npz", out / "cells.npz")):
+        recorded = artifacts.read_manifest(out / name)["input"]["path"]
+        assert not os.path.isabs(recorded), (name, recorded)
+        assert (out / recorded).resolve() == source.resolve(), (name, recorded)
