@@ -19,6 +19,7 @@ import shapely
 from bearnav_cli.geometry import FreeSpace
 
 __all__ = [
+    "MAX_ROUTE_VERTICES",
     "route_lengths",
     "sample_starts",
 ]
@@ -66,6 +67,12 @@ def sample_starts(space: FreeSpace, goal: np.ndarray, count: int, rng: np.random
         found.append(p[keep])
         total += int(keep.sum())
     return np.concatenate(found)[:count]
+
+
+#: Most corners of the goal's free component the visibility graph is built on. The graph tests every
+#: pair (``n²/2``): 5,000 corners are 12.5 M pairs, about a second and a few hundred MB; a map of
+#: 2,000 small discs has over 200,000 corners (tens of GB). Beyond it the routes are not computed.
+MAX_ROUTE_VERTICES = 5000
 
 
 def _ring_vertices(region: shapely.Polygon) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -125,7 +132,9 @@ def route_lengths(space: FreeSpace, goal: np.ndarray, starts: np.ndarray) -> np.
     Returns
     -------
     ndarray, shape (R,)
-        Route lengths (map units); ``inf`` for a start outside the goal's component.
+        Route lengths (map units); ``inf`` for a start outside the goal's component; ``NaN``
+        for every start when the component has more than :data:`MAX_ROUTE_VERTICES` corners
+        (its all-pairs visibility graph would not fit a run's memory or time).
     """
     starts = np.asarray(starts, float).reshape(-1, 2)
     goal = np.asarray(goal, float)
@@ -136,6 +145,8 @@ def route_lengths(space: FreeSpace, goal: np.ndarray, starts: np.ndarray) -> np.
     shapely.prepare(region)
     verts, prev, nxt = _ring_vertices(region)
     n = len(verts)
+    if n > MAX_ROUTE_VERTICES:
+        return np.full(len(starts), np.nan)
     # graph over the vertices plus the goal (index n): tangent at both ends, then visible
     ii, jj = np.triu_indices(n, k=1)
     keep = _tangent(verts[ii], prev[ii], nxt[ii], verts[jj]) & _tangent(verts[jj], prev[jj], nxt[jj], verts[ii])

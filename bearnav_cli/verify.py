@@ -39,7 +39,7 @@ from bearnav_cli.funnel import coverage_domain, reached_parts
 from bearnav_cli.geometry import FreeSpace, inflate
 from bearnav_cli.liveness import Liveness
 from bearnav_cli.liveness import measure as measure_liveness
-from bearnav_cli.routes import route_lengths, sample_starts
+from bearnav_cli.routes import MAX_ROUTE_VERTICES, route_lengths, sample_starts
 from bearnav_cli.runtime import PlanArrays
 from bearnav_cli.stages import simulate
 
@@ -718,6 +718,9 @@ class VerifyReport:
     def notes(self) -> list[str]:
         """What the report adds without failing: the robot outside the certificate, liveness, unreached regions."""
         out = [] if self.uncovered_dynamics is None else [self.uncovered_dynamics]
+        if len(self.route) and np.isnan(self.route).all():
+            out.append(f"the shortest-route ratio was not computed: the free space has more than "
+                       f"{MAX_ROUTE_VERTICES:,} corners (the straight-line ratio is given)")  # fmt: skip
         if self.liveness is not None:
             out.append(self.liveness.summary())
         if self.liveness_note is not None:

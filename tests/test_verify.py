@@ -193,6 +193,17 @@ def test_route_around_one_square_matches_the_hand_value():
     assert lengths[4] == pytest.approx(2 + 2 + math.hypot(2, 1), abs=1e-12)
 
 
+def test_routes_beyond_the_corner_limit_are_nan_and_noted(monkeypatch):
+    # issue 27 item 6: 2,000 discs have 200,000+ corners; the all-pairs graph asked for 44 GiB
+    from bearnav_cli import routes
+
+    space = FreeSpace.from_map(hand_map(obstacles=[[[4, 3], [6, 3], [6, 5], [4, 5]]]))
+    goal, starts = np.array([8.0, 4.0]), np.array([[2.0, 4.0], [2.0, 6.0]])
+    assert np.isfinite(routes.route_lengths(space, goal, starts)).all()
+    monkeypatch.setattr(routes, "MAX_ROUTE_VERTICES", 4)  # the box and the square have 8 corners
+    assert np.isnan(routes.route_lengths(space, goal, starts)).all()
+
+
 def test_route_through_two_staggered_walls():
     """Over the first wall's top end, under the second's bottom end: four bends, by hand."""
     walls = [[[3, 0], [3.5, 0], [3.5, 6], [3, 6]], [[6, 2], [6.5, 2], [6.5, 8], [6, 8]]]
