@@ -125,7 +125,19 @@ def finite_problem(values: Any, allow_nan: bool = False) -> str | None:
 
 
 def at_least(values: Any, low: float, what: str, allow_nan: bool = False) -> str | None:
-    """The first value below ``low`` (or not finite; NaN allowed when ``allow_nan``), described as ``what``."""
+    """The first value below ``low`` (or not finite; NaN allowed when ``allow_nan``), described as ``what``.
+
+    Parameters
+    ----------
+    values : array_like
+        The numbers (any shape, read flat), in whatever unit ``low`` has.
+    low : float
+        The least value allowed.
+    what : str
+        What they must be, for the message (``"zero or positive"``).
+    allow_nan : bool, default False
+        NaN passes (infinities still fail).
+    """
     values = np.asarray(values, float).reshape(-1)
     problem = finite_problem(values, allow_nan)
     if problem is not None:
@@ -135,13 +147,31 @@ def at_least(values: Any, low: float, what: str, allow_nan: bool = False) -> str
 
 
 def in_range(values: np.ndarray, low: int, high: int) -> str | None:
-    """The first integer of ``values`` outside ``low..high`` (inclusive)."""
+    """The first integer of ``values`` outside ``low..high`` (inclusive).
+
+    Parameters
+    ----------
+    values : ndarray of int, shape (M,)
+        Indices or codes.
+    low, high : int
+        The least and the greatest value allowed.
+    """
     k = first((values < low) | (values > high))
     return None if k is None else f"must lie in {low}..{high}, got {int(values[k])} at index {k}"
 
 
 def offsets_problem(offsets: np.ndarray, total: int, count: int) -> str | None:
-    """``count + 1`` offsets from 0, never decreasing, to ``total`` (coords + offsets, DESIGN §3.1)."""
+    """``count + 1`` offsets from 0, never decreasing, to ``total`` (coords + offsets, DESIGN §3.1).
+
+    Parameters
+    ----------
+    offsets : ndarray of int, shape (count + 1,)
+        Where each item's rows begin.
+    total : int
+        The number of rows (``len(coords)``).
+    count : int
+        The number of items.
+    """
     if len(offsets) != count + 1:
         return f"expected {count + 1} offsets, got {len(offsets)}"
     if offsets[0] != 0 or offsets[-1] != total or np.any(np.diff(offsets) < 0):

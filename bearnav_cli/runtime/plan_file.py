@@ -278,6 +278,15 @@ def shape_problem(kind: str, entries: dict[str, Any]) -> tuple[str, str] | None:
 def check_entries(kind: str, entries: dict[str, Any], file: str) -> None:
     """Every entry of ``schema.ENTRIES[kind]`` there, with its dtype kind and dimensions, and no other.
 
+    Parameters
+    ----------
+    kind : str
+        The artifact kind (``"plan"``), a key of ``schema.ENTRIES``.
+    entries : dict
+        The data entries (:func:`parse_npz`): 0-d texts as ``str``, the rest arrays.
+    file : str
+        The file, for the errors.
+
     Raises
     ------
     ArtifactError
