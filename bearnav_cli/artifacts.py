@@ -30,9 +30,7 @@ import os
 import platform
 import re
 import signal
-import stat
 import threading
-import zipfile
 from collections.abc import Iterator
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -42,11 +40,9 @@ import numpy as np
 
 __all__ = [
     "ARTIFACT_FORMAT",
-    "read_input",
     "atomic_output",
     "atomic_write",
     "cache_key",
-    "canonical_json",
     "check_output_file",
     "check_output_folder",
     "content_hash",
@@ -54,15 +50,12 @@ __all__ = [
     "embedded_map_text",
     "entries_of",
     "fresh",
-    "human_bytes",
     "Kind",
     "kind_of_schema",
     "KINDS",
     "load",
     "Loaded",
     "make_manifest",
-    "MANIFEST_FIELDS",
-    "memory_budget",
     "metrics_path",
     "output_files",
     "output_folder",
@@ -94,7 +87,9 @@ from bearnav_cli.datatypes import (
     validate_artifact,
 )
 from bearnav_cli.errors import ArtifactError, FolderBusyError, OutputPathError
-from bearnav_cli.runtime.schema import ENTRIES, SCHEMAS, Entry
+from bearnav_cli.runtime import invariants, plan_file
+from bearnav_cli.runtime.plan_file import canonical_json, memory_budget
+from bearnav_cli.runtime.schema import ENTRIES, SCHEMAS, STAGES, Entry
 
 
 @dataclass(frozen=True)
@@ -128,17 +123,17 @@ class Kind:
         return Path(self.filename).suffix
 
 
-#: Every artifact kind: its file and the stage that writes it here; its schema name and entries come
-#: from the one declaration, :mod:`bearnav_cli.runtime.schema`.
+#: Every artifact kind: its file here; its schema name, entries and the stage that writes it come from
+#: the one declaration, :mod:`bearnav_cli.runtime.schema`.
 KINDS: dict[str, Kind] = {
-    name: Kind(name, SCHEMAS[name], filename, ENTRIES[name], stage)
-    for name, filename, stage in (
-        ("map", "map.json", "map"),
-        ("tree", "tree.npz", "rrtstar"),
-        ("simplified", "simplified.npz", "simplify"),
-        ("cells", "cells.npz", "decompose"),
-        ("plan", "plan.npz", "synthesize"),
-        ("simulation", "sim.npz", "simulate"),
+    name: Kind(name, SCHEMAS[name], filename, ENTRIES[name], STAGES[name])
+    for name, filename in (
+        ("map", "map.json"),
+        ("tree", "tree.npz"),
+        ("simplified", "simplified.npz"),
+        ("cells", "cells.npz"),
+        ("plan", "plan.npz"),
+        ("simulation", "sim.npz"),
     )
 }
 
@@ -151,21 +146,6 @@ RETIRED_SCHEMAS = {
     "bearnav.plan/2": "one plan-wide exit inset and δ* of millimetres; re-run `bearnav plan MAP.yaml --force` to get "
     "bearnav.plan/3 (per-cell insets and usable tolerances τ_c)",
     "bearnav.sim/1": "runs without their loop constants; re-run `bearnav simulate PLAN.npz --force`",
-}
-
-#: Manifest fields (DESIGN §3.1): name -> (accepted JSON types, required).
-MANIFEST_FIELDS: dict[str, tuple[tuple[type, ...], bool]] = {
-    "schema": ((str,), True),
-    "stage": ((str,), True),
-    "stage_version": ((int,), True),
-    "params": ((dict,), True),
-    "input": ((dict,), True),
-    "content_sha256": ((str,), True),
-    "key": ((str,), True),
-    "software": ((dict,), False),
-    "summary": ((str,), False),
-    "elapsed_s": ((int, float), False),
-    "stats": ((dict,), False),
 }
 
 #: Part of every cache key: bumped when what an artifact holds changes for the same inputs (2: the
@@ -197,51 +177,23 @@ class Loaded:
 # --------------------------------------------------------------------------- hashing
 
 
-def canonical_json(value: Any) -> str:
-    """Deterministic JSON text: sorted keys, no spaces, plain floats."""
-    return json.dumps(value, sort_keys=True, separators=(",", ":"), allow_nan=True)
-
-
 def sha256_text(text: str) -> str:
     """SHA-256 of ``text`` encoded as UTF-8, as 64 lowercase hex digits."""
     return hashlib.sha256(text.encode()).hexdigest()
 
 
-#: Fields of the map document that stay out of every content hash: ``source`` is provenance,
-#: ``params`` the per-stage overrides, which reach each stage's cache key through its resolved
-#: parameters instead (a stage reruns only when what it computes from changes).
-_UNHASHED_MAP_FIELDS = ("source", "params")
-
-
 def content_hash(entries: dict[str, Any], kind: str | None = None) -> str:
     """SHA-256 over data entries in sorted key order (name, dtype, shape and bytes of each).
 
-    The map (``map.json``'s document, or the ``map`` entry every later artifact embeds) is hashed
-    without ``source`` (the YAML's name and hash) and ``params`` (the map's per-stage parameters):
-    editing a comment or ``params: simulate:`` in the YAML reruns the map stage, but an identical
-    map does not invalidate the stages after it, and each stage's own parameters are part of its
-    cache key (:func:`cache_key`).
+    The one implementation is :func:`bearnav_cli.runtime.plan_file.content_hash`, which the robot's
+    loader recomputes too. The map (``map.json``'s document, or the ``map`` entry every later
+    artifact embeds) is hashed without ``source`` (the YAML's name and hash) and ``params`` (the
+    map's per-stage parameters): editing a comment or ``params: simulate:`` in the YAML reruns the
+    map stage, but an identical map does not invalidate the stages after it, and each stage's own
+    parameters are part of its cache key (:func:`cache_key`). ``kind`` is not used: every kind
+    hashes the same way.
     """
-    if "map" in entries:
-        try:
-            document = json.loads(entries["map"])
-        except (TypeError, ValueError):  # a damaged entry: hashed as it is, its loader names the problem
-            document = None
-        if isinstance(document, dict):
-            for name in _UNHASHED_MAP_FIELDS:
-                document.pop(name, None)
-            entries = {**entries, "map": canonical_json(document)}
-    digest = hashlib.sha256()
-    for key in sorted(entries):
-        value = entries[key]
-        if isinstance(value, str):
-            digest.update(f"{key}|str|".encode())
-            digest.update(value.encode())
-        else:
-            array = np.ascontiguousarray(value)
-            digest.update(f"{key}|{array.dtype.str}|{array.shape}|".encode())
-            digest.update(array.tobytes())
-    return digest.hexdigest()
+    return plan_file.content_hash(entries)
 
 
 def cache_key(stage: str, stage_version: int, params: dict, input_hash: str) -> str:
@@ -411,29 +363,13 @@ def _from_entries(kind: str, entries: dict[str, Any], manifest: dict, check_map:
     if kind == "cells":
         return Cells(map=map_, stats=stats, **cell_arrays)
     cells = Cells(map=map_, **cell_arrays)
-    if not np.array_equal(entries["landmarks"], map_.landmarks):
-        raise ArtifactError("landmarks differ from the embedded map's", field="landmarks")
+    problem = invariants.landmarks_problem(entries["landmarks"], map_.landmarks)
+    if problem is not None:
+        raise ArtifactError(problem, field="landmarks")
     return Plan(cells=cells, stats=stats, **{key: entries[key] for key in PLAN_KEYS if key != "landmarks"})
 
 
 # --------------------------------------------------------------------------- memory
-
-
-def memory_budget() -> int:
-    """Bytes a single request may use: half of this machine's physical memory (``os.sysconf``)."""
-    try:
-        return int(os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")) // 2
-    except (ValueError, OSError, AttributeError):  # pragma: no cover - not POSIX
-        return 4 << 30
-
-
-def human_bytes(count: float) -> str:
-    """``"1.5 GB"``."""
-    for unit in ("B", "kB", "MB", "GB", "TB", "PB"):
-        if abs(count) < 1000 or unit == "PB":
-            return f"{count:.3g} {unit}" if unit != "B" else f"{int(count)} B"
-        count /= 1000
-    return f"{count:.3g} EB"  # pragma: no cover
 
 
 # --------------------------------------------------------------------------- writing
@@ -866,46 +802,8 @@ def output_folder(folder: str | os.PathLike) -> Iterator[Path]:
 _NPY_MAGIC = b"\x93NUMPY"
 _ZIP_MAGIC = (b"PK\x03\x04", b"PK\x05\x06")
 
-
-def read_input(path: str | os.PathLike, error: Callable[..., Exception] = ArtifactError, what: str = "file",
-               field: str | None = None) -> bytes:  # fmt: skip
-    """The bytes of an input file: a regular file no larger than :func:`memory_budget`, or one clear error.
-
-    A device (``/dev/zero``), a FIFO or a socket is refused from its ``stat`` without opening it
-    (reading one never ends, or blocks for ever), and so is a file larger than a run may hold.
-
-    Parameters
-    ----------
-    path : path-like
-    error : callable
-        The error class raised, called as ``error(message, file=path, field=field)``
-        (:class:`~bearnav_cli.errors.ArtifactError` or :class:`~bearnav_cli.errors.InvalidMapError`).
-    what : str
-        What the file is, for the message (``"file"``, ``"image"``).
-    field : str, optional
-        The field that named the file (a map's ``image``), for the message.
-    """
-    path = Path(path)
-    where = {"file": str(path), "field": field}
-    try:
-        info = path.stat()
-    except FileNotFoundError:
-        raise error(f"no such {what}", **where) from None
-    except OSError as exc:
-        raise error(f"cannot read the {what} ({exc.strerror or exc})", **where) from None
-    if stat.S_ISDIR(info.st_mode):
-        raise error(f"is a folder, not a{'n' if what[0] in 'aeiou' else ''} {what}", **where)
-    if not stat.S_ISREG(info.st_mode):
-        raise error("not a regular file (a device, FIFO or socket): bearnav reads only files", **where)
-    budget = memory_budget()
-    if info.st_size > budget:
-        raise error(f"{human_bytes(info.st_size)}, more than the {human_bytes(budget)} a run may use", **where)
-    try:
-        return path.read_bytes()
-    except PermissionError:
-        raise error(f"cannot read the {what} (permission denied)", **where) from None
-    except OSError as exc:
-        raise error(f"cannot read the {what} ({exc.strerror or exc})", **where) from None
+#: Every byte of an input file, or one clear error naming it (one reader for the robot and the CLI).
+read_input = plan_file.read_input
 
 
 def _read_file(path: Path) -> bytes:
@@ -928,48 +826,8 @@ def _parse_json(path: Path, data: bytes) -> tuple[dict, dict[str, Any]]:
 
 
 def _parse_npz(path: Path, data: bytes) -> tuple[dict, dict[str, Any]]:
-    if data.startswith(_NPY_MAGIC):
-        raise ArtifactError("is a single .npy array, not an .npz archive", file=str(path))
-    if not data.startswith(_ZIP_MAGIC):
-        raise ArtifactError("not an npz archive (not a zip file)", file=str(path))
-    buffer = io.BytesIO(data)
-    try:
-        with zipfile.ZipFile(buffer) as archive:
-            infos = archive.infolist()
-    except (zipfile.BadZipFile, zipfile.LargeZipFile, OSError, ValueError, EOFError) as exc:
-        raise ArtifactError(f"damaged zip archive ({exc})", file=str(path)) from None
-    declared = sum(info.file_size for info in infos)
-    if declared > memory_budget():
-        raise ArtifactError(f"declares {human_bytes(declared)} of data, more than the {human_bytes(memory_budget())} "
-                            "a load may use", file=str(path))  # fmt: skip
-    for info in infos:
-        if not info.filename.endswith(".npy"):
-            raise ArtifactError(f"unexpected member {info.filename!r} (an npz holds .npy arrays)", file=str(path))
-    arrays: dict[str, np.ndarray] = {}
-    key = None
-    try:
-        with np.load(buffer, allow_pickle=False) as npz:
-            for key in npz.files:
-                arrays[key] = npz[key]
-    except MemoryError:
-        raise ArtifactError("too large to load", file=str(path), field=key) from None
-    except Exception as exc:  # noqa: BLE001 - zlib, zipfile, numpy's format errors: the file is damaged
-        what = f"damaged entry ({type(exc).__name__}: {exc})" if key else f"damaged npz ({type(exc).__name__}: {exc})"
-        raise ArtifactError(what, file=str(path), field=key) from None
-    raw = arrays.pop("manifest", None)
-    if raw is None:
-        raise ArtifactError("no manifest entry (not a bearnav artifact)", file=str(path))
-    if raw.dtype.kind != "U" or raw.ndim != 0:
-        raise ArtifactError(f"expected a 0-d JSON text, got a {raw.ndim}-d {raw.dtype} array", file=str(path),
-                            field="manifest")  # fmt: skip
-    try:
-        manifest = json.loads(str(raw))
-    except json.JSONDecodeError as exc:
-        raise ArtifactError(f"not valid JSON ({exc})", file=str(path), field="manifest") from None
-    if not isinstance(manifest, dict):
-        raise ArtifactError(f"expected a JSON object, got {type(manifest).__name__}", file=str(path), field="manifest")
-    entries = {k: (str(v) if v.dtype.kind == "U" and v.ndim == 0 else v) for k, v in arrays.items()}
-    return manifest, entries
+    # the robot's reader (runtime.plan_file), within this process's budget (a test lowers it)
+    return plan_file.parse_npz(data, str(path), memory_budget())
 
 
 def _read_raw(path: Path) -> tuple[dict, dict[str, Any]]:
@@ -1003,23 +861,7 @@ def _check_manifest(manifest: dict, path: Path, expect: tuple[str, ...] | None) 
     if expect and kind not in expect:
         names = " or ".join(KINDS[w].schema for w in expect)
         raise ArtifactError(f"is a {schema} artifact, expected {names}", file=str(path))
-    for name, (types, required) in MANIFEST_FIELDS.items():
-        if name not in manifest:
-            if required:
-                raise ArtifactError("missing", file=str(path), field=f"manifest.{name}")
-            continue
-        value = manifest[name]
-        if not isinstance(value, types) or (isinstance(value, bool) and bool not in types):
-            wanted = " or ".join("an object" if t is dict else t.__name__ for t in types)
-            raise ArtifactError(f"expected {wanted}, got {type(value).__name__}", file=str(path),
-                                field=f"manifest.{name}")  # fmt: skip
-    if manifest["stage"] != KINDS[kind].stage:
-        raise ArtifactError(f"is {manifest['stage']!r}, but {schema} is written by {KINDS[kind].stage!r}",
-                            file=str(path), field="manifest.stage")  # fmt: skip
-    if not isinstance(manifest["input"].get("content_sha256"), str):
-        raise ArtifactError("expected a hash text", file=str(path), field="manifest.input.content_sha256")
-    if not isinstance(manifest["input"].get("path"), (str, type(None))):
-        raise ArtifactError("expected a path or null", file=str(path), field="manifest.input.path")
+    plan_file.check_manifest_fields(manifest, str(path), KINDS[kind].stage)
     return kind
 
 
@@ -1056,26 +898,11 @@ def load(path: str | os.PathLike, expect: str | tuple[str, ...] | None = None) -
     manifest, entries = _read_raw(path)
     wanted = (expect,) if isinstance(expect, str) else expect
     kind = _check_manifest(manifest, path, wanted)
-    declared = KINDS[kind].entries
-    for key, entry in declared.items():
-        dtype_kind, ndim = entry.kind, entry.ndim
-        if key not in entries:
-            raise ArtifactError("missing entry", file=str(path), field=key)
-        value = entries[key]
-        if dtype_kind == "U":
-            if not isinstance(value, str):
-                raise ArtifactError("expected a JSON text", file=str(path), field=key)
-        elif isinstance(value, str):
-            raise ArtifactError(f"expected a {ndim}-d {dtype_kind} array, got a text", file=str(path), field=key)
-        elif value.dtype.kind != dtype_kind or value.ndim != ndim:
-            raise ArtifactError(
-                f"expected a {ndim}-d {dtype_kind} array, got a {value.ndim}-d {value.dtype} one",
-                file=str(path),
-                field=key,
-            )
-    extra = sorted(set(entries) - set(declared))
-    if extra:
-        raise ArtifactError(f"unexpected entry (not part of {KINDS[kind].schema})", file=str(path), field=extra[0])
+    plan_file.check_entries(kind, entries, str(path))
+    if kind == "plan":  # the robot's loader checks these shapes before its hash: so does this one
+        problem = plan_file.shape_problem(kind, entries)
+        if problem is not None:
+            raise ArtifactError(problem[1], file=str(path), field=problem[0])
     if content_hash(entries, kind) != manifest["content_sha256"]:
         raise ArtifactError("content hash mismatch (file corrupted or edited)", file=str(path))
     map_digest = sha256_text(entries["map"])

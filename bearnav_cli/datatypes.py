@@ -15,17 +15,34 @@ import enum
 import json
 import math
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
 from bearnav_cli.errors import ArtifactError
+from bearnav_cli.runtime.invariants import (
+    CELLS_INVARIANTS,
+    PLAN_INVARIANTS,
+    Invariant,
+    cell_areas,
+    check_cells_form,
+    check_plan_form,
+    ragged_problem,
+    validate,
+)
+from bearnav_cli.runtime.invariants import TREE_SHAPE as _TREE_SHAPE
+from bearnav_cli.runtime.invariants import at_least as _at_least
+from bearnav_cli.runtime.invariants import finite_problem as _finite_problem
+from bearnav_cli.runtime.invariants import first as _first
+from bearnav_cli.runtime.invariants import in_range as _in_range
+from bearnav_cli.runtime.invariants import nodes_problem as _nodes_problem
+from bearnav_cli.runtime.invariants import offsets_problem as _offsets_problem
+from bearnav_cli.runtime.invariants import tree_problem as _tree_problem
 from bearnav_cli.runtime.robot import ROBOT_DEFAULTS, ROBOT_KEYS, robot_parameters
 from bearnav_cli.runtime.schema import ENTRIES
 
 __all__ = [
     "AREA_QUANTILES",
-    "cell_areas",
     "tolerance_by_area",
     "FrozenDict",
     "freeze",
@@ -34,17 +51,13 @@ __all__ = [
     "cell_list",
     "CellFlag",
     "Cells",
-    "CELLS_INVARIANTS",
     "CellStatus",
-    "CERTIFICATES",
     "frozen_array",
-    "Invariant",
     "INVARIANTS",
     "Map",
     "MAP_INVARIANTS",
     "Outcome",
     "Plan",
-    "PLAN_INVARIANTS",
     "PLAN_KEYS",
     "Polygon",
     "ragged",
@@ -55,7 +68,6 @@ __all__ = [
     "Tree",
     "TREE_INVARIANTS",
     "TREE_KEYS",
-    "validate",
     "validate_artifact",
 ]
 
@@ -177,79 +189,6 @@ def _data_keys(kind: str) -> tuple[str, ...]:
 # it is saved, and docs/artifacts.md lists them ("Checked on load"; a test compares the lists).
 
 
-@dataclass(frozen=True)
-class Invariant:
-    """One property an artifact must have to make sense.
-
-    Attributes
-    ----------
-    field : str
-        The entry (or map field) it is about, as the error message names it.
-    rule : str
-        What must hold, in a few words (the text docs/artifacts.md shows).
-    check : callable
-        ``check(artifact) -> str | None``: what is wrong, or None; or a pair ``(subfield, text)`` to name
-        a part of the field (``params`` → ``params.rrtstar.seed``).
-    """
-
-    field: str
-    rule: str
-    check: Callable[[Any], Any]
-
-
-def validate(invariants: tuple[Invariant, ...], artifact: Any, prefix: str = "") -> None:
-    """Run ``invariants`` on ``artifact``; raise :class:`ArtifactError` naming the field of the first that fails.
-
-    Parameters
-    ----------
-    invariants : tuple of Invariant
-        The checks, run in order (``MAP_INVARIANTS``, ``INVARIANTS[kind]`` ...).
-    artifact : Map, Tree, Cells, Plan or Simulation
-        What each ``Invariant.check`` is called with.
-    prefix : str, default ""
-        Put before the failing field's name in the error (``"map."`` when checking the map
-        embedded in another artifact).
-
-    Raises
-    ------
-    ArtifactError
-        The first failing invariant's text, with ``field`` = ``prefix`` + its field (and
-        subfield, ``params.rrtstar.seed``).
-    """
-    for invariant in invariants:
-        problem = invariant.check(artifact)
-        if problem is None:
-            continue
-        field = invariant.field
-        if isinstance(problem, tuple):
-            field, problem = f"{field}.{problem[0]}", problem[1]
-        raise ArtifactError(problem, field=prefix + field)
-
-
-def _first(mask: np.ndarray) -> int | None:
-    """Index of the first True of a bool array, or None."""
-    hits = np.flatnonzero(mask)
-    return int(hits[0]) if hits.size else None
-
-
-def _finite_problem(values: Any, allow_nan: bool = False) -> str | None:
-    values = np.asarray(values, float)
-    bad = np.isinf(values) if allow_nan else ~np.isfinite(values)
-    k = _first(bad.reshape(-1))
-    if k is None:
-        return None
-    return f"contains {'an infinity' if allow_nan else 'NaN or infinity'} (flat index {k})"
-
-
-def _at_least(values: Any, low: float, what: str, allow_nan: bool = False) -> str | None:
-    values = np.asarray(values, float).reshape(-1)
-    problem = _finite_problem(values, allow_nan)
-    if problem is not None:
-        return problem
-    k = _first(~np.isnan(values) & (values < low)) if allow_nan else _first(values < low)
-    return None if k is None else f"must be {what}, got {values[k]:g} at index {k}"
-
-
 def _ring_problem(polygons: tuple[Polygon, ...]) -> str | None:
     """Rings of 3 or more finite vertices, simple polygons of positive area (shapely's validity)."""
     for k, polygon in enumerate(polygons):
@@ -268,48 +207,6 @@ def _ring_problem(polygons: tuple[Polygon, ...]) -> str | None:
     if k is None:
         return None
     return f"polygon {k} is not a simple polygon of positive area ({shapely.is_valid_reason(shapes[k])})"
-
-
-def _tree_problem(nodes: np.ndarray, parent: np.ndarray) -> str | None:
-    """``parent == -1`` exactly at node 0, indices in range, and every chain ends at node 0 (no cycle)."""
-    n = len(nodes)
-    if n == 0 or len(parent) != n:
-        return f"expected one parent per node ({n} nodes, {len(parent)} parents)"
-    if parent[0] != -1 or np.count_nonzero(parent == -1) != 1:
-        return "must be -1 exactly at node 0 (the root)"
-    k = _first((parent < -1) | (parent >= n))
-    if k is not None:
-        return f"node {k} has parent {int(parent[k])}, out of range 0..{n - 1}"
-    up = np.array(parent, np.int64)
-    up[0] = 0
-    for _ in range(max(1, math.ceil(math.log2(n))) + 1):  # pointer doubling: 2^k ancestors
-        up = up[up]
-    k = _first(up != 0)
-    return None if k is None else f"node {k}'s parent chain never reaches the root (a cycle)"
-
-
-def _root_problem(nodes: np.ndarray, map_: Any) -> str | None:
-    if len(nodes) and not np.all(np.abs(nodes[0] - map_.goal) <= 10 * map_.tol):
-        return f"node 0 {nodes[0].tolist()} is not the goal {map_.goal.tolist()}"
-    return None
-
-
-def _nodes_problem(artifact: Any) -> str | None:
-    """Finite node positions, node 0 at the goal of the artifact's map."""
-    return _finite_problem(artifact.nodes) or _root_problem(artifact.nodes, artifact.map)
-
-
-def _offsets_problem(offsets: np.ndarray, total: int, count: int) -> str | None:
-    if len(offsets) != count + 1:
-        return f"expected {count + 1} offsets, got {len(offsets)}"
-    if offsets[0] != 0 or offsets[-1] != total or np.any(np.diff(offsets) < 0):
-        return f"offsets must start at 0, never decrease and end at {total}"
-    return None
-
-
-def _in_range(values: np.ndarray, low: int, high: int) -> str | None:
-    k = _first((values < low) | (values > high))
-    return None if k is None else f"must lie in {low}..{high}, got {int(values[k])} at index {k}"
 
 
 @dataclass(frozen=True, eq=False)  # arrays inside: identity equality, a hash that works
@@ -687,13 +584,6 @@ def _tree_cost_problem(tree: Tree) -> str | None:
     return f"node {k + 1}: {cost[k + 1]:g} is not its parent's cost plus the edge length ({expected[k]:g})"
 
 
-#: The tree every tree-carrying artifact holds (trees, and the cells' nodes and parents).
-_TREE_SHAPE: tuple[Invariant, ...] = (
-    Invariant("parent", "-1 exactly at node 0, indices in range, every chain ends at node 0 (no cycle)",
-              lambda t: _tree_problem(t.nodes, t.parent)),
-    Invariant("nodes", "finite; node 0 is the goal", _nodes_problem),
-)  # fmt: skip
-
 #: What ``tree.npz`` and ``simplified.npz`` must satisfy (besides their map's invariants).
 TREE_INVARIANTS: tuple[Invariant, ...] = (
     *_TREE_SHAPE,
@@ -767,8 +657,9 @@ def ragged(coords: Any, offsets: Any, width: int | None, name: str, count: int, 
     shape = (None,) if width is None else (None, width)
     coords = frozen_array(coords, dtype, shape, name)
     offsets = frozen_array(offsets, np.int64, (count + 1,), f"{name} offsets")
-    if offsets[0] != 0 or offsets[-1] != len(coords) or np.any(np.diff(offsets) < 0):
-        raise ArtifactError("offsets must rise from 0 to the number of rows", field=f"{name} offsets")
+    problem = ragged_problem(coords, offsets)
+    if problem is not None:
+        raise ArtifactError(problem, field=f"{name} offsets")
     return coords, offsets
 
 
@@ -862,27 +753,10 @@ class Cells:
         put = object.__setattr__
         _freeze(self, "cells", ("cell_flags",), dims)
         put(self, "certificate", str(self.certificate))
-        if self.certificate not in CERTIFICATES:
-            raise ArtifactError(f"must be one of {', '.join(CERTIFICATES)}, got {self.certificate!r}",
-                                field="certificate")  # fmt: skip
         _freeze(self, "cells", ("cell_exit_row", "cell_rank", "node_added", "exit_inset"), dims)
         put(self, "free_coverage", float(self.free_coverage))
         put(self, "lookahead", float(self.lookahead))
-        counts = np.diff(self.cell_row_offsets)
-        goal = self.parent[self.cell_node] == -1
-        if np.any(self.cell_exit_row[goal] != -1) or np.any(
-            (self.cell_exit_row[~goal] < 0) | (self.cell_exit_row[~goal] >= counts[~goal])
-        ):
-            raise ArtifactError("must index one of the cell's rows (-1 exactly for the goal cell)",
-                                field="cell_exit_row")  # fmt: skip
-        if not np.all(np.isfinite(self.cell_rank)):
-            raise ArtifactError("contains NaN or infinity", field="cell_rank")
-        inset = self.exit_inset
-        if not (np.all(np.isnan(inset[goal])) and np.all(np.isfinite(inset[~goal]) & (inset[~goal] >= 0))):
-            raise ArtifactError("must be finite and zero or positive in every edge cell and NaN in the goal cell",
-                                field="exit_inset")  # fmt: skip
-        if not (math.isfinite(self.lookahead) and self.lookahead >= 0):
-            raise ArtifactError(f"must be finite and zero or positive, got {self.lookahead:g}", field="lookahead")
+        check_cells_form(self)  # the robot's loader runs the same checks (runtime.invariants)
 
     @property
     def is_funnel(self) -> bool:
@@ -914,21 +788,6 @@ class Cells:
     def arrays(self) -> dict[str, np.ndarray]:
         """The data entries of ``cells.npz`` (without ``manifest`` and ``map``)."""
         return {name: _entry(getattr(self, name)) for name in CELL_KEYS}
-
-
-def cell_areas(cells: Cells | Any) -> np.ndarray:
-    """The signed (shoelace) area of every cell polygon, shape (C,), map units² (positive when CCW).
-
-    ``cells`` is anything with ``cell_vertices`` and ``cell_vertex_offsets`` (Cells, Plan's cells,
-    :class:`~bearnav_cli.runtime.plan_arrays.PlanArrays`).
-    """
-    offsets, verts = cells.cell_vertex_offsets, cells.cell_vertices
-    if not len(verts):
-        return np.zeros(len(offsets) - 1)
-    following = np.arange(len(verts)) + 1
-    following[offsets[1:] - 1] = offsets[:-1]
-    x, y = verts[:, 0], verts[:, 1]
-    return np.add.reduceat(x * y[following] - x[following] * y, offsets[:-1]) / 2
 
 
 #: The quantiles of :func:`tolerance_by_area`, by name.
@@ -965,73 +824,18 @@ def tolerance_by_area(cells: Cells, usable: np.ndarray) -> dict[str, float]:
     return out
 
 
-def _cell_polygon_problem(cells: Cells) -> str | None:
-    """Each cell a counter-clockwise polygon of 3 or more vertices with positive area (shoelace)."""
-    counts = np.diff(cells.cell_vertex_offsets)
-    k = _first(counts < 3)
-    if k is not None:
-        return f"cell {k} has {int(counts[k])} vertices (at least 3 are needed)"
-    if not len(cells.cell_vertices):
-        return None
-    area = cell_areas(cells)
-    k = _first(~(area > 0))
-    return None if k is None else f"cell {k} is not a counter-clockwise polygon of positive area (area {area[k]:.3g})"
-
-
-def _unit_problem(vectors: np.ndarray, rows: np.ndarray | None = None) -> str | None:
-    norms = np.hypot(vectors[:, 0], vectors[:, 1])
-    bad = np.abs(norms - 1.0) > 1e-6
-    if rows is not None:
-        bad &= rows
-    k = _first(bad)
-    return None if k is None else f"row {k} has norm {norms[k]:.6g}, expected 1"
-
-
-def _s_problem(cells: Cells) -> str | None:
-    problem = _at_least(cells.s_min, 0.0, "zero or positive")
-    if problem is not None:
-        return problem
-    k = _first(cells.s_min > cells.s_max * (1 + 1e-9) + cells.map.tol)
-    return None if k is None else f"cell {k}: s_min {cells.s_min[k]:g} exceeds s_max {cells.s_max[k]:g}"
-
-
-def _coverage_problem(value: float) -> str | None:
-    if math.isnan(value) or 0.0 <= value <= 1.0:
-        return None
-    return f"must lie in [0, 1] (or be NaN), got {value:g}"
-
-
-#: What ``cells.npz`` (and the cells of ``plan.npz``) must satisfy (besides their map's invariants).
-CELLS_INVARIANTS: tuple[Invariant, ...] = (
-    *_TREE_SHAPE,
-    Invariant("cell_node", "distinct node indices in range",
-              lambda c: None if len(np.unique(c.cell_node)) == len(c.cell_node) else "two cells share a node"),
-    Invariant("cell_vertices", "each cell a counter-clockwise polygon of 3 or more vertices with positive area",
-              _cell_polygon_problem),
-    Invariant("cell_A", "unit-norm rows", lambda c: _unit_problem(c.cell_A)),
-    Invariant("exit_dir", "a unit vector in every cell but the goal cell",
-              lambda c: _unit_problem(c.exit_dir, c.parent[c.cell_node] >= 0)),
-    Invariant("s_min", "0 <= s_min <= s_max", _s_problem),
-    Invariant("cell_flags", "only the known flag bits (0 to 31)", lambda c: _in_range(c.cell_flags, 0, 31)),
-    Invariant("cell_rank", "zero or positive", lambda c: _at_least(c.cell_rank, 0.0, "zero or positive")),
-    Invariant("free_coverage", "in [0, 1], or NaN", lambda c: _coverage_problem(c.free_coverage)),
-)  # fmt: skip
-
-
 def _entry(value: Any) -> Any:
     """A data entry as artifacts store it: texts stay ``str`` (a 0-d text entry), the rest arrays."""
     return value if isinstance(value, str) else np.asarray(value)
 
-
-#: ``Cells.certificate`` values (DESIGN §3.3).
-CERTIFICATES = ("funnel", "paper")
 
 #: Data keys common to ``cells.npz`` and ``plan.npz`` besides ``map`` (DESIGN §3.2–3.3).
 CELL_KEYS = _data_keys("cells")
 
 
 def _check_cell_arrays(obj: Any) -> None:
-    """Shape, dtype and finiteness checks shared by :class:`Cells` and :class:`Plan`."""
+    """The cell arrays of ``obj`` (a :class:`Cells`) as read-only arrays of their declared dtypes and shapes;
+    what they must then satisfy is :func:`~bearnav_cli.runtime.invariants.check_cells_form`'s."""
     _freeze(obj, "cells", ("nodes",), {})
     n = len(obj.nodes)
     c = len(np.asarray(obj.cell_node))
@@ -1050,29 +854,6 @@ def _check_cell_arrays(obj: Any) -> None:
         if values is not None:
             _freeze(obj, "cells", (values,), {entry.shape[0]: len(a)})
     _freeze(obj, "cells", ("cell_landmarks",), dims)
-    if n == 0 or obj.parent[0] != -1 or np.count_nonzero(obj.parent == -1) != 1:
-        raise ArtifactError("parent must be -1 exactly at node 0", field="parent")
-    if np.any((obj.cell_node < 0) | (obj.cell_node >= n)):
-        raise ArtifactError("cell_node index out of range", field="cell_node")
-    if np.any((obj.fixed_landmark < 0) | (obj.fixed_landmark >= len(obj.map.landmarks))):
-        raise ArtifactError("landmark index out of range", field="fixed_landmark")
-    if not np.array_equal(np.diff(obj.cell_row_offsets), np.diff(obj.cell_vertex_offsets)):
-        raise ArtifactError("one row per polygon edge expected", field="cell_row_offsets")
-    for name in (
-        "nodes",
-        "collision_samples",
-        "cell_A",
-        "cell_b",
-        "cell_vertices",
-        "exit_point",
-        "exit_dir",
-        "cbf_A",
-        "cbf_b",
-        "s_min",
-        "s_max",
-    ):
-        if not np.all(np.isfinite(getattr(obj, name))):
-            raise ArtifactError("contains NaN or infinity", field=name)
 
 
 #: Data keys that ``plan.npz`` adds to the cell keys (DESIGN §3.2–3.3).
@@ -1132,11 +913,7 @@ class Plan:
         object.__setattr__(self, "goal_tolerance", float(self.goal_tolerance))
         _freeze(self, "plan", ("tolerance", "usable_tolerance"), dims)
         object.__setattr__(self, "plan_tolerance", float(self.plan_tolerance))
-        for name in ("gain", "c_v", "u_max"):
-            if not np.all(np.isfinite(getattr(self, name))):
-                raise ArtifactError("contains NaN or infinity", field=name)
-        if np.any((self.status < 0) | (self.status > 4)):
-            raise ArtifactError("status must be 0..4", field="status")
+        check_plan_form(self)  # the robot's loader runs the same checks (runtime.invariants)
 
     @property
     def map(self) -> Map:
@@ -1151,35 +928,6 @@ class Plan:
         out = self.cells.arrays()
         out.update({name: np.asarray(getattr(self, name)) for name in PLAN_KEYS})  # landmarks: the map's
         return out
-
-
-def _goal_tolerance_problem(plan: Plan) -> str | None:
-    value = plan.goal_tolerance
-    return None if math.isfinite(value) and value > 0 else f"must be finite and positive, got {value:g}"
-
-
-def _tolerance_problem(values: Any, allow_inf: bool = False) -> str | None:
-    values = np.asarray(values, float)
-    if allow_inf:  # +inf is a constant field's δ_c; −inf is never a tolerance
-        values = np.where(values == np.inf, 0.0, values)
-    return _at_least(values, 0.0, "zero or positive (or NaN)", allow_nan=True)
-
-
-#: What ``plan.npz`` adds to the cells' invariants (checked on ``plan.cells`` too).
-PLAN_INVARIANTS: tuple[Invariant, ...] = (
-    Invariant("goal_tolerance", "finite and positive", _goal_tolerance_problem),
-    Invariant("u_max", "positive", lambda p: _at_least(p.u_max, np.nextafter(0.0, 1.0), "positive")),
-    Invariant("c_v", "zero or positive", lambda p: _at_least(p.c_v, 0.0, "zero or positive")),
-    Invariant("c_h", "zero or positive, or NaN (no barrier rows)", lambda p: _tolerance_problem(p.c_h)),
-    Invariant("margin_h", "finite or NaN", lambda p: _finite_problem(p.margin_h, allow_nan=True)),
-    Invariant("margin_v", "finite or NaN", lambda p: _finite_problem(p.margin_v, allow_nan=True)),
-    Invariant("tolerance", "zero or positive (+inf for a constant field), or NaN",
-              lambda p: _tolerance_problem(p.tolerance, allow_inf=True)),
-    Invariant("usable_tolerance", "finite and zero or positive, or NaN",
-              lambda p: _tolerance_problem(p.usable_tolerance)),
-    Invariant("plan_tolerance", "finite and zero or positive, or NaN",
-              lambda p: _tolerance_problem([p.plan_tolerance])),
-)  # fmt: skip
 
 
 class Outcome(enum.IntEnum):

@@ -214,7 +214,7 @@ def default_resolution(arrays: PlanArrays, diagonal: float) -> float:
     diagonal : float
         ``D``, the map's diagonal (map units).
     """
-    from bearnav_cli.datatypes import cell_areas
+    from bearnav_cli.runtime.invariants import cell_areas
 
     areas = np.abs(cell_areas(arrays))
     median = float(np.median(areas)) if len(areas) else 0.0

@@ -25,6 +25,7 @@ from typing import TYPE_CHECKING, Any, Callable
 from bearnav_cli import artifacts
 from bearnav_cli.datatypes import Map, replace
 from bearnav_cli.errors import ArtifactError, InternalError, InvalidMapError, InvalidParamsError, ResourceLimitError
+from bearnav_cli.runtime.plan_file import human_bytes
 
 # The stage modules (scipy, highspy and the algorithms) are imported when a stage is used, not with
 # the pipeline: loading an artifact (`bearnav inspect`) imports only the stages whose parameters its
@@ -501,8 +502,8 @@ TRAJECTORY_POINT_BYTES = 80
 def _too_big(what: str, need: float, where: str, fits: str) -> ResourceLimitError:
     budget = artifacts.memory_budget()
     return ResourceLimitError(
-        f"{what} needs about {artifacts.human_bytes(need)} of memory, more than the "
-        f"{artifacts.human_bytes(budget)} a run may use (half of this machine's); {fits}",
+        f"{what} needs about {human_bytes(need)} of memory, more than the "
+        f"{human_bytes(budget)} a run may use (half of this machine's); {fits}",
         field=where,
     )
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from bearnav_cli import artifacts
 from bearnav_cli.datatypes import Cells, CellStatus, Map, Plan, Polygon, replace
 from bearnav_cli.runtime.plan_arrays import tree_costs
 
@@ -203,3 +204,10 @@ def hand_plan(
 def paper_exit_row(A: np.ndarray, b: np.ndarray, z: np.ndarray, x_j: np.ndarray) -> int:
     """The row of a §4 cell on the exit line: normal ``−z`` through ``x_j``."""
     return int(np.argmax(A @ -z - np.abs(A @ x_j - b)))
+
+
+def write_plan(path, plan: Plan):
+    """Save ``plan`` as ``plan.npz`` at ``path`` with a manifest and its content hash (what a robot loads)."""
+    manifest = artifacts.make_manifest("plan", plan, stage="synthesize", stage_version=1, params={}, input_path=None,
+                                       input_hash="0", summary="", elapsed_s=0.0)  # fmt: skip
+    return artifacts.save(path, plan, manifest)

@@ -27,6 +27,7 @@ from bearnav_cli.world.starts import domain_starts
 
 from .conftest import build_map
 from .funnel_maps import ITERATIONS, random_spec
+from .handmade import write_plan
 from .test_cli_errors import assert_one_line_error
 
 #: The look-ahead of the test plans (map units; the random maps' robot radii are 0.08–0.15).
@@ -200,8 +201,7 @@ def test_a_robot_that_may_not_reverse_never_drives_backwards():
 
 def test_the_controller_reports_arrival_of_the_look_ahead_point(tmp_path):
     plan = lookahead_plan(reverse=False)
-    path = tmp_path / "plan.npz"
-    np.savez(path, map=np.array(plan.map.to_json_text()), **plan.arrays())
+    path = write_plan(tmp_path / "plan.npz", plan)
     assert Controller.from_plan(str(path), dynamics="unicycle").settings.clamp_reverse  # the map's reverse: false
     ctl = Controller.from_plan(str(path), dynamics="unicycle")
     arrays = ctl.arrays

@@ -16,7 +16,8 @@ from bearnav_cli.runtime import PlanArrays
 from bearnav_cli.stages import simulate
 
 from .conftest import REPO
-from .handmade import CHAIN_NODES, CHAIN_PARENT, cell_polygons, first_cells, hand_map, hand_plan
+from .handmade import CHAIN_NODES, CHAIN_PARENT, cell_polygons, first_cells, hand_map, hand_plan, write_plan
+from .test_hostile_common import rewrite_npz
 
 #: The exact motion of ALGORITHMS §7.1 (no wheel slip), for tests of exact paths.
 EXACT = simulate.Params(odometry_noise=0.0)
@@ -55,8 +56,7 @@ def test_chain_cells_are_as_designed(chain):
 
 
 def test_from_npz_equals_from_plan(chain, arrays, tmp_path):
-    path = tmp_path / "plan.npz"
-    np.savez(path, map=np.array(chain.map.to_json_text()), **chain.arrays())
+    path = write_plan(tmp_path / "plan.npz", chain)
     loaded = PlanArrays.from_npz(path)
     for name in runtime.RUNTIME_KEYS + ("bounds", "goal", "node_cell", "parent_cell", "field_a", "field_M"):
         ours, theirs = np.asarray(getattr(loaded, name)), np.asarray(getattr(arrays, name))
@@ -65,14 +65,12 @@ def test_from_npz_equals_from_plan(chain, arrays, tmp_path):
 
 
 def test_from_npz_names_a_missing_entry(chain, tmp_path):
-    path = tmp_path / "plan.npz"
-    entries = chain.arrays()
-    del entries["gain"]
-    np.savez(path, map=np.array(chain.map.to_json_text()), **entries)
-    with pytest.raises(ArtifactError, match="gain"):
+    good = write_plan(tmp_path / "good.npz", chain)
+    path = rewrite_npz(good, tmp_path / "plan.npz", lambda manifest, entries: entries.__delitem__("gain"))
+    with pytest.raises(ArtifactError, match="gain: missing entry"):
         PlanArrays.from_npz(path)
     (tmp_path / "junk.npz").write_bytes(b"not a zip")
-    with pytest.raises(ArtifactError, match="cannot read"):
+    with pytest.raises(ArtifactError, match="not an npz archive"):
         PlanArrays.from_npz(tmp_path / "junk.npz")
 
 

@@ -1,6 +1,8 @@
 """What a robot installs: numpy only, next to ``plan.npz`` (DESIGN §2, §6). This is the robot's one import.
 
 - :mod:`~bearnav_cli.runtime.plan_arrays` — the run-time view of a plan (:class:`PlanArrays`);
+- :mod:`~bearnav_cli.runtime.plan_file` — the one loader of ``plan.npz`` (:func:`load_plan`: file, manifest,
+  entries, content hash), with the checks of :mod:`~bearnav_cli.runtime.invariants` the CLI's loader shares;
 - :mod:`~bearnav_cli.runtime.bearing` — measurements, field of view, bearing reconstruction (§6);
 - :mod:`~bearnav_cli.runtime.cell_policy` — which cell's controller a robot uses (§7.3, §11.3);
 - :mod:`~bearnav_cli.runtime.bounded` — convex sets that hold the robot (ALGORITHMS §12.2);
@@ -42,7 +44,9 @@ _SUBMODULES = (
     "cell_policy",
     "controller",
     "estimate",
+    "invariants",
     "plan_arrays",
+    "plan_file",
     "robot",
     "schema",
     "step",

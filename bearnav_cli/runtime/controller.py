@@ -7,13 +7,13 @@ robots with, so what is simulated is what runs on the robot.
 
 from __future__ import annotations
 
-import json
 import math
 from typing import Any
 
 import numpy as np
 
 from bearnav_cli.runtime.plan_arrays import PlanArrays
+from bearnav_cli.runtime.plan_file import load_plan
 from bearnav_cli.runtime.robot import lookahead_point, robot_parameters
 from bearnav_cli.runtime.step import SPEED, ControlOutput, ControlSettings, ControlState, control
 
@@ -61,9 +61,16 @@ class Controller:
         the map's robot section (:func:`error_model`). On a plan with a look-ahead
         ``λ > 0`` (``arrays.lookahead``) the unicycle drives the point ``λ`` ahead of its axle
         (ALGORITHMS §12.6, docs/runtime.md).
+
+        Raises
+        ------
+        ArtifactError
+            The plan fails a check of :func:`~bearnav_cli.runtime.plan_file.load_plan` (a damaged or
+            edited file, a manifest, entry or invariant), naming the file and the field.
         """
-        arrays = PlanArrays.from_npz(path)
-        robot = _robot(path)
+        loaded = load_plan(path)  # every check of the CLI's loader numpy can make: ArtifactError, nothing raw
+        arrays = PlanArrays.from_loaded(loaded)
+        robot = _robot(loaded.map.document)
         if not robot["reverse"]:
             options["clamp_reverse"] = True
         # the set estimator's bounds are the robot's (the map's robot section) unless given
@@ -139,15 +146,10 @@ class Controller:
         return int(self.state.cell[0])
 
 
-def _robot(path: str) -> dict:
+def _robot(document: dict) -> dict:
     """The robot parameters of the map embedded in ``plan.npz`` (``runtime.robot.robot_parameters``; defaults
-    where the file says nothing)."""
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            document = json.loads(str(data["map"][()]))
-    except (OSError, ValueError, KeyError):  # PlanArrays.from_npz has read this file: not reached in practice
-        return robot_parameters(None)
-    section = document.get("robot") if isinstance(document, dict) else None
+    where the map says nothing)."""
+    section = document.get("robot")
     return robot_parameters(section if isinstance(section, dict) else None)
 
 

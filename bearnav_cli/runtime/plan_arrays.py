@@ -9,10 +9,8 @@ obstacle edges of the embedded map). :mod:`bearnav_cli.runtime` builds on it.
 from __future__ import annotations
 
 import dataclasses
-import json
 import logging
 import math
-import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -20,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from bearnav_cli.errors import ArtifactError
-from bearnav_cli.runtime import schema
+from bearnav_cli.runtime import plan_file, schema
 
 __all__ = [
     "CHUNK",
@@ -382,54 +380,38 @@ class PlanArrays:
 
     @classmethod
     def from_npz(cls, path: str | Path) -> PlanArrays:
-        """Load the run-time arrays from a ``plan.npz`` file (``allow_pickle=False``).
-
-        The bounds come from the embedded ``map`` JSON. This loader does not check the
-        manifest or the content hash (``bearnav inspect`` does).
+        """Load the run-time arrays from a ``plan.npz`` file, after every check of
+        :func:`~bearnav_cli.runtime.plan_file.load_plan` (manifest, entries, content hash, the
+        plan's invariants: the ones ``bearnav inspect`` makes, but for the map's shapely checks).
 
         Raises
         ------
         ArtifactError
-            A missing entry, a wrong shape, or a file numpy cannot read.
+            Naming the file (and the field): a damaged or edited file, or a plan that makes no sense.
         """
-        try:
-            with np.load(path, allow_pickle=False) as data:
-                manifest = json.loads(str(data["manifest"][()])) if "manifest" in data.files else {}
-                retired = manifest.get("schema") if isinstance(manifest, dict) else None
-                if retired in schema.RETIRED_PLAN_SCHEMAS:
-                    raise ArtifactError(f"is a {retired} plan, which this version no longer reads; re-run "
-                                        f"`bearnav plan MAP.yaml --force` to get {schema.SCHEMAS['plan']}",
-                                        file=str(path))  # fmt: skip
-                missing = [key for key in (*RUNTIME_KEYS, "map") if key not in data.files]
-                if missing:
-                    raise ArtifactError(f"missing entries {', '.join(missing)}", file=str(path))
-                entries = {key: np.array(data[key]) for key in RUNTIME_KEYS}
-                map_json = json.loads(str(data["map"][()]))
-        except (OSError, ValueError, KeyError, zipfile.BadZipFile) as exc:
-            if isinstance(exc, ArtifactError):
-                raise
-            raise ArtifactError(f"cannot read plan ({type(exc).__name__}: {exc})", file=str(path)) from exc
-        return cls._from_entries(entries, map_json, str(path))
+        return cls.from_loaded(plan_file.load_plan(path))
 
     @classmethod
-    def _from_entries(cls, entries: dict[str, Any], map_json: dict, file: str | None = None) -> PlanArrays:
-        """Build from the ``RUNTIME_KEYS`` entries and the embedded map (bounds, radius, obstacle rings)."""
+    def from_loaded(cls, loaded: plan_file.LoadedPlan) -> PlanArrays:
+        """The run-time arrays of a plan :func:`~bearnav_cli.runtime.plan_file.load_plan` has read."""
+        entries = {key: loaded.entries[key] for key in RUNTIME_KEYS}
+        return cls._from_entries(entries, loaded.map, str(loaded.path))
+
+    @classmethod
+    def _from_entries(cls, entries: dict[str, Any], map_json: Any, file: str | None = None) -> PlanArrays:
+        """Build from the ``RUNTIME_KEYS`` entries and the embedded map (bounds, radius, obstacle rings):
+        its JSON document or :class:`~bearnav_cli.runtime.plan_file.EmbeddedMap`."""
         entries = dict(entries)
-        try:
-            bounds = np.asarray(map_json["bounds"], float)
-            radius = float(map_json.get("robot_radius", 0.0))
-            rings, sight = (
-                [(np.asarray(o["exterior"], float), *(np.asarray(h, float) for h in o.get("holes", ())))
-                 for o in map_json[key]]
-                for key in ("obstacles", "raw_obstacles")
-            )  # fmt: skip
-        except (KeyError, TypeError, ValueError) as exc:
-            raise ArtifactError("embedded map has no bounds or obstacles", file=file, field="map") from exc
+        map_ = map_json if isinstance(map_json, plan_file.EmbeddedMap) else plan_file.embedded_map(map_json, file)
         for key in RUNTIME_KEYS:
             if _PLAN[key].ndim == 0:  # 0-d arrays in the file: a number, or the certificate's text
                 entries[key] = str(entries[key]) if _PLAN[key].dtype == "str" else float(entries[key])
-        return cls(bounds=bounds, obstacle_edges=ring_edges(rings), sight_edges=ring_edges(sight), robot_radius=radius,
-                   **entries)  # fmt: skip
+        try:
+            return cls(bounds=map_.bounds, obstacle_edges=ring_edges(map_.obstacles),
+                       sight_edges=ring_edges(map_.raw_obstacles), robot_radius=map_.robot_radius,
+                       **entries)  # fmt: skip
+        except ArtifactError as exc:
+            raise exc.located(file) if file else exc from None
 
 
 def ring_edges(polygons: list[tuple[np.ndarray, ...]]) -> np.ndarray:
@@ -472,8 +454,12 @@ def tree_costs(nodes: np.ndarray, parent: np.ndarray) -> np.ndarray:
     up = np.where(parent >= 0, parent, np.arange(n))
     cost = np.hypot(*(nodes - nodes[up]).T)
     for _ in range(n.bit_length() + 1):
+        # a fixed point is the end only if every jump lands on a root: on a cycle of length 2^k,
+        # k doublings make every node its own ancestor, a fixed point too
         if np.array_equal(up, up[up]):
-            return cost
+            if np.all(parent[up] == -1):
+                return cost
+            break
         cost = cost + cost[up]
         up = up[up]
     raise ArtifactError("parent does not describe a tree", field="parent")

@@ -19,7 +19,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-__all__ = ["DIMENSIONS", "Entry", "ENTRIES", "RETIRED_PLAN_SCHEMAS", "RUNTIME_KEYS", "SCHEMAS", "shape_text"]
+__all__ = ["DIMENSIONS", "Entry", "ENTRIES", "RETIRED_PLAN_SCHEMAS", "RUNTIME_KEYS", "SCHEMAS", "shape_text", "STAGES"]
 
 
 class Entry(NamedTuple):
@@ -87,6 +87,16 @@ SCHEMAS: dict[str, str] = {
     "cells": "bearnav.cells/3",
     "plan": "bearnav.plan/3",
     "simulation": "bearnav.sim/2",
+}
+
+#: The stage that writes each artifact kind (the manifest's ``stage``).
+STAGES: dict[str, str] = {
+    "map": "map",
+    "tree": "rrtstar",
+    "simplified": "simplify",
+    "cells": "decompose",
+    "plan": "synthesize",
+    "simulation": "simulate",
 }
 
 #: The plan schemas this version refuses with a "re-run" message (``artifacts.RETIRED_SCHEMAS`` has the rest).

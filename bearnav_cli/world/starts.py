@@ -7,10 +7,10 @@ import re
 
 import numpy as np
 
-from bearnav_cli.datatypes import cell_areas
 from bearnav_cli.errors import InvalidParamsError
 from bearnav_cli.geometry import FreeSpace
 from bearnav_cli.routes import sample_starts
+from bearnav_cli.runtime.invariants import cell_areas
 
 __all__ = ["InDomain", "domain_starts", "parse_starts", "resolve_starts"]
 
