@@ -38,7 +38,7 @@ from bearnav_cli.runtime.invariants import in_range as _in_range
 from bearnav_cli.runtime.invariants import nodes_problem as _nodes_problem
 from bearnav_cli.runtime.invariants import offsets_problem as _offsets_problem
 from bearnav_cli.runtime.invariants import tree_problem as _tree_problem
-from bearnav_cli.runtime.robot import ROBOT_DEFAULTS, ROBOT_KEYS, robot_parameters
+from bearnav_cli.runtime.robot import ROBOT_DEFAULTS, ROBOT_KEYS, robot_parameters, robot_problem
 from bearnav_cli.runtime.schema import ENTRIES
 
 __all__ = [
@@ -480,19 +480,8 @@ def _map_bounds_problem(map_: Map) -> str | None:
 
 
 def _map_robot_problem(map_: Map) -> tuple[str, str] | None:
-    """The robot section: finite, zero or positive numbers (angles below 90°, unknown ones None), ``reverse`` a bool."""
-    for key, value in map_.robot.items():
-        if key == "reverse":
-            if not isinstance(value, bool):
-                return key, f"expected true or false, got {value!r}"
-            continue
-        if value is None and ROBOT_DEFAULTS[key] is None:
-            continue
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
-            return key, f"expected a finite number, zero or positive, got {value!r}"
-        if key.endswith("_deg") and value >= 90:
-            return key, f"must be below 90 degrees, got {value:g}"
-    return None
+    """The robot section (:func:`bearnav_cli.runtime.robot.robot_problem`, the robot's own check)."""
+    return robot_problem(map_.robot)
 
 
 #: What every map (``map.json``, and the map embedded in every later artifact) must satisfy.

@@ -137,6 +137,17 @@ REHASHED = {
     "clockwise cell": (_clockwise, "cell_vertices", "counter-clockwise"),
     "fixed_landmark out of range": (_fixed_landmark_out_of_range, "fixed_landmark", ""),
     "landmarks moved": (_landmarks_moved, "landmarks", "embedded map"),
+    "robot slip as text": (
+        lambda m, e: edit_embedded_map(e, lambda doc: doc.update(robot={"slip": "lots"})),
+        "map.robot.slip",
+        "finite",
+    ),
+    "robot section a list": (lambda m, e: edit_embedded_map(e, lambda doc: doc.update(robot=[1])), "map", "malformed"),
+    "robot key unknown": (
+        lambda m, e: edit_embedded_map(e, lambda doc: doc.update(robot={"wheels": 3})),
+        "map.robot",
+        "wheels",
+    ),
     "the map's landmarks moved": (_map_landmarks_moved, "landmarks", "embedded map"),
     "parent as float": (_parent_as_float, "parent", "array"),
     "gain of the wrong shape": (_gain_short, "gain", "shape"),

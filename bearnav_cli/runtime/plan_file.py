@@ -32,6 +32,7 @@ import numpy as np
 
 from bearnav_cli.errors import ArtifactError
 from bearnav_cli.runtime import invariants, schema
+from bearnav_cli.runtime.robot import robot_problem
 
 __all__ = [
     "canonical_json",
@@ -409,6 +410,11 @@ def embedded_map(document: Any, file: str | None = None) -> EmbeddedMap:
         raise ArtifactError("needs finite xmin < xmax and ymin < ymax", file=file, field="map.bounds")
     if not (math.isfinite(radius) and radius >= 0):
         raise ArtifactError(f"must be finite, zero or positive, got {radius:g}", file=file, field="map.robot_radius")
+    robot = robot_problem(document.get("robot"))
+    if robot is not None and robot[0] == "" and not isinstance(document.get("robot"), dict):
+        raise ArtifactError(f"malformed embedded map (robot: {robot[1]})", file=file, field="map")
+    if robot is not None:
+        raise ArtifactError(robot[1], file=file, field=f"map.robot.{robot[0]}".rstrip("."))
     if not (np.all(np.isfinite(goal)) and np.all(np.isfinite(landmarks))):
         raise ArtifactError("contains NaN or infinity", file=file, field="map.goal" if not np.all(np.isfinite(goal))
                             else "map.landmarks")  # fmt: skip

@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["ROBOT_DEFAULTS", "ROBOT_KEYS", "lookahead_command", "lookahead_point", "robot_parameters"]
+__all__ = ["ROBOT_DEFAULTS", "ROBOT_KEYS", "lookahead_command", "lookahead_point", "robot_parameters", "robot_problem"]
 
 #: The keys of the map's ``robot:`` section and their defaults (DESIGN §3.4, ALGORITHMS §12.1, §12.6):
 #:
@@ -43,6 +43,38 @@ ROBOT_DEFAULTS: dict[str, Any] = {
 }
 #: The keys of the ``robot:`` section, in the order ``docs/maps.md`` lists them.
 ROBOT_KEYS: tuple[str, ...] = tuple(ROBOT_DEFAULTS)
+
+
+def robot_problem(section: Any) -> tuple[str, str] | None:
+    """What is wrong with a normalised robot section (``map.json``'s ``robot``), as ``(key, message)``.
+
+    The one check of the section, for ``map.json`` and for the map a robot reads from ``plan.npz``:
+    an object of known keys; finite numbers, zero or positive (angles below 90°; the keys whose
+    default is None may be None); ``reverse`` true or false. None when it is sound.
+
+    Parameters
+    ----------
+    section : Any
+        The parsed section (None: absent, the defaults).
+    """
+    if section is None:
+        return None
+    if not isinstance(section, Mapping):
+        return "", f"expected an object, got {type(section).__name__}"
+    for key, value in section.items():
+        if key not in ROBOT_DEFAULTS:
+            return "", f"unknown key {key!r} (expected one of: {', '.join(ROBOT_KEYS)})"
+        if key == "reverse":
+            if not isinstance(value, bool):
+                return key, f"expected true or false, got {value!r}"
+            continue
+        if value is None and ROBOT_DEFAULTS[key] is None:
+            continue
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
+            return key, f"expected a finite number, zero or positive, got {value!r}"
+        if key.endswith("_deg") and value >= 90:
+            return key, f"must be below 90 degrees, got {value:g}"
+    return None
 
 
 def robot_parameters(section: Mapping[str, Any] | None = None) -> dict[str, Any]:
