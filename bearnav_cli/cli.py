@@ -1160,12 +1160,17 @@ def simulate_command(
     if not 0.0 <= min_success <= 1.0:
         raise _fail(f"--min-success: must lie in [0, 1], got {min_success}", EXIT_INVALID)
     overrides = options
+    sim_npz = out_path or plan_npz.with_name(pipeline.STAGE_BY_NAME["simulate"].filename)
+    # every output against every other before any work: a bag folder around sim.npz would replace it
+    artifacts.check_distinct(
+        {"-o/--out": sim_npz, "sim.json": artifacts.metrics_path(sim_npz), "--gif": gif, "--bag": bag}
+    )
     if gif is not None:  # before any work, like every output path
         artifacts.check_output_file(gif, (".gif",), "--gif", inputs=(plan_npz,))
-    if bag is not None:  # before any work too: suffix, folder, rosbags installed
+    if bag is not None:  # before any work too: suffix, folder, what is there, rosbags installed
         from bearnav_cli import bag as ros_bag
 
-        ros_bag.check_path(bag, "--bag")
+        ros_bag.check_path(bag, "--bag", force=force)
     with _progress_bar() as progress:
         report = pipeline.run_stage("simulate", plan_npz, out_path, overrides, force,
                                     _progress_factory(progress)("simulate"))  # fmt: skip
@@ -1175,7 +1180,7 @@ def simulate_command(
         pipeline.ACTIVITY.stage, pipeline.ACTIVITY.written = f"{bag} (sim.npz and sim.json were written)", False
         if not _Quiet.enabled and not as_json and len(sim.trajectory_coords) > 50_000:  # about a second each
             err.print(f"writing {bag} ({len(sim.trajectory_coords)} poses) ...", highlight=False, markup=False)
-        ros_bag.write(bag, sim, option="--bag")
+        ros_bag.write(bag, sim, option="--bag", force=force)
     if as_json:
         shown = {"sim": str(report.path), "ran": report.ran, "metrics": metrics}
         out.print_json(json.dumps(shown if bag is None else dict(shown, bag=str(bag))))
