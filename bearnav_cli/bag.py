@@ -112,6 +112,20 @@ def check_path(path: str | os.PathLike, option: str | None = "--bag", force: boo
     ``force``), an extension-less path that is a file or a folder other than a bag bearnav wrote or
     an empty one (even with ``force``: a folder is replaced whole), and a missing ``rosbags``.
 
+    Parameters
+    ----------
+    path : str or os.PathLike
+        ``NAME.mcap`` or ``NAME``, as the user gave it.
+    option : str or None, default "--bag"
+        The option named in errors.
+    force : bool, default False
+        Replace a ``.mcap`` file bearnav did not write (the user's ``--force``).
+
+    Returns
+    -------
+    Path
+        ``path``.
+
     Raises
     ------
     OutputPathError, InvalidParamsError
