@@ -18,7 +18,7 @@ demo: $(STAMP)
 	$(BIN)/bearnav plan maps/kitchen.yaml
 	$(BIN)/bearnav verify plans/kitchen/plan.npz
 	$(BIN)/bearnav simulate plans/kitchen/plan.npz --fov 60
-	$(BIN)/bearnav simulate plans/kitchen/plan.npz --fov 90 --dynamics unicycle -o plans/kitchen/sim_unicycle.npz
+	$(BIN)/bearnav simulate plans/kitchen/plan.npz --fov 90 --dynamics unicycle -o plans/kitchen/sim_demo_unicycle.npz
 	$(BIN)/bearnav simulate plans/kitchen/plan.npz --fov 60 --starts random:100 -o plans/kitchen/sim_random.npz
 	$(BIN)/bearnav plot plans/kitchen/simplified.npz --also plans/kitchen/tree.npz -o plans/kitchen/simplified.png
 	$(BIN)/bearnav plot plans/kitchen/plan.npz -o plans/kitchen/plan.png

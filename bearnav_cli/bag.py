@@ -22,24 +22,24 @@ orientation is the yaw ``trajectory_heading[p]`` about +z.
 A ``.mcap`` path is written as one self-contained MCAP file (the rosbag2 metadata is inside,
 chunks compressed with zstd; Foxglove opens it, ``ros2 bag play`` reads it); a path without an
 extension as a ROS 2 bag folder (``metadata.yaml`` and ``NAME.mcap``). The bag is written in a
-temp folder next to it and renamed into place, so a failure leaves nothing under the real name;
-an existing bag there is replaced.
+temp folder next to it (``artifacts.staging_folder``: a killed run's is removed by the next) and
+renamed into place, so a failure leaves nothing under the real name. Only a bag bearnav wrote is
+replaced (``artifacts.written_by``: the ``bearnav.map`` custom data every bag carries; a bag
+folder holding anything else is someone's); ``--force`` replaces any ``.mcap`` file, never a
+folder that is not such a bag.
 """
 
 from __future__ import annotations
 
-import contextlib
 import logging
 import math
 import os
-import shutil
-import tempfile
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from bearnav_cli import artifacts
 from bearnav_cli.datatypes import CellStatus, Simulation
 from bearnav_cli.errors import InvalidParamsError, OutputPathError
 
@@ -104,28 +104,46 @@ def _rosbags(option: str | None = "--bag") -> Any:
     }
 
 
-def check_path(path: str | os.PathLike, option: str | None = "--bag") -> Path:
+def check_path(path: str | os.PathLike, option: str | None = "--bag", force: bool = False) -> Path:
     """Refuse a bag path before any work; return it as a :class:`~pathlib.Path`.
 
-    Refused: a suffix other than ``.mcap`` or none, a missing or unwritable folder, a ``.mcap``
-    path that is a folder, an extension-less path that is a file or a folder other than a ROS 2
-    bag (one with ``metadata.yaml``) or an empty one, and a missing ``rosbags``.
+    Refused: a suffix other than ``.mcap`` (lower case: rosbags reads no other) or none, a missing
+    or unwritable folder, a ``.mcap`` path that is a folder or a file bearnav did not write (unless
+    ``force``), an extension-less path that is a file or a folder other than a bag bearnav wrote or
+    an empty one (even with ``force``: a folder is replaced whole), and a missing ``rosbags``.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        ``NAME.mcap`` or ``NAME``, as the user gave it.
+    option : str or None, default "--bag"
+        The option named in errors.
+    force : bool, default False
+        Replace a ``.mcap`` file bearnav did not write (the user's ``--force``).
+
+    Returns
+    -------
+    Path
+        ``path``.
 
     Raises
     ------
     OutputPathError, InvalidParamsError
     """
-    path = _checked_path(path, option)
+    path = _checked_path(path, option, force)
     _rosbags(option)
     return path
 
 
-def _checked_path(path: str | os.PathLike, option: str | None) -> Path:
+def _checked_path(path: str | os.PathLike, option: str | None, force: bool) -> Path:
     """:func:`check_path` without the rosbags check (:func:`write` imports rosbags once itself)."""
     path = Path(path)
-    suffix = path.suffix.lower()
+    suffix = path.suffix
     if path.name in ("", ".", ".."):
         raise OutputPathError("give the bag a name (NAME.mcap or NAME)", file=str(path), option=option)
+    if suffix.lower() == ".mcap" and suffix != ".mcap":
+        raise OutputPathError(f"extension {suffix!r}: write .mcap in lower case (rosbags reads only .mcap files)",
+                              file=str(path), option=option)  # fmt: skip
     if suffix not in SUFFIXES:
         raise OutputPathError(f"extension {path.suffix!r}: expected .mcap (one MCAP file) or no extension "
                               "(a ROS 2 bag folder)", file=str(path), option=option)  # fmt: skip
@@ -140,15 +158,16 @@ def _checked_path(path: str | os.PathLike, option: str | None) -> Path:
             raise OutputPathError("is a folder; give a new .mcap file name", file=str(path), option=option)
         if path.exists() and not path.is_file():
             raise OutputPathError("exists and is not a regular file", file=str(path), option=option)
+        artifacts.check_overwrite(path, "bag", force=force, option=option)
     elif path.is_symlink():
         raise OutputPathError("is a symbolic link; give a new name", file=str(path), option=option)
     elif path.exists():
         if not path.is_dir():
             raise OutputPathError("is a file; a bag without an extension is a folder (or give NAME.mcap)",
                                   file=str(path), option=option)  # fmt: skip
-        if any(path.iterdir()) and not (path / "metadata.yaml").is_file():
-            raise OutputPathError("is a folder but not a ROS 2 bag (no metadata.yaml); give a new name",
-                                  file=str(path), option=option)  # fmt: skip
+        if any(path.iterdir()) and artifacts.written_by(path) != artifacts.Origin("bag"):
+            raise OutputPathError("is a folder but not a ROS 2 bag written by bearnav (metadata.yaml and MCAP "
+                                  "files only); give a new name", file=str(path), option=option)  # fmt: skip
     return path
 
 
@@ -227,16 +246,6 @@ def _markers(sim: Simulation, ns: int, types: dict) -> list:
     return markers
 
 
-@contextlib.contextmanager
-def _staging(path: Path) -> Iterator[Path]:
-    """A temp folder next to ``path`` (named like bearnav's temp files), removed when the block ends."""
-    staging = Path(tempfile.mkdtemp(prefix=f".{path.name}.bearnav-{os.getpid()}-", suffix=".tmp", dir=path.parent))
-    try:
-        yield staging
-    finally:
-        shutil.rmtree(staging, ignore_errors=True)
-
-
 def _put(built: Path, path: Path, staging: Path) -> None:
     """Rename ``built`` (a file or a bag folder) to ``path``, replacing what is there."""
     if built.is_dir() and path.is_dir() and any(path.iterdir()):
@@ -251,7 +260,8 @@ def _put(built: Path, path: Path, staging: Path) -> None:
         os.replace(built, path)
 
 
-def write(path: str | os.PathLike, sim: Simulation, *, t0_ns: int = 0, option: str | None = "--bag") -> dict[str, int]:
+def write(path: str | os.PathLike, sim: Simulation, *, t0_ns: int = 0, option: str | None = "--bag",
+          force: bool = False) -> dict[str, int]:  # fmt: skip
     """Write ``sim`` as a ROS 2 bag (module docstring: topics, types, times); return topic -> messages.
 
     Parameters
@@ -264,13 +274,15 @@ def write(path: str | os.PathLike, sim: Simulation, *, t0_ns: int = 0, option: s
         Stamp of the first point and of the markers (ns since the epoch of ROS time).
     option : str, optional
         The option named in errors.
+    force : bool, default False
+        Replace a ``.mcap`` file bearnav did not write (:func:`check_path`).
 
     Raises
     ------
     OutputPathError, InvalidParamsError
         A refused path, or rosbags missing.
     """
-    path = _checked_path(path, option)
+    path = _checked_path(path, option, force)
     ros = _rosbags(option)
     store = ros["typestore"]
     types = store.types
@@ -283,8 +295,8 @@ def write(path: str | os.PathLike, sim: Simulation, *, t0_ns: int = 0, option: s
     serialize = store.serialize_cdr
     pose_t, path_t = types["geometry_msgs/msg/PoseStamped"], types["nav_msgs/msg/Path"]
     counts = dict.fromkeys(TOPICS, 0)
-    with _staging(path) as staging:
-        name = path.stem if path.suffix.lower() == ".mcap" else path.name
+    with artifacts.staging_folder(path) as staging:
+        name = path.stem if path.suffix == ".mcap" else path.name
         folder = staging / name
         writer = ros["Writer"](folder, version=9, storage_plugin=ros["mcap"])
         writer.set_compression(*ros["zstd"])
@@ -308,7 +320,7 @@ def write(path: str | os.PathLike, sim: Simulation, *, t0_ns: int = 0, option: s
                 for p, pose in zip(range(begin, end), poses, strict=True):
                     writer.write(connection["/bearnav/pose"], int(stamps[p]), serialize(pose, pose.__msgtype__))
                 counts["/bearnav/pose"] += end - begin
-        built = folder / f"{name}.mcap" if path.suffix.lower() == ".mcap" else folder
+        built = folder / f"{name}.mcap" if path.suffix == ".mcap" else folder
         _put(built, path, staging)
     log.info("wrote %s: %s", path, ", ".join(f"{n} on {t}" for t, n in counts.items()))
     return counts

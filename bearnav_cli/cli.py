@@ -1159,12 +1159,17 @@ def simulate_command(
     if not 0.0 <= min_success <= 1.0:
         raise _fail(f"--min-success: must lie in [0, 1], got {min_success}", EXIT_INVALID)
     overrides = options
+    sim_npz = out_path or plan_npz.with_name(pipeline.STAGE_BY_NAME["simulate"].filename)
+    # every output against every other before any work: a bag folder around sim.npz would replace it
+    artifacts.check_distinct(
+        {"-o/--out": sim_npz, "sim.json": artifacts.metrics_path(sim_npz), "--gif": gif, "--bag": bag}
+    )
     if gif is not None:  # before any work, like every output path
         artifacts.check_output_file(gif, (".gif",), "--gif", inputs=(plan_npz,))
-    if bag is not None:  # before any work too: suffix, folder, rosbags installed
+    if bag is not None:  # before any work too: suffix, folder, what is there, rosbags installed
         from bearnav_cli import bag as ros_bag
 
-        ros_bag.check_path(bag, "--bag")
+        ros_bag.check_path(bag, "--bag", force=force)
     with _progress_bar() as progress:
         report = pipeline.run_stage("simulate", plan_npz, out_path, overrides, force,
                                     _progress_factory(progress)("simulate"))  # fmt: skip
@@ -1174,7 +1179,7 @@ def simulate_command(
         pipeline.ACTIVITY.stage, pipeline.ACTIVITY.written = f"{bag} (sim.npz and sim.json were written)", False
         if not _Quiet.enabled and not as_json and len(sim.trajectory_coords) > 50_000:  # about a second each
             err.print(f"writing {bag} ({len(sim.trajectory_coords)} poses) ...", highlight=False, markup=False)
-        ros_bag.write(bag, sim, option="--bag")
+        ros_bag.write(bag, sim, option="--bag", force=force)
     if as_json:
         shown = {"sim": str(report.path), "ran": report.ran, "metrics": metrics}
         out.print_json(json.dumps(shown if bag is None else dict(shown, bag=str(bag))))
@@ -1470,11 +1475,16 @@ def tags_command(
         None, "--map", help="The map YAML to add the tags to (default: the plan's map, written as polygons)."
     ),
     out_path: Optional[Path] = typer.Option(
-        None, "-o", "--out", help="Map YAML with the new tags (default: next to the plan, map_tags.yaml)."
+        None,
+        "-o",
+        "--out",
+        help="Map YAML with the new tags, a new file (default: NAME_tags.yaml next to the --map "
+        "YAML, else map_tags.yaml next to the plan).",
     ),
     figure: Optional[Path] = typer.Option(
         None, "--figure", help="Where to glue them, a figure (default: the map YAML's name with .png)."
     ),
+    force: bool = typer.Option(False, "--force", help="Replace an -o file that is not a map bearnav tags wrote."),
     quiet: bool = QUIET,
     as_json: bool = JSON,
 ) -> None:
@@ -1492,11 +1502,14 @@ def tags_command(
     from bearnav_cli.stages import map_
 
     _Quiet.enabled |= quiet
-    out_path = out_path or plan_npz.parent / "map_tags.yaml"
+    if out_path is None:  # a new file: the map given stays as it is
+        out_path = map_yaml.with_name(f"{map_yaml.stem}_tags.yaml") if map_yaml else plan_npz.parent / "map_tags.yaml"
     artifacts.check_output_file(out_path, (".yaml", ".yml"), "-o/--out", inputs=tuple(p for p in (plan_npz, map_yaml)
                                                                                         if p is not None))  # fmt: skip
+    artifacts.check_overwrite(out_path, "tags", force=force)
     figure = figure or out_path.with_suffix(".png")
     artifacts.check_output_file(figure, FIGURE_SUFFIXES, "--figure")
+    artifacts.check_distinct({"-o/--out": out_path, "--figure": figure})
     options = {**CAMERA_OPTIONS, "error_target": "--error-target", "max_tags": "--max-tags"}
     try:
         params = tags.Params(fov_deg=fov, max_range=float("inf") if max_range is None else max_range,
@@ -1506,6 +1519,7 @@ def tags_command(
     pipeline.ACTIVITY.stage = "tags"
     plan = pipeline.load(plan_npz, "plan").artifact
     spec = map_.spec_of(plan.map)
+    original = None  # the YAML text the user wrote, kept as it is in the new map
     if map_yaml is not None:
         source = read_map_source(map_yaml)
         problem = composition.map_frame_problem(plan.map, map_.run(source))
@@ -1513,10 +1527,31 @@ def tags_command(
             raise _fail(f"{map_yaml}: {problem}: not the plan's map", EXIT_INVALID)
         grid_elsewhere = "occupancy" in source.spec and map_yaml.resolve().parent != out_path.resolve().parent
         spec = spec if grid_elsewhere else source.spec  # an occupancy image path is relative to its YAML
+        bare_grid = source.grid is not None and "occupancy" not in source.spec  # its spec comes from options
+        if not grid_elsewhere and not bare_grid:
+            original = _read_bytes(map_yaml).decode("utf-8", errors="replace")
     proposal = tags.propose_tags(plan, params)
+    name = tags.tagged_name(str(spec.get("name", plan.map.name)))  # another name: re-planning it makes its own folder
     new_spec = tags.map_spec_with_tags(spec, proposal)
+    new_spec = {"name": name, **{key: value for key, value in new_spec.items() if key != "name"}}
     map_.run(map_.MapSource(spec=new_spec, file=str(out_path), sha256=""))  # the map stage accepts it
-    text = yaml.safe_dump(new_spec, sort_keys=False, default_flow_style=None)
+    header = (f"{artifacts.TAGS_MARKER} {proposal.count} new tags for a {fov:g}° camera, from {plan_npz} "
+              f"(and {map_yaml or 'its map'}); plan it with `bearnav plan {out_path}`")  # fmt: skip
+    text = tags.map_text_with_tags(original, proposal, name, header) if original is not None else None
+    if text is not None:
+        try:
+            kept = yaml.safe_load(text)
+        except yaml.YAMLError:
+            kept = None
+        meant = dict(yaml.safe_load(original), name=name, landmarks=new_spec["landmarks"])
+        if kept != meant:
+            text = None  # a layout the text edit got wrong: the map is written afresh (its comments are lost)
+    if text is None:
+        if original is not None and not _Quiet.enabled:
+            err.print(f"[yellow]warning:[/yellow] {out_path}: bearnav cannot extend the landmarks of {map_yaml} "
+                      "where they are; the map is written afresh, without its comments", highlight=False,
+                      soft_wrap=True)  # fmt: skip
+        text = header + "\n" + yaml.safe_dump(new_spec, sort_keys=False, default_flow_style=None)
     artifacts.atomic_write(out_path, lambda f: f.write(text.encode()))
     plot = _plotting()  # matplotlib is slow to import: only here
 

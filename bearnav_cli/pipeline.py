@@ -884,10 +884,13 @@ def _with_current_params(loaded: artifacts.Loaded, payload: Any, out: Path) -> A
     return refreshed
 
 
-def _check_outputs(stage: Stage, out: Path, inputs: tuple[str | Path, ...] = ()) -> None:
+def _check_outputs(stage: Stage, out: Path, inputs: tuple[str | Path, ...] = (), force: bool = False) -> None:
+    """Every file the stage writes at ``out``: a fitting path, not an input, and nothing bearnav's stage did not
+    write (unless ``force``)."""
     for path in artifacts.output_files(stage.output_kind, out):
         artifacts.check_output_file(path, (path.suffix if path != out else artifacts.KINDS[stage.output_kind].suffix,),
                                     inputs=inputs)  # fmt: skip
+        artifacts.check_overwrite(path, stage.name, force=force)
 
 
 def run_map(source: map_.MapSource, out: Path, overrides: dict | None = None, force: bool = False) -> StageReport:
@@ -912,7 +915,7 @@ def run_map(source: map_.MapSource, out: Path, overrides: dict | None = None, fo
     stage = STAGE_BY_NAME["map"]
     _begin("map")
     out = Path(out)
-    _check_outputs(stage, out, (source.file,))
+    _check_outputs(stage, out, (source.file,), force)
     params = _map_stage_params(source, overrides)
     with artifacts.output_folder(out.parent):
         return _run_and_save(stage, source, params, out, source.file, source.sha256, force, None)
@@ -955,13 +958,35 @@ def run_stage(
     stage = STAGE_BY_NAME[name]
     _begin(name)
     out = Path(out) if out is not None else Path(input_path).with_name(stage.filename)
-    _check_outputs(stage, out, (input_path,))
+    _check_outputs(stage, out, (input_path,), force)
     with artifacts.output_folder(out.parent):
         loaded = load(input_path, stage.input_kind)
         params = _stage_params(name, loaded.artifact, overrides)
         return _run_and_save(
             stage, loaded.artifact, params, out, str(input_path), loaded.manifest["content_sha256"], force, progress
         )
+
+
+def _spec_params(source: map_.MapSource) -> Any:
+    return source.spec.get("params", {}) if isinstance(source.spec, dict) else {}
+
+
+def _spec_name(source: map_.MapSource) -> str:
+    """The name the map stage gives the map of ``source`` (its ``name:``, by default ``map``)."""
+    name = source.spec.get("name", "map") if isinstance(source.spec, dict) else "map"
+    return str(name)
+
+
+def _check_plan_params(map_params: Any, source: Any, overrides: dict[str, dict], diagonal: float | None) -> None:
+    """Build every stage's ``Params`` before the first one runs, so that a bad option writes nothing.
+
+    Without the map's diagonal (a YAML not yet normalised) the limits given relative to it wait for
+    the stage itself (:func:`_stage_params`), as do the resource estimates, which need its input.
+    """
+    if not isinstance(source, Path):
+        _map_stage_params(source, overrides.get("map"))
+    for stage in STAGES[1:]:
+        resolve_params(stage.name, map_params, overrides.get(stage.name), diagonal)
 
 
 def _check_chain(reports: list[StageReport]) -> None:
@@ -1016,7 +1041,15 @@ def plan(
     overrides = overrides or {}
     out_dir = Path(out_dir)
     _begin("map")
-    artifacts.check_output_folder(out_dir, tuple(stage.filename for stage in STAGES))
+    names = tuple(stage.filename for stage in STAGES)
+    artifacts.check_output_folder(out_dir, names)
+    adopted = load(source, "map") if isinstance(source, Path) else None
+    map_params = adopted.artifact.params if adopted is not None else _spec_params(source)
+    map_name = adopted.artifact.name if adopted is not None else _spec_name(source)
+    _check_plan_params(map_params, source, overrides, adopted.artifact.diagonal if adopted is not None else None)
+    artifacts.check_plan_folder(out_dir, names, map_name, force=force)
+    for stage in STAGES:  # before any stage runs: nothing of the plan is written when one of them is refused
+        _check_outputs(stage, out_dir / stage.filename, (), force)  # a map.json given is copied over map.json
     with artifacts.output_folder(out_dir):
         if isinstance(source, Path):
             reports = [_adopt_map(source, out_dir / STAGES[0].filename)]
