@@ -12,7 +12,7 @@ npz files hold a ``manifest`` entry (0-d JSON string), ``map.json`` a top-level
 - **Writes** are atomic (temp files in the same folder, then ``os.replace``, with SIGINT and
   SIGTERM held back while the files are renamed), checked against the same invariants first,
   and ``sim.npz`` + ``sim.json`` are committed together. Temp files are named
-  ``.NAME.bearnav-PID-XXXX.tmp``: those of a run that died are removed by the next one.
+  ``.NAME.bearnav-PID-MARK-XXXX.tmp``: those of a run that died are removed by the next one.
 - **Output folders**: :func:`check_output_file` and :func:`check_output_folder` refuse bad
   output paths before any work; :func:`output_folder` creates the folder and holds an
   exclusive ``fcntl.flock`` on it (one run per folder).
@@ -387,7 +387,19 @@ def _from_entries(kind: str, entries: dict[str, Any], manifest: dict, check_map:
 
 # --------------------------------------------------------------------------- writing
 
-_TEMP = re.compile(r"^\.(?P<name>.+)\.bearnav-(?P<pid>\d+)-[A-Za-z0-9_]+\.tmp(\.[A-Za-z0-9]+)?$")
+_TEMP = re.compile(r"^\.(?P<name>.+)\.bearnav-(?P<pid>\d+)-(?P<mark>[0-9a-f]{8})-[A-Za-z0-9_]+\.tmp(\.[A-Za-z0-9]+)?$")
+
+
+def _temp_mark(pid: int) -> str:
+    """Eight hex digits only bearnav puts after the PID in its temp names: a user's file that merely
+    looks like one (``.notes.bearnav-4194303-x.tmp``) lacks them and is never cleaned up."""
+    return hashlib.sha256(f"bearnav temp file of process {pid}".encode()).hexdigest()[:8]
+
+
+def _temp_prefix(path: Path, pid: int | None = None) -> str:
+    """The start of the name of a temp file or staging folder for ``path``, made by process ``pid``."""
+    pid = os.getpid() if pid is None else pid
+    return f".{path.name}.bearnav-{pid}-{_temp_mark(pid)}-"
 
 
 @contextlib.contextmanager
@@ -439,8 +451,7 @@ def _temp_file(path: Path) -> tuple[int, Path]:
     """A new temp file next to ``path`` (same suffix at the end, so formats that go by it work)."""
     import tempfile  # writing only: loading an artifact does not need it (nor random, shutil ...)
 
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.bearnav-{os.getpid()}-", suffix=f".tmp{path.suffix}",
-                               dir=path.parent)  # fmt: skip
+    fd, tmp = tempfile.mkstemp(prefix=_temp_prefix(path), suffix=f".tmp{path.suffix}", dir=path.parent)
     # mkstemp makes 0600; an artifact is as readable as any other file. fchmod on the descriptor:
     # a chmod by path could reach another file swapped in under that name in a shared folder
     os.fchmod(fd, 0o666 & ~_umask())
@@ -950,8 +961,9 @@ def _pid_alive(pid: int) -> bool:
 def remove_stale_temp_files(folder: str | os.PathLike) -> list[Path]:
     """Remove the temp files and staging folders a killed bearnav run left in ``folder``.
 
-    Only names bearnav gives them (``.NAME.bearnav-PID-XXXX.tmp``, :func:`staging_folder`'s too)
-    whose writer's PID is gone are removed: a live run's are left alone.
+    Only names bearnav gives them (``.NAME.bearnav-PID-MARK-XXXX.tmp``, :func:`staging_folder`'s too,
+    with ``MARK`` the PID's :func:`_temp_mark`), owned by this user, whose writer's PID is gone are
+    removed: a live run's, another user's and a lookalike without the mark are left alone.
 
     Parameters
     ----------
@@ -972,8 +984,15 @@ def remove_stale_temp_files(folder: str | os.PathLike) -> list[Path]:
         return removed
     for name in names:
         match = _TEMP.match(name)
-        if match and not _pid_alive(int(match.group("pid"))):
-            path = Path(folder) / name
+        if not match or match.group("mark") != _temp_mark(int(match.group("pid"))):
+            continue
+        path = Path(folder) / name
+        try:  # only this user's: never another's file in a shared folder
+            owner = path.lstat().st_uid
+        except OSError:
+            continue
+        mine = not hasattr(os, "getuid") or owner == os.getuid()
+        if mine and not _pid_alive(int(match.group("pid"))):
             try:
                 if path.is_dir() and not path.is_symlink():
                     shutil.rmtree(path)
@@ -998,7 +1017,7 @@ def staging_folder(path: str | os.PathLike) -> Iterator[Path]:
 
     path = Path(path)
     remove_stale_temp_files(path.parent)
-    staging = Path(tempfile.mkdtemp(prefix=f".{path.name}.bearnav-{os.getpid()}-", suffix=".tmp", dir=path.parent))
+    staging = Path(tempfile.mkdtemp(prefix=_temp_prefix(path), suffix=".tmp", dir=path.parent))
     try:
         yield staging
     finally:

@@ -1160,7 +1160,9 @@ def simulate_command(
         raise _fail(f"--min-success: must lie in [0, 1], got {min_success}", EXIT_INVALID)
     overrides = options
     sim_npz = out_path or plan_npz.with_name(pipeline.STAGE_BY_NAME["simulate"].filename)
-    # every output against every other before any work: a bag folder around sim.npz would replace it
+    # -o's own form first (a sim.json given as -o is a wrong extension, not a clash with its metrics),
+    # then every output against every other before any work: a bag folder around sim.npz would replace it
+    artifacts.check_output_file(sim_npz, (artifacts.KINDS["simulation"].suffix,), inputs=(plan_npz,))
     artifacts.check_distinct(
         {"-o/--out": sim_npz, "sim.json": artifacts.metrics_path(sim_npz), "--gif": gif, "--bag": bag}
     )

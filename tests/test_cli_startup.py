@@ -143,8 +143,10 @@ def test_inspect_imports_the_loader_and_numpy_only(plans):
     assert not found, found
     assert "numpy" in modules and "bearnav_cli.artifacts" in modules  # the check is the loader's, as before
     runtime = imported(modules, ("bearnav_cli.runtime",))
-    # the schema, and the robot section's defaults the map type reads (numpy only, no controller)
-    assert runtime == ["bearnav_cli.runtime", "bearnav_cli.runtime.robot", "bearnav_cli.runtime.schema"], runtime
+    # the schema, the robot section's defaults the map type reads, and the one copy of the file reader
+    # and the invariants the robot's loader shares (numpy only, no controller)
+    assert runtime == ["bearnav_cli.runtime", "bearnav_cli.runtime.invariants", "bearnav_cli.runtime.plan_file",
+                       "bearnav_cli.runtime.robot", "bearnav_cli.runtime.schema"], runtime  # fmt: skip
 
 
 def test_inspect_imports_the_stages_the_maps_params_name(plans):

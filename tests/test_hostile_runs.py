@@ -244,9 +244,9 @@ def _dead_pid() -> int:
 
 def test_temp_files_of_a_killed_run_are_removed_by_the_next(tmp_path, built):
     folder = copy_plan(built, tmp_path / "p")
-    stale = folder / f".sim.npz.bearnav-{_dead_pid()}-abc123.tmp"
+    stale = folder / f"{artifacts._temp_prefix(folder / 'sim.npz', _dead_pid())}abc123.tmp"
     stale.write_bytes(b"PK\x03\x04 half of a simulation")
-    alive = folder / f".sim.npz.bearnav-{os.getpid()}-def456.tmp"  # a live writer's: left alone
+    alive = folder / f"{artifacts._temp_prefix(folder / 'sim.npz')}def456.tmp"  # a live writer's: left alone
     alive.write_bytes(b"busy")
     result = invoke("-q", "simulate", folder / "plan.npz", "--starts", "random:2", "--min-success", "0")
     assert result.exit_code == 0, result.output

@@ -172,15 +172,19 @@ def _dead_pid() -> int:
 
 def test_stale_staging_folders_and_temp_files_are_removed_by_the_next_write(tmp_path):
     dead = _dead_pid()
-    staging = tmp_path / f".b.mcap.bearnav-{dead}-k3x_9.tmp"
+    prefix = artifacts._temp_prefix  # the names bearnav gives
+    staging = tmp_path / f"{prefix(tmp_path / 'b.mcap', dead)}k3x_9.tmp"
     (staging / "b").mkdir(parents=True)
     (staging / "b" / "b.mcap").write_bytes(b"half a bag")
-    stale = tmp_path / f".map.yaml.bearnav-{dead}-abc123.tmp.yaml"
+    stale = tmp_path / f"{prefix(tmp_path / 'map.yaml', dead)}abc123.tmp.yaml"
     stale.write_text("half a map")
-    live = tmp_path / ".x.png.bearnav-1-abc.tmp.png"  # pid 1 is alive: left alone
+    live = tmp_path / f"{prefix(tmp_path / 'x.png', 1)}abc.tmp.png"  # pid 1 is alive: left alone
     live.write_text("busy")
+    # issue 27 (security): a user's file that only looks like a temp file of a dead process is kept
+    lookalike = tmp_path / f".notes.bearnav-{dead}-x.tmp"
+    lookalike.write_text("my notes")
     artifacts.atomic_write(tmp_path / "map.yaml", lambda f: f.write(b"name: x\n"))  # what tags does
-    assert not staging.exists() and not stale.exists() and live.exists()
+    assert not staging.exists() and not stale.exists() and live.exists() and lookalike.exists()
     staging.mkdir()
     with artifacts.staging_folder(tmp_path / "b.mcap") as mine:  # what --bag does
         assert not staging.exists() and mine.is_dir()
