@@ -70,6 +70,18 @@ def example_plan(name: str, tmp_path_factory: pytest.TempPathFactory) -> Path:
     return folder / "plan.npz"
 
 
+def planned_small_map(tmp_path_factory: pytest.TempPathFactory, name: str = "small") -> Path:
+    """``plan.npz`` of :data:`SMALL_MAP` planned by the pipeline into a new folder (half a second)."""
+    from bearnav_cli import pipeline
+    from bearnav_cli.cli import read_map_source
+
+    folder = tmp_path_factory.mktemp(name)
+    source = folder / "small.yaml"
+    source.write_text(yaml.safe_dump(SMALL_MAP, sort_keys=False))
+    pipeline.plan(read_map_source(source), folder)
+    return folder / "plan.npz"
+
+
 @functools.cache
 def random_plan(seed: int):
     """The plan of ``funnel_maps.random_spec(seed)`` (computed in memory once per test process)."""

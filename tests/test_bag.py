@@ -9,28 +9,23 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import yaml
 
 # rosbags comes with the test extra (bearnav[ros]): a broken install fails here rather than skipping
 from rosbags.highlevel import AnyReader
 from typer.testing import CliRunner
 
 from bearnav_cli import artifacts, bag, pipeline
-from bearnav_cli.cli import app, read_map_source
+from bearnav_cli.cli import app
 from bearnav_cli.errors import InvalidParamsError
 
-from .conftest import SMALL_MAP
+from .conftest import planned_small_map
 from .test_cli_errors import assert_one_line_error
 
 
 @pytest.fixture(scope="module")
 def plan_path(tmp_path_factory) -> Path:
     """The small map of conftest planned once (a few hundred RRT* iterations)."""
-    folder = tmp_path_factory.mktemp("small")
-    source = folder / "small.yaml"
-    source.write_text(yaml.safe_dump(SMALL_MAP, sort_keys=False))
-    pipeline.plan(read_map_source(source), folder)
-    return folder / "plan.npz"
+    return planned_small_map(tmp_path_factory)
 
 
 def simulate(plan: Path, *args) -> object:

@@ -13,7 +13,6 @@ import json
 import os
 import re
 import struct
-import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
@@ -27,6 +26,7 @@ from bearnav_cli import artifacts, datatypes
 from .test_hostile_common import (
     REPO,
     assert_clean_failure,
+    deflate_damaged,
     edit_embedded_map,
     invoke,
     read_npz,
@@ -91,14 +91,7 @@ def _truncated(src: Path, dst: Path) -> Path:
 
 def _deflate(src: Path, dst: Path) -> Path:
     """Flip bytes in the middle of the largest compressed member (a damaged deflate stream)."""
-    data = bytearray(src.read_bytes())
-    with zipfile.ZipFile(src) as archive:
-        info = max(archive.infolist(), key=lambda i: i.compress_size)
-    name_len, extra_len = struct.unpack("<HH", data[info.header_offset + 26 : info.header_offset + 30])
-    start = info.header_offset + 30 + name_len + extra_len + info.compress_size // 2
-    for k in range(start, start + 24):
-        data[k] ^= 0x5A
-    dst.write_bytes(bytes(data))
+    dst.write_bytes(deflate_damaged(src.read_bytes(), src))
     return dst
 
 

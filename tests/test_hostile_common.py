@@ -16,8 +16,10 @@ import hashlib
 import json
 import os
 import shutil
+import struct
 import subprocess
 import sys
+import zipfile
 from pathlib import Path
 from typing import Any, Callable
 from unittest import mock
@@ -196,3 +198,16 @@ __all__ = [
     "rehash", "rewrite_json", "rewrite_npz", "run_program", "small_plan", "small_spec", "snapshot", "stderr_lines",
     "temp_files", "write_npz", "write_yaml",
 ]  # fmt: skip
+
+
+def deflate_damaged(data: bytes, path: Path) -> bytes:
+    """``data`` (the bytes of the npz at ``path``) with 24 bytes flipped in the middle of its largest
+    member's deflate stream: a damaged entry inside an intact zip."""
+    out = bytearray(data)
+    with zipfile.ZipFile(path) as archive:
+        info = max(archive.infolist(), key=lambda i: i.compress_size)
+    name_len, extra_len = struct.unpack("<HH", out[info.header_offset + 26 : info.header_offset + 30])
+    start = info.header_offset + 30 + name_len + extra_len + info.compress_size // 2
+    for k in range(start, start + 24):
+        out[k] ^= 0x5A
+    return bytes(out)

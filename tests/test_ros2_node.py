@@ -16,16 +16,13 @@ import types as pytypes
 
 import numpy as np
 import pytest
-import yaml
 
 # rosbags comes with the test extra (bearnav[ros]): a broken install fails here rather than skipping
 from rosbags import typesys
 
-from bearnav_cli import pipeline
-from bearnav_cli.cli import read_map_source
 from bearnav_cli.runtime import Controller, camera
 
-from .conftest import REPO, SMALL_MAP
+from .conftest import REPO, planned_small_map
 
 CONTRIB = REPO / "contrib" / "ros2"
 
@@ -64,11 +61,7 @@ def store():
 
 @pytest.fixture(scope="module")
 def plan_path(tmp_path_factory):
-    folder = tmp_path_factory.mktemp("small")
-    source = folder / "small.yaml"
-    source.write_text(yaml.safe_dump(SMALL_MAP, sort_keys=False))
-    pipeline.plan(read_map_source(source), folder)
-    return str(folder / "plan.npz")
+    return str(planned_small_map(tmp_path_factory))
 
 
 def wire(store, message):

@@ -10,32 +10,25 @@ raw ``zlib.error``, ``EOFError``, ``IndexError``, ``ValueError`` or ``TypeError`
 
 from __future__ import annotations
 
-import struct
 import zipfile
 from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
 import pytest
-import yaml
 
-from bearnav_cli import artifacts, datatypes, pipeline
-from bearnav_cli.cli import read_map_source
+from bearnav_cli import artifacts, datatypes
 from bearnav_cli.errors import ArtifactError
 from bearnav_cli.runtime import Controller, PlanArrays, invariants, plan_file, tree_costs
 
-from .conftest import SMALL_MAP
-from .test_hostile_common import edit_embedded_map, rewrite_npz
+from .conftest import planned_small_map
+from .test_hostile_common import deflate_damaged, edit_embedded_map, rewrite_npz
 
 
 @pytest.fixture(scope="module")
 def plan_path(tmp_path_factory) -> Path:
     """The small map of conftest planned once (half a second)."""
-    folder = tmp_path_factory.mktemp("loader")
-    source = folder / "small.yaml"
-    source.write_text(yaml.safe_dump(SMALL_MAP, sort_keys=False))
-    pipeline.plan(read_map_source(source), folder)
-    return folder / "plan.npz"
+    return planned_small_map(tmp_path_factory, "loader")
 
 
 def refused_by_both(path: Path, field: str | None, words: str = "") -> None:
@@ -194,18 +187,6 @@ def _truncated(data: bytes, path: Path) -> bytes:
     return data[: len(data) // 2]
 
 
-def _member_flipped(data: bytes, path: Path) -> bytes:
-    """24 bytes flipped in the middle of the largest member's deflate stream."""
-    out = bytearray(data)
-    with zipfile.ZipFile(path) as archive:
-        info = max(archive.infolist(), key=lambda i: i.compress_size)
-    name_len, extra_len = struct.unpack("<HH", out[info.header_offset + 26 : info.header_offset + 30])
-    start = info.header_offset + 30 + name_len + extra_len + info.compress_size // 2
-    for k in range(start, start + 24):
-        out[k] ^= 0x5A
-    return bytes(out)
-
-
 def _directory_scribbled(data: bytes, path: Path) -> bytes:
     out = bytearray(data)
     start = out.find(b"PK\x01\x02")
@@ -216,7 +197,7 @@ def _directory_scribbled(data: bytes, path: Path) -> bytes:
 #: Damaged bytes: (damage, field named, words in the error).
 DAMAGED = {
     "truncated": (_truncated, None, "damaged zip"),
-    "bytes flipped in a member": (_member_flipped, "found", "damaged entry"),
+    "bytes flipped in a member": (deflate_damaged, "found", "damaged entry"),
     "central directory scribbled": (_directory_scribbled, None, "damaged zip"),
     "not a zip": (lambda data, path: b"plan.npz\n" * 40, None, "not an npz archive"),
     "an npy": (lambda data, path: b"\x93NUMPY" + data[6:200], None, ".npy"),
