@@ -403,7 +403,7 @@ class Map:
                 # maps written before tags had a facing: every tag free-standing
                 landmark_facing=np.radians(
                     np.array(
-                        [math.nan if lm.get("facing") is None else float(lm["facing"]) for lm in data["landmarks"]],
+                        [_facing_number(lm.get("facing")) for lm in data["landmarks"]],
                         float,
                     )
                 ),
@@ -412,6 +412,15 @@ class Map:
             if isinstance(exc, ArtifactError):
                 raise
             raise ArtifactError(f"malformed map ({type(exc).__name__}: {exc})", field="map") from exc
+
+
+def _facing_number(value: Any) -> float:
+    """``map.json``'s facing (degrees, or null) as a float, NaN for null; ``true`` is not 1°."""
+    if value is None:
+        return math.nan
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ArtifactError(f"expected degrees or null, got {value!r}", field="map.landmarks.facing")
+    return float(value)
 
 
 def _facing_degrees(facing: float) -> float | None:
@@ -459,7 +468,14 @@ def _map_landmarks_problem(map_: Map) -> str | None:
         return "landmark ids must be distinct"
     lo, hi = map_.bounds[:2], map_.bounds[2:]
     k = _first(~np.all((map_.landmarks >= lo) & (map_.landmarks <= hi), axis=1))
-    return None if k is None else f"landmark {k} {map_.landmarks[k].tolist()} is outside the bounds"
+    if k is not None:
+        return f"landmark {k} {map_.landmarks[k].tolist()} is outside the bounds"
+    # two tags at one point give one bearing twice: the YAML reader refuses it, and so does map.json
+    _, first, counts = np.unique(map_.landmarks, axis=0, return_index=True, return_counts=True)
+    if np.any(counts > 1):
+        k = int(first[np.flatnonzero(counts > 1)[0]])
+        return f"two landmarks at one position, {map_.landmarks[k].tolist()} (landmark {k} and another)"
+    return None
 
 
 def _map_name_problem(map_: Map) -> str | None:
@@ -499,7 +515,7 @@ MAP_INVARIANTS: tuple[Invariant, ...] = (
     Invariant("goal", "strictly inside B_r (the bounds less the robot radius) and in no obstacle",
               lambda m: _map_points_problem(m, m.goal[None, :], strict=True)),
     Invariant("starts", "inside B_r and in no obstacle", lambda m: _map_points_problem(m, m.starts, strict=False)),
-    Invariant("landmarks", "at least 2, inside the bounds, with distinct ids", _map_landmarks_problem),
+    Invariant("landmarks", "at least 2, inside the bounds, with distinct ids and positions", _map_landmarks_problem),
     Invariant("params", "stage name -> parameter name -> a number, string, true/false or null", _map_params_problem),
 )  # fmt: skip
 

@@ -374,6 +374,12 @@ MAP_EDITS: dict[str, tuple[Callable[[dict], None], str]] = {
     "bounds-inverted": (_set("bounds", [10.0, 0.0, 0.0, 8.0]), "bounds"),
     "one-landmark": (_one_landmark, "landmarks"),
     "landmark-ids-repeated": (_duplicate_ids, "landmarks"),
+    # issue 27 item 11: the YAML reader refused these, map.json did not
+    "landmarks-at-one-position": (
+        lambda d: d["landmarks"][1].update(position=d["landmarks"][0]["position"]),
+        "landmarks",
+    ),
+    "facing-true": (lambda d: d["landmarks"][0].update(facing=True), "landmarks.facing"),
     "name-a-path": (_set("name", "../escape"), "name"),
     "params-wrong-type": (_set("params.rrtstar.iterations", "many"), "params.rrtstar.iterations"),
     "params-seed-negative": (_set("params.rrtstar.seed", -1), "params.rrtstar.seed"),
