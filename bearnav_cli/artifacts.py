@@ -36,7 +36,6 @@ import platform
 import re
 import signal
 import threading
-import zipfile
 from collections.abc import Iterator
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -764,10 +763,9 @@ class Origin:
 
 def _npz_origin(path: Path) -> Origin | None:
     # only the manifest and map members are read: a plan's arrays stay on disk
-    with zipfile.ZipFile(path) as archive:
-        if "manifest.npy" not in archive.namelist():
-            return None
     with np.load(path, allow_pickle=False) as npz:
+        if "manifest" not in npz.files:
+            return None
         manifest = json.loads(str(npz["manifest"]))
         document = json.loads(str(npz["map"])) if "map" in npz.files else {}
     if not isinstance(manifest, dict) or not isinstance(manifest.get("stage"), str):

@@ -508,15 +508,19 @@ def _too_big(what: str, need: float, where: str, fits: str) -> ResourceLimitErro
     )
 
 
+def _count(cells: float) -> float:
+    """``ceil(cells)``, kept a float beyond 2**53: a tiny step makes counts past any integer a float
+    holds exactly, or ``inf``, and those are only compared with the limits and refused."""
+    return math.ceil(cells) if cells < 2.0**53 else cells
+
+
 def _check_rrtstar(params: rrtstar.Params, map_: Map, where: dict[str, str]) -> None:
     from bearnav_cli.stages import rrtstar
 
     xmin, ymin, xmax, ymax = (float(v) for v in map_.bounds)  # Python floats overflow to inf quietly
     width, height = xmax - xmin, ymax - ymin
     cell = params.step / rrtstar.BUCKETS_PER_STEP
-    # in floats first: a tiny step makes counts beyond any float (or inf), and those are refused
-    rough = (width / cell) * (height / cell)
-    grid = math.ceil(width / cell) * math.ceil(height / cell) if rough <= MAX_GRID_CELLS else rough
+    grid = _count(width / cell) * _count(height / cell)
     if grid > MAX_GRID_CELLS:
         smallest = rrtstar.BUCKETS_PER_STEP * math.sqrt(width * height / MAX_GRID_CELLS)
         raise ResourceLimitError(
@@ -524,10 +528,8 @@ def _check_rrtstar(params: rrtstar.Params, map_: Map, where: dict[str, str]) -> 
             f"(limit {MAX_GRID_CELLS:.0e}); use at least {smallest:.3g}",
             field=where["step"],
         )
-    rough = 0.0 if params.border_spacing == 0 else 2.0 * (width + height) / params.border_spacing
-    border = 0 if params.border_spacing == 0 else 2 * (math.ceil(width / params.border_spacing)
-                                                      + math.ceil(height / params.border_spacing)) \
-        if rough <= 2 * MAX_BORDER_SAMPLES else rough  # fmt: skip
+    spacing = params.border_spacing
+    border = 0 if spacing == 0 else 2 * (_count(width / spacing) + _count(height / spacing))
     if border > MAX_BORDER_SAMPLES:
         smallest = 2 * (width + height) / MAX_BORDER_SAMPLES
         derived = "border_spacing" not in where.get("_explicit", "").split(",")
@@ -999,9 +1001,9 @@ def _check_chain(reports: list[StageReport]) -> None:
                                 file=str(after.path))  # fmt: skip
 
 
-def _adopt_map(map_json: Path, target: Path) -> StageReport:
-    """A ready ``map.json`` as the map stage's report, copied into the plan folder when it lies elsewhere."""
-    loaded = load(map_json, "map")
+def _adopt_map(loaded: artifacts.Loaded, map_json: Path, target: Path) -> StageReport:
+    """A ready ``map.json`` (``loaded`` from ``map_json``) as the map stage's report, copied into the plan
+    folder when it lies elsewhere."""
     if artifacts.copy_file(map_json, target):  # the same bytes: what was loaded is what is there now
         loaded = dataclasses.replace(loaded, path=target)
     _committed()
@@ -1052,7 +1054,7 @@ def plan(
         _check_outputs(stage, out_dir / stage.filename, (), force)  # a map.json given is copied over map.json
     with artifacts.output_folder(out_dir):
         if isinstance(source, Path):
-            reports = [_adopt_map(source, out_dir / STAGES[0].filename)]
+            reports = [_adopt_map(adopted, source, out_dir / STAGES[0].filename)]
         else:
             reports = [run_map(source, out_dir / STAGES[0].filename, overrides.get("map"), force)]
         if on_stage:
