@@ -226,7 +226,8 @@ def test_cluttered_maps_plan_with_finite_usable_tolerances(seed):
 @pytest.mark.parametrize("seed", [0, 2])
 def test_cover_F_reaches_into_the_band_along_the_walls(seed):
     """ALGORITHMS §12.7: ``cover = F`` adds band leaves after F_m; the cells still compose, each band leaf
-    hangs from a node that is not a band leaf, and the recomputed coverage of F is the stored one."""
+    hangs from a node that is not a band leaf, the recomputed coverage of F is the stored one, and no
+    band cell lowers the least τ_c of the cells before the band (the floor the stage records)."""
     from bearnav_cli import pipeline
     from bearnav_cli.stages import decompose
     from tests.conftest import build_map
@@ -250,3 +251,9 @@ def test_cover_F_reaches_into_the_band_along_the_walls(seed):
     assert comp.ok, comp.problems
     assert comp.coverage_free == pytest.approx(far.free_coverage, rel=1e-6)
     assert np.all(np.isfinite(plan.usable_tolerance)) and np.all(plan.usable_tolerance > 0)
+    # the floor is the least Lemma-6 τ_c of the cells before the band, which synthesis only raises
+    floor = far.stats["band_tolerance_floor"]
+    near_plan = synthesize.run(near)
+    assert floor <= near_plan.plan_tolerance * (1 + 1e-9)
+    assert np.min(plan.usable_tolerance[first_band:]) >= floor * (1 - 1e-9)
+    assert plan.plan_tolerance >= floor * (1 - 1e-9)

@@ -24,6 +24,7 @@ from bearnav_cli.datatypes import CellFlag, Cells, Tree, cell_list
 from bearnav_cli.errors import ArtifactError, InvalidParamsError
 from bearnav_cli.funnel import (
     INSET_LIMIT,
+    NeckChoice,
     ObstaclePieces,
     Region,
     best_neck,
@@ -341,6 +342,8 @@ DENSIFY_GRID = 16
 #: Band leaves (ALGORITHMS §12.7) sit this fraction of the barrier margin from ``O``: their cells reach
 #: within about half of that of the walls.
 WALL_LEAF_DEPTH = 0.1
+#: A band curve's vertex turning by more than this (radians) is a corner: band leaves go there first.
+BAND_CORNER_TURN = math.radians(30.0)
 #: Candidate points tested against the nodes in one vectorised call.
 DENSIFY_BATCH = 8
 #: Nodes (by route length) each candidate tries before all of them.
@@ -385,21 +388,24 @@ def _funnel_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) 
             raise ArtifactError(f"cell of node {i}: {exc}", field="nodes") from exc
 
     insets = {}  # δ_e,c of every edge cell, by node
+    usable = {}  # min(h*/2, δ_e,c/2): the τ_c Lemma 6's field gives each edge cell, by node
     capped = []
 
-    def neck(region: Region, i: int, j: int) -> Region:
+    def neck_of(region: Region, i: int, j: int, x_i: np.ndarray) -> NeckChoice:
         # §12.4: the inset that maximises τ_c = min(h*/2, δ_e,c/2), or the one the user fixed
         try:
             if params.exit_inset is None:
-                choice = best_neck(region, nodes[i], nodes[j], regions[j], tol)
-            else:
-                room = INSET_LIMIT * depth(regions[j].A, regions[j].b, nodes[j])
-                if params.exit_inset > room:
-                    capped.append(i)
-                choice = neck_choice(region, nodes[i], nodes[j], regions[j], min(params.exit_inset, room), tol)
+                return best_neck(region, x_i, nodes[j], regions[j], tol)
+            room = INSET_LIMIT * depth(regions[j].A, regions[j].b, nodes[j])
+            if params.exit_inset > room:
+                capped.append(i)
+            return neck_choice(region, x_i, nodes[j], regions[j], min(params.exit_inset, room), tol)
         except ValueError as exc:  # x_j lies inside its parent's cell (C2): a bug
             raise ArtifactError(f"cell of node {i}: {exc}", field="exit_inset") from exc
-        insets[i] = choice.inset
+
+    def neck(region: Region, i: int, j: int, choice: NeckChoice | None = None) -> Region:
+        choice = choice or neck_of(region, i, j, nodes[i])
+        insets[i], usable[i] = choice.inset, choice.usable
         return choice.region
 
     goal_start = goal_cell(nodes, free_bounds, tol) if local else None
@@ -425,15 +431,39 @@ def _funnel_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) 
     reach = space.with_clearance(clearance)
     added = []
 
+    trial = {}  # the band leaf band_leaf accepted last, with its built cell: (point, node, NeckChoice)
+
     def add_leaf(p: np.ndarray, n: int) -> shapely.Polygon:
         nonlocal nodes, parent, cost
         nodes = np.vstack([nodes, p])
         parent = np.append(parent, n)
         cost = np.append(cost, cost[n] + math.hypot(*(p - nodes[n])))
         i = len(nodes) - 1
-        regions.append(neck(region_of(i, n, nodes), i, n))
+        built = trial.pop("leaf", None)
+        choice = built[2] if built and built[1] == n and np.array_equal(built[0], p) else None
+        regions.append(neck(region_of(i, n, nodes) if choice is None else None, i, n, choice))
         added.append(i)
         return shapely.Polygon(regions[-1].polygon)
+
+    def band_leaf(pocket: shapely.Geometry) -> tuple[np.ndarray, int] | None:
+        # the first candidate whose cell keeps the floor: a band cell that would lower the plan's
+        # least τ_c is not built, and the pocket's next candidate is tried
+        candidates = _band_candidates(pocket, offset)
+        if refused and len(candidates):  # a refused leaf would be refused again: its parent stays
+            known = np.array(refused)
+            candidates = candidates[~np.any(np.all(candidates[:, None, :] == known[None], axis=2), axis=1)]
+        while len(candidates) and len(joinable):
+            leaf = _join_leaf(candidates, nodes, cost, near_wall, tol, joinable, nearest=True)
+            if leaf is None:
+                return None
+            p, n = leaf
+            choice = neck_of(region_of(len(nodes), n, np.vstack([nodes, p])), len(nodes), n, p)
+            if choice.usable >= floor:
+                trial["leaf"] = (p, n, choice)
+                return leaf
+            refused.append(p)
+            candidates = candidates[np.flatnonzero(np.all(candidates == p, axis=1))[0] + 1 :]
+        return None
 
     allowed = (1.0 - params.coverage_target) * domain_area
     pockets = _densify(pockets, allowed, params.max_added_nodes,
@@ -457,7 +487,6 @@ def _funnel_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) 
     # leaves a band depth q = WALL_LEAF_DEPTH·m from O get cells that keep only min(m, s·d) ≈ q/4
     # from the piece beside them, so densifying F with them leaves a band of about q/4
     in_fm = len(added)
-    n_eligible = len(nodes)
     # ``covered`` is the union of every cell so far (recomputed above when leaves were added)
     whole_free = coverage_domain(free, free_bounds, space.obstacles, 0.0)
     reached_free, _ = reached_parts(whole_free, covered)
@@ -466,14 +495,20 @@ def _funnel_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) 
             if g.area > 0]  # fmt: skip
     free_before = 1.0 - sum(p[1] for p in band) / free_area if free_area > 0 else 1.0
     depth_q = WALL_LEAF_DEPTH * margin
+    refused = []  # band leaves whose cells would have lowered the plan's least τ_c
+    # band cells may not lower the least τ_c of the cells before them (Lemma 6's, which the
+    # synthesis only raises): a cell that would is left out, and its part of the band uncovered
+    floor = min(usable.values(), default=0.0)
+    # τ_c ≤ δ_e,c/2 and the exit face holds x_j, so no band cell under a node shallower in its own
+    # cell than 2·floor/INSET_LIMIT keeps the floor
+    room = np.array([depth(regions[n].A, regions[n].b, nodes[n]) for n in range(len(nodes))])
+    joinable = np.flatnonzero(INSET_LIMIT * room >= 2.0 * floor)
     if params.cover == "F":
         offset = shapely.boundary(coverage_domain(free, free_bounds, space.obstacles, depth_q))
         shapely.prepare(offset)
         near_wall = space.with_clearance(0.5 * depth_q)
         band = _densify(band, (1.0 - params.coverage_target) * free_area, params.max_added_nodes - len(added),
-                        lambda g: _join_leaf(_band_candidates(g, offset), nodes, cost, near_wall, tol, n_eligible,
-                                             nearest=True),
-                        add_leaf)  # fmt: skip
+                        band_leaf, add_leaf)  # fmt: skip
     band_unreachable = sum(1 for p in band if p[2])
     free_after = 1.0 - sum(p[1] for p in band) / free_area if free_area > 0 else 1.0
     if len(added) > in_fm:  # the added cells may meet parts of F no cell met before: measure again
@@ -516,6 +551,8 @@ def _funnel_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) 
         "band_leaves": len(added) - in_fm,
         "band_depth": depth_q,
         "band_unreachable_pockets": band_unreachable,
+        "band_refused_leaves": len(refused),
+        "band_tolerance_floor": floor,
         "added_nodes": len(added),
         "unreachable_pockets": len(unreachable),
         "uncovered_area": uncovered_area,
@@ -611,17 +648,19 @@ def _densify_leaf(pocket: shapely.Geometry, nodes: np.ndarray, cost: np.ndarray,
 
 
 def _join_leaf(candidates: np.ndarray, nodes: np.ndarray, cost: np.ndarray, reach: FreeSpace, tol: float,
-               eligible: int | None = None, nearest: bool = False) -> tuple[np.ndarray, int] | None:  # fmt: skip
+               eligible: np.ndarray | None = None, nearest: bool = False) -> tuple[np.ndarray, int] | None:  # fmt: skip
     """The first of ``candidates`` (in order) free in ``reach`` that sees a node along a segment free in
     ``reach``, and the node with the least ``‖p − x_n‖ + cost(n)`` among those it sees; None if none does.
 
-    ``eligible``: only the first ``eligible`` nodes may be joined (band leaves hang from the tree and
-    its F_m leaves, never from another band leaf, whose exit point would sit near a wall).
+    ``eligible``: the indices of the nodes that may be joined (band leaves hang from the tree and
+    its F_m leaves, never from another band leaf, whose exit point would sit near a wall, nor from
+    a node too shallow in its own cell for the band's floor on ``τ_c``).
     ``nearest``: the nearest node it sees instead of the cheapest route (measured on the kitchen:
     band leaves cover 98.3% of F with it, 98.1% by route, 96.7% joined to the farthest node).
     """
     if eligible is not None:
-        nodes, cost = nodes[:eligible], cost[:eligible]
+        leaf = _join_leaf(candidates, nodes[eligible], cost[eligible], reach, tol, nearest=nearest)
+        return None if leaf is None else (leaf[0], int(eligible[leaf[1]]))
     candidates = candidates[reach.points_free(candidates)] if len(candidates) else candidates
     # a few candidates at a time, deepest first, each against every node: most pockets are reached
     # from their pole, and a pocket no node sees costs one pass over its grid
@@ -649,9 +688,11 @@ def _band_candidates(pocket: shapely.Geometry, offset: shapely.Geometry) -> np.n
     """Leaf candidates of a pocket in the band along ``O`` (ALGORITHMS §12.7), shape (k, 2).
 
     Points of ``offset`` (the curve at the band leaf depth ``q`` from ``O`` and the walls) inside the
-    pocket, its middle first, then spread along it: a leaf there gets a cell that keeps only
-    ``min(m, s·d) ≈ q/4`` (``funnel.ROW_SHARE``) from the piece beside it, so its cell reaches that
-    close to the wall.
+    pocket: first the curve's corners, sharpest turn first, then its middle, then points spread
+    along it. A leaf there gets a cell that keeps only ``min(m, s·d) ≈ q/4`` (``funnel.ROW_SHARE``)
+    from the piece beside it, so its cell reaches that close to the wall. At a corner, the leaf is
+    ``q`` from both walls and its cell fills the corner; from the middle of one wall, the cell keeps
+    a quarter of its distance from the other wall, and filling the corner took a fan of leaves.
     """
     curve = shapely.intersection(pocket, offset)
     length = float(curve.length) if not curve.is_empty else 0.0
@@ -659,9 +700,21 @@ def _band_candidates(pocket: shapely.Geometry, offset: shapely.Geometry) -> np.n
         return np.zeros((0, 2))
     parts = [g for g in shapely.get_parts(curve) if g.length > 0]
     parts.sort(key=lambda g: -g.length)
+    turns, corners = [np.zeros(0)], [np.zeros((0, 2))]
+    for g in parts:
+        xy = shapely.get_coordinates(g)
+        if np.array_equal(xy[0], xy[-1]):  # a closed curve: its first vertex has neighbours too
+            xy = np.vstack([xy[-2], xy])
+        if len(xy) < 3:
+            continue
+        u, v = xy[1:-1] - xy[:-2], xy[2:] - xy[1:-1]
+        turn = np.abs(np.arctan2(u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0], np.einsum("ij,ij->i", u, v)))
+        turns.append(turn[turn > BAND_CORNER_TURN])
+        corners.append(xy[1:-1][turn > BAND_CORNER_TURN])
+    corners = np.concatenate(corners)[np.argsort(-np.concatenate(turns), kind="stable")]
     where = np.array([0.5, 0.25, 0.75, 0.1, 0.9])
     points = [shapely.get_coordinates(shapely.line_interpolate_point(g, where, normalized=True)) for g in parts[:4]]
-    return np.concatenate(points).reshape(-1, 2)
+    return np.concatenate([corners, *points]).reshape(-1, 2)
 
 
 def _pocket_mouth(pocket: shapely.Geometry, domain_edge: shapely.Geometry | None) -> np.ndarray:
