@@ -114,6 +114,25 @@ def test_synthesis_never_tolerates_less_than_lemma_6(seed):
 
 
 @pytest.mark.parametrize("seed", SEEDS)
+def test_the_batched_sinks_are_each_cells_own(seed):
+    """synthesize._sinks takes every exit face in one sort: the same faces, sinks and ``h*`` as
+    :func:`funnel.exit_face` and :func:`funnel.exit_sink` cell by cell (ragged cells, ties included)."""
+    from bearnav_cli.stages.synthesize import _sinks
+
+    cells = random_plan(seed).cells
+    edge = np.flatnonzero(cells.parent[cells.cell_node] >= 0)
+    verts = [cells.vertices(c) for c in edge]
+    rows = [cells.barrier(c) for c in edge]
+    z, x_j = cells.exit_dir[edge], cells.exit_point[edge]
+    sink, h_star = _sinks(np.concatenate(verts), np.array([len(v) for v in verts]),
+                          np.concatenate([n for n, _ in rows]), np.concatenate([q for _, q in rows]),
+                          np.array([len(q) for _, q in rows]), z, x_j)  # fmt: skip
+    for k, c in enumerate(edge):
+        one_sink, one_h = exit_sink(exit_face(verts[k], z[k], x_j[k]), *rows[k])
+        assert np.allclose(sink[k], one_sink, atol=1e-12) and h_star[k] == pytest.approx(one_h, abs=1e-12), c
+
+
+@pytest.mark.parametrize("seed", SEEDS)
 def test_each_inset_is_the_exit_faces_slack_in_its_parent(seed):
     plan = random_plan(seed)
     comp = composition.check(plan, 0.1)

@@ -41,7 +41,7 @@ from bearnav_cli.cell_lp import (
 )
 from bearnav_cli.datatypes import CellFlag, Cells, CellStatus, Plan, tolerance_by_area
 from bearnav_cli.errors import ArtifactError, InvalidParamsError
-from bearnav_cli.funnel import cell_tolerance, exit_face, exit_sinks, plan_tolerance_of, usable_tolerances
+from bearnav_cli.funnel import cell_tolerance, exit_sinks, plan_tolerance_of, usable_tolerances
 from bearnav_cli.lp import LpResult, LpSolver, LpStatus
 
 __all__ = [
@@ -888,7 +888,15 @@ def more_tolerant_all(solutions: Sequence[CellSolution], problems: Sequence[Cell
     terms = [None] * C if terms is None else list(terms)
     terms = [_lemma4_terms(p) if t is None else t for p, t in zip(problems, terms, strict=True)]
     diam = np.array([t[1] for t in terms], float)
-    sink, h_star = _sinks(problems)
+    z = np.array([p.z for p in problems], float)
+    x_j = np.array([p.x_j for p in problems], float)
+    # ragged vertices and barrier rows, and every (vertex, row) pair of the same cell
+    n_v = np.array([len(p.vertices) for p in problems])
+    n_h = np.array([len(p.cbf_q) for p in problems])
+    V = np.concatenate([p.vertices for p in problems])
+    N = np.concatenate([np.asarray(p.cbf_n, float).reshape(-1, 2) for p in problems])
+    Q = np.concatenate([np.asarray(p.cbf_q, float).ravel() for p in problems])
+    sink, h_star = _sinks(V, n_v, N, Q, n_h, z, x_j)
     c_h = np.array([s.c_h for s in solutions], float)
     c_lp = np.array([s.c_v for s in solutions], float)
     # Lemma 6 takes c ≤ c_v ≤ c_h, and c_v only sets the time bound: lower both where the input
@@ -897,8 +905,6 @@ def more_tolerant_all(solutions: Sequence[CellSolution], problems: Sequence[Cell
     c = np.minimum(c_lp, (1.0 - 1e-9) * u_max / (diam + h_star))
     eps = np.minimum(0.5 * c * h_star, 0.5 * (u_max - c * diam))
     c_v = np.stack([c_lp, c])  # (2, C): the constant (L2) is checked with, per field
-    z = np.array([p.z for p in problems], float)
-    x_j = np.array([p.x_j for p in problems], float)
     # the two fields u = a − M x of every cell: the LP's (from its gain) and Lemma 6's
     M = np.empty((2, C, 2, 2))
     a = np.empty((2, C, 2))
@@ -907,12 +913,6 @@ def more_tolerant_all(solutions: Sequence[CellSolution], problems: Sequence[Cell
         a[0, k] = sol.K @ prob.landmarks.ravel()
     M[1] = c[:, None, None] * np.eye(2)
     a[1] = c[:, None] * sink - np.where(eps > 0, eps, 0.0)[:, None] * z
-    # ragged vertices and barrier rows, and every (vertex, row) pair of the same cell
-    n_v = np.array([len(p.vertices) for p in problems])
-    n_h = np.array([len(p.cbf_q) for p in problems])
-    V = np.concatenate([p.vertices for p in problems])
-    N = np.concatenate([np.asarray(p.cbf_n, float).reshape(-1, 2) for p in problems])
-    Q = np.concatenate([np.asarray(p.cbf_q, float).ravel() for p in problems])
     v_cell, h_cell = np.repeat(np.arange(C), n_v), np.repeat(np.arange(C), n_h)
     v_start, h_start = np.cumsum(n_v) - n_v, np.cumsum(n_h) - n_h
     pairs = n_v * n_h
@@ -964,17 +964,26 @@ def more_tolerant_all(solutions: Sequence[CellSolution], problems: Sequence[Cell
     return out
 
 
-def _sinks(problems: Sequence[CellProblem]) -> tuple[np.ndarray, np.ndarray]:
-    """Lemma 6's sink ``x*`` (C, 2) and side depth ``h*`` (C,) of every cell (:func:`funnel.exit_sinks`)."""
-    C = len(problems)
-    H = max((len(p.cbf_q) for p in problems), default=0)
-    normals, offsets = np.zeros((C, H, 2)), np.full((C, H), np.inf)  # padding rows: never the least
-    faces = np.empty((C, 2, 2))
-    for k, p in enumerate(problems):
-        h = len(p.cbf_q)
-        normals[k, :h], offsets[k, :h] = np.asarray(p.cbf_n, float).reshape(-1, 2), p.cbf_q
-        faces[k] = exit_face(p.vertices, p.z, p.x_j)
-    return exit_sinks(faces, normals, offsets)
+def _sinks(V: np.ndarray, n_v: np.ndarray, N: np.ndarray, Q: np.ndarray, n_h: np.ndarray, z: np.ndarray,
+           x_j: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """Lemma 6's sink ``x*`` (C, 2) and side depth ``h*`` (C,) of every cell (:func:`funnel.exit_sinks`).
+
+    The cells come ragged: ``V`` (ΣP, 2) their vertices, ``n_v`` (C,) how many per cell; ``N``, ``Q``
+    (ΣH, 2), (ΣH,) their barrier rows ``n·x + q ≥ 0``, ``n_h`` (C,) per cell; ``z``, ``x_j`` (C, 2).
+    Each exit face is :func:`funnel.exit_face`'s (the two vertices nearest the exit line, in polygon
+    order, ties to the first), taken for all cells in one sort.
+    """
+    C = len(n_v)
+    v_cell, h_cell = np.repeat(np.arange(C), n_v), np.repeat(np.arange(C), n_h)
+    v_start, h_start = np.cumsum(n_v) - n_v, np.cumsum(n_h) - n_h
+    gap = np.abs(np.einsum("pi,pi->p", V - x_j[v_cell], z[v_cell]))
+    nearest = np.lexsort((gap, v_cell))  # per cell, its vertices by gap (stable: ties keep polygon order)
+    ends = np.sort(np.stack([nearest[v_start], nearest[v_start + 1]], axis=1), axis=1)
+    H = int(n_h.max(initial=0))
+    normals, offsets = np.zeros((C, H, 2)), np.full((C, H), np.inf)
+    local = np.arange(len(Q)) - h_start[h_cell]  # padding rows (offset +inf): never the least
+    normals[h_cell, local], offsets[h_cell, local] = N, Q
+    return exit_sinks(V[ends], normals, offsets)
 
 
 def cell_tolerances(cells: Cells, gain: np.ndarray, c_h: np.ndarray, c_v: np.ndarray, u_max: float,
