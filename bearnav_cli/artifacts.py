@@ -1183,6 +1183,8 @@ def load(path: str | os.PathLike, expect: str | tuple[str, ...] | None = None) -
             raise ArtifactError(problem[1], file=str(path), field=problem[0])
     if content_hash(entries, kind) != manifest["content_sha256"]:
         raise ArtifactError("content hash mismatch (file corrupted or edited)", file=str(path))
+    if kind == "simulation":
+        _check_companion(path, manifest)
     map_digest = sha256_text(entries["map"])
     try:
         artifact = _from_entries(kind, entries, manifest, check_map=map_digest not in _CHECKED_MAPS)
@@ -1193,6 +1195,29 @@ def load(path: str | os.PathLike, expect: str | tuple[str, ...] | None = None) -
     except (ValueError, TypeError, KeyError, IndexError, AttributeError, OverflowError) as exc:
         raise ArtifactError(f"malformed ({type(exc).__name__}: {exc})", file=str(path)) from None
     return Loaded(artifact, manifest, path)
+
+
+def _check_companion(path: Path, manifest: dict) -> None:
+    """Refuse a ``sim.npz`` whose ``sim.json`` is another run's (a mixed pair).
+
+    The two are renamed into place one after the other (:func:`_commit`), so a SIGKILL between the
+    renames leaves the new ``sim.npz`` beside the old ``sim.json``; every reader refuses that pair
+    (``fresh`` too, so the next ``simulate`` rewrites both). A missing ``sim.json``, or a JSON file
+    that is not a bearnav simulation's metrics, is no pair and passes.
+    """
+    metrics = metrics_path(path)
+    if not metrics.is_file():
+        return
+    try:
+        companion = json.loads(_read_file(metrics).decode("utf-8"))
+    except (ArtifactError, UnicodeDecodeError, json.JSONDecodeError, OSError, ValueError):
+        return  # not a readable JSON file: not bearnav's metrics
+    other = companion.get("manifest") if isinstance(companion, dict) else None
+    if not isinstance(other, dict) or other.get("schema") != manifest["schema"]:
+        return
+    if other != json.loads(canonical_json(manifest)):
+        raise ArtifactError(f"{metrics.name} beside it holds another run's metrics (a write was cut between the "
+                            "two files): re-run the simulation with --force", file=str(path))  # fmt: skip
 
 
 def fresh(path: str | os.PathLike, kind: str, key: str, input_hash: str) -> Loaded | None:
