@@ -478,3 +478,21 @@ def test_params_are_checked():
     with pytest.raises(InvalidParamsError) as err:
         simplify.Params(ctl="all")
     assert err.value.field == "ctl"
+
+
+@pytest.mark.parametrize("grid", [False, True])
+def test_nearest_nodes_by_k_d_tree_equal_the_brute_force(grid):
+    """The reconnection statistic's k nearest nodes: the k-d tree path (large trees) gives exactly the
+    brute force's indices and distances, ties to the lower index included (grid points tie often)."""
+    rng = np.random.default_rng(7)
+    points, nodes = rng.random((800, 2)), rng.random((600, 2))
+    if grid:
+        points, nodes = np.round(points * 12) / 12, np.round(nodes * 12) / 12
+    brute = simplify._brute_nearest(points, nodes, 4)
+    saved = simplify._KDTREE_PAIRS
+    try:
+        simplify._KDTREE_PAIRS = 0
+        tree = simplify._nearest_distances(points, nodes, 4)
+    finally:
+        simplify._KDTREE_PAIRS = saved
+    assert np.array_equal(tree[1], brute[1]) and np.array_equal(tree[0], brute[0])

@@ -220,15 +220,39 @@ def _compact(keep: np.ndarray, *arrays: np.ndarray, parent: np.ndarray) -> tuple
 
 #: Largest number of point × node distances computed at once by :func:`_nearest_distances`.
 _CHUNK = 1 << 20
+#: Above this many point × node pairs, :func:`_nearest_distances` asks a k-d tree (a 20,000-iteration
+#: tree has about 10⁴ discarded × 4·10³ kept nodes: 1 s by brute force, 0.05 s by the tree).
+_KDTREE_PAIRS = 1 << 23
 
 
 def _nearest_distances(points: np.ndarray, nodes: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
-    """The ``k`` nearest nodes of each point by brute force: distances and indices, shapes (n, k).
+    """The ``k`` nearest nodes of each point: distances and indices, shapes (n, k), ties to the lower index.
 
-    Node sets here have hundreds to a few thousand points, where chunked numpy beats building a
-    k-d tree, and it spares every command the import of scipy.spatial (a fifth of a second).
+    Up to :data:`_KDTREE_PAIRS` pairs by chunked brute force, which beats building a k-d tree there
+    and spares the command the import of scipy.spatial (a fifth of a second); above it, by
+    ``scipy.spatial.cKDTree``, whose answers are re-ordered to the same tie rule (rows where the
+    ``k``-th and the next distance tie are measured by brute force, so the answer is the same).
     """
     points = np.asarray(points, float).reshape(-1, 2)
+    if len(points) * len(nodes) > _KDTREE_PAIRS and k < len(nodes):
+        from scipy.spatial import cKDTree
+
+        dist, index = cKDTree(nodes).query(points, k=k + 1)
+        # (dist, index) order within each row: the tie rule of the brute force
+        key = np.argsort(index, axis=1, kind="stable")
+        dist, index = np.take_along_axis(dist, key, axis=1), np.take_along_axis(index, key, axis=1)
+        key = np.argsort(dist, axis=1, kind="stable")
+        dist, index = np.take_along_axis(dist, key, axis=1), np.take_along_axis(index, key, axis=1)
+        tied = np.flatnonzero(dist[:, k - 1] == dist[:, k])
+        dist, index = dist[:, :k].copy(), index[:, :k].copy()
+        if tied.size:
+            dist[tied], index[tied] = _brute_nearest(points[tied], nodes, k)
+        return dist, index
+    return _brute_nearest(points, nodes, k)
+
+
+def _brute_nearest(points: np.ndarray, nodes: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_nearest_distances` by chunked brute force."""
     dist = np.empty((len(points), k))
     index = np.empty((len(points), k), np.int64)
     step = max(1, _CHUNK // max(1, len(nodes)))
@@ -449,6 +473,8 @@ def _remove_crossings(nodes, parent, cost, tol: float) -> tuple[np.ndarray, np.n
         version[i] += 1
         version[j] += 1
         # re-test the three changed edges against every piece of their origins' neighbours
+        # (only the pieces whose own box meets the changed edge's: a proper crossing lies in both
+        # boxes, and an origin's neighbours are many once PPR has made long edges)
         edge_ids, cands = [], []
         for e in (i, j, new):
             o = origin[e]
@@ -456,6 +482,10 @@ def _remove_crossings(nodes, parent, cost, tol: float) -> tuple[np.ndarray, np.n
             split = cand[has_extra[cand]]
             if split.size:
                 cand = np.concatenate([cand, *(extra[int(s)] for s in split)])
+            ends = nodes[[e, parent[e]]]
+            lo, hi = ends.min(axis=0) - tol, ends.max(axis=0) + tol
+            c, d = nodes[cand], nodes[parent[cand]]
+            cand = cand[np.all((np.minimum(c, d) <= hi) & (np.maximum(c, d) >= lo), axis=1)]
             edge_ids.append(np.full(cand.size, e))
             cands.append(cand)
         es, fs = np.concatenate(edge_ids), np.concatenate(cands)
