@@ -49,7 +49,6 @@ __all__ = [
     "field_vertex_templates",
     "FieldTemplates",
     "gain_from_theta",
-    "gram_condition",
     "landmark_matrix",
     "LpTemplate",
     "min_norm_gain",
@@ -287,14 +286,6 @@ def _min_norm_gain(M: tuple[float, ...], a: tuple[float, float], landmarks: np.n
         row0 += (m00 / n + o0 * ex, m01 / n + o0 * ey)
         row1 += (m10 / n + o1 * ex, m11 / n + o1 * ey)
     return np.array([row0, row1])
-
-
-def gram_condition(landmarks: np.ndarray) -> float:
-    """``cond(GᵀG)`` of :func:`landmark_matrix`'s ``G``, in closed form; ``inf`` if all landmarks coincide."""
-    landmarks = np.asarray(landmarks, float)
-    mean = landmarks.mean(axis=0)
-    delta = landmarks - mean
-    return _gram_condition(len(landmarks), mean, float((delta * delta).sum()))
 
 
 def _gram_condition(n: int, mean, sigma: float) -> float:

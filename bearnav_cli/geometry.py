@@ -31,7 +31,6 @@ __all__ = [
     "from_shapely",
     "inflate",
     "landmark_coverage",
-    "point_polygon_distance",
     "polygon_rows",
     "to_shapely",
 ]
@@ -548,29 +547,3 @@ def polygon_rows(polygon: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     normal = np.column_stack([edge[:, 1], -edge[:, 0]])
     normal /= np.hypot(normal[:, 0], normal[:, 1])[:, None]
     return normal, np.einsum("ij,ij->i", normal, polygon)
-
-
-def point_polygon_distance(point: np.ndarray, polygon: np.ndarray, A: np.ndarray, b: np.ndarray) -> float:
-    """Exact distance from a point to a convex polygon (0 inside), map units.
-
-    Parameters
-    ----------
-    point : ndarray, shape (2,)
-        The point (map units).
-    polygon : ndarray, shape (p, 2)
-        The convex polygon's vertices, in the order of its edges ``v_q → v_{q+1}``.
-    A, b : ndarray, shapes (p, 2), (p,)
-        The same polygon as ``{x : A x ≤ b}`` (:func:`polygon_rows`), for the inside test.
-
-    Returns
-    -------
-    float
-        The distance to the nearest point of the nearest edge; 0 when ``A @ point ≤ b``.
-    """
-    if np.all(A @ point <= b):
-        return 0.0
-    start = polygon
-    edge = np.roll(polygon, -1, axis=0) - start
-    t = np.clip(np.einsum("ij,ij->i", point - start, edge) / np.einsum("ij,ij->i", edge, edge), 0.0, 1.0)
-    nearest = start + t[:, None] * edge
-    return float(np.min(np.hypot(*(nearest - point).T)))

@@ -40,6 +40,7 @@ from bearnav_cli import composition
 from bearnav_cli.errors import InvalidParamsError
 from bearnav_cli.geometry import FreeSpace
 from bearnav_cli.runtime import bearing, cell_policy
+from bearnav_cli.runtime.invariants import is_number
 from bearnav_cli.runtime.plan_arrays import PlanArrays
 
 __all__ = [
@@ -85,13 +86,10 @@ def check_params(fov_deg: float, noise_deg: float, max_range: float = math.inf, 
         Grid spacing (map units), finite and ``> 0``; ``None``: ``D/100``.
     """
 
-    def number(value: Any) -> bool:
-        return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool)
-
     bearing.check_camera(fov_deg, noise_deg, min_spread_deg)
-    if not number(max_range) or not max_range > 0:
+    if not is_number(max_range) or not max_range > 0:
         raise InvalidParamsError(f"must be positive, got {max_range!r}", field="range")
-    if error_target is not None and (not number(error_target) or not (error_target > 0 and
+    if error_target is not None and (not is_number(error_target) or not (error_target > 0 and
                                                                        math.isfinite(error_target))):  # fmt: skip
         raise InvalidParamsError(f"must be positive, got {error_target!r}", field="error_target")
     _check_spacing(spacing)
@@ -100,11 +98,7 @@ def check_params(fov_deg: float, noise_deg: float, max_range: float = math.inf, 
 def _check_spacing(spacing: float | None) -> None:
     if spacing is None:
         return
-    if (
-        isinstance(spacing, bool)
-        or not isinstance(spacing, (int, float, np.integer, np.floating))
-        or not (spacing > 0 and math.isfinite(spacing))
-    ):
+    if not is_number(spacing) or not (spacing > 0 and math.isfinite(spacing)):
         raise InvalidParamsError(f"must be positive, got {spacing!r}", field="spacing")
 
 

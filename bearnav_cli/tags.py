@@ -48,6 +48,7 @@ from bearnav_cli.geometry import FreeSpace, box_polygon
 from bearnav_cli.lp import INF, LpSolver, LpStatus
 from bearnav_cli.perception import EvaluationGrid, PerceptionCoverage
 from bearnav_cli.runtime import bearing
+from bearnav_cli.runtime.invariants import is_number
 
 __all__ = [
     "NUDGE",
@@ -117,8 +118,7 @@ class Params:
         if m is not None and (isinstance(m, bool) or not isinstance(m, (int, np.integer)) or m < 0):
             raise InvalidParamsError(f"must be an integer >= 0, got {m!r}", field="max_tags")
         w = self.tag_width
-        if w is not None and (isinstance(w, bool) or not isinstance(w, (int, float, np.integer, np.floating))
-                              or not (w > 0 and math.isfinite(w))):  # fmt: skip
+        if w is not None and (not is_number(w) or not (w > 0 and math.isfinite(w))):
             raise InvalidParamsError(f"must be positive, got {w!r}", field="tag_width")
 
     def width(self, diagonal: float) -> float:

@@ -27,7 +27,7 @@ _ORIGIN = {
     **dict.fromkeys(("Detection", "Intrinsics", "Mount", "Observation", "TagMap", "heading_from_tag", "observe"),
                     "camera"),
     **dict.fromkeys(("affine_field", "apply_gain", "approach_target", "barrier_values", "contains", "displacement",
-                     "field", "funnel_update", "in_safe_set", "least_rank_cell", "locate", "lyapunov",
+                     "field", "funnel_update", "in_safe_set", "least_rank_cell", "locate",
                      "nearest_node", "segments_clear", "switch", "update", "voronoi_owner"), "cell_policy"),
     "Controller": "controller",
     **dict.fromkeys(("Estimate", "Fix", "SetEstimate", "bounded_update", "fuse", "measure"), "estimate"),

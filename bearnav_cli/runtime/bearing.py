@@ -36,6 +36,7 @@ from typing import Any
 import numpy as np
 
 from bearnav_cli.errors import InvalidParamsError
+from bearnav_cli.runtime.invariants import is_number
 
 __all__ = [
     "ANGLE_SLACK",
@@ -90,11 +91,6 @@ def _norm(v: np.ndarray) -> np.ndarray:
 def _safe(den: np.ndarray) -> np.ndarray:
     """``den`` with its zeros replaced by 1, so a division never produces inf or NaN."""
     return np.where(den != 0, den, 1.0)
-
-
-def _unit(v: np.ndarray) -> np.ndarray:
-    """``unit(v)`` over the last axis, and the zero vector where ``v = 0`` (undefined direction)."""
-    return v / _safe(_norm(v))[..., None]
 
 
 def _points(x: Any) -> np.ndarray:
@@ -201,14 +197,11 @@ def check_camera(fov_deg: Any, noise_deg: Any, min_spread_deg: Any = 2.0) -> Non
         For the first value out of its range, naming its field.
     """
 
-    def number(value: Any) -> bool:
-        return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool)
-
-    if not number(fov_deg) or not 0 < fov_deg <= 360:
+    if not is_number(fov_deg) or not 0 < fov_deg <= 360:
         raise InvalidParamsError(f"must be in (0, 360] degrees, got {fov_deg!r}", field="fov")
-    if not number(noise_deg) or not (noise_deg >= 0 and math.isfinite(noise_deg)):
+    if not is_number(noise_deg) or not (noise_deg >= 0 and math.isfinite(noise_deg)):
         raise InvalidParamsError(f"must be zero or positive, got {noise_deg!r}", field="noise_deg")
-    if not number(min_spread_deg) or not 0 < min_spread_deg <= 90:
+    if not is_number(min_spread_deg) or not 0 < min_spread_deg <= 90:
         raise InvalidParamsError(f"must be in (0, 90] degrees, got {min_spread_deg!r}", field="min_spread_deg")
 
 

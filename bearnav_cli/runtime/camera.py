@@ -32,6 +32,7 @@ import numpy as np
 
 from bearnav_cli.errors import InvalidParamsError
 from bearnav_cli.runtime.bearing import wrap
+from bearnav_cli.runtime.invariants import is_number
 
 __all__ = [
     "BEHIND_MARGIN", "CORNER_SLACK", "ROTATION_TOL", "Detection", "Intrinsics", "Mount", "Observation", "TagMap",
@@ -58,7 +59,7 @@ DISTORTION_MODELS = ("plumb_bob", "rational_polynomial")
 
 
 def _finite(value: Any, name: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+    if not is_number(value):
         raise InvalidParamsError(f"expected a number, got {value!r}", field=name)
     if not math.isfinite(float(value)):
         raise InvalidParamsError(f"must be finite, got {value}", field=name)
@@ -168,11 +169,6 @@ class Intrinsics:
     def hfov(self) -> float:
         """Horizontal field of view (rad) of the undistorted pinhole, edge to edge."""
         return math.atan((self.cx + 0.5) / self.fx) + math.atan((self.width - 0.5 - self.cx) / self.fx)
-
-    @property
-    def vfov(self) -> float:
-        """Vertical field of view (rad) of the undistorted pinhole, edge to edge."""
-        return math.atan((self.cy + 0.5) / self.fy) + math.atan((self.height - 0.5 - self.cy) / self.fy)
 
     def _coefficients(self) -> tuple[float, ...]:
         d = self.distortion + (0.0,) * (8 - len(self.distortion))

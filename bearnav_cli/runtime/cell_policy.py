@@ -41,7 +41,6 @@ __all__ = [
     "in_sight",
     "least_rank_cell",
     "locate",
-    "lyapunov",
     "nearest_node",
     "obstacle_clearance",
     "segments_clear",
@@ -125,22 +124,6 @@ def nearest_node(arrays: PlanArrays, x: np.ndarray) -> np.ndarray:
 def voronoi_owner(arrays: PlanArrays, x: np.ndarray) -> np.ndarray:
     """The cell of the nearest tree node, which contains the point (Lemma 2), shape (R,)."""
     return arrays.node_cell[nearest_node(arrays, x)]
-
-
-def lyapunov(arrays: PlanArrays, cell: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """``V_c(x) = z_c·(x − x_j)``, shape (R,); identically 0 in the goal cell.
-
-    Parameters
-    ----------
-    arrays : PlanArrays
-        The plan: each cell's exit direction ``z_c`` and exit point ``x_j``.
-    cell : ndarray of int, shape (R,)
-        The cell of each robot.
-    x : ndarray, shape (R, 2)
-        Positions or their estimates (map units); ``V`` is in map units.
-    """
-    c, p = _cells(arrays, cell), _points(x)
-    return np.einsum("rk,rk->r", arrays.exit_dir[c], p - arrays.exit_point[c])
 
 
 def barrier_values(arrays: PlanArrays, x: np.ndarray, where: np.ndarray | None = None) -> np.ndarray:

@@ -38,6 +38,7 @@ __all__ = [
     "first",
     "in_range",
     "Invariant",
+    "is_number",
     "landmarks_problem",
     "nodes_problem",
     "offsets_problem",
@@ -49,6 +50,12 @@ __all__ = [
     "unit_problem",
     "validate",
 ]
+
+
+def is_number(value: Any) -> bool:
+    """Whether ``value`` is a real number of Python or numpy, and not a bool (which is an int to Python)."""
+    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool)
+
 
 #: ``certificate`` values (DESIGN §3.3).
 CERTIFICATES = ("funnel", "paper")
