@@ -10,6 +10,7 @@ The vector field is the runtime's own (:func:`bearnav_cli.runtime.locate` and
 from __future__ import annotations
 
 import math
+import textwrap
 from typing import Any, Mapping, Sequence
 
 import matplotlib
@@ -60,10 +61,8 @@ __all__ = [
     "map_handles",
     "MARKER_HALF",
     "NEVER_ACTIVE_LABEL",
-    "OUTCOME_COLORS",
     "OUTCOME_NAMES",
     "OUTLINE_COLOR",
-    "PALETTE",
     "PERCEPTION_FAIL_COLOR",
     "PERCEPTION_FAIL_FREE_COLOR",
     "place_labels",
@@ -85,7 +84,6 @@ __all__ = [
     "save_animation",
     "save_figure",
     "simulation_config",
-    "STATUS_COLORS",
     "tags_figure",
     "TREE_COLOR",
     "UNCERTIFIED_COLOR",
@@ -332,6 +330,17 @@ def label_key(ax: plt.Axes, sample: str, label: str, **style: Any) -> None:
 
     An empty line whose marker is the text, so that :func:`figure_for`'s legend shows it like any
     other mark; a second call with the same ``label`` adds nothing.
+
+    Parameters
+    ----------
+    ax : matplotlib.axes.Axes
+        The axes whose legend gets the entry.
+    sample : str
+        The text the key shows (e.g. ``"12"`` for cell indices).
+    label : str
+        The entry's text (the label :func:`place_labels` gives the texts it stands for).
+    **style
+        ``color`` and ``fontstyle`` (``"italic"``) of those texts.
     """
     if label in [h.get_label() for h in ax.lines]:
         return
@@ -514,7 +523,8 @@ def plot_cells(ax: plt.Axes, cells: Cells, status: np.ndarray | None = None, *, 
             bar.ax.tick_params(labelsize=7)
             bar.solids.set_alpha(fill)
     rings = [np.vstack([cells.vertices(c), cells.vertices(c)[:1]]) for c in range(cells.n_cells)]
-    ax.add_collection(LineCollection(rings, colors=OUTLINE_COLOR, linewidths=0.3, alpha=0.55, zorder=0.8,
+    # faint: the cells overlap, and the fill's white edges already part the regions where each is used
+    ax.add_collection(LineCollection(rings, colors=OUTLINE_COLOR, linewidths=0.3, alpha=0.3, zorder=0.8,
                                      label=key("cell outlines"), gid="cell-outlines"))  # fmt: skip
     if exit_faces:
         faces_xy = []
@@ -522,7 +532,7 @@ def plot_cells(ax: plt.Axes, cells: Cells, status: np.ndarray | None = None, *, 
             v, k = cells.vertices(c), int(cells.cell_exit_row[c])
             faces_xy.append(np.stack([v[k], v[(k + 1) % len(v)]]))
         if faces_xy:
-            ax.add_collection(LineCollection(faces_xy, colors=EXIT_COLOR, linewidths=1.1, zorder=0.9,
+            ax.add_collection(LineCollection(faces_xy, colors=EXIT_COLOR, linewidths=0.9, zorder=0.9,
                                              label=key("exit faces"), gid="exit-faces"))  # fmt: skip
     if status is not None:
         bad = np.flatnonzero(np.isin(status, [CellStatus.NOT_CERTIFIED, CellStatus.SOLVER_FAILURE]))
@@ -598,7 +608,17 @@ def label_cells(ax: plt.Axes, cells: Cells, *, regions: Sequence[shapely.Geometr
 
 
 def cell_number_keys(ax: plt.Axes, cells: Cells, active: np.ndarray | None = None) -> None:
-    """Legend entries for :func:`label_cells`' indices (the never-active kind only when some cell is)."""
+    """Legend entries for :func:`label_cells`' indices (the never-active kind only when some cell is).
+
+    Parameters
+    ----------
+    ax : matplotlib.axes.Axes
+        The axes whose legend gets the entries (add them before the legend is drawn).
+    cells : Cells
+        The cells whose indices are written.
+    active : ndarray of bool, shape (C,), optional
+        Whether each cell is ever active (computed from :func:`active_regions` when not given).
+    """
     if active is None:
         active = _cell_anchors(cells, active_regions(cells) if cells.is_funnel else None)[1]
     label_key(ax, "12", CELL_NUMBER_LABEL)
@@ -630,12 +650,14 @@ def plot_uncovered(ax: plt.Axes, cells: Cells, uncovered: shapely.Geometry,
 
 
 def _draw_cells(ax: plt.Axes, vertices: np.ndarray, offsets: np.ndarray, status: np.ndarray | None, *,
-                fill: float = 0.25, line: float = 0.6, lw: float = 0.4, legend: bool = True) -> plt.Axes:  # fmt: skip
-    """Cells given as coords + offsets: outlines, and fills by status when given (labelled ``cells: <status>``)."""
+                fill: float = 0.25, line: float = 0.6, lw: float = 0.4, legend: bool = True,
+                skip: Sequence[int] = ()) -> plt.Axes:  # fmt: skip
+    """Cells given as coords + offsets: outlines, and fills by status when given (labelled ``cells: <status>``;
+    none for the statuses in ``skip``)."""
     seen: set = set()
     for c in range(len(offsets) - 1):
         v = vertices[offsets[c] : offsets[c + 1]]
-        if status is not None:
+        if status is not None and int(status[c]) not in skip:
             name = _status_name(status[c])
             ax.fill(*v.T, color=STATUS_COLORS[CellStatus(int(status[c]))], alpha=fill, lw=0, zorder=0.5,
                     gid="cell-fill", label=_shared(name, seen) if legend else "_" + name)  # fmt: skip
@@ -875,11 +897,15 @@ def plot_estimate_trace(ax: plt.Axes, trace: Any, *, cmap: str = "viridis", scal
 
 
 def plot_sim_background(ax: plt.Axes, sim: Simulation) -> plt.Axes:
-    """The simulation's cells (outlines, filled by status; overlapping cells shade deeper) and tree, faintly.
+    """The simulation's cells and tree, faintly: outlines, and a fill by status for the cells not plainly certified.
 
-    The tree is dark grey, apart from every outcome's colour, so that the runs over it stand out.
+    Certified cells are left unfilled (their green would be the success paths' colour, and overlapping
+    cells stack into a shade that hides the runs); the goal cell, relaxed and uncertified cells are
+    filled. The tree is dark grey, apart from every outcome's colour.
     """
-    _draw_cells(ax, sim.cell_vertices, sim.cell_vertex_offsets, sim.cell_status, fill=0.12, line=0.35, lw=0.3)
+    status = np.asarray(sim.cell_status)
+    _draw_cells(ax, sim.cell_vertices, sim.cell_vertex_offsets, status, fill=0.25, line=0.35, lw=0.3,
+                skip=(CellStatus.CERTIFIED,))  # fmt: skip
     return plot_tree(ax, sim, color=ROLE_COLORS["background tree"], lw=0.6, alpha=0.5, label="simplified tree")
 
 
@@ -909,8 +935,8 @@ def plot_trajectories(ax: plt.Axes, sim: Simulation, *, limit: int = 400) -> plt
         color = OUTCOME_COLORS[outcome]
         ax.plot(*path.T, color=color, lw=0.9, alpha=0.85, zorder=4, label=_shared(OUTCOME_NAMES[outcome], seen),
                 gid="run")  # fmt: skip
-        ax.plot(*path[0], "o", ms=3, mfc=ROLE_COLORS["edge"], mec=color, zorder=5, label=_shared("run starts", seen),
-                gid="run-start")  # fmt: skip
+        ax.plot(*path[0], "o", ms=3, color=color, mfc=ROLE_COLORS["edge"], mec=color, zorder=5,
+                label=_shared("run starts", seen), gid="run-start")  # fmt: skip
         if outcome != 0:
             ax.plot(*path[-1], "x", ms=5, color=color, zorder=5, label=_shared("where a failed run ended", seen),
                     gid="run-end")  # fmt: skip
@@ -1003,8 +1029,10 @@ def _simulation_title(sim: Simulation, params: Mapping[str, Any] | None) -> str:
     return figure_title(sim.map.name, "simulate", summary, simulation_config(params, sim.stats))
 
 
-def _legend(ax: plt.Axes, *, below: bool) -> None:
-    """One legend of every labelled artist of the axes, each label once, below the axes or beside them.
+def _legend(ax: plt.Axes, ncol: int = 3) -> None:
+    """One legend of every labelled artist of the axes, each label once, below the axes in ``ncol`` columns.
+
+    Below, not beside: a long entry then widens nothing, and the figure grows by its rows (:func:`_finish`).
 
     The field's arrows get an arrow as their key (a quiver's own key is a rectangle, like an obstacle's),
     and a fill fainter than 0.3 a key at 0.3 (the faint fills of a simulation's cells overlap, so
@@ -1020,12 +1048,8 @@ def _legend(ax: plt.Axes, *, below: bool) -> None:
         labels.append(label)
     if not handles:
         return
-    if below:
-        legend = ax.legend(handles=handles, labels=labels, loc="upper center", bbox_to_anchor=(0.5, -0.08), ncol=3,
-                           fontsize=7, frameon=False)  # fmt: skip
-    else:
-        legend = ax.legend(handles=handles, labels=labels, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=7,
-                           framealpha=0.85)  # fmt: skip
+    legend = ax.legend(handles=handles, labels=labels, loc="upper center", bbox_to_anchor=(0.5, -0.08), ncol=ncol,
+                       fontsize=7, frameon=False)  # fmt: skip
     for key in legend.legend_handles:
         if isinstance(key, Patch) and key.get_alpha() is not None and key.get_alpha() < 0.3:
             key.set_alpha(0.3)
@@ -1035,7 +1059,9 @@ def _frame(map_: Map, title: str, *, landmarks: bool = True) -> tuple[plt.Figure
     xmin, ymin, xmax, ymax = map_.bounds
     width = 8.0
     height = max(3.0, width * (ymax - ymin) / (xmax - xmin))
-    fig, ax = plt.subplots(figsize=(width + 1.8, height))  # the extra width holds the legend or colour bar
+    # constrained layout keeps a two-line title and the legend below inside the figure (tight_layout
+    # does not, for an axes of equal aspect); the extra width holds a colour bar (_finish)
+    fig, ax = plt.subplots(figsize=(width + 1.8, height), layout="constrained")
     plot_map(ax, map_, labels=False, landmarks=landmarks)
     ax.set_title(title, fontsize=10)
     ax.set_xlabel(f"x ({AXIS_UNITS})")
@@ -1043,16 +1069,54 @@ def _frame(map_: Map, title: str, *, landmarks: bool = True) -> tuple[plt.Figure
     return fig, ax
 
 
-def _finish(fig: plt.Figure, ax: plt.Axes, *, below: bool) -> None:
-    """Legend, a figure tall enough for it and the title, and the layout (before any label is placed)."""
-    _legend(ax, below=below)
+def _fit_title(ax: plt.Axes) -> None:
+    """Make a title wider than the figure fit: a smaller font down to 8 pt, then its lines wrapped."""
+    title, page = ax.title, ax.figure.bbox.width * 0.97
+    width = title.get_window_extent().width
+    if width <= page:
+        return
+    size = max(8.0, title.get_fontsize() * page / width)
+    title.set_fontsize(size)
+    width = title.get_window_extent().width
+    if width > page:
+        lines = title.get_text().split("\n")
+        chars = int(max(len(line) for line in lines) * page / width)
+        title.set_text("\n".join(textwrap.fill(line, chars) for line in lines))
+
+
+def _finish(fig: plt.Figure, ax: plt.Axes) -> None:
+    """Legend, a figure sized for it, the title and a colour bar, and the layout, settled for the labels.
+
+    The layout is computed once and then fixed: labels are placed in display space after it
+    (:func:`place_labels`), and a layout redone at save time would move them.
+    """
+    w, h = fig.get_size_inches()
+    fig.set_size_inches(w - (1.2 if len(fig.axes) == 1 else 0.0), h)  # the extra width is a colour bar's
+    ncol, page = 3, fig.bbox.width
+    _legend(ax, ncol)
+    # long entries: fewer columns, or the layout narrows the axes to make room for the legend
+    while ax.get_legend() is not None and ncol > 1 and ax.get_legend().get_window_extent().width > 0.97 * page:
+        ncol -= 1
+        _legend(ax, ncol)
+    _fit_title(ax)
     legend = ax.get_legend()
     extra = 0.3 * ax.get_title().count("\n")
-    if below and legend is not None:
-        extra += 0.22 * math.ceil(len(legend.get_texts()) / 3)
+    if legend is not None:
+        extra += 0.22 * math.ceil(len(legend.get_texts()) / ncol)
     w, h = fig.get_size_inches()
     fig.set_size_inches(w, h + extra)
-    fig.tight_layout()
+    engine = fig.get_layout_engine()
+    for _ in range(3):  # an axes of equal aspect can leave the title or the legend out: grow the figure until not
+        engine.execute(fig)  # the layout alone, without drawing every artist
+        # the title is the top of the figure and the legend its bottom (pixels)
+        top = ax.title.get_window_extent().y1 - fig.bbox.y1
+        bottom = -ax.get_legend().get_window_extent().y0 if ax.get_legend() is not None else 0.0
+        over = (max(0.0, top) + max(0.0, bottom)) / fig.dpi
+        if over <= 0.01:
+            break
+        w, h = fig.get_size_inches()
+        fig.set_size_inches(w, h + over + 0.05)
+    fig.set_layout_engine("none")
 
 
 def save_animation(sim: Simulation, path: str, *, frames: int = 80, limit: int = 60,
@@ -1094,7 +1158,7 @@ def save_animation(sim: Simulation, path: str, *, frames: int = 80, limit: int =
                        color=colors, angles="xy", scale_units="xy", scale=1.0 / size, width=0.004,
                        zorder=5.5) if has_heading else None  # fmt: skip
     longest = max((len(sim.trajectory(r)) for r in runs), default=1)
-    _finish(fig, ax, below=False)
+    _finish(fig, ax)
     label_landmarks(ax, sim.map)
 
     def draw(k: int) -> list:
@@ -1250,12 +1314,12 @@ def figure_for(artifact: Any, *, background: Sequence[Any] = (), title: str | No
         if barriers:
             plot_barriers(ax, cells)
         # thin and light: the tree is what the cells were built on, the arrows are what the robot runs
-        plot_tree(ax, cells, nodes=True, lw=0.45, alpha=0.6, label="simplified tree")
+        plot_tree(ax, cells, nodes=True, lw=0.45, alpha=0.45, label="simplified tree")
         if plan is not None and arrows > 0:
             plot_field(ax, plan, arrows=arrows)
     if perception is not None:
         plot_perception(ax, perception, landmarks=False, legend=False)
-    _finish(fig, ax, below=cells is not None)
+    _finish(fig, ax)
     # the landmarks' ids first: a cell index never hides one
     if labels is not False:
         label_landmarks(ax, map_, every=bool(labels))
@@ -1332,13 +1396,13 @@ def plot_perception(ax: plt.Axes, coverage: Any, *, free: bool = True, landmarks
         _existing_tags(ax, coverage.landmarks, "perception-tags", "tags")
     if legend:
         _axis_labels(ax)
-        _legend(ax, below=True)
+        _legend(ax)
     return ax
 
 
 #: Legend labels of the tags figure's two kinds of tag (their ids are written beside them where they fit).
-PROPOSED_TAGS_LABEL = "proposed tags: glue one at each (ids beside them)"
-EXISTING_TAGS_LABEL = "existing tags, the map's (ids beside them where they fit)"
+PROPOSED_TAGS_LABEL = "proposed tags ({}): glue one at each, ids beside them"
+EXISTING_TAGS_LABEL = "existing tags ({}), ids beside them where they fit"
 
 
 def plot_tags(ax: plt.Axes, proposal: Any, *, failures: bool = True, labels: bool = True,
@@ -1374,12 +1438,12 @@ def plot_tags(ax: plt.Axes, proposal: Any, *, failures: bool = True, labels: boo
     if failures:
         plot_perception(ax, proposal.after, landmarks=False, legend=False)
     before = proposal.before
-    _existing_tags(ax, before.landmarks, "existing-tags", f"{EXISTING_TAGS_LABEL} ({len(before.landmarks)})")
+    _existing_tags(ax, before.landmarks, "existing-tags", EXISTING_TAGS_LABEL.format(len(before.landmarks)))
     new = np.asarray(proposal.positions, float).reshape(-1, 2)
     normals = np.asarray(proposal.normals, float).reshape(-1, 2)
     ax.scatter(new[:, 0], new[:, 1], marker="D", s=34, color=PROPOSED_TAG_COLOR, edgecolor=ROLE_COLORS["edge"],
                linewidths=0.6, zorder=6.5, gid="proposed-tags",
-               label=f"{PROPOSED_TAGS_LABEL} ({len(new)})")  # fmt: skip
+               label=PROPOSED_TAGS_LABEL.format(len(new)))  # fmt: skip
     if len(new):
         xmin, xmax = ax.get_xlim()
         scale = 0.02 * abs(xmax - xmin) if xmax != xmin else 0.1
@@ -1393,7 +1457,7 @@ def plot_tags(ax: plt.Axes, proposal: Any, *, failures: bool = True, labels: boo
                    gid="uncoverable", label=f"no placement covers ({len(stuck)} points)")  # fmt: skip
     if legend:
         _axis_labels(ax)
-        _legend(ax, below=True)
+        _legend(ax)
     if labels:
         label_tags(ax, proposal)
     return ax
@@ -1425,7 +1489,7 @@ def label_tags(ax: plt.Axes, proposal: Any) -> list:
     normals = np.asarray(proposal.normals, float).reshape(-1, 2)
     old = np.asarray(proposal.before.landmarks, float).reshape(-1, 2)
     marks = np.vstack([new, old])
-    label = f"{PROPOSED_TAGS_LABEL} ({len(new)})"
+    label = PROPOSED_TAGS_LABEL.format(len(new))
     texts = []
     for name, point, n in zip(proposal.ids, new, normals, strict=True):
         # the corner toward the free side first: there the label covers no wall
@@ -1433,16 +1497,16 @@ def label_tags(ax: plt.Axes, proposal: Any) -> list:
         texts += place_labels(ax, [str(name)], point[None], gid="proposed-tag-label", label=label, avoid=marks,
                               offsets=facing, every=True, replace=False, color=PROPOSED_TAG_COLOR)  # fmt: skip
     texts += place_labels(ax, proposal.before.landmark_ids, old, gid="existing-tag-label", avoid=marks,
-                          label=f"{EXISTING_TAGS_LABEL} ({len(old)})", color=EXISTING_TAG_COLOR)  # fmt: skip
+                          label=EXISTING_TAGS_LABEL.format(len(old)), color=EXISTING_TAG_COLOR)  # fmt: skip
     return texts
 
 
 def _tags_title(proposal: Any, map_: Map) -> str:
     before, after = proposal.before, proposal.after
-    config = f"{before.fov_deg:g}° camera, {before.noise_deg:g}° noise"
-    if before.error_target is not None:
-        config += f", fix within {before.error_target:g}"
-    config += f": the rule holds on {before.fraction_domain:.1%} → {after.fraction_domain:.1%} of D"
+    target = before.error_target
+    rule = "2 usable tags in view" if target is None else f"a fix within {target:g} in view"
+    config = (f"{before.fov_deg:g}° camera, {before.noise_deg:g}° noise: {rule} on {before.fraction_domain:.1%} "
+              f"→ {after.fraction_domain:.1%} of D")  # fmt: skip
     return figure_title(map_.name, "tags", f"where to glue {len(proposal.ids)} new tags", config)
 
 
@@ -1465,6 +1529,6 @@ def tags_figure(proposal: Any, map_: Map, title: str | None = None) -> plt.Figur
     """
     fig, ax = _frame(map_, title or _tags_title(proposal, map_), landmarks=False)
     plot_tags(ax, proposal, labels=False, legend=False)
-    _finish(fig, ax, below=True)
+    _finish(fig, ax)
     label_tags(ax, proposal)
     return fig
