@@ -1393,7 +1393,7 @@ def plot_perception(ax: plt.Axes, coverage: Any, *, free: bool = True, landmarks
         ax.scatter(out[:, 0], out[:, 1], marker=".", s=5, lw=0, color=PERCEPTION_FAIL_FREE_COLOR, zorder=5.4,
                    gid="perception-fail-free", label="the same, in F outside D")  # fmt: skip
     if landmarks:
-        _existing_tags(ax, coverage.landmarks, "perception-tags", "tags")
+        _existing_tags(ax, coverage.landmarks, "perception-tags", f"tags ({len(coverage.landmarks)})")
     if legend:
         _axis_labels(ax)
         _legend(ax)
