@@ -42,6 +42,7 @@ import numpy as np
 from bearnav_cli import artifacts
 from bearnav_cli.datatypes import CellStatus, Simulation
 from bearnav_cli.errors import InvalidParamsError, OutputPathError
+from bearnav_cli.palette import OUTCOME_COLORS, ROLE_COLORS, STATUS_COLORS, rgba
 
 __all__ = ["FRAME", "SUFFIXES", "TOPICS", "check_path", "write"]
 
@@ -62,22 +63,11 @@ STORE = "ros2_jazzy"
 
 INSTALL_HINT = "writing ROS 2 bags needs the rosbags package: pip install 'bearnav[ros]'"
 
-#: RGBA of each cell status (plot.STATUS_COLORS, opaque enough for lines).
-STATUS_RGBA = {
-    CellStatus.CERTIFIED: (0.19, 0.64, 0.33, 0.9),
-    CellStatus.RELAXED: (0.99, 0.68, 0.38, 0.9),
-    CellStatus.NOT_CERTIFIED: (0.99, 0.45, 0.37, 0.9),
-    CellStatus.SOLVER_FAILURE: (0.87, 0.18, 0.15, 1.0),
-    CellStatus.GOAL: (0.26, 0.57, 0.78, 0.9),
-}
-#: RGBA of each run outcome (plot.OUTCOME_COLORS): success, collision, stall, timeout, lost.
-OUTCOME_RGBA = {
-    0: (0.17, 0.64, 0.37, 1.0),
-    1: (0.87, 0.18, 0.15, 1.0),
-    2: (0.99, 0.55, 0.24, 1.0),
-    3: (0.46, 0.42, 0.69, 1.0),
-    4: (0.39, 0.39, 0.39, 1.0),
-}
+#: RGBA of each cell status: the figures' colours (:data:`bearnav_cli.palette.STATUS_COLORS`), opaque enough for lines.
+STATUS_RGBA = {status: rgba(color, 1.0 if status == CellStatus.SOLVER_FAILURE else 0.9)
+               for status, color in STATUS_COLORS.items()}  # fmt: skip
+#: RGBA of each run outcome: the figures' colours (:data:`bearnav_cli.palette.OUTCOME_COLORS`).
+OUTCOME_RGBA = {outcome: rgba(color) for outcome, color in OUTCOME_COLORS.items()}
 
 
 def _rosbags(option: str | None = "--bag") -> Any:
@@ -204,14 +194,14 @@ def _markers(sim: Simulation, ns: int, types: dict) -> list:
     markers: list = []
     counts: dict[str, int] = {}
 
-    def add(namespace: str, kind: int, points: Any = (), rgba: tuple = (0.0, 0.0, 0.0, 1.0),
+    def add(namespace: str, kind: int, points: Any = (), color: tuple = (0.0, 0.0, 0.0, 1.0),
             scale: tuple = (width, 0.0, 0.0), at: tuple = (0.0, 0.0), text: str = "") -> None:  # fmt: skip
         ident = counts.get(namespace, 0)
         counts[namespace] = ident + 1
         markers.append(marker_t(
             header=_header(ns, types), ns=namespace, id=ident, type=kind, action=marker_t.ADD,
             pose=_pose(at[0], at[1], 0.0, types), scale=vector_t(x=scale[0], y=scale[1], z=scale[2]),
-            color=color_t(r=rgba[0], g=rgba[1], b=rgba[2], a=rgba[3]), lifetime=duration(sec=0, nanosec=0),
+            color=color_t(r=color[0], g=color[1], b=color[2], a=color[3]), lifetime=duration(sec=0, nanosec=0),
             frame_locked=False, points=[point_t(x=float(x), y=float(y), z=0.0) for x, y in points], colors=[],
             texture_resource="", texture=texture(header=_header(ns, types), format="", data=np.zeros(0, np.uint8)),
             uv_coordinates=[], text=text, mesh_resource="",
@@ -223,24 +213,27 @@ def _markers(sim: Simulation, ns: int, types: dict) -> list:
 
     xmin, ymin, xmax, ymax = bounds
     add("bounds", marker_t.LINE_STRIP, ring(np.array([[xmin, ymin], [xmax, ymin], [xmax, ymax], [xmin, ymax]])))
-    for namespace, polygons, rgba in (("obstacles", sim.map.raw_obstacles, (0.15, 0.15, 0.15, 1.0)),
-                                      ("inflated", sim.map.obstacles, (0.55, 0.55, 0.55, 0.8))):  # fmt: skip
+    # the figures' colours (bearnav_cli.palette), so that a bag and a figure of one run read alike
+    for namespace, polygons, color in (("obstacles", sim.map.raw_obstacles, rgba(ROLE_COLORS["raw obstacle"])),
+                                       ("inflated", sim.map.obstacles,
+                                        rgba(ROLE_COLORS["inflated obstacle"], 0.8))):  # fmt: skip
         for polygon in polygons:
             for vertices in (polygon.exterior, *polygon.holes):
-                add(namespace, marker_t.LINE_STRIP, ring(vertices), rgba)
+                add(namespace, marker_t.LINE_STRIP, ring(vertices), color)
     offsets = sim.cell_vertex_offsets
     for c, status in enumerate(sim.cell_status):
         vertices = sim.cell_vertices[offsets[c] : offsets[c + 1]]
         add("cells", marker_t.LINE_STRIP, ring(vertices), STATUS_RGBA[CellStatus(int(status))], (0.5 * width, 0, 0))
     tag = 0.02 * size
     for ident, (x, y) in zip(sim.map.landmark_ids, sim.map.landmarks, strict=True):
-        add("tags", marker_t.CUBE, rgba=(0.1, 0.1, 0.1, 1.0), scale=(tag, tag, tag), at=(x, y))
-        add("tag_ids", marker_t.TEXT_VIEW_FACING, rgba=(0.0, 0.0, 0.0, 1.0), scale=(0, 0, 1.5 * tag),
+        add("tags", marker_t.CUBE, color=rgba(ROLE_COLORS["landmark"]), scale=(tag, tag, tag), at=(x, y))
+        add("tag_ids", marker_t.TEXT_VIEW_FACING, color=rgba(ROLE_COLORS["text"]), scale=(0, 0, 1.5 * tag),
             at=(x, y + 1.2 * tag), text=str(ident))  # fmt: skip
     child = np.flatnonzero(sim.parent >= 0)
     edges = np.stack([sim.nodes[child], sim.nodes[sim.parent[child]]], axis=1).reshape(-1, 2)
-    add("tree", marker_t.LINE_LIST, edges, (0.3, 0.3, 0.3, 0.7), (0.5 * width, 0, 0))
-    add("goal", marker_t.SPHERE, rgba=(0.2, 0.4, 1.0, 1.0), scale=(2 * tag, 2 * tag, 2 * tag), at=tuple(sim.map.goal))
+    add("tree", marker_t.LINE_LIST, edges, rgba(ROLE_COLORS["background tree"], 0.7), (0.5 * width, 0, 0))
+    add("goal", marker_t.SPHERE, color=rgba(ROLE_COLORS["goal"]), scale=(2 * tag, 2 * tag, 2 * tag),
+        at=tuple(sim.map.goal))  # fmt: skip
     for r, outcome in enumerate(sim.outcome):
         add("runs", marker_t.LINE_STRIP, sim.trajectory(r), OUTCOME_RGBA.get(int(outcome), (0, 0, 0, 1)))
     return markers

@@ -1205,7 +1205,7 @@ def simulate_command(
         if not _Quiet.enabled and not as_json:  # a GIF takes seconds: say what is happening
             err.print(f"writing {gif} (80 frames) ...", highlight=False, markup=False)
         with artifacts.atomic_output(gif) as tmp:
-            plot.save_animation(sim, str(tmp))
+            plot.save_animation(sim, str(tmp), params=(report.manifest or {}).get("params"))
         if not as_json:
             out.print(f"wrote {gif}", highlight=False)
     rate = metrics.get("success_rate")
@@ -1557,8 +1557,7 @@ def tags_command(
     artifacts.atomic_write(out_path, lambda f: f.write(text.encode()))
     plot = _plotting()  # matplotlib is slow to import: only here
 
-    fig = plot.tags_figure(proposal, plan.map, f"{plan.map.name}: where to glue {proposal.count} new tags "
-                           f"({fov:g}° camera, {noise_deg:g}° noise)")  # fmt: skip
+    fig = plot.tags_figure(proposal, plan.map)  # its title states the camera, the noise and the coverage
     with artifacts.atomic_output(figure) as tmp:
         plot.save_figure(fig, str(tmp))
     if as_json:
@@ -1674,7 +1673,7 @@ def plot_command(
     coverage = composition.coverage_regions(cells, margin=0.0) if cells is not None and cells.is_funnel else None
     fig = plot.figure_for(shown, background=background, title=title, color_by=color_by, barriers=barriers,
                           labels=labels, cell_numbers=cell_numbers, coverage=coverage, perception=seeing,
-                          liveness=live)  # fmt: skip
+                          liveness=live, params=loaded.manifest.get("params"))  # fmt: skip
     with artifacts.atomic_output(out_path) as tmp:
         plot.save_figure(fig, str(tmp))
     if seeing is not None:

@@ -15,6 +15,7 @@ LAYERS = {
     # it sits just above errors; datatypes and artifacts read the one artifact schema from runtime/schema.py
     "runtime": 0.5,
     "datatypes": 1,
+    "palette": 1.2,  # the figures' and bags' colours, plain data on datatypes' enums
     "geometry": 2,
     "lp": 2,
     "occupancy": 2,
@@ -85,8 +86,8 @@ def test_imports_flow_one_way():
             if dep is None or dep == "__version__":
                 continue
             if layer_name == "plot":
-                if dep not in ("datatypes", "errors", "runtime"):  # DESIGN §2: fields come from runtime
-                    problems.append(f"plot imports {target} (plot depends on datatypes and runtime only)")
+                if dep not in ("datatypes", "errors", "palette", "runtime"):  # DESIGN §2: fields come from runtime
+                    problems.append(f"plot imports {target} (plot depends on datatypes, palette and runtime only)")
                 continue
             if layer_name == "runtime":
                 if dep not in ("runtime", "errors"):

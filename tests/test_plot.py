@@ -29,9 +29,15 @@ from .test_cli_errors import assert_one_line_error  # noqa: E402
 
 
 @pytest.fixture(scope="module")
-def small_plan():
-    """A funnel plan of the small test map, built in-process."""
-    return pipeline.compute(build_map(SMALL_MAP))["plan"]
+def small_chain():
+    """Every artifact of the small test map, built in-process (``pipeline.compute``)."""
+    return pipeline.compute(build_map(SMALL_MAP))
+
+
+@pytest.fixture(scope="module")
+def small_plan(small_chain):
+    """A funnel plan of the small test map."""
+    return small_chain["plan"]
 
 
 @pytest.fixture(scope="module")
@@ -192,7 +198,7 @@ def test_colour_by_rank_tolerance_and_status(small_plan, draw):
 def test_legend_names_every_layer(small_plan, draw):
     texts = " | ".join(legend_texts(draw(small_plan, coverage=composition.coverage_regions(small_plan.cells))))
     for word in ("obstacles", "inflated by the robot radius", "tree", "added nodes", "landmarks", "goal",
-                 "uncovered", "exit faces", "field direction"):  # fmt: skip
+                 "no cell covers", "exit faces", "field direction"):  # fmt: skip
         assert word in texts, word
 
 
@@ -209,8 +215,7 @@ def test_landmark_labels_never_collide_unless_asked(small_plan, draw):
 
 def test_cell_numbers_on_request(small_plan, draw):
     assert not by_gid(draw(small_plan), "cell-number")
-    numbers = by_gid(draw(small_plan, cell_numbers=True), "cell-number")
-    assert sorted(int(t.get_text()) for t in numbers) == list(range(small_plan.cells.n_cells))
+    assert plot.CELL_NUMBER_LABEL not in legend_texts(draw(small_plan))
 
 
 def test_paper_plans_are_coloured_by_status(paper_plan, draw):
@@ -250,3 +255,159 @@ def test_importing_plot_keeps_the_callers_backend():
             "print(matplotlib.get_backend())")  # fmt: skip
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip().lower() == "svg"
+
+
+# --------------------------------------------------------------------------- issue 23 item 5: figures a new user reads
+#
+# Each figure is drawn once (a module fixture) and read by several tests: every drawn mark has a legend
+# entry, no two labels overlap, the title states the configuration, the colours are the palette's.
+# test_tags.py reads the tags figure with the same checks (assert_reads_well).
+
+
+@pytest.fixture(scope="module")
+def figures(small_chain, small_plan):
+    """``{name: figure}``: the plan with cell indices, a simulation and the simplified tree."""
+    import dataclasses
+
+    from bearnav_cli.stages import simulate
+
+    params = simulate.Params(fov=90.0, noise_deg=0.5, dynamics="unicycle", max_steps=40)  # 2 map starts, time out
+    sim = simulate.run(small_plan, params)
+    coverage = composition.coverage_regions(small_plan.cells)
+    made = {
+        "plan": plot.figure_for(small_plan, cell_numbers=True, coverage=coverage),
+        "sim": plot.figure_for(sim, params=dataclasses.asdict(params)),
+        "tree": plot.figure_for(small_chain["simplified"], background=[small_chain["tree"]]),
+    }
+    yield made
+    for fig in made.values():
+        plt.close(fig)
+
+
+def drawn(ax) -> list:
+    """The marks of the axes a reader sees: visible artists with something to draw."""
+    marks = []
+    for a in (*ax.lines, *ax.collections, *ax.patches, *ax.texts):
+        if not a.get_visible() or a.get_gid() == "label-key":  # legend keys of the labels draw nothing
+            continue
+        if isinstance(a, matplotlib.lines.Line2D) and not len(a.get_xdata()):
+            continue
+        if isinstance(a, matplotlib.collections.Collection) and not (len(a.get_offsets()) or len(a.get_paths())):
+            continue
+        marks.append(a)
+    return marks
+
+
+def _rgb(color) -> str:
+    return mcolors.to_hex(mcolors.to_rgba(color)[:3])
+
+
+def unexplained_marks(ax) -> set:
+    """``(gid, label)`` of the drawn marks without a legend entry.
+
+    An artist's label (``_label`` for one that shares an entry) is to be a legend entry; the map's
+    frame needs none, and a fill by rank or ``τ_c`` is read off the colour bar.
+    """
+    entries = set(legend_texts(ax))
+    has_bar = len(ax.figure.axes) > 1
+    return {(a.get_gid(), a.get_label()) for a in drawn(ax)
+            if a.get_label().lstrip("_") not in entries and a.get_gid() != "bounds"
+            and not (a.get_gid() == "cell-fill" and has_bar)}  # fmt: skip
+
+
+def overlapping_labels(fig) -> list:
+    """Pairs of visible texts of the main axes whose renderer window extents overlap."""
+    ax = fig.axes[0]
+    renderer = fig.canvas.get_renderer()
+    texts = [t for t in ax.texts if t.get_visible() and t.get_text()]
+    boxes = [t.get_window_extent(renderer) for t in texts]
+    return [(a.get_text(), b.get_text()) for i, a in enumerate(texts) for j, b in enumerate(texts)
+            if j > i and boxes[i].overlaps(boxes[j])]  # fmt: skip
+
+
+def colours_outside_the_palette(ax) -> set:
+    """The colours of categorical marks that are not palette.PALETTE's (a fill read off a colour bar aside)."""
+    from bearnav_cli.palette import PALETTE
+
+    used = set()
+    for a in drawn(ax):
+        if a.get_gid() == "cell-fill" and len(ax.figure.axes) > 1:
+            continue
+        if isinstance(a, matplotlib.lines.Line2D):
+            used |= {_rgb(a.get_color()), _rgb(a.get_markerfacecolor()), _rgb(a.get_markeredgecolor())}
+        elif isinstance(a, matplotlib.text.Text):
+            used.add(_rgb(a.get_color()))
+        elif isinstance(a, matplotlib.collections.Collection):
+            used |= {_rgb(c) for c in (*a.get_facecolor(), *a.get_edgecolor())}
+        else:
+            used |= {_rgb(c) for c in (a.get_facecolor(), a.get_edgecolor()) if mcolors.to_rgba(c)[3] > 0}
+    return used - {c.lower() for c in PALETTE.values()}
+
+
+def assert_reads_well(fig) -> None:
+    """Every mark has a legend entry (each entry once, the field's key an arrow), no two labels overlap, labels,
+    title and legend lie inside the figure, and every categorical colour is the palette's."""
+    ax = fig.axes[0]
+    assert not unexplained_marks(ax)
+    texts = legend_texts(ax)
+    assert len(set(texts)) == len(texts)
+    legend = ax.get_legend()
+    for key, text in zip(legend.legend_handles, legend.get_texts(), strict=True):
+        if text.get_text().startswith("field direction"):
+            assert not isinstance(key, matplotlib.patches.Patch)  # an arrow, not a box like an obstacle's
+    assert [t for t in ax.texts if t.get_visible() and t.get_text()]
+    assert not overlapping_labels(fig)
+    renderer = fig.canvas.get_renderer()
+    page = fig.bbox
+    for box in [t.get_window_extent(renderer) for t in ax.texts] + [ax.title.get_window_extent(renderer),
+                                                                     legend.get_window_extent(renderer)]:  # fmt: skip
+        assert page.x0 - 1 <= box.x0 and box.x1 <= page.x1 + 1 and page.y0 - 1 <= box.y0 and box.y1 <= page.y1 + 1
+    assert not colours_outside_the_palette(ax)
+
+
+@pytest.mark.parametrize("name", ["plan", "sim", "tree"])
+def test_the_figures_read_well(figures, name):
+    assert_reads_well(figures[name])
+
+
+def test_cell_indices_give_way_to_landmark_ids(figures, small_plan):
+    """Landmark ids are placed first; every index is a cell's, at most once, and the indices have a legend key."""
+    ax = figures["plan"].axes[0]
+    ids = {t.get_text() for t in by_gid(ax, "landmark-label")}
+    assert ids == set(small_plan.map.landmark_ids)  # the small map's ids all fit, cell indices or not
+    numbers = [int(t.get_text()) for t in by_gid(ax, "cell-number")]
+    assert len(numbers) == len(set(numbers)) and set(numbers) <= set(range(small_plan.cells.n_cells))
+    assert len(numbers) > 0.6 * small_plan.cells.n_cells
+    assert plot.CELL_NUMBER_LABEL in legend_texts(ax)
+
+
+def test_titles_state_the_configuration(figures, small_plan):
+    sim_title = figures["sim"].axes[0].get_title()
+    for words in ("small — simulate", "of 2 runs reached the goal", "the map's starts", "fov 90°",
+                  "bearing noise 0.5° (1σ)", "unicycle dynamics", "kalman estimator"):  # fmt: skip
+        assert words in sim_title, words
+    assert figures["plan"].axes[0].get_title().startswith(f"small — plan: {small_plan.cells.n_cells} funnel cells")
+    assert figures["tree"].axes[0].get_title().startswith("small — simplified tree:")
+    assert "unknown" in plot.simulation_config(None)  # a sim.npz without its manifest says so, not a guess
+
+
+def test_the_simulations_tree_and_cells_stand_apart_from_its_runs(figures):
+    """The tree under the runs is not blue-green like success, and certified cells are not filled green."""
+    ax = figures["sim"].axes[0]
+    (tree,) = by_gid(ax, "tree")
+    assert _rgb(tree.get_edgecolor()[0]) not in {_rgb(c) for c in plot.OUTCOME_COLORS.values()}
+    fills = {_rgb(a.get_facecolor()) for a in by_gid(ax, "cell-fill")}
+    assert _rgb(plot.OUTCOME_COLORS[0]) not in fills
+
+
+def test_bags_and_figures_share_the_palette():
+    """One source: the bag's RGBA are the palette's colours, and plot's role names point into it."""
+    from bearnav_cli import bag, palette
+
+    for status, color in palette.STATUS_COLORS.items():
+        assert bag.STATUS_RGBA[status][:3] == pytest.approx(mcolors.to_rgb(color))
+    for outcome, color in palette.OUTCOME_COLORS.items():
+        assert bag.OUTCOME_RGBA[outcome][:3] == pytest.approx(mcolors.to_rgb(color))
+    assert plot.STATUS_COLORS is palette.STATUS_COLORS and plot.OUTCOME_COLORS is palette.OUTCOME_COLORS
+    assert set(palette.ROLE_COLORS.values()) <= set(palette.PALETTE.values())
+    assert len(set(palette.OUTCOME_COLORS.values())) == len(palette.OUTCOME_COLORS)  # outcomes told apart

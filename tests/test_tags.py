@@ -254,6 +254,26 @@ def test_figure_shows_where_to_glue_the_tags():
     names = [t.get_text() for t in ax.texts if t.get_gid() == "proposed-tag-label"]
     assert names == list(prop.ids)
     labels = [t.get_text() for t in ax.get_legend().get_texts()]
-    assert f"proposed tags ({prop.count})" in labels and f"existing tags ({len(plan.map.landmarks)})" in labels
+    assert plot.PROPOSED_TAGS_LABEL.format(prop.count) in labels
+    assert plot.EXISTING_TAGS_LABEL.format(len(plan.map.landmarks)) in labels
     assert "map units" in ax.get_xlabel() and "map units" in ax.get_ylabel()
+    plt.close(fig)
+
+
+def test_the_tags_figure_reads_well():
+    """issue 23 item 5: a legend entry for every mark, no colliding ids, the palette's colours, and a title
+    with the camera; every proposed id is written, existing ids where they fit."""
+    from tests.test_plot import assert_reads_well
+
+    plan = plan_of("random", 2)
+    prop = proposal_of("random", 2, max_tags=2)
+    fig = plot.tags_figure(prop, plan.map)
+    ax = fig.axes[0]
+    assert_reads_well(fig)
+    assert [t.get_text() for t in ax.texts if t.get_gid() == "proposed-tag-label"] == list(prop.ids)
+    existing = [t.get_text() for t in ax.texts if t.get_gid() == "existing-tag-label"]
+    assert existing and set(existing) <= set(plan.map.landmark_ids)
+    title = ax.get_title()
+    assert title.startswith(f"{plan.map.name} — tags: where to glue 2 new tags")
+    assert f"{prop.before.fov_deg:g}° camera, {prop.before.noise_deg:g}° noise" in title
     plt.close(fig)
