@@ -63,6 +63,7 @@ __all__ = [
     "KINDS",
     "load",
     "Loaded",
+    "map_source_of",
     "make_manifest",
     "metrics_path",
     "output_files",
@@ -1149,6 +1150,48 @@ def read_manifest(path: str | os.PathLike) -> dict:
     manifest, _ = _read_raw(path)
     _check_manifest(manifest, path, None)
     return manifest
+
+
+def _manifest_of(path: Path) -> dict | None:
+    """The manifest of an artifact file, unchecked, reading no other member of an npz; None if it has none."""
+    try:
+        if path.suffix.lower() == ".npz":
+            with np.load(path, allow_pickle=False) as npz:
+                manifest = json.loads(str(npz["manifest"])) if "manifest" in npz.files else None
+        else:
+            manifest = json.loads(path.read_bytes().decode("utf-8")).get("manifest")
+    except Exception:  # noqa: BLE001 - a file that does not show its manifest names no source
+        return None
+    return manifest if isinstance(manifest, dict) else None
+
+
+def map_source_of(path: str | os.PathLike) -> Path | None:
+    """The map YAML an artifact was planned from, following the manifests' inputs; None if there is none.
+
+    Each manifest records its input relative to its own folder (plan.npz ← cells.npz ← ... ←
+    map.json ← the YAML); the chain ends at the map stage's input. The answer is a path as the
+    caller can use it (relative when the artifact's path is), and only a YAML file that exists:
+    a plan made from a map.json whose YAML moved, or from options, names none.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        Any artifact of a plan (``plan.npz``, ``cells.npz``, ``map.json``, ...).
+
+    Returns
+    -------
+    Path or None
+    """
+    path = Path(path)
+    for _ in range(len(KINDS) + 1):  # one step per stage: a chain that loops ends here
+        manifest = _manifest_of(path)
+        source = (manifest or {}).get("input") or {}
+        if not isinstance(source, dict) or not isinstance(source.get("path"), str):
+            return None
+        path = Path(os.path.normpath(path.parent / source["path"]))
+        if manifest.get("stage") == "map":
+            return path if path.suffix.lower() in (".yaml", ".yml") and path.is_file() else None
+    return None
 
 
 #: SHA-256 of the map texts whose invariants this process has checked (a plan reads one map five times).

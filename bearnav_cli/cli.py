@@ -395,11 +395,13 @@ def read_map_source(
     starts: Optional[List[str]] = None,
     robot_radius: Optional[float] = None,
     lookahead: Optional[float] = None,
+    robot: Optional[dict] = None,
 ) -> "MapSource":
     """Read a bearnav map YAML (or a bare ROS map_server YAML plus options) into a MapSource.
 
-    ``lookahead`` (``--lookahead``, any map) overrides the map's ``robot.lookahead``; like the bare
-    grid's options it is part of the input hash, so another value reruns the map stage.
+    ``lookahead`` (``--lookahead``, any map) overrides the map's ``robot.lookahead``, and ``robot``
+    (``plan --slip`` ...: ``{key: value}`` of the ``robot:`` section) the other keys it names; like the
+    bare grid's options they are part of the input hash, so another value reruns the map stage.
     """
     import hashlib
 
@@ -413,6 +415,7 @@ def read_map_source(
                               f"`bearnav plan {path}`", file=str(path))  # fmt: skip
     blobs = [data]
     grid = None
+    robot_given = {**(robot or {}), **({"lookahead": lookahead} if lookahead is not None else {})}
     if "image" not in spec:
         given = [name for name, value in (("--goal", goal), ("--landmark", landmarks), ("--start", starts),
                                           ("--robot-radius", robot_radius)) if value not in (None, [])]  # fmt: skip
@@ -430,15 +433,16 @@ def read_map_source(
         spec["starts"] = [_pair(text, "--start") for text in starts or []]
         if robot_radius is not None:
             spec["robot_radius"] = robot_radius
-        if lookahead is not None:
-            spec["robot"] = {"lookahead": lookahead}
+        if robot_given:
+            spec["robot"] = dict(robot_given)
         # the options are part of the input: other options must make the map stage rerun
         blobs.append(json.dumps(spec, sort_keys=True).encode())
     else:
         spec.setdefault("name", path.stem)
-        if lookahead is not None and isinstance(spec.get("robot") or {}, dict):  # else the map stage names it
-            spec["robot"] = {**(spec.get("robot") or {}), "lookahead": lookahead}
-            blobs.append(json.dumps({"--lookahead": lookahead}).encode())
+        if robot_given and isinstance(spec.get("robot") or {}, dict):  # else the map stage names it
+            spec["robot"] = {**(spec.get("robot") or {}), **robot_given}
+            blobs.append(json.dumps({"--" + key.replace("_", "-"): value for key, value in robot_given.items()},
+                                    sort_keys=True).encode())  # fmt: skip
         if "occupancy" in spec:
             if not isinstance(spec["occupancy"], str):
                 raise InvalidMapError("expected a file name", file=str(path), field="occupancy")
@@ -518,28 +522,112 @@ def _progress_bar() -> "Progress":
     )
 
 
-def _outcome_failure(artifact: Any) -> str | None:
-    """Why a finished run's result is not usable (exit 1), or None."""
-    from bearnav_cli.datatypes import CellFlag, Cells, CellStatus, cell_list
+# --------------------------------------------------------------------------- next steps
+# Every failed outcome and every perception shortfall ends with the command that addresses it, with the
+# real file names, built here and only here, so that each hint runs as printed (tests/test_cli_hints.py).
+
+
+def _command_text(*words: Any) -> str:
+    """A command line as a user pastes it into a shell (paths with spaces quoted)."""
+    import shlex
+
+    return shlex.join(str(word) for word in words)
+
+
+def _camera_words(fov: float, max_range: Optional[float] = None) -> list[str]:
+    """The options naming a camera, as ``tags``, ``simulate`` and ``plan`` spell them."""
+    return ["--fov", f"{fov:g}", *(["--range", f"{max_range:g}"] if max_range is not None else [])]
+
+
+def _tags_output(plan_npz: Path, map_yaml: Optional[Path]) -> Path:
+    """Where ``bearnav tags`` writes its map without ``-o``: NAME_tags.yaml next to ``--map``, else next to the plan."""
+    return map_yaml.with_name(f"{map_yaml.stem}_tags.yaml") if map_yaml else plan_npz.parent / "map_tags.yaml"
+
+
+def _tags_map(plan_npz: Path) -> Optional[Path]:
+    """The map YAML ``bearnav tags --map`` can extend for this plan: the one it was planned from, if that is a
+    bearnav map (a bare map_server YAML needs the options it was planned with, so the plan's own map is used)."""
+    from bearnav_cli import artifacts
+
+    source = artifacts.map_source_of(plan_npz)
+    if source is None:
+        return None
+    try:
+        spec, _ = _read_yaml(source)
+    except BearnavError:
+        return None
+    return source if isinstance(spec, dict) and "image" not in spec else None
+
+
+def tags_step(plan_npz: Path, fov: float = 360.0, max_range: Optional[float] = None,
+              plan_words: tuple[str, ...] = ()) -> str:  # fmt: skip
+    """The next step where a camera cannot fix itself: the ``bearnav tags`` command for this plan, the map it
+    writes and the ``bearnav plan`` command that re-plans with it (``plan_words``: options to plan it with).
+
+    Parameters
+    ----------
+    plan_npz : Path
+        The plan, as the user named it (or as bearnav wrote it).
+    fov, max_range : float
+        The camera (degrees; map units, None for unlimited).
+    plan_words : tuple of str
+        Options of the re-planning command (the camera of ``plan --fov``).
+
+    Returns
+    -------
+    str
+        ```bearnav tags PLAN --fov F --map M` writes M_tags.yaml; then `bearnav plan M_tags.yaml```.
+    """
+    map_yaml = _tags_map(plan_npz)
+    tags = _command_text("bearnav", "tags", plan_npz, *_camera_words(fov, max_range),
+                         *(["--map", map_yaml] if map_yaml is not None else []))  # fmt: skip
+    written = _tags_output(plan_npz, map_yaml)
+    return f"`{tags}` writes {written}; then `{_command_text('bearnav', 'plan', written, *plan_words)}`"
+
+
+def _outcome_failure(artifact: Any, path: Optional[Path] = None, camera: tuple[float, Optional[float]] = (360.0, None),
+                     plan_words: tuple[str, ...] = ()) -> str | None:  # fmt: skip
+    """Why a finished run's result is not usable (exit 1) and what to do next, or None.
+
+    ``path`` is the artifact's file (the hints name it), ``camera`` the (fov, range) the tags are
+    proposed for, ``plan_words`` the options of the re-planning command.
+    """
+    from bearnav_cli.datatypes import CellFlag, Cells, CellStatus, Plan, cell_list
 
     cells = getattr(artifact, "cells", artifact)  # a Plan holds its Cells
     nodes = getattr(cells, "nodes", None)
     if nodes is not None and len(nodes) < 2:
-        return "no route: the tree has only its root (every sample fell in obstacles?)"
+        what = "no route: the tree has only its root (is the goal walled in, or did every sample fall in obstacles?)"
+        return what + (f"; `{_command_text('bearnav', 'plot', path)}` draws it" if path is not None else "")
     blind = cells.flagged(CellFlag.BLIND_SPOT) if isinstance(cells, Cells) else []
     if blind:
-        return (f"cells {cell_list(blind, 20)} have free points that see fewer than 2 landmarks (add landmarks there: "
-                "`bearnav tags PLAN.npz --fov 360` proposes where, or give your camera's --fov)")  # fmt: skip
+        what = f"cells {cell_list(blind, 20)} have free points that see fewer than 2 landmarks"
+        if path is None:
+            return what
+        if isinstance(artifact, Plan):
+            step = tags_step(path, *camera, plan_words=plan_words)
+        else:  # cells.npz: tags places landmarks along a plan's fields
+            plan_npz = path.with_name("plan.npz")
+            step = f"`{_command_text('bearnav', 'synthesize', path, '-o', plan_npz)}`, then " + tags_step(
+                plan_npz, *camera, plan_words=plan_words)  # fmt: skip
+        return f"{what}: add landmarks there; {step}"
     status = getattr(artifact, "status", None)
     if status is not None:
         bad = (status == CellStatus.NOT_CERTIFIED) | (status == CellStatus.SOLVER_FAILURE)
         failed = [int(c) for c in bad.nonzero()[0]]
         if failed:
-            return f"cells {cell_list(failed, 20)} are not certified (status 2 or 3)"
+            where = f"`bearnav inspect {path} --cell {failed[0]}` shows the first" if path is not None else ""
+            return f"cells {cell_list(failed, 20)} are not certified (status 2 or 3)" + (f"; {where}" if where else "")
     return None
 
 
-def _finish(reports: "list[pipeline.StageReport]", as_json: bool, extra: Optional[dict] = None) -> None:
+def _finish(
+    reports: "list[pipeline.StageReport]",
+    as_json: bool,
+    extra: Optional[dict] = None,
+    camera: "tuple[float, float | None]" = (360.0, None),
+    plan_words: tuple[str, ...] = (),
+) -> None:
     """Print the reports' JSON rows (the last with ``extra`` fields) and exit 1 on a failed outcome."""
     if as_json:
         rows = [
@@ -549,7 +637,7 @@ def _finish(reports: "list[pipeline.StageReport]", as_json: bool, extra: Optiona
         if rows and extra:
             rows[-1].update(extra)
         out.print_json(json.dumps(rows))
-    problem = _outcome_failure(reports[-1].artifact) if reports else None
+    problem = _outcome_failure(reports[-1].artifact, reports[-1].path, camera, plan_words) if reports else None
     if problem:
         raise _fail(problem, EXIT_OUTCOME)
 
@@ -1275,6 +1363,28 @@ def plan_command(
     ),
     robot_radius: Optional[float] = typer.Option(None, help="Robot radius, map units (bare grids only; 0)."),
     lookahead: Optional[float] = LOOKAHEAD,
+    fov: Optional[float] = typer.Option(
+        None,
+        "--fov",
+        help="Check the plan for a camera of this field of view (degrees, (0, 360]): exit 1 where "
+        "it sees no usable pair of tags along the field, with the `bearnav tags` command that adds them.",
+    ),
+    max_range: Optional[float] = typer.Option(
+        None, "--range", help="That camera's range, map units (default: unlimited)."
+    ),
+    noise_deg: Optional[float] = typer.Option(
+        None, "--noise-deg", help="Bearing noise (1σ, degrees) of that camera's predicted fix error (default 1)."
+    ),
+    bearing_error_deg: Optional[float] = typer.Option(
+        None, "--bearing-error-deg", help="Overrides the map's robot.bearing_error_deg η_cam (degrees)."
+    ),
+    compass_error_deg: Optional[float] = typer.Option(
+        None, "--compass-error-deg", help="Overrides the map's robot.compass_error_deg ψ (degrees)."
+    ),
+    slip: Optional[float] = typer.Option(None, "--slip", help="Overrides the map's robot.slip κ."),
+    slip_floor: Optional[float] = typer.Option(
+        None, "--slip-floor", help="Overrides the map's robot.slip_floor ν (map units per step)."
+    ),
     force: bool = FORCE,
     quiet: bool = QUIET,
     as_json: bool = JSON,
@@ -1283,6 +1393,8 @@ def plan_command(
     """Run every stage from the map to the last one, skipping fresh stages.
 
     Takes the same map options as `bearnav map`; a map.json from `bearnav map` starts at rrtstar.
+    The error bounds (--bearing-error-deg ...) go into the plan's robot section, which simulate
+    --estimator set and verify read; with --fov the plan is also checked for that camera.
 
     Examples: bearnav plan maps/kitchen.yaml --seed 3;
     bearnav plan lab.yaml --goal 1,1 --landmark 0,2 --landmark 4,0 (a bare map_server YAML)
@@ -1297,6 +1409,14 @@ def plan_command(
                    "--lookahead": lookahead,
                    **{_option_name("map", name): options[name] for name in PLAN_OPTIONS["map"]}}  # fmt: skip
     overrides = {stage: {name: options[name] for name in names} for stage, names in PLAN_OPTIONS.items()}
+    robot = {key: value for key, value in (("bearing_error_deg", bearing_error_deg), ("compass_error_deg",
+             compass_error_deg), ("slip", slip), ("slip_floor", slip_floor)) if value is not None}  # fmt: skip
+    map_options.update({"--" + key.replace("_", "-"): value for key, value in robot.items()})
+    if fov is None and (max_range is not None or noise_deg is not None):
+        given = "--range" if max_range is not None else "--noise-deg"
+        raise _fail(f"{given}: only with --fov (the camera it belongs to)", EXIT_INVALID)
+    if fov is not None:  # checked before any stage runs
+        _check_camera(fov, 1.0 if noise_deg is None else noise_deg, max_range)
     if source.is_dir():
         inside = source / "map.json"
         hint = f"; did you mean {inside}?" if inside.is_file() else " (give a map YAML or a map.json)"
@@ -1310,16 +1430,48 @@ def plan_command(
         target = out_dir or source.parent
     else:
         goal_xy = _pair(goal, "--goal") if goal else None
-        src = read_map_source(source, goal_xy, landmark, start, robot_radius, lookahead)
+        src = read_map_source(source, goal_xy, landmark, start, robot_radius, lookahead, robot)
         target = out_dir or Path("plans") / str(src.spec.get("name", source.stem))
 
     def show(report: pipeline.StageReport) -> None:
-        if not as_json:
+        if not as_json and (not _Quiet.enabled or report.stage == pipeline.STAGES[-1].name):
             out.print(_report_line(report), highlight=False, soft_wrap=True)
 
     with _progress_bar() as progress:
-        reports = pipeline.plan(src, target, overrides, force, _progress_factory(progress), show)
-    _finish(reports, as_json)
+        try:
+            reports = pipeline.plan(src, target, overrides, force, _progress_factory(progress), show)
+        except InvalidMapError as exc:  # a robot bound only the option gave: name the option
+            key = (exc.field or "").removeprefix("robot.")
+            if key not in robot:
+                raise
+            raise _fail(f"--{key.replace('_', '-')}: {exc.reason}", EXIT_INVALID) from None
+    plan_words = tuple(_camera_words(fov, max_range)) if fov is not None else ()
+    plan_words += tuple(word for key, value in robot.items() for word in (f"--{key.replace('_', '-')}", f"{value:g}"))
+    seeing, extra = None, None
+    plan = reports[-1].artifact
+    if fov is not None and _outcome_failure(plan) is None:  # the camera's check, on a plan that passed the others
+        from bearnav_cli import perception
+
+        seeing = perception.perception_coverage(plan, fov, 1.0 if noise_deg is None else noise_deg,
+                                                float("inf") if max_range is None else max_range)  # fmt: skip
+        extra = {
+            "perception": {
+                "fov_deg": fov,
+                "range": max_range,
+                "noise_deg": seeing.noise_deg,
+                "fraction_domain": seeing.fraction_domain,
+                "fraction_free": seeing.fraction_free,
+            }
+        }
+        if not as_json:
+            out.print(f"  perception: {seeing.summary()}", highlight=False, markup=False, soft_wrap=True)
+    _finish(reports, as_json, extra, camera=(360.0 if fov is None else fov, max_range), plan_words=plan_words)
+    if seeing is not None and seeing.fraction_domain < 1.0:
+        from bearnav_cli.datatypes import percent
+
+        raise _fail(f"a {fov:g}° camera looking along the field sees no usable pair of tags from "
+                    f"{percent(1.0 - seeing.fraction_domain)} of D: add tags there; "
+                    + tags_step(reports[-1].path, fov, max_range, plan_words), EXIT_OUTCOME)  # fmt: skip
 
 
 #: ``decompose --cells`` (and ``plan --cells``) choices.

@@ -57,8 +57,10 @@ __all__ = [
     "Map",
     "MAP_INVARIANTS",
     "Outcome",
+    "percent",
     "Plan",
     "PLAN_KEYS",
+    "plural",
     "Polygon",
     "ragged",
     "replace",
@@ -616,6 +618,27 @@ class CellFlag(enum.IntFlag):
     LANDMARK_INSIDE = 4  # every candidate fixed landmark lies in the cell (s_min = 0)
     SAMPLE_ON_EDGE = 8  # a collision sample on the edge line was skipped
     BLIND_SPOT = 16  # a free point of the coverage grid (spacing D/100) in the cell sees < 2 landmarks
+
+
+def plural(count: int, word: str, many: str | None = None) -> str:
+    """``"1 obstacle"``, ``"3 obstacles"``: a count and its noun, for every message that counts things.
+
+    ``many`` is the plural when it is not ``word + "s"`` (``"1 cell box"``...).
+    """
+    return f"{count} {word if count == 1 else many or word + 's'}"
+
+
+def percent(share: float) -> str:
+    """A share as a percentage to 0.1%, never ``0.0%`` or ``100.0%`` unless it is exactly 0 or 1.
+
+    A message that reports a sliver as ``0.0%`` says nothing (or something false): it reads
+    ``< 0.1%`` instead, and ``> 99.9%`` for a share just short of all.
+    """
+    if 0.0 < share < 0.0005:
+        return "< 0.1%"
+    if 0.9995 <= share < 1.0:
+        return "> 99.9%"
+    return f"{share:.1%}"
 
 
 def cell_list(cells: Any, limit: int = 12) -> str:

@@ -1,0 +1,92 @@
+"""Issue 23 item 2: every failed outcome names its likely cause and the next command, with the real files.
+
+The hints are commands a user pastes as printed: the tests parse them out of the message and run
+them, so a hint that names a placeholder (``PLAN.npz``), a file that is not there or an option the
+command does not take fails here.
+"""
+
+from __future__ import annotations
+
+import re
+import shlex
+
+import pytest
+
+from .test_cli_errors import assert_one_line_error
+
+#: A map whose two landmarks both sit left of the one obstacle: the free space behind it sees neither
+#: (a blind spot, so `plan` exits 1); small and few iterations, so that planning it takes a tenth of a second.
+BLIND_MAP = {
+    "name": "blind",
+    "bounds": [0, 0, 4, 3],
+    "robot_radius": 0.1,
+    "goal": [0.5, 0.5],
+    "obstacles": [{"rectangle": [1.5, 1, 2.5, 2]}],
+    "landmarks": [[0, 3], [0, 0]],
+    "params": {"rrtstar": {"iterations": 150, "seed": 0}},
+}
+
+
+def error_line(result) -> str:
+    lines = [line for line in result.output.splitlines() if line.startswith("error:")]
+    assert len(lines) == 1, result.output
+    return lines[0]
+
+
+def commands(text: str) -> list[list[str]]:
+    """The ``bearnav ...`` commands quoted in a message, as argument lists (``bearnav`` left out)."""
+    return [shlex.split(code)[1:] for code in re.findall(r"`([^`]+)`", text) if code.startswith("bearnav ")]
+
+
+@pytest.fixture
+def blind_plan(cli, write_map):
+    """``bearnav plan blind.yaml`` run from the scratch folder, as a user types it: exit 1, files written."""
+    write_map(BLIND_MAP, "blind.yaml")
+    result = cli("plan", "blind.yaml")
+    assert result.exit_code == 1, result.output
+    return result
+
+
+def test_the_blind_spot_hint_runs_as_printed_and_its_map_plans_past_the_check(cli, blind_plan, tmp_path):
+    line = error_line(blind_plan)
+    assert "fewer than 2 landmarks" in line and "PLAN" not in line, line
+    tags, plan = commands(line)
+    assert tags[:2] == ["tags", "plans/blind/plan.npz"] and "--map" in tags and "blind.yaml" in tags, line
+    assert (tmp_path / "plans" / "blind" / "plan.npz").is_file()  # the plan the hint names was written
+    ran = cli(*tags)
+    assert ran.exit_code == 0, ran.output
+    assert plan[0] == "plan" and (tmp_path / plan[1]).is_file(), line  # the map the hint says tags writes
+    replanned = cli(*plan)
+    assert replanned.exit_code == 0, replanned.output
+    assert "blind spot" not in replanned.output and "error:" not in replanned.output, replanned.output
+
+
+def test_plan_fov_checks_the_camera_and_hints_with_its_options(cli, write_map, tmp_path):
+    # a tag in every corner: no blind spot, but a 60° camera of range 3 looking along the field misses pairs
+    write_map(dict(BLIND_MAP, name="corners", landmarks=[[0, 3], [0, 0], [4, 0], [4, 3]]), "corners.yaml")
+    result = cli("plan", "corners.yaml", "--fov", "60", "--range", "3", "--slip", "0.05")
+    assert result.exit_code == 1, result.output
+    assert "perception:" in result.output and "60° camera, range 3" in result.output, result.output
+    line = error_line(result)
+    tags, plan = commands(line)
+    assert tags[:2] == ["tags", "plans/corners/plan.npz"] and "corners.yaml" in tags, line
+    assert tags[tags.index("--fov") + 1] == "60" and tags[tags.index("--range") + 1] == "3", line
+    # the re-planning command keeps the camera and the robot bound the user gave
+    assert plan[:2] == ["plan", "corners_tags.yaml"], line
+    assert plan[plan.index("--fov") + 1] == "60" and plan[plan.index("--slip") + 1] == "0.05", line
+    from bearnav_cli import artifacts
+
+    robot = artifacts.load(tmp_path / "plans" / "corners" / "plan.npz").artifact.map.robot
+    assert robot["slip"] == 0.05  # --slip went into the plan's robot section
+    assert cli("plan", "corners.yaml", "--slip", "0.05").exit_code == 0  # without a camera: no perception check
+
+
+@pytest.mark.parametrize(
+    "args, option",
+    [(("--range", "3"), "--range"), (("--noise-deg", "1"), "--noise-deg"), (("--fov", "0"), "--fov"),
+     (("--slip", "-1"), "--slip"), (("--bearing-error-deg", "95"), "--bearing-error-deg")],
+)  # fmt: skip
+def test_plan_refuses_a_bad_camera_or_robot_bound_naming_the_option(cli, write_map, tmp_path, args, option):
+    write_map(BLIND_MAP, "blind.yaml")
+    assert_one_line_error(cli("plan", "blind.yaml", *args), option)
+    assert not (tmp_path / "plans" / "blind" / "plan.npz").exists()
