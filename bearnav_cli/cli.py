@@ -560,7 +560,7 @@ def _tags_map(plan_npz: Path) -> Optional[Path]:
 
 
 def tags_step(plan_npz: Path, fov: float = 360.0, max_range: Optional[float] = None,
-              plan_words: tuple[str, ...] = ()) -> str:  # fmt: skip
+              plan_words: tuple[str, ...] = (), map_yaml: Optional[Path] = None) -> str:  # fmt: skip
     """The next step where a camera cannot fix itself: the ``bearnav tags`` command for this plan, the map it
     writes and the ``bearnav plan`` command that re-plans with it (``plan_words``: options to plan it with).
 
@@ -572,13 +572,15 @@ def tags_step(plan_npz: Path, fov: float = 360.0, max_range: Optional[float] = N
         The camera (degrees; map units, None for unlimited).
     plan_words : tuple of str
         Options of the re-planning command (the camera of ``plan --fov``).
+    map_yaml : Path, optional
+        The map YAML to give ``--map`` (default: the one the plan was made from, if any).
 
     Returns
     -------
     str
         ```bearnav tags PLAN --fov F --map M` writes M_tags.yaml; then `bearnav plan M_tags.yaml```.
     """
-    map_yaml = _tags_map(plan_npz)
+    map_yaml = map_yaml or _tags_map(plan_npz)
     tags = _command_text("bearnav", "tags", plan_npz, *_camera_words(fov, max_range),
                          *(["--map", map_yaml] if map_yaml is not None else []))  # fmt: skip
     written = _tags_output(plan_npz, map_yaml)
@@ -1033,8 +1035,12 @@ def map_command(
     if not as_json:
         out.print(_report_line(report), highlight=False, soft_wrap=True)
         if seeing is not None:
-            camera = f"--fov {fov:g}" + (f" --range {max_range:g}" if max_range is not None else "")
-            hint = f"; after planning, `bearnav tags PLAN.npz {camera}` places tags where it fails"
+            # the plan `bearnav plan` makes of this map.json lands next to it; of the YAML, in plans/NAME/
+            default = target == Path("plans") / str(src.spec.get("name", source.stem)) / "map.json"
+            planning = _command_text("bearnav", "plan", source if default else target)
+            bearnav_map = source if src.grid is None or "occupancy" in src.spec else None  # a bare grid needs options
+            step = tags_step(target.parent / "plan.npz", fov, max_range, map_yaml=bearnav_map)
+            hint = f"; to place tags where it fails, `{planning}`, then {step}"
             out.print(f"  perception: {seeing.summary()}{hint if seeing.fraction_some < 1.0 else ''}",
                       highlight=False, markup=False, soft_wrap=True)  # fmt: skip
     _finish([report], as_json, extra)

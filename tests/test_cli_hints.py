@@ -90,3 +90,20 @@ def test_plan_refuses_a_bad_camera_or_robot_bound_naming_the_option(cli, write_m
     write_map(BLIND_MAP, "blind.yaml")
     assert_one_line_error(cli("plan", "blind.yaml", *args), option)
     assert not (tmp_path / "plans" / "blind" / "plan.npz").exists()
+
+
+def test_a_retired_artifact_names_the_command_that_remakes_it_from_its_own_files(cli, tmp_path, tmp_path_factory):
+    from .test_hostile_common import copy_plan, rewrite_npz, small_plan
+
+    built = small_plan(tmp_path_factory.mktemp("retired"))
+    folder = copy_plan(built, tmp_path / "old")  # the map YAML stays behind: the map.json beside the plan is named
+
+    def retire(schema):
+        return lambda manifest, entries: manifest.update(schema=schema)
+
+    plan = rewrite_npz(folder / "plan.npz", folder / "plan.npz", retire("bearnav.plan/2"), rehashed=False)
+    line = error_line(cli("inspect", plan))
+    assert f"`bearnav plan {folder / 'map.json'} --force` to get bearnav.plan/3" in line, line
+    sim = rewrite_npz(folder / "sim.npz", folder / "sim.npz", retire("bearnav.sim/1"), rehashed=False)
+    line = error_line(cli("inspect", sim))
+    assert f"`bearnav simulate {folder / 'plan.npz'} --force`" in line and "PLAN" not in line, line
