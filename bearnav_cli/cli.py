@@ -587,6 +587,64 @@ def tags_step(plan_npz: Path, fov: float = 360.0, max_range: Optional[float] = N
     return f"`{tags}` writes {written}; then `{_command_text('bearnav', 'plan', written, *plan_words)}`"
 
 
+def _simulate_words(params: dict, **changes: Any) -> list[str]:
+    """The ``bearnav simulate`` options that give the loop ``params`` (with ``changes``): those off their defaults."""
+    words: list[str] = []
+    for field in params_fields("simulate"):
+        if field.name in PARAMS_ONLY["simulate"] or field.name not in params:
+            continue
+        value = changes.get(field.name, params[field.name])
+        if value == field.default or value is None:
+            continue
+        name = _option_name("simulate", field.name)
+        if field.kind is bool:
+            words.append(name if value else FLAG_OFF.get(("simulate", field.name), "--no-" + name[2:]))
+        else:
+            words += [name, _shown(value).strip("'")]
+    return words
+
+
+def simulation_steps(report: "pipeline.StageReport", plan_npz: Path, min_success: float) -> str:
+    """Why too few simulated runs reached the goal, outcome by outcome, and the command that addresses each.
+
+    Parameters
+    ----------
+    report : StageReport
+        The simulate stage's report (its artifact the :class:`~bearnav_cli.datatypes.Simulation`, its
+        manifest the loop's parameters).
+    plan_npz : Path
+        The plan simulated.
+    min_success : float
+        The ``--min-success`` the runs fell short of.
+
+    Returns
+    -------
+    str
+        One line: the outcome, then ``lost: ...; collision: ...`` and the figure that shows the runs.
+    """
+    params = dict((report.manifest or {}).get("params") or {})
+    counts = report.artifact.counts()
+    steps = []
+    if counts.get("lost"):
+        fov, max_range = float(params.get("fov", 360.0)), params.get("range")
+        hold = params.get("hold_time", 2.0)
+        steps.append(f"lost: the camera saw fewer than two usable tags for --hold-time {hold:g} s (a {fov:g}° "
+                     "camera); add tags: " + tags_step(plan_npz, fov, max_range))  # fmt: skip
+    if counts.get("collision") and params.get("estimator") != "set":
+        retry = _command_text("bearnav", "simulate", plan_npz, *_simulate_words(params, estimator="set"))
+        steps.append("collision: the position estimate erred beyond the cell's tolerance (noise, slip, a camera or "
+                     f"a unicycle outside the certificate); `{retry}` drives only where its error bound is "
+                     "certified")  # fmt: skip
+    elif counts.get("collision"):
+        steps.append("collision: the error bounds assumed are below the errors simulated (--bearing-error-deg, "
+                     "--slip); `bearnav verify " + str(plan_npz) + "` checks the certificate")  # fmt: skip
+    if counts.get("stall") or counts.get("timeout"):
+        steps.append("stall or timeout: the field vanished or the run made no progress (outside every cell?)")
+    shown = _command_text("bearnav", "plot", report.path)
+    return (f"{report.summary}, fewer than --min-success {min_success:g}: " + "; ".join(steps)
+            + f"; `{shown}` draws the runs by outcome, into {_figure_default(report.path)}")  # fmt: skip
+
+
 def _outcome_failure(artifact: Any, path: Optional[Path] = None, camera: tuple[float, Optional[float]] = (360.0, None),
                      plan_words: tuple[str, ...] = ()) -> str | None:  # fmt: skip
     """Why a finished run's result is not usable (exit 1) and what to do next, or None.
@@ -603,7 +661,9 @@ def _outcome_failure(artifact: Any, path: Optional[Path] = None, camera: tuple[f
         return what + (f"; `{_command_text('bearnav', 'plot', path)}` draws it" if path is not None else "")
     blind = cells.flagged(CellFlag.BLIND_SPOT) if isinstance(cells, Cells) else []
     if blind:
-        what = f"cells {cell_list(blind, 20)} have free points that see fewer than 2 landmarks"
+        one = len(blind) == 1
+        what = f"{'cell' if one else 'cells'} {cell_list(blind, 20)} {'has' if one else 'have'} free points that see "
+        what += "fewer than 2 landmarks"
         if path is None:
             return what
         if isinstance(artifact, Plan):
@@ -1195,12 +1255,12 @@ def verify_command(
         out.print(f"verify    {plan_npz}  {report.summary()}", highlight=False, soft_wrap=True)
         for reason in report.reasons:
             out.print(f"  - {reason}", highlight=False, soft_wrap=True)
-        for note in getattr(report, "notes", []):
+        for note in [] if _Quiet.enabled else getattr(report, "notes", []):
             out.print(f"  note: {note}", highlight=False, soft_wrap=True)
         if seeing is not None:
             out.print(f"  perception: {seeing.summary()} (the rule: `bearnav tags` places tags where it fails)",
                       highlight=False, soft_wrap=True)  # fmt: skip
-        if starts:
+        if starts and not _Quiet.enabled:
             out.print(f"  the {starts} runs drive with displacements (exact positions) and a full view, at speed "
                       f"{speed:g} map units/s: `bearnav simulate` adds bearings, a camera and noise; {WORDS_NOTE}",
                       highlight=False, markup=False, soft_wrap=True)  # fmt: skip
@@ -1279,6 +1339,8 @@ def simulate_command(
     if as_json:
         shown = {"sim": str(report.path), "ran": report.ran, "metrics": metrics}
         out.print_json(json.dumps(shown if bag is None else dict(shown, bag=str(bag))))
+    elif _Quiet.enabled:  # -q: the result's one line (and, on stderr, what failed)
+        out.print(_report_line(report), highlight=False, soft_wrap=True)
     else:
         from rich.table import Table
 
@@ -1304,7 +1366,7 @@ def simulate_command(
             out.print(f"wrote {gif}", highlight=False)
     rate = metrics.get("success_rate")
     if rate is None or rate < min_success:
-        raise typer.Exit(EXIT_OUTCOME)
+        raise _fail(simulation_steps(report, plan_npz, min_success), EXIT_OUTCOME)
 
 
 def _metric_rows(metrics: dict) -> list[tuple[str, str]]:
@@ -1730,18 +1792,39 @@ def tags_command(
         }))  # fmt: skip
     else:
         out.print(f"tags      {out_path}  {proposal.summary()}", highlight=False, soft_wrap=True)
-        out.print(
-            f"wrote {out_path} and {figure}; re-plan with `bearnav plan {out_path}`", highlight=False, soft_wrap=True
-        )
+        if not _Quiet.enabled:
+            out.print(f"wrote {out_path} and {figure}; re-plan with `{_command_text('bearnav', 'plan', out_path)}`",
+                      highlight=False, soft_wrap=True)  # fmt: skip
     if not proposal.target_reached:
-        raise typer.Exit(EXIT_OUTCOME)
+        from bearnav_cli.datatypes import percent
+
+        short = 1.0 - proposal.after.fraction_domain
+        if max_tags is not None and proposal.count >= max_tags:
+            again = _command_text("bearnav", "tags", plan_npz, *_camera_words(fov, max_range),
+                                  *(["--noise-deg", f"{noise_deg:g}"] if noise_deg != 1.0 else []),
+                                  *(["--error-target", f"{error_target:g}"] if error_target is not None else []),
+                                  *(["--map", map_yaml] if map_yaml is not None else []), "-o", out_path)  # fmt: skip
+            fix = (f"--max-tags {max_tags} allowed too few (at least {proposal.lower_bound} are needed); "
+                   f"`{again}` places as many as the rule needs")  # fmt: skip
+        else:
+            fix = ("the rest of D sees no wall or obstacle a tag could go on in view: a wider --fov, a longer "
+                   "--range or a lower --error-target")  # fmt: skip
+        raise _fail(f"the rule still fails on {percent(short)} of D: {fix}; {out_path} has the tags placed",
+                    EXIT_OUTCOME)  # fmt: skip
+
+
+def _figure_default(artifact: Path) -> Path:
+    """Where ``bearnav plot`` draws an artifact without ``-o``: next to it, its name with .png (plan.npz: plan.png)."""
+    return artifact.with_suffix(".png")
 
 
 @app.command("plot")
 @handles_errors
 def plot_command(
     artifact: Path = typer.Argument(..., metavar="ARTIFACT", help="Any bearnav artifact (map.json, *.npz)."),
-    out_path: Path = typer.Option(..., "-o", "--out", help="Figure file (.png, .pdf, .svg)."),
+    out_path: Optional[Path] = typer.Option(
+        None, "-o", "--out", help="Figure file (.png, .pdf, .svg; default: the artifact's name with .png, next to it)."
+    ),
     also: Optional[List[Path]] = typer.Option(None, "--also", help="Tree artifact drawn faintly underneath."),
     title: Optional[str] = typer.Option(None, help="Figure title."),
     color_by: Optional[str] = typer.Option(
@@ -1783,6 +1866,7 @@ def plot_command(
     from bearnav_cli.datatypes import Cells, Plan
 
     _Quiet.enabled |= quiet
+    out_path = out_path or _figure_default(artifact)
     artifacts.check_output_file(out_path, FIGURE_SUFFIXES, "-o/--out", inputs=(artifact, *(also or [])))
     if fov is None and (noise_deg is not None or max_range is not None):
         given = "--noise-deg" if noise_deg is not None else "--range"

@@ -56,6 +56,7 @@ __all__ = [
     "INVARIANTS",
     "Map",
     "MAP_INVARIANTS",
+    "NEGLIGIBLE_SHARE",
     "Outcome",
     "percent",
     "Plan",
@@ -628,15 +629,20 @@ def plural(count: int, word: str, many: str | None = None) -> str:
     return f"{count} {word if count == 1 else many or word + 's'}"
 
 
+#: A share of an area below which a warning is not worth giving: it would read ``0.0%``, a few points of a
+#: grid at a corner rather than a place a robot could be stuck in (the checks that fail a plan do not use it).
+NEGLIGIBLE_SHARE = 0.0005
+
+
 def percent(share: float) -> str:
     """A share as a percentage to 0.1%, never ``0.0%`` or ``100.0%`` unless it is exactly 0 or 1.
 
     A message that reports a sliver as ``0.0%`` says nothing (or something false): it reads
     ``< 0.1%`` instead, and ``> 99.9%`` for a share just short of all.
     """
-    if 0.0 < share < 0.0005:
+    if 0.0 < share < NEGLIGIBLE_SHARE:
         return "< 0.1%"
-    if 0.9995 <= share < 1.0:
+    if 1.0 - NEGLIGIBLE_SHARE <= share < 1.0:
         return "> 99.9%"
     return f"{share:.1%}"
 

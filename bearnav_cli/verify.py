@@ -33,7 +33,7 @@ import shapely
 
 from bearnav_cli import composition, runtime
 from bearnav_cli.composition import Composition
-from bearnav_cli.datatypes import CellFlag, CellStatus, Map, Outcome, Plan, Simulation, cell_list
+from bearnav_cli.datatypes import CellFlag, CellStatus, Map, Outcome, Plan, Simulation, cell_list, plural
 from bearnav_cli.errors import ArtifactError, InvalidParamsError
 from bearnav_cli.funnel import coverage_domain, reached_parts
 from bearnav_cli.geometry import FreeSpace, inflate
@@ -667,7 +667,8 @@ class VerifyReport:
         """Why the plan fails verification (empty when it passes)."""
         out = []
         if self.uncertified:
-            out.append(f"{len(self.uncertified)} cells not certified (status 2 or 3): {cell_list(self.uncertified)}")
+            out.append(f"{plural(len(self.uncertified), 'cell')} not certified (status 2 or 3): "
+                       f"{cell_list(self.uncertified)}")  # fmt: skip
         if self.false_certificates:
             items = [f"{c} ({why})" for c, why in sorted(self.false_certificates.items())]
             out.append(f"{len(items)} certified cells fail the recomputation: {cell_list(items)}")

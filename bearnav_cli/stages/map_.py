@@ -18,7 +18,7 @@ import numpy as np
 import shapely
 
 from bearnav_cli import occupancy
-from bearnav_cli.datatypes import Map, replace
+from bearnav_cli.datatypes import NEGLIGIBLE_SHARE, Map, plural, replace
 from bearnav_cli.errors import InvalidMapError
 from bearnav_cli.geometry import (
     CIRCLE_SEGMENTS,
@@ -507,7 +507,7 @@ def _validate(reader: _Reader, map_: Map, params: Params, culprit: str | None = 
 def _coverage_warning(map_: Map, space: FreeSpace, cells: int) -> None:
     points, counts = landmark_coverage(map_, space, cells)
     poor = points[counts < 2]
-    if len(poor) == 0 or len(points) == 0:
+    if len(poor) == 0 or len(points) == 0 or len(poor) < NEGLIGIBLE_SHARE * len(points):
         return
     share = 100.0 * len(poor) / len(points)
     lo, hi = poor.min(axis=0), poor.max(axis=0)
@@ -573,17 +573,18 @@ def summary(map_: Map, listed: int | None = None) -> str:
     if map_.lookahead > 0:
         radius += f" + look-ahead {map_.lookahead:g}"
     if listed is None or (listed == raw == inflated):
-        shapes = f"{inflated} obstacles ({radius})"
+        shapes = f"{plural(inflated, 'obstacle')} ({radius})"
     else:
         merged = []
         if raw != listed:
             merged.append(f"into {raw} (touching or overlapping)")
         if inflated != raw:
             merged.append(f"into {inflated} by the {radius} (gaps it cannot pass)")
-        shapes = f"{listed} obstacles merged " + " and ".join(merged) if merged else f"{listed} obstacles"
+        counted = plural(listed, "obstacle")
+        shapes = f"{counted} merged " + " and ".join(merged) if merged else counted
         if inflated == raw:
             shapes += f", {radius}"
     return (
         f"{map_.name}: {xmax - xmin:g} x {ymax - ymin:g} bounds, {shapes}, "
-        f"{len(map_.landmarks)} landmarks, {len(map_.starts)} starts"
+        f"{plural(len(map_.landmarks), 'landmark')}, {plural(len(map_.starts), 'start')}"
     )
