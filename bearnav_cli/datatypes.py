@@ -350,6 +350,13 @@ class Map:
         return float(self.robot_radius) + self.lookahead
 
     @property
+    def inflation_text(self) -> str:
+        """``"robot radius 0.2"`` (``"robot radius 0.2 + look-ahead 0.1"``): what the walls and obstacles are grown
+        by, in the words every message about the free space uses."""
+        text = f"robot radius {self.robot_radius:g}"
+        return text + (f" + look-ahead {self.lookahead:g}" if self.lookahead > 0 else "")
+
+    @property
     def free_bounds(self) -> np.ndarray:
         """``B_r``: the bounds shrunk by the planning radius, where the planned point may go (ALGORITHMS §11.1).
 

@@ -7,8 +7,10 @@ command does not take fails here.
 
 from __future__ import annotations
 
+import dataclasses
 import re
 import shlex
+from pathlib import Path
 
 import pytest
 
@@ -107,3 +109,84 @@ def test_a_retired_artifact_names_the_command_that_remakes_it_from_its_own_files
     sim = rewrite_npz(folder / "sim.npz", folder / "sim.npz", retire("bearnav.sim/1"), rehashed=False)
     line = error_line(cli("inspect", sim))
     assert f"`bearnav simulate {folder / 'plan.npz'} --force`" in line and "PLAN" not in line, line
+
+
+# --------------------------------------------------------------------------- item 6: messages that are right
+
+
+@pytest.fixture(scope="module")
+def built(tmp_path_factory):
+    from .test_hostile_common import small_plan
+
+    return small_plan(tmp_path_factory.mktemp("hints"))
+
+
+@pytest.mark.parametrize(
+    "start, words",
+    [("-1,2", ("outside the bounds [0, 10]",)), ("0.15,2", ("within the robot radius 0.2 of a wall", "[0.2, 9.8]")),
+     ("3.9,4.5", ("inside an obstacle grown by the robot radius 0.2",))],
+)  # fmt: skip
+def test_a_start_near_a_wall_or_an_obstacle_is_told_apart_from_one_outside(cli, built, tmp_path, start, words):
+    result = cli("simulate", built["plan"], "--starts", start, "-o", tmp_path / "s" / "sim.npz")
+    assert_one_line_error(result, f"start 0 ({start.replace(',', ', ')})", *words)
+    assert "outside the bounds" not in error_line(result) or start == "-1,2"
+
+
+def test_a_goal_outside_the_free_space_names_the_inflation(cli, write_map):
+    spec = dict(BLIND_MAP, goal=[0.05, 0.5])  # inside the bounds, within the radius of the wall
+    assert_one_line_error(cli("map", write_map(spec, "goal.yaml")), "goal", "grown by the robot radius 0.1")
+
+
+def test_plan_refuses_a_bad_option_before_it_prints_or_writes_anything(cli, write_map, tmp_path):
+    write_map(BLIND_MAP, "blind.yaml")
+    result = cli("plan", "blind.yaml", "--iterations", "-5")
+    assert_one_line_error(result, "--iterations")
+    assert result.output.startswith("error:"), result.output  # no "map fresh" or "map ran" line before it
+    assert not (tmp_path / "plans").exists()
+
+
+def test_counts_of_one_are_singular_and_slivers_are_not_zero():
+    from bearnav_cli.datatypes import percent, plural
+
+    assert plural(1, "obstacle") == "1 obstacle" and plural(3, "obstacle") == "3 obstacles"
+    assert plural(0, "start") == "0 starts"
+    assert percent(0.0) == "0.0%" and percent(1.0) == "100.0%" and percent(0.25) == "25.0%"
+    assert percent(1e-5) == "< 0.1%" and percent(1 - 1e-5) == "> 99.9%"
+
+
+def test_the_map_summary_counts_one_obstacle_in_the_singular(cli, write_map):
+    result = cli("map", write_map(BLIND_MAP, "blind.yaml"), "-o", "one/map.json")
+    assert result.exit_code == 0, result.output
+    assert "1 obstacle (" in result.output and "1 obstacles" not in result.output, result.output
+
+
+# --------------------------------------------------------------------------- simulate's failures, -q, plot's default
+
+
+def test_lost_runs_name_the_tags_command_and_the_figure_that_shows_them(cli, write_map, tmp_path):
+    write_map(dict(BLIND_MAP, name="corners", landmarks=[[0, 3], [0, 0], [4, 0], [4, 3]]), "corners.yaml")
+    assert cli("-q", "plan", "corners.yaml").exit_code == 0
+    result = cli("-q", "simulate", "plans/corners/plan.npz", "--fov", "60", "--starts", "random:4")
+    assert result.exit_code == 1, result.output
+    # -q: the result line and the error, no table, no note
+    out_lines = [line for line in result.stdout.splitlines() if line.strip()]
+    assert len(out_lines) == 1 and out_lines[0].startswith("simulate"), result.stdout
+    line = error_line(result)
+    assert "lost" in line and "fewer than --min-success 1" in line, line
+    tags, plan, figure = commands(line)
+    assert tags[:2] == ["tags", "plans/corners/plan.npz"] and tags[tags.index("--fov") + 1] == "60", line
+    assert tags[tags.index("--map") + 1] == "corners.yaml" and plan == ["plan", "corners_tags.yaml"], line
+    drawn = cli(*figure)  # `bearnav plot plans/corners/sim.npz`: no -o, the figure goes next to the runs
+    assert drawn.exit_code == 0, drawn.output
+    assert (tmp_path / "plans" / "corners" / "sim.png").stat().st_size > 0
+    assert f"wrote {Path('plans/corners/sim.png')}" in drawn.output
+
+
+def test_simulate_words_give_the_loop_back_as_options():
+    from bearnav_cli.cli import _simulate_words
+    from bearnav_cli.stages import simulate
+
+    params = dataclasses.asdict(simulate.Params(fov=60.0, dynamics="unicycle", occlusion=False))
+    words = _simulate_words(params, estimator="set")
+    assert words == ["--dynamics", "unicycle", "--fov", "60", "--no-occlusion", "--estimator", "set"], words
+    assert _simulate_words(dataclasses.asdict(simulate.Params())) == []

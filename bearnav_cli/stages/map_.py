@@ -469,15 +469,18 @@ def _validate(reader: _Reader, map_: Map, params: Params, culprit: str | None = 
     space = FreeSpace.from_map(map_)
     if space.free_area <= 0:
         raise fail("obstacles", "the free space is empty")
+    # the free space a message names is the planned point's: say what it is less than the map's
+    free = (f"the free space (the bounds less the walls and obstacles grown by the {map_.inflation_text}, where the "
+            "robot's centre may go)")  # fmt: skip
     if not space.points_strictly_free(map_.goal)[0]:
         what = "the goal " if culprit else ""
-        raise fail("goal", f"{what}{map_.goal.tolist()} is not strictly inside the free space")
+        raise fail("goal", f"{what}{map_.goal.tolist()} is not strictly inside {free}")
     component = space.component_of(map_.goal)
     for k, start in enumerate(map_.starts):
         where = f"starts[{k}]"
         what = f"{where} " if culprit else ""
         if not space.points_strictly_free(start)[0]:
-            raise fail(where, f"{what}{start.tolist()} is not strictly inside the free space")
+            raise fail(where, f"{what}{start.tolist()} is not strictly inside {free}")
         if not component.intersects(shapely.Point(start)):
             raise fail(where, f"{what}{start.tolist()} cannot reach the goal (another free component)")
 
@@ -569,9 +572,7 @@ def summary(map_: Map, listed: int | None = None) -> str:
     """One line for ``inspect`` and ``plan``; with ``listed`` (:func:`listed_obstacles`) it says what was merged."""
     xmin, ymin, xmax, ymax = map_.bounds
     raw, inflated = len(map_.raw_obstacles), len(map_.obstacles)
-    radius = f"robot radius {map_.robot_radius:g}"
-    if map_.lookahead > 0:
-        radius += f" + look-ahead {map_.lookahead:g}"
+    radius = map_.inflation_text
     if listed is None or (listed == raw == inflated):
         shapes = f"{plural(inflated, 'obstacle')} ({radius})"
     else:
