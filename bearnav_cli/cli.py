@@ -238,6 +238,12 @@ def _fail(message: str, code: int) -> typer.Exit:
     return typer.Exit(code)
 
 
+def _print_json(data: Any) -> None:
+    """Print ``data`` as indented JSON on stdout, never wrapped: rich's print_json breaks long strings at the
+    terminal's width, mid-token, and what a machine reads must parse whatever the terminal."""
+    out.print(json.dumps(data, indent=2, ensure_ascii=False), markup=False, highlight=False, soft_wrap=True)
+
+
 class Terminated(KeyboardInterrupt):
     """SIGTERM, turned into an exception so that temp files are removed on the way out."""
 
@@ -698,7 +704,7 @@ def _finish(
         ]
         if rows and extra:
             rows[-1].update(extra)
-        out.print_json(json.dumps(rows))
+        _print_json(rows)
     problem = _outcome_failure(reports[-1].artifact, reports[-1].path, camera, plan_words) if reports else None
     if problem:
         raise _fail(problem, EXIT_OUTCOME)
@@ -1250,7 +1256,7 @@ def verify_command(
                                   "fraction_free": seeing.fraction_free,
                                   "median_predicted_error": seeing.median_error_domain,
                                   "fraction_within_tolerance": seeing.fraction_within_tolerance}  # fmt: skip
-        out.print_json(json.dumps(data))
+        _print_json(data)
     else:
         out.print(f"verify    {plan_npz}  {report.summary()}", highlight=False, soft_wrap=True)
         for reason in report.reasons:
@@ -1338,7 +1344,7 @@ def simulate_command(
         ros_bag.write(bag, sim, option="--bag", force=force)
     if as_json:
         shown = {"sim": str(report.path), "ran": report.ran, "metrics": metrics}
-        out.print_json(json.dumps(shown if bag is None else dict(shown, bag=str(bag))))
+        _print_json(shown if bag is None else dict(shown, bag=str(bag)))
     elif _Quiet.enabled:  # -q: the result's one line (and, on stderr, what failed)
         out.print(_report_line(report), highlight=False, soft_wrap=True)
     else:
@@ -1555,7 +1561,9 @@ def _is_map_artifact(path: Path) -> bool:
 @handles_errors
 def inspect_command(
     artifact: Path = typer.Argument(..., metavar="ARTIFACT", help="Any bearnav artifact (map.json, *.npz)."),
-    cells: bool = typer.Option(False, "--cells", help="Also print the per-cell statistics in full."),
+    cells: bool = typer.Option(
+        False, "--cells", help="Also print a table of the cells (one row each, with units); with --json, its rows."
+    ),
     cell: Optional[int] = typer.Option(
         None, "--cell", metavar="N", help="Print one cell of cells.npz or plan.npz: rows, vertices, status, δ_c."
     ),
@@ -1575,26 +1583,114 @@ def inspect_command(
     if cell is not None:
         _inspect_cell(artifact, loaded.artifact, cell, as_json)
         return
+    table = _cell_table(loaded.artifact, manifest.get("stats") or {}) if cells else None
     if as_json:
-        out.print_json(json.dumps(manifest))
+        units = {key: unit.replace("u", "map unit") if unit else None for key, _, unit in table[0]} if table else None
+        _print_json(manifest if table is None else {"units": units, "cells": table[1]})
         return
     stage = f"stage {manifest['stage']} v{manifest['stage_version']}"
     out.print(f"[bold]{artifact}[/bold]  {manifest['schema']}  ({stage})")
-    out.print(f"summary   {manifest.get('summary', '')}", highlight=False, markup=False)
-    out.print(f"params    {json.dumps(manifest.get('params', {}), sort_keys=True)}", highlight=False, markup=False)
+    # soft_wrap: a line as long as it is (a terminal folds it; rich would cut the JSON mid-token at 80 columns)
+    out.print(f"summary   {manifest.get('summary', '')}", highlight=False, markup=False, soft_wrap=True)
+    out.print(f"params    {json.dumps(manifest.get('params', {}), sort_keys=True)}", highlight=False, markup=False,
+              soft_wrap=True)  # fmt: skip
     inp = manifest.get("input", {})
     out.print(f"input     {inp.get('path')}  sha256 {str(inp.get('content_sha256'))[:16]}…", highlight=False)
     out.print(f"content   sha256 {manifest['content_sha256'][:16]}…  key {manifest['key'][:16]}…", highlight=False)
     stats = manifest.get("stats") or {}
     if stats:
-        shown = stats if cells else _short_stats(stats)
-        out.print(f"stats     {json.dumps(shown, sort_keys=True)}", highlight=False, markup=False)
+        out.print(f"stats     {json.dumps(_short_stats(stats), sort_keys=True)}", highlight=False, markup=False,
+                  soft_wrap=True)  # fmt: skip
     software = ", ".join(f"{k} {v}" for k, v in manifest.get("software", {}).items())
-    out.print(f"software  {software}  elapsed {manifest.get('elapsed_s', 0):.3f} s", highlight=False)
+    out.print(f"software  {software}  elapsed {manifest.get('elapsed_s', 0):.3f} s", highlight=False, soft_wrap=True)
     per_cell = sorted(key for key, value in stats.items() if isinstance(value, list) and value)
-    if not cells and per_cell:
-        out.print(f"(--cells adds the per-cell statistics {', '.join(per_cell)}; --cell N shows one cell)",
+    if cells:
+        from bearnav_cli.datatypes import cell_list
+
+        if table is not None:
+            _print_cell_table(*table)
+        shown = {_STATS_KEY.get(key, key) for key, _, _ in table[0]} if table is not None else set()
+        lists = {key: value for key, value in stats.items() if isinstance(value, list) and value and key not in shown}
+        for key, value in sorted(lists.items()):  # lists of cells (or of rounds), not a column each
+            out.print(f"{key}: {cell_list(value, 40)}", highlight=False, markup=False, soft_wrap=True)
+    elif per_cell:
+        out.print(f"(--cells adds a table of the cells and the lists {', '.join(per_cell)}; --cell N shows one cell)",
                   highlight=False, markup=False, soft_wrap=True)  # fmt: skip
+
+
+#: The per-cell lists of a plan's statistics that ``inspect --cells`` shows as columns: (key, heading, unit).
+_PLAN_STATS_COLUMNS = (("lp_solves", "LP", ""), ("c_tilde_h", "c̃_h", "1/(s·u)"), ("c_tilde_v", "c̃_v", "1/(s·u)"),
+                       ("c_h_over_s_max", "c_h/s_max", "1/(s·u)"))  # fmt: skip
+#: Where a column's numbers come from in the statistics, when not its key (``attempts``: the LP solves of a cell).
+_STATS_KEY = {"lp_solves": "attempts"}
+
+
+def _cell_table(artifact: Any, stats: dict) -> "tuple[list[tuple[str, str, str]], list[dict]] | None":
+    """``inspect --cells``: the columns as (key, heading, unit) and one row per cell, or None without cells.
+
+    The rows hold numbers keyed by column (None where there is none: the goal cell's exit inset, a
+    cell without a tolerance), so that ``--json`` prints them as they are and the table formats them.
+    Lengths are in map units (``u``).
+    """
+    import math
+
+    import numpy as np
+
+    from bearnav_cli.datatypes import CellFlag, Cells, CellStatus, Plan
+
+    plan = artifact if isinstance(artifact, Plan) else None
+    cells = plan.cells if plan is not None else artifact
+    if not isinstance(cells, Cells):
+        return None
+
+    def number(value: Any) -> Any:
+        value = float(value)
+        return None if math.isnan(value) else value
+
+    columns = [("cell", "cell", ""), ("rank", "rank", "u"), ("vertices", "vertices", ""),
+               ("barrier_rows", "barriers", ""), ("exit_inset", "exit inset", "u"),
+               ("landmarks", "landmarks", "")]  # fmt: skip
+    if plan is not None:
+        columns[1:1] = [("status", "status", ""), ("delta_c", "δ_c", "u"), ("tau_c", "τ_c", "u")]
+        columns += [c for c in _PLAN_STATS_COLUMNS if len(stats.get(_STATS_KEY.get(c[0], c[0])) or []) == cells.n_cells]
+    columns.append(("flags", "flags", ""))
+    barrier_rows = np.diff(cells.cbf_offsets)
+    rows = []
+    for c in range(cells.n_cells):
+        row: dict[str, Any] = {"cell": c, "rank": number(cells.cell_rank[c]), "vertices": len(cells.vertices(c)),
+                               "barrier_rows": int(barrier_rows[c]), "exit_inset": number(cells.exit_inset[c]),
+                               "landmarks": int(np.count_nonzero(cells.cell_landmarks[c])),
+                               "flags": ",".join(f.name.lower() for f in CellFlag
+                                                 if f and int(cells.cell_flags[c]) & f)}  # fmt: skip
+        if plan is not None:
+            row.update(status=CellStatus(int(plan.status[c])).name.lower(), delta_c=number(plan.tolerance[c]),
+                       tau_c=number(plan.usable_tolerance[c]))  # fmt: skip
+            for key, _, _ in columns:
+                if key in dict((k, h) for k, h, _ in _PLAN_STATS_COLUMNS):
+                    row[key] = stats[_STATS_KEY.get(key, key)][c]
+        rows.append({key: row[key] for key, _, _ in columns})
+    return columns, rows
+
+
+def _print_cell_table(columns: "list[tuple[str, str, str]]", rows: list[dict]) -> None:
+    """The rows of :func:`_cell_table` as plain aligned text (as wide as it needs: never wrapped or cut),
+    the units under the headings, numbers to 4 digits, "-" where there is none."""
+
+    def text(value: Any) -> str:
+        return "-" if value is None else f"{value:.4g}" if isinstance(value, float) else str(value)
+
+    cells = [[text(row[key]) for key, _, _ in columns] for row in rows]
+    widths = [max([len(heading), len(unit) + 2, *(len(line[k]) for line in cells)])
+              for k, (_, heading, unit) in enumerate(columns)]  # fmt: skip
+    left = {"status", "flags"}
+
+    def line(items: list[str]) -> str:
+        return "  ".join(item.ljust(w) if key in left else item.rjust(w)
+                         for item, w, (key, _, _) in zip(items, widths, columns, strict=True)).rstrip()  # fmt: skip
+
+    for items in ([h for _, h, _ in columns], [f"[{u}]" if u else "" for _, _, u in columns], *cells):
+        out.print(line(items), highlight=False, markup=False, soft_wrap=True)
+    out.print("u: map units; s: seconds", highlight=False, markup=False, soft_wrap=True)
 
 
 def _short_stats(stats: dict) -> dict:
@@ -1649,7 +1745,7 @@ def _inspect_cell(path: Path, artifact: Any, c: int, as_json: bool) -> None:
                     exit_inset=None if np.isnan(inset) else inset,
                     margin_h=float(plan.margin_h[c]), margin_v=float(plan.margin_v[c]))  # fmt: skip
     if as_json:
-        out.print_json(json.dumps(info))
+        _print_json(info)
         return
 
     def point(p: Any) -> str:
@@ -1782,14 +1878,14 @@ def tags_command(
     with artifacts.atomic_output(figure) as tmp:
         plot.save_figure(fig, str(tmp))
     if as_json:
-        out.print_json(json.dumps({
+        _print_json({
             "map": str(out_path), "figure": str(figure), "new_tags": proposal.count,
             "lower_bound": proposal.lower_bound, "ids": list(proposal.ids),
             "positions": [[float(v) for v in p] for p in proposal.positions],
             "target_reached": proposal.target_reached,
             "domain_before": proposal.before.fraction_domain, "domain_after": proposal.after.fraction_domain,
             "free_before": proposal.before.fraction_free, "free_after": proposal.after.fraction_free,
-        }))  # fmt: skip
+        })  # fmt: skip
     else:
         out.print(f"tags      {out_path}  {proposal.summary()}", highlight=False, soft_wrap=True)
         if not _Quiet.enabled:

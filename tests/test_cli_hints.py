@@ -8,6 +8,7 @@ command does not take fails here.
 from __future__ import annotations
 
 import dataclasses
+import json
 import re
 import shlex
 from pathlib import Path
@@ -190,3 +191,40 @@ def test_simulate_words_give_the_loop_back_as_options():
     words = _simulate_words(params, estimator="set")
     assert words == ["--dynamics", "unicycle", "--fov", "60", "--no-occlusion", "--estimator", "set"], words
     assert _simulate_words(dataclasses.asdict(simulate.Params())) == []
+
+
+# --------------------------------------------------------------------------- item 7: inspect --cells, JSON
+
+
+def test_inspect_cells_is_a_table_with_units_and_json_rows_for_machines(cli, built):
+    from bearnav_cli import artifacts
+
+    plan = artifacts.load(built["plan"]).artifact
+    text = cli("inspect", built["plan"], "--cells")
+    assert text.exit_code == 0, text.output
+    lines = text.output.splitlines()
+    head = next(k for k, line in enumerate(lines) if line.startswith("cell "))
+    assert "τ_c" in lines[head] and "[u]" in lines[head + 1] and "map units" in text.output
+    rows = lines[head + 2 : head + 2 + plan.cells.n_cells]
+    assert [int(row.split()[0]) for row in rows] == list(range(plan.cells.n_cells))  # one row per cell, in order
+    data = json.loads(cli("inspect", built["plan"], "--cells", "--json").output)
+    assert len(data["cells"]) == plan.cells.n_cells and data["units"]["tau_c"] == "map unit"
+    for c, row in enumerate(data["cells"]):
+        assert row["cell"] == c and row["status"] in ("goal", "certified", "relaxed")
+        assert row["tau_c"] is None or row["tau_c"] == pytest.approx(float(plan.usable_tolerance[c]))
+    cells = json.loads(cli("inspect", built["cells"], "--cells", "--json").output)
+    assert len(cells["cells"]) == plan.cells.n_cells and "status" not in cells["cells"][0]
+
+
+def test_json_is_never_wrapped_whatever_the_terminal(cli, built):
+    from typer.testing import CliRunner
+
+    from bearnav_cli.cli import app
+
+    narrow = CliRunner().invoke(app, ["inspect", str(built["plan"]), "--json"], env={"COLUMNS": "40"})
+    manifest = json.loads(narrow.output)  # parses: no string broken across lines
+    assert any(len(line) > 40 for line in narrow.output.splitlines())
+    assert manifest["schema"].startswith("bearnav.plan/")
+    text = CliRunner().invoke(app, ["inspect", str(built["plan"])], env={"COLUMNS": "40"}).output
+    params = next(line for line in text.splitlines() if line.startswith("params"))
+    json.loads(params.removeprefix("params").strip())  # the text view's JSON line is whole too
