@@ -156,8 +156,14 @@ app = _Typer(
     # the plain help is as wide as the terminal, up to 120 columns (click's own limit is 80)
     context_settings={"max_content_width": 120},
     help="Certified bearing-only navigation controllers from a 2-D map.\n\n"
-    "Lengths are in map units; a default written '0.01 D' is 1% of D, the diagonal of the map's bounds. "
-    "Maps: docs/maps.md; commands and the words of their output: docs/cli.md.\n\n"
+    "Lengths are in map units; a default written '0.01 D' is 1% of D, the diagonal of the map's bounds.\n\n"
+    # a pip install has no docs/ folder: the help says what a map is, and where the full description lives
+    "A map is a YAML file with bounds [xmin, ymin, xmax, ymax], robot_radius, goal [x, y], starts (a list of "
+    "[x, y]), obstacles (each a polygon: [[x, y], ...], a rectangle: [xmin, ymin, xmax, ymax] or a circle: "
+    "{center, radius}), landmarks ([x, y] or {id, position, facing}) and optional robot: and params: sections; "
+    "or a ROS map_server YAML (plan it with --goal and --landmark). `bearnav map MAP` checks one and names any "
+    "field that is wrong. docs/maps.md and docs/cli.md of the bearnav source describe every key, command and "
+    "word of the output.\n\n"
     "Example: bearnav plan maps/kitchen.yaml",
 )
 
@@ -189,6 +195,10 @@ EXIT_OUTCOME, EXIT_INVALID, EXIT_INTERRUPTED, EXIT_TERMINATED = 1, 3, 130, 143
 EXIT_INTERNAL = 70
 #: Suffixes ``bearnav plot -o`` writes (matplotlib's formats that need nothing more than pillow).
 FIGURE_SUFFIXES = (".png", ".pdf", ".svg", ".svgz", ".eps", ".ps", ".jpg", ".jpeg", ".tif", ".tiff", ".webp")
+
+
+#: What -q does, for ``bearnav -q`` and every command's own ``-q``.
+QUIET_HELP = "Quiet: errors and the final result only (no stage lines, progress bars or warnings)."
 
 
 class _Quiet:
@@ -349,7 +359,7 @@ def _print_version(value: bool) -> None:
 
 @app.callback()
 def main(
-    quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bars or warnings."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help=QUIET_HELP),
     version: bool = typer.Option(
         False, "--version", help="Print the version and exit.", is_eager=True, callback=_print_version
     ),
@@ -1027,7 +1037,7 @@ WORDS_NOTE = 'lost, stall, left-cell events, approach, hold, certified, D, F_m: 
 
 MAP_ARG = typer.Argument(..., metavar="MAP", help="Map YAML (bearnav format, or a ROS map_server YAML).")
 FORCE = typer.Option(False, "--force", help="Rerun even if the output is fresh.")
-QUIET = typer.Option(False, "--quiet", "-q", help="No progress bars or warnings.")
+QUIET = typer.Option(False, "--quiet", "-q", help=QUIET_HELP)
 JSON = typer.Option(False, "--json", help="Print machine-readable JSON.")
 LOOKAHEAD = typer.Option(
     None, metavar="λ", help="Look-ahead λ, map units (any map; overrides the map's robot.lookahead): plan for the "

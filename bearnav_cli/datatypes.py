@@ -631,7 +631,18 @@ class CellFlag(enum.IntFlag):
 def plural(count: int, word: str, many: str | None = None) -> str:
     """``"1 obstacle"``, ``"3 obstacles"``: a count and its noun, for every message that counts things.
 
-    ``many`` is the plural when it is not ``word + "s"`` (``"1 cell box"``...).
+    Parameters
+    ----------
+    count : int
+        How many.
+    word : str
+        The noun in the singular.
+    many : str, optional
+        Its plural, when it is not ``word + "s"``.
+
+    Returns
+    -------
+    str
     """
     return f"{count} {word if count == 1 else many or word + 's'}"
 

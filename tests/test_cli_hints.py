@@ -228,3 +228,29 @@ def test_json_is_never_wrapped_whatever_the_terminal(cli, built):
     text = CliRunner().invoke(app, ["inspect", str(built["plan"])], env={"COLUMNS": "40"}).output
     params = next(line for line in text.splitlines() if line.startswith("params"))
     json.loads(params.removeprefix("params").strip())  # the text view's JSON line is whole too
+
+
+def test_help_describes_a_map_without_the_source_tree(cli):
+    text = cli("--help").output
+    for word in ("A map is a YAML file", "bounds", "robot_radius", "obstacles", "landmarks", "map_server"):
+        assert word in text, word
+    assert "quiet" in text.lower() and "final result" in text
+
+
+def test_make_demo_installs_bearnav_alone_and_make_test_the_test_extra(tmp_path):
+    import shutil
+    import subprocess
+
+    from .conftest import REPO
+
+    if shutil.which("make") is None:
+        pytest.skip("no make")
+    venv = tmp_path / "venv"  # never made: -n prints the recipes
+
+    def recipes(target: str) -> str:
+        return subprocess.run(["make", "-n", "-C", str(REPO), target, f"VENV={venv}"], capture_output=True,
+                              text=True, check=True).stdout  # fmt: skip
+
+    demo, test = recipes("demo"), recipes("test")
+    assert "pip install --quiet -e ." in demo and "[test]" not in demo, demo
+    assert "pip install --quiet -e '.[test]'" in test and "pytest" in test, test
