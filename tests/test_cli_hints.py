@@ -41,6 +41,14 @@ def commands(text: str) -> list[list[str]]:
     return [shlex.split(code)[1:] for code in re.findall(r"`([^`]+)`", text) if code.startswith("bearnav ")]
 
 
+@pytest.fixture(scope="module")
+def built(tmp_path_factory):
+    """The small plan (and a 5-run simulation) the CLI tests share."""
+    from .test_hostile_common import small_plan
+
+    return small_plan(tmp_path_factory.mktemp("hints"))
+
+
 @pytest.fixture
 def blind_plan(cli, write_map):
     """``bearnav plan blind.yaml`` run from the scratch folder, as a user types it: exit 1, files written."""
@@ -95,10 +103,9 @@ def test_plan_refuses_a_bad_camera_or_robot_bound_naming_the_option(cli, write_m
     assert not (tmp_path / "plans" / "blind" / "plan.npz").exists()
 
 
-def test_a_retired_artifact_names_the_command_that_remakes_it_from_its_own_files(cli, tmp_path, tmp_path_factory):
-    from .test_hostile_common import copy_plan, rewrite_npz, small_plan
+def test_a_retired_artifact_names_the_command_that_remakes_it_from_its_own_files(cli, built, tmp_path):
+    from .test_hostile_common import copy_plan, rewrite_npz
 
-    built = small_plan(tmp_path_factory.mktemp("retired"))
     folder = copy_plan(built, tmp_path / "old")  # the map YAML stays behind: the map.json beside the plan is named
 
     def retire(schema):
@@ -113,13 +120,6 @@ def test_a_retired_artifact_names_the_command_that_remakes_it_from_its_own_files
 
 
 # --------------------------------------------------------------------------- item 6: messages that are right
-
-
-@pytest.fixture(scope="module")
-def built(tmp_path_factory):
-    from .test_hostile_common import small_plan
-
-    return small_plan(tmp_path_factory.mktemp("hints"))
 
 
 @pytest.mark.parametrize(
