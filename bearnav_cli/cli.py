@@ -661,6 +661,51 @@ def simulation_steps(report: "pipeline.StageReport", plan_npz: Path, min_success
             + f"; `{shown}` draws the runs by outcome, into {_figure_default(report.path)}")  # fmt: skip
 
 
+def verify_steps(report: Any, plan_npz: Path, world: Optional[Path]) -> str:
+    """What to do about a plan that fails ``bearnav verify``: one line naming the real files.
+
+    Parameters
+    ----------
+    report : VerifyReport
+        ``verify.run``'s report (its reasons are printed above this line).
+    plan_npz : Path
+        The plan verified.
+    world : Path, optional
+        The ``--world`` map, if one was given.
+
+    Returns
+    -------
+    str
+    """
+    import numpy as np
+
+    from bearnav_cli import artifacts
+    from bearnav_cli.datatypes import Outcome, plural
+
+    steps = []
+    if report.world_cells:
+        steps.append(f"the world moved: re-plan in it with `{_command_text('bearnav', 'plan', world)}`")
+    if report.uncertified:
+        shown = _command_text("bearnav", "inspect", plan_npz, "--cell", report.uncertified[0])
+        steps.append(f"`{shown}` shows the first cell not certified")
+    composition_fails = report.composition is not None and not report.composition.ok
+    breached = report.breaches is not None and bool(report.breaches.any())
+    broken = bool(report.false_certificates) or composition_fails or bool(report.lookahead_problems) or breached
+    if broken:  # the checks a plan bearnav wrote passes: an edited file, another version's, or a bug
+        origin = artifacts.map_source_of(plan_npz)
+        again = (f"`{_command_text('bearnav', 'plan', origin, '--force')}`" if origin
+                 else "`bearnav plan` of the map it was made from, with --force,")  # fmt: skip
+        steps.append(f"if the plan was edited or made by another version, {again} makes it again; else please "
+                     "report it with the plan")  # fmt: skip
+    runs = report.rollouts
+    if runs is not None and len(runs) and bool(np.any(np.asarray(runs.outcome) != Outcome.SUCCESS)):
+        again = _command_text("bearnav", "simulate", plan_npz, "--measurement", "displacement", "--odometry-noise", "0")
+        steps.append(f"`{again}` drives runs of the same loop and writes them; `bearnav plot` of its sim.npz draws "
+                     "them by outcome")  # fmt: skip
+    text = f"{plan_npz} fails verification ({plural(len(report.reasons), 'problem')} above)"
+    return text + (": " + "; ".join(steps) if steps else "")
+
+
 def _outcome_failure(artifact: Any, path: Optional[Path] = None, camera: tuple[float, Optional[float]] = (360.0, None),
                      plan_words: tuple[str, ...] = ()) -> str | None:  # fmt: skip
     """Why a finished run's result is not usable (exit 1) and what to do next, or None.
@@ -1281,7 +1326,7 @@ def verify_command(
                       f"{speed:g} map units/s: `bearnav simulate` adds bearings, a camera and noise; {WORDS_NOTE}",
                       highlight=False, markup=False, soft_wrap=True)  # fmt: skip
     if report.failed:
-        raise typer.Exit(EXIT_OUTCOME)
+        raise _fail(verify_steps(report, plan_npz, world), EXIT_OUTCOME)
 
 
 def _load_world(path: Path):

@@ -254,3 +254,15 @@ def test_make_demo_installs_bearnav_alone_and_make_test_the_test_extra(tmp_path)
     demo, test = recipes("demo"), recipes("test")
     assert "pip install --quiet -e ." in demo and "[test]" not in demo, demo
     assert "pip install --quiet -e '.[test]'" in test and "pytest" in test, test
+
+
+def test_verify_failing_in_a_moved_world_names_the_replan_in_it(cli, write_map):
+    write_map(dict(BLIND_MAP, name="corners", landmarks=[[0, 3], [0, 0], [4, 0], [4, 3]]), "corners.yaml")
+    assert cli("-q", "plan", "corners.yaml").exit_code == 0
+    moved = dict(BLIND_MAP, name="moved", obstacles=[{"rectangle": [1.5, 0.8, 2.6, 2.2]}],
+                 landmarks=[[0, 3], [0, 0], [4, 0], [4, 3]])  # fmt: skip
+    write_map(moved, "moved.yaml")
+    result = cli("verify", "plans/corners/plan.npz", "--starts", "0", "--world", "moved.yaml")
+    assert result.exit_code == 1, result.output
+    line = error_line(result)
+    assert "plans/corners/plan.npz fails verification" in line and commands(line) == [["plan", "moved.yaml"]], line
