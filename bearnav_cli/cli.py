@@ -1321,6 +1321,8 @@ def verify_command(
         if seeing is not None:
             out.print(f"  perception: {seeing.summary()} (the rule: `bearnav tags` places tags where it fails)",
                       highlight=False, soft_wrap=True)  # fmt: skip
+        if not _Quiet.enabled:  # what the certificate says, in words, whatever else was printed
+            out.print(f"  {verify.guarantee(plan, report)}", highlight=False, markup=False, soft_wrap=True)
         if starts and not _Quiet.enabled:
             out.print(f"  the {starts} runs drive with displacements (exact positions) and a full view, at speed "
                       f"{speed:g} map units/s: `bearnav simulate` adds bearings, a camera and noise; {WORDS_NOTE}",

@@ -266,3 +266,28 @@ def test_verify_failing_in_a_moved_world_names_the_replan_in_it(cli, write_map):
     assert result.exit_code == 1, result.output
     line = error_line(result)
     assert "plans/corners/plan.npz fails verification" in line and commands(line) == [["plan", "moved.yaml"]], line
+
+
+# --------------------------------------------------------------------------- item 3: what is guaranteed
+
+
+def test_verify_ends_with_what_is_proven_measured_and_not_covered(cli, built):
+    from bearnav_cli import artifacts
+
+    plan = artifacts.load(built["plan"]).artifact
+    result = cli("verify", built["plan"], "--starts", "2")
+    assert result.exit_code == 0, result.output
+    line = next(line for line in result.output.splitlines() if line.strip().startswith("guarantee:"))
+    for words in ("proven from the plan file", f"radius {plan.map.robot_radius:g}", "starts in D", "τ_c",
+                  "a worst case", "η = 0.2°", "measured only: 2 closed-loop runs", "not covered"):  # fmt: skip
+        assert words in line, (words, line)
+    assert "worst-case time to goal ≤" in result.output  # the summary labels the loose bound too
+    quiet = cli("-q", "verify", built["plan"], "--starts", "0")
+    assert "guarantee" not in quiet.output and len(quiet.stdout.splitlines()) == 1, quiet.output
+
+
+def test_a_long_time_bound_is_also_given_in_hours():
+    from bearnav_cli.verify import duration_text
+
+    assert duration_text(13870.0) == "≤ 1.387e+04 s (3.9 h)" and duration_text(30.0) == "≤ 30 s"
+    assert duration_text(float("inf")) == "unbounded"
