@@ -1,28 +1,40 @@
-# bearnav: `make demo` sets up .venv and plans the kitchen map; `make test` runs ruff (lint, format) and pytest (a worker per CPU);
+# bearnav: `make demo` sets up .venv with bearnav alone (its runtime dependencies) and plans the kitchen map;
+# `make test` installs the test extra too (OpenCV, rosbags, ruff, pytest) and runs ruff (lint, format) and pytest (a worker per CPU);
 # `make reproduce` redraws the papers' figures in docs/figures/ (only those whose inputs changed);
 # `make runtime-wheel` writes the robot's numpy-only wheel into dist/.
 PYTHON ?= python3
 VENV ?= .venv
 BIN := $(VENV)/bin
+# bearnav with the test extra (make test, bench, reproduce); it holds the runtime dependencies too
 STAMP := $(VENV)/.bearnav-installed
+# bearnav alone, its runtime dependencies only (make demo): no OpenCV, rosbags or ruff
+RUNTIME_STAMP := $(VENV)/.bearnav-runtime
 
-.PHONY: demo test lint bench clean reproduce runtime-wheel
+.PHONY: demo install test lint bench clean reproduce runtime-wheel
 
-$(STAMP): pyproject.toml
+$(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[test]'
-	touch $(STAMP)
 
-demo: $(STAMP)
+$(RUNTIME_STAMP): pyproject.toml | $(BIN)/python
+	$(BIN)/python -m pip install --quiet -e .
+	touch $(RUNTIME_STAMP)
+
+$(STAMP): pyproject.toml | $(BIN)/python
+	$(BIN)/python -m pip install --quiet -e '.[test]'
+	touch $(STAMP) $(RUNTIME_STAMP)
+
+install: $(RUNTIME_STAMP)
+
+demo: $(RUNTIME_STAMP)
 	$(BIN)/bearnav plan maps/kitchen.yaml
 	$(BIN)/bearnav verify plans/kitchen/plan.npz
 	$(BIN)/bearnav simulate plans/kitchen/plan.npz --fov 60
 	$(BIN)/bearnav simulate plans/kitchen/plan.npz --fov 90 --dynamics unicycle -o plans/kitchen/sim_demo_unicycle.npz
 	$(BIN)/bearnav simulate plans/kitchen/plan.npz --fov 60 --starts random:100 -o plans/kitchen/sim_random.npz
-	$(BIN)/bearnav plot plans/kitchen/simplified.npz --also plans/kitchen/tree.npz -o plans/kitchen/simplified.png
-	$(BIN)/bearnav plot plans/kitchen/plan.npz -o plans/kitchen/plan.png
-	$(BIN)/bearnav plot plans/kitchen/sim_random.npz -o plans/kitchen/sim_random.png
+	$(BIN)/bearnav plot plans/kitchen/simplified.npz --also plans/kitchen/tree.npz
+	$(BIN)/bearnav plot plans/kitchen/plan.npz
+	$(BIN)/bearnav plot plans/kitchen/sim_random.npz
 	@echo "figures: plans/kitchen/simplified.png plans/kitchen/plan.png plans/kitchen/sim_random.png; run bearnav yourself: . .venv/bin/activate"
 
 test: $(STAMP)

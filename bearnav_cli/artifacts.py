@@ -63,6 +63,7 @@ __all__ = [
     "KINDS",
     "load",
     "Loaded",
+    "map_source_of",
     "make_manifest",
     "metrics_path",
     "output_files",
@@ -150,14 +151,14 @@ KINDS: dict[str, Kind] = {
 }
 
 
-#: Schemas of earlier versions, with what to do about a file that has one.
+#: Schemas of earlier versions, with what a file that has one lacks (:func:`_rerun_hint` adds the command
+#: that makes it again, with the file's own map or plan).
 RETIRED_SCHEMAS = {
-    "bearnav.cells/1": "cells without composable certificates; re-run `bearnav plan MAP.yaml --force`",
-    "bearnav.plan/1": "per-cell certificates only; re-run `bearnav plan MAP.yaml --force` to get bearnav.plan/3",
-    "bearnav.cells/2": "one plan-wide exit inset; re-run `bearnav plan MAP.yaml --force` to get bearnav.cells/3",
-    "bearnav.plan/2": "one plan-wide exit inset and δ* of millimetres; re-run `bearnav plan MAP.yaml --force` to get "
-    "bearnav.plan/3 (per-cell insets and usable tolerances τ_c)",
-    "bearnav.sim/1": "runs without their loop constants; re-run `bearnav simulate PLAN.npz --force`",
+    "bearnav.cells/1": "cells without composable certificates",
+    "bearnav.plan/1": "per-cell certificates only",
+    "bearnav.cells/2": "one plan-wide exit inset",
+    "bearnav.plan/2": "one plan-wide exit inset and δ* of millimetres",
+    "bearnav.sim/1": "runs without their loop constants",
 }
 
 #: Part of every cache key: bumped when what an artifact holds changes for the same inputs (2: the
@@ -1127,6 +1128,28 @@ def kind_of_schema(schema: Any) -> str | None:
     return None
 
 
+def _rerun_hint(schema: str, path: Path, manifest: dict) -> str:
+    """The command that writes a retired artifact again in the current schema, naming its real input.
+
+    A simulation is re-run from the plan its manifest records; cells and plans are re-planned
+    from the map YAML they came from (:func:`map_source_of`), else from the ``map.json`` beside them.
+    """
+    import shlex
+
+    kind = next((k for k in KINDS.values() if schema.startswith(k.schema.rpartition("/")[0] + "/")), None)
+    current = f" to get {kind.schema}" if kind is not None else ""
+    if kind is not None and kind.name == "simulation":
+        source = (manifest.get("input") or {}).get("path") if isinstance(manifest.get("input"), dict) else None
+        if isinstance(source, str):
+            plan = os.path.normpath(path.parent / source)
+            return f"re-run `bearnav simulate {shlex.quote(plan)} --force`{current}"
+        return f"re-run `bearnav simulate` on the plan it was made from, with --force{current}"
+    origin = map_source_of(path) or (path.parent / "map.json" if (path.parent / "map.json").is_file() else None)
+    if origin is not None:
+        return f"re-run `bearnav plan {shlex.quote(str(origin))} --force`{current}"
+    return f"re-run `bearnav plan` on the map it was made from, with --force{current}"
+
+
 def _check_manifest(manifest: dict, path: Path, expect: tuple[str, ...] | None) -> str:
     """The kind of the artifact, after checking the manifest's fields; raises ArtifactError."""
     schema = manifest.get("schema")
@@ -1134,7 +1157,8 @@ def _check_manifest(manifest: dict, path: Path, expect: tuple[str, ...] | None) 
     if kind is None:
         if schema in RETIRED_SCHEMAS:
             raise ArtifactError(f"is a {schema} artifact, which this version no longer reads "
-                                f"({RETIRED_SCHEMAS[schema]})", file=str(path), field="manifest.schema")  # fmt: skip
+                                f"({RETIRED_SCHEMAS[schema]}; {_rerun_hint(schema, path, manifest)})", file=str(path),
+                                field="manifest.schema")  # fmt: skip
         raise ArtifactError(f"unknown schema {schema!r}", file=str(path), field="manifest.schema")
     if expect and kind not in expect:
         names = " or ".join(KINDS[w].schema for w in expect)
@@ -1149,6 +1173,48 @@ def read_manifest(path: str | os.PathLike) -> dict:
     manifest, _ = _read_raw(path)
     _check_manifest(manifest, path, None)
     return manifest
+
+
+def _manifest_of(path: Path) -> dict | None:
+    """The manifest of an artifact file, unchecked, reading no other member of an npz; None if it has none."""
+    try:
+        if path.suffix.lower() == ".npz":
+            with np.load(path, allow_pickle=False) as npz:
+                manifest = json.loads(str(npz["manifest"])) if "manifest" in npz.files else None
+        else:
+            manifest = json.loads(path.read_bytes().decode("utf-8")).get("manifest")
+    except Exception:  # noqa: BLE001 - a file that does not show its manifest names no source
+        return None
+    return manifest if isinstance(manifest, dict) else None
+
+
+def map_source_of(path: str | os.PathLike) -> Path | None:
+    """The map YAML an artifact was planned from, following the manifests' inputs; None if there is none.
+
+    Each manifest records its input relative to its own folder (plan.npz ← cells.npz ← ... ←
+    map.json ← the YAML); the chain ends at the map stage's input. The answer is a path as the
+    caller can use it (relative when the artifact's path is), and only a YAML file that exists:
+    a plan made from a map.json whose YAML moved, or from options, names none.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        Any artifact of a plan (``plan.npz``, ``cells.npz``, ``map.json``, ...).
+
+    Returns
+    -------
+    Path or None
+    """
+    path = Path(path)
+    for _ in range(len(KINDS) + 1):  # one step per stage: a chain that loops ends here
+        manifest = _manifest_of(path)
+        source = (manifest or {}).get("input") or {}
+        if not isinstance(source, dict) or not isinstance(source.get("path"), str):
+            return None
+        path = Path(os.path.normpath(path.parent / source["path"]))
+        if manifest.get("stage") == "map":
+            return path if path.suffix.lower() in (".yaml", ".yml") and path.is_file() else None
+    return None
 
 
 #: SHA-256 of the map texts whose invariants this process has checked (a plan reads one map five times).

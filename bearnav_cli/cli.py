@@ -156,8 +156,14 @@ app = _Typer(
     # the plain help is as wide as the terminal, up to 120 columns (click's own limit is 80)
     context_settings={"max_content_width": 120},
     help="Certified bearing-only navigation controllers from a 2-D map.\n\n"
-    "Lengths are in map units; a default written '0.01 D' is 1% of D, the diagonal of the map's bounds. "
-    "Maps: docs/maps.md; commands and the words of their output: docs/cli.md.\n\n"
+    "Lengths are in map units; a default written '0.01 D' is 1% of D, the diagonal of the map's bounds.\n\n"
+    # a pip install has no docs/ folder: the help says what a map is, and where the full description lives
+    "A map is a YAML file with bounds [xmin, ymin, xmax, ymax], robot_radius, goal [x, y], starts (a list of "
+    "[x, y]), obstacles (each a polygon: [[x, y], ...], a rectangle: [xmin, ymin, xmax, ymax] or a circle: "
+    "{center, radius}), landmarks ([x, y] or {id, position, facing}) and optional robot: and params: sections; "
+    "or a ROS map_server YAML (plan it with --goal and --landmark). `bearnav map MAP` checks one and names any "
+    "field that is wrong. docs/maps.md and docs/cli.md of the bearnav source describe every key, command and "
+    "word of the output.\n\n"
     "Example: bearnav plan maps/kitchen.yaml",
 )
 
@@ -189,6 +195,10 @@ EXIT_OUTCOME, EXIT_INVALID, EXIT_INTERRUPTED, EXIT_TERMINATED = 1, 3, 130, 143
 EXIT_INTERNAL = 70
 #: Suffixes ``bearnav plot -o`` writes (matplotlib's formats that need nothing more than pillow).
 FIGURE_SUFFIXES = (".png", ".pdf", ".svg", ".svgz", ".eps", ".ps", ".jpg", ".jpeg", ".tif", ".tiff", ".webp")
+
+
+#: What -q does, for ``bearnav -q`` and every command's own ``-q``.
+QUIET_HELP = "Quiet: errors and the final result only (no stage lines, progress bars or warnings)."
 
 
 class _Quiet:
@@ -236,6 +246,12 @@ def _plotting():
 def _fail(message: str, code: int) -> typer.Exit:
     err.print(f"[red]error:[/red] {message}".replace("\n", " "), highlight=False, soft_wrap=True, markup=True)
     return typer.Exit(code)
+
+
+def _print_json(data: Any) -> None:
+    """Print ``data`` as indented JSON on stdout, never wrapped: rich's print_json breaks long strings at the
+    terminal's width, mid-token, and what a machine reads must parse whatever the terminal."""
+    out.print(json.dumps(data, indent=2, ensure_ascii=False), markup=False, highlight=False, soft_wrap=True)
 
 
 class Terminated(KeyboardInterrupt):
@@ -343,7 +359,7 @@ def _print_version(value: bool) -> None:
 
 @app.callback()
 def main(
-    quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bars or warnings."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help=QUIET_HELP),
     version: bool = typer.Option(
         False, "--version", help="Print the version and exit.", is_eager=True, callback=_print_version
     ),
@@ -395,11 +411,13 @@ def read_map_source(
     starts: Optional[List[str]] = None,
     robot_radius: Optional[float] = None,
     lookahead: Optional[float] = None,
+    robot: Optional[dict] = None,
 ) -> "MapSource":
     """Read a bearnav map YAML (or a bare ROS map_server YAML plus options) into a MapSource.
 
-    ``lookahead`` (``--lookahead``, any map) overrides the map's ``robot.lookahead``; like the bare
-    grid's options it is part of the input hash, so another value reruns the map stage.
+    ``lookahead`` (``--lookahead``, any map) overrides the map's ``robot.lookahead``, and ``robot``
+    (``plan --slip`` ...: ``{key: value}`` of the ``robot:`` section) the other keys it names; like the
+    bare grid's options they are part of the input hash, so another value reruns the map stage.
     """
     import hashlib
 
@@ -413,6 +431,7 @@ def read_map_source(
                               f"`bearnav plan {path}`", file=str(path))  # fmt: skip
     blobs = [data]
     grid = None
+    robot_given = {**(robot or {}), **({"lookahead": lookahead} if lookahead is not None else {})}
     if "image" not in spec:
         given = [name for name, value in (("--goal", goal), ("--landmark", landmarks), ("--start", starts),
                                           ("--robot-radius", robot_radius)) if value not in (None, [])]  # fmt: skip
@@ -430,15 +449,16 @@ def read_map_source(
         spec["starts"] = [_pair(text, "--start") for text in starts or []]
         if robot_radius is not None:
             spec["robot_radius"] = robot_radius
-        if lookahead is not None:
-            spec["robot"] = {"lookahead": lookahead}
+        if robot_given:
+            spec["robot"] = dict(robot_given)
         # the options are part of the input: other options must make the map stage rerun
         blobs.append(json.dumps(spec, sort_keys=True).encode())
     else:
         spec.setdefault("name", path.stem)
-        if lookahead is not None and isinstance(spec.get("robot") or {}, dict):  # else the map stage names it
-            spec["robot"] = {**(spec.get("robot") or {}), "lookahead": lookahead}
-            blobs.append(json.dumps({"--lookahead": lookahead}).encode())
+        if robot_given and isinstance(spec.get("robot") or {}, dict):  # else the map stage names it
+            spec["robot"] = {**(spec.get("robot") or {}), **robot_given}
+            blobs.append(json.dumps({"--" + key.replace("_", "-"): value for key, value in robot_given.items()},
+                                    sort_keys=True).encode())  # fmt: skip
         if "occupancy" in spec:
             if not isinstance(spec["occupancy"], str):
                 raise InvalidMapError("expected a file name", file=str(path), field="occupancy")
@@ -518,28 +538,219 @@ def _progress_bar() -> "Progress":
     )
 
 
-def _outcome_failure(artifact: Any) -> str | None:
-    """Why a finished run's result is not usable (exit 1), or None."""
-    from bearnav_cli.datatypes import CellFlag, Cells, CellStatus, cell_list
+# --------------------------------------------------------------------------- next steps
+# Every failed outcome and every perception shortfall ends with the command that addresses it, with the
+# real file names, built here and only here, so that each hint runs as printed (tests/test_cli_hints.py).
+
+
+def _command_text(*words: Any) -> str:
+    """A command line as a user pastes it into a shell (paths with spaces quoted)."""
+    import shlex
+
+    return shlex.join(str(word) for word in words)
+
+
+def _camera_words(fov: float, max_range: Optional[float] = None) -> list[str]:
+    """The options naming a camera, as ``tags``, ``simulate`` and ``plan`` spell them."""
+    return ["--fov", f"{fov:g}", *(["--range", f"{max_range:g}"] if max_range is not None else [])]
+
+
+def _tags_output(plan_npz: Path, map_yaml: Optional[Path]) -> Path:
+    """Where ``bearnav tags`` writes its map without ``-o``: NAME_tags.yaml next to ``--map``, else next to the plan."""
+    return map_yaml.with_name(f"{map_yaml.stem}_tags.yaml") if map_yaml else plan_npz.parent / "map_tags.yaml"
+
+
+def _tags_map(plan_npz: Path) -> Optional[Path]:
+    """The map YAML ``bearnav tags --map`` can extend for this plan: the one it was planned from, if that is a
+    bearnav map (a bare map_server YAML needs the options it was planned with, so the plan's own map is used)."""
+    from bearnav_cli import artifacts
+
+    source = artifacts.map_source_of(plan_npz)
+    if source is None:
+        return None
+    try:
+        spec, _ = _read_yaml(source)
+    except BearnavError:
+        return None
+    return source if isinstance(spec, dict) and "image" not in spec else None
+
+
+def tags_step(plan_npz: Path, fov: float = 360.0, max_range: Optional[float] = None,
+              plan_words: tuple[str, ...] = (), map_yaml: Optional[Path] = None) -> str:  # fmt: skip
+    """The next step where a camera cannot fix itself: the ``bearnav tags`` command for this plan, the map it
+    writes and the ``bearnav plan`` command that re-plans with it (``plan_words``: options to plan it with).
+
+    Parameters
+    ----------
+    plan_npz : Path
+        The plan, as the user named it (or as bearnav wrote it).
+    fov, max_range : float
+        The camera (degrees; map units, None for unlimited).
+    plan_words : tuple of str
+        Options of the re-planning command (the camera of ``plan --fov``).
+    map_yaml : Path, optional
+        The map YAML to give ``--map`` (default: the one the plan was made from, if any).
+
+    Returns
+    -------
+    str
+        ```bearnav tags PLAN --fov F --map M` writes M_tags.yaml; then `bearnav plan M_tags.yaml```.
+    """
+    map_yaml = map_yaml or _tags_map(plan_npz)
+    tags = _command_text("bearnav", "tags", plan_npz, *_camera_words(fov, max_range),
+                         *(["--map", map_yaml] if map_yaml is not None else []))  # fmt: skip
+    written = _tags_output(plan_npz, map_yaml)
+    return f"`{tags}` writes {written}; then `{_command_text('bearnav', 'plan', written, *plan_words)}`"
+
+
+def _simulate_words(params: dict, **changes: Any) -> list[str]:
+    """The ``bearnav simulate`` options that give the loop ``params`` (with ``changes``): those off their defaults."""
+    words: list[str] = []
+    for field in params_fields("simulate"):
+        if field.name in PARAMS_ONLY["simulate"] or field.name not in params:
+            continue
+        value = changes.get(field.name, params[field.name])
+        if value == field.default or value is None:
+            continue
+        name = _option_name("simulate", field.name)
+        if field.kind is bool:
+            words.append(name if value else FLAG_OFF.get(("simulate", field.name), "--no-" + name[2:]))
+        else:
+            words += [name, _shown(value).strip("'")]
+    return words
+
+
+def simulation_steps(report: "pipeline.StageReport", plan_npz: Path, min_success: float) -> str:
+    """Why too few simulated runs reached the goal, outcome by outcome, and the command that addresses each.
+
+    Parameters
+    ----------
+    report : StageReport
+        The simulate stage's report (its artifact the :class:`~bearnav_cli.datatypes.Simulation`, its
+        manifest the loop's parameters).
+    plan_npz : Path
+        The plan simulated.
+    min_success : float
+        The ``--min-success`` the runs fell short of.
+
+    Returns
+    -------
+    str
+        One line: the outcome, then ``lost: ...; collision: ...`` and the figure that shows the runs.
+    """
+    params = dict((report.manifest or {}).get("params") or {})
+    counts = report.artifact.counts()
+    steps = []
+    if counts.get("lost"):
+        fov, max_range = float(params.get("fov", 360.0)), params.get("range")
+        hold = params.get("hold_time", 2.0)
+        steps.append(f"lost: the camera saw fewer than two usable tags for --hold-time {hold:g} s (a {fov:g}° "
+                     "camera); add tags: " + tags_step(plan_npz, fov, max_range))  # fmt: skip
+    if counts.get("collision") and params.get("estimator") != "set":
+        retry = _command_text("bearnav", "simulate", plan_npz, *_simulate_words(params, estimator="set"))
+        steps.append("collision: the position estimate erred beyond the cell's tolerance (noise, slip, a camera or "
+                     f"a unicycle outside the certificate); `{retry}` drives only where its error bound is "
+                     "certified")  # fmt: skip
+    elif counts.get("collision"):
+        steps.append("collision: the error bounds assumed are below the errors simulated (--bearing-error-deg, "
+                     "--slip); `bearnav verify " + str(plan_npz) + "` checks the certificate")  # fmt: skip
+    if counts.get("stall") or counts.get("timeout"):
+        steps.append("stall or timeout: the field vanished or the run made no progress (outside every cell?)")
+    shown = _command_text("bearnav", "plot", report.path)
+    return (f"{report.summary}, fewer than --min-success {min_success:g}: " + "; ".join(steps)
+            + f"; `{shown}` draws the runs by outcome, into {_figure_default(report.path)}")  # fmt: skip
+
+
+def verify_steps(report: Any, plan_npz: Path, world: Optional[Path]) -> str:
+    """What to do about a plan that fails ``bearnav verify``: one line naming the real files.
+
+    Parameters
+    ----------
+    report : VerifyReport
+        ``verify.run``'s report (its reasons are printed above this line).
+    plan_npz : Path
+        The plan verified.
+    world : Path, optional
+        The ``--world`` map, if one was given.
+
+    Returns
+    -------
+    str
+    """
+    import numpy as np
+
+    from bearnav_cli import artifacts
+    from bearnav_cli.datatypes import Outcome, plural
+
+    steps = []
+    if report.world_cells:
+        steps.append(f"the world moved: re-plan in it with `{_command_text('bearnav', 'plan', world)}`")
+    if report.uncertified:
+        shown = _command_text("bearnav", "inspect", plan_npz, "--cell", report.uncertified[0])
+        steps.append(f"`{shown}` shows the first cell not certified")
+    composition_fails = report.composition is not None and not report.composition.ok
+    breached = report.breaches is not None and bool(report.breaches.any())
+    broken = bool(report.false_certificates) or composition_fails or bool(report.lookahead_problems) or breached
+    if broken:  # the checks a plan bearnav wrote passes: an edited file, another version's, or a bug
+        origin = artifacts.map_source_of(plan_npz)
+        again = (f"`{_command_text('bearnav', 'plan', origin, '--force')}`" if origin
+                 else "`bearnav plan` of the map it was made from, with --force,")  # fmt: skip
+        steps.append(f"if the plan was edited or made by another version, {again} makes it again; else please "
+                     "report it with the plan")  # fmt: skip
+    runs = report.rollouts
+    if runs is not None and len(runs) and bool(np.any(np.asarray(runs.outcome) != Outcome.SUCCESS)):
+        again = _command_text("bearnav", "simulate", plan_npz, "--measurement", "displacement", "--odometry-noise", "0")
+        steps.append(f"`{again}` drives runs of the same loop and writes them; `bearnav plot` of its sim.npz draws "
+                     "them by outcome")  # fmt: skip
+    text = f"{plan_npz} fails verification ({plural(len(report.reasons), 'problem')} above)"
+    return text + (": " + "; ".join(steps) if steps else "")
+
+
+def _outcome_failure(artifact: Any, path: Optional[Path] = None, camera: tuple[float, Optional[float]] = (360.0, None),
+                     plan_words: tuple[str, ...] = ()) -> str | None:  # fmt: skip
+    """Why a finished run's result is not usable (exit 1) and what to do next, or None.
+
+    ``path`` is the artifact's file (the hints name it), ``camera`` the (fov, range) the tags are
+    proposed for, ``plan_words`` the options of the re-planning command.
+    """
+    from bearnav_cli.datatypes import CellFlag, Cells, CellStatus, Plan, cell_list
 
     cells = getattr(artifact, "cells", artifact)  # a Plan holds its Cells
     nodes = getattr(cells, "nodes", None)
     if nodes is not None and len(nodes) < 2:
-        return "no route: the tree has only its root (every sample fell in obstacles?)"
+        what = "no route: the tree has only its root (is the goal walled in, or did every sample fall in obstacles?)"
+        return what + (f"; `{_command_text('bearnav', 'plot', path)}` draws it" if path is not None else "")
     blind = cells.flagged(CellFlag.BLIND_SPOT) if isinstance(cells, Cells) else []
     if blind:
-        return (f"cells {cell_list(blind, 20)} have free points that see fewer than 2 landmarks (add landmarks there: "
-                "`bearnav tags PLAN.npz --fov 360` proposes where, or give your camera's --fov)")  # fmt: skip
+        one = len(blind) == 1
+        what = f"{'cell' if one else 'cells'} {cell_list(blind, 20)} {'has' if one else 'have'} free points that see "
+        what += "fewer than 2 landmarks"
+        if path is None:
+            return what
+        if isinstance(artifact, Plan):
+            step = tags_step(path, *camera, plan_words=plan_words)
+        else:  # cells.npz: tags places landmarks along a plan's fields
+            plan_npz = path.with_name("plan.npz")
+            step = f"`{_command_text('bearnav', 'synthesize', path, '-o', plan_npz)}`, then " + tags_step(
+                plan_npz, *camera, plan_words=plan_words)  # fmt: skip
+        return f"{what}: add landmarks there; {step}"
     status = getattr(artifact, "status", None)
     if status is not None:
         bad = (status == CellStatus.NOT_CERTIFIED) | (status == CellStatus.SOLVER_FAILURE)
         failed = [int(c) for c in bad.nonzero()[0]]
         if failed:
-            return f"cells {cell_list(failed, 20)} are not certified (status 2 or 3)"
+            where = f"`bearnav inspect {path} --cell {failed[0]}` shows the first" if path is not None else ""
+            return f"cells {cell_list(failed, 20)} are not certified (status 2 or 3)" + (f"; {where}" if where else "")
     return None
 
 
-def _finish(reports: "list[pipeline.StageReport]", as_json: bool, extra: Optional[dict] = None) -> None:
+def _finish(
+    reports: "list[pipeline.StageReport]",
+    as_json: bool,
+    extra: Optional[dict] = None,
+    camera: "tuple[float, float | None]" = (360.0, None),
+    plan_words: tuple[str, ...] = (),
+) -> None:
     """Print the reports' JSON rows (the last with ``extra`` fields) and exit 1 on a failed outcome."""
     if as_json:
         rows = [
@@ -548,8 +759,8 @@ def _finish(reports: "list[pipeline.StageReport]", as_json: bool, extra: Optiona
         ]
         if rows and extra:
             rows[-1].update(extra)
-        out.print_json(json.dumps(rows))
-    problem = _outcome_failure(reports[-1].artifact) if reports else None
+        _print_json(rows)
+    problem = _outcome_failure(reports[-1].artifact, reports[-1].path, camera, plan_words) if reports else None
     if problem:
         raise _fail(problem, EXIT_OUTCOME)
 
@@ -871,7 +1082,7 @@ WORDS_NOTE = 'lost, stall, left-cell events, approach, hold, certified, D, F_m: 
 
 MAP_ARG = typer.Argument(..., metavar="MAP", help="Map YAML (bearnav format, or a ROS map_server YAML).")
 FORCE = typer.Option(False, "--force", help="Rerun even if the output is fresh.")
-QUIET = typer.Option(False, "--quiet", "-q", help="No progress bars or warnings.")
+QUIET = typer.Option(False, "--quiet", "-q", help=QUIET_HELP)
 JSON = typer.Option(False, "--json", help="Print machine-readable JSON.")
 LOOKAHEAD = typer.Option(
     None, metavar="λ", help="Look-ahead λ, map units (any map; overrides the map's robot.lookahead): plan for the "
@@ -945,8 +1156,12 @@ def map_command(
     if not as_json:
         out.print(_report_line(report), highlight=False, soft_wrap=True)
         if seeing is not None:
-            camera = f"--fov {fov:g}" + (f" --range {max_range:g}" if max_range is not None else "")
-            hint = f"; after planning, `bearnav tags PLAN.npz {camera}` places tags where it fails"
+            # the plan `bearnav plan` makes of this map.json lands next to it; of the YAML, in plans/NAME/
+            default = target == Path("plans") / str(src.spec.get("name", source.stem)) / "map.json"
+            planning = _command_text("bearnav", "plan", source if default else target)
+            bearnav_map = source if src.grid is None or "occupancy" in src.spec else None  # a bare grid needs options
+            step = tags_step(target.parent / "plan.npz", fov, max_range, map_yaml=bearnav_map)
+            hint = f"; to place tags where it fails, `{planning}`, then {step}"
             out.print(f"  perception: {seeing.summary()}{hint if seeing.fraction_some < 1.0 else ''}",
                       highlight=False, markup=False, soft_wrap=True)  # fmt: skip
     _finish([report], as_json, extra)
@@ -1096,22 +1311,24 @@ def verify_command(
                                   "fraction_free": seeing.fraction_free,
                                   "median_predicted_error": seeing.median_error_domain,
                                   "fraction_within_tolerance": seeing.fraction_within_tolerance}  # fmt: skip
-        out.print_json(json.dumps(data))
+        _print_json(data)
     else:
         out.print(f"verify    {plan_npz}  {report.summary()}", highlight=False, soft_wrap=True)
         for reason in report.reasons:
             out.print(f"  - {reason}", highlight=False, soft_wrap=True)
-        for note in getattr(report, "notes", []):
+        for note in [] if _Quiet.enabled else getattr(report, "notes", []):
             out.print(f"  note: {note}", highlight=False, soft_wrap=True)
         if seeing is not None:
             out.print(f"  perception: {seeing.summary()} (the rule: `bearnav tags` places tags where it fails)",
                       highlight=False, soft_wrap=True)  # fmt: skip
-        if starts:
+        if not _Quiet.enabled:  # what the certificate says, in words, whatever else was printed
+            out.print(f"  {verify.guarantee(plan, report)}", highlight=False, markup=False, soft_wrap=True)
+        if starts and not _Quiet.enabled:
             out.print(f"  the {starts} runs drive with displacements (exact positions) and a full view, at speed "
                       f"{speed:g} map units/s: `bearnav simulate` adds bearings, a camera and noise; {WORDS_NOTE}",
                       highlight=False, markup=False, soft_wrap=True)  # fmt: skip
     if report.failed:
-        raise typer.Exit(EXIT_OUTCOME)
+        raise _fail(verify_steps(report, plan_npz, world), EXIT_OUTCOME)
 
 
 def _load_world(path: Path):
@@ -1184,7 +1401,9 @@ def simulate_command(
         ros_bag.write(bag, sim, option="--bag", force=force)
     if as_json:
         shown = {"sim": str(report.path), "ran": report.ran, "metrics": metrics}
-        out.print_json(json.dumps(shown if bag is None else dict(shown, bag=str(bag))))
+        _print_json(shown if bag is None else dict(shown, bag=str(bag)))
+    elif _Quiet.enabled:  # -q: the result's one line (and, on stderr, what failed)
+        out.print(_report_line(report), highlight=False, soft_wrap=True)
     else:
         from rich.table import Table
 
@@ -1210,7 +1429,7 @@ def simulate_command(
             out.print(f"wrote {gif}", highlight=False)
     rate = metrics.get("success_rate")
     if rate is None or rate < min_success:
-        raise typer.Exit(EXIT_OUTCOME)
+        raise _fail(simulation_steps(report, plan_npz, min_success), EXIT_OUTCOME)
 
 
 def _metric_rows(metrics: dict) -> list[tuple[str, str]]:
@@ -1275,6 +1494,28 @@ def plan_command(
     ),
     robot_radius: Optional[float] = typer.Option(None, help="Robot radius, map units (bare grids only; 0)."),
     lookahead: Optional[float] = LOOKAHEAD,
+    fov: Optional[float] = typer.Option(
+        None,
+        "--fov",
+        help="Check the plan for a camera of this field of view (degrees, (0, 360]): exit 1 where "
+        "it sees no usable pair of tags along the field, with the `bearnav tags` command that adds them.",
+    ),
+    max_range: Optional[float] = typer.Option(
+        None, "--range", help="That camera's range, map units (default: unlimited)."
+    ),
+    noise_deg: Optional[float] = typer.Option(
+        None, "--noise-deg", help="Bearing noise (1σ, degrees) of that camera's predicted fix error (default 1)."
+    ),
+    bearing_error_deg: Optional[float] = typer.Option(
+        None, "--bearing-error-deg", help="Overrides the map's robot.bearing_error_deg η_cam (degrees)."
+    ),
+    compass_error_deg: Optional[float] = typer.Option(
+        None, "--compass-error-deg", help="Overrides the map's robot.compass_error_deg ψ (degrees)."
+    ),
+    slip: Optional[float] = typer.Option(None, "--slip", help="Overrides the map's robot.slip κ."),
+    slip_floor: Optional[float] = typer.Option(
+        None, "--slip-floor", help="Overrides the map's robot.slip_floor ν (map units per step)."
+    ),
     force: bool = FORCE,
     quiet: bool = QUIET,
     as_json: bool = JSON,
@@ -1283,6 +1524,8 @@ def plan_command(
     """Run every stage from the map to the last one, skipping fresh stages.
 
     Takes the same map options as `bearnav map`; a map.json from `bearnav map` starts at rrtstar.
+    The error bounds (--bearing-error-deg ...) go into the plan's robot section, which simulate
+    --estimator set and verify read; with --fov the plan is also checked for that camera.
 
     Examples: bearnav plan maps/kitchen.yaml --seed 3;
     bearnav plan lab.yaml --goal 1,1 --landmark 0,2 --landmark 4,0 (a bare map_server YAML)
@@ -1297,6 +1540,14 @@ def plan_command(
                    "--lookahead": lookahead,
                    **{_option_name("map", name): options[name] for name in PLAN_OPTIONS["map"]}}  # fmt: skip
     overrides = {stage: {name: options[name] for name in names} for stage, names in PLAN_OPTIONS.items()}
+    robot = {key: value for key, value in (("bearing_error_deg", bearing_error_deg), ("compass_error_deg",
+             compass_error_deg), ("slip", slip), ("slip_floor", slip_floor)) if value is not None}  # fmt: skip
+    map_options.update({"--" + key.replace("_", "-"): value for key, value in robot.items()})
+    if fov is None and (max_range is not None or noise_deg is not None):
+        given = "--range" if max_range is not None else "--noise-deg"
+        raise _fail(f"{given}: only with --fov (the camera it belongs to)", EXIT_INVALID)
+    if fov is not None:  # checked before any stage runs
+        _check_camera(fov, 1.0 if noise_deg is None else noise_deg, max_range)
     if source.is_dir():
         inside = source / "map.json"
         hint = f"; did you mean {inside}?" if inside.is_file() else " (give a map YAML or a map.json)"
@@ -1310,16 +1561,48 @@ def plan_command(
         target = out_dir or source.parent
     else:
         goal_xy = _pair(goal, "--goal") if goal else None
-        src = read_map_source(source, goal_xy, landmark, start, robot_radius, lookahead)
+        src = read_map_source(source, goal_xy, landmark, start, robot_radius, lookahead, robot)
         target = out_dir or Path("plans") / str(src.spec.get("name", source.stem))
 
     def show(report: pipeline.StageReport) -> None:
-        if not as_json:
+        if not as_json and (not _Quiet.enabled or report.stage == pipeline.STAGES[-1].name):
             out.print(_report_line(report), highlight=False, soft_wrap=True)
 
     with _progress_bar() as progress:
-        reports = pipeline.plan(src, target, overrides, force, _progress_factory(progress), show)
-    _finish(reports, as_json)
+        try:
+            reports = pipeline.plan(src, target, overrides, force, _progress_factory(progress), show)
+        except InvalidMapError as exc:  # a robot bound only the option gave: name the option
+            key = (exc.field or "").removeprefix("robot.")
+            if key not in robot:
+                raise
+            raise _fail(f"--{key.replace('_', '-')}: {exc.reason}", EXIT_INVALID) from None
+    plan_words = tuple(_camera_words(fov, max_range)) if fov is not None else ()
+    plan_words += tuple(word for key, value in robot.items() for word in (f"--{key.replace('_', '-')}", f"{value:g}"))
+    seeing, extra = None, None
+    plan = reports[-1].artifact
+    if fov is not None and _outcome_failure(plan) is None:  # the camera's check, on a plan that passed the others
+        from bearnav_cli import perception
+
+        seeing = perception.perception_coverage(plan, fov, 1.0 if noise_deg is None else noise_deg,
+                                                float("inf") if max_range is None else max_range)  # fmt: skip
+        extra = {
+            "perception": {
+                "fov_deg": fov,
+                "range": max_range,
+                "noise_deg": seeing.noise_deg,
+                "fraction_domain": seeing.fraction_domain,
+                "fraction_free": seeing.fraction_free,
+            }
+        }
+        if not as_json:
+            out.print(f"  perception: {seeing.summary()}", highlight=False, markup=False, soft_wrap=True)
+    _finish(reports, as_json, extra, camera=(360.0 if fov is None else fov, max_range), plan_words=plan_words)
+    if seeing is not None and seeing.fraction_domain < 1.0:
+        from bearnav_cli.datatypes import percent
+
+        raise _fail(f"a {fov:g}° camera looking along the field sees no usable pair of tags from "
+                    f"{percent(1.0 - seeing.fraction_domain)} of D: add tags there; "
+                    + tags_step(reports[-1].path, fov, max_range, plan_words), EXIT_OUTCOME)  # fmt: skip
 
 
 #: ``decompose --cells`` (and ``plan --cells``) choices.
@@ -1335,7 +1618,9 @@ def _is_map_artifact(path: Path) -> bool:
 @handles_errors
 def inspect_command(
     artifact: Path = typer.Argument(..., metavar="ARTIFACT", help="Any bearnav artifact (map.json, *.npz)."),
-    cells: bool = typer.Option(False, "--cells", help="Also print the per-cell statistics in full."),
+    cells: bool = typer.Option(
+        False, "--cells", help="Also print a table of the cells (one row each, with units); with --json, its rows."
+    ),
     cell: Optional[int] = typer.Option(
         None, "--cell", metavar="N", help="Print one cell of cells.npz or plan.npz: rows, vertices, status, δ_c."
     ),
@@ -1355,26 +1640,114 @@ def inspect_command(
     if cell is not None:
         _inspect_cell(artifact, loaded.artifact, cell, as_json)
         return
+    table = _cell_table(loaded.artifact, manifest.get("stats") or {}) if cells else None
     if as_json:
-        out.print_json(json.dumps(manifest))
+        units = {key: unit.replace("u", "map unit") if unit else None for key, _, unit in table[0]} if table else None
+        _print_json(manifest if table is None else {"units": units, "cells": table[1]})
         return
     stage = f"stage {manifest['stage']} v{manifest['stage_version']}"
     out.print(f"[bold]{artifact}[/bold]  {manifest['schema']}  ({stage})")
-    out.print(f"summary   {manifest.get('summary', '')}", highlight=False, markup=False)
-    out.print(f"params    {json.dumps(manifest.get('params', {}), sort_keys=True)}", highlight=False, markup=False)
+    # soft_wrap: a line as long as it is (a terminal folds it; rich would cut the JSON mid-token at 80 columns)
+    out.print(f"summary   {manifest.get('summary', '')}", highlight=False, markup=False, soft_wrap=True)
+    out.print(f"params    {json.dumps(manifest.get('params', {}), sort_keys=True)}", highlight=False, markup=False,
+              soft_wrap=True)  # fmt: skip
     inp = manifest.get("input", {})
     out.print(f"input     {inp.get('path')}  sha256 {str(inp.get('content_sha256'))[:16]}…", highlight=False)
     out.print(f"content   sha256 {manifest['content_sha256'][:16]}…  key {manifest['key'][:16]}…", highlight=False)
     stats = manifest.get("stats") or {}
     if stats:
-        shown = stats if cells else _short_stats(stats)
-        out.print(f"stats     {json.dumps(shown, sort_keys=True)}", highlight=False, markup=False)
+        out.print(f"stats     {json.dumps(_short_stats(stats), sort_keys=True)}", highlight=False, markup=False,
+                  soft_wrap=True)  # fmt: skip
     software = ", ".join(f"{k} {v}" for k, v in manifest.get("software", {}).items())
-    out.print(f"software  {software}  elapsed {manifest.get('elapsed_s', 0):.3f} s", highlight=False)
+    out.print(f"software  {software}  elapsed {manifest.get('elapsed_s', 0):.3f} s", highlight=False, soft_wrap=True)
     per_cell = sorted(key for key, value in stats.items() if isinstance(value, list) and value)
-    if not cells and per_cell:
-        out.print(f"(--cells adds the per-cell statistics {', '.join(per_cell)}; --cell N shows one cell)",
+    if cells:
+        from bearnav_cli.datatypes import cell_list
+
+        if table is not None:
+            _print_cell_table(*table)
+        shown = {_STATS_KEY.get(key, key) for key, _, _ in table[0]} if table is not None else set()
+        lists = {key: value for key, value in stats.items() if isinstance(value, list) and value and key not in shown}
+        for key, value in sorted(lists.items()):  # lists of cells (or of rounds), not a column each
+            out.print(f"{key}: {cell_list(value, 40)}", highlight=False, markup=False, soft_wrap=True)
+    elif per_cell:
+        out.print(f"(--cells adds a table of the cells and the lists {', '.join(per_cell)}; --cell N shows one cell)",
                   highlight=False, markup=False, soft_wrap=True)  # fmt: skip
+
+
+#: The per-cell lists of a plan's statistics that ``inspect --cells`` shows as columns: (key, heading, unit).
+_PLAN_STATS_COLUMNS = (("lp_solves", "LP", ""), ("c_tilde_h", "c̃_h", "1/(s·u)"), ("c_tilde_v", "c̃_v", "1/(s·u)"),
+                       ("c_h_over_s_max", "c_h/s_max", "1/(s·u)"))  # fmt: skip
+#: Where a column's numbers come from in the statistics, when not its key (``attempts``: the LP solves of a cell).
+_STATS_KEY = {"lp_solves": "attempts"}
+
+
+def _cell_table(artifact: Any, stats: dict) -> "tuple[list[tuple[str, str, str]], list[dict]] | None":
+    """``inspect --cells``: the columns as (key, heading, unit) and one row per cell, or None without cells.
+
+    The rows hold numbers keyed by column (None where there is none: the goal cell's exit inset, a
+    cell without a tolerance), so that ``--json`` prints them as they are and the table formats them.
+    Lengths are in map units (``u``).
+    """
+    import math
+
+    import numpy as np
+
+    from bearnav_cli.datatypes import CellFlag, Cells, CellStatus, Plan
+
+    plan = artifact if isinstance(artifact, Plan) else None
+    cells = plan.cells if plan is not None else artifact
+    if not isinstance(cells, Cells):
+        return None
+
+    def number(value: Any) -> Any:
+        value = float(value)
+        return None if math.isnan(value) else value
+
+    columns = [("cell", "cell", ""), ("rank", "rank", "u"), ("vertices", "vertices", ""),
+               ("barrier_rows", "barriers", ""), ("exit_inset", "exit inset", "u"),
+               ("landmarks", "landmarks", "")]  # fmt: skip
+    if plan is not None:
+        columns[1:1] = [("status", "status", ""), ("delta_c", "δ_c", "u"), ("tau_c", "τ_c", "u")]
+        columns += [c for c in _PLAN_STATS_COLUMNS if len(stats.get(_STATS_KEY.get(c[0], c[0])) or []) == cells.n_cells]
+    columns.append(("flags", "flags", ""))
+    barrier_rows = np.diff(cells.cbf_offsets)
+    rows = []
+    for c in range(cells.n_cells):
+        row: dict[str, Any] = {"cell": c, "rank": number(cells.cell_rank[c]), "vertices": len(cells.vertices(c)),
+                               "barrier_rows": int(barrier_rows[c]), "exit_inset": number(cells.exit_inset[c]),
+                               "landmarks": int(np.count_nonzero(cells.cell_landmarks[c])),
+                               "flags": ",".join(f.name.lower() for f in CellFlag
+                                                 if f and int(cells.cell_flags[c]) & f)}  # fmt: skip
+        if plan is not None:
+            row.update(status=CellStatus(int(plan.status[c])).name.lower(), delta_c=number(plan.tolerance[c]),
+                       tau_c=number(plan.usable_tolerance[c]))  # fmt: skip
+            for key, _, _ in columns:
+                if key in dict((k, h) for k, h, _ in _PLAN_STATS_COLUMNS):
+                    row[key] = stats[_STATS_KEY.get(key, key)][c]
+        rows.append({key: row[key] for key, _, _ in columns})
+    return columns, rows
+
+
+def _print_cell_table(columns: "list[tuple[str, str, str]]", rows: list[dict]) -> None:
+    """The rows of :func:`_cell_table` as plain aligned text (as wide as it needs: never wrapped or cut),
+    the units under the headings, numbers to 4 digits, "-" where there is none."""
+
+    def text(value: Any) -> str:
+        return "-" if value is None else f"{value:.4g}" if isinstance(value, float) else str(value)
+
+    cells = [[text(row[key]) for key, _, _ in columns] for row in rows]
+    widths = [max([len(heading), len(unit) + 2, *(len(line[k]) for line in cells)])
+              for k, (_, heading, unit) in enumerate(columns)]  # fmt: skip
+    left = {"status", "flags"}
+
+    def line(items: list[str]) -> str:
+        return "  ".join(item.ljust(w) if key in left else item.rjust(w)
+                         for item, w, (key, _, _) in zip(items, widths, columns, strict=True)).rstrip()  # fmt: skip
+
+    for items in ([h for _, h, _ in columns], [f"[{u}]" if u else "" for _, _, u in columns], *cells):
+        out.print(line(items), highlight=False, markup=False, soft_wrap=True)
+    out.print("u: map units; s: seconds", highlight=False, markup=False, soft_wrap=True)
 
 
 def _short_stats(stats: dict) -> dict:
@@ -1429,7 +1802,7 @@ def _inspect_cell(path: Path, artifact: Any, c: int, as_json: bool) -> None:
                     exit_inset=None if np.isnan(inset) else inset,
                     margin_h=float(plan.margin_h[c]), margin_v=float(plan.margin_v[c]))  # fmt: skip
     if as_json:
-        out.print_json(json.dumps(info))
+        _print_json(info)
         return
 
     def point(p: Any) -> str:
@@ -1561,28 +1934,49 @@ def tags_command(
     with artifacts.atomic_output(figure) as tmp:
         plot.save_figure(fig, str(tmp))
     if as_json:
-        out.print_json(json.dumps({
+        _print_json({
             "map": str(out_path), "figure": str(figure), "new_tags": proposal.count,
             "lower_bound": proposal.lower_bound, "ids": list(proposal.ids),
             "positions": [[float(v) for v in p] for p in proposal.positions],
             "target_reached": proposal.target_reached,
             "domain_before": proposal.before.fraction_domain, "domain_after": proposal.after.fraction_domain,
             "free_before": proposal.before.fraction_free, "free_after": proposal.after.fraction_free,
-        }))  # fmt: skip
+        })  # fmt: skip
     else:
         out.print(f"tags      {out_path}  {proposal.summary()}", highlight=False, soft_wrap=True)
-        out.print(
-            f"wrote {out_path} and {figure}; re-plan with `bearnav plan {out_path}`", highlight=False, soft_wrap=True
-        )
+        if not _Quiet.enabled:
+            out.print(f"wrote {out_path} and {figure}; re-plan with `{_command_text('bearnav', 'plan', out_path)}`",
+                      highlight=False, soft_wrap=True)  # fmt: skip
     if not proposal.target_reached:
-        raise typer.Exit(EXIT_OUTCOME)
+        from bearnav_cli.datatypes import percent
+
+        short = 1.0 - proposal.after.fraction_domain
+        if max_tags is not None and proposal.count >= max_tags:
+            again = _command_text("bearnav", "tags", plan_npz, *_camera_words(fov, max_range),
+                                  *(["--noise-deg", f"{noise_deg:g}"] if noise_deg != 1.0 else []),
+                                  *(["--error-target", f"{error_target:g}"] if error_target is not None else []),
+                                  *(["--map", map_yaml] if map_yaml is not None else []), "-o", out_path)  # fmt: skip
+            fix = (f"--max-tags {max_tags} allowed too few (at least {proposal.lower_bound} are needed); "
+                   f"`{again}` places as many as the rule needs")  # fmt: skip
+        else:
+            fix = ("the rest of D sees no wall or obstacle a tag could go on in view: a wider --fov, a longer "
+                   "--range or a lower --error-target")  # fmt: skip
+        raise _fail(f"the rule still fails on {percent(short)} of D: {fix}; {out_path} has the tags placed",
+                    EXIT_OUTCOME)  # fmt: skip
+
+
+def _figure_default(artifact: Path) -> Path:
+    """Where ``bearnav plot`` draws an artifact without ``-o``: next to it, its name with .png (plan.npz: plan.png)."""
+    return artifact.with_suffix(".png")
 
 
 @app.command("plot")
 @handles_errors
 def plot_command(
     artifact: Path = typer.Argument(..., metavar="ARTIFACT", help="Any bearnav artifact (map.json, *.npz)."),
-    out_path: Path = typer.Option(..., "-o", "--out", help="Figure file (.png, .pdf, .svg)."),
+    out_path: Optional[Path] = typer.Option(
+        None, "-o", "--out", help="Figure file (.png, .pdf, .svg; default: the artifact's name with .png, next to it)."
+    ),
     also: Optional[List[Path]] = typer.Option(None, "--also", help="Tree artifact drawn faintly underneath."),
     title: Optional[str] = typer.Option(None, help="Figure title."),
     color_by: Optional[str] = typer.Option(
@@ -1624,6 +2018,7 @@ def plot_command(
     from bearnav_cli.datatypes import Cells, Plan
 
     _Quiet.enabled |= quiet
+    out_path = out_path or _figure_default(artifact)
     artifacts.check_output_file(out_path, FIGURE_SUFFIXES, "-o/--out", inputs=(artifact, *(also or [])))
     if fov is None and (noise_deg is not None or max_range is not None):
         given = "--noise-deg" if noise_deg is not None else "--range"

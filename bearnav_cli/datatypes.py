@@ -56,9 +56,12 @@ __all__ = [
     "INVARIANTS",
     "Map",
     "MAP_INVARIANTS",
+    "NEGLIGIBLE_SHARE",
     "Outcome",
+    "percent",
     "Plan",
     "PLAN_KEYS",
+    "plural",
     "Polygon",
     "ragged",
     "replace",
@@ -347,6 +350,13 @@ class Map:
         return float(self.robot_radius) + self.lookahead
 
     @property
+    def inflation_text(self) -> str:
+        """``"robot radius 0.2"`` (``"robot radius 0.2 + look-ahead 0.1"``): what the walls and obstacles are grown
+        by, in the words every message about the free space uses."""
+        text = f"robot radius {self.robot_radius:g}"
+        return text + (f" + look-ahead {self.lookahead:g}" if self.lookahead > 0 else "")
+
+    @property
     def free_bounds(self) -> np.ndarray:
         """``B_r``: the bounds shrunk by the planning radius, where the planned point may go (ALGORITHMS §11.1).
 
@@ -616,6 +626,43 @@ class CellFlag(enum.IntFlag):
     LANDMARK_INSIDE = 4  # every candidate fixed landmark lies in the cell (s_min = 0)
     SAMPLE_ON_EDGE = 8  # a collision sample on the edge line was skipped
     BLIND_SPOT = 16  # a free point of the coverage grid (spacing D/100) in the cell sees < 2 landmarks
+
+
+def plural(count: int, word: str, many: str | None = None) -> str:
+    """``"1 obstacle"``, ``"3 obstacles"``: a count and its noun, for every message that counts things.
+
+    Parameters
+    ----------
+    count : int
+        How many.
+    word : str
+        The noun in the singular.
+    many : str, optional
+        Its plural, when it is not ``word + "s"``.
+
+    Returns
+    -------
+    str
+    """
+    return f"{count} {word if count == 1 else many or word + 's'}"
+
+
+#: A share of an area below which a warning is not worth giving: it would read ``0.0%``, a few points of a
+#: grid at a corner rather than a place a robot could be stuck in (the checks that fail a plan do not use it).
+NEGLIGIBLE_SHARE = 0.0005
+
+
+def percent(share: float) -> str:
+    """A share as a percentage to 0.1%, never ``0.0%`` or ``100.0%`` unless it is exactly 0 or 1.
+
+    A message that reports a sliver as ``0.0%`` says nothing (or something false): it reads
+    ``< 0.1%`` instead, and ``> 99.9%`` for a share just short of all.
+    """
+    if 0.0 < share < NEGLIGIBLE_SHARE:
+        return "< 0.1%"
+    if 1.0 - NEGLIGIBLE_SHARE <= share < 1.0:
+        return "> 99.9%"
+    return f"{share:.1%}"
 
 
 def cell_list(cells: Any, limit: int = 12) -> str:

@@ -37,6 +37,7 @@ import numpy as np
 import shapely
 
 from bearnav_cli import composition
+from bearnav_cli.datatypes import percent, plural
 from bearnav_cli.errors import InvalidParamsError
 from bearnav_cli.geometry import FreeSpace
 from bearnav_cli.runtime import bearing, cell_policy
@@ -418,8 +419,9 @@ class PerceptionCoverage:
         """One line: the camera, the fractions of ``D`` and ``F`` where the rule holds, and ``δ*``."""
         target = "" if self.error_target is None else f", error ≤ {self.error_target:g}"
         rng = "" if not math.isfinite(self.max_range) else f", range {self.max_range:g}"
-        return (f"{len(self.landmarks)} tags, {self.fov_deg:g}° camera{rng}, {self.noise_deg:g}° noise{target}: "
-                f"two usable tags in view from {self.fraction_domain:.1%} of D and {self.fraction_free:.1%} of F; "
+        return (f"{plural(len(self.landmarks), 'tag')}, {self.fov_deg:g}° camera{rng}, {self.noise_deg:g}° noise"
+                f"{target}: two usable tags in view from {percent(self.fraction_domain)} of D and "
+                f"{percent(self.fraction_free)} of F; "
                 f"median predicted error {self.median_error_domain:.3g} in D, within δ* = {self.plan_tolerance:.3g} "
                 f"on {self.fraction_within_tolerance:.1%} of D")  # fmt: skip
 
@@ -583,9 +585,9 @@ class HeadingCoverage:
     def summary(self) -> str:
         """One line: the camera and the fractions of ``F`` where some heading and where every heading sees a pair."""
         rng = "" if not math.isfinite(self.max_range) else f", range {self.max_range:g}"
-        return (f"{len(self.landmarks)} tags, {self.fov_deg:g}° camera{rng}: two usable tags in view from "
-                f"{self.fraction_some:.1%} of F with some heading and {self.fraction_every:.1%} of F with every "
-                f"heading; {len(self.blind)} of {len(self.points)} grid points blind")  # fmt: skip
+        return (f"{plural(len(self.landmarks), 'tag')}, {self.fov_deg:g}° camera{rng}: two usable tags in view from "
+                f"{percent(self.fraction_some)} of F with some heading and {percent(self.fraction_every)} of F with "
+                f"every heading; {len(self.blind)} of {len(self.points)} grid points blind")  # fmt: skip
 
 
 def _critical_headings(points: np.ndarray, reach: np.ndarray, landmarks: np.ndarray,

@@ -43,6 +43,7 @@ import numpy as np
 import shapely
 
 from bearnav_cli import perception
+from bearnav_cli.datatypes import percent, plural
 from bearnav_cli.errors import InvalidParamsError
 from bearnav_cli.geometry import FreeSpace, box_polygon
 from bearnav_cli.lp import INF, LpSolver, LpStatus
@@ -361,10 +362,12 @@ class TagProposal:
     def summary(self) -> str:
         """One line: tags added against the lower bound, and the coverage of ``D`` and ``F`` before and after."""
         reached = "target reached" if self.target_reached else "target NOT reached"
-        return (f"{self.count} new tags (lower bound {self.lower_bound}) to the {len(self.before.landmarks)} of the "
-                f"map, {reached}: rule holds on {self.before.fraction_domain:.1%} → {self.after.fraction_domain:.1%} "
-                f"of D and {self.before.fraction_free:.1%} → {self.after.fraction_free:.1%} of F; "
-                f"{1.0 - self.coverable_fraction:.1%} of D cannot be covered")  # fmt: skip
+        uncovered = 1.0 - self.coverable_fraction
+        return (f"{plural(self.count, 'new tag')} (lower bound {self.lower_bound}) to the "
+                f"{len(self.before.landmarks)} of the map, {reached}: rule holds on "
+                f"{percent(self.before.fraction_domain)} → {percent(self.after.fraction_domain)} of D and "
+                f"{percent(self.before.fraction_free)} → {percent(self.after.fraction_free)} of F"
+                + (f"; {percent(uncovered)} of D cannot be covered" if uncovered > 0 else ""))  # fmt: skip
 
 
 def new_tag_ids(existing: Any, count: int) -> tuple[str, ...]:

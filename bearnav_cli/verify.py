@@ -33,7 +33,7 @@ import shapely
 
 from bearnav_cli import composition, runtime
 from bearnav_cli.composition import Composition
-from bearnav_cli.datatypes import CellFlag, CellStatus, Map, Outcome, Plan, Simulation, cell_list
+from bearnav_cli.datatypes import CellFlag, CellStatus, Map, Outcome, Plan, Simulation, cell_list, percent, plural
 from bearnav_cli.errors import ArtifactError, InvalidParamsError
 from bearnav_cli.funnel import coverage_domain, reached_parts
 from bearnav_cli.geometry import FreeSpace, inflate
@@ -45,7 +45,8 @@ from bearnav_cli.stages import simulate
 
 __all__ = ["CERTIFICATE_TOL", "CERTIFIED", "COVERAGE_TOL", "GOAL_FIELD_TOL", "UNIT_TOL", "Certificates", "Geometry",
            "Params", "Unreached", "VerifyReport", "certificate_problems", "certificates", "check_geometry",
-           "check_lookahead", "flagged_cells", "loop_speed", "run", "unreached_regions"]  # fmt: skip
+           "check_lookahead", "duration_text", "flagged_cells", "guarantee", "loop_speed", "run",
+           "unreached_regions"]  # fmt: skip
 
 log = logging.getLogger(__name__)
 
@@ -667,7 +668,8 @@ class VerifyReport:
         """Why the plan fails verification (empty when it passes)."""
         out = []
         if self.uncertified:
-            out.append(f"{len(self.uncertified)} cells not certified (status 2 or 3): {cell_list(self.uncertified)}")
+            out.append(f"{plural(len(self.uncertified), 'cell')} not certified (status 2 or 3): "
+                       f"{cell_list(self.uncertified)}")  # fmt: skip
         if self.false_certificates:
             items = [f"{c} ({why})" for c, why in sorted(self.false_certificates.items())]
             out.append(f"{len(items)} certified cells fail the recomputation: {cell_list(items)}")
@@ -750,7 +752,7 @@ class VerifyReport:
             text = (f"{certified}/{n} funnel cells certified, composition {'proved' if comp.ok else 'FAILS'}, "
                     f"{100 * comp.coverage_free:.1f}% of F ({100 * comp.coverage:.1f}% of F_m) covered, usable "
                     f"tolerance τ_c ≥ {comp.plan_tolerance:.3g} (by area: median {tau['median']:.3g}, 10% below "
-                    f"{tau['p10']:.3g}), time to goal ≤ {comp.time_bound:.4g} s")  # fmt: skip
+                    f"{tau['p10']:.3g}), worst-case time to goal {duration_text(comp.time_bound)}")  # fmt: skip
             if self.rollouts is not None and len(self.rollouts):
                 d = self.in_domain
                 ok = self.rollouts.outcome == Outcome.SUCCESS
@@ -916,6 +918,69 @@ def _liveness(plan: Plan, params: Params, speed: float) -> tuple[Liveness | None
         if exc.field in names:
             raise InvalidParamsError(exc.reason, field=names[exc.field]) from None
         return None, f"liveness: not measured, {exc.field}: {exc.reason}"
+
+
+def duration_text(seconds: float) -> str:
+    """``"≤ 1.387e+04 s (3.9 h)"``: a time bound in seconds, and in minutes or hours when it is long."""
+    if not math.isfinite(seconds):
+        return "unbounded"
+    text = f"≤ {seconds:.4g} s"
+    if seconds >= 3600:
+        return text + f" ({seconds / 3600:.2g} h)"
+    if seconds >= 120:
+        return text + f" ({seconds / 60:.2g} min)"
+    return text
+
+
+def guarantee(plan: Plan, report: VerifyReport) -> str:
+    """One sentence for a robotics engineer: what ``report`` proves of ``plan``, what it only measured, what it leaves.
+
+    Proven: from which starts (``D``), for which robot (radius, single integrator or look-ahead
+    point), under which position error (``τ_c``), and the worst-case time. Measured only: the
+    closed-loop runs and liveness. Not covered: starts outside ``D``, errors beyond the robot
+    section's bounds, a camera that sees fewer than two tags.
+
+    Parameters
+    ----------
+    plan : Plan
+        The plan verified.
+    report : VerifyReport
+        What :func:`run` found.
+
+    Returns
+    -------
+    str
+    """
+    comp = report.composition
+    if report.failed:
+        return "guarantee: none, the plan fails verification (above)"
+    runs = report.rollouts
+    measured = (f"measured only: {plural(len(runs), 'closed-loop run')} with exact positions (`bearnav simulate` adds "
+                "a camera and noise)") if runs is not None and len(runs) else "nothing measured (no runs)"  # fmt: skip
+    if comp is None:  # a paper plan: per-cell certificates (§4), no composition theorem
+        return (f"guarantee: each certified cell's controller keeps a robot that knows its position in the cell and "
+                f"drives it out of the exit face (ALGORITHMS §4); that the cells compose into a route to the goal is "
+                f"not proven for paper cells; {measured}")  # fmt: skip
+    robot = runtime.robot.robot_parameters(plan.map.robot)
+    who = f"a robot of radius {plan.map.robot_radius:g} "
+    who += (f"planned through its look-ahead point λ = {plan.map.lookahead:g} ahead of the axle (a unicycle)"
+            if plan.map.lookahead > 0 else "commanded in velocity (a single integrator; a unicycle only through "
+            "`bearnav plan --lookahead`)")  # fmt: skip
+    tol = comp.usable_by_area
+    eta = float(robot["bearing_error_deg"]) + float(robot["compass_error_deg"] or 0.0)
+    if report.liveness is not None:
+        measured += f", and liveness: {report.liveness.live_fraction:.0%} of D sure of a good enough look"
+    proven = (f"proven from the plan file, {who} that starts in D ({percent(comp.coverage_free)} of F) and knows "
+              f"its position, in the cell it is in, to within τ_c (≥ {comp.plan_tolerance:.3g} map units, median "
+              f"{tol['median']:.3g}) reaches the goal without touching an obstacle or a wall, at speed "
+              f"{comp.speed:g} map units/s within {duration_text(comp.time_bound)} (a worst case, from the least "
+              "progress each cell's certificate guarantees, not an estimate of a run's time)")  # fmt: skip
+    bounded = (f"with bearings erring by at most η = {eta:g}° and wheel slip within {robot['slip']:g} of each step "
+               "(the map's robot section) the `simulate --estimator set` robot moves only where it knows that much, "
+               "but that it always gets a good enough look is not proven")  # fmt: skip
+    uncovered = ("not covered: starts outside D, errors beyond those bounds, places where the camera sees fewer "
+                 "than two tags (`bearnav verify --fov F` measures them)")  # fmt: skip
+    return f"guarantee: {proven}; {bounded}; {measured}; {uncovered}"
 
 
 def run(

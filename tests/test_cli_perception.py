@@ -67,7 +67,9 @@ def test_map_fov_json_carries_the_report_and_the_hint_follows_the_fraction(cli, 
         assert report["fraction_some_heading"] == expected.fraction_some
         assert report["blind_points"] == len(expected.blind) and report["grid_points"] == len(expected.points)
         text = cli("map", source, "-o", tmp_path / name / "map.json", "--fov", "60").output
-        assert ("`bearnav tags PLAN.npz --fov 60`" in text) == (expected.fraction_some < 1.0), text
+        # the hint names the plan `bearnav plan` will write next to this map.json, and the map YAML
+        tags = f"`bearnav tags {tmp_path / name / 'plan.npz'} --fov 60 --map {source}`"
+        assert (tags in text.replace("\n", "")) == (expected.fraction_some < 1.0), text
     assert expected.fraction_some < 1.0  # two tags on the small map leave blind spots
     plain = json.loads(cli("map", source, "-o", tmp_path / "two" / "map.json", "--json", "-q").output)
     assert "perception" not in plain[0]  # without --fov, the same rows as before

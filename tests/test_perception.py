@@ -20,6 +20,7 @@ import numpy as np
 import pytest
 
 from bearnav_cli import perception, plot
+from bearnav_cli.datatypes import percent
 from bearnav_cli.errors import InvalidParamsError
 from bearnav_cli.geometry import FreeSpace
 from bearnav_cli.runtime import cell_policy
@@ -268,7 +269,7 @@ def test_heading_coverage_matches_a_brute_force_over_headings(seed, fov, max_ran
     assert cov.fraction_some == pytest.approx(np.mean(cov.some))
     assert cov.fraction_every == pytest.approx(np.mean(cov.every))
     assert len(cov.blind) == np.sum(~cov.some) and len(cov.heading_dependent) == np.sum(cov.some & ~cov.every)
-    assert f"{cov.fraction_some:.1%} of F with some heading" in cov.summary()
+    assert f"{percent(cov.fraction_some)} of F with some heading" in cov.summary()
 
 
 def test_heading_coverage_grows_with_tags_camera_and_range():

@@ -340,7 +340,7 @@ def test_verify_world_names_the_cells_a_moved_chair_breaks(plans):
     result = CliRunner().invoke(app, ["verify", str(path), "--starts", "0", "--world",
                                       str(REPO / "maps" / "kitchen_moved.yaml"), "--json"])  # fmt: skip
     assert result.exit_code == 1
-    listed = json.loads(result.output)["world_cells"]
+    listed = json.loads(result.stdout)["world_cells"]
     world = FreeSpace.from_map(artifacts.load(path).artifact.map)  # the plan's own world: no cell meets it
     moved = FreeSpace.from_map(map_.run(read_map_source(REPO / "maps" / "kitchen_moved.yaml")))
     hits = [c for c in range(plan.cells.n_cells) if shapely.Polygon(plan.cells.vertices(c)).intersects(moved.obstacles)]

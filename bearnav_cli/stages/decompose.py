@@ -20,7 +20,7 @@ import shapely
 import shapely.ops
 
 from bearnav_cli.barriers import cbf_rows, corridor_rows, goal_cbf_rows, wall_rows
-from bearnav_cli.datatypes import CellFlag, Cells, Tree, cell_list
+from bearnav_cli.datatypes import NEGLIGIBLE_SHARE, CellFlag, Cells, Tree, cell_list, plural
 from bearnav_cli.errors import ArtifactError, InvalidParamsError
 from bearnav_cli.funnel import (
     INSET_LIMIT,
@@ -490,7 +490,7 @@ def _funnel_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) 
             domain, domain_area = final, float(final.area)
             uncovered_area = float(shapely.difference(domain, covered).area)
     unreached_area = max(float(full_domain.area) - domain_area, 0.0)
-    if unreached_area > 1e-9 * max(float(full_domain.area), 1e-300):
+    if unreached_area > NEGLIGIBLE_SHARE * max(float(full_domain.area), 1e-300):
         log.warning("%.1f%% of F_m (%.3g map units²) is cut off from every cell by passages narrower than "
                     "2m = %.3g (a robot keeping the barrier margin cannot get there): coverage is of the rest; "
                     "a smaller decompose.barrier_margin or a wider passage would join it",
@@ -908,7 +908,8 @@ def run(tree: Tree, params: Params = Params(), progress: Callable[[int, int], No
         (CellFlag.BLIND_SPOT, "free points that see fewer than 2 landmarks: a robot cannot locate itself there"),
     ):
         if stats[flag.name.lower()]:
-            log.warning("%d cells: %s: %s", len(stats[flag.name.lower()]), what, cell_list(stats[flag.name.lower()]))
+            flagged = stats[flag.name.lower()]
+            log.warning("%s: %s: %s", plural(len(flagged), "cell"), what, cell_list(flagged))
     return Cells(
         map=map_,
         nodes=nodes,
@@ -943,13 +944,13 @@ def run(tree: Tree, params: Params = Params(), progress: Callable[[int, int], No
 
 def summary(cells: Cells) -> str:
     """One line: cells, barrier rows and flagged cells."""
-    text = f"{cells.n_cells} cells, {len(cells.cbf_b)} barrier rows"
+    text = f"{plural(cells.n_cells, 'cell')}, {plural(len(cells.cbf_b), 'barrier row')}"
     bare = cells.stats.get("cells_without_cbf", 0)
     if bare:
-        text += f" ({bare} cells without one)"
+        text += f" ({plural(bare, 'cell')} without one)"
     few = np.count_nonzero(cells.cell_flags & CellFlag.FEW_LANDMARKS)
     if few:
-        text += f"; {few} cells topped up with landmarks not visible everywhere"
+        text += f"; {plural(few, 'cell')} topped up with landmarks not visible everywhere"
     blind = cells.flagged(CellFlag.BLIND_SPOT)
     if blind:
         text += f"; blind spots (< 2 landmarks in sight) in cells {cell_list(blind)}"

@@ -18,7 +18,7 @@ import numpy as np
 import shapely
 
 from bearnav_cli import occupancy
-from bearnav_cli.datatypes import Map, replace
+from bearnav_cli.datatypes import NEGLIGIBLE_SHARE, Map, plural, replace
 from bearnav_cli.errors import InvalidMapError
 from bearnav_cli.geometry import (
     CIRCLE_SEGMENTS,
@@ -469,15 +469,18 @@ def _validate(reader: _Reader, map_: Map, params: Params, culprit: str | None = 
     space = FreeSpace.from_map(map_)
     if space.free_area <= 0:
         raise fail("obstacles", "the free space is empty")
+    # the free space a message names is the planned point's: say what it is less than the map's
+    free = (f"the free space (the bounds less the walls and obstacles grown by the {map_.inflation_text}, where the "
+            "robot's centre may go)")  # fmt: skip
     if not space.points_strictly_free(map_.goal)[0]:
         what = "the goal " if culprit else ""
-        raise fail("goal", f"{what}{map_.goal.tolist()} is not strictly inside the free space")
+        raise fail("goal", f"{what}{map_.goal.tolist()} is not strictly inside {free}")
     component = space.component_of(map_.goal)
     for k, start in enumerate(map_.starts):
         where = f"starts[{k}]"
         what = f"{where} " if culprit else ""
         if not space.points_strictly_free(start)[0]:
-            raise fail(where, f"{what}{start.tolist()} is not strictly inside the free space")
+            raise fail(where, f"{what}{start.tolist()} is not strictly inside {free}")
         if not component.intersects(shapely.Point(start)):
             raise fail(where, f"{what}{start.tolist()} cannot reach the goal (another free component)")
 
@@ -507,7 +510,7 @@ def _validate(reader: _Reader, map_: Map, params: Params, culprit: str | None = 
 def _coverage_warning(map_: Map, space: FreeSpace, cells: int) -> None:
     points, counts = landmark_coverage(map_, space, cells)
     poor = points[counts < 2]
-    if len(poor) == 0 or len(points) == 0:
+    if len(poor) == 0 or len(points) == 0 or len(poor) < NEGLIGIBLE_SHARE * len(points):
         return
     share = 100.0 * len(poor) / len(points)
     lo, hi = poor.min(axis=0), poor.max(axis=0)
@@ -569,21 +572,20 @@ def summary(map_: Map, listed: int | None = None) -> str:
     """One line for ``inspect`` and ``plan``; with ``listed`` (:func:`listed_obstacles`) it says what was merged."""
     xmin, ymin, xmax, ymax = map_.bounds
     raw, inflated = len(map_.raw_obstacles), len(map_.obstacles)
-    radius = f"robot radius {map_.robot_radius:g}"
-    if map_.lookahead > 0:
-        radius += f" + look-ahead {map_.lookahead:g}"
+    radius = map_.inflation_text
     if listed is None or (listed == raw == inflated):
-        shapes = f"{inflated} obstacles ({radius})"
+        shapes = f"{plural(inflated, 'obstacle')} ({radius})"
     else:
         merged = []
         if raw != listed:
             merged.append(f"into {raw} (touching or overlapping)")
         if inflated != raw:
             merged.append(f"into {inflated} by the {radius} (gaps it cannot pass)")
-        shapes = f"{listed} obstacles merged " + " and ".join(merged) if merged else f"{listed} obstacles"
+        counted = plural(listed, "obstacle")
+        shapes = f"{counted} merged " + " and ".join(merged) if merged else counted
         if inflated == raw:
             shapes += f", {radius}"
     return (
         f"{map_.name}: {xmax - xmin:g} x {ymax - ymin:g} bounds, {shapes}, "
-        f"{len(map_.landmarks)} landmarks, {len(map_.starts)} starts"
+        f"{plural(len(map_.landmarks), 'landmark')}, {plural(len(map_.starts), 'start')}"
     )

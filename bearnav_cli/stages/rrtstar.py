@@ -19,7 +19,7 @@ from typing import Callable
 
 import numpy as np
 
-from bearnav_cli.datatypes import Map, Tree
+from bearnav_cli.datatypes import Map, Tree, plural
 from bearnav_cli.errors import InvalidParamsError
 from bearnav_cli.geometry import FreeSpace
 
@@ -376,6 +376,6 @@ def summary(tree: Tree) -> str:
     """One line for ``inspect`` and ``plan``."""
     s = tree.stats
     return (
-        f"{len(tree.nodes)} nodes from {s.get('iterations', '?')} iterations, "
+        f"{plural(len(tree.nodes), 'node')} from {s.get('iterations', '?')} iterations, "
         f"{s.get('random_collision_samples', '?')} collision samples + {s.get('border_samples', '?')} on the border"
     )

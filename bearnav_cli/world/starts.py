@@ -71,14 +71,25 @@ def resolve_starts(map_, spec: str, rng: np.random.Generator) -> np.ndarray:
     if isinstance(parsed, int):
         return sample_starts(space, map_.goal, parsed, rng)
     starts = np.asarray(map_.starts, float).reshape(-1, 2) if isinstance(parsed, str) else parsed
-    inside = space.in_bounds(starts)
-    blocked = space.in_obstacle(starts)
+    inside = space.in_bounds(starts)  # B_r: the bounds shrunk by the planning radius
+    blocked = space.in_obstacle(starts)  # O: the obstacles grown by it
+    lo, hi = np.asarray(map_.bounds[:2], float), np.asarray(map_.bounds[2:], float)
     for k, (x, y) in enumerate(starts):
+        where = f"start {k} ({x:g}, {y:g})"
         if not inside[k]:
-            raise InvalidParamsError(f"start {k} ({x:g}, {y:g}) is outside the bounds", field="starts")
+            if not (lo <= (x, y)).all() or not ((x, y) <= hi).all():
+                raise InvalidParamsError(f"{where} is outside the bounds {_box(map_.bounds)}", field="starts")
+            raise InvalidParamsError(f"{where} is within the {map_.inflation_text} of a wall (the robot's centre "
+                                     f"stays in {_box(map_.free_bounds)})", field="starts")  # fmt: skip
         if blocked[k]:
-            raise InvalidParamsError(f"start {k} ({x:g}, {y:g}) is inside an obstacle", field="starts")
+            raise InvalidParamsError(f"{where} is inside an obstacle grown by the {map_.inflation_text} (the robot "
+                                     "would touch it)", field="starts")  # fmt: skip
     return starts
+
+
+def _box(bounds) -> str:
+    x0, y0, x1, y1 = (float(v) for v in bounds)
+    return f"[{x0:g}, {x1:g}] × [{y0:g}, {y1:g}]"
 
 
 def domain_starts(arrays, count: int, rng: np.random.Generator) -> np.ndarray:
