@@ -60,3 +60,23 @@ def test_every_dimension_is_explained():
 
 def test_the_runtime_reads_a_subset_of_the_plan():
     assert set(schema.RUNTIME_KEYS) <= set(schema.ENTRIES["plan"])
+
+
+def test_the_architecture_table_names_every_module_and_the_layers():
+    """docs/architecture.md's package table has one row per module of the package (and none for a module
+    that is gone), and its layering block names every layer of tests/test_layering.py."""
+    from .test_layering import LAYERS
+
+    text = (REPO / "docs" / "architecture.md").read_text()
+    rows = set(re.findall(r"^\| `([a-z_/]+\.py)` \|", text, flags=re.M))
+    package = REPO / "bearnav_cli"
+    modules = {
+        str(p.relative_to(package)) for p in package.rglob("*.py") if p.name not in ("__init__.py", "__main__.py")
+    }
+    assert modules - rows == set(), f"modules without a row in docs/architecture.md: {sorted(modules - rows)}"
+    assert rows - modules == set(), f"rows for modules that do not exist: {sorted(rows - modules)}"
+    block = text[text.index("## Import layering") :]
+    block = block[block.index("```") : block.index("```", block.index("```") + 3)]
+    named = set(re.findall(r"[a-z_]+", block))
+    missing = {layer for layer in LAYERS if layer not in named}
+    assert not missing, f"layers missing from the layering block: {sorted(missing)}"
