@@ -1712,9 +1712,11 @@ def sweep_command(
     out_dir: Optional[Path] = typer.Option(None, "-o", "--out", help="The store folder (default sweeps/NAME/)."),
     jobs: Optional[int] = typer.Option(None, "--jobs", "-j", help="Local worker processes (default: every CPU)."),
     scheduler: Optional[str] = typer.Option(
-        None, "--scheduler", metavar="ADDRESS", help="Run the jobs on this Dask scheduler (tcp://HOST:PORT; "
-        "needs bearnav[dask]) instead of local processes."
-    ),  # fmt: skip
+        None,
+        "--scheduler",
+        metavar="ADDRESS",
+        help="Run the jobs on this Dask scheduler (tcp://HOST:PORT; needs bearnav[dask]), not in local processes.",
+    ),
     report: bool = typer.Option(False, "--report", help="Only redraw the table and figure from the store."),
     figure: Optional[Path] = typer.Option(None, "--figure", help="The figure (default STORE/success.png)."),
     quiet: bool = QUIET,

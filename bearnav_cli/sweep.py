@@ -768,7 +768,10 @@ def _record(job: Job, outcome: dict, plan_data: dict) -> dict:
     """The job file: schema, key, grid values, status, results, the plan's figures and the times."""
     plan = plan_data.get("plan")
     info = plan_data.get("info") or {}
-    tolerance = getattr(plan, "plan_tolerance", None) if plan is not None else None
+    figures = None
+    if plan is not None:
+        figures = {"tolerance": _finite(getattr(plan, "plan_tolerance", None)), "cells": int(len(plan.cells.cell_node)),
+                   "n_tags": int(len(plan.map.landmarks)), "new_tags": info.get("new_tags")}  # fmt: skip
     return {
         "schema": JOB_SCHEMA,
         "key": job.key,
@@ -778,10 +781,7 @@ def _record(job: Job, outcome: dict, plan_data: dict) -> dict:
         "status": outcome["status"],
         "error": outcome.get("error"),
         "result": outcome.get("result"),
-        "plan": None if plan is None else {
-            "tolerance": _finite(tolerance), "cells": int(len(plan.cells.cell_node)),
-            "n_tags": int(len(plan.map.landmarks)), "new_tags": info.get("new_tags"),
-        },  # fmt: skip
+        "plan": figures,
         "times": {"plan_s": info.get("elapsed_s"), "sim_s": outcome.get("sim_s")},
         "software": artifacts.software_versions(),
     }
