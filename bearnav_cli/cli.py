@@ -1757,6 +1757,7 @@ def sweep_command(
             executor, close = sweep.connect_scheduler(scheduler)
         else:
             executor = sweep.local_executor(jobs or os.cpu_count() or 1)
+        interrupted = True
         try:
             with _sweep_progress() as progress:
                 plans = progress.add_task("plans", total=None, failed=0, left="")
@@ -1769,6 +1770,7 @@ def sweep_command(
                     progress.update(plans, completed=done, total=total, left=total - done)
 
                 outcome = sweep.run(job_list, store, executor, on_job, on_plans)
+            interrupted = False
         except KeyboardInterrupt as exc:
             done = len([r for r in sweep.records(store, job_list).values() if r.get("status") == "done"])
             word = "terminated" if isinstance(exc, Terminated) else "interrupted"
@@ -1779,7 +1781,7 @@ def sweep_command(
             if close is not None:
                 close()
             else:
-                executor.shutdown(wait=True, cancel_futures=True)
+                sweep.stop_local(executor, interrupted)
     found = sweep.records(store, job_list)
     rows = sweep.table(job_list, found)
     written = sweep.write_results(store, rows)

@@ -61,6 +61,7 @@ __all__ = [
     "expand",
     "expand_maps",
     "local_executor",
+    "stop_local",
     "make_plans",
     "markdown",
     "read_sweep",
@@ -603,11 +604,34 @@ def _save_plan(store: Path, key: str, plan: Any, manifest: dict | None, info: di
     artifacts.write_record(folder / "plan.json", document)
 
 
+def _worker_signals() -> None:
+    """A local worker leaves Ctrl-C to the sweep, which stops it (:func:`stop_local`); SIGTERM ends it at once.
+
+    A forked worker inherits the command line's handlers, which turn both signals into exceptions
+    that a long job may not see for seconds.
+    """
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+
 def local_executor(jobs: int) -> Any:
     """A :class:`concurrent.futures.ProcessPoolExecutor` of ``jobs`` processes (``--jobs``)."""
     from concurrent.futures import ProcessPoolExecutor
 
-    return ProcessPoolExecutor(max_workers=jobs)
+    return ProcessPoolExecutor(max_workers=jobs, initializer=_worker_signals)
+
+
+def stop_local(executor: Any, interrupted: bool) -> None:
+    """Shut a :func:`local_executor` down: wait for it after a sweep, end its workers at once after an interrupt."""
+    if not interrupted:
+        executor.shutdown(wait=True)
+        return
+    # the executor has no public way to end running jobs: its worker processes (a CPython attribute since 3.2)
+    for process in list((getattr(executor, "_processes", None) or {}).values()):
+        process.terminate()
+    executor.shutdown(wait=True, cancel_futures=True)
 
 
 def connect_scheduler(address: str, timeout: float = SCHEDULER_TIMEOUT_S) -> tuple[Any, Callable[[], None]]:

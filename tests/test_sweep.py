@@ -80,7 +80,7 @@ def test_same_table_on_one_two_processes_and_a_cluster_and_resume(folder):
         with pytest.raises(KeyboardInterrupt):
             sweep.run(jobs, folder / "one", executor, stop)
     finally:
-        executor.shutdown(wait=True, cancel_futures=True)
+        sweep.stop_local(executor, interrupted=True)
     assert len(sweep.records(folder / "one", jobs)) == 3
     result = invoke("small.yaml", "--jobs", "1", "-o", "one", "--json")
     assert result.exit_code == 0, result.output
