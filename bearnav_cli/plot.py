@@ -1092,7 +1092,11 @@ def sweep_plot(panels: Sequence[Any], title: str | None = None) -> plt.Figure:
     fovs = list(dict.fromkeys(line["fov"] for p in panels for line in p.lines))
     color = {f: _SWEEP_COLORS[i % len(_SWEEP_COLORS)] for i, f in enumerate(fovs)}
     marker = {f: _SWEEP_MARKERS[i % len(_SWEEP_MARKERS)] for i, f in enumerate(fovs)}
-    fig, axes = plt.subplots(len(maps), len(dynamics), figsize=(5.2 * len(dynamics), 3.1 * len(maps) + 0.9),
+    ncol = 2 if len(dynamics) == 1 else 4
+    n_handles = len(fovs) + len({line["variant_index"] for p in panels for line in p.lines if line["variant"]})
+    legend_rows = -(-n_handles // ncol)
+    height = 3.1 * len(maps) + 0.6 + 0.22 * legend_rows
+    fig, axes = plt.subplots(len(maps), len(dynamics), figsize=(max(6.4, 5.2 * len(dynamics)), height),
                              sharex=True, sharey=True, squeeze=False)  # fmt: skip
     variants: dict[int, str] = {}
     noises: set[float] = set()
@@ -1122,8 +1126,8 @@ def sweep_plot(panels: Sequence[Any], title: str | None = None) -> plt.Figure:
                        mfc="black" if k == 0 else "white", label=label)
                 for k, label in sorted(variants.items()) if label]  # fmt: skip
     if handles:
-        fig.legend(handles=handles, loc="lower center", ncol=min(4, len(handles)), fontsize=8, frameon=False)
+        fig.legend(handles=handles, loc="lower center", ncol=min(ncol, len(handles)), fontsize=8, frameon=False)
     if title:
         fig.suptitle(title, fontsize=10)
-    fig.tight_layout(rect=(0, 0.06, 1, 0.97))
+    fig.tight_layout(rect=(0, (0.22 * legend_rows + 0.1) / height, 1, 1 - 0.3 / height))
     return fig
