@@ -48,6 +48,7 @@ bench: $(STAMP)
 	$(BIN)/python bench/synthesize.py --readme
 	$(BIN)/python bench/simulate.py --readme
 	$(BIN)/python bench/plan.py --readme
+	$(BIN)/python bench/sweep.py --readme
 
 # The robot's distribution, bearnav-runtime (numpy only): dist/bearnav_runtime-VERSION-py3-none-any.whl
 # (docs/runtime.md). Standard library only: no venv, build backend or network needed.
@@ -55,7 +56,7 @@ runtime-wheel:
 	$(PYTHON) tools/build_runtime.py -o dist
 
 clean:
-	rm -rf plans/*/ .pytest_cache dist/
+	rm -rf plans/*/ sweeps/ .pytest_cache dist/
 
 # --------------------------------------------------------------------------- reproduce (repro/)
 FIGURES := docs/figures
@@ -93,10 +94,13 @@ $(FIGURES)/kitchen_sets.png: repro/kitchen_sets.py $(REPRO_LIB) plans/kitchen/pl
 $(FIGURES)/paper_b.png: repro/paper_b.py $(REPRO_LIB) plans/paper_b_circles/plan.npz
 	$(BIN)/python $< $(filter %.npz,$^) -o $@
 
-# Every example map, as MAP.yaml SIMPLIFIED.npz PLAN.npz triples; the script also proposes tags and
-# re-plans with them in-process (map, decompose, synthesize), so the planning code is an input too.
-# About 20 minutes on the 2-core development machine (256 configurations of 200 starts).
+# The robustness figure is a sweep (repro/robustness.yaml, docs/sweeps.md): every example map × both tag sets ×
+# 4 fields of view × 4 noises × 2 dynamics, 200 random starts, one job each, on every CPU (bearnav sweep --jobs N
+# for fewer). The store sweeps/robustness/ keeps every finished job (a job's file is named by the hash of its map,
+# seed, parameters and stage versions), so an interrupted `make reproduce` resumes where it stopped. About 20
+# minutes of CPU on the 2-core development machine (bench/README.md "Sweep").
 ROBUSTNESS_MAPS := kitchen paper_sim_circles paper_b_circles storeroom
-$(FIGURES)/robustness.png: repro/robustness.py $(REPRO_LIB) $(PLAN_SRC) \
-		$(foreach m,$(ROBUSTNESS_MAPS),maps/$(m).yaml plans/$(m)/simplified.npz plans/$(m)/plan.npz)
-	$(BIN)/python $< $(filter maps/%.yaml %.npz,$^) -o $@
+$(FIGURES)/robustness.png: repro/robustness.yaml $(STAMP) $(PLAN_SRC) $(foreach m,$(ROBUSTNESS_MAPS),maps/$(m).yaml)
+	$(BIN)/bearnav sweep $< -o sweeps/robustness --figure $@
+	cp sweeps/robustness/results.csv $(FIGURES)/robustness.csv
+	cp sweeps/robustness/results.md $(FIGURES)/robustness.md

@@ -71,6 +71,7 @@ __all__ = [
     "output_folder",
     "params_dict",
     "read_manifest",
+    "read_record",
     "remove_stale_temp_files",
     "RETIRED_SCHEMAS",
     "save",
@@ -78,6 +79,9 @@ __all__ = [
     "software_versions",
     "staging_folder",
     "TAGS_MARKER",
+    "write_parquet",
+    "write_record",
+    "write_table",
     "written_by",
 ]
 
@@ -1328,3 +1332,62 @@ def fresh(path: str | os.PathLike, kind: str, key: str, input_hash: str) -> Load
         if not isinstance(companion, dict) or companion.get("manifest") != json.loads(canonical_json(manifest)):
             return None
     return loaded
+
+
+# --------------------------------------------------------------------------- the sweep store (bearnav sweep)
+
+
+def write_record(path: str | os.PathLike, document: dict) -> None:
+    """Write one small JSON record of the sweep store (a job, a plan's provenance) atomically.
+
+    NaN and infinities are written as ``null`` (JSON has neither); the folder is created.
+    """
+
+    def clean(value: Any) -> Any:
+        if isinstance(value, float) and not np.isfinite(value):
+            return None
+        if isinstance(value, dict):
+            return {str(k): clean(v) for k, v in value.items()}
+        if isinstance(value, (list, tuple)):
+            return [clean(v) for v in value]
+        return value
+
+    text = json.dumps(clean(document), indent=1, sort_keys=True, allow_nan=False) + "\n"
+    atomic_write(path, lambda handle: handle.write(text.encode()))
+
+
+def read_record(path: str | os.PathLike, schema: str) -> dict | None:
+    """A record :func:`write_record` wrote with this ``schema``, or None (missing, unreadable, another schema)."""
+    try:
+        document = json.loads(Path(path).read_bytes().decode("utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+        return None
+    if not isinstance(document, dict) or document.get("schema") != schema:
+        return None
+    return document
+
+
+def write_table(path: str | os.PathLike, columns: tuple[str, ...], rows: list[dict]) -> Path:
+    """Write ``rows`` as CSV (a header of ``columns``, None as an empty cell) atomically; returns ``path``."""
+    import csv
+
+    buffer = io.StringIO()
+    writer = csv.DictWriter(buffer, fieldnames=list(columns), lineterminator="\n")
+    writer.writeheader()
+    writer.writerows([{c: ("" if row.get(c) is None else row.get(c)) for c in columns} for row in rows])
+    data = buffer.getvalue().encode()
+    atomic_write(path, lambda handle: handle.write(data))
+    return Path(path)
+
+
+def write_parquet(path: str | os.PathLike, columns: tuple[str, ...], rows: list[dict]) -> Path | None:
+    """Write ``rows`` as Parquet atomically when pyarrow is installed (else nothing, None)."""
+    try:
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+    except ImportError:
+        return None
+    table = pa.table({c: [row.get(c) for row in rows] for c in columns})
+    with atomic_output(path) as tmp:
+        pq.write_table(table, str(tmp))
+    return Path(path)

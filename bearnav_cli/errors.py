@@ -15,6 +15,7 @@ __all__ = [
     "InternalError",
     "InvalidMapError",
     "InvalidParamsError",
+    "InvalidSweepError",
     "OutputPathError",
     "ResourceLimitError",
 ]
@@ -56,6 +57,26 @@ class InvalidParamsError(BearnavError, ValueError):
         self.field = field
         self.reason = message
         super().__init__(_locate(message, None, field))
+
+
+class InvalidSweepError(BearnavError, ValueError):
+    """A sweep file (``bearnav sweep``, docs/sweeps.md) is malformed: an unknown key, an empty list, a bad value.
+
+    Parameters
+    ----------
+    message : str
+        What is wrong, in a few words.
+    file : str, optional
+        The sweep file.
+    field : str, optional
+        Its key (``noise_deg``).
+    """
+
+    def __init__(self, message: str, *, file: str | None = None, field: str | None = None):
+        self.file = file
+        self.field = field
+        self.reason = message
+        super().__init__(_locate(message, file, field))
 
 
 class ArtifactError(BearnavError, ValueError):

@@ -33,6 +33,7 @@ LAYERS = {
     "artifacts": 4,
     "bag": 4.5,
     "pipeline": 5,
+    "sweep": 5.5,  # bearnav sweep: grids of pipeline plans and simulate runs, its store through artifacts
     "cli": 6,
 }
 EXTERNAL_ONLY_IN = {
