@@ -1368,7 +1368,17 @@ def read_record(path: str | os.PathLike, schema: str) -> dict | None:
 
 
 def write_table(path: str | os.PathLike, columns: tuple[str, ...], rows: list[dict]) -> Path:
-    """Write ``rows`` as CSV (a header of ``columns``, None as an empty cell) atomically; returns ``path``."""
+    """Write ``rows`` as CSV (a header of ``columns``, None as an empty cell) atomically; returns ``path``.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file to write (replaced atomically).
+    columns : tuple of str
+        The column names, in order.
+    rows : list of dict
+        One dict per row, column name → value (a missing or None value is an empty cell).
+    """
     import csv
 
     buffer = io.StringIO()
@@ -1381,7 +1391,17 @@ def write_table(path: str | os.PathLike, columns: tuple[str, ...], rows: list[di
 
 
 def write_parquet(path: str | os.PathLike, columns: tuple[str, ...], rows: list[dict]) -> Path | None:
-    """Write ``rows`` as Parquet atomically when pyarrow is installed (else nothing, None)."""
+    """Write ``rows`` as Parquet atomically when pyarrow is installed (else nothing, None).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file to write (replaced atomically).
+    columns : tuple of str
+        The column names, in order.
+    rows : list of dict
+        One dict per row, column name → value (a missing value is null).
+    """
     try:
         import pyarrow as pa
         import pyarrow.parquet as pq
