@@ -26,7 +26,7 @@ MANIFEST_FIELDS = {
 
 
 def _plan(cli, path, *extra):
-    result = cli("plan", path, "--quiet", *extra)
+    result = cli("plan", path, *extra)  # not --quiet: it leaves only the last stage line
     assert result.exit_code == 0, result.output
     return result.output
 
