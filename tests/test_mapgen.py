@@ -8,6 +8,7 @@ wall or a face. The same seed gives the same bytes, and other seeds or kinds oth
 
 from __future__ import annotations
 
+import functools
 import logging
 
 import numpy as np
@@ -22,6 +23,12 @@ from tests import mapgen
 from tests.conftest import build_made
 
 SEEDS = (0, 1, 2)
+
+
+@functools.cache
+def loaded(seed: int, kind: str) -> map_.Map:
+    """The map stage's map of ``generate(seed, kind)``, once per test process (the grids take a while)."""
+    return build_made(mapgen.generate(seed, kind))
 
 
 @pytest.fixture(autouse=True)
@@ -44,7 +51,7 @@ def _on_a_face(built: map_.Map) -> np.ndarray:
 @pytest.mark.parametrize("kind", mapgen.KINDS)
 def test_every_kind_loads_feasible(kind, seed):
     made = mapgen.generate(seed, kind)
-    built = build_made(made)
+    built = loaded(seed, kind)
     space = FreeSpace.from_map(built)
     points = np.vstack([built.goal, built.starts])
     assert len(built.starts) >= 1 and space.points_strictly_free(points).all()
@@ -58,10 +65,9 @@ def test_every_kind_loads_feasible(kind, seed):
 
 @pytest.mark.parametrize("kind", mapgen.KINDS)
 def test_the_written_files_are_the_same_map(kind, tmp_path):
-    made = mapgen.generate(1, kind)
-    path = made.write(tmp_path)
+    path = mapgen.generate(0, kind).write(tmp_path)
     from_files = map_.run(read_map_source(path)).to_json()
-    in_memory = build_made(made).to_json()
+    in_memory = loaded(0, kind).to_json()
     # the same map.json but for the input's hash (the CLI hashes every file it read)
     from_files.pop("source"), in_memory.pop("source")
     assert from_files == in_memory
@@ -96,7 +102,7 @@ def test_grids_are_ragged(seed):
     """A grid's obstacles are not a few rectangles: their outlines have many corners, and specks or unknown pixels."""
     made = mapgen.generate(seed, "grid")
     gray, _ = decode_image(made.image, made.grid["image"])
-    built = build_made(made)
+    built = loaded(seed, "grid")
     corners = sum(len(p.exterior) + sum(len(h) for h in p.holes) for p in built.raw_obstacles)
     assert corners > 20 * len(built.raw_obstacles)
     assert set(np.unique(gray)) <= {mapgen.OCCUPIED_GRAY, mapgen.UNKNOWN_GRAY, mapgen.FREE_GRAY}
