@@ -312,11 +312,13 @@ class FreeSpace:
         """For each landmark, the part of ``B`` from which it is in line of sight (prepared polygons).
 
         The shadow of a raw obstacle seen from ``l`` is the union, over its boundary edges
-        ``(a, b)``, of the quadrilaterals ``a, b, b + F·unit(b − l), a + F·unit(a − l)`` (``F``
-        beyond the bounds), plus the obstacle; the region is ``B`` minus every shadow. A point
-        test against it is :meth:`visible` with the same tolerance for a tag on a wall (edges
-        through the landmark cast no shadow), except on shadow boundaries, a set of measure
-        zero; it costs one prepared point query instead of a segment test per step.
+        ``(a, b)``, of the quadrilaterals ``a, b, b + F·u_b, a + F·u_a`` (``u_a``, ``u_b`` the unit
+        vectors from ``l`` to ``a`` and ``b``, ``F`` beyond the bounds), with a fifth corner
+        ``l + F·unit(u_a + u_b)`` for an edge that spans more than 120° from ``l`` (its straight far
+        side would stop short of the bounds), plus the obstacle; the region is ``B`` minus every
+        shadow. A point test against it is :meth:`visible` with the same tolerance for a tag on a
+        wall (edges through the landmark cast no shadow), except on shadow boundaries, a set of
+        measure zero; it costs one prepared point query instead of a segment test per step.
 
         Parameters
         ----------
@@ -343,9 +345,22 @@ class FreeSpace:
             da, db = edges[:, 0] - lm, edges[:, 1] - lm
             na, nb = np.hypot(*da.T), np.hypot(*db.T)
             keep = (na > self.tol) & (nb > self.tol)  # an edge ending at the tag casts no shadow
-            quads = np.stack([edges[keep, 0], edges[keep, 1], edges[keep, 1] + far * (db[keep] / nb[keep, None]),
-                              edges[keep, 0] + far * (da[keep] / na[keep, None])], axis=1)  # fmt: skip
-            shadow = shapely.union_all(np.concatenate([shapely.polygons(quads), [self.raw_obstacles]]))
+            a, b = edges[keep, 0], edges[keep, 1]
+            ua, ub = da[keep] / na[keep, None], db[keep] / nb[keep, None]
+            quads = np.stack([a, b, b + far * ub, a + far * ua], axis=1)
+            # the far side a + F·u_a → b + F·u_b passes F·cos(θ/2) from the tag, θ the angle the edge spans:
+            # short of the bounds for a long face close to the tag (the back of a thin wall, θ near 180°).
+            # Such an edge's far side bends at the bisector instead (each half within 45° of it); the
+            # others keep four corners, half the union's work
+            e = b - a
+            off_line = np.abs(e[:, 0] * da[keep, 1] - e[:, 1] * da[keep, 0]) > self.tol * np.hypot(*e.T)
+            bisector = ua + ub
+            norm = np.hypot(*bisector.T)
+            bend = off_line & (norm < 1.0)  # cos(θ/2) = |u_a + u_b|/2 < 1/2; an edge through the tag stays flat
+            mid = lm + far * bisector[bend] / norm[bend, None]
+            wide = np.stack([a[bend], b[bend], quads[bend, 2], mid, quads[bend, 3]], axis=1)
+            pieces = np.concatenate([shapely.polygons(quads[~bend]), shapely.polygons(wide), [self.raw_obstacles]])
+            shadow = shapely.union_all(pieces)
             region = shapely.difference(box, shadow)
             shapely.prepare(region)
             regions.append(region)

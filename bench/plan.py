@@ -16,20 +16,22 @@ Two parts, each measured side by side in one run:
   imports, reading and writing artifacts, hashing) is the rest.
   Medians over the rounds, against the issue's target of 1.5 s (aim 1 s) and DESIGN §7's 2 s.
 * **Decompose against coverage.** For the example maps (kitchen, storeroom: an occupancy grid,
-  read by ``bearnav_cli.cli.read_map_source`` as the CLI reads it) and random maps from
-  ``random_map.py`` (clutter, rooms, grid), map → rrtstar → simplify run in-process once with
+  read by ``bearnav_cli.cli.read_map_source`` as the CLI reads it) and random maps of
+  ``tests/mapgen.py`` (clutter, rooms, maze, grid; written to files and read as the CLI reads
+  them), map → rrtstar → simplify run in-process once with
   the map's parameters; then ``decompose.run`` is timed with the map's decompose parameters
   in three variants, side by side in each round, the order rotating: funnel cells without
   densification (``max_added_nodes=0``), funnel cells as planned (default densification until
   ``coverage_target`` of F_m or ``max_added_nodes``), and the papers' cells
   (``cells="paper"``). Cell counts and the coverage of F_m before and after densification
-  come from ``cells.stats``. A map whose map → rrtstar → simplify fails (e.g. a rooms map with
-  a start in another free component) is skipped and named, and the next seed of that kind is
-  tried.
+  come from ``cells.stats``. A map whose map → rrtstar → simplify fails is skipped and named,
+  and the next seed of that kind is tried. ``--external PATH`` takes the random maps from
+  another generator instead (a script run as ``PATH SEED --kind KIND -o FILE``, kinds clutter,
+  rooms and grid), e.g. to compare with an earlier record.
 
 Run from the repository root::
 
-    PYTHONPATH=. python bench/plan.py [--quick] [--readme]
+    PYTHONPATH=. python bench/plan.py [--quick] [--readme] [--external PATH]
 
 The markdown goes to stdout; ``--readme`` replaces the ``plan`` section of ``bench/README.md``.
 """
@@ -53,6 +55,7 @@ from common import README, REPO_DIR, load_line, load_snapshot, machine_line, mar
 from bearnav_cli import artifacts, pipeline
 from bearnav_cli.cli import read_map_source
 from bearnav_cli.stages import decompose
+from tests import mapgen
 
 SECTION = "plan"
 PLAN_MAP = "maps/kitchen.yaml"
@@ -64,11 +67,10 @@ TARGET_S, AIM_S, DESIGN_S = 1.5, 1.0, 2.0
 DECOMPOSE_ROUNDS = 5
 #: The example maps of the decompose table.
 EXAMPLE_MAPS = (REPO_DIR / "maps" / "kitchen.yaml", REPO_DIR / "maps" / "storeroom.yaml")
-#: The random map generator (``random_map.py SEED --kind KIND -o FILE``): ``BEARNAV_RANDOM_MAP``, else next to
-#: the repository (``../shared/tools``).
-RANDOM_MAP = Path(os.environ.get("BEARNAV_RANDOM_MAP") or REPO_DIR.parent / "shared" / "tools" / "random_map.py")
-#: Random maps: per kind, the seeds tried in order; the first one that plans is used.
-RANDOM_SEEDS = {"clutter": (1, 2, 3, 4, 5), "rooms": (1, 2, 3, 4, 5), "grid": (1, 2, 3, 4, 5)}
+#: Random maps: per kind of tests/mapgen.py, the seeds tried in order; the first one that plans is used.
+RANDOM_SEEDS = {kind: (1, 2, 3, 4, 5) for kind in mapgen.KINDS}
+#: The kinds an ``--external`` generator is asked for.
+EXTERNAL_KINDS = ("clutter", "rooms", "grid")
 STAGE_FILES = tuple((stage.name, stage.filename) for stage in pipeline.STAGES)
 
 
@@ -280,23 +282,29 @@ def example_maps() -> list[Prepared]:
     return out
 
 
-def random_maps(folder: Path, kinds: tuple[str, ...]) -> tuple[list[Prepared], list[str]]:
+def random_map(folder: Path, seed: int, kind: str, external: Path | None) -> tuple[Path, str]:
+    """Write the random map ``seed`` of ``kind`` into ``folder``: its YAML and how to make it again."""
+    if external is None:
+        return mapgen.generate(seed, kind).write(folder), f"`python -m tests.mapgen {seed} --kind {kind}`"
+    path = folder / f"{kind}_{seed}.yaml"
+    subprocess.run([sys.executable, str(external), str(seed), "--kind", kind, "-o", str(path)], check=True, cwd=folder)
+    return path, f"`{external.name} {seed} --kind {kind}`"
+
+
+def random_maps(folder: Path, kinds: tuple[str, ...],
+                external: Path | None = None) -> tuple[list[Prepared], list[str]]:  # fmt: skip
     """The first seed of each kind whose map plans to a simplified tree, and the skipped ones (with why)."""
     out, skipped = [], []
-    if not RANDOM_MAP.exists():
-        return out, [f"no random maps: {RANDOM_MAP} not found"]
     for kind in kinds:
         for seed in RANDOM_SEEDS[kind]:
-            path = folder / f"{kind}_{seed}.yaml"
-            cmd = [sys.executable, str(RANDOM_MAP), str(seed), "--kind", kind, "-o", str(path)]
-            subprocess.run(cmd, check=True, cwd=folder)
+            path, shown = random_map(folder, seed, kind, external)
             try:
                 simplified = prepare(path)
             except Exception as exc:  # noqa: BLE001 - any failure to plan the map: skip it and say why
-                skipped.append(f"`random_map.py {seed} --kind {kind}` ({type(exc).__name__}: {exc})")
+                skipped.append(f"{shown} ({type(exc).__name__}: {exc})")
                 log(f"  skipped {kind} seed {seed}: {exc}")
                 continue
-            out.append(Prepared(f"random {kind} {seed}", f"`random_map.py {seed} --kind {kind}`", simplified,
+            out.append(Prepared(f"random {kind} {seed}", shown, simplified,
                                 pipeline.resolve_params("decompose", simplified.map.params)))  # fmt: skip
             break
         else:
@@ -339,7 +347,8 @@ def pct(value: float | None) -> str:
     return "—" if value is None else f"{100 * value:.1f}%"
 
 
-def decompose_text(maps: list[Prepared], skipped: list[str], rounds: int, target: float, limit: int) -> str:
+def decompose_text(maps: list[Prepared], skipped: list[str], rounds: int, target: float, limit: int,
+                   generator: str, kinds: tuple[str, ...]) -> str:  # fmt: skip
     rows, short, ratios = [], [], []
     for m in maps:
         log(f"decompose: {m.label} ({len(m.simplified.nodes)} nodes) × {rounds} rounds …")
@@ -382,7 +391,7 @@ def decompose_text(maps: list[Prepared], skipped: list[str], rounds: int, target
         "cells",
         "time paper / densified funnel",
     ]
-    seeds = ", ".join(f"{kind} {', '.join(map(str, s))}" for kind, s in RANDOM_SEEDS.items())
+    seeds = ", ".join(f"{kind} {', '.join(map(str, RANDOM_SEEDS[kind]))}" for kind in kinds)
     text = (
         "Decompose against coverage: map → rrtstar → simplify in-process once per map with the map's parameters "
         "(random maps have none: the defaults), then `decompose.run` with the map's decompose parameters in three "
@@ -391,13 +400,13 @@ def decompose_text(maps: list[Prepared], skipped: list[str], rounds: int, target
         f"*funnel (default)*: densified until the cells cover {target:.0%} of F_m (at most {limit} added leaf "
         'nodes), as `bearnav plan` runs it; *paper*: `cells="paper"` (ALGORITHMS §4, no coverage statistics). '
         "Coverage is `area(F_m ∩ D) / area(F_m)` from `cells.stats` (`free_coverage_before`, `free_coverage_m`, "
-        f"`added_nodes`). Random maps from `{RANDOM_MAP.name}` (seeds tried in order per kind: {seeds}; the first "
+        f"`added_nodes`). Random maps from {generator} (seeds tried in order per kind: {seeds}; the first "
         "that plans is used)."
     )
     parts = [text, markdown_table(headers, rows)]
     if skipped:
         parts.append("Skipped: " + "; ".join(skipped) + ".")
-    elif RANDOM_MAP.exists():
+    else:
         parts.append("No random map was skipped: the first seed of every kind planned.")
     if ratios:
         verdict = (
@@ -416,6 +425,8 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--quick", action="store_true",
                         help="smoke test: 3 plan runs, 1 decompose round, kitchen and one clutter map")  # fmt: skip
     parser.add_argument("--readme", action="store_true", help=f"replace the '{SECTION}' section of {README}")
+    parser.add_argument("--external", type=Path, metavar="PATH",
+                        help="random maps from this script (PATH SEED --kind KIND -o FILE)")  # fmt: skip
     args = parser.parse_args(argv)
     plan_rounds = 3 if args.quick else PLAN_ROUNDS
     dec_rounds = 1 if args.quick else DECOMPOSE_ROUNDS
@@ -427,9 +438,13 @@ def main(argv: list[str] | None = None) -> None:
     log("decompose: preparing the maps …")
     maps = example_maps()[:1] if args.quick else example_maps()
     with tempfile.TemporaryDirectory(prefix="bearnav-bench-maps-") as tmp:
-        extra, skipped = random_maps(Path(tmp), ("clutter",) if args.quick else tuple(RANDOM_SEEDS))
+        kinds = EXTERNAL_KINDS if args.external else mapgen.KINDS
+        kinds = kinds[:1] if args.quick else kinds
+        extra, skipped = random_maps(Path(tmp), kinds, args.external)
+        generator = f"`{args.external.name}`" if args.external else "`tests/mapgen.py`"
         defaults = decompose.Params()
-        dec = decompose_text(maps + extra, skipped, dec_rounds, defaults.coverage_target, defaults.max_added_nodes)
+        dec = decompose_text(maps + extra, skipped, dec_rounds, defaults.coverage_target, defaults.max_added_nodes,
+                             generator, kinds)  # fmt: skip
     load_after = load_snapshot()
 
     command = f"`bench/plan.py{' --quick' if args.quick else ''}`"

@@ -91,15 +91,22 @@ def random_plan(seed: int):
     return pipeline.compute(build_map(random_spec(seed, ITERATIONS)))["plan"]
 
 
-@functools.cache
-def tool_plan(seed: int, kind: str):
-    """The plan of the shared random-map tool's map ``seed`` of ``kind`` (skipped without the tool)."""
+def build_made(made) -> map_.Map:
+    """Run the map stage on a :class:`tests.mapgen.MadeMap` (a grid map with its image, as the CLI reads it)."""
     from bearnav_cli import pipeline
-    from tests.funnel_maps import ITERATIONS, load_random_map_tool
 
-    spec, _ = load_random_map_tool().generate(seed, kind)
-    spec.setdefault("params", {})["rrtstar"] = {"iterations": ITERATIONS, "seed": 0}
-    return pipeline.compute(build_map(spec))["plan"]
+    return map_.run(made.source(), pipeline.resolve_params("map", made.spec.get("params")))
+
+
+@functools.cache
+def made_plan(seed: int, kind: str):
+    """The plan of ``mapgen.generate(seed, kind)`` with the random maps' tree budget (once per test process)."""
+    from bearnav_cli import pipeline
+    from tests import mapgen
+    from tests.funnel_maps import ITERATIONS
+
+    made = mapgen.generate(seed, kind, params={"rrtstar": {"iterations": ITERATIONS, "seed": 0}})
+    return pipeline.compute(build_made(made))["plan"]
 
 
 @pytest.fixture

@@ -4,21 +4,20 @@
 rectangles and discs in a small box, a goal in the free space with some clearance, and
 landmarks on the walls and on the obstacles' boundaries. The same seed always gives the same
 map. Nothing here imports the package's planner: only numpy, shapely and the circle polygon
-the map stage uses (so that a tag put on a disc lies exactly on its boundary).
+the map stage uses (so that a tag put on a disc lies exactly on its boundary). Larger maps of more
+kinds (rooms, mazes, occupancy grids) come from :mod:`tests.mapgen`.
 """
 
 from __future__ import annotations
 
 import math
-import os
-from pathlib import Path
 
 import numpy as np
 import shapely
 
 from bearnav_cli.geometry import CIRCLE_SEGMENTS, circle_polygon
 
-__all__ = ["ITERATIONS", "PIPELINE", "cluttered_spec", "load_random_map_tool", "random_spec"]
+__all__ = ["ITERATIONS", "PIPELINE", "cluttered_spec", "random_spec"]
 
 #: The stages after ``map`` that make a plan.
 PIPELINE = ["rrtstar", "simplify", "decompose", "synthesize"]
@@ -154,23 +153,3 @@ def cluttered_spec(seed: int, iterations: int = 400) -> dict:
         landmarks.append([[u * W, 0.0], [W, u * H], [(1 - u) * W, H], [0.0, (1 - u) * H]][int(side)])
     landmarks = [[_round(x), _round(y)] for x, y in landmarks]
     return _spec(f"cluttered_{seed}", W, H, radius, goal, rects, discs, landmarks, iterations, 0)
-
-
-#: The shared generator of maps nobody tuned: next to the repository (``../shared``), or where the
-#: environment variable ``BEARNAV_RANDOM_MAP_TOOL`` says (a clone made elsewhere); absent on some machines.
-RANDOM_MAP_TOOL = Path(os.environ.get("BEARNAV_RANDOM_MAP_TOOL")
-                       or Path(__file__).resolve().parents[2] / "shared" / "tools" / "random_map.py")  # fmt: skip
-
-
-def load_random_map_tool():
-    """The module ``shared/tools/random_map.py`` (its ``generate(seed, kind)``); the test is skipped without it."""
-    import importlib.util
-
-    import pytest
-
-    if not RANDOM_MAP_TOOL.exists():
-        pytest.skip("shared random_map tool not available")
-    spec = importlib.util.spec_from_file_location("random_map", RANDOM_MAP_TOOL)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module

@@ -1,7 +1,7 @@
 """The error-ball rule of the control step (issue 11): beyond the certified tolerance ``δ*`` a robot
 drives only as fast as keeps every position its estimate allows off the obstacles.
 
-Properties, on small random maps (tests/funnel_maps.py and the shared random-map tool):
+Properties, on small random maps (tests/funnel_maps.py) and a rooms map of tests/mapgen.py:
 
 - ``obstacle_clearance`` is the exact distance to the inflated obstacles and the walls (checked
   against shapely), and ``away`` points from the nearest boundary point;
@@ -26,7 +26,7 @@ from bearnav_cli.runtime.cell_policy import least_rank_cell, obstacle_clearance
 from bearnav_cli.runtime.plan_arrays import PlanArrays
 from bearnav_cli.runtime.step import ControlSettings, error_ball_pace, steer_clear
 from bearnav_cli.stages import simulate
-from tests.conftest import random_plan, tool_plan
+from tests.conftest import made_plan, random_plan
 
 
 @pytest.fixture(autouse=True)
@@ -35,7 +35,7 @@ def _quiet(caplog):
 
 
 PLANS = {"random 1": lambda: random_plan(1), "random 4": lambda: random_plan(4),
-         "rooms 2": lambda: tool_plan(2, "rooms")}  # fmt: skip
+         "rooms 2": lambda: made_plan(2, "rooms")}  # fmt: skip
 
 
 def _points_in_bounds(plan, n: int, seed: int) -> np.ndarray:

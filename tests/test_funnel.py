@@ -27,14 +27,14 @@ import shapely
 from bearnav_cli import artifacts, composition, pipeline, verify
 from bearnav_cli.cell_lp import CellProblem, min_norm_gain
 from bearnav_cli.datatypes import CellStatus, Outcome, replace
-from bearnav_cli.errors import InvalidMapError
 from bearnav_cli.geometry import DEFAULT_CLEARANCE, FreeSpace
 from bearnav_cli.lp import LpSolver
 from bearnav_cli.runtime import cell_policy
 from bearnav_cli.runtime.plan_arrays import PlanArrays
 from bearnav_cli.stages import decompose, simulate, synthesize
+from tests import mapgen
 from tests.conftest import build_map
-from tests.funnel_maps import ITERATIONS, load_random_map_tool, random_spec
+from tests.funnel_maps import ITERATIONS, random_spec
 
 SPEED = 0.5
 #: The random maps and RRT* seeds of the end-to-end test.
@@ -82,11 +82,13 @@ def exit_face(vertices: np.ndarray, z: np.ndarray, x_j: np.ndarray, tol: float) 
 
 
 def raw_obstacles_of(spec: dict) -> tuple[list, list]:
-    """The spec's obstacles exactly: rectangles as shapely boxes, discs as (centre, radius)."""
+    """The spec's obstacles exactly: rectangles and polygons as shapely polygons, discs as (centre, radius)."""
     boxes, discs = [], []
     for o in spec["obstacles"]:
         if "rectangle" in o:
             boxes.append(shapely.box(*o["rectangle"]))
+        elif "polygon" in o:
+            boxes.append(shapely.Polygon(o["polygon"]))
         else:
             discs.append((np.array(o["circle"]["center"], float), float(o["circle"]["radius"])))
     return boxes, discs
@@ -250,7 +252,7 @@ def check_free_and_inside(plan, spec: dict) -> None:
         assert shapely.intersection(poly, inflated).area == 0.0, f"cell {c} overlaps an obstacle"
         assert not shapely.intersects(poly, inflated), f"cell {c} touches an obstacle"
         if raw_boxes is not None:
-            assert shapely.distance(poly, raw_boxes) >= rho - tol, f"cell {c} within ρ of a rectangle"
+            assert shapely.distance(poly, raw_boxes) >= rho - tol, f"cell {c} within ρ of a rectangle or polygon"
         for centre, radius in discs:
             assert shapely.distance(poly, shapely.Point(centre)) >= radius + rho - tol, f"cell {c} within ρ of a disc"
         assert np.all(v >= lo - tol) and np.all(v <= hi + tol), f"cell {c} leaves B_r"
@@ -321,20 +323,10 @@ def test_same_seed_same_plan():
 
 
 @pytest.mark.parametrize("kind", ["clutter", "rooms"])
-def test_random_map_tool(kind):
-    """One map of the shared generator through the same checks (clutter: starts dropped)."""
-    spec, grid = load_random_map_tool().generate(0, kind)
-    assert grid is None
-    if kind == "clutter":
-        spec["starts"] = []  # a random start may lie in another component; the test needs none
-    spec["params"] = {"rrtstar": {"iterations": 300, "seed": 0}}
-    try:
-        map_ = build_map(spec)
-    except InvalidMapError as exc:  # some rooms maps put a start in a room the goal cannot reach
-        if "start" in str(exc):
-            pytest.skip(f"invalid random map (start): {exc}")
-        raise
-    plan = pipeline.compute(map_)["plan"]
+def test_made_map(kind):
+    """One map of tests/mapgen.py through the same checks."""
+    spec = mapgen.generate(0, kind, params={"rrtstar": {"iterations": 300, "seed": 0}}).spec
+    plan = pipeline.compute(build_map(spec))["plan"]
     assert not np.isin(plan.status, [2, 3]).any()
     assert composition.check(plan, SPEED).ok
     check_free_and_inside(plan, spec)

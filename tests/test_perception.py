@@ -1,6 +1,6 @@
 """Perception coverage (issue 11 part 2): the rule, checked against an independent evaluation.
 
-On small random maps (tests/funnel_maps.py and the shared random-map tool): the camera heading is
+On small random maps (tests/funnel_maps.py) and a rooms map of tests/mapgen.py: the camera heading is
 the direction of the runtime's field (computed here through ``cell_policy.field``, the gain applied
 to the displacements, not the affine form the module uses), visibility is the segment test of
 ``FreeSpace.visible`` with an own field-of-view test, the fix is usable exactly when two or more
@@ -25,7 +25,7 @@ from bearnav_cli.errors import InvalidParamsError
 from bearnav_cli.geometry import FreeSpace
 from bearnav_cli.runtime import cell_policy
 from bearnav_cli.runtime.plan_arrays import PlanArrays
-from tests.conftest import build_map, random_plan, tool_plan
+from tests.conftest import build_map, made_plan, random_plan
 from tests.funnel_maps import ITERATIONS, random_spec
 
 #: Coarser than the default D/100, to keep the file fast; the rule does not depend on it.
@@ -39,7 +39,7 @@ def _quiet(caplog):
 
 def plans():
     return [("random 0", lambda: random_plan(0)), ("random 3", lambda: random_plan(3)),
-            ("rooms 2", lambda: tool_plan(2, "rooms"))]  # fmt: skip
+            ("rooms 2", lambda: made_plan(2, "rooms"))]  # fmt: skip
 
 
 def spacing_of(plan) -> float:

@@ -299,6 +299,26 @@ def test_visibility_regions_agree_with_the_segment_test(plans):
         assert np.array_equal(exact, fast)
 
 
+def test_the_back_of_a_thin_wall_shadows_a_tag_on_its_front():
+    """A tag on one face of a thin wall: the other face spans nearly 180° from it, and its shadow still
+    reaches the bounds (a straight far side ended about a unit behind the wall: tests/mapgen.py rooms 2)."""
+    import shapely
+
+    from tests.conftest import build_map
+
+    spec = {"name": "thin", "bounds": [0, 0, 6, 13], "goal": [4, 1], "landmarks": [[2.058, 7.647], [6, 0], [0, 13]],
+            "obstacles": [{"rectangle": [1.99, 4.993, 2.058, 10.475]}]}  # fmt: skip
+    space = FreeSpace.from_map(build_map(spec))
+    tag = np.array([[2.058, 7.647]])
+    rng = np.random.default_rng(0)
+    pts = rng.uniform([0, 0], [6, 13], (2000, 2))
+    pts = pts[space.points_free(pts)]
+    exact = space.visible(pts, np.repeat(tag, len(pts), 0))
+    region = space.visibility_regions(tag)[0]
+    assert np.array_equal(shapely.intersects_xy(region, pts[:, 0], pts[:, 1]), exact)
+    assert not exact[pts[:, 0] < 1.0].any() and exact[pts[:, 0] > 2.1].all()
+
+
 def test_controller_reports_arrival_and_needs_a_heading(plans):
     plan, path = plans["kitchen"]
     robot = runtime.Controller.from_plan(str(path), dynamics="unicycle")

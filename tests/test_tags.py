@@ -24,8 +24,9 @@ from bearnav_cli import perception, pipeline, plot, tags
 from bearnav_cli.datatypes import replace
 from bearnav_cli.errors import InvalidParamsError
 from bearnav_cli.stages import decompose, synthesize
+from tests import mapgen
 from tests.conftest import build_map
-from tests.funnel_maps import ITERATIONS, load_random_map_tool, random_spec
+from tests.funnel_maps import ITERATIONS, random_spec
 
 #: Evaluation grid D/CELLS: coarser than the default D/100 to keep the file fast.
 CELLS = 60
@@ -40,9 +41,7 @@ def _quiet(caplog):
 def spec_of(source: str, seed: int) -> dict:
     if source == "random":
         return random_spec(seed, ITERATIONS)
-    spec, _ = load_random_map_tool().generate(seed, source)
-    spec.setdefault("params", {})["rrtstar"] = {"iterations": ITERATIONS, "seed": 0}
-    return spec
+    return mapgen.generate(seed, source, params={"rrtstar": {"iterations": ITERATIONS, "seed": 0}}).spec
 
 
 @functools.cache
