@@ -1091,6 +1091,11 @@ LOOKAHEAD = typer.Option(
 
 
 #: The option of each field a camera check names (``perception.check_params``, ``bearing.check_camera``).
+#: The range and noise of the camera a ``--fov`` names (map, plan, plot): one declaration each.
+CAMERA_RANGE = typer.Option(None, "--range", help="That camera's range, map units (default: unlimited).")
+CAMERA_NOISE = typer.Option(
+    None, "--noise-deg", help="Bearing noise (1σ, degrees) of that camera's predicted fix error (default 1)."
+)
 CAMERA_OPTIONS = {"fov": "--fov", "fov_deg": "--fov", "noise_deg": "--noise-deg", "range": "--range",
                   "max_range": "--range"}  # fmt: skip
 
@@ -1119,9 +1124,7 @@ def map_command(
     fov: Optional[float] = typer.Option(
         None, "--fov", help="Also report where a camera of this field of view (degrees, (0, 360]) can fix itself."
     ),
-    max_range: Optional[float] = typer.Option(
-        None, "--range", help="That camera's range, map units (default: unlimited)."
-    ),
+    max_range: Optional[float] = CAMERA_RANGE,
     force: bool = FORCE,
     quiet: bool = QUIET,
     as_json: bool = JSON,
@@ -1500,12 +1503,8 @@ def plan_command(
         help="Check the plan for a camera of this field of view (degrees, (0, 360]): exit 1 where "
         "it sees no usable pair of tags along the field, with the `bearnav tags` command that adds them.",
     ),
-    max_range: Optional[float] = typer.Option(
-        None, "--range", help="That camera's range, map units (default: unlimited)."
-    ),
-    noise_deg: Optional[float] = typer.Option(
-        None, "--noise-deg", help="Bearing noise (1σ, degrees) of that camera's predicted fix error (default 1)."
-    ),
+    max_range: Optional[float] = CAMERA_RANGE,
+    noise_deg: Optional[float] = CAMERA_NOISE,
     bearing_error_deg: Optional[float] = typer.Option(
         None, "--bearing-error-deg", help="Overrides the map's robot.bearing_error_deg η_cam (degrees)."
     ),
@@ -1993,12 +1992,8 @@ def plot_command(
     fov: Optional[float] = typer.Option(
         None, "--fov", help="Mark where a camera of this field of view (degrees, (0, 360]) fails along a plan's field."
     ),
-    noise_deg: Optional[float] = typer.Option(
-        None, "--noise-deg", help="Bearing noise (1σ, degrees) of that camera's predicted fix error (default 1)."
-    ),
-    max_range: Optional[float] = typer.Option(
-        None, "--range", help="That camera's range, map units (default: unlimited)."
-    ),
+    noise_deg: Optional[float] = CAMERA_NOISE,
+    max_range: Optional[float] = CAMERA_RANGE,
     live_fov: Optional[float] = typer.Option(
         None, "--live-fov", help="With --color-by live: the camera's field of view, degrees, (0, 360] (default 60)."
     ),

@@ -21,6 +21,7 @@ import shapely
 import yaml
 
 from bearnav_cli.geometry import circle_polygon
+from tests.mapgen import maze_passages
 
 __all__ = ["KINDS", "clutter", "maze", "office"]
 
@@ -125,21 +126,7 @@ def maze(seed: int) -> dict:
     """A perfect maze (depth-first) of 4 × 3 cells of 2.5 m, walls 0.1 m thick."""
     rng = np.random.default_rng([seed, 12])
     nx, ny, s = 4, 3, 2.5
-    seen = np.zeros((nx, ny), bool)
-    open_walls: set[tuple[int, int, int, int]] = set()
-    stack = [(0, 0)]
-    seen[0, 0] = True
-    while stack:
-        i, j = stack[-1]
-        nbrs = [(i + di, j + dj) for di, dj in ((1, 0), (-1, 0), (0, 1), (0, -1))
-                if 0 <= i + di < nx and 0 <= j + dj < ny and not seen[i + di, j + dj]]  # fmt: skip
-        if not nbrs:
-            stack.pop()
-            continue
-        a, b = nbrs[int(rng.integers(len(nbrs)))]
-        open_walls.add((min(i, a), min(j, b), max(i, a), max(j, b)))
-        seen[a, b] = True
-        stack.append((a, b))
+    open_walls = maze_passages(rng, nx, ny, (0, 0))
     obstacles = []
     h = WALL / 2
     for i in range(nx):

@@ -35,7 +35,7 @@ import yaml
 
 from bearnav_cli.geometry import circle_polygon
 
-__all__ = ["KINDS", "MIN_COMPONENT_SHARE", "MadeMap", "generate", "main"]
+__all__ = ["KINDS", "MIN_COMPONENT_SHARE", "MadeMap", "generate", "main", "maze_passages"]
 
 #: The kinds of map, each drawn from its own random stream (seed 3 of two kinds are unrelated maps).
 KINDS = ("clutter", "rooms", "maze", "grid")
@@ -279,15 +279,27 @@ def _rooms(rng: np.random.Generator, radius: float) -> _Layout:
     return out
 
 
-def _maze(rng: np.random.Generator) -> _Layout:
-    """A perfect maze (depth-first) on a random grid of random cell size, a few walls knocked out (loops)."""
-    nx, ny, size = int(rng.integers(3, 7)), int(rng.integers(3, 6)), rng.uniform(1.0, 2.2)
-    out = _Layout(_r(nx * size), _r(ny * size))
-    half = rng.uniform(0.03, 0.1)
+def maze_passages(rng: np.random.Generator, nx: int, ny: int, start: tuple[int, int]) -> set[tuple[int, int, int, int]]:
+    """The passages of a perfect maze on an ``nx × ny`` grid of cells, dug depth-first from ``start``.
+
+    Parameters
+    ----------
+    rng : numpy.random.Generator
+        Picks the next neighbour at every step.
+    nx, ny : int
+        Cells along x and y.
+    start : tuple of int
+        The cell the dig starts from.
+
+    Returns
+    -------
+    set of tuple
+        ``(i0, j0, i1, j1)`` (lower cell first) for every wall that is open.
+    """
     seen = np.zeros((nx, ny), bool)
     opened: set[tuple[int, int, int, int]] = set()
-    stack = [(int(rng.integers(nx)), int(rng.integers(ny)))]
-    seen[stack[0]] = True
+    stack = [start]
+    seen[start] = True
     while stack:
         i, j = stack[-1]
         nbrs = [(i + di, j + dj) for di, dj in ((1, 0), (-1, 0), (0, 1), (0, -1))
@@ -299,6 +311,15 @@ def _maze(rng: np.random.Generator) -> _Layout:
         opened.add((min(i, a), min(j, b), max(i, a), max(j, b)))
         seen[a, b] = True
         stack.append((a, b))
+    return opened
+
+
+def _maze(rng: np.random.Generator) -> _Layout:
+    """A perfect maze (depth-first) on a random grid of random cell size, a few walls knocked out (loops)."""
+    nx, ny, size = int(rng.integers(3, 7)), int(rng.integers(3, 6)), rng.uniform(1.0, 2.2)
+    out = _Layout(_r(nx * size), _r(ny * size))
+    half = rng.uniform(0.03, 0.1)
+    opened = maze_passages(rng, nx, ny, (int(rng.integers(nx)), int(rng.integers(ny))))
     loops = rng.uniform(0.0, 0.2)
     for i in range(nx):
         for j in range(ny):
