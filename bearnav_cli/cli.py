@@ -1596,12 +1596,46 @@ def plan_command(
         if not as_json:
             out.print(f"  perception: {seeing.summary()}", highlight=False, markup=False, soft_wrap=True)
     _finish(reports, as_json, extra, camera=(360.0 if fov is None else fov, max_range), plan_words=plan_words)
+    if not as_json and not _Quiet.enabled and (seeing is None or seeing.fraction_domain >= 1.0):
+        out.print(f"  {plan_guarantee(plan, reports[-1].path, fov)}", highlight=False, markup=False, soft_wrap=True)
     if seeing is not None and seeing.fraction_domain < 1.0:
         from bearnav_cli.datatypes import percent
 
         raise _fail(f"a {fov:g}° camera looking along the field sees no usable pair of tags from "
                     f"{percent(1.0 - seeing.fraction_domain)} of D: add tags there; "
                     + tags_step(reports[-1].path, fov, max_range, plan_words), EXIT_OUTCOME)  # fmt: skip
+
+
+def plan_guarantee(plan: Any, path: Path, fov: Optional[float] = None) -> str:
+    """The sentence ``plan`` ends with: what the synthesis certified, for which robot, and what proves it.
+
+    Parameters
+    ----------
+    plan : Plan
+        The plan just made (every check of ``plan`` passed).
+    path : Path
+        Its ``plan.npz``, for the ``bearnav verify`` command the sentence names.
+    fov : float, optional
+        The camera ``plan --fov`` checked, if any.
+    """
+    from bearnav_cli import composition
+    from bearnav_cli.datatypes import percent
+
+    check = f"`{_command_text('bearnav', 'verify', path)}` proves it from the file alone"
+    camera = (f"a {fov:g}° camera sees a usable pair of tags along the field everywhere in that area (measured on a "
+              "grid)" if fov is not None else "the camera is not checked (add --fov)")  # fmt: skip
+    if not plan.cells.is_funnel:
+        return (f"guarantee: each certified cell's controller keeps a robot that knows its position in that cell and "
+                f"drives it out of the cell's exit; that the cells chain into a route to the goal is not certified "
+                f"for paper cells; {camera}")  # fmt: skip
+    by_area = composition.tolerance_by_area(plan.cells, plan.usable_tolerance)
+    robot = (f"a robot of radius {plan.map.robot_radius:g}"
+             + (f" driven through its point {plan.map.lookahead:g} ahead of the axle (a unicycle)"
+                if plan.map.lookahead > 0 else " commanded in velocity"))  # fmt: skip
+    where = f"the certified area ({percent(plan.cells.free_coverage)} of the free space)"
+    known = f"{plan.plan_tolerance:.3g} map units (median {by_area['median']:.3g} by area)"
+    return (f"guarantee (by construction): {robot} that starts in {where} and knows its position to within "
+            f"{known} reaches the goal without touching an obstacle or a wall; {check}; {camera}")  # fmt: skip
 
 
 #: ``decompose --cells`` (and ``plan --cells``) choices.

@@ -416,14 +416,16 @@ class PerceptionCoverage:
         return float(np.median(e)) if len(e) else math.nan
 
     def summary(self) -> str:
-        """One line: the camera, the fractions of ``D`` and ``F`` where the rule holds, and ``δ*``."""
+        """One line: the camera, the fractions of ``D`` and ``F`` where the rule holds, and one fix against ``τ_c``."""
         target = "" if self.error_target is None else f", error ≤ {self.error_target:g}"
         rng = "" if not math.isfinite(self.max_range) else f", range {self.max_range:g}"
         return (f"{plural(len(self.landmarks), 'tag')}, {self.fov_deg:g}° camera{rng}, {self.noise_deg:g}° noise"
                 f"{target}: two usable tags in view from {percent(self.fraction_domain)} of D and "
                 f"{percent(self.fraction_free)} of F; "
-                f"median predicted error {self.median_error_domain:.3g} in D, within δ* = {self.plan_tolerance:.3g} "
-                f"on {self.fraction_within_tolerance:.1%} of D")  # fmt: skip
+                f"one fix's median predicted error {self.median_error_domain:.3g} in D, below the plan's least "
+                f"position tolerance τ_c = {self.plan_tolerance:.3g} on {percent(self.fraction_within_tolerance)} of D "
+                "(a run does not rest on one fix: it fuses fixes with odometry, which `bearnav simulate` measures "
+                "and nothing here proves)")  # fmt: skip
 
 
 def _share(mask: np.ndarray, where: np.ndarray) -> float:

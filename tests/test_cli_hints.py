@@ -70,6 +70,12 @@ def test_the_blind_spot_hint_runs_as_printed_and_its_map_plans_past_the_check(cl
     replanned = cli(*plan)
     assert replanned.exit_code == 0, replanned.output
     assert "blind spot" not in replanned.output and "error:" not in replanned.output, replanned.output
+    # issue 23 item 3: a plan that passes ends with what is certified, for which robot, and what proves it
+    sentence = next(line for line in replanned.output.splitlines() if "guarantee" in line)
+    assert "radius 0.1" in sentence and "certified area" in sentence and "camera is not checked" in sentence
+    (verify,) = commands(sentence)
+    assert verify[0] == "verify" and (tmp_path / verify[1]).is_file() and verify[1].endswith("plan.npz"), sentence
+    assert "§" not in sentence and "δ" not in sentence, sentence
 
 
 def test_plan_fov_checks_the_camera_and_hints_with_its_options(cli, write_map, tmp_path):
@@ -78,6 +84,7 @@ def test_plan_fov_checks_the_camera_and_hints_with_its_options(cli, write_map, t
     result = cli("plan", "corners.yaml", "--fov", "60", "--range", "3", "--slip", "0.05")
     assert result.exit_code == 1, result.output
     assert "perception:" in result.output and "60° camera, range 3" in result.output, result.output
+    assert "δ*" not in result.output and "nothing here proves" in result.output, result.output  # says why runs succeed
     line = error_line(result)
     tags, plan = commands(line)
     assert tags[:2] == ["tags", "plans/corners/plan.npz"] and "corners.yaml" in tags, line
