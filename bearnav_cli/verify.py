@@ -973,7 +973,7 @@ def guarantee(plan: Plan, report: VerifyReport) -> str:
     proven = (f"proven from the plan file, {who} that starts in D ({percent(comp.coverage_free)} of F) and knows "
               f"its position, in the cell it is in, to within τ_c (≥ {comp.plan_tolerance:.3g} map units, median "
               f"{tol['median']:.3g}) reaches the goal without touching an obstacle or a wall, at speed "
-              f"{comp.speed:g} map units/s within {duration_text(comp.time_bound)} (a worst case, from the least "
+              f"{comp.speed:g} map units/s in {duration_text(comp.time_bound)} (a worst case, from the least "
               "progress each cell's certificate guarantees, not an estimate of a run's time)")  # fmt: skip
     bounded = (f"with bearings erring by at most η = {eta:g}° and wheel slip within {robot['slip']:g} of each step "
                "(the map's robot section) the `simulate --estimator set` robot moves only where it knows that much, "
