@@ -81,7 +81,8 @@ class Params:
     clearance : float or None
         Smallest distance of every new (shortcut) edge from the inflated obstacles and the
         walls (map units); ``None`` means ``0.01·D``, capped at half the goal's clearance,
-        as in ``rrtstar``; ``0`` is ALGORITHMS §3 as written.
+        as in ``rrtstar``; ``0`` is the paper's
+        simplification as written (ALGORITHMS §3).
     """
 
     max_rounds: int = 10
