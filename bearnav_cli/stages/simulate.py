@@ -177,14 +177,17 @@ class Params:
         so that the truth lies nearer to the nearest obstacle than the estimate says (bearings, and
         odometry pushed toward it).
     bearing_error_deg : float or None
-        ``η_cam`` the set estimator assumes (degrees); ``None``: the map's ``robot.bearing_error_deg``
-        (default 0.2), or ``noise_bound_deg`` when that is given.
+        The bound on every bearing error the set estimator assumes (degrees, ``η_cam``); ``None``: the
+        map's ``robot.bearing_error_deg`` (default 0.2), or ``noise_bound_deg`` when that is given.
     compass_error_deg : float or None
-        ``ψ`` (degrees), added to the bearing bound (``η = η_cam + ψ``); ``None``: the map's.
+        The compass (heading) error bound, added to the bearing bound (degrees; ``η = η_cam + ψ``);
+        ``None``: the map's.
     slip : float or None
-        ``κ``, the odometry bound's fraction of each step; ``None``: the map's ``robot.slip`` (0.03).
+        The odometry error bound as a fraction of each step (``κ``); ``None``: the map's ``robot.slip``
+        (0.03).
     slip_floor : float or None
-        ``ν`` (map units per step that translates); ``None``: the map's, else ``1e-4·D``.
+        The odometry error bound's floor, added on every step that translates (map units; ``ν``);
+        ``None``: the map's, else ``1e-4·D``.
     """
 
     dynamics: str = "single"

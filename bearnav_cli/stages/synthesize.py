@@ -71,7 +71,7 @@ class Params:
         Initial scale of the rates in each cell's barrier and exit conditions, halved while the LP
         is infeasible. It is ``κ_h = κ_v`` of the constants ``c_h``, ``c_v`` (§5.3).
     halvings : int
-        How many times ``κ`` may be halved after an infeasible LP before the
+        How many times ``kappa`` may be halved after an infeasible LP before the
         least-violation solve (so ``halvings + 1`` feasibility attempts).
     gain_structure : {"full", "diag", "scalar"}
         The controller gain of each cell: any 2×2 matrix, diagonal, or a multiple of the identity.
