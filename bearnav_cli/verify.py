@@ -74,7 +74,7 @@ class Params:
         Seed of ``numpy.random.default_rng`` for the starts.
     speed : float or None
         Reference speed of the closed loop (map units / s); ``None`` means the map's ``params: simulate:
-        speed``, else simulate's default. :func:`loop_speed` resolves both.
+        speed``, else simulate's default. Both are resolved by :func:`loop_speed`.
     dt : float or None
         Euler step (s); ``None`` takes the simulate default.
     min_success : float or None
