@@ -970,7 +970,32 @@ def _plain(text: str) -> str:
 
     text = re.sub(r":\w+:`~[\w.]*\.(\w+)`", r"\1", text)
     text = re.sub(r":\w+:`([^`]+)`", r"\1", text)
-    return text.replace("``", "")
+    return _user_words(text.replace("``", ""))
+
+
+#: A part of a parenthesis that points into the developer documentation or the code: "ALGORITHMS
+#: §11.5", "§6", "Lemma 7", "runtime.step.error_ball_pace", "bearnav_cli.world.camera.IdealCamera".
+_REFERENCE = (
+    r"(?:(?:ALGORITHMS|DESIGN)\s+)?§[\d.–-]+(?:\s+step\s+\d+)?|Lemma\s+\d+|issue\s+\d+(?:\.\d+)?"
+    r"|(?:bearnav_cli|runtime|funnel|liveness)(?:\.\w+)+"
+)
+
+
+def _user_words(text: str) -> str:
+    """Help text without the developer's references: the parts of a parenthesis that cite a section
+    of docs/algorithms.md, a lemma, an issue or a module of the code are dropped (a parenthesis of
+    nothing else goes with them). The docstrings keep them; docs/algorithms.md explains them.
+    """
+    import re
+
+    def keep(match: re.Match[str]) -> str:
+        parts = match.group(2).split(", ")
+        kept = [part for part in parts if not re.fullmatch(_REFERENCE, part.strip())]
+        if len(kept) == len(parts):
+            return match.group(0)
+        return f"{match.group(1)}({', '.join(kept)})" if kept else ""
+
+    return re.sub(r"(\s*)\(([^()]*)\)", keep, text)
 
 
 def _shown(value: Any) -> str:
@@ -1255,7 +1280,7 @@ def verify_command(
     plan_npz: Path = typer.Argument(..., metavar="PLAN_NPZ", help="plan.npz from `bearnav synthesize`."),
     tree: Optional[Path] = typer.Option(None, help="tree.npz whose collision samples the plan must keep."),
     world: Optional[Path] = typer.Option(
-        None, help="Another map YAML in the same frame: list the cells whose (C1) no longer holds there."
+        None, help="Another map YAML in the same frame: list the cells that are no longer obstacle-free there."
     ),
     fov: Optional[float] = typer.Option(
         None, "--fov", help="Also report perception coverage for a camera of this field of view, degrees (0, 360]."
@@ -1265,7 +1290,7 @@ def verify_command(
     as_json: bool = JSON,
     **options: Any,
 ) -> None:
-    """Prove the composed certificate from the plan alone (no solver): every cell, coverage, δ*, the loop.
+    """Prove the plan's certificate from the plan alone (no solver): every cell, coverage, tolerance, the loop.
 
     Example: bearnav verify plans/kitchen/plan.npz --starts 500 --min-success 0.99
     """
@@ -1506,14 +1531,14 @@ def plan_command(
     max_range: Optional[float] = CAMERA_RANGE,
     noise_deg: Optional[float] = CAMERA_NOISE,
     bearing_error_deg: Optional[float] = typer.Option(
-        None, "--bearing-error-deg", help="Overrides the map's robot.bearing_error_deg η_cam (degrees)."
+        None, "--bearing-error-deg", help="Overrides the map's robot.bearing_error_deg (degrees)."
     ),
     compass_error_deg: Optional[float] = typer.Option(
-        None, "--compass-error-deg", help="Overrides the map's robot.compass_error_deg ψ (degrees)."
+        None, "--compass-error-deg", help="Overrides the map's robot.compass_error_deg (degrees)."
     ),
-    slip: Optional[float] = typer.Option(None, "--slip", help="Overrides the map's robot.slip κ."),
+    slip: Optional[float] = typer.Option(None, "--slip", help="Overrides the map's robot.slip."),
     slip_floor: Optional[float] = typer.Option(
-        None, "--slip-floor", help="Overrides the map's robot.slip_floor ν (map units per step)."
+        None, "--slip-floor", help="Overrides the map's robot.slip_floor (map units per step)."
     ),
     force: bool = FORCE,
     quiet: bool = QUIET,
@@ -1655,7 +1680,7 @@ def inspect_command(
         False, "--cells", help="Also print a table of the cells (one row each, with units); with --json, its rows."
     ),
     cell: Optional[int] = typer.Option(
-        None, "--cell", metavar="N", help="Print one cell of cells.npz or plan.npz: rows, vertices, status, δ_c."
+        None, "--cell", metavar="N", help="Print one cell of cells.npz or plan.npz: rows, vertices, status, tolerance."
     ),
     quiet: bool = QUIET,
     as_json: bool = JSON,
@@ -1896,7 +1921,7 @@ def tags_command(
     quiet: bool = QUIET,
     as_json: bool = JSON,
 ) -> None:
-    """Propose tag positions so that a camera looking along the fields sees a usable pair from all of D.
+    """Propose tag positions so that a camera looking along the fields sees a usable pair in the certified area.
 
     The tags go on obstacle and wall boundaries, facing the free side, a tag's width apart; the
     existing tags stay. Writes the map with the new tags and a figure of where to glue them; the
@@ -2015,8 +2040,8 @@ def plot_command(
     color_by: Optional[str] = typer.Option(
         None,
         "--color-by",
-        help="Cell fill: rank, tolerance (τ_c), status, or live (ALGORITHMS §12.5: red where a "
-        "cell is not live) (default: rank; status for paper plans).",
+        help="Cell fill: rank, tolerance (the position error the cell tolerates), status, or live "
+        "(red where a cell is not live) (default: rank; status for paper plans).",
     ),
     barriers: bool = typer.Option(False, "--barriers", help="Also draw every barrier line h = 0."),
     labels: Optional[bool] = typer.Option(

@@ -73,8 +73,8 @@ class Params:
     seed : int
         Seed of ``numpy.random.default_rng`` for the starts.
     speed : float or None
-        ``v_ref`` of the closed loop (map units / s); ``None`` means the map's ``params: simulate:
-        speed``, else simulate's default (both resolved by :func:`loop_speed`).
+        Reference speed of the closed loop (map units / s); ``None`` means the map's ``params: simulate:
+        speed``, else simulate's default. Both are resolved by :func:`loop_speed`.
     dt : float or None
         Euler step (s); ``None`` takes the simulate default.
     min_success : float or None
@@ -92,7 +92,7 @@ class Params:
         its true position (``p`` with a look-ahead) lies outside every cell of ``D`` after a step;
         any breach or collision of a run from ``D`` fails verify.
     bearing_error_deg : float or None
-        ``η`` of the liveness report (degrees, in (0, 45)): the bound on every world-frame bearing error;
+        The bound on every world-frame bearing error of the liveness report (degrees, in (0, 45));
         ``None`` means the map's ``robot: bearing_error_deg`` plus ``compass_error_deg`` (0.2° by default).
     live_fov : float or None
         Measure liveness (ALGORITHMS §12.5) for a camera of this field of view (degrees, in (0, 360]).
@@ -101,9 +101,9 @@ class Params:
         and the certified bearing error ``η*``: a measurement at a stated resolution, not a proof, that
         never fails verify (:func:`bearnav_cli.liveness.measure`).
     slip : float or None
-        ``κ`` of the liveness report (in [0, 1)): odometry errs by at most ``κ`` of a step plus the floor
-        ``ν``. ``None`` means the map's ``robot: slip`` (0.03 by default); ``ν`` is the map's
-        ``robot: slip_floor``, else ``1e-4·D``.
+        The odometry error bound of the liveness report, a fraction of each step (in [0, 1)) plus a
+        floor (``κ`` and ``ν``). ``None`` means the map's ``robot: slip`` (0.03 by default); the
+        floor is the map's ``robot: slip_floor``, else ``1e-4·D``.
     live_resolution : float or None
         Grid spacing of the liveness report (map units, > 0). ``None`` means about 25 points in the
         median cell, at most ``0.01·D`` (:func:`bearnav_cli.liveness.default_resolution`).

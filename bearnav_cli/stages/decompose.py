@@ -65,28 +65,33 @@ class Params:
     Attributes
     ----------
     cells : {"funnel", "funnel-local", "paper"}
-        ``funnel`` (default): obstacle-free convex cells that compose (ALGORITHMS §11.5): the
-        corridor region of each edge, necked where its exit face would leave the parent cell,
-        and densified until the cells cover ``coverage_target`` of ``F_m``. ``funnel-local``
+        ``funnel`` (default): obstacle-free convex cells that hand the robot on from one to the
+        next (ALGORITHMS §11.5): the corridor around each tree edge, narrowed where its exit
+        would leave the next cell, with cells added until they cover ``coverage_target`` of the
+        free space at least the barrier margin from obstacles and walls. ``funnel-local``
         starts each region from the §4.1 cell (bisector rows). ``paper``: the §4 cells with
         per-cell barrier rows, to reproduce the papers (the options below marked *paper* apply).
     exit_inset : float or None
-        ``δ_e,c`` (funnel): each cell's exit face lies in its parent cell eroded by its own inset
-        (map units, ALGORITHMS §12.4). ``None`` (default): per cell, the inset that maximises
-        ``τ_c = min(h*/2, δ_e,c/2)`` (``funnel.best_neck``); a number: that inset in every cell,
-        capped at 98% of the exit point's depth in its parent cell (warns).
+        Funnel: how far inside the next cell each cell's exit lies (map units, ALGORITHMS §12.4).
+        ``None`` (default): per cell, the inset that makes the position error the cell tolerates
+        largest (``funnel.best_neck``); a number: that inset in every cell, capped at 98% of the
+        exit point's depth in the next cell (warns). In the symbols of docs/algorithms.md the
+        inset is ``δ_e,c`` and the tolerance ``τ_c = min(h*/2, δ_e,c/2)``.
     coverage_target : float
-        Funnel: densify until the cells cover this fraction of ``F_m`` (ALGORITHMS §11.5 step 3),
-        then (``cover = F``) of ``F``.
+        Funnel: add cells until they cover this fraction of the free space at least the barrier
+        margin from obstacles and walls (``cover = F_m``, ALGORITHMS §11.5 step 3), then, with
+        ``cover = F``, of all the free space.
     cover : {"F_m", "F"}
-        Funnel: the domain densification fills. ``F_m`` (default): the §11.5 domain; the band
-        within ``m`` of ``O`` stays outside ``D`` (kitchen: 99.0% of ``F_m``, 86.2% of ``F``).
-        ``F`` (ALGORITHMS §12.7): then leaves in that band, ``WALL_LEAF_DEPTH·m`` from ``O`` (the
-        band curve's corners first), whose cells reach within about a quarter of that of the
-        walls, so robots parked there start inside the certificate. A band cell never lowers the
-        least ``τ_c`` of the cells before the band: a leaf whose cell would is joined to the next
-        node (up to ``BAND_NODE_TRIES``) or left out, and the warning says so. Kitchen, seeds 0–4:
-        99.0% of ``F``, the same least ``τ_c``, about 1.8× the cells and twice the planning time.
+        Funnel: the area the added cells fill. ``F_m`` (default): the free space at least the
+        barrier margin from obstacles and walls (ALGORITHMS §11.5); the band nearer to them stays
+        outside the certified area (kitchen: 99.0% of ``F_m``, 86.2% of the free space).
+        ``F``: all the free space (ALGORITHMS §12.7): then leaves in that band,
+        ``WALL_LEAF_DEPTH·m`` from ``O`` (the band curve's corners first), whose cells reach within
+        about a quarter of that of the walls, so robots parked there start inside the certificate. A
+        band cell never lowers the least ``τ_c`` of the cells before the band: a leaf whose cell
+        would is joined to the next node (up to ``BAND_NODE_TRIES``) or left out, and the warning
+        says so. Kitchen, seeds 0–4: 99.0% of ``F``, the same least ``τ_c``, about 1.8× the cells
+        and twice the planning time.
     max_added_nodes : int
         Funnel: at most this many leaf nodes are added by densification.
     bisector_rule : {"crossing", "parent"}
@@ -107,10 +112,11 @@ class Params:
         ``wedge``: ALGORITHMS §4.5–4.6 as written, lines through collision samples; its safe
         set overlaps the obstacles between samples.
     barrier_margin : float or None
-        ``m``: a ``corridor`` barrier row is moved ``min(m, d/2)`` toward the edge (``d`` the
-        piece's distance from it), so the safe set keeps that distance from the obstacles; a
-        funnel cell's row keeps ``min(m, d/4)`` (``funnel.ROW_SHARE``), and ``F_m`` is the free
-        space at least ``m`` from ``O`` (map units); ``None`` means ``0.01·D``.
+        How far the safe set keeps from the obstacles and walls (map units). ``None`` means
+        ``0.01·D``. With ``m`` the margin, a ``corridor`` barrier row is moved ``min(m, d/2)``
+        toward the edge (``d`` the piece's distance from it); a funnel cell's row keeps
+        ``min(m, d/4)`` (``funnel.ROW_SHARE``), and ``F_m`` is the free space at least ``m`` from
+        ``O``.
     """
 
     cells: str = "funnel"

@@ -74,14 +74,16 @@ class Params:
     Attributes
     ----------
     max_rounds : int
-        Upper bound on the rounds of PPR | CtL | RC | CtL (at least 1).
+        Upper bound on the rounds of shortcuts, leaf cutting and crossing removal (at least 1).
+        A round is PPR | CtL | RC | CtL.
     ctl : {"middle", "extremes"}
-        Which leaves CtL keeps among the leaf children of one parent, sorted by
+        Which leaves leaf cutting (CtL) keeps among the leaf children of one parent, sorted by
         angle from the incoming edge: the middle one, or the first and last.
     clearance : float or None
         Smallest distance of every new (shortcut) edge from the inflated obstacles and the
         walls (map units); ``None`` means ``0.01·D``, capped at half the goal's clearance,
-        as in ``rrtstar``; ``0`` is ALGORITHMS §3 as written.
+        as in ``rrtstar``; ``0`` is the paper's
+        simplification as written (ALGORITHMS §3).
     """
 
     max_rounds: int = 10

@@ -111,7 +111,7 @@ class Params:
     keep_clear : bool
         On a funnel plan, a step beyond the certified tolerance ``δ*`` is slowed so that the
         estimate's error ball (3σ), grown by the step, never reaches an obstacle, and bent away
-        from the nearest one as it slows (``runtime.step.error_ball_pace``); a robot that cannot
+        from the nearest one as it slows; a robot that cannot
         move waits for fixes. Off: full speed on any estimate.
     initial_heading : float or None
         Initial heading (degrees); ``None``: toward the active cell's exit point (the goal
@@ -122,18 +122,19 @@ class Params:
     odometry : bool
         Between fixes, carry ``x̂`` forward with the commanded motion (wheel odometry: it errs by
         the wheel slip, ``odometry_noise``) for ``hold_time``, and on while the filter's 3σ stays
-        within the barrier margin; off: §7.5's hold as written.
+        within the barrier margin; off: the paper's hold policy as written (§7.5).
     odometry_noise : float
         Wheel slip ``σ`` of the simulated base (default 0.02): odometry alone errs by ``≈ σ·d``
         (standard deviation, along and across the path) over a straight run of length ``d`` (per run
-        a scale error and a heading bias, both ``N(0, σ²)``, plus per-step jitter of the same size:
-        :class:`bearnav_cli.world.motion.Base`). 0 is the exact motion of §7.1 that the certificates
-        assume (``verify`` runs with it).
+        a scale error and a heading bias, both ``N(0, σ²)``, plus per-step jitter of the same size).
+        0 is the exact motion that the certificates assume (§7.1,
+        :class:`bearnav_cli.world.motion.Base`); ``verify`` runs with it.
     odometry_drift : float
         Odometry error (1σ) per unit travelled that the controller's filter assumes, its process
-        noise (:class:`~bearnav_cli.runtime.ControlSettings`, default 0.05 = 5% of the distance
-        travelled). More than the slip (2σ = 4% rms per step, ``σ·d`` over a run), and added up
-        linearly, as the per-run slip adds up: :func:`bearnav_cli.runtime.estimate.fuse` grows the
+        noise (default 0.05 = 5% of the distance travelled). The default is
+        :class:`~bearnav_cli.runtime.ControlSettings`'s. More than the slip (2σ = 4% rms per step,
+        ``σ·d`` over a run), and added up linearly, as the per-run slip adds up:
+        :func:`bearnav_cli.runtime.estimate.fuse` grows the
         estimate's σ by ``drift·ℓ`` per step of length ``ℓ`` (``σ ← σ + drift·ℓ``, so ``drift·d``
         after ``d`` blind), and its 3σ covers the default slip over a hold (``docs/choices.md``).
     max_fix_error : float or None
@@ -153,18 +154,20 @@ class Params:
         Step limit of every run; ``None`` means ``ceil(5·L_route/(v·dt)) + 1000`` per run, with
         ``L_route = ‖x₀ − x_n‖ + cost(n)`` and ``n`` the start's nearest tree node.
     camera : {"ideal", "render"}
-        ``ideal``: the bearings of ALGORITHMS §6.1 (:class:`bearnav_cli.world.camera.IdealCamera`,
-        ``fov``, ``noise_deg``, ``range`` and ``occlusion`` above); ``render``: frames drawn and
-        AprilTags detected in them (``bearnav_cli.world.render.RenderedCamera``, needs
-        ``bearnav[camera]``; its figures go to the metrics under ``camera``).
+        ``ideal``: exact bearings to the tags in view, with the ``fov``, ``noise_deg``, ``range`` and
+        ``occlusion`` above (ALGORITHMS §6.1, :class:`bearnav_cli.world.camera.IdealCamera`);
+        ``render``: camera frames drawn and the AprilTags detected in them (needs
+        ``bearnav[camera]``; its figures go to the metrics under ``camera``,
+        ``bearnav_cli.world.render.RenderedCamera``).
     seed : int
         Seeds the bearing noise, the wheel slip and the random starts (separate streams).
     record_trajectories : bool
         Keep every robot's trajectory (``verify`` turns this off).
     estimator : {"kalman", "set"}
-        How the robot knows where it is: ``set``, the bounded-error sets of ALGORITHMS §12.2 with the
-        certified policy of §12.3 (it drives only while its error bound is within the cell's usable
-        tolerance, and stops to look otherwise); ``kalman``, the scalar filter with the pace rule.
+        How the robot knows where it is: ``set``, a guaranteed bound on its position error
+        (ALGORITHMS §12.2–12.3): it drives only while the bound is within the error the cell
+        tolerates, and stops to look otherwise; ``kalman``, a scalar filter of the position and its standard
+        deviation, with the pace rule of ``keep_clear``.
     noise_bound_deg : float or None
         Bounded noise instead of ``noise_deg`` (degrees, in [0, 45)): every bearing error uniform
         in ``[−η, η]`` and every odometry error within ``κ‖d̂‖ + ν`` (ALGORITHMS §12.8); the set
@@ -174,14 +177,17 @@ class Params:
         so that the truth lies nearer to the nearest obstacle than the estimate says (bearings, and
         odometry pushed toward it).
     bearing_error_deg : float or None
-        ``η_cam`` the set estimator assumes (degrees); ``None``: the map's ``robot.bearing_error_deg``
-        (default 0.2), or ``noise_bound_deg`` when that is given.
+        The bound on every bearing error the set estimator assumes (degrees, ``η_cam``); ``None``: the
+        map's ``robot.bearing_error_deg`` (default 0.2), or ``noise_bound_deg`` when that is given.
     compass_error_deg : float or None
-        ``ψ`` (degrees), added to the bearing bound (``η = η_cam + ψ``); ``None``: the map's.
+        The compass (heading) error bound, added to the bearing bound (degrees; ``η = η_cam + ψ``);
+        ``None``: the map's.
     slip : float or None
-        ``κ``, the odometry bound's fraction of each step; ``None``: the map's ``robot.slip`` (0.03).
+        The odometry error bound as a fraction of each step (``κ``); ``None``: the map's ``robot.slip``
+        (0.03).
     slip_floor : float or None
-        ``ν`` (map units per step that translates); ``None``: the map's, else ``1e-4·D``.
+        The odometry error bound's floor, added on every step that translates (map units; ``ν``);
+        ``None``: the map's, else ``1e-4·D``.
     """
 
     dynamics: str = "single"

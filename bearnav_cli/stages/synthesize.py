@@ -68,13 +68,15 @@ class Params:
     u_max : float
         Input box ``|u_1|, |u_2| ≤ u_max`` (map units per second).
     kappa : float
-        Initial ``κ_h = κ_v`` of the constants ``c_h``, ``c_v`` (§5.3).
+        Initial scale of the rates in each cell's barrier and exit conditions, halved while the LP
+        is infeasible. It is ``κ_h = κ_v`` of the constants ``c_h``, ``c_v`` (§5.3).
     halvings : int
-        How many times ``κ`` may be halved after an infeasible LP before the
+        How many times ``kappa`` may be halved after an infeasible LP before the
         least-violation solve (so ``halvings + 1`` feasibility attempts).
     gain_structure : {"full", "diag", "scalar"}
-        ``K_k`` any 2×2 matrix (solved in field space, minimum-norm gain by Lemma 3),
-        diagonal, or a multiple of the identity (both solved in gain space).
+        The controller gain of each cell: any 2×2 matrix, diagonal, or a multiple of the identity.
+        ``full`` is solved in field space (the minimum-norm gain ``K_k`` by Lemma 3), the others in
+        gain space.
     lp_form : {"vertex", "dual"}
         Constraints at the cell's vertices, or through LP duality (§5.2).
     w_h, w_v : float
@@ -86,10 +88,11 @@ class Params:
     goal_tolerance : float or None
         Success radius around the goal (map units); ``None`` means ``0.01·D``.
     tolerant : bool
-        Funnel cells: keep, of the LP's field and Lemma 4's field ``c_v(x_j − x) − εz`` (``ε`` chosen
-        for the largest tolerance), the one whose certificate tolerates the larger position error
-        ``δ_c`` (ALGORITHMS §11.4). The LP maximises the sum of its margins, which leaves ``δ_c`` at
-        a fraction of a millimetre on the example maps; Lemma 4's field tolerates half the depth of
+        Funnel cells: keep whichever of two fields tolerates the larger position error, the LP's or
+        one that heads straight for the exit point (ALGORITHMS §11.4). The second is Lemma 4's
+        field ``c_v(x_j − x) − εz`` (``ε`` chosen for the largest tolerance ``δ_c``). The LP
+        maximises the sum of its margins, which leaves ``δ_c`` at a fraction of a millimetre on
+        the example maps; Lemma 4's field tolerates half the depth of
         ``x_j`` in the cell. ``False``: the LP's field always.
     """
 
