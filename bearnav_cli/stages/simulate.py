@@ -164,8 +164,9 @@ class Params:
     record_trajectories : bool
         Keep every robot's trajectory (``verify`` turns this off).
     estimator : {"kalman", "set"}
-        How the robot knows where it is: ``set``, a guaranteed bound on its position error
-        (ALGORITHMS §12.2–12.3): it drives only while the bound is within the error the cell
+        How the robot knows where it is: ``set``, a bound on its position error that holds while
+        the errors stay within the robot section's bounds (ALGORITHMS §12.2–12.3): it drives only
+        while the bound is within the error the cell
         tolerates, and stops to look otherwise; ``kalman``, a scalar filter of the position and its standard
         deviation, with the pace rule of ``keep_clear``.
     noise_bound_deg : float or None
