@@ -909,7 +909,7 @@ def _liveness(plan: Plan, params: Params, speed: float) -> tuple[Liveness | None
     if params.live_fov is None:
         return None, None
     if not plan.cells.is_funnel:
-        return None, "liveness: not measured, a paper plan has no usable tolerance τ_c (ALGORITHMS §12.5)"
+        return None, "liveness: not measured, a paper plan has no usable position tolerance"
     names = {"eta_deg": "bearing_error_deg", "fov_deg": "live_fov", "kappa": "slip", "resolution": "live_resolution"}
     try:
         return measure_liveness(plan, params.bearing_error_deg, params.live_fov, kappa=params.slip, speed=speed,
@@ -959,7 +959,7 @@ def guarantee(plan: Plan, report: VerifyReport) -> str:
                 "a camera and noise)") if runs is not None and len(runs) else "nothing measured (no runs)"  # fmt: skip
     if comp is None:  # a paper plan: per-cell certificates (§4), no composition theorem
         return (f"guarantee: each certified cell's controller keeps a robot that knows its position in the cell and "
-                f"drives it out of the exit face (ALGORITHMS §4); that the cells compose into a route to the goal is "
+                f"drives it out of the exit face; that the cells compose into a route to the goal is "
                 f"not proven for paper cells; {measured}")  # fmt: skip
     robot = runtime.robot.robot_parameters(plan.map.robot)
     who = f"a robot of radius {plan.map.robot_radius:g} "
@@ -1064,8 +1064,8 @@ def run(
     uncovered = None
     if params.dynamics == "unicycle" and plan.map.lookahead <= 0 and params.n_starts > 0:
         uncovered = ("the unicycle on a plan without a look-ahead (λ = 0) is outside the certificate: its steps count "
-                     "as uncertified, and a breach is only a true position outside D; plan with `--lookahead λ`, "
-                     "λ ≥ α/ω_max, to drive it inside (ALGORITHMS §12.6)")  # fmt: skip
+                     "as uncertified, and a breach is only a true position outside D; plan with `--lookahead L`, "
+                     "L at least the speed over the turn rate, to drive it inside")  # fmt: skip
     report = VerifyReport(
         status=np.asarray(plan.status),
         certificates=cert,

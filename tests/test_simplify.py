@@ -230,7 +230,7 @@ def test_summary_names_finishing_passes_and_crossings_left(case):
     )
     stats = dict(out.stats, crossings_at_nodes=7)
     text = simplify.summary(Tree(out.map, out.nodes, out.parent, out.cost, out.collision_samples, stats))
-    assert "; 7 edge pairs cross at a node (RC skips those, §3); " in text
+    assert "; 7 edge pairs cross at a node (left: the crossing point is a node already); " in text
 
 
 def test_extremes_keeps_at_most_two_leaves(clutter):

@@ -666,7 +666,8 @@ def summary(tree: Tree) -> str:
     left_text = f"; {left} proper crossing{'s remain' if left != 1 else ' remains'} ({why})" if left else ""
     at = s.get("crossings_at_nodes") or 0
     if at:
-        left_text += f"; {at} edge pair{'s cross' if at != 1 else ' crosses'} at a node (RC skips those, §3)"
+        pairs = f"{at} edge pair{'s cross' if at != 1 else ' crosses'}"
+        left_text += f"; {pairs} at a node (left: the crossing point is a node already)"
     return (
         f"{len(tree.nodes)} nodes (from {s.get('nodes_before', '?')}) after {s.get('rounds', '?')} rounds{finish}: "
         f"{s.get('ppr_rewires', '?')} shortcuts, {s.get('leaves_cut', '?')} leaves cut, "
