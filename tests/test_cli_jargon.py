@@ -29,3 +29,17 @@ def test_help_has_no_jargon(command: str) -> None:
     text = ANSI.sub("", result.output)
     found = [line.strip() for line in text.splitlines() if JARGON.search(line)]
     assert not found, f"bearnav {command} --help shows developer jargon:\n" + "\n".join(found)
+
+
+def test_a_plans_stage_lines_have_no_jargon(tmp_path_factory) -> None:
+    """The summaries ``bearnav plan`` prints, one per stage, speak the user's words too (no section signs,
+    lemma or condition labels, internal module names)."""
+    from bearnav_cli import artifacts, pipeline
+
+    from .conftest import planned_small_map
+
+    folder = planned_small_map(tmp_path_factory, "jargon").parent
+    for stage in pipeline.STAGES:
+        loaded = artifacts.load(folder / stage.filename)
+        line = stage.module.summary(loaded.artifact)
+        assert not JARGON.search(line), f"{stage.name}: {line}"
