@@ -1374,6 +1374,8 @@ def _run_one(stage: str, source: Path, out_path: Optional[Path], overrides: dict
     if not as_json:
         out.print(_report_line(report), highlight=False, soft_wrap=True)
     _finish([report], as_json)
+    if stage == "synthesize" and not as_json and not _Quiet.enabled:  # the plan: what it certifies, in words
+        out.print(f"  {plan_guarantee(report.artifact, report.path)}", highlight=False, markup=False, soft_wrap=True)
 
 
 @app.command("simulate")

@@ -298,3 +298,16 @@ def test_a_long_time_bound_is_also_given_in_hours():
 
     assert duration_text(13870.0) == "≤ 1.387e+04 s (3.9 h)" and duration_text(30.0) == "≤ 30 s"
     assert duration_text(float("inf")) == "unbounded"
+
+
+def test_synthesize_ends_with_what_its_plan_certifies(cli, built, tmp_path):
+    """Issue 23 item 3: `bearnav synthesize` alone ends with the plan's guarantee sentence, naming the
+    `bearnav verify` command for the plan it wrote."""
+    out = tmp_path / "again.npz"
+    result = cli("synthesize", built["cells"], "-o", out)
+    assert result.exit_code == 0, result.output
+    sentence = next(line for line in result.output.splitlines() if "guarantee" in line)
+    (verify,) = commands(sentence)
+    assert verify == ["verify", str(out)], sentence
+    quiet = cli("synthesize", built["cells"], "-o", out, "-q", "--force")
+    assert quiet.exit_code == 0 and "guarantee" not in quiet.output, quiet.output
