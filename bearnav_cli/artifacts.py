@@ -1358,9 +1358,9 @@ def write_record(path: str | os.PathLike, document: dict) -> None:
 
 def read_record(path: str | os.PathLike, schema: str) -> dict | None:
     """A record :func:`write_record` wrote with this ``schema``, or None (missing, unreadable, another schema)."""
-    try:
-        document = json.loads(Path(path).read_bytes().decode("utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+    try:  # through the one reader of input files: a FIFO or a huge file in the store is refused, not read
+        document = json.loads(_read_file(Path(path)).decode("utf-8"))
+    except (ArtifactError, UnicodeDecodeError, json.JSONDecodeError):
         return None
     if not isinstance(document, dict) or document.get("schema") != schema:
         return None
