@@ -41,6 +41,7 @@ __all__ = [
     "check_resources",
     "check_value",
     "compute",
+    "compute_saved",
     "check_verify_starts",
     "LIMITS",
     "load",
@@ -55,6 +56,7 @@ __all__ = [
     "Range",
     "reset_activity",
     "resolve_params",
+    "stage_manifest",
     "RRT_BYTES_PER_GRID_CELL",
     "RRT_BYTES_PER_ITERATION",
     "RUN_BYTES",
@@ -788,20 +790,116 @@ def compute(
     InvalidParamsError, InvalidMapError, ResourceLimitError
         As :func:`plan` raises them.
     """
+    made = _chain(source, None, through, overrides, progress, manifests=False)
+    return {kind: artifact for kind, (artifact, _) in made.items()}
+
+
+def compute_saved(
+    source: map_.MapSource | Map | Any,
+    through: str = "synthesize",
+    overrides: dict[str, dict] | None = None,
+    after: str | None = None,
+) -> dict[str, tuple[Any, dict]]:
+    """:func:`compute`, and each artifact's manifest as :func:`plan` would write it (no input path).
+
+    For a caller that stores the artifacts itself (``bearnav sweep``), so that what it saves has
+    the manifests of ``bearnav plan``: the same parameters, summaries, statistics and input hashes.
+
+    Parameters
+    ----------
+    source : MapSource, Map or an artifact
+        As :func:`compute`; with ``after``, the output of that stage (a simplified tree, say), and
+        the chain goes on from the next stage.
+    through : str
+        The last stage to run.
+    overrides : dict, optional
+        ``{stage: {param: value}}``.
+    after : str, optional
+        The stage whose output ``source`` is (None: ``source`` is the map or its description).
+
+    Returns
+    -------
+    dict
+        ``{kind: (artifact, manifest)}`` of every stage run, in stage order (the map's manifest is
+        None when ``source`` was a normalised map).
+    """
+    return _chain(source, after, through, overrides, None, manifests=True)
+
+
+def _chain(source: Any, after: str | None, through: str, overrides: dict[str, dict] | None,
+           progress: Callable[[str], Progress | None] | None, manifests: bool) -> dict[str, tuple]:  # fmt: skip
+    """The stages after ``after`` (None: from the map) through ``through``, each artifact with its manifest
+    (None unless ``manifests``: hashing every input is work :func:`compute` does not need)."""
     names = [stage.name for stage in _CHAIN]
-    if through not in names:
-        raise ValueError(f"unknown stage {through!r}; expected one of {', '.join(names)}")
+    for name in (through, after):
+        if name is not None and name not in names:
+            raise ValueError(f"unknown stage {name!r}; expected one of {', '.join(names)}")
     overrides = overrides or {}
-    if isinstance(source, Map):
-        artifact: Any = source
+    made: dict[str, tuple[Any, dict | None]] = {}
+    if after is not None:
+        artifact = source
+        first = names.index(after) + 1
+    elif isinstance(source, Map):
+        artifact, first = source, 1
+        made[_CHAIN[0].output_kind] = (artifact, None)
     else:
-        artifact = _execute(_CHAIN[0], source, _map_stage_params(source, overrides.get("map")), None, source.file)
-    made = {_CHAIN[0].output_kind: artifact}
-    for stage in _CHAIN[1 : names.index(through) + 1]:
+        params = _map_stage_params(source, overrides.get("map"))
+        artifact = _timed_stage(_CHAIN[0], source, params, None, source.file, source.sha256 if manifests else None,
+                                made)  # fmt: skip
+        first = 1
+    for stage in _CHAIN[first : names.index(through) + 1]:
         params = _stage_params(stage.name, artifact, overrides.get(stage.name))
-        artifact = _execute(stage, artifact, params, progress(stage.name) if progress else None, stage.name)
-        made[stage.output_kind] = artifact
+        input_hash = artifacts.content_hash(artifacts.entries_of(artifact)) if manifests else None
+        artifact = _timed_stage(stage, artifact, params, progress(stage.name) if progress else None, stage.name,
+                                input_hash, made)  # fmt: skip
     return made
+
+
+def _timed_stage(stage: Stage, payload: Any, params: Any, progress: Progress | None, file: str,
+                 input_hash: str | None, made: dict) -> Any:  # fmt: skip
+    """Run one stage of :func:`_chain` and file its artifact in ``made``, with its manifest when ``input_hash``
+    is given (timed: the manifest records the stage's wall time)."""
+    started = time.perf_counter()
+    result = _execute(stage, payload, params, progress, file)
+    elapsed = time.perf_counter() - started
+    manifest = None if input_hash is None else stage_manifest(stage, result, payload, params, input_hash, None, elapsed)
+    made[stage.output_kind] = (result, manifest)
+    return result
+
+
+def stage_manifest(stage: Stage, result: Any, payload: Any, params: Any, input_hash: str,
+                   input_path: str | None, elapsed_s: float) -> dict:  # fmt: skip
+    """The manifest of ``result``, the output of ``stage`` run on ``payload`` with ``params`` (DESIGN §3.1).
+
+    The one builder of a stage's manifest: :func:`plan` writes it, :func:`compute_saved` returns it.
+
+    Parameters
+    ----------
+    stage : Stage
+        The stage that ran.
+    result : Any
+        Its output.
+    payload : Any
+        Its input (the map stage's summary names the obstacles the description listed).
+    params : Any
+        Its resolved ``Params``.
+    input_hash : str
+        The input's content hash (for the map stage, its description's SHA-256).
+    input_path : str or None
+        The input's path as the manifest records it (relative to the output's folder), or None.
+    elapsed_s : float
+        The stage's wall time (s).
+    """
+    if isinstance(result, Map):
+        from bearnav_cli.stages import map_
+
+        summary = map_.summary(result, map_.listed_obstacles(payload))
+    else:
+        summary = stage.module.summary(result)
+    return artifacts.make_manifest(stage.output_kind, result, stage=stage.name, stage_version=stage.module.VERSION,
+                                   params=artifacts.params_dict(params), input_path=input_path,
+                                   input_hash=input_hash, summary=summary, elapsed_s=elapsed_s,
+                                   stats=getattr(result, "stats", None))  # fmt: skip
 
 
 def _relative_to_output(input_path: str | None, out: Path) -> str | None:
@@ -840,24 +938,9 @@ def _run_and_save(
     started = time.perf_counter()
     result = _execute(stage, payload, params, progress, input_path or str(out))
     elapsed = time.perf_counter() - started
-    if isinstance(result, Map):
-        from bearnav_cli.stages import map_
-
-        summary = map_.summary(result, map_.listed_obstacles(payload))
-    else:
-        summary = stage.module.summary(result)
-    manifest = artifacts.make_manifest(
-        stage.output_kind,
-        result,
-        stage=stage.name,
-        stage_version=stage.module.VERSION,
-        params=params_json,
-        input_path=_relative_to_output(input_path, out),
-        input_hash=input_hash,
-        summary=summary,
-        elapsed_s=elapsed,
-        stats=getattr(result, "stats", None),
-    )
+    manifest = stage_manifest(stage, result, payload, params, input_hash, _relative_to_output(input_path, out),
+                              elapsed)  # fmt: skip
+    summary = manifest["summary"]
     try:
         artifacts.save(out, result, manifest, on_commit=_committed)
     except ArtifactError as exc:

@@ -423,16 +423,6 @@ def _one_line(exc: BaseException) -> str:
     return text if isinstance(exc, BearnavError) else f"{type(exc).__name__}: {text}"
 
 
-def _manifest(stage: str, artifact: Any, params: Any, input_artifact: Any, elapsed: float) -> dict:
-    module = pipeline.STAGE_BY_NAME[stage].module
-    input_hash = artifacts.content_hash(artifacts.entries_of(input_artifact))
-    return artifacts.make_manifest(
-        pipeline.STAGE_BY_NAME[stage].output_kind, artifact, stage=stage, stage_version=module.VERSION,
-        params=artifacts.params_dict(params), input_path=None, input_hash=input_hash,
-        summary=module.summary(artifact), elapsed_s=elapsed, stats=getattr(artifact, "stats", None),
-    )  # fmt: skip
-
-
 def _tagged_plan(task: PlanTask, simplified: Any, plan: Any, tags_params: Any) -> tuple[Any, dict, dict]:
     """The plan re-made with the tags ``bearnav tags`` proposes (repro/robustness.py's recipe, now here).
 
@@ -452,14 +442,7 @@ def _tagged_plan(task: PlanTask, simplified: Any, plan: Any, tags_params: Any) -
     with_tags = map_stage.MapSource(spec=spec, file=source.file, sha256=f"{source.sha256}+{proposal.count} tags",
                                     grid=source.grid)  # fmt: skip
     new_map = pipeline.compute(with_tags, through="map")["map"]
-    artifact = replace(simplified, map=new_map)
-    made = None
-    for stage in ("decompose", "synthesize"):
-        params = pipeline.resolve_params(stage, new_map.params, None, new_map.diagonal)
-        began = time.perf_counter()
-        made = pipeline.STAGE_BY_NAME[stage].module.run(artifact, params)
-        manifest = _manifest(stage, made, params, artifact, time.perf_counter() - began)
-        artifact = made
+    made, manifest = pipeline.compute_saved(replace(simplified, map=new_map), after="simplify")["plan"]
     return made, manifest, info
 
 
@@ -480,12 +463,10 @@ def make_plans(task: PlanTask) -> dict:
             simplified, plan = task.base
         else:
             overrides = {"rrtstar": {"seed": task.seed}} if task.seed is not None else {}
-            made = pipeline.compute(task.source, through="synthesize", overrides=overrides)
-            simplified, cells, plan = made["simplified"], made["cells"], made["plan"]
-            params = pipeline.resolve_params("synthesize", cells.map.params, None, cells.map.diagonal)
-            s_params = pipeline.resolve_params("simplify", cells.map.params, None, cells.map.diagonal)
-            out["simplified"] = (simplified, _manifest("simplify", simplified, s_params, made["tree"], 0.0))
-            out["plans"][task.base_key] = {"plan": plan, "manifest": _manifest("synthesize", plan, params, cells, 0.0),
+            made = pipeline.compute_saved(task.source, through="synthesize", overrides=overrides)
+            (simplified, _), (plan, manifest) = made["simplified"], made["plan"]
+            out["simplified"] = made["simplified"]
+            out["plans"][task.base_key] = {"plan": plan, "manifest": manifest,
                                            "info": {"elapsed_s": time.perf_counter() - began}}  # fmt: skip
     except Exception as exc:  # noqa: BLE001 - recorded with the jobs that needed the plan
         error = _one_line(exc)
