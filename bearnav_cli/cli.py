@@ -717,7 +717,8 @@ def _outcome_failure(artifact: Any, path: Optional[Path] = None, camera: tuple[f
 
     cells = getattr(artifact, "cells", artifact)  # a Plan holds its Cells
     nodes = getattr(cells, "nodes", None)
-    if nodes is not None and len(nodes) < 2:
+    added = getattr(cells, "node_added", None)  # leaves decompose added to cover F: not a route the tree found
+    if nodes is not None and len(nodes) - (0 if added is None else sum(map(bool, added))) < 2:
         what = "no route: the tree has only its root (is the goal walled in, or did every sample fall in obstacles?)"
         return what + (f"; `{_command_text('bearnav', 'plot', path)}` draws it" if path is not None else "")
     blind = cells.flagged(CellFlag.BLIND_SPOT) if isinstance(cells, Cells) else []

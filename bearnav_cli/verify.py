@@ -700,10 +700,11 @@ class VerifyReport:
                 out.append(f"{len(bad)} runs from the certified domain did not reach the goal (the theorem says "
                            f"every one does: a bug): starts {cell_list(bad)}")  # fmt: skip
         if self.rollouts is not None and len(self.rollouts):
-            hit = np.flatnonzero(self.rollouts.outcome == Outcome.COLLISION)
+            hit = np.flatnonzero(self._collided(certified=True))
             if hit.size:
-                out.append(f"{hit.size} of {len(self.rollouts)} closed-loop runs collided (any collision fails, "
-                           f"whatever --min-success says): starts {cell_list(hit)}")  # fmt: skip
+                whence = " from the certified domain" if self.composition is not None else ""
+                out.append(f"{hit.size} of {len(self.rollouts)} closed-loop runs{whence} collided (any collision "
+                           f"fails, whatever --min-success says): starts {cell_list(hit)}")  # fmt: skip
         if self.breaches is not None and self.breaches.any():
             bad = np.flatnonzero(self.breaches)
             out.append(f"{bad.size} runs from the certified domain breached it (a step not certified, or a true "
@@ -716,10 +717,28 @@ class VerifyReport:
             out.append(f"success rate {self.success_rate:.1%} below --min-success {self.min_success:.1%}")
         return out
 
+    def _collided(self, certified: bool) -> np.ndarray:
+        """The runs that collided, shape (R,) bool: from D (``certified``) or from outside it.
+
+        A funnel plan's theorem covers the starts in ``D``, so a collision from there fails verify;
+        a run from outside ``D`` drives on uncertified rules, and its collision is measured (a note).
+        A paper plan certifies no domain: every collision fails.
+        """
+        hit = self.rollouts.outcome == Outcome.COLLISION
+        if self.composition is None:
+            return hit if certified else np.zeros_like(hit)
+        return hit & (self.in_domain if certified else ~self.in_domain)
+
     @property
     def notes(self) -> list[str]:
         """What the report adds without failing: the robot outside the certificate, liveness, unreached regions."""
         out = [] if self.uncovered_dynamics is None else [self.uncovered_dynamics]
+        if self.rollouts is not None and len(self.rollouts):
+            outside = np.flatnonzero(self._collided(certified=False))
+            if outside.size:
+                out.append(f"{outside.size} of {len(self.rollouts)} closed-loop runs from outside the certified "
+                           f"domain collided (measured, not certified: those starts lie in the sliver of free "
+                           f"space no cell covers, by an obstacle or a wall): starts {cell_list(outside)}")  # fmt: skip
         if len(self.route) and np.isnan(self.route).all():
             out.append(f"the shortest-route ratio was not computed: the free space has more than "
                        f"{MAX_ROUTE_VERTICES:,} corners (the straight-line ratio is given)")  # fmt: skip

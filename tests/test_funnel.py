@@ -508,8 +508,9 @@ def test_densification():
     map_ = build_map(random_spec(1, ITERATIONS, 0))
     tree = pipeline.compute(map_, through="simplify")["simplified"]
     n = len(tree.nodes)
-    bare = decompose.run(tree, decompose.Params(max_added_nodes=0))
-    dense = decompose.run(tree)
+    # densification of F_m (§11.5 step 3) alone: the band along the walls (cover = F) has its own test
+    bare = decompose.run(tree, decompose.Params(max_added_nodes=0, cover="F_m"))
+    dense = decompose.run(tree, decompose.Params(cover="F_m"))
     assert bare.n_cells == n and not bare.node_added.any()
     added = np.flatnonzero(dense.node_added)
     assert len(added) == dense.stats["added_nodes"] > 0
@@ -524,7 +525,7 @@ def test_densification():
     assert after >= decompose.Params().coverage_target or len(added) == decompose.Params().max_added_nodes
     space = FreeSpace.from_map(map_)
     assert space.segments_free(dense.nodes[added], dense.nodes[dense.parent[added]]).all()
-    capped = decompose.run(tree, decompose.Params(max_added_nodes=3))
+    capped = decompose.run(tree, decompose.Params(max_added_nodes=3, cover="F_m"))
     assert np.count_nonzero(capped.node_added) == min(3, len(added))
     assert bare.stats["free_coverage_m"] <= capped.stats["free_coverage_m"] <= dense.stats["free_coverage_m"]
     clear = space.with_clearance(space.planning_clearance(None, map_.goal, map_.diagonal))

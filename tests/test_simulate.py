@@ -108,8 +108,9 @@ def test_unicycle_reaches_the_goal_from_the_map_starts(plans, name, fov, slip):
 
 
 def test_the_field_of_view_shows_with_the_default_wheel_slip(plans):
-    """A robot that loses its fix drives on odometry: on paper_b_circles a 60° camera spends over a
-    thousand steps without a fix and still reaches the goal from every start with exact odometry; with the
+    """A robot that loses its fix drives on odometry: on paper_b_circles a 60° camera spends a tenth of
+    every run or more without a fix (a 360° camera none) and still reaches the goal from every start with
+    exact odometry; with the
     slip the blind stretches drift and the paths differ from a 360° camera's.
     (Exact odometry no longer gives the 360° paths: the filter does not know its odometry is exact, its
     error bound grows linearly with the distance, so a long blind stretch ends in a look-around.)"""
@@ -122,7 +123,9 @@ def test_the_field_of_view_shows_with_the_default_wheel_slip(plans):
         return np.array_equal(a.trajectory_offsets, b.trajectory_offsets) and np.allclose(
             a.trajectory_coords, b.trajectory_coords, rtol=0.0, atol=1e-6 * plan.map.diagonal)  # fmt: skip
 
-    assert runs[(60.0, "exact")].hold_steps.sum() > 1000
+    assert not runs[(360.0, "default")].hold_steps.any()
+    narrow = runs[(60.0, "exact")]
+    assert np.all(narrow.hold_steps >= 0.1 * narrow.steps), (narrow.hold_steps, narrow.steps)
     # a single integrator with a 60° camera and the default slip can end lost at a blind spot near the goal
     # (no heading shows two tags there, and its error bound has outgrown blind_error): the other three arrive
     for key, run in runs.items():

@@ -254,8 +254,8 @@ def test_cover_F_reaches_into_the_band_along_the_walls(seed):
 
     map_ = build_map(random_spec(seed, ITERATIONS))
     tree = pipeline.compute(map_, through="simplify")["simplified"]
-    near = decompose.run(tree)
-    far = decompose.run(tree, decompose.Params(cover="F"))
+    near = decompose.run(tree, decompose.Params(cover="F_m"))
+    far = decompose.run(tree)  # cover = F is the default
     band = far.stats["band_leaves"]
     assert near.stats["band_leaves"] == 0 and band > 0
     assert far.free_coverage > near.free_coverage
@@ -269,6 +269,8 @@ def test_cover_F_reaches_into_the_band_along_the_walls(seed):
     comp = composition.check(plan, 0.1)
     assert comp.ok, comp.problems
     assert comp.coverage_free == pytest.approx(far.free_coverage, rel=1e-6)
+    # the recorded coverage of F_m is of the final cells, band included, as verify recomputes it
+    assert comp.coverage == pytest.approx(far.stats["free_coverage_m"], rel=1e-9)
     assert np.all(np.isfinite(plan.usable_tolerance)) and np.all(plan.usable_tolerance > 0)
     # the floor is the least Lemma-6 τ_c of the cells before the band, which synthesis only raises
     floor = far.stats["band_tolerance_floor"]

@@ -846,24 +846,29 @@ def estimate_trace(plan, start: np.ndarray, params: Params, every: int = 10) -> 
     if params.estimator != "set":
         raise InvalidParamsError("a trace of estimate sets needs estimator set", field="estimator")
     loop, active, _ = start_loop(plan, np.asarray(start, float).reshape(1, 2), params)
-    truth, x_hat, error, sets, looking = [], [], [], [], []
-    step = 0
+    records = []  # (axle, set vertices, looking) of the recorded steps
+    step, last = 0, None  # last: the latest step's record, kept until recorded
     while active.size:
-        axle = loop.x[0].copy()
+        axle = loop.x[0].copy()  # where the robot was when the step's bearings were taken
         active = loop.step(active)
         step += 1
-        if step % every and active.size:
-            continue
-        st = loop.state
-        n = int(st.set_count[0])
-        if n == 0:
-            continue
-        x, e = runtime_bounded.centre(st.set_vertices[:1], st.set_count[:1])
-        truth.append(axle)
-        x_hat.append(x[0])
-        error.append(e[0])
-        sets.append(st.set_vertices[0, :n].copy())
-        looking.append(bool(loop.was_looking[0]))
+        if not active.size and loop.outcome[0] == Outcome.SUCCESS:
+            # arrival ends a step before its bearings are taken: the set is still the previous step's,
+            # which holds the previous axle, not this one
+            break
+        n = int(loop.state.set_count[0])
+        last = (axle, loop.state.set_vertices[0, :n].copy(), bool(loop.was_looking[0])) if n else None
+        if last is not None and not (step % every and active.size):
+            records.append(last)
+            last = None
+    if last is not None:  # the last step with a set, when it was not one of every `every`
+        records.append(last)
+    truth = [r[0] for r in records]
+    sets = [r[1] for r in records]
+    looking = [r[2] for r in records]
+    centres = [runtime_bounded.centre(v[None], np.array([len(v)])) for v in sets]
+    x_hat = [c[0][0] for c in centres]
+    error = [c[1][0] for c in centres]
     offsets = np.concatenate([[0], np.cumsum([len(v) for v in sets])]).astype(np.int64)
     return EstimateTrace(np.array(truth).reshape(-1, 2), np.array(x_hat).reshape(-1, 2), np.array(error),
                          np.concatenate(sets) if sets else np.zeros((0, 2)), offsets, np.array(looking, bool),
