@@ -245,6 +245,13 @@ def cache_key(stage: str, stage_version: int, params: dict, input_hash: str) -> 
 
 def software_versions() -> dict[str, str]:
     """Versions of the packages that shape results (provenance, not part of the key)."""
+    return dict(_installed_versions())
+
+
+@functools.cache
+def _installed_versions() -> tuple[tuple[str, str], ...]:
+    # each metadata lookup scans site-packages (about 4 ms): a plan makes five manifests, and the
+    # versions cannot change within one process
     from importlib import metadata  # 10 ms (email, csv ...): only when a manifest is made, never to load
 
     versions = {"bearnav": __version__, "python": platform.python_version()}
@@ -253,7 +260,7 @@ def software_versions() -> dict[str, str]:
             versions[package] = metadata.version(package)
         except metadata.PackageNotFoundError:
             pass
-    return versions
+    return tuple(versions.items())
 
 
 def params_dict(params: Any) -> dict:

@@ -9,6 +9,7 @@ obstacle counts as a collision.
 from __future__ import annotations
 
 import math
+import weakref
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -111,6 +112,10 @@ def barrier_margin(requested: float | None, diagonal: float) -> float:
     return DEFAULT_CLEARANCE * diagonal if requested is None else float(requested)
 
 
+#: :meth:`FreeSpace.from_map`'s spaces by ``id`` of their live map: (weak reference to the map, space).
+_SPACES: dict[int, tuple[weakref.ref, FreeSpace]] = {}
+
+
 @dataclass(frozen=True)
 class FreeSpace:
     """Free space ``B \\ O`` of a map, with exact vectorised queries.
@@ -147,7 +152,21 @@ class FreeSpace:
         ``bounds`` is ``B_r``, the map's bounds shrunk by the robot radius (the bounds are walls,
         ALGORITHMS §11.1): every robot query (free points, segments, clearance, starts) uses it.
         ``sight_bounds`` keeps the map's own ``B``, where landmarks live and sight lines run.
+
+        One space per map object while it lives (maps are immutable): the stages of one plan,
+        which pass the same map on, share its unions, visibility regions and coverage grid.
         """
+        key = id(map_)
+        known = _SPACES.get(key)
+        if known is not None and known[0]() is map_:
+            return known[1]
+        space = cls._build(map_)
+        # the callback runs as the map is freed, before its id can name another object
+        _SPACES[key] = (weakref.ref(map_, lambda _, key=key: _SPACES.pop(key, None)), space)
+        return space
+
+    @classmethod
+    def _build(cls, map_: Map) -> FreeSpace:
         obstacles = shapely.union_all([to_shapely(p) for p in map_.obstacles])
         raw = shapely.union_all([to_shapely(p) for p in map_.raw_obstacles])
         shapely.prepare(obstacles)
@@ -308,6 +327,11 @@ class FreeSpace:
         result[ok] = ~shapely.intersects(self.raw_obstacles, lines)
         return result
 
+    @cached_property
+    def _memo(self) -> dict:
+        """Results of :meth:`visibility_regions` and :func:`landmark_coverage` for this space, by their inputs."""
+        return {}
+
     def visibility_regions(self, landmarks: np.ndarray) -> list[shapely.Geometry]:
         """For each landmark, the part of ``B`` from which it is in line of sight (prepared polygons).
 
@@ -328,6 +352,13 @@ class FreeSpace:
         -------
         list of shapely.Geometry, length L
         """
+        landmarks = np.asarray(landmarks, float).reshape(-1, 2)
+        key = ("sight", landmarks.tobytes())
+        if key not in self._memo:
+            self._memo[key] = self._visibility_regions(landmarks)
+        return list(self._memo[key])
+
+    def _visibility_regions(self, landmarks: np.ndarray) -> list[shapely.Geometry]:
         outer = self.sight_bounds
         box = shapely.box(*outer)
         far = 4.0 * float(np.hypot(*(outer[2:] - outer[:2])))
@@ -406,6 +437,14 @@ def landmark_coverage(map_: Map, space: FreeSpace, cells: int = 100,
     counts : ndarray of int, shape (P,)
         Landmarks in line of sight from each point.
     """
+    key = ("coverage", cells, np.asarray(map_.landmarks, float).tobytes(), np.asarray(map_.bounds, float).tobytes())
+    if key not in space._memo:
+        space._memo[key] = _landmark_coverage(map_, space, cells, sight)
+    points, counts = space._memo[key]
+    return points.copy(), counts.copy()
+
+
+def _landmark_coverage(map_: Map, space: FreeSpace, cells: int, sight: list | None) -> tuple[np.ndarray, np.ndarray]:
     xmin, ymin, xmax, ymax = map_.bounds
     spacing = map_.diagonal / cells
     xs = np.arange(xmin + spacing / 2, xmax, spacing)

@@ -51,7 +51,7 @@ log = logging.getLogger(__name__)
 __all__ = ["Params", "run", "summary"]
 
 CELL_MODES = ("funnel", "funnel-local", "paper")
-COVER_DOMAINS = ("F_m", "F")
+COVER_DOMAINS = ("F", "F_m")  # the default first, as every choice tuple
 BARRIERS = ("corridor", "wedge")
 BISECTOR_RULES = ("crossing", "parent")
 CBF_APEXES = ("child", "parent")
