@@ -17,7 +17,6 @@ rows and constant scales in a few numpy passes over the flat ``Cells`` arrays
 
 from __future__ import annotations
 
-import dataclasses
 import logging
 import math
 import time
@@ -31,6 +30,7 @@ from bearnav_cli.cell_lp import (
     CellProblem,
     FieldTemplates,
     LpTemplate,
+    _min_norm_gain,
     dual_template,
     field_map,
     field_vertex_templates,
@@ -893,12 +893,12 @@ def more_tolerant_all(solutions: Sequence[CellSolution], problems: Sequence[Cell
     diam = np.array([t[1] for t in terms], float)
     z = np.array([p.z for p in problems], float)
     x_j = np.array([p.x_j for p in problems], float)
-    # ragged vertices and barrier rows, and every (vertex, row) pair of the same cell
+    # ragged vertices and barrier rows (CellProblem holds them as float64 (p, 2), (h, 2), (h,))
     n_v = np.array([len(p.vertices) for p in problems])
     n_h = np.array([len(p.cbf_q) for p in problems])
     V = np.concatenate([p.vertices for p in problems])
-    N = np.concatenate([np.asarray(p.cbf_n, float).reshape(-1, 2) for p in problems])
-    Q = np.concatenate([np.asarray(p.cbf_q, float).ravel() for p in problems])
+    N = np.concatenate([p.cbf_n for p in problems])
+    Q = np.concatenate([p.cbf_q for p in problems])
     sink, h_star = _sinks(V, n_v, N, Q, n_h, z, x_j)
     c_h = np.array([s.c_h for s in solutions], float)
     c_lp = np.array([s.c_v for s in solutions], float)
@@ -911,31 +911,40 @@ def more_tolerant_all(solutions: Sequence[CellSolution], problems: Sequence[Cell
     # the two fields u = a − M x of every cell: the LP's (from its gain) and Lemma 6's
     M = np.empty((2, C, 2, 2))
     a = np.empty((2, C, 2))
-    for k, (sol, prob) in enumerate(zip(solutions, problems, strict=True)):
-        M[0, k] = sol.K.reshape(2, -1, 2).sum(axis=1)
-        a[0, k] = sol.K @ prob.landmarks.ravel()
+    # The LP's field [K𝟙, Kℓ], one stacked call per landmark count: the sum runs over the
+    # landmarks in the same order, and each item of the stacked matmul is the per-cell product.
+    n_lm = np.array([len(p.landmarks) for p in problems])
+    for n in np.unique(n_lm).tolist():
+        group = np.flatnonzero(n_lm == n).tolist()
+        K = np.stack([solutions[k].K for k in group])  # (g, 2, 2n)
+        ell = np.stack([problems[k].landmarks for k in group]).reshape(len(group), 2 * n, 1)
+        M[0, group] = K.reshape(len(group), 2, n, 2).sum(axis=2)
+        a[0, group] = np.matmul(K, ell)[..., 0]
     M[1] = c[:, None, None] * np.eye(2)
     a[1] = c[:, None] * sink - np.where(eps > 0, eps, 0.0)[:, None] * z
     v_cell, h_cell = np.repeat(np.arange(C), n_v), np.repeat(np.arange(C), n_h)
     v_start, h_start = np.cumsum(n_v) - n_v, np.cumsum(n_h) - n_h
-    pairs = n_v * n_h
-    pair_cell = np.repeat(np.arange(C), pairs)
-    local = np.arange(int(pairs.sum())) - np.repeat(np.cumsum(pairs) - pairs, pairs)
-    pair_row = h_start[pair_cell] + local % n_h[pair_cell]  # rows vary fastest
-    pair_vertex = v_start[pair_cell] + local // n_h[pair_cell]
+    # every (row, vertex) pair of the same cell, row after row: each row's pairs and each cell's
+    # rows and vertices are contiguous, so the maxima are segment reductions (reduceat)
+    row_len = n_v[h_cell]
+    row_start = np.cumsum(row_len) - row_len
+    pair_row = np.repeat(np.arange(len(Q)), row_len)
+    pair_vertex = np.arange(int(row_len.sum())) + np.repeat(v_start[h_cell] - row_start, row_len)
+    has_rows = n_h > 0
     U = a[:, v_cell] - np.einsum("fcij,cj->fci", M[:, v_cell], V)  # (2, ΣP, 2): u at every vertex
-    values = -(np.einsum("fpi,pi->fp", U[:, pair_vertex], N[pair_row])
-               + c_h[pair_cell] * (np.einsum("pi,pi->p", V[pair_vertex], N[pair_row]) + Q[pair_row]))  # fmt: skip
-    row_max = np.full((2, len(Q)), -np.inf)
+    pair_n = N[pair_row]
+    values = -(np.einsum("fpi,pi->fp", U[:, pair_vertex], pair_n)
+               + c_h[h_cell[pair_row]] * (np.einsum("pi,pi->p", V[pair_vertex], pair_n) + Q[pair_row]))  # fmt: skip
     cbf = np.full((2, C), -np.inf)
     if len(Q):
-        np.maximum.at(row_max, (slice(None), pair_row), values)
-        np.maximum.at(cbf, (slice(None), h_cell), row_max)
-    clf = np.full((2, C), -np.inf)
-    np.maximum.at(clf, (slice(None), v_cell), np.einsum("fpi,pi->fp", U, z[v_cell])
-                  + c_v[:, v_cell] * np.einsum("pi,pi->p", V - x_j[v_cell], z[v_cell]))  # fmt: skip
-    peak = np.zeros((2, C))
-    np.maximum.at(peak, (slice(None), v_cell), np.abs(U).max(axis=2))
+        row_max = np.maximum.reduceat(values, row_start, axis=1)
+        cbf[:, has_rows] = np.maximum.reduceat(row_max, h_start[has_rows], axis=1)
+    else:
+        row_max = np.zeros((2, 0))
+    progress = np.einsum("fpi,pi->fp", U, z[v_cell]) + c_v[:, v_cell] * np.einsum("pi,pi->p", V - x_j[v_cell],
+                                                                                  z[v_cell])  # fmt: skip
+    clf = np.maximum.reduceat(progress, v_start, axis=1)
+    peak = np.maximum.reduceat(np.abs(U).max(axis=2), v_start, axis=1)
     # δ_c = min over the barrier rows and the exit direction of margin / ‖Mᵀn‖ (funnel.cell_tolerance)
     row_gain = np.hypot(*np.einsum("ri,frij->frj", N, M[:, h_cell]).transpose(2, 0, 1))  # (2, ΣH)
     z_gain = np.hypot(*np.einsum("ci,fcij->fcj", z, M).transpose(2, 0, 1))  # (2, C)
@@ -944,26 +953,27 @@ def more_tolerant_all(solutions: Sequence[CellSolution], problems: Sequence[Cell
         ratio_h = np.where(row_gain > 0, sigma_h / row_gain, np.inf)
         ratio_v = np.where(z_gain > 0, sigma_v / z_gain, np.inf)
     delta = ratio_v.copy()
-    if len(Q):
-        np.minimum.at(delta, (slice(None), h_cell), ratio_h)
     positive = sigma_v > 0
     if len(Q):
-        bad_rows = np.zeros((2, C), bool)
-        np.logical_or.at(bad_rows, (slice(None), h_cell), ~(sigma_h > 0))
-        positive &= ~bad_rows
+        starts = h_start[has_rows]
+        delta[:, has_rows] = np.minimum(delta[:, has_rows], np.minimum.reduceat(ratio_h, starts, axis=1))
+        positive[:, has_rows] &= ~np.logical_or.reduceat(~(sigma_h > 0), starts, axis=1)
     # the LP's own solution sits on its bounds up to the solver's rounding
     valid = (cbf <= 1e-9 * u_max) & (clf < 0) & (peak - u_max <= 1e-9 * u_max)
     delta = np.where(valid & positive, delta, 0.0)
     delta[1, ~(eps > 0)] = -np.inf  # Lemma 6's field exists only for ε > 0
+    # Python floats for the per-cell results (the same numbers as float() of each entry)
+    cbf_l, clf_l, delta_l, c_l = cbf.tolist(), clf.tolist(), delta.tolist(), c.tolist()
+    M_l, a_l, n_h_l = M[1].tolist(), a[1].tolist(), n_h.tolist()
     out = []
     for k, (sol, prob) in enumerate(zip(solutions, problems, strict=True)):
-        if not delta[1, k] > delta[0, k]:  # the LP's field, with its margins re-checked here
-            out.append(dataclasses.replace(sol, margin_h=float(cbf[0, k]) if n_h[k] else math.nan,
-                                           margin_v=float(clf[0, k]), tolerance=float(delta[0, k])))  # fmt: skip
-            continue
-        out.append(dataclasses.replace(sol, K=min_norm_gain(M[1, k], a[1, k], prob.landmarks), c_v=float(c[k]),
-                                       margin_h=float(cbf[1, k]) if n_h[k] else math.nan,
-                                       margin_v=float(clf[1, k]), tolerance=float(delta[1, k])))  # fmt: skip
+        f = 1 if delta_l[1][k] > delta_l[0][k] else 0  # 0: the LP's field, with its margins re-checked here
+        if f:  # min_norm_gain of M[1, k], a[1, k], on their Python floats
+            K, c_k = _min_norm_gain(tuple(M_l[k][0] + M_l[k][1]), tuple(a_l[k]), prob.landmarks), c_l[k]
+        else:
+            K, c_k = sol.K, sol.c_v
+        out.append(CellSolution(sol.status, K, sol.c_h, c_k, cbf_l[f][k] if n_h_l[k] else math.nan, clf_l[f][k],
+                                sol.attempts, sol.kappa, sol.objective, delta_l[f][k]))  # fmt: skip
     return out
 
 
@@ -977,16 +987,26 @@ def _sinks(V: np.ndarray, n_v: np.ndarray, N: np.ndarray, Q: np.ndarray, n_h: np
     order, ties to the first), taken for all cells in one sort.
     """
     C = len(n_v)
-    v_cell, h_cell = np.repeat(np.arange(C), n_v), np.repeat(np.arange(C), n_h)
+    v_cell = np.repeat(np.arange(C), n_v)
     v_start, h_start = np.cumsum(n_v) - n_v, np.cumsum(n_h) - n_h
     gap = np.abs(np.einsum("pi,pi->p", V - x_j[v_cell], z[v_cell]))
     nearest = np.lexsort((gap, v_cell))  # per cell, its vertices by gap (stable: ties keep polygon order)
-    ends = np.sort(np.stack([nearest[v_start], nearest[v_start + 1]], axis=1), axis=1)
-    H = int(n_h.max(initial=0))
-    normals, offsets = np.zeros((C, H, 2)), np.full((C, H), np.inf)
-    local = np.arange(len(Q)) - h_start[h_cell]  # padding rows (offset +inf): never the least
-    normals[h_cell, local], offsets[h_cell, local] = N, Q
-    return exit_sinks(V[ends], normals, offsets)
+    faces = V[np.sort(np.stack([nearest[v_start], nearest[v_start + 1]], axis=1), axis=1)]
+    # exit_sinks costs C·H³ with every cell padded to the largest row count H: one call per row
+    # count instead. Padding rows (offset +inf) are never the least and only add candidates t = 0,
+    # so each cell's sink is the one of the padded call. A cell without rows among cells with rows
+    # keeps one padding row: padded, it gets the face's first end, not the mean of a call without rows.
+    padded = n_h.max(initial=0) > 0
+    sinks, depths = np.empty((C, 2)), np.empty(C)
+    for k in np.unique(n_h).tolist():
+        group = np.flatnonzero(n_h == k)
+        if k or not padded:
+            rows = h_start[group][:, None] + np.arange(k)
+            normals, offsets = N[rows], Q[rows]
+        else:
+            normals, offsets = np.zeros((len(group), 1, 2)), np.full((len(group), 1), np.inf)
+        sinks[group], depths[group] = exit_sinks(faces[group], normals, offsets)
+    return sinks, depths
 
 
 def cell_tolerances(cells: Cells, gain: np.ndarray, c_h: np.ndarray, c_v: np.ndarray, u_max: float,
