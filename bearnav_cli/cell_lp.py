@@ -52,6 +52,7 @@ __all__ = [
     "landmark_matrix",
     "LpTemplate",
     "min_norm_gain",
+    "min_norm_gains",
     "theta_from_gain",
     "vertex_lp",
     "vertex_lp_field",
@@ -201,8 +202,8 @@ def gain_from_theta(space: str, theta: np.ndarray, landmarks: np.ndarray) -> np.
     """
     n = len(landmarks)
     if space == "field":
-        m00, m01, a0, m10, m11, a1 = theta.tolist()
-        return _min_norm_gain((m00, m01, m10, m11), (a0, a1), landmarks)
+        F = theta.reshape(2, 3)
+        return min_norm_gain(F[:, :2], F[:, 2], landmarks)
     if space == "full":
         return theta.reshape(2, 2 * n).copy()
     K = np.zeros((2, 2 * n))
@@ -232,7 +233,7 @@ def min_norm_gain(M: np.ndarray, a: np.ndarray, landmarks: np.ndarray) -> np.nda
     ``K* = [M, a] (GᵀG)⁻¹Gᵀ``, in closed form: with ``l̄`` the landmarks' mean,
     ``δ_k = l_k − l̄`` and ``σ = Σ‖δ_k‖²``, block ``k`` is ``K_k = M/n + (a − M l̄) δ_kᵀ/σ``
     (so ``Σ K_k = M`` and ``Σ K_k l_k = a``). Logs a warning when ``cond(GᵀG) > 1e12``
-    (nearly coincident landmarks).
+    (nearly coincident landmarks). One field of :func:`min_norm_gains`.
 
     Parameters
     ----------
@@ -253,39 +254,59 @@ def min_norm_gain(M: np.ndarray, a: np.ndarray, landmarks: np.ndarray) -> np.nda
     ArtifactError
         If all landmarks coincide (``G`` loses rank; map landmarks are distinct).
     """
-    (m00, m01), (m10, m11) = np.asarray(M, float).tolist()
-    return _min_norm_gain((m00, m01, m10, m11), tuple(np.asarray(a, float).tolist()), landmarks)
+    landmarks = np.asarray(landmarks, float)
+    return min_norm_gains(np.reshape(M, (1, 2, 2)), np.reshape(a, (1, 2)), landmarks[None])[0]
 
 
-def _min_norm_gain(M: tuple[float, ...], a: tuple[float, float], landmarks: np.ndarray) -> np.ndarray:
-    """:func:`min_norm_gain` with ``M`` as ``(M₀₀, M₀₁, M₁₀, M₁₁)`` and ``a`` as plain floats."""
-    # A handful of numbers per cell: plain floats are several times faster than numpy calls here.
-    points = np.asarray(landmarks, float).tolist()
-    n = len(points)
-    mx = my = 0.0
-    for x, y in points:
-        mx += x
-        my += y
-    mx, my = mx / n, my / n
-    dx, dy, sigma = [], [], 0.0
-    for x, y in points:
-        dx.append(x - mx)
-        dy.append(y - my)
-        sigma += (x - mx) ** 2 + (y - my) ** 2
-    if not sigma > 0:
-        raise ArtifactError("the cell's landmarks coincide: no gain realises a general field", field="landmarks")
-    cond = _gram_condition(n, (mx, my), sigma)
-    if not cond <= COND_WARNING:
-        log.warning("nearly coincident landmarks: cond(GᵀG) = %.3g", cond)
-    m00, m01, m10, m11 = M
-    a0, a1 = a
-    o0 = (a0 - m00 * mx - m01 * my) / sigma
-    o1 = (a1 - m10 * mx - m11 * my) / sigma
-    row0, row1 = [], []
-    for ex, ey in zip(dx, dy, strict=True):  # K_k = M/n + (a − M l̄) δ_kᵀ/σ
-        row0 += (m00 / n + o0 * ex, m01 / n + o0 * ey)
-        row1 += (m10 / n + o1 * ex, m11 / n + o1 * ey)
-    return np.array([row0, row1])
+def min_norm_gains(M: np.ndarray, a: np.ndarray, landmarks: np.ndarray) -> np.ndarray:
+    """:func:`min_norm_gain` of ``g`` fields at once, each over its own ``n`` landmarks.
+
+    Every number is computed as for one field alone (elementwise operations in the same order,
+    the means summed landmark by landmark from 0), so a gain does not depend on the fields it
+    is computed with.
+
+    Parameters
+    ----------
+    M : ndarray, shape (g, 2, 2)
+        The fields' linear parts (1/s).
+    a : ndarray, shape (g, 2)
+        The fields' constant parts (map units/s).
+    landmarks : ndarray, shape (g, n, 2)
+        Positions of each field's landmarks (map units), ``n ≥ 2``.
+
+    Returns
+    -------
+    ndarray, shape (g, 2, 2n)
+        The gains ``K*``.
+
+    Raises
+    ------
+    ArtifactError
+        If all landmarks of a field coincide.
+    """
+    M, a = np.asarray(M, float), np.asarray(a, float)
+    landmarks = np.asarray(landmarks, float)
+    g, n = landmarks.shape[:2]
+    mean = np.zeros((g, 2))
+    for k in range(n):
+        mean += landmarks[:, k]
+    mean /= n
+    delta = landmarks - mean[:, None, :]  # δ_k, (g, n, 2)
+    sigma = np.empty(g)
+    for i, (offsets, (mx, my)) in enumerate(zip(delta.tolist(), mean.tolist(), strict=True)):
+        # Python's ** (the C library's pow), which does not always round as numpy's x·x does
+        s = 0.0
+        for ex, ey in offsets:
+            s += ex**2 + ey**2
+        if not s > 0:
+            raise ArtifactError("the cell's landmarks coincide: no gain realises a general field", field="landmarks")
+        cond = _gram_condition(n, (mx, my), s)
+        if not cond <= COND_WARNING:
+            log.warning("nearly coincident landmarks: cond(GᵀG) = %.3g", cond)
+        sigma[i] = s
+    offset = (a - M[:, :, 0] * mean[:, :1] - M[:, :, 1] * mean[:, 1:]) / sigma[:, None]  # (a − M l̄)/σ, (g, 2)
+    K = M[:, :, None, :] / n + offset[:, :, None, None] * delta[:, None, :, :]  # K_k = M/n + (a − M l̄) δ_kᵀ/σ
+    return K.reshape(g, 2, 2 * n)
 
 
 def _gram_condition(n: int, mean, sigma: float) -> float:

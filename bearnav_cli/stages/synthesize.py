@@ -30,12 +30,12 @@ from bearnav_cli.cell_lp import (
     CellProblem,
     FieldTemplates,
     LpTemplate,
-    _min_norm_gain,
     dual_template,
     field_map,
     field_vertex_templates,
     gain_from_theta,
     min_norm_gain,
+    min_norm_gains,
     theta_from_gain,
     vertex_template,
 )
@@ -599,7 +599,8 @@ def solve_prepared(prepared: PreparedCell, params: Params, solver: LpSolver, fun
     return SolveOutcome(status, result, upper, c_h, c_v, kappa, attempts)
 
 
-def finish_cell(prepared: PreparedCell, outcome: SolveOutcome, recheck: bool = True) -> CellSolution:
+def finish_cell(prepared: PreparedCell, outcome: SolveOutcome, recheck: bool = True,
+                K: np.ndarray | None = None) -> CellSolution:  # fmt: skip
     """The gain of the solved LP (Lemma 3 in field space; zero after a failure) and its re-checked margins.
 
     Parameters
@@ -613,6 +614,9 @@ def finish_cell(prepared: PreparedCell, outcome: SolveOutcome, recheck: bool = T
         Re-check the margins at the vertices through the checker's rows. False leaves them NaN
         for a certified or relaxed cell, for :func:`more_tolerant_all`, which re-checks every
         cell's field at its vertices in one pass.
+    K : ndarray, shape (2, 2n), optional
+        The gain of the optimal LP's variables when already recovered (:func:`run` recovers
+        those of field space for all cells at once); None: recovered here.
 
     Returns
     -------
@@ -622,7 +626,8 @@ def finish_cell(prepared: PreparedCell, outcome: SolveOutcome, recheck: bool = T
     problem = prepared.problem
     status, result = outcome.status, outcome.result
     if result.status is LpStatus.OPTIMAL:
-        K = gain_from_theta(prepared.space, result.x[: prepared.L.shape[2]], problem.landmarks)
+        if K is None:
+            K = gain_from_theta(prepared.space, result.x[: prepared.L.shape[2]], problem.landmarks)
     else:
         status, K = CellStatus.SOLVER_FAILURE, np.zeros((2, 2 * len(problem.landmarks)))
     margin_h = margin_v = math.nan
@@ -804,8 +809,16 @@ def run(cells: Cells, params: Params = Params(), progress: Callable[[int, int], 
         if progress is not None and (done % report_every == 0 or done == len(prepared)):
             progress(C - len(prepared) + done, C)
     tolerant = cells.is_funnel and params.tolerant  # more_tolerant_all re-checks those cells' margins
+    gains = {}
+    if built is not None:  # field space: Lemma 3's gains of every optimal LP at once (gain_from_theta)
+        optimal = [c for c, outcome in outcomes.items() if outcome.result.status is LpStatus.OPTIMAL]
+        theta = np.array([outcomes[c].result.x[:6] for c in optimal]).reshape(-1, 2, 3)
+        fields = np.zeros((C, 2, 3))
+        fields[optimal] = theta
+        gains = _grouped_gains(fields[:, :, :2], fields[:, :, 2], [cell_landmarks[lo[c] : lo[c + 1]] for c in range(C)],
+                               optimal)  # fmt: skip
     for c, outcome in outcomes.items():
-        solutions[c] = sol = finish_cell(prepared[c], outcome, recheck=not tolerant)
+        solutions[c] = sol = finish_cell(prepared[c], outcome, recheck=not tolerant, K=gains.get(c))
         if sol.status == CellStatus.NOT_CERTIFIED:
             log.warning("cell %d not certified: least-violation margins h %.3g, V %.3g", c, sol.margin_h, sol.margin_v)
         elif sol.status == CellStatus.SOLVER_FAILURE:
@@ -962,18 +975,32 @@ def more_tolerant_all(solutions: Sequence[CellSolution], problems: Sequence[Cell
     valid = (cbf <= 1e-9 * u_max) & (clf < 0) & (peak - u_max <= 1e-9 * u_max)
     delta = np.where(valid & positive, delta, 0.0)
     delta[1, ~(eps > 0)] = -np.inf  # Lemma 6's field exists only for ε > 0
+    lemma6 = delta[1] > delta[0]  # else the LP's field, with its margins re-checked here
+    gains = _grouped_gains(M[1], a[1], [p.landmarks for p in problems], np.flatnonzero(lemma6).tolist())
     # Python floats for the per-cell results (the same numbers as float() of each entry)
     cbf_l, clf_l, delta_l, c_l = cbf.tolist(), clf.tolist(), delta.tolist(), c.tolist()
-    M_l, a_l, n_h_l = M[1].tolist(), a[1].tolist(), n_h.tolist()
+    n_h_l, lemma6_l = n_h.tolist(), lemma6.tolist()
     out = []
-    for k, (sol, prob) in enumerate(zip(solutions, problems, strict=True)):
-        f = 1 if delta_l[1][k] > delta_l[0][k] else 0  # 0: the LP's field, with its margins re-checked here
-        if f:  # min_norm_gain of M[1, k], a[1, k], on their Python floats
-            K, c_k = _min_norm_gain(tuple(M_l[k][0] + M_l[k][1]), tuple(a_l[k]), prob.landmarks), c_l[k]
-        else:
-            K, c_k = sol.K, sol.c_v
+    for k, sol in enumerate(solutions):
+        f = int(lemma6_l[k])
+        K, c_k = (gains[k], c_l[k]) if f else (sol.K, sol.c_v)
         out.append(CellSolution(sol.status, K, sol.c_h, c_k, cbf_l[f][k] if n_h_l[k] else math.nan, clf_l[f][k],
                                 sol.attempts, sol.kappa, sol.objective, delta_l[f][k]))  # fmt: skip
+    return out
+
+
+def _grouped_gains(M: np.ndarray, a: np.ndarray, landmarks: Sequence[np.ndarray], which: list[int]) -> dict:
+    """:func:`~bearnav_cli.cell_lp.min_norm_gains` of the fields ``which``, one call per landmark count.
+
+    ``M`` (C, 2, 2) and ``a`` (C, 2) are the fields, ``landmarks[k]`` (n_k, 2) those of field ``k``;
+    returns ``{k: K}`` with ``K`` of shape (2, 2n_k) for every ``k`` in ``which``.
+    """
+    counts = [len(landmarks[k]) for k in which]
+    out = {}
+    for n in sorted(set(counts)):
+        group = [k for k, count in zip(which, counts, strict=True) if count == n]
+        K = min_norm_gains(M[group], a[group], np.stack([landmarks[k] for k in group]))
+        out.update(zip(group, K, strict=True))
     return out
 
 
