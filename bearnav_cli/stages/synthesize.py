@@ -456,20 +456,30 @@ def _prepared(problem: CellProblem, params: Params, space: str, L: np.ndarray, c
     return PreparedCell(problem, space, L, checker, template, h_scale, v_scale, lemma4_terms)
 
 
-def _kappa_sweep(prepared: PreparedCell, params: Params, solver: LpSolver, fixed: tuple, columns: tuple) -> tuple:
+def _kappa_lp(prepared: PreparedCell, params: Params, attempt: int, columns: tuple) -> tuple:
+    """Attempt ``attempt`` of :func:`_kappa_sweep`: ``(κ, c_h, c_v, bounds)``, ``bounds`` the row and column
+    bounds of its LP (the last four arguments of :meth:`LpSolver.solve`)."""
+    kappa = params.kappa * 0.5**attempt
+    c_h, c_v = kappa * params.u_max / prepared.h_scale, kappa * params.u_max / prepared.v_scale
+    return (kappa, c_h, c_v, prepared.template.row_bounds(c_h, c_v) + tuple(columns))
+
+
+def _kappa_sweep(prepared: PreparedCell, params: Params, solver: LpSolver, fixed: tuple, columns: tuple,
+                 first: tuple | None = None) -> tuple:  # fmt: skip
     """Solve with ``κ, κ/2, …`` (``halvings`` times) until the LP is not infeasible.
 
-    Returns the last result, its ``κ``, ``c_h``, ``c_v``, row upper bounds and the number of solves.
+    ``first`` is ``(attempt 0 of _kappa_lp, its result)`` when that LP is solved already. Returns the
+    last result, its ``κ``, ``c_h``, ``c_v``, row upper bounds and the number of solves.
     """
-    template = prepared.template
     for attempt in range(params.halvings + 1):
-        kappa = params.kappa * 0.5**attempt
-        c_h, c_v = kappa * params.u_max / prepared.h_scale, kappa * params.u_max / prepared.v_scale
-        lower, upper = template.row_bounds(c_h, c_v)
-        result = solver.solve(*fixed, lower, upper, *columns)
+        if attempt == 0 and first is not None:
+            (kappa, c_h, c_v, bounds), result = first
+        else:
+            kappa, c_h, c_v, bounds = _kappa_lp(prepared, params, attempt, columns)
+            result = solver.solve(*fixed, *bounds)
         if result.status is not LpStatus.INFEASIBLE:
             break
-    return result, kappa, c_h, c_v, upper, attempt + 1
+    return result, kappa, c_h, c_v, bounds[1], attempt + 1
 
 
 #: A funnel cell halves ``κ`` at most this often looking for constants Lemma 4 covers (``κ·2⁻⁶⁰``).
@@ -495,31 +505,51 @@ def _lemma4_terms(problem: CellProblem) -> tuple[float, float]:
     return h_min, diam
 
 
-def _funnel_sweep(prepared: PreparedCell, params: Params, solver: LpSolver, fixed: tuple) -> SolveOutcome:
+def _funnel_lp(prepared: PreparedCell, params: Params, halving: int, terms: tuple[float, float]) -> tuple:
+    """Halving ``halving`` of :func:`_funnel_sweep`: ``(κ, c_h, c_v, bounds)``.
+
+    ``terms`` are Lemma 4's ``(min_k h_k(x_j), diam(P))``; ``bounds`` are the row and column bounds
+    of the LP (the last four arguments of :meth:`LpSolver.solve`), None when ``ε_max ≤ 0`` at
+    this ``κ`` (no LP).
+    """
+    template, u_max = prepared.template, params.u_max
+    n_theta, n_h = template.n_theta, template.n_h
+    h_min, diam = terms
+    kappa = params.kappa * 0.5**halving
+    c_v = kappa * u_max / prepared.v_scale
+    c_h = max(kappa * u_max / prepared.h_scale, c_v)
+    eps = min(c_v * h_min, u_max - c_v * diam)  # lemma4_margin
+    if not eps > 0:
+        return kappa, c_h, c_v, None
+    columns = template.col_upper.copy()
+    columns[n_theta : n_theta + n_h] = -0.25 * eps
+    strict = min(params.clf_margin * u_max, 0.25 * eps) if params.clf_margin > 0 else 0.25 * eps
+    columns[n_theta + n_h] = -strict
+    return kappa, c_h, c_v, template.row_bounds(c_h, c_v) + (template.col_lower, columns)
+
+
+def _funnel_sweep(prepared: PreparedCell, params: Params, solver: LpSolver, fixed: tuple,
+                  first: tuple | None = None) -> SolveOutcome:  # fmt: skip
     """ALGORITHMS §11.2 for a funnel cell: ``c_h ≥ c_v`` enforced and ``κ`` halved until Lemma 4 holds.
 
     The LP is then feasible with strict margins ``S_h,k ≤ −ε/4`` (every barrier row) and
     ``S_V ≤ −min(clf_margin·u_max, ε/4)`` (``ε = ε_max``), and maximises them as §5.2 weighs them.
+    ``first`` is ``(halving 0 of _funnel_lp, its result)`` when that LP is solved already.
     """
     template, u_max = prepared.template, params.u_max
-    n_theta, n_h = template.n_theta, template.n_h
     result, upper, c_h, c_v, kappa, attempts = None, None, math.nan, math.nan, params.kappa, 0
     halving = 0
     # geometry: the same at every κ
     h_min, diam = prepared.lemma4_terms if prepared.lemma4_terms is not None else _lemma4_terms(prepared.problem)
     for halving in range(FUNNEL_HALVINGS + 1):
-        kappa = params.kappa * 0.5**halving
-        c_v = kappa * u_max / prepared.v_scale
-        c_h = max(kappa * u_max / prepared.h_scale, c_v)
-        eps = min(c_v * h_min, u_max - c_v * diam)  # lemma4_margin
-        if not eps > 0:
-            continue
-        columns = template.col_upper.copy()
-        columns[n_theta : n_theta + n_h] = -0.25 * eps
-        strict = min(params.clf_margin * u_max, 0.25 * eps) if params.clf_margin > 0 else 0.25 * eps
-        columns[n_theta + n_h] = -strict
-        lower, upper = template.row_bounds(c_h, c_v)
-        result = solver.solve(*fixed, lower, upper, template.col_lower, columns)
+        if halving == 0 and first is not None:
+            (kappa, c_h, c_v, bounds), result = first
+        else:
+            kappa, c_h, c_v, bounds = _funnel_lp(prepared, params, halving, (h_min, diam))
+            if bounds is None:
+                continue
+            result = solver.solve(*fixed, *bounds)
+        upper = bounds[1]
         attempts += 1
         if result.status is LpStatus.OPTIMAL:
             break
@@ -539,7 +569,29 @@ def _funnel_sweep(prepared: PreparedCell, params: Params, solver: LpSolver, fixe
     return SolveOutcome(status, result, prepared.checker.row_upper(c_h, c_v), c_h, c_v, kappa, attempts + 1)
 
 
-def solve_prepared(prepared: PreparedCell, params: Params, solver: LpSolver, funnel: bool = False) -> SolveOutcome:
+def _strict_columns(prepared: PreparedCell, params: Params) -> np.ndarray:
+    """Column upper bounds of §5.3's first CLF bound, ``S_V ≤ −clf_margin·u_max``, shape (n,)."""
+    # A strictly negative CLF slack, S_V <= −clf_margin·u_max, leaves the field no equilibrium
+    # in the cell and bounds the time to the exit face; a cell where no κ allows it is solved
+    # again with S_V <= 0 (status 1, listed in stats.zero_clf_margin).
+    template = prepared.template
+    strict = template.col_upper.copy()
+    strict[template.n_theta + template.n_h] = -params.clf_margin * params.u_max  # the S_V column
+    return strict
+
+
+def _first_attempt(prepared: PreparedCell, params: Params, funnel: bool) -> tuple | None:
+    """The first LP :func:`solve_prepared` solves: ``(κ, c_h, c_v, bounds)`` of :func:`_funnel_lp` or
+    :func:`_kappa_lp`; None for a funnel cell without an LP at the first ``κ`` (``ε_max ≤ 0``)."""
+    if funnel:
+        terms = prepared.lemma4_terms if prepared.lemma4_terms is not None else _lemma4_terms(prepared.problem)
+        attempt = _funnel_lp(prepared, params, 0, terms)
+        return attempt if attempt[3] is not None else None
+    return _kappa_lp(prepared, params, 0, (prepared.template.col_lower, _strict_columns(prepared, params)))
+
+
+def solve_prepared(prepared: PreparedCell, params: Params, solver: LpSolver, funnel: bool = False,
+                   first: tuple | None = None) -> SolveOutcome:  # fmt: skip
     """SOLVE_CELL's loop (§5.3): halve ``κ`` while infeasible, then the least-violation LP.
 
     Without ``funnel``, the CLF slack is first bounded by ``S_V ≤ −clf_margin·u_max`` and, when
@@ -557,6 +609,9 @@ def solve_prepared(prepared: PreparedCell, params: Params, solver: LpSolver, fun
     funnel : bool
         The cell is a funnel cell (ALGORITHMS §11.2): ``c_h ≥ c_v``, ``κ`` halved until Lemma 4
         holds, strict margins from ``ε_max``.
+    first : tuple, optional
+        ``(attempt, result)`` when the cell's first LP is solved already: ``attempt`` from
+        :func:`_first_attempt`, ``result`` its :class:`LpResult`. The loop goes on from there.
 
     Returns
     -------
@@ -568,18 +623,14 @@ def solve_prepared(prepared: PreparedCell, params: Params, solver: LpSolver, fun
     # as they are, without a CellLp per attempt.
     fixed = (template.cost, template.A_indptr, template.A_indices, template.A_values)
     if funnel:
-        return _funnel_sweep(prepared, params, solver, fixed)
-    # A strictly negative CLF slack, S_V <= −clf_margin·u_max, leaves the field no equilibrium
-    # in the cell and bounds the time to the exit face; a cell where no κ allows it is solved
-    # again with S_V <= 0 (status 1, listed in stats.zero_clf_margin).
-    strict = template.col_upper.copy()
-    strict[template.n_theta + template.n_h] = -params.clf_margin * u_max  # the S_V column
-    bounds = [(template.col_lower, strict)]
+        return _funnel_sweep(prepared, params, solver, fixed, first)
+    bounds = [(template.col_lower, _strict_columns(prepared, params))]
     if params.clf_margin > 0:
         bounds.append((template.col_lower, template.col_upper))
     attempts = 0
     for columns in bounds:
-        result, kappa, c_h, c_v, upper, tries = _kappa_sweep(prepared, params, solver, fixed, columns)
+        result, kappa, c_h, c_v, upper, tries = _kappa_sweep(prepared, params, solver, fixed, columns, first)
+        first = None  # the first LP is the strict bound's
         attempts += tries
         if result.status is not LpStatus.INFEASIBLE:  # optimal, or a failure relaxing cannot mend
             break
@@ -802,12 +853,7 @@ def run(cells: Cells, params: Params = Params(), progress: Callable[[int, int], 
                                         _checked_v_max(v_max), terms)  # fmt: skip
         except ArtifactError as exc:
             raise ArtifactError(f"cell {c}: {exc}", field=exc.field) from exc
-    outcomes = {}
-    report_every = max(1, len(prepared) // 100)
-    for done, c in enumerate(prepared, 1):
-        outcomes[c] = solve_prepared(prepared[c], params, solver, funnel=cells.is_funnel)
-        if progress is not None and (done % report_every == 0 or done == len(prepared)):
-            progress(C - len(prepared) + done, C)
+    outcomes = _solve_all(prepared, params, solver, cells.is_funnel, progress, C)
     tolerant = cells.is_funnel and params.tolerant  # more_tolerant_all re-checks those cells' margins
     gains = {}
     if built is not None:  # field space: Lemma 3's gains of every optimal LP at once (gain_from_theta)
@@ -860,6 +906,44 @@ def run(cells: Cells, params: Params = Params(), progress: Callable[[int, int], 
     return Plan(cells=cells, gain=gain, c_h=c_h, c_v=c_v, u_max=np.full(C, params.u_max), margin_h=margin_h,
                 margin_v=margin_v, status=status, goal_tolerance=goal_tolerance, tolerance=delta,
                 usable_tolerance=usable, plan_tolerance=plan_tolerance, stats=stats)  # fmt: skip
+
+
+def _solve_all(prepared: dict, params: Params, solver: LpSolver, funnel: bool,
+               progress: Callable[[int, int], None] | None, C: int) -> dict:  # fmt: skip
+    """:func:`solve_prepared` of every prepared cell in order (``{cell: SolveOutcome}``); ``progress(done, C)``
+    about a hundred times, goal cells counted as done.
+
+    Every cell's first LP (:func:`_first_attempt`) is built first, and runs of them go to
+    :meth:`LpSolver.solve_each` together, up to the next progress report: the solves run back to
+    back, which saves most of the cost of work between two HiGHS runs. A cell whose first LP is
+    not optimal is finished (its further LPs solved) before the next cell's LP, so the solver
+    sees the LPs in the order of a cell-by-cell loop.
+    """
+    order = list(prepared)
+    attempts = [_first_attempt(prepared[c], params, funnel) for c in order]
+    report_every = max(1, len(order) // 100)
+    outcomes, done = {}, 0
+    while done < len(order):
+        stop = min(len(order), (done // report_every + 1) * report_every) if progress is not None else len(order)
+        batch = []
+        for i in range(done, stop):
+            if attempts[i] is None:
+                break
+            template = prepared[order[i]].template
+            batch.append((template.cost, template.A_indptr, template.A_indices, template.A_values) + attempts[i][3])
+        results = solver.solve_each(batch) if batch else []
+        for i, result in enumerate(results, done):
+            outcomes[order[i]] = solve_prepared(prepared[order[i]], params, solver, funnel, (attempts[i], result))
+        end = done + len(results)
+        if not results:  # a funnel cell whose first κ gives no LP
+            outcomes[order[end]] = solve_prepared(prepared[order[end]], params, solver, funnel)
+            end += 1
+        if progress is not None:
+            for d in range(done + 1, end + 1):
+                if d % report_every == 0 or d == len(order):
+                    progress(C - len(order) + d, C)
+        done = end
+    return outcomes
 
 
 def more_tolerant(solution: CellSolution, problem: CellProblem, u_max: float,
