@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import functools
 import logging
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -292,31 +291,37 @@ def min_norm_gains(M: np.ndarray, a: np.ndarray, landmarks: np.ndarray) -> np.nd
         mean += landmarks[:, k]
     mean /= n
     delta = landmarks - mean[:, None, :]  # δ_k, (g, n, 2)
-    sigma = np.empty(g)
-    for i, (offsets, (mx, my)) in enumerate(zip(delta.tolist(), mean.tolist(), strict=True)):
+    sigma = []
+    for offsets in delta.tolist():
         # Python's ** (the C library's pow), which does not always round as numpy's x·x does
         s = 0.0
         for ex, ey in offsets:
             s += ex**2 + ey**2
         if not s > 0:
             raise ArtifactError("the cell's landmarks coincide: no gain realises a general field", field="landmarks")
-        cond = _gram_condition(n, (mx, my), s)
-        if not cond <= COND_WARNING:
-            log.warning("nearly coincident landmarks: cond(GᵀG) = %.3g", cond)
-        sigma[i] = s
+        sigma.append(s)
+    sigma = np.array(sigma)
+    cond = _gram_conditions(n, mean, sigma)
+    for value in cond[~(cond <= COND_WARNING)].tolist():
+        log.warning("nearly coincident landmarks: cond(GᵀG) = %.3g", value)
     offset = (a - M[:, :, 0] * mean[:, :1] - M[:, :, 1] * mean[:, 1:]) / sigma[:, None]  # (a − M l̄)/σ, (g, 2)
     K = M[:, :, None, :] / n + offset[:, :, None, None] * delta[:, None, :, :]  # K_k = M/n + (a − M l̄) δ_kᵀ/σ
     return K.reshape(g, 2, 2 * n)
 
 
-def _gram_condition(n: int, mean, sigma: float) -> float:
-    """``GᵀG = [[nI, s], [sᵀ, t]]`` (``s = n·mean``, ``t = σ + n‖mean‖²``) has the eigenvalue ``n``
-    and the two of ``[[n, ‖s‖], [‖s‖, t]]``: ``λ₊`` and ``λ₋ = nσ/λ₊``."""
-    norm_s = n * math.hypot(mean[0], mean[1])
+def _gram_conditions(n: int, mean: np.ndarray, sigma: np.ndarray) -> np.ndarray:
+    """``cond(GᵀG)`` of ``g`` landmark sets of ``n`` landmarks each: ``mean`` (g, 2), ``σ`` (g,) as in
+    :func:`min_norm_gains`; shape (g,).
+
+    ``GᵀG = [[nI, s], [sᵀ, t]]`` (``s = n·mean``, ``t = σ + n‖mean‖²``) has the eigenvalue ``n``
+    and the two of ``[[n, ‖s‖], [‖s‖, t]]``: ``λ₊`` and ``λ₋ = nσ/λ₊``.
+    """
+    norm_s = n * np.hypot(mean[:, 0], mean[:, 1])
     t = sigma + norm_s * norm_s / n
-    big = 0.5 * (n + t) + math.hypot(0.5 * (n - t), norm_s)
-    small = min(float(n), n * sigma / big)
-    return big / small if small > 0 else math.inf
+    big = 0.5 * (n + t) + np.hypot(0.5 * (n - t), norm_s)
+    small = np.minimum(float(n), n * sigma / big)
+    with np.errstate(divide="ignore"):
+        return np.where(small > 0, big / small, np.inf)
 
 
 # --------------------------------------------------------------------------- the LPs

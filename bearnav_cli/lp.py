@@ -166,6 +166,8 @@ class LpSolver:
 
     def __init__(self) -> None:
         self._highs = _quiet_highs()
+        # looked up once: _run is the code between two HiGHS runs (see solve_each)
+        self._methods = (self._highs.passModel, self._highs.run, self._highs.getModelStatus)
         for name, value in OPTIONS.items():
             self._set(name, value)
         self.solves = 0
@@ -228,13 +230,14 @@ class LpSolver:
             One per problem solved, in order: every problem while the LPs are optimal, and the
             first LP that is not (infeasible, unbounded or an error) last.
         """
-        highs, solved, status = self._highs, [], _OPTIMAL
         models = [(len(p[0]), len(p[4])) + tuple(p) for p in problems]
-        for args in [self._pass_args(model) for model in models]:
+        solved, status = [], _OPTIMAL
+        solution, objective = self._highs.getSolution, self._highs.getObjectiveValue
+        for args in [self._pass_args(model) for model in models]:  # the loop is all the code between two runs
             status = self._run(args)
             if status != _OPTIMAL:
                 break
-            solved.append((highs.getSolution().col_value, highs.getObjectiveValue()))
+            solved.append((solution().col_value, objective()))
         results = [LpResult(LpStatus.OPTIMAL, np.array(x, dtype=float), float(objective)) for x, objective in solved]
         if status != _OPTIMAL:
             results.append(self._not_optimal(status, models[len(solved)]))
@@ -257,11 +260,12 @@ class LpSolver:
         """Pass the model (arguments of :meth:`_pass_args`) and run; the model status as an int, or an
         error status if a call fails."""
         self.solves += 1
-        if self._highs.passModel(*args) == _ERROR:
+        pass_model, run, model_status = self._methods
+        if pass_model(*args) == _ERROR:
             return _MODEL_ERROR
-        if self._highs.run() == _ERROR:
+        if run() == _ERROR:
             return _SOLVE_ERROR
-        return int(self._highs.getModelStatus())
+        return int(model_status())
 
     def _pass_args(self, model: tuple) -> tuple:
         """Arguments of ``Highs.passModel``: the raw-array form when this highspy has it, else a ``HighsLp``.
