@@ -106,14 +106,18 @@ class CellProblem:
     landmarks: np.ndarray
 
     def __post_init__(self) -> None:
-        for name, shape in _PROBLEM_SHAPES:
+        for name, shape, ndim in _PROBLEM_SHAPES:
             value = getattr(self, name)
-            if type(value) is not np.ndarray or value.dtype != np.float64 or value.ndim != len(shape):
+            # a float64 array's dtype is (almost always) the one native instance: ``is`` first,
+            # the cheap test for the arrays run() slices from Cells
+            if type(value) is not np.ndarray or value.ndim != ndim or (value.dtype is not _F64 and value.dtype != _F64):
                 object.__setattr__(self, name, np.asarray(value, dtype=float).reshape(shape))
 
 
-_PROBLEM_SHAPES = (("vertices", (-1, 2)), ("A", (-1, 2)), ("b", (-1,)), ("z", (2,)), ("x_j", (2,)),
-                   ("cbf_n", (-1, 2)), ("cbf_q", (-1,)), ("landmarks", (-1, 2)))  # fmt: skip
+_F64 = np.dtype(np.float64)
+_PROBLEM_SHAPES = tuple((name, shape, len(shape)) for name, shape in (
+    ("vertices", (-1, 2)), ("A", (-1, 2)), ("b", (-1,)), ("z", (2,)), ("x_j", (2,)), ("cbf_n", (-1, 2)),
+    ("cbf_q", (-1,)), ("landmarks", (-1, 2))))  # fmt: skip
 
 
 def landmark_matrix(landmarks: np.ndarray) -> np.ndarray:
