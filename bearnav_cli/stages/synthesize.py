@@ -12,7 +12,10 @@ passes (build every LP, solve them all, recover the gains), which keeps each kin
 code cache-warm. With the full gain (field space) the build pass makes every cell's vertex
 rows and constant scales in a few numpy passes over the flat ``Cells`` arrays
 (:func:`~bearnav_cli.cell_lp.field_vertex_templates`); the LPs are the same bytes as
-:func:`prepare_cell` builds one cell at a time.
+:func:`prepare_cell` builds one cell at a time. Every cell's first LP is built before the
+solves, which run back to back (:meth:`~bearnav_cli.lp.LpSolver.solve_each`), and the gains
+of Lemma 3 are recovered for all cells at once (:func:`~bearnav_cli.cell_lp.min_norm_gains`);
+the numbers are those of the cell-by-cell functions.
 """
 
 from __future__ import annotations
@@ -921,17 +924,18 @@ def _solve_all(prepared: dict, params: Params, solver: LpSolver, funnel: bool,
     """
     order = list(prepared)
     attempts = [_first_attempt(prepared[c], params, funnel) for c in order]
+    problems = []  # the arguments of LpSolver.solve of each first LP
+    for c, attempt in zip(order, attempts, strict=True):
+        t = prepared[c].template
+        problems.append(None if attempt is None else (t.cost, t.A_indptr, t.A_indices, t.A_values) + attempt[3])
+    gap = [len(order)] * (len(order) + 1)  # gap[i]: the first cell from i on without a first LP
+    for i in range(len(order) - 1, -1, -1):
+        gap[i] = i if problems[i] is None else gap[i + 1]
     report_every = max(1, len(order) // 100)
     outcomes, done = {}, 0
     while done < len(order):
         stop = min(len(order), (done // report_every + 1) * report_every) if progress is not None else len(order)
-        batch = []
-        for i in range(done, stop):
-            if attempts[i] is None:
-                break
-            template = prepared[order[i]].template
-            batch.append((template.cost, template.A_indptr, template.A_indices, template.A_values) + attempts[i][3])
-        results = solver.solve_each(batch) if batch else []
+        results = solver.solve_each(problems[done : min(stop, gap[done])]) if gap[done] > done else []
         for i, result in enumerate(results, done):
             outcomes[order[i]] = solve_prepared(prepared[order[i]], params, solver, funnel, (attempts[i], result))
         end = done + len(results)
