@@ -12,12 +12,14 @@ passes (build every LP, solve them all, recover the gains), which keeps each kin
 code cache-warm. With the full gain (field space) the build pass makes every cell's vertex
 rows and constant scales in a few numpy passes over the flat ``Cells`` arrays
 (:func:`~bearnav_cli.cell_lp.field_vertex_templates`); the LPs are the same bytes as
-:func:`prepare_cell` builds one cell at a time.
+:func:`prepare_cell` builds one cell at a time. Every cell's first LP is built before the
+solves, which run back to back (:meth:`~bearnav_cli.lp.LpSolver.solve_each`), and the gains
+of Lemma 3 are recovered for all cells at once (:func:`~bearnav_cli.cell_lp.min_norm_gains`);
+the numbers are those of the cell-by-cell functions.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import logging
 import math
 import time
@@ -36,6 +38,7 @@ from bearnav_cli.cell_lp import (
     field_vertex_templates,
     gain_from_theta,
     min_norm_gain,
+    min_norm_gains,
     theta_from_gain,
     vertex_template,
 )
@@ -456,20 +459,30 @@ def _prepared(problem: CellProblem, params: Params, space: str, L: np.ndarray, c
     return PreparedCell(problem, space, L, checker, template, h_scale, v_scale, lemma4_terms)
 
 
-def _kappa_sweep(prepared: PreparedCell, params: Params, solver: LpSolver, fixed: tuple, columns: tuple) -> tuple:
+def _kappa_lp(prepared: PreparedCell, params: Params, attempt: int, columns: tuple) -> tuple:
+    """Attempt ``attempt`` of :func:`_kappa_sweep`: ``(κ, c_h, c_v, bounds)``, ``bounds`` the row and column
+    bounds of its LP (the last four arguments of :meth:`LpSolver.solve`)."""
+    kappa = params.kappa * 0.5**attempt
+    c_h, c_v = kappa * params.u_max / prepared.h_scale, kappa * params.u_max / prepared.v_scale
+    return (kappa, c_h, c_v, prepared.template.row_bounds(c_h, c_v) + tuple(columns))
+
+
+def _kappa_sweep(prepared: PreparedCell, params: Params, solver: LpSolver, fixed: tuple, columns: tuple,
+                 first: tuple | None = None) -> tuple:  # fmt: skip
     """Solve with ``κ, κ/2, …`` (``halvings`` times) until the LP is not infeasible.
 
-    Returns the last result, its ``κ``, ``c_h``, ``c_v``, row upper bounds and the number of solves.
+    ``first`` is ``(attempt 0 of _kappa_lp, its result)`` when that LP is solved already. Returns the
+    last result, its ``κ``, ``c_h``, ``c_v``, row upper bounds and the number of solves.
     """
-    template = prepared.template
     for attempt in range(params.halvings + 1):
-        kappa = params.kappa * 0.5**attempt
-        c_h, c_v = kappa * params.u_max / prepared.h_scale, kappa * params.u_max / prepared.v_scale
-        lower, upper = template.row_bounds(c_h, c_v)
-        result = solver.solve(*fixed, lower, upper, *columns)
+        if attempt == 0 and first is not None:
+            (kappa, c_h, c_v, bounds), result = first
+        else:
+            kappa, c_h, c_v, bounds = _kappa_lp(prepared, params, attempt, columns)
+            result = solver.solve(*fixed, *bounds)
         if result.status is not LpStatus.INFEASIBLE:
             break
-    return result, kappa, c_h, c_v, upper, attempt + 1
+    return result, kappa, c_h, c_v, bounds[1], attempt + 1
 
 
 #: A funnel cell halves ``κ`` at most this often looking for constants Lemma 4 covers (``κ·2⁻⁶⁰``).
@@ -495,31 +508,51 @@ def _lemma4_terms(problem: CellProblem) -> tuple[float, float]:
     return h_min, diam
 
 
-def _funnel_sweep(prepared: PreparedCell, params: Params, solver: LpSolver, fixed: tuple) -> SolveOutcome:
+def _funnel_lp(prepared: PreparedCell, params: Params, halving: int, terms: tuple[float, float]) -> tuple:
+    """Halving ``halving`` of :func:`_funnel_sweep`: ``(κ, c_h, c_v, bounds)``.
+
+    ``terms`` are Lemma 4's ``(min_k h_k(x_j), diam(P))``; ``bounds`` are the row and column bounds
+    of the LP (the last four arguments of :meth:`LpSolver.solve`), None when ``ε_max ≤ 0`` at
+    this ``κ`` (no LP).
+    """
+    template, u_max = prepared.template, params.u_max
+    n_theta, n_h = template.n_theta, template.n_h
+    h_min, diam = terms
+    kappa = params.kappa * 0.5**halving
+    c_v = kappa * u_max / prepared.v_scale
+    c_h = max(kappa * u_max / prepared.h_scale, c_v)
+    eps = min(c_v * h_min, u_max - c_v * diam)  # lemma4_margin
+    if not eps > 0:
+        return kappa, c_h, c_v, None
+    columns = template.col_upper.copy()
+    columns[n_theta : n_theta + n_h] = -0.25 * eps
+    strict = min(params.clf_margin * u_max, 0.25 * eps) if params.clf_margin > 0 else 0.25 * eps
+    columns[n_theta + n_h] = -strict
+    return kappa, c_h, c_v, template.row_bounds(c_h, c_v) + (template.col_lower, columns)
+
+
+def _funnel_sweep(prepared: PreparedCell, params: Params, solver: LpSolver, fixed: tuple,
+                  first: tuple | None = None) -> SolveOutcome:  # fmt: skip
     """ALGORITHMS §11.2 for a funnel cell: ``c_h ≥ c_v`` enforced and ``κ`` halved until Lemma 4 holds.
 
     The LP is then feasible with strict margins ``S_h,k ≤ −ε/4`` (every barrier row) and
     ``S_V ≤ −min(clf_margin·u_max, ε/4)`` (``ε = ε_max``), and maximises them as §5.2 weighs them.
+    ``first`` is ``(halving 0 of _funnel_lp, its result)`` when that LP is solved already.
     """
     template, u_max = prepared.template, params.u_max
-    n_theta, n_h = template.n_theta, template.n_h
     result, upper, c_h, c_v, kappa, attempts = None, None, math.nan, math.nan, params.kappa, 0
     halving = 0
     # geometry: the same at every κ
     h_min, diam = prepared.lemma4_terms if prepared.lemma4_terms is not None else _lemma4_terms(prepared.problem)
     for halving in range(FUNNEL_HALVINGS + 1):
-        kappa = params.kappa * 0.5**halving
-        c_v = kappa * u_max / prepared.v_scale
-        c_h = max(kappa * u_max / prepared.h_scale, c_v)
-        eps = min(c_v * h_min, u_max - c_v * diam)  # lemma4_margin
-        if not eps > 0:
-            continue
-        columns = template.col_upper.copy()
-        columns[n_theta : n_theta + n_h] = -0.25 * eps
-        strict = min(params.clf_margin * u_max, 0.25 * eps) if params.clf_margin > 0 else 0.25 * eps
-        columns[n_theta + n_h] = -strict
-        lower, upper = template.row_bounds(c_h, c_v)
-        result = solver.solve(*fixed, lower, upper, template.col_lower, columns)
+        if halving == 0 and first is not None:
+            (kappa, c_h, c_v, bounds), result = first
+        else:
+            kappa, c_h, c_v, bounds = _funnel_lp(prepared, params, halving, (h_min, diam))
+            if bounds is None:
+                continue
+            result = solver.solve(*fixed, *bounds)
+        upper = bounds[1]
         attempts += 1
         if result.status is LpStatus.OPTIMAL:
             break
@@ -539,7 +572,29 @@ def _funnel_sweep(prepared: PreparedCell, params: Params, solver: LpSolver, fixe
     return SolveOutcome(status, result, prepared.checker.row_upper(c_h, c_v), c_h, c_v, kappa, attempts + 1)
 
 
-def solve_prepared(prepared: PreparedCell, params: Params, solver: LpSolver, funnel: bool = False) -> SolveOutcome:
+def _strict_columns(prepared: PreparedCell, params: Params) -> np.ndarray:
+    """Column upper bounds of §5.3's first CLF bound, ``S_V ≤ −clf_margin·u_max``, shape (n,)."""
+    # A strictly negative CLF slack, S_V <= −clf_margin·u_max, leaves the field no equilibrium
+    # in the cell and bounds the time to the exit face; a cell where no κ allows it is solved
+    # again with S_V <= 0 (status 1, listed in stats.zero_clf_margin).
+    template = prepared.template
+    strict = template.col_upper.copy()
+    strict[template.n_theta + template.n_h] = -params.clf_margin * params.u_max  # the S_V column
+    return strict
+
+
+def _first_attempt(prepared: PreparedCell, params: Params, funnel: bool) -> tuple | None:
+    """The first LP :func:`solve_prepared` solves: ``(κ, c_h, c_v, bounds)`` of :func:`_funnel_lp` or
+    :func:`_kappa_lp`; None for a funnel cell without an LP at the first ``κ`` (``ε_max ≤ 0``)."""
+    if funnel:
+        terms = prepared.lemma4_terms if prepared.lemma4_terms is not None else _lemma4_terms(prepared.problem)
+        attempt = _funnel_lp(prepared, params, 0, terms)
+        return attempt if attempt[3] is not None else None
+    return _kappa_lp(prepared, params, 0, (prepared.template.col_lower, _strict_columns(prepared, params)))
+
+
+def solve_prepared(prepared: PreparedCell, params: Params, solver: LpSolver, funnel: bool = False,
+                   first: tuple | None = None) -> SolveOutcome:  # fmt: skip
     """SOLVE_CELL's loop (§5.3): halve ``κ`` while infeasible, then the least-violation LP.
 
     Without ``funnel``, the CLF slack is first bounded by ``S_V ≤ −clf_margin·u_max`` and, when
@@ -557,6 +612,9 @@ def solve_prepared(prepared: PreparedCell, params: Params, solver: LpSolver, fun
     funnel : bool
         The cell is a funnel cell (ALGORITHMS §11.2): ``c_h ≥ c_v``, ``κ`` halved until Lemma 4
         holds, strict margins from ``ε_max``.
+    first : tuple, optional
+        ``(attempt, result)`` when the cell's first LP is solved already: ``attempt`` from
+        :func:`_first_attempt`, ``result`` its :class:`LpResult`. The loop goes on from there.
 
     Returns
     -------
@@ -568,18 +626,14 @@ def solve_prepared(prepared: PreparedCell, params: Params, solver: LpSolver, fun
     # as they are, without a CellLp per attempt.
     fixed = (template.cost, template.A_indptr, template.A_indices, template.A_values)
     if funnel:
-        return _funnel_sweep(prepared, params, solver, fixed)
-    # A strictly negative CLF slack, S_V <= −clf_margin·u_max, leaves the field no equilibrium
-    # in the cell and bounds the time to the exit face; a cell where no κ allows it is solved
-    # again with S_V <= 0 (status 1, listed in stats.zero_clf_margin).
-    strict = template.col_upper.copy()
-    strict[template.n_theta + template.n_h] = -params.clf_margin * u_max  # the S_V column
-    bounds = [(template.col_lower, strict)]
+        return _funnel_sweep(prepared, params, solver, fixed, first)
+    bounds = [(template.col_lower, _strict_columns(prepared, params))]
     if params.clf_margin > 0:
         bounds.append((template.col_lower, template.col_upper))
     attempts = 0
     for columns in bounds:
-        result, kappa, c_h, c_v, upper, tries = _kappa_sweep(prepared, params, solver, fixed, columns)
+        result, kappa, c_h, c_v, upper, tries = _kappa_sweep(prepared, params, solver, fixed, columns, first)
+        first = None  # the first LP is the strict bound's
         attempts += tries
         if result.status is not LpStatus.INFEASIBLE:  # optimal, or a failure relaxing cannot mend
             break
@@ -599,7 +653,8 @@ def solve_prepared(prepared: PreparedCell, params: Params, solver: LpSolver, fun
     return SolveOutcome(status, result, upper, c_h, c_v, kappa, attempts)
 
 
-def finish_cell(prepared: PreparedCell, outcome: SolveOutcome, recheck: bool = True) -> CellSolution:
+def finish_cell(prepared: PreparedCell, outcome: SolveOutcome, recheck: bool = True,
+                K: np.ndarray | None = None) -> CellSolution:  # fmt: skip
     """The gain of the solved LP (Lemma 3 in field space; zero after a failure) and its re-checked margins.
 
     Parameters
@@ -613,6 +668,9 @@ def finish_cell(prepared: PreparedCell, outcome: SolveOutcome, recheck: bool = T
         Re-check the margins at the vertices through the checker's rows. False leaves them NaN
         for a certified or relaxed cell, for :func:`more_tolerant_all`, which re-checks every
         cell's field at its vertices in one pass.
+    K : ndarray, shape (2, 2n), optional
+        The gain of the optimal LP's variables when already recovered (:func:`run` recovers
+        those of field space for all cells at once); None: recovered here.
 
     Returns
     -------
@@ -622,7 +680,8 @@ def finish_cell(prepared: PreparedCell, outcome: SolveOutcome, recheck: bool = T
     problem = prepared.problem
     status, result = outcome.status, outcome.result
     if result.status is LpStatus.OPTIMAL:
-        K = gain_from_theta(prepared.space, result.x[: prepared.L.shape[2]], problem.landmarks)
+        if K is None:
+            K = gain_from_theta(prepared.space, result.x[: prepared.L.shape[2]], problem.landmarks)
     else:
         status, K = CellStatus.SOLVER_FAILURE, np.zeros((2, 2 * len(problem.landmarks)))
     margin_h = margin_v = math.nan
@@ -797,15 +856,18 @@ def run(cells: Cells, params: Params = Params(), progress: Callable[[int, int], 
                                         _checked_v_max(v_max), terms)  # fmt: skip
         except ArtifactError as exc:
             raise ArtifactError(f"cell {c}: {exc}", field=exc.field) from exc
-    outcomes = {}
-    report_every = max(1, len(prepared) // 100)
-    for done, c in enumerate(prepared, 1):
-        outcomes[c] = solve_prepared(prepared[c], params, solver, funnel=cells.is_funnel)
-        if progress is not None and (done % report_every == 0 or done == len(prepared)):
-            progress(C - len(prepared) + done, C)
+    outcomes = _solve_all(prepared, params, solver, cells.is_funnel, progress, C)
     tolerant = cells.is_funnel and params.tolerant  # more_tolerant_all re-checks those cells' margins
+    gains = {}
+    if built is not None:  # field space: Lemma 3's gains of every optimal LP at once (gain_from_theta)
+        optimal = [c for c, outcome in outcomes.items() if outcome.result.status is LpStatus.OPTIMAL]
+        theta = np.array([outcomes[c].result.x[:6] for c in optimal]).reshape(-1, 2, 3)
+        fields = np.zeros((C, 2, 3))
+        fields[optimal] = theta
+        gains = _grouped_gains(fields[:, :, :2], fields[:, :, 2], [cell_landmarks[lo[c] : lo[c + 1]] for c in range(C)],
+                               optimal)  # fmt: skip
     for c, outcome in outcomes.items():
-        solutions[c] = sol = finish_cell(prepared[c], outcome, recheck=not tolerant)
+        solutions[c] = sol = finish_cell(prepared[c], outcome, recheck=not tolerant, K=gains.get(c))
         if sol.status == CellStatus.NOT_CERTIFIED:
             log.warning("cell %d not certified: least-violation margins h %.3g, V %.3g", c, sol.margin_h, sol.margin_v)
         elif sol.status == CellStatus.SOLVER_FAILURE:
@@ -847,6 +909,45 @@ def run(cells: Cells, params: Params = Params(), progress: Callable[[int, int], 
     return Plan(cells=cells, gain=gain, c_h=c_h, c_v=c_v, u_max=np.full(C, params.u_max), margin_h=margin_h,
                 margin_v=margin_v, status=status, goal_tolerance=goal_tolerance, tolerance=delta,
                 usable_tolerance=usable, plan_tolerance=plan_tolerance, stats=stats)  # fmt: skip
+
+
+def _solve_all(prepared: dict, params: Params, solver: LpSolver, funnel: bool,
+               progress: Callable[[int, int], None] | None, C: int) -> dict:  # fmt: skip
+    """:func:`solve_prepared` of every prepared cell in order (``{cell: SolveOutcome}``); ``progress(done, C)``
+    about a hundred times, goal cells counted as done.
+
+    Every cell's first LP (:func:`_first_attempt`) is built first, and runs of them go to
+    :meth:`LpSolver.solve_each` together, up to the next progress report: the solves run back to
+    back, which saves most of the cost of work between two HiGHS runs. A cell whose first LP is
+    not optimal is finished (its further LPs solved) before the next cell's LP, so the solver
+    sees the LPs in the order of a cell-by-cell loop.
+    """
+    order = list(prepared)
+    attempts = [_first_attempt(prepared[c], params, funnel) for c in order]
+    problems = []  # the arguments of LpSolver.solve of each first LP
+    for c, attempt in zip(order, attempts, strict=True):
+        t = prepared[c].template
+        problems.append(None if attempt is None else (t.cost, t.A_indptr, t.A_indices, t.A_values) + attempt[3])
+    gap = [len(order)] * (len(order) + 1)  # gap[i]: the first cell from i on without a first LP
+    for i in range(len(order) - 1, -1, -1):
+        gap[i] = i if problems[i] is None else gap[i + 1]
+    report_every = max(1, len(order) // 100)
+    outcomes, done = {}, 0
+    while done < len(order):
+        stop = min(len(order), (done // report_every + 1) * report_every) if progress is not None else len(order)
+        results = solver.solve_each(problems[done : min(stop, gap[done])]) if gap[done] > done else []
+        for i, result in enumerate(results, done):
+            outcomes[order[i]] = solve_prepared(prepared[order[i]], params, solver, funnel, (attempts[i], result))
+        end = done + len(results)
+        if not results:  # a funnel cell whose first κ gives no LP
+            outcomes[order[end]] = solve_prepared(prepared[order[end]], params, solver, funnel)
+            end += 1
+        if progress is not None:
+            for d in range(done + 1, end + 1):
+                if d % report_every == 0 or d == len(order):
+                    progress(C - len(order) + d, C)
+        done = end
+    return outcomes
 
 
 def more_tolerant(solution: CellSolution, problem: CellProblem, u_max: float,
@@ -893,12 +994,12 @@ def more_tolerant_all(solutions: Sequence[CellSolution], problems: Sequence[Cell
     diam = np.array([t[1] for t in terms], float)
     z = np.array([p.z for p in problems], float)
     x_j = np.array([p.x_j for p in problems], float)
-    # ragged vertices and barrier rows, and every (vertex, row) pair of the same cell
+    # ragged vertices and barrier rows (CellProblem holds them as float64 (p, 2), (h, 2), (h,))
     n_v = np.array([len(p.vertices) for p in problems])
     n_h = np.array([len(p.cbf_q) for p in problems])
     V = np.concatenate([p.vertices for p in problems])
-    N = np.concatenate([np.asarray(p.cbf_n, float).reshape(-1, 2) for p in problems])
-    Q = np.concatenate([np.asarray(p.cbf_q, float).ravel() for p in problems])
+    N = np.concatenate([p.cbf_n for p in problems])
+    Q = np.concatenate([p.cbf_q for p in problems])
     sink, h_star = _sinks(V, n_v, N, Q, n_h, z, x_j)
     c_h = np.array([s.c_h for s in solutions], float)
     c_lp = np.array([s.c_v for s in solutions], float)
@@ -911,31 +1012,40 @@ def more_tolerant_all(solutions: Sequence[CellSolution], problems: Sequence[Cell
     # the two fields u = a − M x of every cell: the LP's (from its gain) and Lemma 6's
     M = np.empty((2, C, 2, 2))
     a = np.empty((2, C, 2))
-    for k, (sol, prob) in enumerate(zip(solutions, problems, strict=True)):
-        M[0, k] = sol.K.reshape(2, -1, 2).sum(axis=1)
-        a[0, k] = sol.K @ prob.landmarks.ravel()
+    # The LP's field [K𝟙, Kℓ], one stacked call per landmark count: the sum runs over the
+    # landmarks in the same order, and each item of the stacked matmul is the per-cell product.
+    n_lm = np.array([len(p.landmarks) for p in problems])
+    for n in np.unique(n_lm).tolist():
+        group = np.flatnonzero(n_lm == n).tolist()
+        K = np.stack([solutions[k].K for k in group])  # (g, 2, 2n)
+        ell = np.stack([problems[k].landmarks for k in group]).reshape(len(group), 2 * n, 1)
+        M[0, group] = K.reshape(len(group), 2, n, 2).sum(axis=2)
+        a[0, group] = np.matmul(K, ell)[..., 0]
     M[1] = c[:, None, None] * np.eye(2)
     a[1] = c[:, None] * sink - np.where(eps > 0, eps, 0.0)[:, None] * z
     v_cell, h_cell = np.repeat(np.arange(C), n_v), np.repeat(np.arange(C), n_h)
     v_start, h_start = np.cumsum(n_v) - n_v, np.cumsum(n_h) - n_h
-    pairs = n_v * n_h
-    pair_cell = np.repeat(np.arange(C), pairs)
-    local = np.arange(int(pairs.sum())) - np.repeat(np.cumsum(pairs) - pairs, pairs)
-    pair_row = h_start[pair_cell] + local % n_h[pair_cell]  # rows vary fastest
-    pair_vertex = v_start[pair_cell] + local // n_h[pair_cell]
+    # every (row, vertex) pair of the same cell, row after row: each row's pairs and each cell's
+    # rows and vertices are contiguous, so the maxima are segment reductions (reduceat)
+    row_len = n_v[h_cell]
+    row_start = np.cumsum(row_len) - row_len
+    pair_row = np.repeat(np.arange(len(Q)), row_len)
+    pair_vertex = np.arange(int(row_len.sum())) + np.repeat(v_start[h_cell] - row_start, row_len)
+    has_rows = n_h > 0
     U = a[:, v_cell] - np.einsum("fcij,cj->fci", M[:, v_cell], V)  # (2, ΣP, 2): u at every vertex
-    values = -(np.einsum("fpi,pi->fp", U[:, pair_vertex], N[pair_row])
-               + c_h[pair_cell] * (np.einsum("pi,pi->p", V[pair_vertex], N[pair_row]) + Q[pair_row]))  # fmt: skip
-    row_max = np.full((2, len(Q)), -np.inf)
+    pair_n = N[pair_row]
+    values = -(np.einsum("fpi,pi->fp", U[:, pair_vertex], pair_n)
+               + c_h[h_cell[pair_row]] * (np.einsum("pi,pi->p", V[pair_vertex], pair_n) + Q[pair_row]))  # fmt: skip
     cbf = np.full((2, C), -np.inf)
     if len(Q):
-        np.maximum.at(row_max, (slice(None), pair_row), values)
-        np.maximum.at(cbf, (slice(None), h_cell), row_max)
-    clf = np.full((2, C), -np.inf)
-    np.maximum.at(clf, (slice(None), v_cell), np.einsum("fpi,pi->fp", U, z[v_cell])
-                  + c_v[:, v_cell] * np.einsum("pi,pi->p", V - x_j[v_cell], z[v_cell]))  # fmt: skip
-    peak = np.zeros((2, C))
-    np.maximum.at(peak, (slice(None), v_cell), np.abs(U).max(axis=2))
+        row_max = np.maximum.reduceat(values, row_start, axis=1)
+        cbf[:, has_rows] = np.maximum.reduceat(row_max, h_start[has_rows], axis=1)
+    else:
+        row_max = np.zeros((2, 0))
+    progress = np.einsum("fpi,pi->fp", U, z[v_cell]) + c_v[:, v_cell] * np.einsum("pi,pi->p", V - x_j[v_cell],
+                                                                                  z[v_cell])  # fmt: skip
+    clf = np.maximum.reduceat(progress, v_start, axis=1)
+    peak = np.maximum.reduceat(np.abs(U).max(axis=2), v_start, axis=1)
     # δ_c = min over the barrier rows and the exit direction of margin / ‖Mᵀn‖ (funnel.cell_tolerance)
     row_gain = np.hypot(*np.einsum("ri,frij->frj", N, M[:, h_cell]).transpose(2, 0, 1))  # (2, ΣH)
     z_gain = np.hypot(*np.einsum("ci,fcij->fcj", z, M).transpose(2, 0, 1))  # (2, C)
@@ -944,26 +1054,41 @@ def more_tolerant_all(solutions: Sequence[CellSolution], problems: Sequence[Cell
         ratio_h = np.where(row_gain > 0, sigma_h / row_gain, np.inf)
         ratio_v = np.where(z_gain > 0, sigma_v / z_gain, np.inf)
     delta = ratio_v.copy()
-    if len(Q):
-        np.minimum.at(delta, (slice(None), h_cell), ratio_h)
     positive = sigma_v > 0
     if len(Q):
-        bad_rows = np.zeros((2, C), bool)
-        np.logical_or.at(bad_rows, (slice(None), h_cell), ~(sigma_h > 0))
-        positive &= ~bad_rows
+        starts = h_start[has_rows]
+        delta[:, has_rows] = np.minimum(delta[:, has_rows], np.minimum.reduceat(ratio_h, starts, axis=1))
+        positive[:, has_rows] &= ~np.logical_or.reduceat(~(sigma_h > 0), starts, axis=1)
     # the LP's own solution sits on its bounds up to the solver's rounding
     valid = (cbf <= 1e-9 * u_max) & (clf < 0) & (peak - u_max <= 1e-9 * u_max)
     delta = np.where(valid & positive, delta, 0.0)
     delta[1, ~(eps > 0)] = -np.inf  # Lemma 6's field exists only for ε > 0
+    lemma6 = delta[1] > delta[0]  # else the LP's field, with its margins re-checked here
+    gains = _grouped_gains(M[1], a[1], [p.landmarks for p in problems], np.flatnonzero(lemma6).tolist())
+    # Python floats for the per-cell results (the same numbers as float() of each entry)
+    cbf_l, clf_l, delta_l, c_l = cbf.tolist(), clf.tolist(), delta.tolist(), c.tolist()
+    n_h_l, lemma6_l = n_h.tolist(), lemma6.tolist()
     out = []
-    for k, (sol, prob) in enumerate(zip(solutions, problems, strict=True)):
-        if not delta[1, k] > delta[0, k]:  # the LP's field, with its margins re-checked here
-            out.append(dataclasses.replace(sol, margin_h=float(cbf[0, k]) if n_h[k] else math.nan,
-                                           margin_v=float(clf[0, k]), tolerance=float(delta[0, k])))  # fmt: skip
-            continue
-        out.append(dataclasses.replace(sol, K=min_norm_gain(M[1, k], a[1, k], prob.landmarks), c_v=float(c[k]),
-                                       margin_h=float(cbf[1, k]) if n_h[k] else math.nan,
-                                       margin_v=float(clf[1, k]), tolerance=float(delta[1, k])))  # fmt: skip
+    for k, sol in enumerate(solutions):
+        f = int(lemma6_l[k])
+        K, c_k = (gains[k], c_l[k]) if f else (sol.K, sol.c_v)
+        out.append(CellSolution(sol.status, K, sol.c_h, c_k, cbf_l[f][k] if n_h_l[k] else math.nan, clf_l[f][k],
+                                sol.attempts, sol.kappa, sol.objective, delta_l[f][k]))  # fmt: skip
+    return out
+
+
+def _grouped_gains(M: np.ndarray, a: np.ndarray, landmarks: Sequence[np.ndarray], which: list[int]) -> dict:
+    """:func:`~bearnav_cli.cell_lp.min_norm_gains` of the fields ``which``, one call per landmark count.
+
+    ``M`` (C, 2, 2) and ``a`` (C, 2) are the fields, ``landmarks[k]`` (n_k, 2) those of field ``k``;
+    returns ``{k: K}`` with ``K`` of shape (2, 2n_k) for every ``k`` in ``which``.
+    """
+    counts = [len(landmarks[k]) for k in which]
+    out = {}
+    for n in sorted(set(counts)):
+        group = [k for k, count in zip(which, counts, strict=True) if count == n]
+        K = min_norm_gains(M[group], a[group], np.stack([landmarks[k] for k in group]))
+        out.update(zip(group, K, strict=True))
     return out
 
 
@@ -977,16 +1102,26 @@ def _sinks(V: np.ndarray, n_v: np.ndarray, N: np.ndarray, Q: np.ndarray, n_h: np
     order, ties to the first), taken for all cells in one sort.
     """
     C = len(n_v)
-    v_cell, h_cell = np.repeat(np.arange(C), n_v), np.repeat(np.arange(C), n_h)
+    v_cell = np.repeat(np.arange(C), n_v)
     v_start, h_start = np.cumsum(n_v) - n_v, np.cumsum(n_h) - n_h
     gap = np.abs(np.einsum("pi,pi->p", V - x_j[v_cell], z[v_cell]))
     nearest = np.lexsort((gap, v_cell))  # per cell, its vertices by gap (stable: ties keep polygon order)
-    ends = np.sort(np.stack([nearest[v_start], nearest[v_start + 1]], axis=1), axis=1)
-    H = int(n_h.max(initial=0))
-    normals, offsets = np.zeros((C, H, 2)), np.full((C, H), np.inf)
-    local = np.arange(len(Q)) - h_start[h_cell]  # padding rows (offset +inf): never the least
-    normals[h_cell, local], offsets[h_cell, local] = N, Q
-    return exit_sinks(V[ends], normals, offsets)
+    faces = V[np.sort(np.stack([nearest[v_start], nearest[v_start + 1]], axis=1), axis=1)]
+    # exit_sinks costs C·H³ with every cell padded to the largest row count H: one call per row
+    # count instead. Padding rows (offset +inf) are never the least and only add candidates t = 0,
+    # so each cell's sink is the one of the padded call. A cell without rows among cells with rows
+    # keeps one padding row: padded, it gets the face's first end, not the mean of a call without rows.
+    padded = n_h.max(initial=0) > 0
+    sinks, depths = np.empty((C, 2)), np.empty(C)
+    for k in np.unique(n_h).tolist():
+        group = np.flatnonzero(n_h == k)
+        if k or not padded:
+            rows = h_start[group][:, None] + np.arange(k)
+            normals, offsets = N[rows], Q[rows]
+        else:
+            normals, offsets = np.zeros((len(group), 1, 2)), np.full((len(group), 1), np.inf)
+        sinks[group], depths[group] = exit_sinks(faces[group], normals, offsets)
+    return sinks, depths
 
 
 def cell_tolerances(cells: Cells, gain: np.ndarray, c_h: np.ndarray, c_v: np.ndarray, u_max: float,
