@@ -469,30 +469,37 @@ def best_neck(region: Region, x_i: np.ndarray, x_j: np.ndarray, parent: Region, 
     A_n, _ = neck_rows(x_j, z, 0.0, 0.0)  # the neck rows' normals; only their offsets depend on the inset
     normals = np.vstack([-region.A[keep], -A_n])
     offsets = np.concatenate([region.b[keep], [np.inf, np.inf]])
+    # what does not depend on the inset, once: the divisors of the eroded parent's rows along the exit
+    # line, and the neck rows' offsets at t = 0 and their rates along it
+    over_up, over_down = np.where(up, slope, 1.0), np.where(down, slope, 1.0)
+    (at_a, at_b), (rate_a, rate_b) = (A_n[0] @ x_j, A_n[1] @ x_j), (A_n[0] @ w, A_n[1] @ w)
 
     def usable(insets: np.ndarray) -> np.ndarray:
-        room = room0[None, :] - insets[:, None]  # (K, p): the eroded parent's rows along the exit line
-        t_b = np.min(np.where(up, room / np.where(up, slope, 1.0), np.inf), axis=1) - pad
-        t_a = np.max(np.where(down, room / np.where(down, slope, 1.0), -np.inf), axis=1) + pad
+        # the parent's rows along the first axis: minima over an outer axis are the fast ones
+        room = room0[:, None] - insets[None, :]  # (p, K): the eroded parent's rows along the exit line
+        t_b = np.min(np.where(up[:, None], room / over_up[:, None], np.inf), axis=0) - pad
+        t_a = np.max(np.where(down[:, None], room / over_down[:, None], -np.inf), axis=0) + pad
         necked_ = ~((t_a - pad <= f0) & (f1 <= t_b + pad))
         lo, hi = np.where(necked_, np.maximum(f0, t_a), f0), np.where(necked_, np.minimum(f1, t_b), f1)
-        faces = x_j + np.stack([lo, hi], axis=1)[:, :, None] * w  # (K, 2, 2): the necked faces
+        ends = np.stack([lo, hi])  # (2, K): the necked faces' ends along w
         q = np.broadcast_to(offsets, (len(insets), len(offsets))).copy()
         # where necked, the neck rows through a = x_j + t_a·w and b = x_j + t_b·w (neck_rows)
-        q[:, -2] = np.where(necked_, A_n[0] @ x_j + t_a * (A_n[0] @ w), np.inf)
-        q[:, -1] = np.where(necked_, A_n[1] @ x_j + t_b * (A_n[1] @ w), np.inf)
+        q[:, -2] = np.where(necked_, at_a + t_a * rate_a, np.inf)
+        q[:, -1] = np.where(necked_, at_b + t_b * rate_b, np.inf)
+        faces = x_j + ends.T[:, :, None] * w  # (K, 2, 2)
         h_star = exit_sinks(faces, np.broadcast_to(normals, (len(insets), *normals.shape)), q)[1]
-        slack = np.min(room0[None, None, :] - np.stack([lo, hi], axis=1)[:, :, None] * slope[None, None, :],
-                       axis=(1, 2))  # fmt: skip
+        slack = np.min(room0[:, None, None] - ends[None] * slope[:, None, None], axis=(0, 1))
         return np.where(lo < hi, 0.5 * np.minimum(h_star, slack), -np.inf)
 
     limit = INSET_LIMIT * depth(parent.A, parent.b, x_j)
     grid = limit * np.arange(1, samples + 1) / samples
-    k = int(np.argmax(usable(grid)))
+    scores = usable(grid)
+    k = int(np.argmax(scores))
     fine = grid[k] + (limit / samples) * np.linspace(-1.0, 1.0, samples + 2)[1:-1]
     fine = fine[(fine > 0) & (fine <= limit)]
     both = np.concatenate([grid, fine])
-    scores = usable(both)
+    # an inset's score is its own row's: the grid's scores stand, only the fine insets are new
+    scores = np.concatenate([scores, usable(fine)]) if len(fine) else scores
     best = both[np.lexsort((both, -scores))[0]]
     return neck_choice(region, x_i, x_j, parent, float(best), tol)
 
@@ -690,19 +697,23 @@ def exit_sinks(faces: np.ndarray, normals: np.ndarray, offsets: np.ndarray) -> t
     q = np.asarray(offsets, float).reshape(len(faces), -1)
     if not q.shape[1]:  # no rows: every point of the face is as deep (inf)
         return faces.mean(axis=1), np.full(len(faces), np.inf)
+    along = faces[:, 1] - faces[:, 0]
     alpha = np.einsum("chi,ci->ch", n, faces[:, 0]) + q  # h_k at t = 0
-    beta = np.einsum("chi,ci->ch", n, faces[:, 1] - faces[:, 0])  # its slope along t ∈ [0, 1]
+    beta = np.einsum("chi,ci->ch", n, along)  # its slope along t ∈ [0, 1]
+    t = np.zeros((len(faces), 2 + q.shape[1] ** 2))  # the face's ends, then every pair's crossing
+    t[:, 1] = 1.0
     with np.errstate(divide="ignore", invalid="ignore"):
         cross = (alpha[:, None, :] - alpha[:, :, None]) / (beta[:, :, None] - beta[:, None, :])
-    cross = cross.reshape(len(faces), -1)
-    cross = np.where(np.isfinite(cross) & (cross > 0.0) & (cross < 1.0), cross, 0.0)
-    t = np.concatenate([np.zeros((len(faces), 1)), np.ones((len(faces), 1)), cross], axis=1)
-    with np.errstate(invalid="ignore"):
-        values = np.min(alpha[:, None, :] + t[:, :, None] * beta[:, None, :], axis=2)
+        cross = cross.reshape(len(faces), -1)
+        inner = (cross > 0.0) & (cross < 1.0)  # false for NaN and ±inf too
+        t[:, 2:][inner] = cross[inner]
+        # rows first: a minimum over the outer axis is one pass of elementwise minima, several times
+        # faster than over a short inner one (the same exact minimum)
+        values = np.min(alpha.T[:, :, None] + t[None] * beta.T[:, :, None], axis=0)
     best = np.argmax(values, axis=1)
     rows = np.arange(len(faces))
     t_best = t[rows, best]
-    return faces[:, 0] + t_best[:, None] * (faces[:, 1] - faces[:, 0]), values[rows, best]
+    return faces[:, 0] + t_best[:, None] * along, values[rows, best]
 
 
 def exit_face(vertices: np.ndarray, z: np.ndarray, x_j: np.ndarray) -> np.ndarray:
