@@ -72,7 +72,8 @@ class ObstaclePieces:
     def __len__(self) -> int:
         return len(self.geoms)
 
-    def separating_rows(self, ends: np.ndarray, which: np.ndarray, margin: float) -> tuple[np.ndarray, np.ndarray]:
+    def separating_rows(self, ends: np.ndarray, which: np.ndarray, margin: float,
+                        apart: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
         """One row ``A x ≤ b`` (unit ``A``) per piece in ``which`` that keeps the segment ``ends`` off it.
 
         For a piece with nearest points ``p`` (on the piece) and ``s`` (on the segment),
@@ -89,6 +90,9 @@ class ObstaclePieces:
         which : ndarray of int, shape (k,)
         margin : float
             Map units.
+        apart : ndarray, shape (k,), optional
+            ``shapely.distance`` of each piece in ``which`` from the segment (map units), when the
+            caller has it already.
 
         Returns
         -------
@@ -113,8 +117,8 @@ class ObstaclePieces:
             clear = np.min(own @ ends.T - np.einsum("ek,ek->e", own, e[:, 0])[:, None], axis=1)
             # The own line only when it leaves the segment about as much room as the edge itself
             # does: a line through a far edge can pass right by the segment and squeeze the cell.
-            apart = shapely.distance(self.geoms[which[is_edge]], segment)
-            good = (clear > 0) & (clear >= np.minimum(2.0 * margin, 0.5 * apart))
+            far = shapely.distance(self.geoms[which[is_edge]], segment) if apart is None else apart[is_edge]
+            good = (clear > 0) & (clear >= np.minimum(2.0 * margin, 0.5 * far))
             idx = np.flatnonzero(is_edge)[good]
             use_own[idx] = True
             anchor[idx], normal[idx], dist[idx] = e[good, 0], own[good], clear[good]
@@ -168,15 +172,15 @@ def _clip_rows(polygon: np.ndarray, A: np.ndarray, b: np.ndarray, inside: np.nda
     slack = b - A @ inside
     order = np.argsort(slack, kind="stable")
     A, b = A[order], b[order]
+    limit = b + tol
     while len(b):
-        cuts = np.max(polygon @ A.T, axis=0) > b + tol
+        cuts = (polygon @ A.T).max(axis=0) > limit
         if not cuts.any():
             break
-        k = int(np.argmax(cuts))  # the tightest row that still cuts
+        k = int(cuts.argmax())  # the tightest row that still cuts
         polygon = clip(polygon, A[k], b[k], tol)
-        keep = cuts.copy()
-        keep[k] = False
-        A, b = A[keep], b[keep]
+        cuts[k] = False  # the rows left to test: those that cut the polygon before this clip
+        A, b, limit = A[cuts], b[cuts], limit[cuts]
     return polygon
 
 
@@ -199,14 +203,17 @@ def _keep_off_pieces(pieces: ObstaclePieces, polygon: np.ndarray, ends: np.ndarr
     if not len(remaining):
         return polygon
     segment = shapely.LineString(ends) if len(ends) == 2 else shapely.Point(ends[0])
-    remaining = remaining[np.lexsort((remaining, shapely.distance(pieces.geoms[remaining], segment)))]
+    apart = shapely.distance(pieces.geoms[remaining], segment)
+    order = np.lexsort((remaining, apart))
+    remaining, apart = remaining[order], apart[order]
     inside = ends.mean(axis=0)
     while len(remaining):
-        batch, remaining = remaining[:PIECE_BATCH], remaining[PIECE_BATCH:]
-        A_o, b_o = pieces.separating_rows(ends, batch, margin)
+        A_o, b_o = pieces.separating_rows(ends, remaining[:PIECE_BATCH], margin, apart[:PIECE_BATCH])
+        remaining, apart = remaining[PIECE_BATCH:], apart[PIECE_BATCH:]
         polygon = _clip_rows(polygon, A_o, b_o, inside, tol)
         if len(remaining) and len(polygon) >= 3:
-            remaining = remaining[shapely.intersects(pieces.geoms[remaining], shapely.Polygon(polygon))]
+            meet = shapely.intersects(pieces.geoms[remaining], shapely.Polygon(polygon))
+            remaining, apart = remaining[meet], apart[meet]
     return polygon
 
 
