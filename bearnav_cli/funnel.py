@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import shapely
@@ -72,6 +73,21 @@ class ObstaclePieces:
     def __len__(self) -> int:
         return len(self.geoms)
 
+    @cached_property
+    def own_lines(self) -> tuple[np.ndarray, np.ndarray]:
+        """Each edge piece's own line as ``n·x = c``, ``n`` its unit normal to the free side (the right).
+
+        Returns
+        -------
+        n : ndarray, shape (P, 2)
+            NaN for a convex part.
+        c : ndarray, shape (P,)
+            Map units; NaN for a convex part.
+        """
+        d = self.edges[:, 1] - self.edges[:, 0]
+        own = np.column_stack([d[:, 1], -d[:, 0]]) / np.hypot(d[:, 0], d[:, 1])[:, None]
+        return own, np.einsum("ek,ek->e", own, self.edges[:, 0])
+
     def separating_rows(self, ends: np.ndarray, which: np.ndarray, margin: float,
                         apart: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
         """One row ``A x ≤ b`` (unit ``A``) per piece in ``which`` that keeps the segment ``ends`` off it.
@@ -112,9 +128,8 @@ class ObstaclePieces:
         use_own = np.zeros(len(which), bool)
         if is_edge.any():
             e = edges[is_edge]
-            d = e[:, 1] - e[:, 0]
-            own = np.column_stack([d[:, 1], -d[:, 0]]) / np.hypot(d[:, 0], d[:, 1])[:, None]  # right: the free side
-            clear = np.min(own @ ends.T - np.einsum("ek,ek->e", own, e[:, 0])[:, None], axis=1)
+            own, own_at = (lines[which[is_edge]] for lines in self.own_lines)
+            clear = np.min(own @ ends.T - own_at[:, None], axis=1)
             # The own line only when it leaves the segment about as much room as the edge itself
             # does: a line through a far edge can pass right by the segment and squeeze the cell.
             far = shapely.distance(self.geoms[which[is_edge]], segment) if apart is None else apart[is_edge]
