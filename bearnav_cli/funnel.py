@@ -435,12 +435,13 @@ def neck_choice(region: Region, x_i: np.ndarray, x_j: np.ndarray, parent: Region
     -------
     NeckChoice
     """
-    return _scored(necked(region, x_i, x_j, parent, inset, tol), x_i, x_j, parent)
+    cell = necked(region, x_i, x_j, parent, inset, tol)
+    return _scored(cell, exit_face(cell.polygon, (x_i - x_j) / math.hypot(*(x_i - x_j)), x_j), parent)
 
 
-def _scored(cell: Region, x_i: np.ndarray, x_j: np.ndarray, parent: Region) -> NeckChoice:
-    """``cell`` with its exit face's slack in ``parent`` and its sink depth ``h*``."""
-    face = exit_face(cell.polygon, (x_i - x_j) / math.hypot(*(x_i - x_j)), x_j)
+def _scored(cell: Region, face: np.ndarray, parent: Region) -> NeckChoice:
+    """``cell`` with its exit face's slack in ``parent`` and its sink depth ``h*``; ``face`` is its
+    :func:`exit_face`, shape (2, 2)."""
     keep = np.arange(len(cell.b)) != cell.exit_row
     return NeckChoice(cell, depth(parent.A, parent.b, face), exit_sink(face, -cell.A[keep], cell.b[keep])[1])
 
@@ -478,12 +479,13 @@ def best_neck(region: Region, x_i: np.ndarray, x_j: np.ndarray, parent: Region, 
     NeckChoice
     """
     # a face already deeper in the parent than its own side depth: any neck would only lower h*
-    bare = _scored(region, x_i, x_j, parent)
+    z = (x_i - x_j) / math.hypot(*(x_i - x_j))
+    face = exit_face(region.polygon, z, x_j)
+    bare = _scored(region, face, parent)
     if bare.inset >= bare.sink_depth:
         return bare
-    z = (x_i - x_j) / math.hypot(*(x_i - x_j))
     w = np.array([-z[1], z[0]])
-    f0, f1 = np.sort((exit_face(region.polygon, z, x_j) - x_j) @ w)
+    f0, f1 = np.sort((face - x_j) @ w)
     keep = np.arange(len(region.b)) != region.exit_row
     slope, room0 = parent.A @ w, parent.b - parent.A @ x_j
     up, down = slope > 1e-15, slope < -1e-15
