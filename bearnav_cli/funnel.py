@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import shapely
@@ -72,7 +73,23 @@ class ObstaclePieces:
     def __len__(self) -> int:
         return len(self.geoms)
 
-    def separating_rows(self, ends: np.ndarray, which: np.ndarray, margin: float) -> tuple[np.ndarray, np.ndarray]:
+    @cached_property
+    def own_lines(self) -> tuple[np.ndarray, np.ndarray]:
+        """Each edge piece's own line as ``n·x = c``, ``n`` its unit normal to the free side (the right).
+
+        Returns
+        -------
+        n : ndarray, shape (P, 2)
+            NaN for a convex part.
+        c : ndarray, shape (P,)
+            Map units; NaN for a convex part.
+        """
+        d = self.edges[:, 1] - self.edges[:, 0]
+        own = np.column_stack([d[:, 1], -d[:, 0]]) / np.hypot(d[:, 0], d[:, 1])[:, None]
+        return own, np.einsum("ek,ek->e", own, self.edges[:, 0])
+
+    def separating_rows(self, ends: np.ndarray, which: np.ndarray, margin: float,
+                        apart: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
         """One row ``A x ≤ b`` (unit ``A``) per piece in ``which`` that keeps the segment ``ends`` off it.
 
         For a piece with nearest points ``p`` (on the piece) and ``s`` (on the segment),
@@ -89,6 +106,9 @@ class ObstaclePieces:
         which : ndarray of int, shape (k,)
         margin : float
             Map units.
+        apart : ndarray, shape (k,), optional
+            ``shapely.distance`` of each piece in ``which`` from the segment (map units), when the
+            caller has it already.
 
         Returns
         -------
@@ -108,13 +128,12 @@ class ObstaclePieces:
         use_own = np.zeros(len(which), bool)
         if is_edge.any():
             e = edges[is_edge]
-            d = e[:, 1] - e[:, 0]
-            own = np.column_stack([d[:, 1], -d[:, 0]]) / np.hypot(d[:, 0], d[:, 1])[:, None]  # right: the free side
-            clear = np.min(own @ ends.T - np.einsum("ek,ek->e", own, e[:, 0])[:, None], axis=1)
+            own, own_at = (lines[which[is_edge]] for lines in self.own_lines)
+            clear = np.min(own @ ends.T - own_at[:, None], axis=1)
             # The own line only when it leaves the segment about as much room as the edge itself
             # does: a line through a far edge can pass right by the segment and squeeze the cell.
-            apart = shapely.distance(self.geoms[which[is_edge]], segment)
-            good = (clear > 0) & (clear >= np.minimum(2.0 * margin, 0.5 * apart))
+            far = shapely.distance(self.geoms[which[is_edge]], segment) if apart is None else apart[is_edge]
+            good = (clear > 0) & (clear >= np.minimum(2.0 * margin, 0.5 * far))
             idx = np.flatnonzero(is_edge)[good]
             use_own[idx] = True
             anchor[idx], normal[idx], dist[idx] = e[good, 0], own[good], clear[good]
@@ -168,15 +187,15 @@ def _clip_rows(polygon: np.ndarray, A: np.ndarray, b: np.ndarray, inside: np.nda
     slack = b - A @ inside
     order = np.argsort(slack, kind="stable")
     A, b = A[order], b[order]
+    limit = b + tol
     while len(b):
-        cuts = np.max(polygon @ A.T, axis=0) > b + tol
+        cuts = (polygon @ A.T).max(axis=0) > limit
         if not cuts.any():
             break
-        k = int(np.argmax(cuts))  # the tightest row that still cuts
+        k = int(cuts.argmax())  # the tightest row that still cuts
         polygon = clip(polygon, A[k], b[k], tol)
-        keep = cuts.copy()
-        keep[k] = False
-        A, b = A[keep], b[keep]
+        cuts[k] = False  # the rows left to test: those that cut the polygon before this clip
+        A, b, limit = A[cuts], b[cuts], limit[cuts]
     return polygon
 
 
@@ -199,14 +218,17 @@ def _keep_off_pieces(pieces: ObstaclePieces, polygon: np.ndarray, ends: np.ndarr
     if not len(remaining):
         return polygon
     segment = shapely.LineString(ends) if len(ends) == 2 else shapely.Point(ends[0])
-    remaining = remaining[np.lexsort((remaining, shapely.distance(pieces.geoms[remaining], segment)))]
+    apart = shapely.distance(pieces.geoms[remaining], segment)
+    order = np.lexsort((remaining, apart))
+    remaining, apart = remaining[order], apart[order]
     inside = ends.mean(axis=0)
     while len(remaining):
-        batch, remaining = remaining[:PIECE_BATCH], remaining[PIECE_BATCH:]
-        A_o, b_o = pieces.separating_rows(ends, batch, margin)
+        A_o, b_o = pieces.separating_rows(ends, remaining[:PIECE_BATCH], margin, apart[:PIECE_BATCH])
+        remaining, apart = remaining[PIECE_BATCH:], apart[PIECE_BATCH:]
         polygon = _clip_rows(polygon, A_o, b_o, inside, tol)
         if len(remaining) and len(polygon) >= 3:
-            remaining = remaining[shapely.intersects(pieces.geoms[remaining], shapely.Polygon(polygon))]
+            meet = shapely.intersects(pieces.geoms[remaining], shapely.Polygon(polygon))
+            remaining, apart = remaining[meet], apart[meet]
     return polygon
 
 
@@ -413,12 +435,13 @@ def neck_choice(region: Region, x_i: np.ndarray, x_j: np.ndarray, parent: Region
     -------
     NeckChoice
     """
-    return _scored(necked(region, x_i, x_j, parent, inset, tol), x_i, x_j, parent)
+    cell = necked(region, x_i, x_j, parent, inset, tol)
+    return _scored(cell, exit_face(cell.polygon, (x_i - x_j) / math.hypot(*(x_i - x_j)), x_j), parent)
 
 
-def _scored(cell: Region, x_i: np.ndarray, x_j: np.ndarray, parent: Region) -> NeckChoice:
-    """``cell`` with its exit face's slack in ``parent`` and its sink depth ``h*``."""
-    face = exit_face(cell.polygon, (x_i - x_j) / math.hypot(*(x_i - x_j)), x_j)
+def _scored(cell: Region, face: np.ndarray, parent: Region) -> NeckChoice:
+    """``cell`` with its exit face's slack in ``parent`` and its sink depth ``h*``; ``face`` is its
+    :func:`exit_face`, shape (2, 2)."""
     keep = np.arange(len(cell.b)) != cell.exit_row
     return NeckChoice(cell, depth(parent.A, parent.b, face), exit_sink(face, -cell.A[keep], cell.b[keep])[1])
 
@@ -456,12 +479,13 @@ def best_neck(region: Region, x_i: np.ndarray, x_j: np.ndarray, parent: Region, 
     NeckChoice
     """
     # a face already deeper in the parent than its own side depth: any neck would only lower h*
-    bare = _scored(region, x_i, x_j, parent)
+    z = (x_i - x_j) / math.hypot(*(x_i - x_j))
+    face = exit_face(region.polygon, z, x_j)
+    bare = _scored(region, face, parent)
     if bare.inset >= bare.sink_depth:
         return bare
-    z = (x_i - x_j) / math.hypot(*(x_i - x_j))
     w = np.array([-z[1], z[0]])
-    f0, f1 = np.sort((exit_face(region.polygon, z, x_j) - x_j) @ w)
+    f0, f1 = np.sort((face - x_j) @ w)
     keep = np.arange(len(region.b)) != region.exit_row
     slope, room0 = parent.A @ w, parent.b - parent.A @ x_j
     up, down = slope > 1e-15, slope < -1e-15
@@ -469,30 +493,37 @@ def best_neck(region: Region, x_i: np.ndarray, x_j: np.ndarray, parent: Region, 
     A_n, _ = neck_rows(x_j, z, 0.0, 0.0)  # the neck rows' normals; only their offsets depend on the inset
     normals = np.vstack([-region.A[keep], -A_n])
     offsets = np.concatenate([region.b[keep], [np.inf, np.inf]])
+    # what does not depend on the inset, once: the divisors of the eroded parent's rows along the exit
+    # line, and the neck rows' offsets at t = 0 and their rates along it
+    over_up, over_down = np.where(up, slope, 1.0), np.where(down, slope, 1.0)
+    (at_a, at_b), (rate_a, rate_b) = (A_n[0] @ x_j, A_n[1] @ x_j), (A_n[0] @ w, A_n[1] @ w)
 
     def usable(insets: np.ndarray) -> np.ndarray:
-        room = room0[None, :] - insets[:, None]  # (K, p): the eroded parent's rows along the exit line
-        t_b = np.min(np.where(up, room / np.where(up, slope, 1.0), np.inf), axis=1) - pad
-        t_a = np.max(np.where(down, room / np.where(down, slope, 1.0), -np.inf), axis=1) + pad
+        # the parent's rows along the first axis: minima over an outer axis are the fast ones
+        room = room0[:, None] - insets[None, :]  # (p, K): the eroded parent's rows along the exit line
+        t_b = np.min(np.where(up[:, None], room / over_up[:, None], np.inf), axis=0) - pad
+        t_a = np.max(np.where(down[:, None], room / over_down[:, None], -np.inf), axis=0) + pad
         necked_ = ~((t_a - pad <= f0) & (f1 <= t_b + pad))
         lo, hi = np.where(necked_, np.maximum(f0, t_a), f0), np.where(necked_, np.minimum(f1, t_b), f1)
-        faces = x_j + np.stack([lo, hi], axis=1)[:, :, None] * w  # (K, 2, 2): the necked faces
+        ends = np.stack([lo, hi])  # (2, K): the necked faces' ends along w
         q = np.broadcast_to(offsets, (len(insets), len(offsets))).copy()
         # where necked, the neck rows through a = x_j + t_a·w and b = x_j + t_b·w (neck_rows)
-        q[:, -2] = np.where(necked_, A_n[0] @ x_j + t_a * (A_n[0] @ w), np.inf)
-        q[:, -1] = np.where(necked_, A_n[1] @ x_j + t_b * (A_n[1] @ w), np.inf)
+        q[:, -2] = np.where(necked_, at_a + t_a * rate_a, np.inf)
+        q[:, -1] = np.where(necked_, at_b + t_b * rate_b, np.inf)
+        faces = x_j + ends.T[:, :, None] * w  # (K, 2, 2)
         h_star = exit_sinks(faces, np.broadcast_to(normals, (len(insets), *normals.shape)), q)[1]
-        slack = np.min(room0[None, None, :] - np.stack([lo, hi], axis=1)[:, :, None] * slope[None, None, :],
-                       axis=(1, 2))  # fmt: skip
+        slack = np.min(room0[:, None, None] - ends[None] * slope[:, None, None], axis=(0, 1))
         return np.where(lo < hi, 0.5 * np.minimum(h_star, slack), -np.inf)
 
     limit = INSET_LIMIT * depth(parent.A, parent.b, x_j)
     grid = limit * np.arange(1, samples + 1) / samples
-    k = int(np.argmax(usable(grid)))
+    scores = usable(grid)
+    k = int(np.argmax(scores))
     fine = grid[k] + (limit / samples) * np.linspace(-1.0, 1.0, samples + 2)[1:-1]
     fine = fine[(fine > 0) & (fine <= limit)]
     both = np.concatenate([grid, fine])
-    scores = usable(both)
+    # an inset's score is its own row's: the grid's scores stand, only the fine insets are new
+    scores = np.concatenate([scores, usable(fine)]) if len(fine) else scores
     best = both[np.lexsort((both, -scores))[0]]
     return neck_choice(region, x_i, x_j, parent, float(best), tol)
 
@@ -690,19 +721,23 @@ def exit_sinks(faces: np.ndarray, normals: np.ndarray, offsets: np.ndarray) -> t
     q = np.asarray(offsets, float).reshape(len(faces), -1)
     if not q.shape[1]:  # no rows: every point of the face is as deep (inf)
         return faces.mean(axis=1), np.full(len(faces), np.inf)
+    along = faces[:, 1] - faces[:, 0]
     alpha = np.einsum("chi,ci->ch", n, faces[:, 0]) + q  # h_k at t = 0
-    beta = np.einsum("chi,ci->ch", n, faces[:, 1] - faces[:, 0])  # its slope along t ∈ [0, 1]
+    beta = np.einsum("chi,ci->ch", n, along)  # its slope along t ∈ [0, 1]
+    t = np.zeros((len(faces), 2 + q.shape[1] ** 2))  # the face's ends, then every pair's crossing
+    t[:, 1] = 1.0
     with np.errstate(divide="ignore", invalid="ignore"):
         cross = (alpha[:, None, :] - alpha[:, :, None]) / (beta[:, :, None] - beta[:, None, :])
-    cross = cross.reshape(len(faces), -1)
-    cross = np.where(np.isfinite(cross) & (cross > 0.0) & (cross < 1.0), cross, 0.0)
-    t = np.concatenate([np.zeros((len(faces), 1)), np.ones((len(faces), 1)), cross], axis=1)
-    with np.errstate(invalid="ignore"):
-        values = np.min(alpha[:, None, :] + t[:, :, None] * beta[:, None, :], axis=2)
+        cross = cross.reshape(len(faces), -1)
+        inner = (cross > 0.0) & (cross < 1.0)  # false for NaN and ±inf too
+        t[:, 2:][inner] = cross[inner]
+        # rows first: a minimum over the outer axis is one pass of elementwise minima, several times
+        # faster than over a short inner one (the same exact minimum)
+        values = np.min(alpha.T[:, :, None] + t[None] * beta.T[:, :, None], axis=0)
     best = np.argmax(values, axis=1)
     rows = np.arange(len(faces))
     t_best = t[rows, best]
-    return faces[:, 0] + t_best[:, None] * (faces[:, 1] - faces[:, 0]), values[rows, best]
+    return faces[:, 0] + t_best[:, None] * along, values[rows, best]
 
 
 def exit_face(vertices: np.ndarray, z: np.ndarray, x_j: np.ndarray) -> np.ndarray:

@@ -41,6 +41,7 @@ from bearnav_cli.geometry import (
     box_polygon,
     clip,
     landmark_coverage,
+    polygon_edges,
     polygon_rows,
 )
 
@@ -224,8 +225,11 @@ def goal_cell(nodes: np.ndarray, bounds: np.ndarray, tol: float) -> np.ndarray:
 def witness_points(space: FreeSpace, polygon: np.ndarray, anchors: np.ndarray) -> np.ndarray:
     """The points a cell's landmarks must be seen from: the anchors and the vertices of the cell's
     free part (ALGORITHMS §5.4), shape (w, 2), unique rows."""
-    free_part = shapely.difference(shapely.Polygon(polygon), space.obstacles)
+    cell = shapely.Polygon(polygon)
     witnesses = [anchors]
+    if not shapely.intersects(cell, space.obstacles):  # a funnel cell (C1): its free part is itself
+        return np.unique(np.concatenate([anchors, polygon]), axis=0)
+    free_part = shapely.difference(cell, space.obstacles)
     for part in shapely.get_parts(free_part):
         if isinstance(part, shapely.Polygon) and not part.is_empty:
             witnesses.append(np.asarray(part.exterior.coords)[:-1])
@@ -318,7 +322,7 @@ def fixed_landmark(
     A, b = polygon_rows(polygon)
     lm = landmarks[chosen]  # (n, 2)
     # s_min: exact distance to the convex polygon (0 inside), every chosen landmark at once
-    edge = np.roll(polygon, -1, axis=0) - polygon  # (p, 2)
+    edge = polygon_edges(polygon)  # (p, 2)
     rel = lm[:, None, :] - polygon[None]  # (n, p, 2)
     t = np.clip(np.einsum("npi,pi->np", rel, edge) / np.einsum("pi,pi->p", edge, edge), 0.0, 1.0)
     gap = rel - t[..., None] * edge
@@ -700,7 +704,12 @@ def _join_leaf(candidates: np.ndarray, nodes: np.ndarray, cost: np.ndarray, reac
         route = np.hypot(*(group[:, None, :] - nodes[None]).transpose(2, 0, 1))
         route = route if nearest else route + cost[None]
         order = np.argsort(route, axis=1, kind="stable")
-        near = _seen(group, order[:, :DENSIFY_NEAREST], nodes, reach, tol)
+        # the deepest candidate alone first: it mostly sees a node (kitchen, cover F: 181 of 186
+        # groups), and then the others' segments need no test
+        head = _seen(group[:1], order[:1, :DENSIFY_NEAREST], nodes, reach, tol)
+        if head.any():
+            return group[0], int(order[0, int(np.argmax(head[0]))])
+        near = np.vstack([head, _seen(group[1:], order[1:, :DENSIFY_NEAREST], nodes, reach, tol)])
         first = int(np.argmax(near.any(axis=1))) if near.any() else len(group)
         if first > 0 and len(nodes) > DENSIFY_NEAREST:
             ahead = _seen(group[:first], order[:first], nodes, reach, tol)
@@ -726,23 +735,27 @@ def _band_candidates(pocket: shapely.Geometry, offset: shapely.Geometry) -> np.n
     length = float(curve.length) if not curve.is_empty else 0.0
     if not length > 0:
         return np.zeros((0, 2))
-    parts = [g for g in shapely.get_parts(curve) if g.length > 0]
-    parts.sort(key=lambda g: -g.length)
-    turns, corners = [np.zeros(0)], [np.zeros((0, 2))]
-    for g in parts:
-        xy = shapely.get_coordinates(g)
-        if np.array_equal(xy[0], xy[-1]):  # a closed curve: its first vertex has neighbours too
-            xy = np.vstack([xy[-2], xy])
-        if len(xy) < 3:
-            continue
-        u, v = xy[1:-1] - xy[:-2], xy[2:] - xy[1:-1]
-        turn = np.abs(np.arctan2(u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0], np.einsum("ij,ij->i", u, v)))
-        turns.append(turn[turn > BAND_CORNER_TURN])
-        corners.append(xy[1:-1][turn > BAND_CORNER_TURN])
-    corners = np.concatenate(corners)[np.argsort(-np.concatenate(turns), kind="stable")]
+    parts = shapely.get_parts(curve)
+    lengths = shapely.length(parts)
+    parts = parts[lengths > 0][np.argsort(-lengths[lengths > 0], kind="stable")]  # longest first
+    # every part's vertices with their neighbours at once (a pocket's curve has some twenty parts):
+    # the interior vertices of an open part; every vertex of a closed one, its first preceded by the
+    # last but one (the closing repeat)
+    xy, owner = shapely.get_coordinates(parts, return_index=True)
+    starts = np.searchsorted(owner, np.arange(len(parts)))
+    ends = np.append(starts[1:], len(xy)) - 1
+    closed = np.all(xy[starts] == xy[ends], axis=1)
+    first = np.where(closed, starts, starts + 1)
+    count = np.maximum(ends - first, 0)  # vertices with a neighbour on either side
+    at = np.repeat(first - np.cumsum(count) + count, count) + np.arange(count.sum())
+    before = np.where(at == np.repeat(starts, count), np.repeat(ends - 1, count), at - 1)
+    u, v = xy[at] - xy[before], xy[at + 1] - xy[at]
+    turn = np.abs(np.arctan2(u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0], np.einsum("ij,ij->i", u, v)))
+    sharp = turn > BAND_CORNER_TURN
+    corners = xy[at][sharp][np.argsort(-turn[sharp], kind="stable")]
     where = np.array([0.5, 0.25, 0.75, 0.1, 0.9])
-    points = [shapely.get_coordinates(shapely.line_interpolate_point(g, where, normalized=True)) for g in parts[:4]]
-    return np.concatenate([corners, *points]).reshape(-1, 2)
+    points = shapely.get_coordinates(shapely.line_interpolate_point(parts[:4, None], where, normalized=True).ravel())
+    return np.concatenate([corners, points]).reshape(-1, 2)
 
 
 def _pocket_mouth(pocket: shapely.Geometry, domain_edge: shapely.Geometry | None) -> np.ndarray:
