@@ -721,3 +721,27 @@ def test_a_robot_outside_every_cell_with_no_node_in_sight_gets_no_command():
     out = step.control(arrays, s, step.ControlState.initial(np.zeros(1)), np.zeros((1, n, 2)),
                        np.ones((1, n), bool), np.zeros(1), x_true=inside)  # fmt: skip
     assert np.all(out.velocity == 0.0) and out.stalled[0] and not out.certified[0]
+
+
+@pytest.mark.parametrize("seed", [1, 4])
+def test_the_approach_target_is_the_shortest_route_among_the_clear_nodes(seed):
+    """``approach_target``: among the 8 nearest nodes with a clear straight segment, the shortest route
+    ‖x − x_n‖ + cost(n); if none is clear, among every node (brute force over the nodes, exact segment test
+    against shapely's obstacles); ``-1`` from inside an obstacle or where no node is in sight."""
+    plan = make_plan(seed, 0)
+    arrays = PlanArrays.from_plan(plan)
+    space = FreeSpace.from_map(plan.map)
+    rng = np.random.default_rng(seed)
+    x = rng.uniform(arrays.free_bounds[:2], arrays.free_bounds[2:], (400, 2))
+    got = cell_policy.approach_target(arrays, x)
+    nodes, cost = arrays.nodes, arrays.node_cost
+    for r in range(len(x)):
+        dist = np.hypot(*(nodes - x[r]).T)
+        order = np.argsort(dist, kind="stable")
+        lines = shapely.linestrings(np.stack([np.broadcast_to(x[r], nodes.shape), nodes], axis=1)[order])
+        clear = ~shapely.intersects(space.obstacles, lines)
+        route = np.where(clear, dist[order] + cost[order], np.inf)
+        near = route[:8] if np.isfinite(route[:8]).any() else route
+        want = int(order[np.argmin(near)]) if np.isfinite(near).any() else -1
+        assert got[r] == want, (r, x[r].tolist())
+    assert (got == -1).any() and (got >= 0).any()

@@ -521,6 +521,31 @@ def in_sight(arrays: PlanArrays, x: np.ndarray) -> np.ndarray:
     return out.reshape(len(p), len(lm))
 
 
+def _odd_crossings(edges: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Whether a ray from each point toward ``+x`` crosses ``edges`` (E, 2, 2) an odd number of times, shape (R,).
+
+    Odd means inside one ring of the obstacles (even-odd rule); where obstacles overlap it can say
+    even inside both, so a caller may use True, never False, as "inside".
+    """
+    out = np.zeros(len(x), bool)
+    if not len(edges) or not len(x):
+        return out
+    p, q = edges[:, 0], edges[:, 1]
+    rise = q[:, 1] - p[:, 1]
+    slope = np.divide(q[:, 0] - p[:, 0], rise, out=np.zeros(len(rise)), where=rise != 0)
+    step = max(1, CHUNK // len(edges))
+    for s in range(0, len(x), step):
+        y, px = x[s : s + step, 1, None], x[s : s + step, 0, None]
+        straddle = (p[None, :, 1] > y) != (q[None, :, 1] > y)  # never true for a level edge
+        crossing = straddle & (px < p[None, :, 0] + (y - p[None, :, 1]) * slope[None])
+        out[s : s + step] = np.count_nonzero(crossing, axis=1) % 2 == 1
+    return out
+
+
+#: Nodes :func:`approach_target` tests at a time, in route order, for a robot that sees none of its nearest.
+APPROACH_BATCH = 16
+
+
 def approach_target(arrays: PlanArrays, x: np.ndarray, nearest: int = 8) -> np.ndarray:
     """The tree node a robot outside every safe set drives to in a straight line, shape (R,); ``-1`` if none.
 
@@ -545,16 +570,33 @@ def approach_target(arrays: PlanArrays, x: np.ndarray, nearest: int = 8) -> np.n
     cost = arrays.node_cost
     dist = np.hypot(*(p[:, None, :] - nodes[None]).transpose(2, 0, 1))
     order = np.argsort(dist, axis=1, kind="stable")
-    for width in (min(nearest, len(nodes)), len(nodes)):
-        todo = np.flatnonzero(out < 0)
+    width = min(nearest, len(nodes))
+    cand = order[:, :width]
+    clear = segments_clear(arrays, np.repeat(p, width, axis=0), nodes[cand.ravel()]).reshape(-1, width)
+    route = np.where(clear, dist[np.arange(len(p))[:, None], cand] + cost[cand], math.inf)
+    best = np.argmin(route, axis=1)
+    found = np.isfinite(route[np.arange(len(p)), best])
+    out[found] = cand[found, best[found]]
+    todo = np.flatnonzero(~found)
+    # a point inside an obstacle has no clear segment to any node: skip the scan of every node
+    # (an estimate swung into an obstacle, as a look-ahead point does while its robot turns to look)
+    todo = todo[~_odd_crossings(arrays.obstacle_edges, p[todo])]
+    if not len(todo):
+        return out
+    # the others: every node, in route order (ties in distance order, as argmin over the distance
+    # order picks them), a few at a time; the first clear one is the one of shortest route, and
+    # most robots find it among the first few instead of testing every node against every edge
+    route = np.take_along_axis(dist[todo], order[todo], axis=1) + cost[order[todo]]
+    by_route = np.take_along_axis(order[todo], np.argsort(route, axis=1, kind="stable"), axis=1)
+    for start in range(0, len(nodes), APPROACH_BATCH):
         if not len(todo):
             break
-        cand = order[todo, :width]
-        clear = segments_clear(arrays, np.repeat(p[todo], width, axis=0), nodes[cand.ravel()]).reshape(-1, width)
-        route = np.where(clear, dist[todo[:, None], cand] + cost[cand], math.inf)
-        best = np.argmin(route, axis=1)
-        found = np.isfinite(route[np.arange(len(todo)), best])
-        out[todo[found]] = cand[found, best[found]]
+        cand = by_route[:, start : start + APPROACH_BATCH]
+        k = cand.shape[1]
+        clear = segments_clear(arrays, np.repeat(p[todo], k, axis=0), nodes[cand.ravel()]).reshape(-1, k)
+        hit = clear.any(axis=1)
+        out[todo[hit]] = cand[hit, np.argmax(clear[hit], axis=1)]
+        todo, by_route = todo[~hit], by_route[~hit]
     return out
 
 
