@@ -1646,16 +1646,16 @@ def plan_guarantee(plan: Any, path: Path, fov: Optional[float] = None) -> str:
     fov : float, optional
         The camera ``plan --fov`` checked, if any.
     """
-    from bearnav_cli import composition, verify
+    from bearnav_cli import composition
     from bearnav_cli.datatypes import percent
 
     check = f"`{_command_text('bearnav', 'verify', path)}` proves it from the file alone"
     camera = (f"a {fov:g}° camera sees a usable pair of tags along the field everywhere in that area (measured on a "
               "grid)" if fov is not None else "the camera is not checked (add --fov)")  # fmt: skip
     if not plan.cells.is_funnel:
-        return f"guarantee: {verify.PAPER_CLAIM}; {camera}"
+        return f"guarantee: {composition.PAPER_CLAIM}; {camera}"
     by_area = composition.tolerance_by_area(plan.cells, plan.usable_tolerance)
-    robot = verify.robot_words(plan.map)
+    robot = composition.robot_words(plan.map)
     where = f"the certified area ({percent(plan.cells.free_coverage)} of the free space)"
     known = f"{plan.plan_tolerance:.3g} map units (median {by_area['median']:.3g} by area)"
     return (f"guarantee (by construction): {robot} that starts in {where} and knows its position to within "

@@ -39,8 +39,8 @@ from bearnav_cli.funnel import (
 from bearnav_cli.geometry import FreeSpace, barrier_margin
 
 __all__ = [
-    "Composition", "CoverageRegions", "check", "coverage", "coverage_margin", "coverage_regions", "covered_fraction",
-    "time_bound", "world_violations",
+    "PAPER_CLAIM", "Composition", "CoverageRegions", "check", "coverage", "coverage_margin", "coverage_regions",
+    "covered_fraction", "robot_words", "time_bound", "world_violations",
 ]  # fmt: skip
 
 #: Relative agreement of a recomputed tolerance with the stored one.
@@ -374,3 +374,19 @@ def map_frame_problem(plan_map: Map, world: Map) -> str | None:
     if not math.isclose(plan_map.robot_radius, world.robot_radius):
         return f"robot_radius {world.robot_radius} differs from the plan's {plan_map.robot_radius}"
     return None
+
+
+#: What a paper plan's certificates give (ALGORITHMS §4): each cell alone, no route to the goal.
+PAPER_CLAIM = (
+    "each certified cell's controller keeps a robot that knows its position in that cell and drives it "
+    "out of the cell's exit; that the cells chain into a route to the goal is not proven for paper cells"
+)
+
+
+def robot_words(map_: Map) -> str:
+    """The robot a funnel plan's guarantee is about: ``a robot of radius ρ``, commanded in velocity or
+    driven through its look-ahead point (the subject of ``verify``'s and ``plan``'s guarantee sentences)."""
+    who = f"a robot of radius {map_.robot_radius:g}"
+    if map_.lookahead > 0:
+        return f"{who} driven through its point {map_.lookahead:g} ahead of the axle (a unicycle)"
+    return f"{who} commanded in velocity"

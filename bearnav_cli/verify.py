@@ -45,8 +45,8 @@ from bearnav_cli.stages import simulate
 
 __all__ = ["CERTIFICATE_TOL", "CERTIFIED", "COVERAGE_TOL", "GOAL_FIELD_TOL", "UNIT_TOL", "Certificates", "Geometry",
            "Params", "Unreached", "VerifyReport", "certificate_problems", "certificates", "check_geometry",
-           "check_lookahead", "duration_text", "flagged_cells", "guarantee", "loop_speed", "PAPER_CLAIM",
-           "robot_words", "run", "unreached_regions"]  # fmt: skip
+           "check_lookahead", "duration_text", "flagged_cells", "guarantee", "loop_speed", "run",
+           "unreached_regions"]  # fmt: skip
 
 log = logging.getLogger(__name__)
 
@@ -951,22 +951,6 @@ def duration_text(seconds: float) -> str:
     return text
 
 
-#: What a paper plan's certificates give (ALGORITHMS §4): each cell alone, no route to the goal.
-PAPER_CLAIM = (
-    "each certified cell's controller keeps a robot that knows its position in that cell and drives it "
-    "out of the cell's exit; that the cells chain into a route to the goal is not proven for paper cells"
-)
-
-
-def robot_words(map_: Map) -> str:
-    """The robot a funnel plan's guarantee is about: ``a robot of radius ρ``, commanded in velocity or
-    driven through its look-ahead point (the subject of :func:`guarantee` and of ``plan``'s sentence)."""
-    who = f"a robot of radius {map_.robot_radius:g}"
-    if map_.lookahead > 0:
-        return f"{who} driven through its point {map_.lookahead:g} ahead of the axle (a unicycle)"
-    return f"{who} commanded in velocity"
-
-
 def guarantee(plan: Plan, report: VerifyReport) -> str:
     """One sentence for a robotics engineer: what ``report`` proves of ``plan``, what it only measured, what it leaves.
 
@@ -993,10 +977,11 @@ def guarantee(plan: Plan, report: VerifyReport) -> str:
     measured = (f"measured only: {plural(len(runs), 'closed-loop run')} with exact positions (`bearnav simulate` adds "
                 "a camera and noise)") if runs is not None and len(runs) else "nothing measured (no runs)"  # fmt: skip
     if comp is None:  # a paper plan: per-cell certificates (§4), no composition theorem
-        return f"guarantee: {PAPER_CLAIM}; {measured}"
+        return f"guarantee: {composition.PAPER_CLAIM}; {measured}"
     robot = runtime.robot.robot_parameters(plan.map.robot)
-    who = robot_words(plan.map) + ("" if plan.map.lookahead > 0 else " (a single integrator; a unicycle only "
-                                   "through `bearnav plan --lookahead`)")  # fmt: skip
+    who = composition.robot_words(plan.map)
+    if plan.map.lookahead <= 0:
+        who += " (a single integrator; a unicycle only through `bearnav plan --lookahead`)"
     tol = comp.usable_by_area
     eta = float(robot["bearing_error_deg"]) + float(robot["compass_error_deg"] or 0.0)
     if report.liveness is not None:
