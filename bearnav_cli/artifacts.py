@@ -35,6 +35,7 @@ import os
 import platform
 import re
 import signal
+import sys
 import threading
 from collections.abc import Iterator
 from dataclasses import asdict, dataclass
@@ -256,8 +257,10 @@ def _installed_versions() -> tuple[tuple[str, str], ...]:
 
     versions = {"bearnav": __version__, "python": platform.python_version()}
     for package in ("numpy", "shapely", "scipy", "highspy"):
+        # a loaded module's own version is its distribution's (numpy, shapely, scipy say it)
+        loaded = getattr(sys.modules.get(package), "__version__", None)
         try:
-            versions[package] = metadata.version(package)
+            versions[package] = loaded if isinstance(loaded, str) else metadata.version(package)
         except metadata.PackageNotFoundError:
             pass
     return tuple(versions.items())

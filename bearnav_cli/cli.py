@@ -382,7 +382,8 @@ def _read_yaml(path: Path) -> tuple[Any, bytes]:
 
     data = _read_bytes(path)
     try:
-        return yaml.safe_load(data), data
+        # libyaml's parser when pyyaml has it (the same documents, about 9× faster), else pyyaml's own
+        return yaml.load(data, Loader=getattr(yaml, "CSafeLoader", yaml.SafeLoader)), data
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f" at line {mark.line + 1}" if mark else ""

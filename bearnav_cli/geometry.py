@@ -8,8 +8,8 @@ obstacle counts as a collision.
 
 from __future__ import annotations
 
+import hashlib
 import math
-import weakref
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -113,8 +113,24 @@ def barrier_margin(requested: float | None, diagonal: float) -> float:
     return DEFAULT_CLEARANCE * diagonal if requested is None else float(requested)
 
 
-#: :meth:`FreeSpace.from_map`'s spaces by ``id`` of their live map: (weak reference to the map, space).
-_SPACES: dict[int, tuple[weakref.ref, FreeSpace]] = {}
+#: Free spaces :meth:`FreeSpace.from_map` keeps, least recently used first out.
+SPACE_CACHE = 8
+_SPACES: dict[bytes, FreeSpace] = {}
+
+
+def _space_key(map_: Map) -> bytes:
+    """A digest of everything :meth:`FreeSpace.from_map` builds a space from (obstacles, bounds, tolerance)."""
+    digest = hashlib.blake2b(digest_size=16)
+    for polygons in (map_.obstacles, map_.raw_obstacles):
+        digest.update(len(polygons).to_bytes(8, "little"))
+        for polygon in polygons:
+            for ring in (polygon.exterior, *polygon.holes):
+                digest.update(len(ring).to_bytes(8, "little"))
+                digest.update(np.ascontiguousarray(ring, float).tobytes())
+            digest.update(b"|")
+    for values in (map_.free_bounds, map_.bounds, [map_.tol]):
+        digest.update(np.asarray(values, float).tobytes())
+    return digest.digest()
 
 
 @dataclass(frozen=True)
@@ -154,16 +170,17 @@ class FreeSpace:
         ALGORITHMS §11.1): every robot query (free points, segments, clearance, starts) uses it.
         ``sight_bounds`` keeps the map's own ``B``, where landmarks live and sight lines run.
 
-        One space per map object while it lives (maps are immutable): the stages of one plan,
-        which pass the same map on, share its unions, visibility regions and coverage grid.
+        One space per free space: the stages of a plan, which pass the map on or read it back from
+        the previous artifact, share its unions, visibility regions and coverage grid (the last
+        :data:`SPACE_CACHE` free spaces are kept, by the content of what they are built from).
         """
-        key = id(map_)
-        known = _SPACES.get(key)
-        if known is not None and known[0]() is map_:
-            return known[1]
-        space = cls._build(map_)
-        # the callback runs as the map is freed, before its id can name another object
-        _SPACES[key] = (weakref.ref(map_, lambda _, key=key: _SPACES.pop(key, None)), space)
+        key = _space_key(map_)
+        space = _SPACES.pop(key, None)
+        if space is None:
+            space = cls._build(map_)
+            while len(_SPACES) >= SPACE_CACHE:
+                _SPACES.pop(next(iter(_SPACES)))
+        _SPACES[key] = space  # the most recent last
         return space
 
     @classmethod
