@@ -22,7 +22,7 @@ Two parts, each measured side by side in one run:
   the map's parameters; then ``decompose.run`` is timed with the map's decompose parameters
   in three variants, side by side in each round, the order rotating: funnel cells without
   densification (``max_added_nodes=0``), funnel cells as planned (default densification until
-  ``coverage_target`` of F_m or ``max_added_nodes``), and the papers' cells
+  ``coverage_target`` of F_m, then of F, or ``max_added_nodes``), and the papers' cells
   (``cells="paper"``). Cell counts and the coverage of F_m before and after densification
   come from ``cells.stats``. A map whose map → rrtstar → simplify fails is skipped and named,
   and the next seed of that kind is tried. ``--external PATH`` takes the random maps from
@@ -397,10 +397,11 @@ def decompose_text(maps: list[Prepared], skipped: list[str], rounds: int, target
         "(random maps have none: the defaults), then `decompose.run` with the map's decompose parameters in three "
         f"variants side by side in each round, the order rotating; medians over {rounds} round"
         f"{'s' if rounds > 1 else ''}. *funnel, `max_added_nodes=0`*: the funnel cells of the tree's own edges; "
-        f"*funnel (default)*: densified until the cells cover {target:.0%} of F_m (at most {limit} added leaf "
-        'nodes), as `bearnav plan` runs it; *paper*: `cells="paper"` (ALGORITHMS §4, no coverage statistics). '
-        "Coverage is `area(F_m ∩ D) / area(F_m)` from `cells.stats` (`free_coverage_before`, `free_coverage_m`, "
-        f"`added_nodes`). Random maps from {generator} (seeds tried in order per kind: {seeds}; the first "
+        f"*funnel (default)*: densified until the cells cover {target:.0%} of F_m, then of F (`cover = F`: the band "
+        f"along the walls; at most {limit} added leaf nodes in all), as `bearnav plan` runs it; *paper*: "
+        '`cells="paper"` (ALGORITHMS §4, no coverage statistics). Coverage is `area(F_m ∩ D) / area(F_m)` from '
+        "`cells.stats` (`free_coverage_before`, `free_coverage_m`, `added_nodes`; the band's cells count in F_m "
+        f"too). Random maps from {generator} (seeds tried in order per kind: {seeds}; the first "
         "that plans is used)."
     )
     parts = [text, markdown_table(headers, rows)]
