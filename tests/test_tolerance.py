@@ -281,3 +281,26 @@ def test_cover_F_reaches_into_the_band_along_the_walls(seed):
     assert floor <= near_plan.plan_tolerance * (1 + 1e-9)
     assert np.min(plan.usable_tolerance[first_band:]) >= floor * (1 - 1e-9)
     assert plan.plan_tolerance >= floor * (1 - 1e-9)
+
+
+def test_coverage_of_f_short_because_of_a_narrow_passage_names_the_passage(caplog):
+    """A room behind a passage narrower than twice the barrier margin is free space no tree edge reaches: the
+    warning about the coverage of F says so (not that the rest lies along the walls)."""
+    import logging
+
+    from bearnav_cli import pipeline
+    from tests.conftest import build_map
+
+    gap = 0.45  # the robot (0.4 wide) passes; a tree edge keeping the margin (0.094 from each side) does not
+    low, high = 2.5 - gap / 2, 2.5 + gap / 2
+    spec = {
+        "name": "passage", "bounds": [0, 0, 8, 5], "robot_radius": 0.2, "goal": [1.0, 2.5],
+        "landmarks": [[0, 0], [0, 5], [8, 0], [8, 5], [4.1, 1.0], [3.9, 4.0], [4.1, 4.0], [3.9, 1.0]],
+        "obstacles": [{"rectangle": [3.9, 0, 4.1, low]}, {"rectangle": [3.9, high, 4.1, 5]}],
+        "params": {"rrtstar": {"iterations": 600, "seed": 0}},
+    }  # fmt: skip
+    with caplog.at_level(logging.WARNING, logger="bearnav_cli.stages.decompose"):
+        cells = pipeline.compute(build_map(spec), through="decompose")["cells"]
+    assert cells.free_coverage < 0.9
+    said = [r.getMessage() for r in caplog.records if "of F (target" in r.getMessage()]
+    assert len(said) == 1 and "past passages narrower than 2m" in said[0], said

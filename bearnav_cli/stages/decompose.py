@@ -547,8 +547,13 @@ def _funnel_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) 
         uncovered_area = float(shapely.difference(final, covered).area)
         after = 1.0 - uncovered_area / domain_area if domain_area > 0 else 1.0
     if free_after < params.coverage_target and params.cover == "F":
-        log.warning("the cells cover %.1f%% of F (target %.1f%%): the rest lies within %.3g of an obstacle or a "
-                    "wall%s", 100 * free_after, 100 * params.coverage_target, depth_q,
+        # the part of F_m past passages narrower than 2m (warned above) is not a band the leaves can fill
+        cut_off = unreached_area > NEGLIGIBLE_SHARE * max(free_area, 1e-300)
+        why = (f"{100 * unreached_area / free_area:.1f}% of F lies past passages narrower than 2m = {2 * margin:.3g} "
+               "that no tree edge crosses (a smaller decompose.barrier_margin would join it); the rest" if cut_off
+               else "the rest")  # fmt: skip
+        log.warning("the cells cover %.1f%% of F (target %.1f%%): %s lies within the barrier margin %.3g of an "
+                    "obstacle or a wall%s", 100 * free_after, 100 * params.coverage_target, why, margin,
                     (f", in {band_unreachable} pockets no node reaches with clearance {0.5 * depth_q:.3g}"
                      + (f" by a cell that keeps the plan's least usable tolerance {floor:.3g} ({len(refused)} such "
                         "cells were left out)" if refused else ""))
