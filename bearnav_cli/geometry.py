@@ -115,6 +115,9 @@ def barrier_margin(requested: float | None, diagonal: float) -> float:
 
 #: Free spaces :meth:`FreeSpace.from_map` keeps, least recently used first out.
 SPACE_CACHE = 8
+#: Results one space keeps (visibility regions of a landmark set, a coverage grid): ``bearnav tags`` asks for
+#: the regions of hundreds of candidate tags once, and a long-lived process must not hold every set it saw.
+MEMO_ENTRIES = 4
 _SPACES: dict[bytes, FreeSpace] = {}
 
 
@@ -350,6 +353,12 @@ class FreeSpace:
         """Results of :meth:`visibility_regions` and :func:`landmark_coverage` for this space, by their inputs."""
         return {}
 
+    def _remember(self, key: tuple, value: object) -> None:
+        """Keep ``value`` under ``key`` in :attr:`_memo`, with at most :data:`MEMO_ENTRIES` entries (oldest out)."""
+        while len(self._memo) >= MEMO_ENTRIES:
+            self._memo.pop(next(iter(self._memo)))
+        self._memo[key] = value
+
     def visibility_regions(self, landmarks: np.ndarray) -> list[shapely.Geometry]:
         """For each landmark, the part of ``B`` from which it is in line of sight (prepared polygons).
 
@@ -373,7 +382,7 @@ class FreeSpace:
         landmarks = np.asarray(landmarks, float).reshape(-1, 2)
         key = ("sight", landmarks.tobytes())
         if key not in self._memo:
-            self._memo[key] = self._visibility_regions(landmarks)
+            self._remember(key, self._visibility_regions(landmarks))
         return list(self._memo[key])
 
     def _visibility_regions(self, landmarks: np.ndarray) -> list[shapely.Geometry]:
@@ -457,7 +466,7 @@ def landmark_coverage(map_: Map, space: FreeSpace, cells: int = 100,
     """
     key = ("coverage", cells, np.asarray(map_.landmarks, float).tobytes(), np.asarray(map_.bounds, float).tobytes())
     if key not in space._memo:
-        space._memo[key] = _landmark_coverage(map_, space, cells, sight)
+        space._remember(key, _landmark_coverage(map_, space, cells, sight))
     points, counts = space._memo[key]
     return points.copy(), counts.copy()
 

@@ -317,3 +317,26 @@ def test_same_tree_same_cells(small_map):
     a, b = decompose.run(tree, PAPER), decompose.run(tree, PAPER)
     for key, value in a.arrays().items():
         np.testing.assert_array_equal(value, b.arrays()[key])
+
+
+def test_one_free_space_per_content_and_its_results_are_a_fresh_computation():
+    """``FreeSpace.from_map`` gives the same space for another map object of the same content (as each stage of a
+    plan reads the map back from the previous artifact) and another for other obstacles; its kept visibility
+    regions and coverage grid equal a fresh build's."""
+    from bearnav_cli.datatypes import replace
+
+    map_ = build_map(SMALL_MAP)
+    copy = replace(map_, params=dict(map_.params))
+    assert copy is not map_ and FreeSpace.from_map(copy) is FreeSpace.from_map(map_)
+    moved = replace(map_, obstacles=tuple(geometry.from_shapely(shapely.affinity.translate(
+        geometry.to_shapely(map_.obstacles[0]), 0.01))) + tuple(map_.obstacles[1:]))  # fmt: skip
+    assert FreeSpace.from_map(moved) is not FreeSpace.from_map(map_)
+    space, fresh = FreeSpace.from_map(map_), FreeSpace._build(map_)
+    for first, second in zip(space.visibility_regions(map_.landmarks), fresh.visibility_regions(map_.landmarks),
+                             strict=True):  # fmt: skip
+        assert shapely.equals_exact(first, second, 0.0)
+    points, counts = geometry.landmark_coverage(map_, space)
+    counts[:] = -1  # a caller's edit of what it got does not reach what the space keeps
+    points_fresh, counts_fresh = geometry.landmark_coverage(map_, fresh)
+    again_points, again_counts = geometry.landmark_coverage(map_, space)
+    assert np.array_equal(again_points, points_fresh) and np.array_equal(again_counts, counts_fresh)
