@@ -575,8 +575,15 @@ def _camera_words(fov: float, max_range: Optional[float] = None) -> list[str]:
 
 
 def _tags_output(plan_npz: Path, map_yaml: Optional[Path]) -> Path:
-    """Where ``bearnav tags`` writes its map without ``-o``: NAME_tags.yaml next to ``--map``, else next to the plan."""
-    return map_yaml.with_name(f"{map_yaml.stem}_tags.yaml") if map_yaml else plan_npz.parent / "map_tags.yaml"
+    """Where ``bearnav tags`` writes its map without ``-o``: NAME_tags.yaml next to ``--map`` (NAME_tags2.yaml
+    for NAME_tags.yaml, NAME_tags3.yaml for NAME_tags2.yaml ...), else map_tags.yaml next to the plan."""
+    import re
+
+    if map_yaml is None:
+        return plan_npz.parent / "map_tags.yaml"
+    again = re.fullmatch(r"(.+)_tags(\d*)", map_yaml.stem)  # a map tags wrote: count, never NAME_tags_tags
+    name = f"{again[1]}_tags{int(again[2] or 1) + 1}" if again else f"{map_yaml.stem}_tags"
+    return map_yaml.with_name(f"{name}.yaml")
 
 
 def _tags_map(plan_npz: Path) -> Optional[Path]:

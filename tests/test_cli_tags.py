@@ -59,3 +59,17 @@ def test_verify_reports_perception_coverage(cli, write_map, small_spec, tmp_path
     plan = _plan(cli, write_map, small_spec, tmp_path)
     result = cli("verify", plan, "--fov", "60", "--noise-deg", "1", "--starts", "0")
     assert "perception:" in result.output and "60° camera" in result.output, result.output
+
+
+def test_tags_of_a_tags_map_counts_instead_of_repeating_the_suffix(tmp_path):
+    """The default output of ``bearnav tags --map NAME_tags.yaml`` is NAME_tags2.yaml (a map planned from a map tags
+    wrote, tagged again), never NAME_tags_tags.yaml; a map of another name gets NAME_tags.yaml."""
+    from bearnav_cli.cli import _tags_output
+
+    plan = tmp_path / "plans" / "office" / "plan.npz"
+    names = {m: _tags_output(plan, tmp_path / m).name for m in
+             ("office.yaml", "office_tags.yaml", "office_tags2.yaml", "my_tags_room.yaml")}  # fmt: skip
+    assert names == {"office.yaml": "office_tags.yaml", "office_tags.yaml": "office_tags2.yaml",
+                     "office_tags2.yaml": "office_tags3.yaml",
+                     "my_tags_room.yaml": "my_tags_room_tags.yaml"}  # fmt: skip
+    assert _tags_output(plan, None) == plan.parent / "map_tags.yaml"
