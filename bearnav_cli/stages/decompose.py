@@ -432,7 +432,7 @@ def _funnel_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) 
     # coverage of F_m, and densification (§11.5 step 3); the coverage of F is measured at the end
     free = space.component_of(goal)
     full_domain = coverage_domain(free, free_bounds, space.obstacles, margin)
-    covered = shapely.union_all([shapely.Polygon(r.polygon) for r in regions])
+    covered = _cells_union(regions)
     domain, _ = reached_parts(full_domain, covered)  # the parts of F_m the tree's cells can reach
     domain_area = float(domain.area)
     uncovered = shapely.difference(domain, covered)
@@ -496,7 +496,7 @@ def _funnel_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) 
     uncovered_area = sum(p[1] for p in pockets)
     unreachable = [p for p in pockets if p[2]]
     if added:  # an added cell may reach into a part of F_m that no tree cell met: count that part too
-        covered = shapely.union_all([shapely.Polygon(r.polygon) for r in regions])
+        covered = _cells_union(regions)
         final, _ = reached_parts(full_domain, covered)
         if final.area > domain_area * (1.0 + 1e-12):
             domain, domain_area = final, float(final.area)
@@ -508,6 +508,16 @@ def _funnel_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) 
                     "a smaller decompose.barrier_margin or a wider passage would join it",
                     100 * unreached_area / full_domain.area, unreached_area, 2 * margin)  # fmt: skip
     after = 1.0 - uncovered_area / domain_area if domain_area > 0 else 1.0
+    # F_m's densification is done: its shortfall is warned of here (the band's cells can reach into parts
+    # of F_m past passages narrower than 2m without covering them, which the F warning below explains)
+    if after < params.coverage_target:
+        log.warning(
+            "the cells cover %.1f%% of F_m (target %.1f%%): %d pockets no node reaches with clearance%s",
+            100 * after,
+            100 * params.coverage_target,
+            len(unreachable),
+            " and the max_added_nodes limit was reached" if len(added) >= params.max_added_nodes else "",
+        )
     # §12.7: the domain reaches the walls. The band within m of O stays outside every cell above;
     # leaves a band depth q = WALL_LEAF_DEPTH·m from O get cells that keep only min(m, s·d) ≈ q/4
     # from the piece beside them, so densifying F with them leaves a band of about q/4
@@ -537,15 +547,10 @@ def _funnel_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) 
     band_unreachable = sum(1 for p in band if p[2])
     free_after = 1.0 - sum(p[1] for p in band) / free_area if free_area > 0 else 1.0
     if len(added) > in_fm:  # the added cells may meet parts of F no cell met before: measure again
-        covered = shapely.union_all([shapely.Polygon(r.polygon) for r in regions])
-        reached_free, _ = reached_parts(whole_free, covered)
-        free_area = float(reached_free.area)
-        free_after = 1.0 - float(shapely.difference(reached_free, covered).area) / free_area if free_area > 0 else 1.0
+        covered = _cells_union(regions)
+        free_area, free_after, _ = _reached_coverage(whole_free, covered)
         # the band cells reach into F_m too: its recorded coverage is of the final cells, as verify recomputes it
-        final, _ = reached_parts(full_domain, covered)
-        domain_area = float(final.area)  # it holds the reached part of F_m before the band: cells only add to it
-        uncovered_area = float(shapely.difference(final, covered).area)
-        after = 1.0 - uncovered_area / domain_area if domain_area > 0 else 1.0
+        domain_area, after, uncovered_area = _reached_coverage(full_domain, covered)
     if free_after < params.coverage_target and params.cover == "F":
         # the part of F_m past passages narrower than 2m (warned above) is not a band the leaves can fill
         cut_off = unreached_area > NEGLIGIBLE_SHARE * max(free_area, 1e-300)
@@ -558,14 +563,6 @@ def _funnel_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) 
                      + (f" by a cell that keeps the plan's least usable tolerance {floor:.3g} ({len(refused)} such "
                         "cells were left out)" if refused else ""))
                     if band_unreachable else " (the max_added_nodes limit was reached)")  # fmt: skip
-    if after < params.coverage_target:
-        log.warning(
-            "the cells cover %.1f%% of F_m (target %.1f%%): %d pockets no node reaches with clearance%s",
-            100 * after,
-            100 * params.coverage_target,
-            len(unreachable),
-            " and the max_added_nodes limit was reached" if len(added) >= params.max_added_nodes else "",
-        )
     if capped:
         log.warning("exit_inset %.4g capped in %d cells at %.0f%% of their exit point's depth in the parent cell "
                     "(first: node %d)", params.exit_inset, len(capped), 100 * INSET_LIMIT, capped[0])  # fmt: skip
@@ -599,6 +596,20 @@ def _funnel_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) 
     }
     return _Layout(nodes, parent, cost, [(r.polygon, r.A, r.b, r.exit_row) for r in regions], cbf,
                    np.zeros(len(nodes), np.int64), node_added, exit_inset, free_after, stats)  # fmt: skip
+
+
+def _cells_union(regions: list) -> shapely.Geometry:
+    """The union of the cells built so far (:class:`~bearnav_cli.funnel.Region` objects)."""
+    return shapely.union_all([shapely.Polygon(r.polygon) for r in regions])
+
+
+def _reached_coverage(domain: shapely.Geometry, covered: shapely.Geometry) -> tuple[float, float, float]:
+    """The parts of ``domain`` (``F`` or ``F_m``) the cells ``covered`` meet (:func:`reached_parts`): their area,
+    the share of it the cells cover, and the area they leave (map units², 1, map units²)."""
+    reached, _ = reached_parts(domain, covered)
+    area = float(reached.area)
+    left = float(shapely.difference(reached, covered).area)
+    return area, (1.0 - left / area if area > 0 else 1.0), left
 
 
 def _densify(pockets: list, allowed: float, budget: int, find_leaf: Callable, add_leaf: Callable) -> list:
