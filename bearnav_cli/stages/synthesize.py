@@ -1108,19 +1108,12 @@ def _sinks(V: np.ndarray, n_v: np.ndarray, N: np.ndarray, Q: np.ndarray, n_h: np
     nearest = np.lexsort((gap, v_cell))  # per cell, its vertices by gap (stable: ties keep polygon order)
     faces = V[np.sort(np.stack([nearest[v_start], nearest[v_start + 1]], axis=1), axis=1)]
     # exit_sinks costs C·H³ with every cell padded to the largest row count H: one call per row
-    # count instead. Padding rows (offset +inf) are never the least and only add candidates t = 0,
-    # so each cell's sink is the one of the padded call. A cell without rows among cells with rows
-    # keeps one padding row: padded, it gets the face's first end, not the mean of a call without rows.
-    padded = n_h.max(initial=0) > 0
+    # count instead (a cell without rows has h* = +inf anywhere on its face, and no Lemma 6 field)
     sinks, depths = np.empty((C, 2)), np.empty(C)
     for k in np.unique(n_h).tolist():
         group = np.flatnonzero(n_h == k)
-        if k or not padded:
-            rows = h_start[group][:, None] + np.arange(k)
-            normals, offsets = N[rows], Q[rows]
-        else:
-            normals, offsets = np.zeros((len(group), 1, 2)), np.full((len(group), 1), np.inf)
-        sinks[group], depths[group] = exit_sinks(faces[group], normals, offsets)
+        rows = h_start[group][:, None] + np.arange(k)
+        sinks[group], depths[group] = exit_sinks(faces[group], N[rows], Q[rows])
     return sinks, depths
 
 
