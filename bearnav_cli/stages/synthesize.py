@@ -861,8 +861,9 @@ def run(cells: Cells, params: Params = Params(), progress: Callable[[int, int], 
     gains = {}
     if built is not None:  # field space: Lemma 3's gains of every optimal LP at once (gain_from_theta)
         optimal = [c for c, outcome in outcomes.items() if outcome.result.status is LpStatus.OPTIMAL]
-        theta = np.array([outcomes[c].result.x[:6] for c in optimal]).reshape(-1, 2, 3)
-        fields = np.zeros((C, 2, 3))
+        rows, width, n_theta = FIELD_MAP.shape  # θ holds the field [M | a] row by row
+        theta = np.array([outcomes[c].result.x[:n_theta] for c in optimal]).reshape(-1, rows, width)
+        fields = np.zeros((C, rows, width))
         fields[optimal] = theta
         gains = _grouped_gains(fields[:, :, :2], fields[:, :, 2], [cell_landmarks[lo[c] : lo[c + 1]] for c in range(C)],
                                optimal)  # fmt: skip
