@@ -27,7 +27,7 @@ import math
 
 import numpy as np
 
-__all__ = ["MAX_VERTICES", "box", "centre", "clip", "cone_rows", "contains", "diameter", "grow",
+__all__ = ["MAX_VERTICES", "box", "centre", "clip", "cone_rows", "contains", "crossing_parity", "diameter", "grow",
            "intersect_cones", "one_look_bound", "translate"]  # fmt: skip
 
 #: Widest vertex array kept: a set with more vertices is merged down (outward) to this many. A set
@@ -432,6 +432,28 @@ def one_look_bound(x: np.ndarray, landmarks: np.ndarray, visible: np.ndarray, et
     return diameter(vertices, count)
 
 
+def crossing_parity(a: np.ndarray, b: np.ndarray, p: np.ndarray, valid: np.ndarray | bool = True) -> np.ndarray:
+    """Whether a ray from each point toward ``+x`` crosses the edges ``a → b`` an odd number of times, shape (R,).
+
+    The even-odd test: odd is inside a ring the edges close (a point of two overlapping rings
+    crosses both, an even number).
+
+    Parameters
+    ----------
+    a, b : ndarray, shape (R, E, 2) or (E, 2)
+        The edges' ends (map units): each point's own edges, or one set for every point.
+    p : ndarray, shape (R, 2)
+        The points (map units).
+    valid : ndarray of bool, shape (R, E), or True
+        The edges that count (padding rows do not).
+    """
+    px, py = p[:, 0, None], p[:, 1, None]
+    straddles = valid & ((a[..., 1] > py) != (b[..., 1] > py))  # never true for a level edge
+    with np.errstate(divide="ignore", invalid="ignore"):
+        cross_x = a[..., 0] + (py - a[..., 1]) * (b[..., 0] - a[..., 0]) / (b[..., 1] - a[..., 1])
+    return (np.count_nonzero(straddles & (px < cross_x), axis=1) % 2) == 1
+
+
 def contains(vertices: np.ndarray, count: np.ndarray, x: np.ndarray, tol: float = 0.0) -> np.ndarray:
     """Whether each point lies in its set, or within ``tol`` of its boundary, shape (R,).
 
@@ -454,11 +476,7 @@ def contains(vertices: np.ndarray, count: np.ndarray, x: np.ndarray, tol: float 
     valid = _valid(vertices, count)
     a = vertices
     b = vertices[np.arange(len(vertices))[:, None], _next_index(vertices, count)]
-    px, py = p[:, 0, None], p[:, 1, None]
-    straddles = valid & ((a[..., 1] > py) != (b[..., 1] > py))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        cross_x = a[..., 0] + (py - a[..., 1]) * (b[..., 0] - a[..., 0]) / (b[..., 1] - a[..., 1])
-    inside = (np.count_nonzero(straddles & (px < cross_x), axis=1) % 2) == 1
+    inside = crossing_parity(a, b, p, valid)
     edge = b - a
     length2 = np.einsum("rwk,rwk->rw", edge, edge)
     with np.errstate(divide="ignore", invalid="ignore"):

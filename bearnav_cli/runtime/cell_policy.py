@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from bearnav_cli.runtime.bounded import crossing_parity
 from bearnav_cli.runtime.plan_arrays import CHUNK, PlanArrays
 
 __all__ = [
@@ -521,27 +522,6 @@ def in_sight(arrays: PlanArrays, x: np.ndarray) -> np.ndarray:
     return out.reshape(len(p), len(lm))
 
 
-def _odd_crossings(edges: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """Whether a ray from each point toward ``+x`` crosses ``edges`` (E, 2, 2) an odd number of times, shape (R,).
-
-    Odd means inside one ring of the obstacles (even-odd rule); where obstacles overlap it can say
-    even inside both, so a caller may use True, never False, as "inside".
-    """
-    out = np.zeros(len(x), bool)
-    if not len(edges) or not len(x):
-        return out
-    p, q = edges[:, 0], edges[:, 1]
-    rise = q[:, 1] - p[:, 1]
-    slope = np.divide(q[:, 0] - p[:, 0], rise, out=np.zeros(len(rise)), where=rise != 0)
-    step = max(1, CHUNK // len(edges))
-    for s in range(0, len(x), step):
-        y, px = x[s : s + step, 1, None], x[s : s + step, 0, None]
-        straddle = (p[None, :, 1] > y) != (q[None, :, 1] > y)  # never true for a level edge
-        crossing = straddle & (px < p[None, :, 0] + (y - p[None, :, 1]) * slope[None])
-        out[s : s + step] = np.count_nonzero(crossing, axis=1) % 2 == 1
-    return out
-
-
 #: Nodes :func:`approach_target` tests at a time, in route order, for a robot that sees none of its nearest.
 APPROACH_BATCH = 16
 
@@ -580,7 +560,9 @@ def approach_target(arrays: PlanArrays, x: np.ndarray, nearest: int = 8) -> np.n
     todo = np.flatnonzero(~found)
     # a point inside an obstacle has no clear segment to any node: skip the scan of every node
     # (an estimate swung into an obstacle, as a look-ahead point does while its robot turns to look)
-    todo = todo[~_odd_crossings(arrays.obstacle_edges, p[todo])]
+    edges, step = arrays.obstacle_edges, max(1, CHUNK // max(len(arrays.obstacle_edges), 1))
+    inside = [crossing_parity(edges[:, 0], edges[:, 1], p[todo[s : s + step]]) for s in range(0, len(todo), step)]
+    todo = todo[~np.concatenate(inside)] if inside else todo  # even where obstacles overlap: only a True is sure
     if not len(todo):
         return out
     # the others: every node, in route order (ties in distance order, as argmin over the distance
