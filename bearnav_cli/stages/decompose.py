@@ -228,12 +228,12 @@ def witness_points(space: FreeSpace, polygon: np.ndarray, anchors: np.ndarray) -
     cell = shapely.Polygon(polygon)
     witnesses = [anchors]
     if not shapely.intersects(cell, space.obstacles):  # a funnel cell (C1): its free part is itself
-        return np.unique(np.concatenate([anchors, polygon]), axis=0)
-    free_part = shapely.difference(cell, space.obstacles)
-    for part in shapely.get_parts(free_part):
-        if isinstance(part, shapely.Polygon) and not part.is_empty:
-            witnesses.append(np.asarray(part.exterior.coords)[:-1])
-            witnesses.extend(np.asarray(h.coords)[:-1] for h in part.interiors)
+        witnesses.append(polygon)
+    else:
+        for part in shapely.get_parts(shapely.difference(cell, space.obstacles)):
+            if isinstance(part, shapely.Polygon) and not part.is_empty:
+                witnesses.append(np.asarray(part.exterior.coords)[:-1])
+                witnesses.extend(np.asarray(h.coords)[:-1] for h in part.interiors)
     return np.unique(np.concatenate(witnesses), axis=0)
 
 
