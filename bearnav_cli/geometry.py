@@ -442,8 +442,7 @@ class FreeSpace:
         return shapely.Polygon()
 
 
-def landmark_coverage(map_: Map, space: FreeSpace, cells: int = 100,
-                      sight: list | None = None) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+def landmark_coverage(map_: Map, space: FreeSpace, cells: int = 100) -> tuple[np.ndarray, np.ndarray]:
     """Count the landmarks in line of sight from a grid over the free space (ALGORITHMS §1).
 
     Parameters
@@ -453,9 +452,8 @@ def landmark_coverage(map_: Map, space: FreeSpace, cells: int = 100,
     space : FreeSpace
         Built from ``map_``.
     cells : int
-        Grid spacing ``D / cells`` (D the bounds' diagonal); points at cell centres.
-    sight : list of shapely geometries, optional
-        The landmarks' :meth:`FreeSpace.visibility_regions`, when already built.
+        Grid spacing ``D / cells`` (D the bounds' diagonal); points at cell centres. The space
+        keeps the result, and the landmarks' visibility regions it counts with.
 
     Returns
     -------
@@ -466,12 +464,12 @@ def landmark_coverage(map_: Map, space: FreeSpace, cells: int = 100,
     """
     key = ("coverage", cells, np.asarray(map_.landmarks, float).tobytes(), np.asarray(map_.bounds, float).tobytes())
     if key not in space._memo:
-        space._remember(key, _landmark_coverage(map_, space, cells, sight))
+        space._remember(key, _landmark_coverage(map_, space, cells))
     points, counts = space._memo[key]
     return points.copy(), counts.copy()
 
 
-def _landmark_coverage(map_: Map, space: FreeSpace, cells: int, sight: list | None) -> tuple[np.ndarray, np.ndarray]:
+def _landmark_coverage(map_: Map, space: FreeSpace, cells: int) -> tuple[np.ndarray, np.ndarray]:
     xmin, ymin, xmax, ymax = map_.bounds
     spacing = map_.diagonal / cells
     xs = np.arange(xmin + spacing / 2, xmax, spacing)
@@ -481,7 +479,7 @@ def _landmark_coverage(map_: Map, space: FreeSpace, cells: int, sight: list | No
     # one prepared point query per landmark (the segment test's answers away from shadow
     # boundaries, a null set): half the time of a segment per point and landmark
     counts = np.zeros(len(points), np.int64)
-    for region in space.visibility_regions(map_.landmarks) if sight is None else sight:
+    for region in space.visibility_regions(map_.landmarks):
         counts += shapely.intersects_xy(region, points[:, 0], points[:, 1])
     return points, counts
 

@@ -890,7 +890,7 @@ def run(tree: Tree, params: Params = Params(), progress: Callable[[int, int], No
     # Blind spots: the free points of the map stage's coverage grid (spacing D/100) that see
     # fewer than 2 landmarks. A cell holding one cannot be driven by bearings everywhere.
     sight = space.visibility_regions(landmarks)
-    grid, counts = landmark_coverage(map_, space, sight=sight)
+    grid, counts = landmark_coverage(map_, space)
     blind = grid[counts < 2]
     exit_point = np.zeros((n, 2))
     exit_dir = np.zeros((n, 2))
