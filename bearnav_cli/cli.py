@@ -1961,7 +1961,7 @@ def tags_command(
 
     _Quiet.enabled |= quiet
     if out_path is None:  # a new file: the map given stays as it is
-        out_path = map_yaml.with_name(f"{map_yaml.stem}_tags.yaml") if map_yaml else plan_npz.parent / "map_tags.yaml"
+        out_path = _tags_output(plan_npz, map_yaml)
     artifacts.check_output_file(out_path, (".yaml", ".yml"), "-o/--out", inputs=tuple(p for p in (plan_npz, map_yaml)
                                                                                         if p is not None))  # fmt: skip
     artifacts.check_overwrite(out_path, "tags", force=force)
@@ -1978,6 +1978,7 @@ def tags_command(
     plan = pipeline.load(plan_npz, "plan").artifact
     spec = map_.spec_of(plan.map)
     original = None  # the YAML text the user wrote, kept as it is in the new map
+    grid = None  # the occupancy grid the new map names, when it keeps the map's own text
     if map_yaml is not None:
         source = read_map_source(map_yaml)
         problem = composition.map_frame_problem(plan.map, map_.run(source))
@@ -1985,6 +1986,7 @@ def tags_command(
             raise _fail(f"{map_yaml}: {problem}: not the plan's map", EXIT_INVALID)
         grid_elsewhere = "occupancy" in source.spec and map_yaml.resolve().parent != out_path.resolve().parent
         spec = spec if grid_elsewhere else source.spec  # an occupancy image path is relative to its YAML
+        grid = None if grid_elsewhere else source.grid
         bare_grid = source.grid is not None and "occupancy" not in source.spec  # its spec comes from options
         if not grid_elsewhere and not bare_grid:
             original = _read_bytes(map_yaml).decode("utf-8", errors="replace")
@@ -1992,7 +1994,7 @@ def tags_command(
     name = tags.tagged_name(str(spec.get("name", plan.map.name)))  # another name: re-planning it makes its own folder
     new_spec = tags.map_spec_with_tags(spec, proposal)
     new_spec = {"name": name, **{key: value for key, value in new_spec.items() if key != "name"}}
-    map_.run(map_.MapSource(spec=new_spec, file=str(out_path), sha256=""))  # the map stage accepts it
+    map_.run(map_.MapSource(spec=new_spec, file=str(out_path), sha256="", grid=grid))  # the map stage accepts it
     header = (f"{artifacts.TAGS_MARKER} {proposal.count} new tags for a {fov:g}° camera, from {plan_npz} "
               f"(and {map_yaml or 'its map'}); plan it with `bearnav plan {out_path}`")  # fmt: skip
     text = tags.map_text_with_tags(original, proposal, name, header) if original is not None else None

@@ -73,3 +73,23 @@ def test_tags_of_a_tags_map_counts_instead_of_repeating_the_suffix(tmp_path):
                      "office_tags2.yaml": "office_tags3.yaml",
                      "my_tags_room.yaml": "my_tags_room_tags.yaml"}  # fmt: skip
     assert _tags_output(plan, None) == plan.parent / "map_tags.yaml"
+
+
+def test_tags_extends_a_map_that_names_an_occupancy_grid(cli, tmp_path):
+    """``bearnav tags PLAN --map M.yaml`` for a map with ``occupancy:`` beside it (what plan's blind-spot error
+    prints): the new map keeps the grid and is accepted, written where tags_step said (M_tags.yaml), and plans."""
+    from bearnav_cli.cli import _tags_output
+    from tests import mapgen
+
+    made = mapgen.generate(0, "grid", params={"rrtstar": {"iterations": 300, "seed": 0}})
+    source = made.write(tmp_path / "maps")
+    cli("plan", source, "-o", tmp_path / "p", "-q")
+    plan = tmp_path / "p" / "plan.npz"
+    assert plan.exists()
+    result = cli("tags", plan, "--fov", "360", "--map", source, "-q")
+    assert result.exit_code in (0, 1), result.output  # 1: the tag budget did not reach the target
+    written = _tags_output(plan, source)
+    assert written == source.with_name(f"{source.stem}_tags.yaml") and written.exists()
+    spec = yaml.safe_load(written.read_text())
+    assert spec["occupancy"] == made.spec["occupancy"]
+    assert map_.run(read_map_source(written)).landmarks.shape[0] == len(spec["landmarks"])
