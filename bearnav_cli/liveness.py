@@ -1,11 +1,15 @@
 """Liveness of a funnel plan at a bearing error, a camera and a slip (ALGORITHMS §12.5, §12.8).
 
 A robot at ``x`` whose camera looks along the heading ``θ`` sees the landmarks ``S_fov(x, θ)`` (in
-the field of view, in range, in line of sight: ``runtime.step.views``). One look then bounds its
-error by ``ε(x, S) = diam K(x, S)``, ``K = B_r ∩ ∩_{k∈S} cone(l_k, φ_k(x), 2η)``
-(``runtime.bounded.one_look_bound``, §12.2's static bound). Per cell ``c``:
+the field of view, in range, in line of sight: ``runtime.step.views``). A look's set then errs by
+at most ``ε(x, S)`` (``runtime.bounded.one_look_bound``: §12.2's static bound, tightened, see its
+docstring). A look (§12.5, ``runtime.step.look_around``) turns to the best heading and, when that
+view is not enough, turns all around; turning in place does not grow the set, so it ends inside the
+cones of every landmark in sight, ``S_all(x)``. Per cell ``c``:
 
-- ``ε_c^look = max_{x ∈ P_c} min_θ ε(x, S_fov(x, θ))``, the worst over the cell of the best look;
+- ``ε_c^look = max_{x ∈ P_c} ε(x, S_all(x))``, the worst over the cell of the look. §12.5 takes
+  the best single view, ``min_θ ε(x, S_fov(x, θ))``, which ignores the turn all around that §12.5's
+  own look ends with; that is kept as ``eps_view`` (a look of one view, no turn all around);
 - the **margin** ``τ_c − κℓ − ν`` (``τ_c`` the plan's usable tolerance, ``ℓ = v·dt`` one step,
   ``κ`` the slip, ``ν`` its floor; a look-ahead plan also loses the swing ``2λ sin(ψ/2)`` of its
   point, §12.6);
@@ -20,10 +24,10 @@ error by ``ε(x, S) = diam K(x, S)``, ``K = B_r ∩ ∩_{k∈S} cone(l_k, φ_k(x
 ``resolution`` inside each cell, and every cell's vertices (pulled ``0.1%`` toward its centroid)
 and its centroid, so that small cells get points and corners are seen. A look-ahead plan's cells
 hold the point ``p`` ahead of the axle, but the camera looks from the axle, anywhere within
-``λ`` of ``p``: there the grid covers ``P_c ⊕ B_λ``, a superset of the axle's places. The minimum
-over headings takes ``headings`` evenly spaced headings (1 for a camera that sees all around);
-a heading whose view is a subset of another's at the same point can only do worse and is not
-evaluated.
+``λ`` of ``p``: there the grid covers ``P_c ⊕ B_λ``, a superset of the axle's places. The one-view
+minimum over headings takes ``headings`` evenly spaced headings (1 for a camera that sees all
+around); a heading whose view is a subset of another's at the same point can only do worse and is
+not evaluated.
 
 The **live fraction** of ``D`` is the area where the cell the funnel policy uses (the least-rank
 cell holding the point, ``plot.active_regions``'s regions) is live, over the area of ``D``
@@ -80,12 +84,17 @@ class Liveness:
     Attributes
     ----------
     eps_look : ndarray, shape (C,)
-        ``ε_c^look``: the largest over the cell's grid points of the least one-look bound over the
-        headings (map units).
+        ``ε_c^look``: the largest over the cell's grid points of the bound after a look, which ends
+        with a turn all around: every landmark in sight and in range (map units).
+    eps_view : ndarray, shape (C,)
+        The same for the look's first view alone: the least one-view bound over the headings
+        (``eps_look`` for a camera that sees all around; map units).
     margin : ndarray, shape (C,)
         ``τ_c − κℓ − ν`` (less ``2λ sin(ψ/2)`` with a look-ahead; map units).
     live : ndarray of bool, shape (C,)
         ``eps_look < margin``.
+    view_live : ndarray of bool, shape (C,)
+        ``eps_view < margin``: one view at the best heading is enough, no turn all around.
     cell_eta_star : ndarray, shape (C,)
         ``η*_c`` (rad): the largest bearing error at which the grid found the cell live; 0 where
         it is never live.
@@ -98,6 +107,8 @@ class Liveness:
     live_fraction : float
         Area of ``D`` whose active cell (the least-rank cell holding the point) is live, over the
         area of ``D``, in [0, 1].
+    view_fraction : float
+        The same for ``view_live`` (``≤ live_fraction``).
     cover_fraction : float
         Area of the union of the live cells over the area of ``D``, in [0, 1] (``≥ live_fraction``).
     eta : float
@@ -121,13 +132,16 @@ class Liveness:
     """
 
     eps_look: np.ndarray
+    eps_view: np.ndarray
     margin: np.ndarray
     live: np.ndarray
+    view_live: np.ndarray
     cell_eta_star: np.ndarray
     tolerance: np.ndarray
     points: np.ndarray
     eta_star: float
     live_fraction: float
+    view_fraction: float
     cover_fraction: float
     eta: float
     fov: float
@@ -150,7 +164,8 @@ class Liveness:
         reach = "" if math.isinf(self.max_range) else f" of range {self.max_range:g}"
         heads = "1 heading (all around)" if self.headings == 1 else f"{self.headings} headings"
         return (f"liveness at η = {math.degrees(self.eta):.3g}°, {camera}{reach}, κ = {self.kappa:g}: "
-                f"{self.live_fraction:.0%} of D live ({self.n_live}/{len(self.live)} cells); certified bearing "
+                f"{self.live_fraction:.0%} of D live ({self.n_live}/{len(self.live)} cells; {self.view_fraction:.0%} "
+                f"of D after one view, without turning all around); certified bearing "
                 f"error η* = {math.degrees(self.eta_star):.3g}°; measured on a {self.resolution:.3g}-map-unit grid "
                 f"with {heads}, a measurement, not a proof")  # fmt: skip
 
@@ -173,14 +188,17 @@ class Liveness:
             "headings": self.headings,
             "measured": "on a grid of the stated resolution: a measurement, not a proof",
             "live_fraction": self.live_fraction,
+            "view_fraction": self.view_fraction,
             "cover_fraction": self.cover_fraction,
             "live_cells": self.n_live,
             "eta_star_deg": math.degrees(self.eta_star),
             "per_cell": {
                 "eps_look": finite(self.eps_look),
+                "eps_view": finite(self.eps_view),
                 "margin": finite(self.margin),
                 "tolerance": finite(self.tolerance),
                 "live": [bool(v) for v in self.live],
+                "view_live": [bool(v) for v in self.view_live],
                 "eta_star_deg": finite(self.cell_eta_star, deg),
                 "points": [int(v) for v in self.points],
             },
@@ -413,25 +431,35 @@ def measure(plan: Plan, eta_deg: float | None = None, fov_deg: float = 60.0, kap
 
     origin = np.asarray(arrays.bounds, float)[:2]
     points, pair_cell, pair_point = _samples(polygons, lam, resolution, origin)
-    row_point, row_vis = _views(arrays, points, fov, max_range, headings)
-    row_eps = _bounds_of(arrays, points[row_point], row_vis, np.full(len(row_point), eta))
-    eps_point = _point_min(row_eps, row_point, len(points))
-    eps_look = _cell_max(eps_point[pair_point], pair_cell, n_cells)
+    # a look ends with a turn all around (§12.5): its set lies in the cones of every landmark in sight
+    every = np.arange(len(points))
+    all_vis = _views(arrays, points, 2.0 * math.pi, max_range, 1)[1]
+    eps_all = _bounds_of(arrays, points, all_vis, np.full(len(points), eta))
+    eps_look = _cell_max(eps_all[pair_point], pair_cell, n_cells)
     live = eps_look < margin
-    cell_eta = _eta_star(arrays, points, pair_cell, pair_point, row_point, row_vis, row_eps, eps_look, margin, eta,
-                         live)  # fmt: skip
+    cell_eta = _eta_star(arrays, points, pair_cell, pair_point, every, all_vis, eps_all, eps_look, margin, eta, live)
+    if full:
+        eps_view = eps_look
+    else:  # the look's first view, at the best heading
+        row_point, row_vis = _views(arrays, points, fov, max_range, headings)
+        row_eps = _bounds_of(arrays, points[row_point], row_vis, np.full(len(row_point), eta))
+        eps_view = _cell_max(_point_min(row_eps, row_point, len(points))[pair_point], pair_cell, n_cells)
+    view_live = eps_view < margin
 
     rank = np.asarray(arrays.cell_rank, float)
     domain = shapely.union_all(polygons)
     area = float(domain.area)
     regions = _active_regions(polygons, rank)
     live_area = sum(float(regions[c].area) for c in np.flatnonzero(live))
+    view_area = sum(float(regions[c].area) for c in np.flatnonzero(view_live))
     cover = float(shapely.union_all([polygons[c] for c in np.flatnonzero(live)]).area) if live.any() else 0.0
     points_per_cell = np.bincount(pair_cell, minlength=n_cells)
     return Liveness(
-        eps_look=eps_look, margin=margin, live=live, cell_eta_star=cell_eta, tolerance=tau,
+        eps_look=eps_look, eps_view=eps_view, margin=margin, live=live, view_live=view_live,
+        cell_eta_star=cell_eta, tolerance=tau,
         points=points_per_cell, eta_star=float(np.min(cell_eta)) if n_cells else 0.0,
         live_fraction=min(1.0, live_area / area) if area > 0 else 0.0,
+        view_fraction=min(1.0, view_area / area) if area > 0 else 0.0,
         cover_fraction=min(1.0, cover / area) if area > 0 else 0.0,
         eta=eta, fov=fov, kappa=kappa, nu=float(nu), step=step_len, swing=swing, resolution=float(resolution),
         headings=headings, max_range=max_range,

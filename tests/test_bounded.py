@@ -107,7 +107,8 @@ def test_lemma_5_and_the_static_bound(seed):
     assert np.all(count > 0)
     assert bounded.contains(vertices, count, x, 1e-9).all()
     static = bounded.one_look_bound(x, landmarks, visible, eta, bounds, 1e-9)
-    assert np.all(bounded.diameter(vertices, count) <= static * (1 + 1e-7) + 1e-7)  # both clipped with slack
+    _, error = bounded.centre(vertices, count)
+    assert np.all(error <= static * (1 + 1e-7) + 1e-7)  # both clipped with slack
     # the prediction: moved by the measured displacement and grown by its bound, it holds the truth again
     move = rng.normal(size=(r, 2)) * 0.1
     kappa, floor = 0.03, 1e-3
@@ -116,6 +117,66 @@ def test_lemma_5_and_the_static_bound(seed):
     slip *= (size * rng.uniform(0, 1, r) / np.hypot(*slip.T))[:, None]
     predicted, n = bounded.grow(bounded.translate(vertices, move), count, size, 1e-12)
     assert bounded.contains(predicted, n, x + move + slip, 1e-9).all()
+
+
+def smallest_circle_radius(points: np.ndarray) -> float:
+    """The radius of the smallest circle around ``points`` (N, 2), by brute force over pairs and triples."""
+    best = math.inf
+    n = len(points)
+    for i in range(n):
+        for j in range(i + 1, n):
+            candidates = [0.5 * (points[i] + points[j])]
+            for k in range(j + 1, n):
+                a, b, c = points[i], points[j], points[k]
+                d = 2.0 * (a[0] * (b[1] - c[1]) + b[0] * (c[1] - a[1]) + c[0] * (a[1] - b[1]))
+                if abs(d) > 1e-12:
+                    ux = (a @ a * (b[1] - c[1]) + b @ b * (c[1] - a[1]) + c @ c * (a[1] - b[1])) / d
+                    uy = (a @ a * (c[0] - b[0]) + b @ b * (a[0] - c[0]) + c @ c * (b[0] - a[0])) / d
+                    candidates.append(np.array([ux, uy]))
+            for centre in candidates:
+                radius = float(np.max(np.hypot(*(points - centre).T)))
+                best = min(best, radius)
+    return best
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_the_centre_is_within_badoiu_clarkson_of_the_smallest_circle(seed):
+    """``centre``'s error radius is at most (1 + 1/√(CENTRE_STEPS + 1)) times the smallest circle's
+    radius (the Bădoiu–Clarkson step bound the static bound relies on), and never below it."""
+    vertices, count = random_polygons(seed, r=40, points=8)
+    _, error = bounded.centre(vertices, count)
+    factor = 1.0 + 1.0 / math.sqrt(bounded.CENTRE_STEPS + 1)
+    for i in range(len(count)):
+        radius = smallest_circle_radius(vertices[i, : count[i]])
+        assert radius * (1 - 1e-9) <= error[i] <= factor * radius * (1 + 1e-9)
+    assert bounded.RADIUS_PER_WIDTH == pytest.approx(factor / math.sqrt(3.0))
+
+
+@pytest.mark.parametrize(("seed", "eta_deg"), [(0, 0.05), (1, 0.25), (2, 1.0), (3, 3.0)])
+def test_the_static_bound_holds_at_the_worst_errors_and_is_tighter_than_diam_k(seed, eta_deg):
+    """Every bearing error at ±η (the corners of the error box, where the set is widest): the look's
+    error radius stays within ε(x, S); and ε is well below §12.2's diam K where two bearings cross."""
+    rng = np.random.default_rng(100 + seed)
+    r, n_lm = 400, int(rng.integers(2, 9))
+    eta = math.radians(eta_deg)
+    landmarks = rng.uniform(0, 10, size=(n_lm, 2))
+    x = rng.uniform(0.5, 9.5, size=(r, 2))
+    visible = rng.random((r, n_lm)) < 0.7
+    d = landmarks[None] - x[:, None]
+    truth = np.arctan2(d[..., 1], d[..., 0])
+    bounds = np.array([0.0, 0.0, 10.0, 10.0])
+    static = bounded.one_look_bound(x, landmarks, visible, eta, bounds, 1e-9)
+    for _ in range(4):
+        measured = truth + rng.choice([-1.0, 1.0], size=truth.shape) * eta
+        vertices, count = bounded.intersect_cones(*bounded.box(bounds, r), landmarks, measured, visible, eta, 1e-9)
+        _, error = bounded.centre(vertices, count)
+        assert np.all(error <= static * (1 + 1e-7) + 1e-7)
+    wide, n = bounded.intersect_cones(*bounded.box(bounds, r), landmarks, truth, visible, 2 * eta, 1e-9)
+    diam_k = bounded.diameter(wide, n)
+    assert np.all(static <= bounded.RADIUS_PER_WIDTH * diam_k * (1 + 1e-9))
+    crossing = visible.sum(axis=1) >= 2
+    # about 1/2.7 where bearings fix the robot and η is a camera's; the sets' curvature costs more at degrees
+    assert np.median(static[crossing] / diam_k[crossing]) < (0.4 if eta_deg <= 0.25 else 0.6)
 
 
 def test_cones_of_inconsistent_bearings_empty_the_set():

@@ -58,7 +58,7 @@ def test_the_bound_of_a_row_is_one_look_bound(plan):
 
 def test_shapes_and_json(plan, narrow):
     c = plan.cells.n_cells
-    for name in ("eps_look", "margin", "live", "cell_eta_star", "tolerance", "points"):
+    for name in ("eps_look", "eps_view", "margin", "live", "view_live", "cell_eta_star", "tolerance", "points"):
         assert getattr(narrow, name).shape == (c,), name
     assert np.all(narrow.points > 0)  # every cell has points, the small ones too
     assert narrow.headings == liveness.HEADINGS and narrow.step > 0 and narrow.nu > 0
@@ -74,10 +74,48 @@ def test_eps_look_decreases_with_eta(plan, narrow):
     assert smaller.live_fraction >= narrow.live_fraction - 1e-12
 
 
-def test_a_wider_camera_does_no_worse(narrow, wide):
+def test_a_wider_camera_does_no_worse_in_one_view(narrow, wide):
     assert wide.headings == 1
-    assert np.all(wide.eps_look <= narrow.eps_look + 1e-9)
-    assert np.all(wide.live >= narrow.live)
+    assert np.all(wide.eps_view <= narrow.eps_view + 1e-9)
+    assert np.all(wide.view_live >= narrow.view_live)
+    np.testing.assert_array_equal(wide.eps_view, wide.eps_look)  # all around in one view
+
+
+def test_a_look_ends_all_around_whatever_the_camera(narrow, wide):
+    """The look of §12.5 ends with a turn all around: its bound is the 360° view's at any field of view,
+    and no larger than the best single view's."""
+    np.testing.assert_allclose(narrow.eps_look, wide.eps_look, rtol=1e-12)
+    assert np.all(narrow.eps_look <= narrow.eps_view + 1e-12)
+    assert np.all(narrow.live >= narrow.view_live) and narrow.live_fraction >= narrow.view_fraction
+    assert narrow.view_fraction < narrow.live_fraction  # at 60° one view is not always enough
+
+
+@pytest.mark.parametrize("worst", [False, True])
+def test_a_turn_all_around_gives_a_set_within_the_look_bound(plan, worst):
+    """A look simulated view by view (a 60° camera at 36 headings, every bearing within η, the set never
+    grown while the robot turns in place) errs by no more than ``ε(x, S_all)``, the bound liveness uses."""
+    arrays = PlanArrays.from_plan(plan)
+    rng = np.random.default_rng(7)
+    box = estimate.axle_bounds(arrays)
+    x = rng.uniform(box[:2], box[2:], (200, 2))  # B_r: where an axle can be
+    eta = math.radians(0.25)
+    d = arrays.landmarks[None] - x[:, None]
+    truth = np.arctan2(d[..., 1], d[..., 0])
+    per_heading = step.views(arrays, x, math.radians(60.0), math.inf, 36)  # (R, H, L)
+    vertices, count = bounded.box(box, len(x))
+    # at the worst, each bearing errs by ±η in every view (opposite signs in two views leave only a line)
+    signs = rng.choice([-1.0, 1.0], truth.shape)
+    for h in range(per_heading.shape[1]):
+        error = signs * eta if worst else rng.uniform(-eta, eta, truth.shape)
+        vertices, count = bounded.intersect_cones(vertices, count, arrays.landmarks, truth + error,
+                                                  per_heading[:, h], eta, arrays.tol)  # fmt: skip
+    _, error = bounded.centre(vertices, count)
+    all_around = step.views(arrays, x, 2.0 * math.pi, math.inf, 1)[:, 0]
+    np.testing.assert_array_equal(all_around, per_heading.any(axis=1))
+    bound = liveness._bounds_of(arrays, x, all_around, np.full(len(x), eta))
+    seen = all_around.sum(axis=1) >= 2
+    assert seen.sum() > 100
+    assert np.all(error[seen] <= bound[seen] * (1 + 1e-7) + 1e-9)
 
 
 def test_live_means_below_the_margin(wide):
@@ -114,9 +152,9 @@ def test_live_fraction_is_the_area_of_the_live_cells_the_policy_uses(plan, wide)
 def test_a_camera_that_sees_nothing_is_never_live(plan):
     blind = measure(plan, 0.25, 360.0, max_range=1e-6)
     assert not blind.live.any() and blind.live_fraction == 0.0 and blind.eta_star == 0.0
-    # K is all of B_r: its diagonal
+    # K is all of B_r: the bound is the share of its diagonal a centre's error radius may reach
     x0, y0, x1, y1 = estimate.axle_bounds(PlanArrays.from_plan(plan))
-    np.testing.assert_allclose(blind.eps_look, math.hypot(x1 - x0, y1 - y0))
+    np.testing.assert_allclose(blind.eps_look, bounded.RADIUS_PER_WIDTH * math.hypot(x1 - x0, y1 - y0))
 
 
 def test_no_margin_no_liveness(plan):

@@ -13,8 +13,8 @@ robots at once:
 - :func:`intersect_cones` — clip by the cones of every visible bearing;
 - :func:`centre` — the estimate ``x̂`` (a point of the set) and its exact error radius
   ``e = max_v ‖v − x̂‖``;
-- :func:`diameter` and :func:`one_look_bound` — the static bound ``ε(x, S) = diam K(x, S)`` of
-  §12.2 that looking (§12.5) and ``bearnav verify``'s liveness use;
+- :func:`diameter` and :func:`one_look_bound` — the static bound ``ε(x, S)`` of §12.2 on the error
+  radius after one look, which looking (§12.5) and ``bearnav verify``'s liveness use;
 - :func:`contains` — whether points lie in their sets (the simulator's containment count).
 
 Every clip keeps a slack of ``tol`` (``1e-9·D``) on the outside, so round-off never empties a set
@@ -27,7 +27,7 @@ import math
 
 import numpy as np
 
-__all__ = ["MAX_VERTICES", "box", "centre", "clip", "cone_rows", "contains", "crossing_parity", "diameter", "grow",
+__all__ = ["CENTRE_STEPS", "MAX_VERTICES", "RADIUS_PER_WIDTH", "box", "centre", "clip", "cone_rows", "contains", "crossing_parity", "diameter", "grow",
            "intersect_cones", "one_look_bound", "translate"]  # fmt: skip
 
 #: Widest vertex array kept: a set with more vertices is merged down (outward) to this many. A set
@@ -36,6 +36,9 @@ MAX_VERTICES = 24
 #: ``x̂`` is refined by this many Bădoiu–Clarkson steps toward the centre of the smallest circle
 #: around the vertices (the error radius is exact for whatever point results).
 CENTRE_STEPS = 12
+#: ``e ≤ RADIUS_PER_WIDTH · diam X`` for the ``x̂`` :func:`centre` returns: Jung's ``R ≤ diam/√3`` and
+#: Bădoiu–Clarkson's ``e ≤ (1 + 1/√(CENTRE_STEPS + 1)) R`` (:func:`one_look_bound`).
+RADIUS_PER_WIDTH = min(1.0, (1.0 + 1.0 / math.sqrt(CENTRE_STEPS + 1)) / math.sqrt(3.0))
 
 
 def box(bounds: np.ndarray, r: int) -> tuple[np.ndarray, np.ndarray]:
@@ -320,13 +323,23 @@ def intersect_cones(vertices: np.ndarray, count: np.ndarray, landmarks: np.ndarr
     visible = np.asarray(visible, bool)
     if not visible.any():
         return vertices, count
-    # the caller's sets stay as they were; the padding past the widest set is dropped
-    vertices, count = vertices[:, : max(int(count.max(initial=0)), 1)].copy(), count.copy()
     rob, lm = np.nonzero(visible)  # the (robot, landmark) pairs, robot by robot
     eta_pairs = np.broadcast_to(np.asarray(eta, float), (len(visible),))[rob]
     a, b = cone_rows(np.asarray(landmarks, float)[lm], np.asarray(angle, float)[rob, lm], eta_pairs)  # (P, 2, 2)
-    # a cone that holds every vertex now holds the set after every other clip too (clips only shrink
-    # it): only the cones that cut it are applied, one per robot per round
+    return _clip_pairs(vertices, count, rob, a, b, tol)
+
+
+def _clip_pairs(vertices: np.ndarray, count: np.ndarray, rob: np.ndarray, a: np.ndarray, b: np.ndarray,
+                tol: float) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """Each set clipped by the rows of its pairs: pair ``p`` clips set ``rob[p]`` by ``a[p, q]·y ≤ b[p, q]``.
+
+    ``rob`` (P,) is sorted; ``a`` (P, Q, 2), ``b`` (P, Q). The sets are clipped together, one pair
+    of each per round (a set with fewer pairs sits out the later rounds). The caller's arrays stay
+    as they were.
+    """
+    vertices, count = vertices[:, : max(int(count.max(initial=0)), 1)].copy(), count.copy()
+    # a pair whose rows hold every vertex now hold the set after every other clip too (clips only
+    # shrink it): only the pairs that cut it are applied
     s = np.einsum("pqk,pwk->pqw", a, vertices[rob]) - (b + tol)[..., None]
     cuts = np.any((s > 0.0) & _valid(vertices, count)[rob][:, None, :], axis=(1, 2))
     rob, a, b = rob[cuts], a[cuts], b[cuts]
@@ -338,7 +351,7 @@ def intersect_cones(vertices: np.ndarray, count: np.ndarray, landmarks: np.ndarr
         sel = np.flatnonzero(rounds == k)
         who = rob[sel]
         sub_v, sub_n = vertices[who], count[who]
-        for q in range(2):
+        for q in range(a.shape[1]):
             sub_v, sub_n = clip(sub_v, sub_n, a[sel, q], b[sel, q], tol)
         width = max(vertices.shape[1], sub_v.shape[1])
         vertices = fit(vertices, width)
@@ -402,11 +415,27 @@ def diameter(vertices: np.ndarray, count: np.ndarray) -> np.ndarray:
 
 def one_look_bound(x: np.ndarray, landmarks: np.ndarray, visible: np.ndarray, eta: float | np.ndarray,
                    bounds: np.ndarray, tol: float = 0.0) -> np.ndarray:  # fmt: skip
-    """The static bound ``ε(x, S) = diam K(x, S)`` of one look, shape (R,) map units (ALGORITHMS §12.2).
+    """The static bound ``ε(x, S)`` of one look: no set a look at ``S`` from ``x`` gives errs by more, shape (R,).
 
-    ``K(x, S) = B_r ∩ ∩_{k∈S} cone(l_k, φ_k(x), 2η)``: a robot at ``x`` that sees ``S`` with
-    bearing errors within ``η`` has its set inside ``K``, so its error after the look is at most
-    ``ε``. With fewer than two well-spread bearings ``K`` reaches the bounds and ``ε`` is large.
+    A robot at ``x`` that sees ``S`` with bearing errors within ``η`` gets a set ``X`` (§12.2) whose
+    error radius :func:`centre` returns as ``e``. ALGORITHMS §12.2 bounds ``e`` by ``diam K``,
+    ``K = B_r ∩ ∩_{k∈S} cone(l_k, φ_k(x), 2η)``; that is about 2.7 times too large, and this bound
+    is the product of three facts (docs/algorithms.md, "the one-look bound"):
+
+    1. **X is half as wide as K.** Two points ``y, z ∈ X`` lie in one cone of half-angle ``η`` at
+       ``l_k``, so ``z`` is within ``‖z − l_k‖ sin 2η`` of the line ``l_k y``; that line's normal is
+       within ``2η`` of ``n_k``, the normal of the line ``l_k x`` (``y ∈ K``). Hence
+       ``|n_k·(z − y)| ≤ h_k = (r_k + ρ) sin 2η + 2 sin η · diam K`` (``r_k = ‖l_k − x‖``,
+       ``ρ = max_{v∈K} ‖v − x‖``), and ``diam X ≤ max ‖d‖`` over the polygon
+       ``{d : |n_k·d| ≤ h_k ∀k} ∩ [−diam K, diam K]²``, which is about ``diam K / 2``.
+    2. **Jung's theorem** in the plane: the smallest circle around ``X`` has radius
+       ``R ≤ diam X / √3``.
+    3. **Bădoiu–Clarkson**: :func:`centre` starts in the set's hull and takes
+       :data:`CENTRE_STEPS` steps, so ``‖x̂ − c*‖ ≤ R/√(CENTRE_STEPS + 1)`` and
+       ``e ≤ (1 + 1/√(CENTRE_STEPS + 1)) R``; also ``e ≤ diam X`` (``x̂ ∈ X``).
+
+    So ``e ≤ ε = min(1, (1 + 1/√(CENTRE_STEPS + 1))/√3) · min(diam K, max ‖d‖)`` (:data:`RADIUS_PER_WIDTH`
+    is the factor). With fewer than two well-spread bearings ``K`` reaches the bounds and ``ε`` is large.
 
     Parameters
     ----------
@@ -424,12 +453,31 @@ def one_look_bound(x: np.ndarray, landmarks: np.ndarray, visible: np.ndarray, et
         Outside slack of the clips (map units).
     """
     p = np.asarray(x, float).reshape(-1, 2)
-    d = np.asarray(landmarks, float)[None] - p[:, None, :]
+    lm = np.asarray(landmarks, float)
+    visible = np.asarray(visible, bool).reshape(len(p), len(lm))
+    d = lm[None] - p[:, None, :]
+    reach = np.hypot(d[..., 0], d[..., 1])  # r_k (R, L)
     angle = np.arctan2(d[..., 1], d[..., 0])
-    vertices, count = box(bounds, len(p))
-    half = np.minimum(2.0 * np.asarray(eta, float), 0.5 * math.pi - 1e-9)  # the 2η cones around the truth
-    vertices, count = intersect_cones(vertices, count, landmarks, angle, visible, half, tol)
-    return diameter(vertices, count)
+    half = np.minimum(2.0 * np.broadcast_to(np.asarray(eta, float), (len(p),)), 0.5 * math.pi - 1e-9)
+    vertices, count = intersect_cones(*box(bounds, len(p)), lm, angle, visible, half, tol)  # K: the 2η cones
+    width = diameter(vertices, count)
+    valid = _valid(vertices, count)
+    off = vertices - p[:, None, :]
+    rho = np.sqrt(np.max(np.where(valid, off[..., 0] ** 2 + off[..., 1] ** 2, 0.0), axis=1, initial=0.0))
+    bounded_k = np.isfinite(width)
+    # the difference body of X: strips |n_k·d| ≤ h_k around 0, in the box of side 2·diam K
+    span = np.where(bounded_k, width, 0.0)
+    square = np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])
+    diff_v, diff_n = square[None] * span[:, None, None], np.full(len(p), 4, np.int64)
+    rob, k = np.nonzero(visible & (reach > 0.0) & bounded_k[:, None])
+    if len(rob):
+        n = np.stack([-d[rob, k, 1], d[rob, k, 0]], axis=-1) / reach[rob, k, None]
+        h = (reach[rob, k] + rho[rob]) * np.sin(half[rob]) + 2.0 * np.sin(0.5 * half[rob]) * span[rob]
+        a = np.stack([n, -n], axis=1)  # (P, 2, 2)
+        diff_v, diff_n = _clip_pairs(diff_v, diff_n, rob, a, np.stack([h, h], axis=1), tol)
+    spread = np.sqrt(np.max(np.where(_valid(diff_v, diff_n), np.einsum("rwk,rwk->rw", diff_v, diff_v), 0.0),
+                            axis=1, initial=0.0))  # fmt: skip
+    return np.where(bounded_k, RADIUS_PER_WIDTH * np.minimum(width, spread), np.inf)
 
 
 def crossing_parity(a: np.ndarray, b: np.ndarray, p: np.ndarray, valid: np.ndarray | bool = True) -> np.ndarray:
