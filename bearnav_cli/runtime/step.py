@@ -621,8 +621,25 @@ def bounded_control(arrays: PlanArrays, s: ControlSettings, state: ControlState,
         if returning.any():  # the look is over when e would let it move where it was (or it was outside D)
             idx = np.flatnonzero(returning)
             there = lookahead_point(sets.x_hat[idx], resume[idx], lam)
-            k = least_rank_cell(arrays, there) if arrays.funnel else np.full(len(idx), -1)
-            back[idx[(k < 0) | (error[idx] + margin <= arrays.tolerance_in(k) + s.tol)]] = True
+            if arrays.funnel:
+                # in the cell it will drive in there: the one it keeps, unless a cell of lower rank
+                # holds p̂ eroded by e (the switch); the least-rank cell merely holding p̂ may have a
+                # larger τ_c, and a look ended on it turned back into a cell that made it look again
+                had = state.cell[idx]
+                k = least_rank_cell(arrays, there, error[idx],
+                                    below=np.where(had >= 0, arrays.cell_rank[np.maximum(had, 0)], np.inf))
+                k = np.where(k >= 0, k, had)
+                # without a cell, the one a robot there would wait in (a cell grown by e holds p̂)
+                k = np.where(k >= 0, k, least_rank_cell(arrays, there, -error[idx]))
+            else:
+                k = np.full(len(idx), -1)
+            over = error[idx] + margin <= arrays.tolerance_in(k) + s.tol
+            out = np.flatnonzero(k < 0)
+            if len(out):
+                # outside D there: the uncertified rules move it only at a positive error-ball pace; a
+                # look ended at pace 0 turned back to wait, and waiting began the look again
+                over[out] = error_ball_pace(arrays, s, k[out], there[out], error[idx[out]])[0] > 0.0
+            back[idx[over]] = True
         # the swung p says nothing about the cell the robot will drive in: it keeps the one it had
         cell[returning], target[returning], relocated[returning] = state.cell[returning], state.target[returning], False
     hold = np.where(drive, 0.0, np.where(known, state.hold + s.dt, 0.0))
