@@ -37,6 +37,7 @@ if threading.current_thread() is threading.main_thread():
 import functools
 import inspect
 import json
+import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable, List, Optional
@@ -1943,10 +1944,29 @@ def tags_command(
         None, "--figure", help="Where to glue them, a figure (default: the map YAML's name with .png)."
     ),
     force: bool = typer.Option(False, "--force", help="Replace an -o file that is not a map bearnav tags wrote."),
+    target: str = typer.Option(
+        "fix", "--for", help="fix: a usable pair in view where the robot drives; live: every cell live, so that a "
+        "look all around always lets the robot move on, at --bearing-error-deg and --slip (one of fix, live)."
+    ),
+    bearing_error_deg: Optional[float] = typer.Option(
+        None, "--bearing-error-deg", help="With --for live: the bound on every world-frame bearing error (degrees, "
+        "in (0, 45)); None means the map's robot: bearing_error_deg plus compass_error_deg."
+    ),
+    slip: Optional[float] = typer.Option(
+        None, "--slip", help="With --for live: the odometry error bound, a fraction of each step (in [0, 1)); None "
+        "means the map's robot: slip."
+    ),
+    live_resolution: Optional[float] = typer.Option(
+        None, "--live-resolution", help="With --for live: grid spacing of the liveness measurement (map units, > 0); "
+        "None means about 25 points in the median cell, at most 0.01·D."
+    ),
     quiet: bool = QUIET,
     as_json: bool = JSON,
 ) -> None:
     """Propose tag positions so that a camera looking along the fields sees a usable pair in the certified area.
+
+    With --for live, so that every cell is live instead: a look all around brings the set
+    estimator's error bound below what the cell tolerates (the fix rule is the default).
 
     The tags go on obstacle and wall boundaries, facing the free side, a tag's width apart; the
     existing tags stay. Writes the map with the new tags and a figure of where to glue them; the
@@ -1968,10 +1988,15 @@ def tags_command(
     figure = figure or out_path.with_suffix(".png")
     artifacts.check_output_file(figure, FIGURE_SUFFIXES, "--figure")
     artifacts.check_distinct({"-o/--out": out_path, "--figure": figure})
-    options = {**CAMERA_OPTIONS, "error_target": "--error-target", "max_tags": "--max-tags"}
+    options = {**CAMERA_OPTIONS, "error_target": "--error-target", "max_tags": "--max-tags", "target": "--for",
+               "eta_deg": "--bearing-error-deg", "kappa": "--slip", "resolution": "--live-resolution",
+               "plan": "PLAN_NPZ"}  # fmt: skip
+    if target != "live" and (bearing_error_deg is not None or slip is not None or live_resolution is not None):
+        raise _fail("--bearing-error-deg, --slip and --live-resolution are for --for live", EXIT_INVALID)
     try:
         params = tags.Params(fov_deg=fov, max_range=float("inf") if max_range is None else max_range,
-                             noise_deg=noise_deg, error_target=error_target, max_tags=max_tags)  # fmt: skip
+                             noise_deg=noise_deg, error_target=error_target, max_tags=max_tags, target=target,
+                             bearing_error_deg=bearing_error_deg, slip=slip, resolution=live_resolution)  # fmt: skip
     except InvalidParamsError as exc:  # name the option the user typed
         raise _fail(f"{options.get(exc.field, exc.field)}: {exc.reason}", EXIT_INVALID) from None
     pipeline.ACTIVITY.stage = "tags"
@@ -1990,7 +2015,10 @@ def tags_command(
         bare_grid = source.grid is not None and "occupancy" not in source.spec  # its spec comes from options
         if not grid_elsewhere and not bare_grid:
             original = _read_bytes(map_yaml).decode("utf-8", errors="replace")
-    proposal = tags.propose_tags(plan, params)
+    try:
+        proposal = tags.propose(plan, params)
+    except InvalidParamsError as exc:  # liveness's own checks: η, the slip, a paper plan
+        raise _fail(f"{plan_npz}: {options.get(exc.field, exc.field)}: {exc.reason}", EXIT_INVALID) from None
     name = tags.tagged_name(str(spec.get("name", plan.map.name)))  # another name: re-planning it makes its own folder
     new_spec = tags.map_spec_with_tags(spec, proposal)
     new_spec = {"name": name, **{key: value for key, value in new_spec.items() if key != "name"}}
@@ -2026,12 +2054,27 @@ def tags_command(
             "target_reached": proposal.target_reached,
             "domain_before": proposal.before.fraction_domain, "domain_after": proposal.after.fraction_domain,
             "free_before": proposal.before.fraction_free, "free_after": proposal.after.fraction_free,
+            "for": target,
+            **({"live_before": proposal.live_before.live_fraction, "live_after": proposal.live_after.live_fraction,
+                "eta_deg": math.degrees(proposal.live_after.eta),
+                "eta_star_deg_before": math.degrees(proposal.live_before.eta_star),
+                "eta_star_deg_after": math.degrees(proposal.live_after.eta_star)}
+               if proposal.live_after is not None else {}),
         })  # fmt: skip
     else:
         out.print(f"tags      {out_path}  {proposal.summary()}", highlight=False, soft_wrap=True)
         if not _Quiet.enabled:
             out.print(f"wrote {out_path} and {figure}; re-plan with `{_command_text('bearnav', 'plan', out_path)}`",
                       highlight=False, soft_wrap=True)  # fmt: skip
+    if not proposal.target_reached and proposal.live_after is not None:
+        from bearnav_cli.datatypes import percent
+
+        live = proposal.live_after
+        why = (f"--max-tags {max_tags} allowed too few" if max_tags is not None and proposal.count >= max_tags else
+               "no tag makes the grey points live: their cells tolerate less than any look gives (a smaller "
+               "--bearing-error-deg, the heading from the bearings, or a plan with larger tolerances)")  # fmt: skip
+        raise _fail(f"{len(live.live) - live.n_live} cells are still not live ({percent(1.0 - live.live_fraction)} of "
+                    f"D): {why}; {out_path} has the tags placed", EXIT_OUTCOME)  # fmt: skip
     if not proposal.target_reached:
         from bearnav_cli.datatypes import percent
 

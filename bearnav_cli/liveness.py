@@ -53,7 +53,8 @@ from bearnav_cli.errors import InvalidParamsError
 from bearnav_cli.runtime import PlanArrays, bounded, estimate, robot, step
 
 __all__ = ["HEADINGS", "MAX_ETA_DEG", "MAX_GRID_POINTS", "POINTS_PER_CELL", "RESOLUTION_PER_DIAGONAL", "SHRINK",
-           "SHRINK_STEPS", "VERTEX_INSET", "Liveness", "default_resolution", "measure"]  # fmt: skip
+           "SHRINK_STEPS", "VERTEX_INSET", "LiveGrid", "Liveness", "default_resolution", "evaluate", "grid",
+           "measure"]  # fmt: skip
 
 #: Headings of the minimum over headings for a camera narrower than 360° (every 10°).
 HEADINGS = step.LOOK_HEADINGS
@@ -206,6 +207,71 @@ class Liveness:
         }
 
 
+@dataclass(frozen=True, eq=False)
+class LiveGrid:
+    """Where and against what liveness is measured (:func:`grid`): ``P`` points, ``M`` (cell, point) pairs.
+
+    Attributes
+    ----------
+    arrays : PlanArrays
+        The plan's run-time arrays.
+    polygons : tuple of shapely.Polygon, length C
+        The cells.
+    points : ndarray, shape (P, 2)
+        The grid points and every cell's extra points (map units).
+    pair_cell, pair_point : ndarray of int, shape (M,)
+        Which cell holds which point, sorted by cell (a point of several cells is in several pairs).
+    tolerance, margin : ndarray, shape (C,)
+        ``τ_c`` and ``τ_c − κℓ − ν − 2λ sin(ψ/2)`` (map units).
+    eta, fov, kappa, nu, step, swing, resolution, headings, max_range
+        As :class:`Liveness`.
+    """
+
+    arrays: PlanArrays
+    polygons: tuple
+    points: np.ndarray
+    pair_cell: np.ndarray
+    pair_point: np.ndarray
+    tolerance: np.ndarray
+    margin: np.ndarray
+    eta: float
+    fov: float
+    kappa: float
+    nu: float
+    step: float
+    swing: float
+    resolution: float
+    headings: int
+    max_range: float
+
+    def point_margin(self) -> np.ndarray:
+        """The least margin of the cells holding each point, shape (P,) map units: below it, every such cell
+        is live there."""
+        out = np.full(len(self.points), np.inf)
+        np.minimum.at(out, self.pair_point, self.margin[self.pair_cell])
+        return out
+
+    def bounds(self, points: np.ndarray, visible: np.ndarray, landmarks: np.ndarray) -> np.ndarray:
+        """``ε(x, S)`` of each point with the landmarks it sees, shape (P,) map units.
+
+        ``points`` (P, 2); ``visible`` (P, L) which of ``landmarks`` (L, 2) each sees.
+        """
+        x = np.asarray(points, float).reshape(-1, 2)
+        return _bounds_of(self.arrays, x, np.asarray(visible, bool), np.full(len(x), self.eta),
+                          np.asarray(landmarks, float).reshape(-1, 2))  # fmt: skip
+
+    def look_bounds(self, landmarks: np.ndarray, points: np.ndarray | None = None) -> np.ndarray:
+        """``ε(x, S_all(x))`` at the grid points (or at ``points``), shape (P,) map units, with ``landmarks`` (L, 2)."""
+        return self.look(landmarks, points)[1]
+
+    def look(self, landmarks: np.ndarray, points: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """What a look all around sees, (P, L) bool, and its bound ``ε(x, S_all(x))``, (P,) map units (§12.5)."""
+        x = self.points if points is None else np.asarray(points, float).reshape(-1, 2)
+        lm = np.asarray(landmarks, float).reshape(-1, 2)
+        visible = _views(self.arrays, x, 2.0 * math.pi, self.max_range, 1, lm)[1]
+        return visible, self.bounds(x, visible, lm)
+
+
 def _number(value: Any, name: str, *, low: float = 0.0, low_open: bool = False, high: float = math.inf,
             high_open: bool = False) -> float:  # fmt: skip
     """``value`` as a float in its interval (``inf`` only where ``high`` is ``inf`` and closed), else an error."""
@@ -276,8 +342,8 @@ def _samples(polygons: list[shapely.Polygon], grow: float, spacing: float,
     return points, cell[order], point[order]
 
 
-def _views(arrays: PlanArrays, points: np.ndarray, fov: float, max_range: float,
-           headings: int) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+def _views(arrays: PlanArrays, points: np.ndarray, fov: float, max_range: float, headings: int,
+           landmarks: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
     """The views worth evaluating: per point, its distinct maximal visible sets over the headings.
 
     Returns ``(row_point (M,), row_visible (M, L))``: a view that is a subset of another view of the
@@ -285,10 +351,10 @@ def _views(arrays: PlanArrays, points: np.ndarray, fov: float, max_range: float,
     point that sees nothing at any heading keeps one empty view (``ε`` is then the bounds' diagonal).
     """
     out_point, out_vis = [], []
-    n_lm = len(arrays.landmarks)
+    n_lm = len(landmarks)
     for start in range(0, len(points), _POINTS):
         p = points[start : start + _POINTS]
-        vis = step.views(arrays, p, fov, max_range, headings)  # (P, H, L)
+        vis = step.views(arrays, p, fov, max_range, headings, landmarks)  # (P, H, L)
         if headings == 1 or n_lm == 0:
             keep = np.ones(vis.shape[:2], bool)
         else:
@@ -308,14 +374,16 @@ def _views(arrays: PlanArrays, points: np.ndarray, fov: float, max_range: float,
     return np.concatenate(out_point), np.concatenate(out_vis)
 
 
-def _bounds_of(arrays: PlanArrays, x: np.ndarray, visible: np.ndarray, eta: np.ndarray) -> np.ndarray:
+def _bounds_of(arrays: PlanArrays, x: np.ndarray, visible: np.ndarray, eta: np.ndarray,
+               landmarks: np.ndarray | None = None) -> np.ndarray:  # fmt: skip
     """``ε(x, S)`` of every row (M,) map units, each row at its own ``η`` (rad): ``runtime.bounded.one_look_bound``
-    in batches of :data:`_ROWS` rows."""
+    in batches of :data:`_ROWS` rows (``landmarks``: default the plan's)."""
     out = np.empty(len(x))
     box = estimate.axle_bounds(arrays)
+    lm = arrays.landmarks if landmarks is None else landmarks
     for start in range(0, len(x), _ROWS):
         sl = slice(start, start + _ROWS)
-        out[sl] = bounded.one_look_bound(x[sl], arrays.landmarks, visible[sl], eta[sl], box, arrays.tol)
+        out[sl] = bounded.one_look_bound(x[sl], lm, visible[sl], eta[sl], box, arrays.tol)
     return out
 
 
@@ -341,10 +409,10 @@ def _active_regions(polygons: list[shapely.Polygon], rank: np.ndarray) -> list[s
     return regions
 
 
-def measure(plan: Plan, eta_deg: float | None = None, fov_deg: float = 60.0, kappa: float | None = None,
-            nu: float | None = None, speed: float | None = None, resolution: float | None = None,
-            headings: int | None = None, max_range: float = math.inf) -> Liveness:  # fmt: skip
-    """Measure the liveness of a funnel plan's cells on a grid (ALGORITHMS §12.5; see the module docstring).
+def grid(plan: Plan, eta_deg: float | None = None, fov_deg: float = 60.0, kappa: float | None = None,
+         nu: float | None = None, speed: float | None = None, resolution: float | None = None,
+         headings: int | None = None, max_range: float = math.inf) -> LiveGrid:  # fmt: skip
+    """Where and against what :func:`measure` measures: the grid of every cell and each cell's margin.
 
     Parameters
     ----------
@@ -371,7 +439,7 @@ def measure(plan: Plan, eta_deg: float | None = None, fov_deg: float = 60.0, kap
 
     Returns
     -------
-    Liveness
+    LiveGrid
 
     Raises
     ------
@@ -431,18 +499,54 @@ def measure(plan: Plan, eta_deg: float | None = None, fov_deg: float = 60.0, kap
 
     origin = np.asarray(arrays.bounds, float)[:2]
     points, pair_cell, pair_point = _samples(polygons, lam, resolution, origin)
+    return LiveGrid(arrays=arrays, polygons=tuple(polygons), points=points, pair_cell=pair_cell,
+                    pair_point=pair_point, tolerance=tau, margin=margin, eta=eta, fov=fov, kappa=kappa,
+                    nu=float(nu), step=step_len, swing=swing, resolution=float(resolution), headings=headings,
+                    max_range=max_range)  # fmt: skip
+
+
+def measure(plan: Plan, eta_deg: float | None = None, fov_deg: float = 60.0, kappa: float | None = None,
+            nu: float | None = None, speed: float | None = None, resolution: float | None = None,
+            headings: int | None = None, max_range: float = math.inf,
+            landmarks: np.ndarray | None = None) -> Liveness:  # fmt: skip
+    """Measure the liveness of a funnel plan's cells on a grid (ALGORITHMS §12.5; see the module docstring).
+
+    Parameters
+    ----------
+    plan, eta_deg, fov_deg, kappa, nu, speed, resolution, headings, max_range
+        As :func:`grid`.
+    landmarks : ndarray, shape (L, 2), optional
+        The tags to measure with (map units); default the plan's. The cells and their tolerances
+        do not depend on them, so proposed tags are measured on the same plan.
+
+    Returns
+    -------
+    Liveness
+
+    Raises
+    ------
+    InvalidParamsError
+        As :func:`grid`.
+    """
+    return evaluate(grid(plan, eta_deg, fov_deg, kappa, nu, speed, resolution, headings, max_range), landmarks)
+
+
+def evaluate(g: LiveGrid, landmarks: np.ndarray | None = None) -> Liveness:
+    """The liveness of the cells on the grid ``g`` with the landmarks ``landmarks`` (L, 2; default the plan's)."""
+    arrays, points, pair_cell, pair_point, margin, eta = g.arrays, g.points, g.pair_cell, g.pair_point, g.margin, g.eta
+    lm = arrays.landmarks if landmarks is None else np.asarray(landmarks, float).reshape(-1, 2)
+    n_cells = len(margin)
+    polygons = list(g.polygons)
     # a look ends with a turn all around (§12.5): its set lies in the cones of every landmark in sight
-    every = np.arange(len(points))
-    all_vis = _views(arrays, points, 2.0 * math.pi, max_range, 1)[1]
-    eps_all = _bounds_of(arrays, points, all_vis, np.full(len(points), eta))
+    all_vis, eps_all = g.look(lm)
     eps_look = _cell_max(eps_all[pair_point], pair_cell, n_cells)
     live = eps_look < margin
-    cell_eta = _eta_star(arrays, points, pair_cell, pair_point, every, all_vis, eps_all, eps_look, margin, eta, live)
-    if full:
+    cell_eta = _eta_star(arrays, lm, points, pair_cell, pair_point, all_vis, eps_look, margin, eta, live)
+    if g.fov >= 2.0 * math.pi:
         eps_view = eps_look
     else:  # the look's first view, at the best heading
-        row_point, row_vis = _views(arrays, points, fov, max_range, headings)
-        row_eps = _bounds_of(arrays, points[row_point], row_vis, np.full(len(row_point), eta))
+        row_point, row_vis = _views(arrays, points, g.fov, g.max_range, g.headings, lm)
+        row_eps = _bounds_of(arrays, points[row_point], row_vis, np.full(len(row_point), eta), lm)
         eps_view = _cell_max(_point_min(row_eps, row_point, len(points))[pair_point], pair_cell, n_cells)
     view_live = eps_view < margin
 
@@ -456,23 +560,22 @@ def measure(plan: Plan, eta_deg: float | None = None, fov_deg: float = 60.0, kap
     points_per_cell = np.bincount(pair_cell, minlength=n_cells)
     return Liveness(
         eps_look=eps_look, eps_view=eps_view, margin=margin, live=live, view_live=view_live,
-        cell_eta_star=cell_eta, tolerance=tau,
+        cell_eta_star=cell_eta, tolerance=g.tolerance,
         points=points_per_cell, eta_star=float(np.min(cell_eta)) if n_cells else 0.0,
         live_fraction=min(1.0, live_area / area) if area > 0 else 0.0,
         view_fraction=min(1.0, view_area / area) if area > 0 else 0.0,
         cover_fraction=min(1.0, cover / area) if area > 0 else 0.0,
-        eta=eta, fov=fov, kappa=kappa, nu=float(nu), step=step_len, swing=swing, resolution=float(resolution),
-        headings=headings, max_range=max_range,
+        eta=eta, fov=g.fov, kappa=g.kappa, nu=g.nu, step=g.step, swing=g.swing, resolution=g.resolution,
+        headings=g.headings, max_range=g.max_range,
     )  # fmt: skip
 
 
-def _eta_star(arrays: PlanArrays, points: np.ndarray, pair_cell: np.ndarray, pair_point: np.ndarray,
-              row_point: np.ndarray, row_vis: np.ndarray, row_eps: np.ndarray, eps_look: np.ndarray,
-              margin: np.ndarray, eta: float, live: np.ndarray) -> np.ndarray:  # fmt: skip
+def _eta_star(arrays: PlanArrays, landmarks: np.ndarray, points: np.ndarray, pair_cell: np.ndarray,
+              pair_point: np.ndarray, visible: np.ndarray, eps_look: np.ndarray, margin: np.ndarray, eta: float,
+              live: np.ndarray) -> np.ndarray:  # fmt: skip
     """``η*_c`` per cell (rad): the linear estimate, re-evaluated on the grid and shrunk until live.
 
-    Each pair (cell, point) is first re-evaluated at its best view at ``η`` only: below the margin
-    there, the least over the views is too; only the pairs above it evaluate every view.
+    Every point looks at the landmarks ``visible`` (P, L) (its look all around).
     """
     n_cells = len(margin)
     out = np.zeros(n_cells)
@@ -481,30 +584,13 @@ def _eta_star(arrays: PlanArrays, points: np.ndarray, pair_cell: np.ndarray, pai
     guess[ok] = np.minimum(eta * margin[ok] / eps_look[ok], math.radians(MAX_ETA_DEG))
     out[live] = eta  # live at η already: η*_c ≥ η
     pending = ok & (guess > out)
-    # the views of every point, grouped: the rows of point p are order[start[p]:start[p + 1]]
-    order = np.argsort(row_point, kind="stable")
-    start = np.searchsorted(row_point[order], np.arange(len(points) + 1))
-    best = np.full(len(points), -1, np.int64)
-    first = np.lexsort((row_eps, row_point))  # by point, then by ε at η
-    lead = np.ones(len(first), bool)
-    lead[1:] = row_point[first[1:]] != row_point[first[:-1]]
-    best[row_point[first[lead]]] = first[lead]
     for _ in range(SHRINK_STEPS):
         cells = np.flatnonzero(pending)
         if not len(cells):
             break
         sel = np.isin(pair_cell, cells)
         pc, pp = pair_cell[sel], pair_point[sel]
-        top = best[pp]
-        eps_pair = _bounds_of(arrays, points[pp], row_vis[top], guess[pc])
-        again = np.flatnonzero(eps_pair >= margin[pc])  # the best view at η is not enough: try them all
-        if len(again):
-            counts = start[pp[again] + 1] - start[pp[again]]
-            offsets = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
-            rows = order[np.repeat(start[pp[again]], counts) + offsets]
-            owner = np.repeat(again, counts)
-            eps_rows = _bounds_of(arrays, points[row_point[rows]], row_vis[rows], guess[pc][owner])
-            np.minimum.at(eps_pair, owner, eps_rows)
+        eps_pair = _bounds_of(arrays, points[pp], visible[pp], guess[pc], landmarks)
         eps_cell = _cell_max(eps_pair, pc, n_cells)[cells]
         good = eps_cell < margin[cells]
         out[cells[good]] = np.maximum(out[cells[good]], guess[cells[good]])

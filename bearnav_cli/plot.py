@@ -1504,6 +1504,11 @@ def label_tags(ax: plt.Axes, proposal: Any) -> list:
 
 def _tags_title(proposal: Any, map_: Map) -> str:
     before, after = proposal.before, proposal.after
+    live = getattr(proposal, "live_after", None)
+    if live is not None:
+        config = (f"every cell live at η = {math.degrees(live.eta):.3g}°: {proposal.live_before.live_fraction:.1%} "
+                  f"→ {live.live_fraction:.1%} of D")  # fmt: skip
+        return figure_title(map_.name, "tags", f"where to glue {len(proposal.ids)} new tags", config)
     target = before.error_target
     rule = "2 usable tags in view" if target is None else f"a fix within {target:g} in view"
     config = (f"{before.fov_deg:g}° camera, {before.noise_deg:g}° noise: {rule} on {before.fraction_domain:.1%} "
@@ -1529,7 +1534,8 @@ def tags_figure(proposal: Any, map_: Map, title: str | None = None) -> plt.Figur
     matplotlib.figure.Figure
     """
     fig, ax = _frame(map_, title or _tags_title(proposal, map_), landmarks=False)
-    plot_tags(ax, proposal, labels=False, legend=False)
+    # for liveness the perception rule's failures are beside the point: the grey marks say where no tag helps
+    plot_tags(ax, proposal, failures=getattr(proposal, "live_after", None) is None, labels=False, legend=False)
     _finish(fig, ax)
     label_tags(ax, proposal)
     return fig

@@ -33,6 +33,7 @@ is the caller's business. ``plot.plot_tags`` draws a proposal.
 from __future__ import annotations
 
 import copy
+import heapq
 import json
 import math
 import re
@@ -48,12 +49,14 @@ from bearnav_cli.errors import InvalidParamsError
 from bearnav_cli.geometry import FreeSpace, box_polygon
 from bearnav_cli.lp import INF, LpSolver, LpStatus
 from bearnav_cli.perception import EvaluationGrid, PerceptionCoverage
-from bearnav_cli.runtime import bearing
+from bearnav_cli.runtime import bearing, bounded, estimate, step
 from bearnav_cli.runtime.invariants import is_number
 
 __all__ = [
+    "LIVE_RESCORE",
     "NUDGE",
     "TAG_WIDTH_FRACTION",
+    "TARGETS",
     "Candidates",
     "Params",
     "TagProposal",
@@ -61,6 +64,8 @@ __all__ = [
     "map_spec_with_tags",
     "map_text_with_tags",
     "new_tag_ids",
+    "propose",
+    "propose_live_tags",
     "propose_tags",
     "tagged_name",
 ]
@@ -72,6 +77,10 @@ TAG_WIDTH_FRACTION = 0.015
 NUDGE = 1e-6
 #: The LP optimum is rounded up after removing this much (solver tolerance).
 LP_SLACK = 1e-6
+#: What the tags are for: a usable fix where the robot looks (``fix``), or every cell live (``live``).
+TARGETS = ("fix", "live")
+#: Candidates the live greedy re-scores together when the best one's score is stale.
+LIVE_RESCORE = 32
 
 
 @dataclass(frozen=True)
@@ -100,6 +109,12 @@ class Params:
     prune : bool
         After the greedy, drop every chosen tag (the last chosen first) whose removal keeps the rule
         wherever it holds; ``False`` gives the plain greedy.
+    target : str
+        ``fix``: the perception rule above (:func:`propose_tags`); ``live``: every cell live
+        (ALGORITHMS §12.5, :func:`propose_live_tags`).
+    bearing_error_deg, slip, resolution : float or None
+        For ``live``: the bearing error bound ``η`` (degrees), the slip ``κ`` and the grid spacing
+        (map units) of :func:`bearnav_cli.liveness.grid`; ``None``: its defaults (the map's robot).
     """
 
     fov_deg: float = 60.0
@@ -111,10 +126,16 @@ class Params:
     spacing: float | None = None
     min_spread_deg: float = 2.0
     prune: bool = True
+    target: str = "fix"
+    bearing_error_deg: float | None = None
+    slip: float | None = None
+    resolution: float | None = None
 
     def __post_init__(self) -> None:
         perception.check_params(self.fov_deg, self.noise_deg, self.max_range, self.error_target, self.min_spread_deg,
                                 self.spacing)  # fmt: skip
+        if self.target not in TARGETS:
+            raise InvalidParamsError(f"must be one of {', '.join(TARGETS)}, got {self.target!r}", field="target")
         m = self.max_tags
         if m is not None and (isinstance(m, bool) or not isinstance(m, (int, np.integer)) or m < 0):
             raise InvalidParamsError(f"must be an integer >= 0, got {m!r}", field="max_tags")
@@ -326,6 +347,11 @@ class TagProposal:
         Counts of the search: ``candidates`` (candidates seen from some evaluation point),
         ``domain_points`` (grid points of ``D``), ``pairs`` (visible point × candidate pairs) and
         ``greedy`` (tags the greedy chose before pruning). Not compared by ``==``.
+    live_before, live_after : Liveness or None
+        For ``target = live``: the liveness with the map's tags and with the new ones added
+        (:func:`bearnav_cli.liveness.evaluate`); ``lower_bound`` is then 0 and ``lp_objective`` NaN
+        (no bound is computed), ``gains`` counts liveness grid points, ``uncoverable`` the grid points
+        no candidate makes live, and ``coverable_fraction`` is a share of the liveness grid.
     """
 
     ids: tuple
@@ -343,6 +369,8 @@ class TagProposal:
     params: Params
     tag_width: float
     stats: dict = field(default_factory=dict, compare=False)
+    live_before: Any = None
+    live_after: Any = None
 
     @property
     def count(self) -> int:
@@ -363,6 +391,13 @@ class TagProposal:
         """One line: tags added against the lower bound, and the coverage of ``D`` and ``F`` before and after."""
         reached = "target reached" if self.target_reached else "target NOT reached"
         uncovered = 1.0 - self.coverable_fraction
+        if self.live_after is not None:
+            b, a = self.live_before, self.live_after
+            return (f"{plural(self.count, 'new tag')} to the {len(self.before.landmarks)} of the map, {reached}: "
+                    f"live on {percent(b.live_fraction)} → {percent(a.live_fraction)} of D at η = "
+                    f"{math.degrees(a.eta):.3g}° ({b.n_live} → {a.n_live} of {len(a.live)} cells); certified bearing "
+                    f"error η* {math.degrees(b.eta_star):.3g}° → {math.degrees(a.eta_star):.3g}°"
+                    + (f"; {percent(uncovered)} of the grid cannot be made live by any tag" if uncovered > 0 else ""))
         return (f"{plural(self.count, 'new tag')} (lower bound {self.lower_bound}) to the "
                 f"{len(self.before.landmarks)} of the map, {reached}: rule holds on "
                 f"{percent(self.before.fraction_domain)} → {percent(self.after.fraction_domain)} of D and "
@@ -579,6 +614,187 @@ def propose_tags(plan: Any, params: Params = Params()) -> TagProposal:
         target_reached=bool(np.all(after.holds[dom][coverable])), candidates=cand, params=params, tag_width=width,
         stats={"candidates": len(cand.positions), "domain_points": n_d, "pairs": len(pairs.point),
                "greedy": greedy_count},
+    )  # fmt: skip
+
+
+def propose(plan: Any, params: Params = Params()) -> TagProposal:
+    """:func:`propose_tags` or :func:`propose_live_tags`, as ``params.target`` says."""
+    return propose_live_tags(plan, params) if params.target == "live" else propose_tags(plan, params)
+
+
+class _LiveScores:
+    """The live greedy's state: the points of the liveness grid some cell needs a smaller bound at (F of them).
+
+    Each point keeps its look (``runtime.bounded.LookBound``) with the tags so far; a candidate is
+    scored by ``bounded.bound_with`` (an upper bound on the point's bound with it, cheap), a chosen
+    one is added exactly.
+    """
+
+    def __init__(self, g: Any, x: np.ndarray, need: np.ndarray, visible: np.ndarray, landmarks: np.ndarray,
+                 seen: np.ndarray, positions: np.ndarray) -> None:  # fmt: skip
+        self.g, self.x, self.need = g, x, need
+        self.visible, self.landmarks = visible, landmarks  # (F, L) and (L, 2): the tags so far
+        self.seen, self.positions = seen, positions  # (F, C) and (C, 2): the candidates
+        self.look = self._look(np.arange(len(x)))
+
+    def _look(self, rows: np.ndarray) -> bounded.LookBound:
+        return bounded.look_bound(self.x[rows], self.landmarks, self.visible[rows], self.g.eta,
+                                  estimate.axle_bounds(self.g.arrays), self.g.arrays.tol)  # fmt: skip
+
+    @property
+    def eps(self) -> np.ndarray:
+        return self.look.bound
+
+    @property
+    def failing(self) -> np.ndarray:
+        return self.eps >= self.need
+
+    def score(self, rows: np.ndarray, cand: np.ndarray) -> np.ndarray:
+        """For pairs (point ``rows[i]``, candidate ``cand[i]``): the share of the point's missing reduction the
+        candidate makes (1: live there), by the cheap bound."""
+        new = bounded.bound_with(self.look.take(rows), self.x[rows], self.positions[cand], self.g.arrays.tol)
+        eps = self.eps[rows]
+        gap = eps - self.need[rows]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            share = np.clip((eps - new) / np.where(gap > 0, gap, np.inf), 0.0, 1.0)
+        return np.where(new < self.need[rows], 1.0, share)
+
+    def add(self, c: int) -> int:
+        """Candidate ``c`` becomes a tag: the looks of the points that see it, exactly. Points made live."""
+        rows = np.flatnonzero(self.seen[:, c])
+        before = self.failing[rows]
+        self.landmarks = np.vstack([self.landmarks, self.positions[c]])
+        self.visible = np.column_stack([self.visible, self.seen[:, c]])
+        if len(rows):
+            new = self._look(rows)
+            width = max(self.look.diff_vertices.shape[1], new.diff_vertices.shape[1])
+            old = self.look._replace(diff_vertices=bounded.fit(self.look.diff_vertices, width))
+            fields = [np.array(f, copy=True) for f in old]
+            for f, value in zip(fields, new._replace(diff_vertices=bounded.fit(new.diff_vertices, width)), strict=True):
+                f[rows] = value
+            self.look = bounded.LookBound(*fields)
+        return int(np.count_nonzero(before & ~self.failing[rows]))
+
+
+def _live_greedy(scores: _LiveScores, coverable: np.ndarray, limit: float) -> tuple[list[int], list[int], int]:
+    """Lazy greedy of :func:`propose_live_tags`: the chosen candidates, the points each made live, pairs scored first.
+
+    The scores only fall as tags are added (a point's bound shrinks with every tag), so a candidate
+    whose score was taken this round and still leads the others' older scores is the best; older
+    ones are re-scored :data:`LIVE_RESCORE` at a time, in one batch.
+    """
+    n_cand = scores.seen.shape[1]
+    rows, cand = np.nonzero(scores.seen & (coverable & scores.failing)[:, None])
+    n_pairs = len(cand)
+    estimate = np.bincount(cand, scores.score(rows, cand), n_cand)
+    heap = [(-float(v), int(c)) for c, v in enumerate(estimate) if v > 0]
+    heapq.heapify(heap)
+    scored_in = np.full(n_cand, -1)  # the round a candidate's score in the heap was taken in
+    chosen: list[int] = []
+    gains: list[int] = []
+    while heap and len(chosen) < limit:
+        wanted = coverable & scores.failing
+        if not wanted.any():
+            break
+        value, c = heap[0]
+        if scored_in[c] == len(chosen):  # fresh and still the best: take it
+            heapq.heappop(heap)
+            if -value <= 1e-9:
+                break
+            gains.append(scores.add(c))
+            chosen.append(c)
+            continue
+        popped = [heapq.heappop(heap) for _ in range(min(LIVE_RESCORE, len(heap)))]
+        for entry in popped:  # those scored this round keep their place
+            if scored_in[entry[1]] == len(chosen):
+                heapq.heappush(heap, entry)
+        batch = [c for _, c in popped if scored_in[c] != len(chosen)]
+        rows, which = np.nonzero(wanted[:, None] & scores.seen[:, batch])
+        share = scores.score(rows, np.asarray(batch)[which]) if len(rows) else np.zeros(0)
+        values = np.bincount(which, share, len(batch))
+        for b, v in zip(batch, values, strict=True):
+            scored_in[b] = len(chosen)
+            if v > 1e-9:
+                heapq.heappush(heap, (-float(v), b))
+    return chosen, gains, n_pairs
+
+
+def propose_live_tags(plan: Any, params: Params = Params(target="live")) -> TagProposal:
+    """New tags so that every cell of a funnel plan is live (ALGORITHMS §12.5; ``bearnav tags --for live``).
+
+    On the grid of :func:`bearnav_cli.liveness.grid` (the user's ``η``, slip and range; the look
+    goes all around, so the field of view does not enter), a point needs the bound of a look
+    ``ε(x, S_all(x))`` below the least margin of the cells holding it. Candidates are those of
+    :func:`candidates`; a lazy greedy adds the candidate whose tag brings the failing points the
+    most of their missing reduction (a point made live counts 1; scored by the cheap upper bound
+    ``runtime.bounded.bound_with``, the chosen tag's effect computed exactly), until every point
+    some placement can make live is live, or ``max_tags`` are placed. A point no candidate makes live
+    (with all of them added) is ``uncoverable``: a cell whose margin is too small for any look.
+
+    Parameters
+    ----------
+    plan : Plan
+        A funnel plan (``bearnav.plan/3``).
+    params : Params
+        ``bearing_error_deg``, ``slip``, ``resolution``, ``max_range``, ``max_tags``, the tag width;
+        the camera's ``fov_deg`` and ``noise_deg`` only for the perception coverage the figure draws.
+
+    Returns
+    -------
+    TagProposal
+        With ``live_before`` and ``live_after``.
+
+    Raises
+    ------
+    InvalidParamsError
+        As :func:`bearnav_cli.liveness.grid` (a paper plan: field ``plan``).
+    """
+    from bearnav_cli import liveness
+
+    map_ = plan.map
+    width = params.width(map_.diagonal)
+    g = liveness.grid(plan, params.bearing_error_deg, params.fov_deg, kappa=params.slip,
+                      resolution=params.resolution, max_range=params.max_range)  # fmt: skip
+    existing = np.asarray(map_.landmarks, float).reshape(-1, 2)
+    need = g.point_margin()
+    visible0, eps0 = g.look(existing)
+    failing = np.flatnonzero((eps0 >= need) & (need > 0))
+    unfixable = np.flatnonzero(need <= 0)  # no look is good enough where a cell has no margin
+    pe_grid: EvaluationGrid = perception.evaluation_grid(plan, params.spacing)
+    cand = candidates(map_, width, pe_grid.space)
+    x = g.points[failing]
+    seen = step.views(g.arrays, x, 2.0 * math.pi, params.max_range, 1, cand.positions)[:, 0] if len(x) \
+        else np.zeros((0, len(cand.positions)), bool)
+    useful = np.flatnonzero(seen.any(axis=0))
+    cand = Candidates(cand.positions[useful], cand.normals[useful], cand.on_wall[useful])
+    seen = seen[:, useful]
+    # what no placement can do: the bound with every candidate added
+    full = g.bounds(x, np.column_stack([visible0[failing], seen]), np.vstack([existing, cand.positions]))
+    coverable = full < need[failing]
+    scores = _LiveScores(g, x, need[failing], visible0[failing], existing, seen, cand.positions)
+    limit = math.inf if params.max_tags is None else int(params.max_tags)
+    chosen, gains, pairs = _live_greedy(scores, coverable, limit)
+
+    idx = np.array(chosen, np.int64)
+    ids = new_tag_ids(map_.landmark_ids, len(idx))
+    positions = cand.positions[idx].reshape(-1, 2)
+    live_before = liveness.evaluate(g, existing)
+    live_after = liveness.evaluate(g, np.vstack([existing, positions]))
+    camera = dict(fov_deg=params.fov_deg, noise_deg=params.noise_deg, max_range=params.max_range,
+                  error_target=params.error_target, min_spread_deg=params.min_spread_deg)  # fmt: skip
+    existing_sight = pe_grid.space.visibility_regions(map_.landmarks)
+    before = perception.evaluate(pe_grid, map_.landmarks, map_.landmark_ids, sight=existing_sight, **camera)
+    after = perception.evaluate(pe_grid, np.vstack([map_.landmarks, positions]), (*map_.landmark_ids, *ids),
+                                sight=existing_sight + pe_grid.space.visibility_regions(positions), **camera)  # fmt: skip
+    stuck = np.concatenate([unfixable, failing[~coverable]])
+    return TagProposal(
+        ids=ids, positions=positions, normals=cand.normals[idx].reshape(-1, 2), gains=np.array(gains, np.int64),
+        before=before, after=after, lower_bound=0, lp_objective=math.nan, uncoverable=g.points[stuck],
+        coverable_fraction=1.0 - len(stuck) / max(len(g.points), 1),
+        target_reached=bool(np.all(live_after.live)), candidates=cand, params=params, tag_width=width,
+        stats={"candidates": len(cand.positions), "domain_points": len(g.points), "pairs": pairs,
+               "greedy": len(chosen)},
+        live_before=live_before, live_after=live_after,
     )  # fmt: skip
 
 

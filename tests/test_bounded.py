@@ -179,6 +179,27 @@ def test_the_static_bound_holds_at_the_worst_errors_and_is_tighter_than_diam_k(s
     assert np.median(static[crossing] / diam_k[crossing]) < (0.4 if eta_deg <= 0.25 else 0.6)
 
 
+@pytest.mark.parametrize("seed", range(3))
+def test_bound_with_one_more_landmark_is_an_upper_bound_on_the_exact_one(seed):
+    """``bound_with`` (the tag placement's cheap score) never promises less than ``look_bound`` computes with the
+    landmark, and never more than without it."""
+    rng = np.random.default_rng(200 + seed)
+    r, n_lm, eta = 300, 5, math.radians(0.25)
+    landmarks = rng.uniform(0, 10, size=(n_lm, 2))
+    extra = rng.uniform(0, 10, size=(r, 2))
+    x = rng.uniform(0.5, 9.5, size=(r, 2))
+    visible = rng.random((r, n_lm)) < 0.5
+    bounds = np.array([0.0, 0.0, 10.0, 10.0])
+    look = bounded.look_bound(x, landmarks, visible, eta, bounds, 1e-9)
+    cheap = bounded.bound_with(look, x, extra, 1e-9)
+    exact = np.array([bounded.one_look_bound(x[i : i + 1], np.vstack([landmarks, extra[i]]),
+                                             np.append(visible[i], True)[None], eta, bounds, 1e-9)[0]
+                      for i in range(r)])  # fmt: skip
+    assert np.all(exact <= cheap * (1 + 1e-9) + 1e-12)
+    assert np.all(cheap <= look.bound * (1 + 1e-12))
+    assert np.mean(cheap < 0.9 * look.bound) > 0.3  # the landmark often helps (where it crosses the others)
+
+
 def test_cones_of_inconsistent_bearings_empty_the_set():
     landmarks = np.array([[0.0, 0.0], [10.0, 0.0]])
     vertices, count = bounded.box(np.array([-20.0, -20.0, 20.0, 20.0]), 1)

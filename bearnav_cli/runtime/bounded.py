@@ -24,11 +24,12 @@ that holds the truth: the sets are outer approximations, as Lemma 5 needs.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
-__all__ = ["CENTRE_STEPS", "MAX_VERTICES", "RADIUS_PER_WIDTH", "box", "centre", "clip", "cone_rows", "contains", "crossing_parity", "diameter", "grow",
-           "intersect_cones", "one_look_bound", "translate"]  # fmt: skip
+__all__ = ["CENTRE_STEPS", "MAX_VERTICES", "RADIUS_PER_WIDTH", "LookBound", "bound_with", "box", "centre", "clip", "cone_rows", "contains", "crossing_parity", "diameter", "grow",
+           "intersect_cones", "look_bound", "one_look_bound", "translate"]  # fmt: skip
 
 #: Widest vertex array kept: a set with more vertices is merged down (outward) to this many. A set
 #: rarely has more than 12 (the kitchen's 28 tags all around: at most 10 in 1,000 runs).
@@ -413,8 +414,53 @@ def diameter(vertices: np.ndarray, count: np.ndarray) -> np.ndarray:
     return np.where(count > 0, out, np.inf)
 
 
-def one_look_bound(x: np.ndarray, landmarks: np.ndarray, visible: np.ndarray, eta: float | np.ndarray,
-                   bounds: np.ndarray, tol: float = 0.0) -> np.ndarray:  # fmt: skip
+class LookBound(NamedTuple):
+    """One look's bound ``ε(x, S)`` and the sets it is made of (:func:`look_bound`), for ``R`` looks.
+
+    Attributes
+    ----------
+    bound : ndarray, shape (R,)
+        ``ε`` (map units; ``inf`` where ``K`` is empty).
+    width, rho : ndarray, shape (R,)
+        ``diam K`` (0 where ``K`` is empty) and ``ρ = max_{v∈K} ‖v − x‖`` (map units).
+    half : ndarray, shape (R,)
+        The cones' half-angle ``2η`` (rad).
+    diff_vertices, diff_count : ndarray, shapes (R, W, 2), (R,)
+        The difference-body polygon ``{d : |n_k·d| ≤ h_k} ∩ [−diam K, diam K]²`` (map units).
+    """
+
+    bound: np.ndarray
+    width: np.ndarray
+    rho: np.ndarray
+    half: np.ndarray
+    diff_vertices: np.ndarray
+    diff_count: np.ndarray
+
+    def take(self, rows: np.ndarray) -> LookBound:
+        """The looks ``rows``."""
+        return LookBound(*(field[rows] for field in self))
+
+
+def _strip_rows(x: np.ndarray, landmark: np.ndarray, width: np.ndarray, rho: np.ndarray,
+                half: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
+    """The strip ``|n·d| ≤ h`` of one landmark per look (fact 1 of :func:`one_look_bound`): ``a`` (P, 2, 2), ``b``
+    (P, 2), and which pairs have one (a landmark on the point has none)."""
+    d = landmark - x
+    reach = np.hypot(d[:, 0], d[:, 1])
+    ok = reach > 0.0
+    n = np.stack([-d[:, 1], d[:, 0]], axis=-1) / np.where(ok, reach, 1.0)[:, None]
+    h = (reach + rho) * np.sin(half) + 2.0 * np.sin(0.5 * half) * width
+    return np.stack([n, -n], axis=1), np.stack([h, h], axis=1), ok
+
+
+def _spread(vertices: np.ndarray, count: np.ndarray) -> np.ndarray:
+    """The largest norm of a vertex of each polygon (R,) map units."""
+    norm2 = np.einsum("rwk,rwk->rw", vertices, vertices)
+    return np.sqrt(np.max(np.where(_valid(vertices, count), norm2, 0.0), axis=1, initial=0.0))
+
+
+def look_bound(x: np.ndarray, landmarks: np.ndarray, visible: np.ndarray, eta: float | np.ndarray,
+               bounds: np.ndarray, tol: float = 0.0) -> LookBound:  # fmt: skip
     """The static bound ``ε(x, S)`` of one look: no set a look at ``S`` from ``x`` gives errs by more, shape (R,).
 
     A robot at ``x`` that sees ``S`` with bearing errors within ``η`` gets a set ``X`` (§12.2) whose
@@ -456,7 +502,6 @@ def one_look_bound(x: np.ndarray, landmarks: np.ndarray, visible: np.ndarray, et
     lm = np.asarray(landmarks, float)
     visible = np.asarray(visible, bool).reshape(len(p), len(lm))
     d = lm[None] - p[:, None, :]
-    reach = np.hypot(d[..., 0], d[..., 1])  # r_k (R, L)
     angle = np.arctan2(d[..., 1], d[..., 0])
     half = np.minimum(2.0 * np.broadcast_to(np.asarray(eta, float), (len(p),)), 0.5 * math.pi - 1e-9)
     vertices, count = intersect_cones(*box(bounds, len(p)), lm, angle, visible, half, tol)  # K: the 2η cones
@@ -469,15 +514,52 @@ def one_look_bound(x: np.ndarray, landmarks: np.ndarray, visible: np.ndarray, et
     span = np.where(bounded_k, width, 0.0)
     square = np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])
     diff_v, diff_n = square[None] * span[:, None, None], np.full(len(p), 4, np.int64)
-    rob, k = np.nonzero(visible & (reach > 0.0) & bounded_k[:, None])
+    rob, k = np.nonzero(visible & bounded_k[:, None])
     if len(rob):
-        n = np.stack([-d[rob, k, 1], d[rob, k, 0]], axis=-1) / reach[rob, k, None]
-        h = (reach[rob, k] + rho[rob]) * np.sin(half[rob]) + 2.0 * np.sin(0.5 * half[rob]) * span[rob]
-        a = np.stack([n, -n], axis=1)  # (P, 2, 2)
-        diff_v, diff_n = _clip_pairs(diff_v, diff_n, rob, a, np.stack([h, h], axis=1), tol)
-    spread = np.sqrt(np.max(np.where(_valid(diff_v, diff_n), np.einsum("rwk,rwk->rw", diff_v, diff_v), 0.0),
-                            axis=1, initial=0.0))  # fmt: skip
-    return np.where(bounded_k, RADIUS_PER_WIDTH * np.minimum(width, spread), np.inf)
+        a, b, ok = _strip_rows(p[rob], lm[k], span[rob], rho[rob], half[rob])
+        diff_v, diff_n = _clip_pairs(diff_v, diff_n, rob[ok], a[ok], b[ok], tol)
+    bound = np.where(bounded_k, RADIUS_PER_WIDTH * np.minimum(width, _spread(diff_v, diff_n)), np.inf)
+    return LookBound(bound, span, rho, half, diff_v, diff_n)
+
+
+def one_look_bound(x: np.ndarray, landmarks: np.ndarray, visible: np.ndarray, eta: float | np.ndarray,
+                   bounds: np.ndarray, tol: float = 0.0) -> np.ndarray:  # fmt: skip
+    """:func:`look_bound`'s ``ε(x, S)`` alone, shape (R,) map units.
+
+    Parameters
+    ----------
+    x, landmarks, visible, eta, bounds, tol
+        As :func:`look_bound`.
+    """
+    return look_bound(x, landmarks, visible, eta, bounds, tol).bound
+
+
+def bound_with(look: LookBound, x: np.ndarray, landmark: np.ndarray, tol: float = 0.0) -> np.ndarray:
+    """An upper bound on ``ε`` when each look also sees one more landmark, shape (R,) map units.
+
+    The new landmark's strip clips the difference body; ``diam K`` and ``ρ`` are kept (with the
+    landmark they only shrink, and so do the strips they widen), so this is at least the bound
+    :func:`look_bound` computes with it: a cheap score for placing tags.
+
+    Parameters
+    ----------
+    look : LookBound
+        The looks without it.
+    x : ndarray, shape (R, 2)
+        Where they are taken (map units).
+    landmark : ndarray, shape (R, 2)
+        The landmark each one also sees (map units).
+    tol : float
+        Outside slack of the clips (map units).
+    """
+    p = np.asarray(x, float).reshape(-1, 2)
+    a, b, ok = _strip_rows(p, np.asarray(landmark, float).reshape(-1, 2), look.width, look.rho, look.half)
+    rows = np.flatnonzero(ok & np.isfinite(look.bound))
+    vertices, count = look.diff_vertices, look.diff_count
+    if len(rows):
+        vertices, count = _clip_pairs(vertices, count, rows, a[rows], b[rows], tol)
+    tighter = np.minimum(look.bound, RADIUS_PER_WIDTH * np.minimum(look.width, _spread(vertices, count)))
+    return np.where(np.isfinite(look.bound), tighter, np.inf)
 
 
 def crossing_parity(a: np.ndarray, b: np.ndarray, p: np.ndarray, valid: np.ndarray | bool = True) -> np.ndarray:

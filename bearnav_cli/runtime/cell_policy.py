@@ -505,15 +505,24 @@ def obstacle_clearance(arrays: PlanArrays, x: np.ndarray) -> tuple[np.ndarray, n
     return out, away
 
 
-def in_sight(arrays: PlanArrays, x: np.ndarray) -> np.ndarray:
+def in_sight(arrays: PlanArrays, x: np.ndarray, landmarks: np.ndarray | None = None) -> np.ndarray:
     """Line of sight from each point to each landmark through the raw obstacles, shape (R, L) (ALGORITHMS §1).
 
     The segment from ``x`` to ``l − tol·unit(l − x)`` must touch no raw obstacle edge, so a tag on
     a wall is seen from the free side (:meth:`bearnav_cli.geometry.FreeSpace.visible`'s rule, exact
     against the embedded map's rings).
+
+    Parameters
+    ----------
+    arrays : PlanArrays
+        The plan's raw obstacle edges (``sight_edges``) and landmarks.
+    x : ndarray, shape (R, 2)
+        Where the camera is (map units).
+    landmarks : ndarray, shape (L, 2), optional
+        Other positions than the plan's landmarks (tags proposed for it; map units).
     """
     p = _points(x)
-    lm = arrays.landmarks
+    lm = arrays.landmarks if landmarks is None else np.asarray(landmarks, float).reshape(-1, 2)
     d = lm[None, :, :] - p[:, None, :]
     dist = np.hypot(d[..., 0], d[..., 1])
     far = dist > arrays.tol

@@ -817,11 +817,13 @@ def best_bound_heading(arrays: PlanArrays, s: ControlSettings, x: np.ndarray, ph
     return out
 
 
-def views(arrays: PlanArrays, x: np.ndarray, fov: float, max_range: float, headings: int) -> np.ndarray:
+def views(arrays: PlanArrays, x: np.ndarray, fov: float, max_range: float, headings: int,
+          landmarks: np.ndarray | None = None) -> np.ndarray:  # fmt: skip
     """Which landmarks a camera at ``x`` sees at each of ``headings`` evenly spaced headings, (R, H, L).
 
     In the field of view ``fov`` (rad) around the heading, within ``max_range`` (map units; ``inf``:
     any) and in line of sight (``cell_policy.in_sight``); heading ``k`` is ``−π + 2πk/H``.
+    ``landmarks`` (L, 2): other positions than the plan's (tags proposed for it).
 
     Parameters
     ----------
@@ -835,10 +837,13 @@ def views(arrays: PlanArrays, x: np.ndarray, fov: float, max_range: float, headi
         Range (map units).
     headings : int
         ``H``.
+    landmarks : ndarray, shape (L, 2), optional
+        The landmarks (map units); default the plan's.
     """
     p = np.asarray(x, float).reshape(-1, 2)
-    d = arrays.landmarks[None] - p[:, None, :]
-    seen = in_sight(arrays, p)
+    lm = arrays.landmarks if landmarks is None else np.asarray(landmarks, float).reshape(-1, 2)
+    d = lm[None] - p[:, None, :]
+    seen = in_sight(arrays, p, lm)
     if math.isfinite(max_range):
         seen &= np.einsum("rlk,rlk->rl", d, d) <= max_range**2
     theta = np.linspace(-math.pi, math.pi, headings, endpoint=False)
