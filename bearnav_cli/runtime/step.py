@@ -598,6 +598,9 @@ def bounded_control(arrays: PlanArrays, s: ControlSettings, state: ControlState,
             u[edge] = np.where(ok[:, None], field / np.where(ok, norm, 1.0)[:, None], 0.0)
             cell[edge], target[edge] = holder[edge], -1
             last_dir[edge[ok]] = u[edge[ok]]
+            # follow_fields found no cell eroded by e nor a node in sight and called it a stall; the field of
+            # the cell holding p̂ applies now (a run ended at its first step there, under worst-case bearings)
+            stalled[edge] = ~ok
     if outside.any():
         idx = np.flatnonzero(outside)
         pace_out, away = error_ball_pace(arrays, s, cell[idx], reference[idx], error[idx])
@@ -608,9 +611,11 @@ def bounded_control(arrays: PlanArrays, s: ControlSettings, state: ControlState,
     # from there; anything else waits until it has turned back
     pending = np.isfinite(resume) if ahead else np.zeros(r, bool)
     if pending.any() and arrays.funnel:
-        # a swung p found in a cell of higher rank than the one it left is no progress: turn back first
+        # a swung p is progress only in a cell of lower rank than the one it left; in that cell (or a worse one)
+        # the look's swing may have undone the field's progress, and driving from there repeats it look after look
+        # (a loop seen under worst-case bearings): turn back first, as ALGORITHMS §12.6 says
         had = state.cell >= 0
-        worse = pending & had & (cell >= 0) & (arrays.cell_rank[np.maximum(cell, 0)] >
+        worse = pending & had & (cell >= 0) & (arrays.cell_rank[np.maximum(cell, 0)] >=
                                                arrays.cell_rank[np.maximum(state.cell, 0)])  # fmt: skip
         move &= ~worse
     drive = (move | (outside & (pace > 0.0) & ~pending)) & np.any(u != 0.0, axis=1)
