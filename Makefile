@@ -49,6 +49,7 @@ bench: $(STAMP)
 	$(BIN)/python bench/simulate.py --readme
 	$(BIN)/python bench/plan.py --readme
 	$(BIN)/python bench/tolerance.py --readme
+	$(BIN)/python bench/bounded.py --readme --maps kitchen
 	$(BIN)/python bench/sweep.py --readme
 
 # The robot's distribution, bearnav-runtime (numpy only): dist/bearnav_runtime-VERSION-py3-none-any.whl
