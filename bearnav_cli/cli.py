@@ -1945,20 +1945,28 @@ def tags_command(
     ),
     force: bool = typer.Option(False, "--force", help="Replace an -o file that is not a map bearnav tags wrote."),
     target: str = typer.Option(
-        "fix", "--for", help="fix: a usable pair in view where the robot drives; live: every cell live, so that a "
-        "look all around always lets the robot move on, at --bearing-error-deg and --slip (one of fix, live)."
+        "fix",
+        "--for",
+        help="fix: a usable pair in view where the robot drives; live: every cell live, so that a "
+        "look all around always lets the robot move on, at --bearing-error-deg and --slip (one of fix, live).",
     ),
     bearing_error_deg: Optional[float] = typer.Option(
-        None, "--bearing-error-deg", help="With --for live: the bound on every world-frame bearing error (degrees, "
-        "in (0, 45)); None means the map's robot: bearing_error_deg plus compass_error_deg."
+        None,
+        "--bearing-error-deg",
+        help="With --for live: the bound on every world-frame bearing error (degrees, "
+        "in (0, 45)); None means the map's robot: bearing_error_deg plus compass_error_deg.",
     ),
     slip: Optional[float] = typer.Option(
-        None, "--slip", help="With --for live: the odometry error bound, a fraction of each step (in [0, 1)); None "
-        "means the map's robot: slip."
+        None,
+        "--slip",
+        help="With --for live: the odometry error bound, a fraction of each step (in [0, 1)); None "
+        "means the map's robot: slip.",
     ),
     live_resolution: Optional[float] = typer.Option(
-        None, "--live-resolution", help="With --for live: grid spacing of the liveness measurement (map units, > 0); "
-        "None means about 25 points in the median cell, at most 0.01·D."
+        None,
+        "--live-resolution",
+        help="With --for live: grid spacing of the liveness measurement (map units, > 0); "
+        "None means about 25 points in the median cell, at most 0.01·D.",
     ),
     quiet: bool = QUIET,
     as_json: bool = JSON,

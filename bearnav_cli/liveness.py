@@ -495,7 +495,6 @@ def grid(plan: Plan, eta_deg: float | None = None, fov_deg: float = 60.0, kappa:
     swing = 2.0 * lam * math.sin(0.5 * math.radians(compass)) if lam > 0 else 0.0
     tau = np.asarray(arrays.usable_tolerance, float)
     margin = tau - kappa * step_len - nu - swing
-    n_cells = len(tau)
 
     origin = np.asarray(arrays.bounds, float)[:2]
     points, pair_cell, pair_point = _samples(polygons, lam, resolution, origin)

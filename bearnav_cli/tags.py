@@ -393,11 +393,13 @@ class TagProposal:
         uncovered = 1.0 - self.coverable_fraction
         if self.live_after is not None:
             b, a = self.live_before, self.live_after
-            return (f"{plural(self.count, 'new tag')} to the {len(self.before.landmarks)} of the map, {reached}: "
-                    f"live on {percent(b.live_fraction)} → {percent(a.live_fraction)} of D at η = "
-                    f"{math.degrees(a.eta):.3g}° ({b.n_live} → {a.n_live} of {len(a.live)} cells); certified bearing "
-                    f"error η* {math.degrees(b.eta_star):.3g}° → {math.degrees(a.eta_star):.3g}°"
-                    + (f"; {percent(uncovered)} of the grid cannot be made live by any tag" if uncovered > 0 else ""))
+            return (
+                f"{plural(self.count, 'new tag')} to the {len(self.before.landmarks)} of the map, {reached}: "
+                f"live on {percent(b.live_fraction)} → {percent(a.live_fraction)} of D at η = "
+                f"{math.degrees(a.eta):.3g}° ({b.n_live} → {a.n_live} of {len(a.live)} cells); certified bearing "
+                f"error η* {math.degrees(b.eta_star):.3g}° → {math.degrees(a.eta_star):.3g}°"
+                + (f"; {percent(uncovered)} of the grid cannot be made live by any tag" if uncovered > 0 else "")
+            )
         return (f"{plural(self.count, 'new tag')} (lower bound {self.lower_bound}) to the "
                 f"{len(self.before.landmarks)} of the map, {reached}: rule holds on "
                 f"{percent(self.before.fraction_domain)} → {percent(self.after.fraction_domain)} of D and "
@@ -763,8 +765,11 @@ def propose_live_tags(plan: Any, params: Params = Params(target="live")) -> TagP
     pe_grid: EvaluationGrid = perception.evaluation_grid(plan, params.spacing)
     cand = candidates(map_, width, pe_grid.space)
     x = g.points[failing]
-    seen = step.views(g.arrays, x, 2.0 * math.pi, params.max_range, 1, cand.positions)[:, 0] if len(x) \
+    seen = (
+        step.views(g.arrays, x, 2.0 * math.pi, params.max_range, 1, cand.positions)[:, 0]
+        if len(x)
         else np.zeros((0, len(cand.positions)), bool)
+    )
     useful = np.flatnonzero(seen.any(axis=0))
     cand = Candidates(cand.positions[useful], cand.normals[useful], cand.on_wall[useful])
     seen = seen[:, useful]
@@ -784,8 +789,9 @@ def propose_live_tags(plan: Any, params: Params = Params(target="live")) -> TagP
                   error_target=params.error_target, min_spread_deg=params.min_spread_deg)  # fmt: skip
     existing_sight = pe_grid.space.visibility_regions(map_.landmarks)
     before = perception.evaluate(pe_grid, map_.landmarks, map_.landmark_ids, sight=existing_sight, **camera)
+    new_sight = pe_grid.space.visibility_regions(positions)
     after = perception.evaluate(pe_grid, np.vstack([map_.landmarks, positions]), (*map_.landmark_ids, *ids),
-                                sight=existing_sight + pe_grid.space.visibility_regions(positions), **camera)  # fmt: skip
+                                sight=existing_sight + new_sight, **camera)  # fmt: skip
     stuck = np.concatenate([unfixable, failing[~coverable]])
     return TagProposal(
         ids=ids, positions=positions, normals=cand.normals[idx].reshape(-1, 2), gains=np.array(gains, np.int64),

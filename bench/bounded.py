@@ -106,7 +106,7 @@ def main() -> None:
                 stress = {"dynamics": dynamics, "noise_deg": 1.0}
                 rows += [one(plan, f"{tag}: kalman, Gaussian σ=1°", starts, estimator="kalman", **stress)[0],
                          one(plan, f"{tag}: set, Gaussian σ=1°", starts, estimator="set", **stress)[0]]  # fmt: skip
-            print(*(" | ".join(map(str, r)) for r in rows[-(5 if dynamics == "single" else 3):]), sep="\n", flush=True)
+            print(*(" | ".join(map(str, r)) for r in rows[-(5 if dynamics == "single" else 3) :]), sep="\n", flush=True)
     live_headers = ["plan", "tags of the map", "added (--for live)", "placing took",
                     f"live at η = {args.eta}° (before → after)", "η* (before → after)",
                     "live after one view (no turn all around)", "live at η = 0.5°"]  # fmt: skip
@@ -116,7 +116,8 @@ def main() -> None:
             f"(`tags.propose_live_tags`), then planned again with those tags. Liveness measured by "
             f"`bearnav verify --live-fov 60` on the default grid; a look turns all around.\n\n"
             + markdown_table(live_headers, live_rows)
-            + f"\n\n{args.starts} starts uniform in D, 60° camera, bearing errors within η = {args.eta}° (world frame), "
+            + f"\n\n{args.starts} starts uniform in D, 60° camera, bearing errors within η = {args.eta}° "
+            f"(world frame), "
             f"odometry within κ‖d̂‖ + ν (κ = 0.03, ν = 1e-4·D). {machine_line(('numpy', 'shapely'))}\n\n"
             + markdown_table(headers, rows))  # fmt: skip
     print(body)

@@ -15,9 +15,9 @@ from bearnav_cli.errors import InvalidParamsError
 from bearnav_cli.geometry import FreeSpace
 
 from .conftest import random_plan
+from .handmade import hand_map, hand_plan
 from .test_cli_errors import assert_one_line_error
 from .test_cli_tags import _plan
-from .handmade import hand_map, hand_plan
 
 #: A coarse liveness grid (fraction of D): the properties hold on any grid.
 COARSE = 0.03
@@ -62,7 +62,7 @@ def test_the_tags_lie_on_boundaries_facing_free_space_a_tag_apart(proposal):
     assert not np.any(shapely.intersects_xy(space.raw_obstacles, ahead[:, 0], ahead[:, 1]))
     every = np.vstack([plan.map.landmarks, p.positions])
     gaps = np.hypot(*(every[:, None] - every[None]).transpose(2, 0, 1)) + np.eye(len(every)) * 1e9
-    assert gaps[len(plan.map.landmarks):].min() >= p.tag_width * (1 - 1e-9)
+    assert gaps[len(plan.map.landmarks) :].min() >= p.tag_width * (1 - 1e-9)
 
 
 def test_where_no_tag_helps_is_reported_not_claimed(proposal):

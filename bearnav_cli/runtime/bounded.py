@@ -28,8 +28,9 @@ from typing import NamedTuple
 
 import numpy as np
 
-__all__ = ["CENTRE_STEPS", "MAX_VERTICES", "RADIUS_PER_WIDTH", "LookBound", "bound_with", "box", "centre", "clip", "cone_rows", "contains", "crossing_parity", "diameter", "grow",
-           "intersect_cones", "look_bound", "one_look_bound", "translate"]  # fmt: skip
+__all__ = ["CENTRE_STEPS", "MAX_VERTICES", "RADIUS_PER_WIDTH", "LookBound", "bound_with", "box", "centre", "clip",
+           "cone_rows", "contains", "crossing_parity", "diameter", "grow", "intersect_cones", "look_bound",
+           "one_look_bound", "translate"]  # fmt: skip
 
 #: Widest vertex array kept: a set with more vertices is merged down (outward) to this many. A set
 #: rarely has more than 12 (the kitchen's 28 tags all around: at most 10 in 1,000 runs).

@@ -631,8 +631,9 @@ def bounded_control(arrays: PlanArrays, s: ControlSettings, state: ControlState,
                 # holds p̂ eroded by e (the switch); the least-rank cell merely holding p̂ may have a
                 # larger τ_c, and a look ended on it turned back into a cell that made it look again
                 had = state.cell[idx]
-                k = least_rank_cell(arrays, there, error[idx],
-                                    below=np.where(had >= 0, arrays.cell_rank[np.maximum(had, 0)], np.inf))
+                k = least_rank_cell(
+                    arrays, there, error[idx], below=np.where(had >= 0, arrays.cell_rank[np.maximum(had, 0)], np.inf)
+                )
                 k = np.where(k >= 0, k, had)
                 # without a cell, the one a robot there would wait in (a cell grown by e holds p̂)
                 k = np.where(k >= 0, k, least_rank_cell(arrays, there, -error[idx]))
