@@ -39,7 +39,7 @@ __all__ = ["PROGRESS_EVERY", "PROGRESS_WINDOW", "EstimateTrace", "Params", "Sett
            "summary",
            "tree_routes"]  # fmt: skip
 
-VERSION = 2
+VERSION = 3
 log = logging.getLogger(__name__)
 
 #: A robot must move ``2·v·dt`` net over this many steps with a fix, or it stalls (ALGORITHMS §7.2).
