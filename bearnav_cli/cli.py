@@ -603,7 +603,8 @@ def _tags_map(plan_npz: Path) -> Optional[Path]:
 
 
 def tags_step(plan_npz: Path, fov: float = 360.0, max_range: Optional[float] = None,
-              plan_words: tuple[str, ...] = (), map_yaml: Optional[Path] = None) -> str:  # fmt: skip
+              plan_words: tuple[str, ...] = (), map_yaml: Optional[Path] = None,
+              tags_words: tuple[str, ...] = ()) -> str:  # fmt: skip
     """The next step where a camera cannot fix itself: the ``bearnav tags`` command for this plan, the map it
     writes and the ``bearnav plan`` command that re-plans with it (``plan_words``: options to plan it with).
 
@@ -617,6 +618,8 @@ def tags_step(plan_npz: Path, fov: float = 360.0, max_range: Optional[float] = N
         Options of the re-planning command (the camera of ``plan --fov``).
     map_yaml : Path, optional
         The map YAML to give ``--map`` (default: the one the plan was made from, if any).
+    tags_words : tuple of str
+        Further options of the ``bearnav tags`` command (``--for live`` and its bound).
 
     Returns
     -------
@@ -624,7 +627,7 @@ def tags_step(plan_npz: Path, fov: float = 360.0, max_range: Optional[float] = N
         ```bearnav tags PLAN --fov F --map M` writes M_tags.yaml; then `bearnav plan M_tags.yaml```.
     """
     map_yaml = map_yaml or _tags_map(plan_npz)
-    tags = _command_text("bearnav", "tags", plan_npz, *_camera_words(fov, max_range),
+    tags = _command_text("bearnav", "tags", plan_npz, *_camera_words(fov, max_range), *tags_words,
                          *(["--map", map_yaml] if map_yaml is not None else []))  # fmt: skip
     written = _tags_output(plan_npz, map_yaml)
     return f"`{tags}` writes {written}; then `{_command_text('bearnav', 'plan', written, *plan_words)}`"
@@ -668,7 +671,14 @@ def simulation_steps(report: "pipeline.StageReport", plan_npz: Path, min_success
     params = dict((report.manifest or {}).get("params") or {})
     counts = report.artifact.counts()
     steps = []
-    if counts.get("lost"):
+    if counts.get("lost") and params.get("estimator") == "set":
+        fov, max_range = float(params.get("fov", 360.0)), params.get("range")
+        eta = params.get("bearing_error_deg") or params.get("noise_bound_deg")
+        words = ("--for", "live", *(["--bearing-error-deg", f"{eta:g}"] if eta else []))
+        steps.append("lost: a look all around left the error bound above what the cell tolerates (the cell is not "
+                     "live at these bounds); add tags until every cell is: " + tags_step(plan_npz, fov, max_range,
+                                                                                         tags_words=words))  # fmt: skip
+    elif counts.get("lost"):
         fov, max_range = float(params.get("fov", 360.0)), params.get("range")
         hold = params.get("hold_time", 2.0)
         steps.append(f"lost: the camera saw fewer than two usable tags for --hold-time {hold:g} s (a {fov:g}° "

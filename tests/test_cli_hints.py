@@ -190,6 +190,21 @@ def test_lost_runs_name_the_tags_command_and_the_figure_that_shows_them(cli, wri
     assert f"wrote {Path('plans/corners/sim.png')}" in drawn.output
 
 
+def test_lost_set_estimator_runs_name_tags_for_live(cli, write_map, tmp_path):
+    """A set-estimator robot is lost when looks all around do not shrink its bound enough: the hint is
+    ``bearnav tags --for live`` at the bound simulated, not the fix rule."""
+    write_map(dict(BLIND_MAP, name="corners", landmarks=[[0, 3], [0, 0], [4, 0], [4, 3]]), "corners.yaml")
+    assert cli("-q", "plan", "corners.yaml").exit_code == 0
+    result = cli("-q", "simulate", "plans/corners/plan.npz", "--fov", "60", "--starts", "random:4", "--estimator",
+                 "set", "--noise-bound-deg", "3")  # fmt: skip
+    assert result.exit_code == 1, result.output
+    line = error_line(result)
+    assert "lost" in line and "not live" in line, line
+    tags, plan, _ = commands(line)
+    assert tags[tags.index("--for") + 1] == "live" and tags[tags.index("--bearing-error-deg") + 1] == "3", line
+    assert plan == ["plan", "corners_tags.yaml"], line
+
+
 def test_simulate_words_give_the_loop_back_as_options():
     from bearnav_cli.cli import _simulate_words
     from bearnav_cli.stages import simulate
