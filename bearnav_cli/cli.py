@@ -1528,6 +1528,9 @@ def _metric_rows(metrics: dict) -> list[tuple[str, str]]:
             ("mean look (s)", num(metrics.get("look_time_mean_s"), ".2f")),
             ("truth outside its set (steps)", str(metrics.get("containment_violations"))),
             ("empty sets (broken bounds)", str(metrics.get("inconsistencies"))),
+            ("error bound e_t, mean (map units)", num(metrics.get("error_bound_mean"), ".3g")),
+            ("true error, mean (map units)", num(metrics.get("true_error_mean"), ".3g")),
+            ("largest true error / e_t", num(metrics.get("error_used_max"), ".2f")),
         ]
     return rows
 

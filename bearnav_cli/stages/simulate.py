@@ -436,6 +436,10 @@ class _Loop:
         self.inconsistencies = np.zeros(r, np.int64)
         self.violations = np.zeros(r, np.int64)
         self.was_looking = np.zeros(r, bool)
+        # the claimed error e_t against the true one, over the steps with a finite claim: sums and the
+        # largest share of its claim an error used (above 1 only where a bound was broken)
+        self.claims = np.zeros(3)  # steps, Σ e_t, Σ ‖x − x̂‖
+        self.claim_used = 0.0
         self.history = np.zeros((PROGRESS_WINDOW + 1, r, 2))  # ring buffer of positions, by moving steps
         self.history[0] = starts
         self.trace: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
@@ -552,12 +556,22 @@ class _Loop:
                 inside = np.hypot(*(ref - out.x_hat).T) <= out.error_bound + 10.0 * self.arrays.tol
             known = known & np.isfinite(out.error_bound) & np.any(out.x_hat != 0.0, axis=1)
         self.violations[active] += known & ~inside
+        claimed = known & np.isfinite(out.error_bound) & (out.error_bound > 0.0)
+        if claimed.any():
+            bound = out.error_bound[claimed]
+            true = np.hypot(*(ref[claimed] - out.x_hat[claimed]).T)
+            self.claims += (len(bound), float(bound.sum()), float(true.sum()))
+            self.claim_used = max(self.claim_used, float(np.max(true / bound)))
 
     def estimate_counts(self) -> dict:
         """The totals of :meth:`count_estimates` over every run, for the metrics."""
+        steps, bound, true = self.claims
         return {"moved_steps": int(self.moved.sum()), "looks": int(self.looks.sum()),
                 "look_steps": int(self.look_steps.sum()), "inconsistencies": int(self.inconsistencies.sum()),
-                "containment_violations": int(self.violations.sum())}  # fmt: skip
+                "containment_violations": int(self.violations.sum()),
+                "error_bound_mean": bound / steps if steps else None,
+                "true_error_mean": true / steps if steps else None,
+                "error_used_max": self.claim_used if steps else None}  # fmt: skip
 
     def trajectories(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Coords, cells, headings and offsets of every run (departure points, then the final point)."""
@@ -927,6 +941,9 @@ def metrics(sim: Simulation) -> dict:
         "looks_per_run": counts["looks"] / n if n and "looks" in counts else None,
         "look_time_mean_s": (counts["look_steps"] * sim.dt / counts["looks"]) if counts.get("looks") else None,
         "look_time_total_s": counts.get("look_steps", 0) * sim.dt,
+        "error_bound_mean": counts.get("error_bound_mean"),
+        "true_error_mean": counts.get("true_error_mean"),
+        "error_used_max": counts.get("error_used_max"),
         "runs_from_certified_domain": int(np.count_nonzero(sim.start_in_domain)),
         "success_rate_in_domain": _finite_or_none(sim.success_rate_of(sim.start_in_domain)),
         "success_rate_outside_domain": _finite_or_none(sim.success_rate_of(~sim.start_in_domain)),
