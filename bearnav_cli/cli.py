@@ -2077,7 +2077,7 @@ def tags_command(
             "free_before": proposal.before.fraction_free, "free_after": proposal.after.fraction_free,
             "for": target,
             **({"live_before": proposal.live_before.live_fraction, "live_after": proposal.live_after.live_fraction,
-                "eta_deg": math.degrees(proposal.live_after.eta),
+                "eta_deg": math.degrees(proposal.live_after.grid.eta),
                 "eta_star_deg_before": math.degrees(proposal.live_before.eta_star),
                 "eta_star_deg_after": math.degrees(proposal.live_after.eta_star)}
                if proposal.live_after is not None else {}),

@@ -90,8 +90,6 @@ class Liveness:
     eps_view : ndarray, shape (C,)
         The same for the look's first view alone: the least one-view bound over the headings
         (``eps_look`` for a camera that sees all around; map units).
-    margin : ndarray, shape (C,)
-        ``τ_c − κℓ − ν`` (less ``2λ sin(ψ/2)`` with a look-ahead; map units).
     live : ndarray of bool, shape (C,)
         ``eps_look < margin``.
     view_live : ndarray of bool, shape (C,)
@@ -99,8 +97,6 @@ class Liveness:
     cell_eta_star : ndarray, shape (C,)
         ``η*_c`` (rad): the largest bearing error at which the grid found the cell live; 0 where
         it is never live.
-    tolerance : ndarray, shape (C,)
-        ``τ_c``, the plan's usable tolerance (map units).
     points : ndarray of int, shape (C,)
         Grid points of each cell.
     eta_star : float
@@ -112,47 +108,32 @@ class Liveness:
         The same for ``view_live`` (``≤ live_fraction``).
     cover_fraction : float
         Area of the union of the live cells over the area of ``D``, in [0, 1] (``≥ live_fraction``).
-    eta : float
-        The bearing error bound ``η`` (rad).
-    fov : float
-        The camera's full field of view (rad).
-    kappa : float
-        The slip ``κ`` (fraction of a step).
-    nu : float
-        The slip floor ``ν`` (map units).
-    step : float
-        ``ℓ = v·dt``, one step's length (map units).
-    swing : float
-        ``2λ sin(ψ/2)``, the look-ahead point's extra error (map units; 0 without a look-ahead).
-    resolution : float
-        Grid spacing (map units).
-    headings : int
-        Headings of the minimum over headings.
-    max_range : float
-        The camera's range (map units; ``inf``: any).
+    grid : LiveGrid
+        Where and at what it was measured: the bearing error ``η``, the camera, the slip, the grid,
+        and each cell's ``margin`` and ``tolerance`` (also properties of this object).
     """
 
     eps_look: np.ndarray
     eps_view: np.ndarray
-    margin: np.ndarray
     live: np.ndarray
     view_live: np.ndarray
     cell_eta_star: np.ndarray
-    tolerance: np.ndarray
     points: np.ndarray
     eta_star: float
     live_fraction: float
     view_fraction: float
     cover_fraction: float
-    eta: float
-    fov: float
-    kappa: float
-    nu: float
-    step: float
-    swing: float
-    resolution: float
-    headings: int
-    max_range: float
+    grid: LiveGrid
+
+    @property
+    def margin(self) -> np.ndarray:
+        """``τ_c − κℓ − ν`` (less ``2λ sin(ψ/2)`` with a look-ahead), shape (C,) map units."""
+        return self.grid.margin
+
+    @property
+    def tolerance(self) -> np.ndarray:
+        """``τ_c``, the plan's usable tolerance, shape (C,) map units."""
+        return self.grid.tolerance
 
     @property
     def n_live(self) -> int:
@@ -161,13 +142,14 @@ class Liveness:
 
     def summary(self) -> str:
         """One plain sentence: the live fraction, η* and how it was measured."""
-        camera = "360° camera" if self.fov >= 2.0 * math.pi - 1e-12 else f"{math.degrees(self.fov):g}° camera"
-        reach = "" if math.isinf(self.max_range) else f" of range {self.max_range:g}"
-        heads = "1 heading (all around)" if self.headings == 1 else f"{self.headings} headings"
-        return (f"liveness at η = {math.degrees(self.eta):.3g}°, {camera}{reach}, κ = {self.kappa:g}: "
+        g = self.grid
+        camera = "360° camera" if g.fov >= 2.0 * math.pi - 1e-12 else f"{math.degrees(g.fov):g}° camera"
+        reach = "" if math.isinf(g.max_range) else f" of range {g.max_range:g}"
+        heads = "1 heading (all around)" if g.headings == 1 else f"{g.headings} headings"
+        return (f"liveness at η = {math.degrees(g.eta):.3g}°, {camera}{reach}, κ = {g.kappa:g}: "
                 f"{self.live_fraction:.0%} of D live ({self.n_live}/{len(self.live)} cells; {self.view_fraction:.0%} "
                 f"of D after one view, without turning all around); certified bearing "
-                f"error η* = {math.degrees(self.eta_star):.3g}°; measured on a {self.resolution:.3g}-map-unit grid "
+                f"error η* = {math.degrees(self.eta_star):.3g}°; measured on a {g.resolution:.3g}-map-unit grid "
                 f"with {heads}, a measurement, not a proof")  # fmt: skip
 
     def to_json(self) -> dict[str, Any]:
@@ -178,15 +160,15 @@ class Liveness:
 
         deg = math.degrees(1.0)
         return {
-            "eta_deg": round(math.degrees(self.eta), 12),
-            "fov_deg": round(math.degrees(self.fov), 12),
-            "max_range": None if math.isinf(self.max_range) else self.max_range,
-            "kappa": self.kappa,
-            "nu": self.nu,
-            "step": self.step,
-            "swing": self.swing,
-            "resolution": self.resolution,
-            "headings": self.headings,
+            "eta_deg": round(math.degrees(self.grid.eta), 12),
+            "fov_deg": round(math.degrees(self.grid.fov), 12),
+            "max_range": None if math.isinf(self.grid.max_range) else self.grid.max_range,
+            "kappa": self.grid.kappa,
+            "nu": self.grid.nu,
+            "step": self.grid.step,
+            "swing": self.grid.swing,
+            "resolution": self.grid.resolution,
+            "headings": self.grid.headings,
             "measured": "on a grid of the stated resolution: a measurement, not a proof",
             "live_fraction": self.live_fraction,
             "view_fraction": self.view_fraction,
@@ -223,8 +205,24 @@ class LiveGrid:
         Which cell holds which point, sorted by cell (a point of several cells is in several pairs).
     tolerance, margin : ndarray, shape (C,)
         ``τ_c`` and ``τ_c − κℓ − ν − 2λ sin(ψ/2)`` (map units).
-    eta, fov, kappa, nu, step, swing, resolution, headings, max_range
-        As :class:`Liveness`.
+    eta : float
+        The bearing error bound ``η`` (rad).
+    fov : float
+        The camera's full field of view (rad).
+    kappa : float
+        The slip ``κ`` (fraction of a step).
+    nu : float
+        The slip floor ``ν`` (map units).
+    step : float
+        ``ℓ = v·dt``, one step's length (map units).
+    swing : float
+        ``2λ sin(ψ/2)``, the look-ahead point's extra error (map units; 0 without a look-ahead).
+    resolution : float
+        Grid spacing (map units).
+    headings : int
+        Headings of the one-view minimum over headings.
+    max_range : float
+        The camera's range (map units; ``inf``: any).
     """
 
     arrays: PlanArrays
@@ -558,14 +556,12 @@ def evaluate(g: LiveGrid, landmarks: np.ndarray | None = None) -> Liveness:
     cover = float(shapely.union_all([polygons[c] for c in np.flatnonzero(live)]).area) if live.any() else 0.0
     points_per_cell = np.bincount(pair_cell, minlength=n_cells)
     return Liveness(
-        eps_look=eps_look, eps_view=eps_view, margin=margin, live=live, view_live=view_live,
-        cell_eta_star=cell_eta, tolerance=g.tolerance,
+        eps_look=eps_look, eps_view=eps_view, live=live, view_live=view_live, cell_eta_star=cell_eta,
         points=points_per_cell, eta_star=float(np.min(cell_eta)) if n_cells else 0.0,
         live_fraction=min(1.0, live_area / area) if area > 0 else 0.0,
         view_fraction=min(1.0, view_area / area) if area > 0 else 0.0,
         cover_fraction=min(1.0, cover / area) if area > 0 else 0.0,
-        eta=eta, fov=g.fov, kappa=g.kappa, nu=g.nu, step=g.step, swing=g.swing, resolution=g.resolution,
-        headings=g.headings, max_range=g.max_range,
+        grid=g,
     )  # fmt: skip
 
 

@@ -1506,8 +1506,8 @@ def _tags_title(proposal: Any, map_: Map) -> str:
     before, after = proposal.before, proposal.after
     live = getattr(proposal, "live_after", None)
     if live is not None:
-        config = (f"every cell live at η = {math.degrees(live.eta):.3g}°: {proposal.live_before.live_fraction:.1%} "
-                  f"→ {live.live_fraction:.1%} of D")  # fmt: skip
+        config = (f"every cell live at η = {math.degrees(live.grid.eta):.3g}°: "
+                  f"{proposal.live_before.live_fraction:.1%} → {live.live_fraction:.1%} of D")  # fmt: skip
         return figure_title(map_.name, "tags", f"where to glue {len(proposal.ids)} new tags", config)
     target = before.error_target
     rule = "2 usable tags in view" if target is None else f"a fix within {target:g} in view"

@@ -61,10 +61,10 @@ def test_shapes_and_json(plan, narrow):
     for name in ("eps_look", "eps_view", "margin", "live", "view_live", "cell_eta_star", "tolerance", "points"):
         assert getattr(narrow, name).shape == (c,), name
     assert np.all(narrow.points > 0)  # every cell has points, the small ones too
-    assert narrow.headings == liveness.HEADINGS and narrow.step > 0 and narrow.nu > 0
+    assert narrow.grid.headings == liveness.HEADINGS and narrow.grid.step > 0 and narrow.grid.nu > 0
     data = json.loads(json.dumps(narrow.to_json(), allow_nan=False))
     assert len(data["per_cell"]["eps_look"]) == c and "not a proof" in data["measured"]
-    assert "not a proof" in narrow.summary() and f"{narrow.resolution:.3g}-map-unit grid" in narrow.summary()
+    assert "not a proof" in narrow.summary() and f"{narrow.grid.resolution:.3g}-map-unit grid" in narrow.summary()
 
 
 def test_eps_look_decreases_with_eta(plan, narrow):
@@ -75,7 +75,7 @@ def test_eps_look_decreases_with_eta(plan, narrow):
 
 
 def test_a_wider_camera_does_no_worse_in_one_view(narrow, wide):
-    assert wide.headings == 1
+    assert wide.grid.headings == 1
     assert np.all(wide.eps_view <= narrow.eps_view + 1e-9)
     assert np.all(wide.view_live >= narrow.view_live)
     np.testing.assert_array_equal(wide.eps_view, wide.eps_look)  # all around in one view
@@ -120,14 +120,15 @@ def test_a_turn_all_around_gives_a_set_within_the_look_bound(plan, worst):
 
 def test_live_means_below_the_margin(wide):
     np.testing.assert_array_equal(wide.live, wide.eps_look < wide.margin)
-    np.testing.assert_allclose(wide.margin, wide.tolerance - wide.kappa * wide.step - wide.nu - wide.swing)
+    g = wide.grid
+    np.testing.assert_allclose(wide.margin, wide.tolerance - g.kappa * g.step - g.nu - g.swing)
 
 
 def test_eta_star_re_evaluated_is_live(plan, wide):
     eta = wide.cell_eta_star
     assert wide.eta_star == pytest.approx(eta.min())
-    assert np.all(eta[wide.live] >= wide.eta - 1e-15)  # a cell live at η has η*_c ≥ η
-    assert np.all(eta[~wide.live] < wide.eta)
+    assert np.all(eta[wide.live] >= wide.grid.eta - 1e-15)  # a cell live at η has η*_c ≥ η
+    assert np.all(eta[~wide.live] < wide.grid.eta)
     positive = eta[eta > 0]
     assert len(positive)
     # ε grows with η, so at the least positive η*_c every cell with η*_c > 0 is live; at the largest, its cell
