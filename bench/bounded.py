@@ -26,30 +26,17 @@ from __future__ import annotations
 import argparse
 import math
 
-from common import REPO_DIR, machine_line, markdown_table, replace_section, timed
-from made_maps import KINDS
+from common import machine_line, markdown_table, measured_maps, replace_section, timed
 
 from bearnav_cli import liveness, pipeline, tags
-from bearnav_cli.cli import read_map_source
 from bearnav_cli.stages import simulate
 from bearnav_cli.stages.map_ import MapSource
 
 SECTION = "bounded"
-EXAMPLES = ("kitchen", "paper_sim_circles", "paper_b_circles", "storeroom")
-MADE_SEED = 0
 #: The look-ahead λ each map's unicycle is planned with (map units): about 1% of its diagonal, and
 #: at least its speed over a turn rate of 1 rad/s.
 LOOKAHEAD = {"kitchen": 0.1, "paper_sim_circles": 0.5, "paper_b_circles": 0.5, "storeroom": 0.1, "office0": 0.1,
              "maze0": 0.1, "clutter0": 0.1}  # fmt: skip
-
-
-def sources() -> dict[str, MapSource]:
-    """The maps as the CLI reads them (the made maps from their generators, in memory)."""
-    out = {name: read_map_source(REPO_DIR / "maps" / f"{name}.yaml") for name in EXAMPLES}
-    for make in KINDS.values():
-        spec = make(MADE_SEED)
-        out[spec["name"]] = MapSource(spec=spec, file=f"{spec['name']}.yaml", sha256="bench")
-    return out
 
 
 def plan_of(source: MapSource, spec: dict, lookahead: float):
@@ -79,7 +66,7 @@ def main() -> None:
     parser.add_argument("--readme", action="store_true", help=f"replace the '{SECTION}' section of bench/README.md")
     args = parser.parse_args()
     starts = f"domain:{args.starts}"
-    every = sources()
+    every = measured_maps()
     rows, live_rows = [], []
     for name in args.maps.split(","):
         source = every[name]

@@ -29,6 +29,24 @@ REPO_DIR = BENCH_DIR.parent
 README = BENCH_DIR / "README.md"
 
 
+#: The example maps every map-by-map benchmark measures, and the seed of the maps made for the bearings work.
+EXAMPLES = ("kitchen", "paper_sim_circles", "paper_b_circles", "storeroom")
+MADE_SEED = 0
+
+
+def measured_maps() -> dict[str, map_.MapSource]:
+    """The example maps and the three ``made_maps.py`` makes (seed :data:`MADE_SEED`), as the CLI reads them."""
+    from made_maps import KINDS
+
+    from bearnav_cli.cli import read_map_source
+
+    out = {name: read_map_source(REPO_DIR / "maps" / f"{name}.yaml") for name in EXAMPLES}
+    for make in KINDS.values():
+        spec = make(MADE_SEED)
+        out[spec["name"]] = map_.MapSource(spec=spec, file=f"{spec['name']}.yaml", sha256="bench")
+    return out
+
+
 def load_map(path: Path) -> Map:
     """Build a normalised :class:`Map` from a bearnav map YAML.
 

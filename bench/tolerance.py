@@ -22,17 +22,13 @@ import argparse
 import statistics
 
 import numpy as np
-from common import REPO_DIR, machine_line, markdown_table, replace_section, timed
-from made_maps import KINDS
+from common import MADE_SEED, machine_line, markdown_table, measured_maps, replace_section, timed
 
 from bearnav_cli import pipeline
-from bearnav_cli.cli import read_map_source
 from bearnav_cli.datatypes import replace, tolerance_by_area
 from bearnav_cli.stages.map_ import MapSource
 
 SECTION = "tolerance"
-EXAMPLES = ("kitchen", "paper_sim_circles", "paper_b_circles", "storeroom")
-MADE_SEED = 0
 #: ebb27c2, rrtstar seeds 0–4: (δ* per seed, area-weighted median of min(δ_c, δ_e/2) per seed), map units.
 BEFORE = {
     "kitchen": ((0.0066804, 0.00822343, 0.00644271, 0.00847306, 0.00104566),
@@ -50,15 +46,6 @@ BEFORE = {
     "clutter0": ((0.00648037, 0.0030017, 0.00654673, 0.00191827, 0.00670012),
                  (0.00865284, 0.0030017, 0.00860553, 0.00191827, 0.00855049)),
 }  # fmt: skip
-
-
-def sources() -> dict[str, MapSource]:
-    """The measured maps as the CLI reads them (the made maps from their generators, in memory)."""
-    out = {name: read_map_source(REPO_DIR / "maps" / f"{name}.yaml") for name in EXAMPLES}
-    for make in KINDS.values():
-        spec = make(MADE_SEED)
-        out[spec["name"]] = MapSource(spec=spec, file=f"{spec['name']}.yaml", sha256="bench")
-    return out
 
 
 def measure(source: MapSource, seed: int, cover: str) -> dict:
@@ -107,7 +94,7 @@ def main() -> None:
     args = parser.parse_args()
     seeds = [int(s) for s in args.seeds.split(",")]
     rows = []
-    for name, source in sources().items():
+    for name, source in measured_maps().items():
         for cover in args.cover.split(","):
             rows.append(row(name, cover, [measure(source, s, cover) for s in seeds], seeds))
             print(" | ".join(rows[-1]), flush=True)
