@@ -216,7 +216,17 @@ def _warning_handler() -> type:
 
         def emit(self, record: logging.LogRecord) -> None:
             if not _Quiet.enabled or record.levelno >= logging.ERROR:
-                err.print(f"[yellow]warning:[/yellow] {record.getMessage()}", highlight=False, soft_wrap=True)
+                from rich.markup import escape
+
+                from bearnav_cli import pipeline
+
+                # which stage said it, of which file: a plan's five stages warn about one map
+                where = pipeline.ACTIVITY.stage or ""
+                if pipeline.ACTIVITY.file and where:
+                    where += f" of {pipeline.ACTIVITY.file}"
+                where = f"{escape(where)}: " if where else ""
+                err.print(f"[yellow]warning:[/yellow] {where}{escape(record.getMessage())}", highlight=False,
+                          soft_wrap=True)  # fmt: skip
 
     return _WarningHandler
 

@@ -158,14 +158,16 @@ class StageReport:
 
 @dataclass
 class Activity:
-    """The stage this process is working on, for the message of an interrupt.
+    """The stage this process is working on, for the message of an interrupt and of a warning.
 
-    ``stage`` is set when a stage starts (before its input is read); ``written`` once its output
-    is committed (artifacts.save's ``on_commit``, run with SIGINT held back).
+    ``stage`` is set when a stage starts (before its input is read), with ``file``, what it reads
+    (the map, or the artifact before it); ``written`` once its output is committed
+    (artifacts.save's ``on_commit``, run with SIGINT held back).
     """
 
     stage: str | None = None
     written: bool = False
+    file: str | None = None
 
 
 ACTIVITY = Activity()
@@ -173,11 +175,11 @@ ACTIVITY = Activity()
 
 def reset_activity() -> None:
     """Forget the current stage (:data:`ACTIVITY`): nothing is running, nothing written."""
-    ACTIVITY.stage, ACTIVITY.written = None, False
+    ACTIVITY.stage, ACTIVITY.written, ACTIVITY.file = None, False, None
 
 
-def _begin(stage: str) -> None:
-    ACTIVITY.stage, ACTIVITY.written = stage, False
+def _begin(stage: str, file: str | os.PathLike | None = None) -> None:
+    ACTIVITY.stage, ACTIVITY.written, ACTIVITY.file = stage, False, None if file is None else str(file)
 
 
 def _committed() -> None:
@@ -998,7 +1000,7 @@ def run_map(source: map_.MapSource, out: Path, overrides: dict | None = None, fo
         What happened: ran or kept, the map and its manifest.
     """
     stage = STAGE_BY_NAME["map"]
-    _begin("map")
+    _begin("map", source.file)
     out = Path(out)
     _check_outputs(stage, out, (source.file,), force)
     params = _map_stage_params(source, overrides)
@@ -1041,7 +1043,7 @@ def run_stage(
         What happened: ran or kept, the output and its manifest.
     """
     stage = STAGE_BY_NAME[name]
-    _begin(name)
+    _begin(name, input_path)
     out = Path(out) if out is not None else Path(input_path).with_name(stage.filename)
     _check_outputs(stage, out, (input_path,), force)
     with artifacts.output_folder(out.parent):
@@ -1125,7 +1127,7 @@ def plan(
     """
     overrides = overrides or {}
     out_dir = Path(out_dir)
-    _begin("map")
+    _begin("map", source if isinstance(source, Path) else source.file)
     names = tuple(stage.filename for stage in STAGES)
     artifacts.check_output_folder(out_dir, names)
     adopted = load(source, "map") if isinstance(source, Path) else None

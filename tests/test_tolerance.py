@@ -302,5 +302,5 @@ def test_coverage_of_f_short_because_of_a_narrow_passage_names_the_passage(caplo
     with caplog.at_level(logging.WARNING, logger="bearnav_cli.stages.decompose"):
         cells = pipeline.compute(build_map(spec), through="decompose")["cells"]
     assert cells.free_coverage < 0.9
-    said = [r.getMessage() for r in caplog.records if "of F (target" in r.getMessage()]
-    assert len(said) == 1 and "past passages narrower than 2m" in said[0], said
+    said = [r.getMessage() for r in caplog.records if "(of F; target" in r.getMessage()]
+    assert len(said) == 1 and "past passages narrower than" in said[0] and "twice the wall margin" in said[0], said

@@ -503,16 +503,18 @@ def _funnel_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) 
             uncovered_area = float(shapely.difference(domain, covered).area)
     unreached_area = max(float(full_domain.area) - domain_area, 0.0)
     if unreached_area > NEGLIGIBLE_SHARE * max(float(full_domain.area), 1e-300):
-        log.warning("%.1f%% of F_m (%.3g map units²) is cut off from every cell by passages narrower than "
-                    "2m = %.3g (a robot keeping the barrier margin cannot get there): coverage is of the rest; "
-                    "a smaller decompose.barrier_margin or a wider passage would join it",
+        log.warning("%.1f%% of the free space away from the walls (F_m, %.3g map units²) is cut off from every "
+                    "cell by passages narrower than %.3g, twice the wall margin (a robot keeping that margin cannot "
+                    "get there): coverage is of the rest; a smaller decompose.barrier_margin or a wider passage "
+                    "would join it",
                     100 * unreached_area / full_domain.area, unreached_area, 2 * margin)  # fmt: skip
     after = 1.0 - uncovered_area / domain_area if domain_area > 0 else 1.0
     # F_m's densification is done: its shortfall is warned of here (the band's cells can reach into parts
     # of F_m past passages narrower than 2m without covering them, which the F warning below explains)
     if after < params.coverage_target:
         log.warning(
-            "the cells cover %.1f%% of F_m (target %.1f%%): %d pockets no node reaches with clearance%s",
+            "the cells cover %.1f%% of the free space away from the walls (F_m; target %.1f%%): %d pockets no node "
+            "reaches with clearance%s",
             100 * after,
             100 * params.coverage_target,
             len(unreachable),
@@ -554,13 +556,13 @@ def _funnel_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) 
     if free_after < params.coverage_target and params.cover == "F":
         # the part of F_m past passages narrower than 2m (warned above) is not a band the leaves can fill
         cut_off = unreached_area > NEGLIGIBLE_SHARE * max(free_area, 1e-300)
-        why = (f"{100 * unreached_area / free_area:.1f}% of F lies past passages narrower than 2m = {2 * margin:.3g} "
-               "that no tree edge crosses (a smaller decompose.barrier_margin would join it); the rest" if cut_off
-               else "the rest")  # fmt: skip
-        log.warning("the cells cover %.1f%% of F (target %.1f%%): %s lies within the barrier margin %.3g of an "
-                    "obstacle or a wall%s", 100 * free_after, 100 * params.coverage_target, why, margin,
+        why = (f"{100 * unreached_area / free_area:.1f}% of the free space lies past passages narrower than "
+               f"{2 * margin:.3g} (twice the wall margin) that no tree edge crosses (a smaller "
+               "decompose.barrier_margin would join it); the rest" if cut_off else "the rest")  # fmt: skip
+        log.warning("the cells cover %.1f%% of the free space (of F; target %.1f%%): %s lies within the wall margin "
+                    "%.3g of an obstacle or a wall%s", 100 * free_after, 100 * params.coverage_target, why, margin,
                     (f", in {band_unreachable} pockets no node reaches with clearance {0.5 * depth_q:.3g}"
-                     + (f" by a cell that keeps the plan's least usable tolerance {floor:.3g} ({len(refused)} such "
+                     + (f" by a cell that tolerates the plan's least position error {floor:.3g} ({len(refused)} such "
                         "cells were left out)" if refused else ""))
                     if band_unreachable else " (the max_added_nodes limit was reached)")  # fmt: skip
     if capped:
