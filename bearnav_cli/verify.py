@@ -769,16 +769,17 @@ class VerifyReport:
         if comp is not None:
             tau = comp.usable_by_area
             text = (f"{certified}/{n} funnel cells certified, composition {'proved' if comp.ok else 'FAILS'}, "
-                    f"{100 * comp.coverage_free:.1f}% of F ({100 * comp.coverage:.1f}% of F_m) covered, usable "
-                    f"tolerance τ_c ≥ {comp.plan_tolerance:.3g} (by area: median {tau['median']:.3g}, 10% below "
-                    f"{tau['p10']:.3g}), worst-case time to goal {duration_text(comp.time_bound)}")  # fmt: skip
+                    f"{100 * comp.coverage_free:.1f}% of the free space covered ({100 * comp.coverage:.1f}% of it "
+                    f"away from the walls), a position error of {comp.plan_tolerance:.3g} tolerated everywhere "
+                    f"({tau['median']:.3g} at the median point, under {tau['p10']:.3g} on 10% of the area), "
+                    f"worst-case time to goal {duration_text(comp.time_bound)}")  # fmt: skip
             if self.rollouts is not None and len(self.rollouts):
                 d = self.in_domain
                 ok = self.rollouts.outcome == Outcome.SUCCESS
-                text += f"; from D {int(ok[d].sum())}/{int(d.sum())} reached the goal"
-                text += f", from outside D (uncertified) {int(ok[~d].sum())}/{int((~d).sum())}"
+                text += f"; from the certified area {int(ok[d].sum())}/{int(d.sum())} reached the goal"
+                text += f", from outside it (uncertified) {int(ok[~d].sum())}/{int((~d).sum())}"
                 if self.breaches is not None:
-                    text += f", {int(self.breaches.sum())} breaches from D"
+                    text += f", {int(self.breaches.sum())} left the certified area"
             return text + self._unreached_text() + ("; FAILED" if self.failed else "")
         text = f"{certified}/{n} cells certified, coverage {'ok' if self.geometry.coverage_ok else 'FAILS'}"
         if self.rollouts is not None:
@@ -985,17 +986,21 @@ def guarantee(plan: Plan, report: VerifyReport) -> str:
     tol = comp.usable_by_area
     eta = float(robot["bearing_error_deg"]) + float(robot["compass_error_deg"] or 0.0)
     if report.liveness is not None:
-        measured += f", and liveness: {report.liveness.live_fraction:.0%} of D sure of a good enough look"
-    proven = (f"proven from the plan file, {who} that starts in D ({percent(comp.coverage_free)} of F) and knows "
-              f"its position, in the cell it is in, to within τ_c (≥ {comp.plan_tolerance:.3g} map units, median "
-              f"{tol['median']:.3g}) reaches the goal without touching an obstacle or a wall, at speed "
-              f"{comp.speed:g} map units/s in {duration_text(comp.time_bound)} (a worst case, from the least "
-              "progress each cell's certificate guarantees, not an estimate of a run's time)")  # fmt: skip
+        measured += (f", and at η = {math.degrees(report.liveness.grid.eta):.3g}°: "
+                     f"{report.liveness.live_fraction:.0%} of the certified area where a look all around is sure to "
+                     "be good enough (on a grid)")  # fmt: skip
+    proven = (f"proven from the plan file, {who} that starts in the certified area ({percent(comp.coverage_free)} of "
+              f"the free space) and knows its position to within what the cell it is in tolerates (at least "
+              f"{comp.plan_tolerance:.3g} map units, {tol['median']:.3g} at the median point) reaches the goal "
+              f"without touching an obstacle or a wall, at speed {comp.speed:g} map units/s in "
+              f"{duration_text(comp.time_bound)} (a worst case, from the least progress each cell's certificate "
+              "guarantees, not an estimate of a run's time)")  # fmt: skip
     bounded = (f"with bearings erring by at most η = {eta:g}° and wheel slip within {robot['slip']:g} of each step "
                "(the map's robot section) the `simulate --estimator set` robot moves only where it knows that much, "
-               "but that it always gets a good enough look is not proven")  # fmt: skip
-    uncovered = ("not covered: starts outside D, errors beyond those bounds, places where the camera sees fewer "
-                 "than two tags (`bearnav verify --fov F` measures them)")  # fmt: skip
+               "and never gets stuck where a look all around is good enough (`--live-fov F` measures where; "
+               "`bearnav tags --for live` adds tags until it is everywhere)")  # fmt: skip
+    uncovered = ("not covered: starts outside the certified area, errors beyond those bounds, places where the camera "
+                 "sees fewer than two tags (`bearnav verify --fov F` measures them)")  # fmt: skip
     return f"guarantee: {proven}; {bounded}; {measured}; {uncovered}"
 
 

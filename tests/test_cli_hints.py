@@ -300,8 +300,9 @@ def test_verify_ends_with_what_is_proven_measured_and_not_covered(cli, built):
     result = cli("verify", built["plan"], "--starts", "2")
     assert result.exit_code == 0, result.output
     line = next(line for line in result.output.splitlines() if line.strip().startswith("guarantee:"))
-    for words in ("proven from the plan file", f"radius {plan.map.robot_radius:g}", "starts in D", "τ_c",
-                  "a worst case", "η = 0.2°", "measured only: 2 closed-loop runs", "not covered"):  # fmt: skip
+    for words in ("proven from the plan file", f"radius {plan.map.robot_radius:g}", "starts in the certified area",
+                  "tolerates", "a worst case", "η = 0.2°", "measured only: 2 closed-loop runs",
+                  "not covered"):  # fmt: skip
         assert words in line, (words, line)
     assert "worst-case time to goal ≤" in result.output  # the summary labels the loose bound too
     quiet = cli("-q", "verify", built["plan"], "--starts", "0")

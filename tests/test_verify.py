@@ -320,7 +320,7 @@ def test_the_unicycle_closed_loop_from_the_certified_domain_has_no_collision_and
     # an obstacle, so they are few; their runs are measured, not asserted
     assert (~report.in_domain).sum() <= 0.05 * len(report.in_domain)
     assert not report.failed, report.reasons
-    assert report.to_json()["monte_carlo"]["breaches"] == 0 and "0 breaches from D" in report.summary()
+    assert report.to_json()["monte_carlo"]["breaches"] == 0 and "0 left the certified area" in report.summary()
     with pytest.raises(InvalidParamsError) as err:
         verify.Params(dynamics="car")
     assert err.value.field == "dynamics"
