@@ -160,9 +160,14 @@ class StageReport:
 class Activity:
     """The stage this process is working on, for the message of an interrupt and of a warning.
 
-    ``stage`` is set when a stage starts (before its input is read), with ``file``, what it reads
-    (the map, or the artifact before it); ``written`` once its output is committed
-    (artifacts.save's ``on_commit``, run with SIGINT held back).
+    Attributes
+    ----------
+    stage : str or None
+        Set when a stage starts, before its input is read.
+    written : bool
+        Set once its output is committed (artifacts.save's ``on_commit``, run with SIGINT held back).
+    file : str or None
+        What the stage reads: the map, or the artifact before it (warnings name it).
     """
 
     stage: str | None = None

@@ -323,14 +323,17 @@ def check_bounded_errors(plan, seed: int, worst: bool) -> None:
     """Issue 22 on a random plan: the set estimator from D with a 60° camera, every bearing error within 0.25°
     (or at it, toward the nearest face): no collision, the truth never outside its set, no empty set, every
     moving step certified but those at the edge of D (a start whose estimate no cell eroded by e holds), and a
-    run that does not arrive is lost or out of time, never stalled (the maps' own few tags leave cells not live:
+    run that does not arrive is lost or out of steps, never stalled (the maps' own few tags leave cells not live:
     ``bearnav tags --for live`` is what makes every look good enough, measured in bench/README.md)."""
-    params = simulate.Params(starts="domain:3", fov=60.0, estimator="set", noise_bound_deg=0.25, noise_worst=worst,
-                             seed=seed, speed=SPEED, record_trajectories=False)  # fmt: skip
+    # 400 steps a run (the suite's time): the properties are of every step taken, not of arriving
+    params = simulate.Params(starts="domain:2", fov=60.0, estimator="set", noise_bound_deg=0.25, noise_worst=worst,
+                             seed=seed, speed=SPEED, max_steps=400, record_trajectories=False)  # fmt: skip
     stats = simulate.run(plan, params).stats
     assert stats["outcomes"]["collision"] == 0 and stats["outcomes"]["stall"] == 0, stats["outcomes"]
     assert stats["containment_violations"] == 0 and stats["inconsistencies"] == 0
-    assert stats["estimator_counts"]["moved_steps"] == 0 or stats["certified_step_fraction"] >= 0.99
+    moved = stats["estimator_counts"]["moved_steps"]
+    uncertified = moved - round(stats["certified_step_fraction"] * moved)
+    assert uncertified <= 2 + 0.01 * moved, (uncertified, moved)  # the first steps of a start at the edge of D
 
 
 def test_same_seed_same_plan():

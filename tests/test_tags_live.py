@@ -94,7 +94,7 @@ def test_an_unknown_target_is_refused():
 def test_cli_tags_for_live(cli, write_map, small_spec, tmp_path):
     plan = _plan(cli, write_map, small_spec, tmp_path)
     out = tmp_path / "live.yaml"
-    result = cli("tags", plan, "--for", "live", "--bearing-error-deg", "0.3", "--live-resolution", "0.2", "-o", out,
+    result = cli("tags", plan, "--for", "live", "--bearing-error-deg", "0.3", "--live-resolution", "0.3", "-o", out,
                  "--json")  # fmt: skip
     assert result.exit_code in (0, 1), result.output
     data = json.loads(result.output) if result.exit_code == 0 else None
