@@ -81,7 +81,7 @@ def test_tags_extends_a_map_that_names_an_occupancy_grid(cli, tmp_path):
     from bearnav_cli.cli import _tags_output
     from tests import mapgen
 
-    made = mapgen.generate(0, "grid", params={"rrtstar": {"iterations": 300, "seed": 0}})
+    made = mapgen.generate(4, "grid", params={"rrtstar": {"iterations": 300, "seed": 0}})  # a small one: 0.4 s
     source = made.write(tmp_path / "maps")
     cli("plan", source, "-o", tmp_path / "p", "-q")
     plan = tmp_path / "p" / "plan.npz"
