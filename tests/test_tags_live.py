@@ -20,7 +20,7 @@ from .test_cli_errors import assert_one_line_error
 from .test_cli_tags import _plan
 
 #: A coarse liveness grid (fraction of D): the properties hold on any grid.
-COARSE = 0.03
+COARSE = 0.05
 SEEDS = (1,)
 
 
