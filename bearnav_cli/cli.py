@@ -2118,9 +2118,10 @@ def tags_command(
             fix = (f"--max-tags {max_tags} allowed too few (at least {proposal.lower_bound} are needed); "
                    f"`{again}` places as many as the rule needs")  # fmt: skip
         else:
-            fix = ("the rest of D sees no wall or obstacle a tag could go on in view: a wider --fov, a longer "
+            fix = ("the rest sees no wall or obstacle a tag could go on in view: a wider --fov, a longer "
                    "--range or a lower --error-target")  # fmt: skip
-        raise _fail(f"the rule still fails on {percent(short)} of D: {fix}; {out_path} has the tags placed",
+        raise _fail(f"two usable tags are still not in view on {percent(short)} of the certified area: {fix}; "
+                    f"{out_path} has the tags placed",
                     EXIT_OUTCOME)  # fmt: skip
 
 

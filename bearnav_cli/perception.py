@@ -420,10 +420,11 @@ class PerceptionCoverage:
         target = "" if self.error_target is None else f", error ≤ {self.error_target:g}"
         rng = "" if not math.isfinite(self.max_range) else f", range {self.max_range:g}"
         return (f"{plural(len(self.landmarks), 'tag')}, {self.fov_deg:g}° camera{rng}, {self.noise_deg:g}° noise"
-                f"{target}: two usable tags in view from {percent(self.fraction_domain)} of D and "
-                f"{percent(self.fraction_free)} of F; "
-                f"one fix's median predicted error {self.median_error_domain:.3g} in D, below the plan's least "
-                f"position tolerance τ_c = {self.plan_tolerance:.3g} on {percent(self.fraction_within_tolerance)} of D "
+                f"{target}: two usable tags in view from {percent(self.fraction_domain)} of the certified area and "
+                f"{percent(self.fraction_free)} of the free space; "
+                f"one fix's median predicted error {self.median_error_domain:.3g} in the certified area, below the "
+                f"plan's least position tolerance {self.plan_tolerance:.3g} on "
+                f"{percent(self.fraction_within_tolerance)} of it "
                 "(a run does not rest on one fix: it fuses fixes with odometry, which `bearnav simulate` measures "
                 "and nothing here proves)")  # fmt: skip
 
@@ -588,8 +589,8 @@ class HeadingCoverage:
         """One line: the camera and the fractions of ``F`` where some heading and where every heading sees a pair."""
         rng = "" if not math.isfinite(self.max_range) else f", range {self.max_range:g}"
         return (f"{plural(len(self.landmarks), 'tag')}, {self.fov_deg:g}° camera{rng}: two usable tags in view from "
-                f"{percent(self.fraction_some)} of F with some heading and {percent(self.fraction_every)} of F with "
-                f"every heading; {len(self.blind)} of {len(self.points)} grid points blind")  # fmt: skip
+                f"{percent(self.fraction_some)} of the free space with some heading and {percent(self.fraction_every)} "
+                f"of it with every heading; {len(self.blind)} of {len(self.points)} grid points blind")  # fmt: skip
 
 
 def _critical_headings(points: np.ndarray, reach: np.ndarray, landmarks: np.ndarray,

@@ -401,10 +401,11 @@ class TagProposal:
                 + (f"; {percent(uncovered)} of the grid cannot be made live by any tag" if uncovered > 0 else "")
             )
         return (f"{plural(self.count, 'new tag')} (lower bound {self.lower_bound}) to the "
-                f"{len(self.before.landmarks)} of the map, {reached}: rule holds on "
-                f"{percent(self.before.fraction_domain)} → {percent(self.after.fraction_domain)} of D and "
-                f"{percent(self.before.fraction_free)} → {percent(self.after.fraction_free)} of F"
-                + (f"; {percent(uncovered)} of D cannot be covered" if uncovered > 0 else ""))  # fmt: skip
+                f"{len(self.before.landmarks)} of the map, {reached}: two usable tags in view on "
+                f"{percent(self.before.fraction_domain)} → {percent(self.after.fraction_domain)} of the certified area "
+                f"and {percent(self.before.fraction_free)} → {percent(self.after.fraction_free)} of the free space"
+                + (f"; {percent(uncovered)} of the certified area cannot be covered" if uncovered > 0
+                   else ""))  # fmt: skip
 
 
 def new_tag_ids(existing: Any, count: int) -> tuple[str, ...]:

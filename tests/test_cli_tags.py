@@ -33,7 +33,7 @@ def test_tags_writes_a_map_with_the_new_tags_and_a_figure(cli, write_map, small_
     assert spec["landmarks"][:2] == kept and all(t["facing"] is not None for t in kept)
     new_map = map_.run(read_map_source(out))  # the map stage accepts it as it is
     assert len(new_map.landmarks) == len(ids)
-    assert "new tags" in result.output and "rule holds on" in result.output
+    assert "new tags" in result.output and "two usable tags in view on" in result.output
 
 
 def test_tags_with_too_few_tags_allowed_reports_and_exits_1(cli, write_map, small_spec, tmp_path):

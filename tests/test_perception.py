@@ -109,7 +109,7 @@ def test_rule_matches_an_independent_evaluation(name, make):
     within = np.mean((cov.usable & (cov.predicted_error <= plan.plan_tolerance))[cov.in_domain])
     assert cov.fraction_within_tolerance == pytest.approx(within)
     assert len(cov.failing_domain) == np.sum(cov.in_domain & ~cov.holds)
-    assert str(len(lm)) in cov.summary() and "of D" in cov.summary()
+    assert str(len(lm)) in cov.summary() and "of the certified area" in cov.summary()
 
 
 def test_the_rule_grows_with_the_camera_and_shrinks_with_an_error_target():
@@ -269,7 +269,7 @@ def test_heading_coverage_matches_a_brute_force_over_headings(seed, fov, max_ran
     assert cov.fraction_some == pytest.approx(np.mean(cov.some))
     assert cov.fraction_every == pytest.approx(np.mean(cov.every))
     assert len(cov.blind) == np.sum(~cov.some) and len(cov.heading_dependent) == np.sum(cov.some & ~cov.every)
-    assert f"{percent(cov.fraction_some)} of F with some heading" in cov.summary()
+    assert f"{percent(cov.fraction_some)} of the free space with some heading" in cov.summary()
 
 
 def test_heading_coverage_grows_with_tags_camera_and_range():
