@@ -391,6 +391,7 @@ class FreeSpace:
         far = 4.0 * float(np.hypot(*(outer[2:] - outer[:2])))
         rings = []
         for part in shapely.get_parts(self.raw_obstacles):
+            part = shapely.orient_polygons(part)  # exterior CCW, holes CW: the obstacle is on every edge's left
             for ring in (part.exterior, *part.interiors):
                 xy = np.asarray(ring.coords)
                 rings.append(np.stack([xy[:-1], xy[1:]], axis=1))
@@ -402,7 +403,10 @@ class FreeSpace:
                 continue
             da, db = edges[:, 0] - lm, edges[:, 1] - lm
             na, nb = np.hypot(*da.T), np.hypot(*db.T)
-            keep = (na > self.tol) & (nb > self.tol)  # an edge ending at the tag casts no shadow
+            # a segment from the tag that meets an obstacle leaves it last through an edge whose obstacle side
+            # faces the tag: those edges' shadows and the obstacle make the whole shadow (half the pieces)
+            back = da[:, 0] * db[:, 1] - da[:, 1] * db[:, 0] > 0.0  # the tag on the edge's left: (a−l)×(b−l) > 0
+            keep = (na > self.tol) & (nb > self.tol) & back  # an edge ending at the tag casts no shadow
             a, b = edges[keep, 0], edges[keep, 1]
             ua, ub = da[keep] / na[keep, None], db[keep] / nb[keep, None]
             quads = np.stack([a, b, b + far * ub, a + far * ua], axis=1)

@@ -322,6 +322,38 @@ def test_the_back_of_a_thin_wall_shadows_a_tag_on_its_front():
     assert not exact[pts[:, 0] < 1.0].any() and exact[pts[:, 0] > 2.1].all()
 
 
+@pytest.mark.parametrize("kind", ["rooms", "grid", "clutter"])
+def test_visibility_regions_agree_on_made_maps_and_a_ring(kind):
+    """The shadows come from the edges whose obstacle side faces the tag (a segment leaves an obstacle last
+    through one): the regions still say what the segment test says, on made maps (tags on walls and
+    obstacles, and anywhere) and around a ring-shaped obstacle (a hole's edges face the other way)."""
+    import shapely
+
+    from tests import mapgen
+    from tests.conftest import build_made, build_map
+
+    space = FreeSpace.from_map(build_made(mapgen.generate(3, kind)))
+    frame = {"name": "frame", "bounds": [0, 0, 8, 8], "goal": [1, 1], "landmarks": [[0, 8], [8, 0], [8, 8]],
+             "obstacles": [{"rectangle": [2, 2, 6, 3]}, {"rectangle": [2, 5, 6, 6]}, {"rectangle": [2, 3, 3, 5]},
+                           {"rectangle": [5, 3, 6, 5]}]}  # fmt: skip
+    ring = FreeSpace.from_map(build_map(frame))
+    assert len(shapely.get_parts(ring.raw_obstacles)[0].interiors) == 1  # the four walls make one ring
+    rng = np.random.default_rng(7)
+    for sp in (space, ring):
+        x0, y0, x1, y1 = sp.bounds
+        boundary = shapely.boundary(sp.raw_obstacles)
+        on_edges = np.asarray(shapely.get_coordinates(shapely.line_interpolate_point(
+            boundary, rng.uniform(0, 1, 6), normalized=True)))  # fmt: skip
+        tags = np.vstack([on_edges, rng.uniform([x0, y0], [x1, y1], (6, 2))])
+        pts = rng.uniform([x0, y0], [x1, y1], (1500, 2))
+        pts = pts[sp.points_free(pts)]
+        regions = sp.visibility_regions(tags)
+        for tag, region in zip(tags, regions, strict=True):
+            exact = sp.visible(pts, np.repeat(tag[None], len(pts), 0))
+            fast = shapely.intersects_xy(region, pts[:, 0], pts[:, 1])
+            assert np.mean(exact != fast) <= 0.002, (kind, tag)  # shadow boundaries only
+
+
 def test_controller_reports_arrival_and_needs_a_heading(plans):
     plan, path = plans["kitchen"]
     robot = runtime.Controller.from_plan(str(path), dynamics="unicycle")
