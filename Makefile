@@ -42,15 +42,18 @@ test: $(STAMP)
 	$(BIN)/ruff format --check .
 	$(BIN)/python -m pytest -n auto
 
+# the benchmarks import the repository's tests/mapgen.py (the maps nobody tuned): the root on the path
+BENCH := PYTHONPATH=. $(BIN)/python
+
 bench: $(STAMP)
 	$(BIN)/python -m pip install --quiet ompl
-	$(BIN)/python bench/rrtstar.py
-	$(BIN)/python bench/synthesize.py --readme
-	$(BIN)/python bench/simulate.py --readme
-	$(BIN)/python bench/plan.py --readme
-	$(BIN)/python bench/tolerance.py --readme
-	$(BIN)/python bench/bounded.py --readme --maps kitchen
-	$(BIN)/python bench/sweep.py --readme
+	$(BENCH) bench/rrtstar.py
+	$(BENCH) bench/synthesize.py --readme
+	$(BENCH) bench/simulate.py --readme
+	$(BENCH) bench/plan.py --readme
+	$(BENCH) bench/tolerance.py --readme
+	$(BENCH) bench/bounded.py --readme --maps kitchen
+	$(BENCH) bench/sweep.py --readme
 
 # The robot's distribution, bearnav-runtime (numpy only): dist/bearnav_runtime-VERSION-py3-none-any.whl
 # (docs/runtime.md). Standard library only: no venv, build backend or network needed.
