@@ -2020,8 +2020,7 @@ def tags_command(
     artifacts.check_output_file(figure, FIGURE_SUFFIXES, "--figure")
     artifacts.check_distinct({"-o/--out": out_path, "--figure": figure})
     options = {**CAMERA_OPTIONS, "error_target": "--error-target", "max_tags": "--max-tags", "target": "--for",
-               "eta_deg": "--bearing-error-deg", "kappa": "--slip", "resolution": "--live-resolution",
-               "plan": "PLAN_NPZ"}  # fmt: skip
+               "eta_deg": "--bearing-error-deg", "kappa": "--slip", "resolution": "--live-resolution"}  # fmt: skip
     if target != "live" and (bearing_error_deg is not None or slip is not None or live_resolution is not None):
         raise _fail("--bearing-error-deg, --slip and --live-resolution are for --for live", EXIT_INVALID)
     try:
@@ -2049,7 +2048,8 @@ def tags_command(
     try:
         proposal = tags.propose(plan, params)
     except InvalidParamsError as exc:  # liveness's own checks: η, the slip, a paper plan
-        raise _fail(f"{plan_npz}: {options.get(exc.field, exc.field)}: {exc.reason}", EXIT_INVALID) from None
+        where = "" if exc.field == "plan" else f"{options.get(exc.field, exc.field)}: "
+        raise _fail(f"{plan_npz}: {where}{exc.reason}", EXIT_INVALID) from None
     name = tags.tagged_name(str(spec.get("name", plan.map.name)))  # another name: re-planning it makes its own folder
     new_spec = tags.map_spec_with_tags(spec, proposal)
     new_spec = {"name": name, **{key: value for key, value in new_spec.items() if key != "name"}}

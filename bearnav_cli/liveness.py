@@ -472,8 +472,8 @@ def grid(plan: Plan, eta_deg: float | None = None, fov_deg: float = 60.0, kappa:
 
     arrays = PlanArrays.from_plan(plan)
     if not arrays.funnel:
-        raise InvalidParamsError("liveness needs a funnel plan (a paper plan has no usable tolerance τ_c)",
-                                 field="plan")  # fmt: skip
+        raise InvalidParamsError("liveness needs a funnel plan (the papers' cells state no position error they "
+                                 "tolerate)", field="plan")  # fmt: skip
     if resolution is None:
         resolution = default_resolution(arrays, diagonal)
     resolution = _number(resolution, "resolution", low=1e-6 * diagonal, high=diagonal)
