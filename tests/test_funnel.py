@@ -325,9 +325,9 @@ def check_bounded_errors(plan, seed: int, worst: bool) -> None:
     moving step certified but those at the edge of D (a start whose estimate no cell eroded by e holds), and a
     run that does not arrive is lost or out of steps, never stalled (the maps' own few tags leave cells not live:
     ``bearnav tags --for live`` is what makes every look good enough, measured in bench/README.md)."""
-    # 400 steps a run (the suite's time): the properties are of every step taken, not of arriving
+    # 300 steps a run (the suite's time): the properties are of every step taken, not of arriving
     params = simulate.Params(starts="domain:1", fov=60.0, estimator="set", noise_bound_deg=0.25, noise_worst=worst,
-                             seed=seed, speed=SPEED, max_steps=400, record_trajectories=False)  # fmt: skip
+                             seed=seed, speed=SPEED, max_steps=300, record_trajectories=False)  # fmt: skip
     stats = simulate.run(plan, params).stats
     assert stats["outcomes"]["collision"] == 0 and stats["outcomes"]["stall"] == 0, stats["outcomes"]
     assert stats["containment_violations"] == 0 and stats["inconsistencies"] == 0

@@ -75,8 +75,9 @@ def test_where_no_tag_helps_is_reported_not_claimed(proposal):
 
 def test_a_budget_is_kept():
     plan = random_plan(SEEDS[0])
-    p = tags.propose_live_tags(plan, live_params(plan, max_tags=1))
-    assert p.count <= 1
+    coarse = tags.Params(target="live", bearing_error_deg=0.5, resolution=0.1 * plan.map.diagonal, max_tags=1)
+    p = tags.propose_live_tags(plan, coarse)
+    assert p.count <= 1 and not p.target_reached
 
 
 def test_a_paper_plan_has_no_liveness():
