@@ -395,7 +395,7 @@ class TagProposal:
             b, a = self.live_before, self.live_after
             return (
                 f"{plural(self.count, 'new tag')} to the {len(self.before.landmarks)} of the map, {reached}: "
-                f"live on {percent(b.live_fraction)} → {percent(a.live_fraction)} of D at η = "
+                f"live on {percent(b.live_fraction)} → {percent(a.live_fraction)} of the certified area at η = "
                 f"{math.degrees(a.grid.eta):.3g}° ({b.n_live} → {a.n_live} of {len(a.live)} cells); certified bearing "
                 f"error η* {math.degrees(b.eta_star):.3g}° → {math.degrees(a.eta_star):.3g}°"
                 + (f"; {percent(uncovered)} of the grid cannot be made live by any tag" if uncovered > 0 else "")
