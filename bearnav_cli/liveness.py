@@ -258,10 +258,6 @@ class LiveGrid:
         return _bounds_of(self.arrays, x, np.asarray(visible, bool), np.full(len(x), self.eta),
                           np.asarray(landmarks, float).reshape(-1, 2))  # fmt: skip
 
-    def look_bounds(self, landmarks: np.ndarray, points: np.ndarray | None = None) -> np.ndarray:
-        """``ε(x, S_all(x))`` at the grid points (or at ``points``), shape (P,) map units, with ``landmarks`` (L, 2)."""
-        return self.look(landmarks, points)[1]
-
     def look(self, landmarks: np.ndarray, points: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """What a look all around sees, (P, L) bool, and its bound ``ε(x, S_all(x))``, (P,) map units (§12.5)."""
         x = self.points if points is None else np.asarray(points, float).reshape(-1, 2)
@@ -528,14 +524,25 @@ def measure(plan: Plan, eta_deg: float | None = None, fov_deg: float = 60.0, kap
     return evaluate(grid(plan, eta_deg, fov_deg, kappa, nu, speed, resolution, headings, max_range), landmarks)
 
 
-def evaluate(g: LiveGrid, landmarks: np.ndarray | None = None) -> Liveness:
-    """The liveness of the cells on the grid ``g`` with the landmarks ``landmarks`` (L, 2; default the plan's)."""
+def evaluate(g: LiveGrid, landmarks: np.ndarray | None = None,
+             look: tuple[np.ndarray, np.ndarray] | None = None) -> Liveness:  # fmt: skip
+    """The liveness of the cells on a grid with a set of landmarks.
+
+    Parameters
+    ----------
+    g : LiveGrid
+        The grid, the plan and the bounds (:func:`grid`).
+    landmarks : ndarray, shape (L, 2), optional
+        The landmarks (map units); default the plan's.
+    look : tuple of ndarray, optional
+        ``g.look(landmarks)``, when the caller has it already.
+    """
     arrays, points, pair_cell, pair_point, margin, eta = g.arrays, g.points, g.pair_cell, g.pair_point, g.margin, g.eta
     lm = arrays.landmarks if landmarks is None else np.asarray(landmarks, float).reshape(-1, 2)
     n_cells = len(margin)
     polygons = list(g.polygons)
     # a look ends with a turn all around (§12.5): its set lies in the cones of every landmark in sight
-    all_vis, eps_all = g.look(lm)
+    all_vis, eps_all = g.look(lm) if look is None else look
     eps_look = _cell_max(eps_all[pair_point], pair_cell, n_cells)
     live = eps_look < margin
     cell_eta = _eta_star(arrays, lm, points, pair_cell, pair_point, all_vis, eps_look, margin, eta, live)

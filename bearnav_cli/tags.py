@@ -537,6 +537,26 @@ def _gains(chosen: list[int], pairs: _Pairs, sums: _Sums, rule: _Rule) -> np.nda
     return np.array(out, np.int64)
 
 
+def _rule(
+    grid: EvaluationGrid,
+    map_: Any,
+    params: Params,
+    sight: list,
+    positions: np.ndarray | None = None,
+    ids: tuple = (),
+    new_sight: list | None = None,
+) -> PerceptionCoverage:
+    """The perception rule at ``params``' camera with the map's tags (their ``sight``) and new ones at ``positions``."""
+    camera = dict(fov_deg=params.fov_deg, noise_deg=params.noise_deg, max_range=params.max_range,
+                  error_target=params.error_target, min_spread_deg=params.min_spread_deg)  # fmt: skip
+    if positions is None or not len(positions):
+        landmarks, landmark_ids, seen = map_.landmarks, map_.landmark_ids, sight
+    else:
+        landmarks = np.vstack([map_.landmarks, positions])
+        landmark_ids, seen = (*map_.landmark_ids, *ids), sight + list(new_sight)
+    return perception.evaluate(grid, landmarks, landmark_ids, sight=seen, **camera)
+
+
 def propose_tags(plan: Any, params: Params = Params()) -> TagProposal:
     """New tags so that the perception rule holds wherever it can in the certified domain (issue 11, part 1).
 
@@ -563,10 +583,8 @@ def propose_tags(plan: Any, params: Params = Params()) -> TagProposal:
     map_ = plan.map
     width = params.width(map_.diagonal)
     grid: EvaluationGrid = perception.evaluation_grid(plan, params.spacing)
-    camera = dict(fov_deg=params.fov_deg, noise_deg=params.noise_deg, max_range=params.max_range,
-                  error_target=params.error_target, min_spread_deg=params.min_spread_deg)  # fmt: skip
     existing_sight = grid.space.visibility_regions(map_.landmarks)
-    before = perception.evaluate(grid, map_.landmarks, map_.landmark_ids, sight=existing_sight, **camera)
+    before = _rule(grid, map_, params, existing_sight)
 
     cand = candidates(map_, width, grid.space)
     sight = grid.space.visibility_regions(cand.positions)
@@ -608,8 +626,7 @@ def propose_tags(plan: Any, params: Params = Params()) -> TagProposal:
     idx = np.array(chosen, np.int64)
     ids = new_tag_ids(map_.landmark_ids, len(idx))
     positions = cand.positions[idx].reshape(-1, 2)
-    after = perception.evaluate(grid, np.vstack([map_.landmarks, positions]), (*map_.landmark_ids, *ids),
-                                sight=existing_sight + [sight[k] for k in idx], **camera)  # fmt: skip
+    after = _rule(grid, map_, params, existing_sight, positions, ids, [sight[k] for k in idx])
     return TagProposal(
         ids=ids, positions=positions, normals=cand.normals[idx].reshape(-1, 2), gains=gains, before=before,
         after=after, lower_bound=lower_bound, lp_objective=lp_objective, uncoverable=xd[~coverable],
@@ -784,15 +801,11 @@ def propose_live_tags(plan: Any, params: Params = Params(target="live")) -> TagP
     idx = np.array(chosen, np.int64)
     ids = new_tag_ids(map_.landmark_ids, len(idx))
     positions = cand.positions[idx].reshape(-1, 2)
-    live_before = liveness.evaluate(g, existing)
+    live_before = liveness.evaluate(g, existing, look=(visible0, eps0))
     live_after = liveness.evaluate(g, np.vstack([existing, positions]))
-    camera = dict(fov_deg=params.fov_deg, noise_deg=params.noise_deg, max_range=params.max_range,
-                  error_target=params.error_target, min_spread_deg=params.min_spread_deg)  # fmt: skip
     existing_sight = pe_grid.space.visibility_regions(map_.landmarks)
-    before = perception.evaluate(pe_grid, map_.landmarks, map_.landmark_ids, sight=existing_sight, **camera)
-    new_sight = pe_grid.space.visibility_regions(positions)
-    after = perception.evaluate(pe_grid, np.vstack([map_.landmarks, positions]), (*map_.landmark_ids, *ids),
-                                sight=existing_sight + new_sight, **camera)  # fmt: skip
+    before = _rule(pe_grid, map_, params, existing_sight)
+    after = _rule(pe_grid, map_, params, existing_sight, positions, ids, pe_grid.space.visibility_regions(positions))
     stuck = np.concatenate([unfixable, failing[~coverable]])
     return TagProposal(
         ids=ids, positions=positions, normals=cand.normals[idx].reshape(-1, 2), gains=np.array(gains, np.int64),
