@@ -681,18 +681,18 @@ def simulation_steps(report: "pipeline.StageReport", plan_npz: Path, min_success
     params = dict((report.manifest or {}).get("params") or {})
     counts = report.artifact.counts()
     steps = []
-    if counts.get("lost") and params.get("estimator") == "set":
+    if counts.get("lost"):
         fov, max_range = float(params.get("fov", 360.0)), params.get("range")
-        eta = params.get("bearing_error_deg") or params.get("noise_bound_deg")
-        words = ("--for", "live", *(["--bearing-error-deg", f"{eta:g}"] if eta else []))
-        steps.append("lost: a look all around left the error bound above what the cell tolerates (the cell is not "
-                     "live at these bounds); add tags until every cell is: " + tags_step(plan_npz, fov, max_range,
-                                                                                         tags_words=words))  # fmt: skip
-    elif counts.get("lost"):
-        fov, max_range = float(params.get("fov", 360.0)), params.get("range")
-        hold = params.get("hold_time", 2.0)
-        steps.append(f"lost: the camera saw fewer than two usable tags for --hold-time {hold:g} s (a {fov:g}° "
-                     "camera); add tags: " + tags_step(plan_npz, fov, max_range))  # fmt: skip
+        if params.get("estimator") == "set":
+            eta = params.get("bearing_error_deg") or params.get("noise_bound_deg")
+            words = ("--for", "live", *(["--bearing-error-deg", f"{eta:g}"] if eta else []))
+            steps.append("lost: a look all around left the error bound above what the cell tolerates (the cell is "
+                         "not live at these bounds); add tags until every cell is: "
+                         + tags_step(plan_npz, fov, max_range, tags_words=words))  # fmt: skip
+        else:
+            hold = params.get("hold_time", 2.0)
+            steps.append(f"lost: the camera saw fewer than two usable tags for --hold-time {hold:g} s (a {fov:g}° "
+                         "camera); add tags: " + tags_step(plan_npz, fov, max_range))  # fmt: skip
     if counts.get("collision") and params.get("estimator") != "set":
         retry = _command_text("bearnav", "simulate", plan_npz, *_simulate_words(params, estimator="set"))
         steps.append("collision: the position estimate erred beyond the cell's tolerance (noise, slip, a camera or "
@@ -2105,7 +2105,7 @@ def tags_command(
                "no tag makes the grey points live: their cells tolerate less than any look gives (a smaller "
                "--bearing-error-deg, the heading from the bearings, or a plan with larger tolerances)")  # fmt: skip
         raise _fail(f"{len(live.live) - live.n_live} cells are still not live ({percent(1.0 - live.live_fraction)} of "
-                    f"D): {why}; {out_path} has the tags placed", EXIT_OUTCOME)  # fmt: skip
+                    f"the certified area): {why}; {out_path} has the tags placed", EXIT_OUTCOME)  # fmt: skip
     if not proposal.target_reached:
         from bearnav_cli.datatypes import percent
 
