@@ -196,12 +196,12 @@ def test_lost_set_estimator_runs_name_tags_for_live(cli, write_map, tmp_path):
     write_map(dict(BLIND_MAP, name="corners", landmarks=[[0, 3], [0, 0], [4, 0], [4, 3]]), "corners.yaml")
     assert cli("-q", "plan", "corners.yaml").exit_code == 0
     result = cli("-q", "simulate", "plans/corners/plan.npz", "--fov", "60", "--starts", "random:4", "--estimator",
-                 "set", "--noise-bound-deg", "3")  # fmt: skip
+                 "set", "--noise-bound-deg", "8")  # fmt: skip
     assert result.exit_code == 1, result.output
     line = error_line(result)
     assert "lost" in line and "not live" in line, line
     tags, plan, _ = commands(line)
-    assert tags[tags.index("--for") + 1] == "live" and tags[tags.index("--bearing-error-deg") + 1] == "3", line
+    assert tags[tags.index("--for") + 1] == "live" and tags[tags.index("--bearing-error-deg") + 1] == "8", line
     assert plan == ["plan", "corners_tags.yaml"], line
 
 

@@ -141,7 +141,7 @@ def safe_polygon(cells, c: int) -> shapely.Polygon:
 def test_corridor_safe_sets_keep_the_margin_from_every_obstacle(cells, small_map):
     """Every cell's safe set (cell ∩ barrier half-planes) contains its tree edge (or the goal) and
     stays at least min(margin, s·d) away from the inflated obstacles and the walls (exact check;
-    ``s = funnel.ROW_SHARE``, ALGORITHMS §11.5 has 1/2, docs/algorithms.md says why a quarter)."""
+    ``s = funnel.ROW_SHARE``, ALGORITHMS §11.5 has 1/2, docs/algorithms.md says why a twentieth)."""
     from bearnav_cli.funnel import ROW_SHARE
 
     space = FreeSpace.from_map(small_map)

@@ -45,7 +45,8 @@ from bearnav_cli.geometry import (
     polygon_rows,
 )
 
-VERSION = 4  # 4: cover = F and max_added_nodes = 600 by default; free_coverage_m of the final cells
+VERSION = 5  # 4: cover = F and max_added_nodes = 600 by default; free_coverage_m of the final cells;
+# 5: rows keep d/20 from a piece, not d/4 (funnel.ROW_SHARE)
 log = logging.getLogger(__name__)
 
 #: Re-exported: the cell and barrier helpers are part of this stage's interface.
@@ -118,7 +119,7 @@ class Params:
         How far the safe set keeps from the obstacles and walls (map units). ``None`` means
         ``0.01·D``. With ``m`` the margin, a ``corridor`` barrier row is moved ``min(m, d/2)``
         toward the edge (``d`` the piece's distance from it); a funnel cell's row keeps
-        ``min(m, d/4)`` (``funnel.ROW_SHARE``), and ``F_m`` is the free space at least ``m`` from
+        ``min(m, d/20)`` (``funnel.ROW_SHARE``), and ``F_m`` is the free space at least ``m`` from
         ``O``.
     """
 
@@ -521,8 +522,8 @@ def _funnel_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) 
             " and the max_added_nodes limit was reached" if len(added) >= params.max_added_nodes else "",
         )
     # §12.7: the domain reaches the walls. The band within m of O stays outside every cell above;
-    # leaves a band depth q = WALL_LEAF_DEPTH·m from O get cells that keep only min(m, s·d) ≈ q/4
-    # from the piece beside them, so densifying F with them leaves a band of about q/4
+    # leaves a band depth q = WALL_LEAF_DEPTH·m from O get cells that keep only min(m, s·d) = q/20
+    # from the piece beside them, so densifying F with them leaves a band of about q/20
     in_fm = len(added)
     # ``covered`` is the union of every cell so far (recomputed above when leaves were added)
     whole_free = coverage_domain(free, free_bounds, space.obstacles, 0.0)
@@ -744,7 +745,7 @@ def _band_candidates(pocket: shapely.Geometry, offset: shapely.Geometry) -> np.n
 
     Points of ``offset`` (the curve at the band leaf depth ``q`` from ``O`` and the walls) inside the
     pocket: first the curve's corners, sharpest turn first, then its middle, then points spread
-    along it. A leaf there gets a cell that keeps only ``min(m, s·d) ≈ q/4`` (``funnel.ROW_SHARE``)
+    along it. A leaf there gets a cell that keeps only ``min(m, s·d) = q/20`` (``funnel.ROW_SHARE``)
     from the piece beside it, so its cell reaches that close to the wall. At a corner, the leaf is
     ``q`` from both walls and its cell fills the corner; from the middle of one wall, the cell keeps
     a quarter of its distance from the other wall, and filling the corner took a fan of leaves.
