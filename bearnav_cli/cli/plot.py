@@ -73,43 +73,44 @@ def plot_command(
     if color_by is not None and color_by not in plot.COLOR_BY:
         raise fail(f"--color-by: must be one of {', '.join(plot.COLOR_BY)}, got {color_by!r}", EXIT_INVALID)
 
-    pipeline.ACTIVITY.stage = str(out_path)
-    loaded = pipeline.load(artifact)
-    background = [pipeline.load(p, ("tree", "simplified")).artifact for p in also or []]
-    shown = loaded.artifact
-    seeing = None
-    if fov is not None:
-        if not isinstance(shown, Plan):
-            schema = loaded.manifest.get("schema", "not a plan")
-            raise fail(f"--fov: {artifact} is {schema}, not a plan (bearnav.plan/2): the camera looks along "
-                       "the plan's field", EXIT_INVALID)  # fmt: skip
-        from bearnav_cli import perception
+    with pipeline.activity(str(out_path)):  # what an interrupt, an error or a warning names
+        loaded = pipeline.load(artifact)
+        background = [pipeline.load(p, ("tree", "simplified")).artifact for p in also or []]
+        shown = loaded.artifact
+        seeing = None
+        if fov is not None:
+            if not isinstance(shown, Plan):
+                schema = loaded.manifest.get("schema", "not a plan")
+                raise fail(f"--fov: {artifact} is {schema}, not a plan (bearnav.plan/2): the camera looks along "
+                           "the plan's field", EXIT_INVALID)  # fmt: skip
+            from bearnav_cli import perception
 
-        seeing = perception.perception_coverage(shown, fov, noise_deg, float("inf") if max_range is None else max_range)
-    live = None
-    if color_by == "live" or live_fov is not None or bearing_error_deg is not None:
-        if color_by != "live":
-            given = "--live-fov" if live_fov is not None else "--bearing-error-deg"
-            raise fail(f"{given}: only with --color-by live (the liveness it measures)", EXIT_INVALID)
-        if not isinstance(shown, Plan) or not shown.cells.is_funnel:
-            schema = loaded.manifest.get("schema", "not a plan")
-            raise fail(f"--color-by live: {artifact} is {schema}, not a funnel plan: liveness needs its usable "
-                       "tolerances τ_c", EXIT_INVALID)  # fmt: skip
-        from bearnav_cli import liveness
+            max_range_or_inf = float("inf") if max_range is None else max_range
+            seeing = perception.perception_coverage(shown, fov, noise_deg, max_range_or_inf)
+        live = None
+        if color_by == "live" or live_fov is not None or bearing_error_deg is not None:
+            if color_by != "live":
+                given = "--live-fov" if live_fov is not None else "--bearing-error-deg"
+                raise fail(f"{given}: only with --color-by live (the liveness it measures)", EXIT_INVALID)
+            if not isinstance(shown, Plan) or not shown.cells.is_funnel:
+                schema = loaded.manifest.get("schema", "not a plan")
+                raise fail(f"--color-by live: {artifact} is {schema}, not a funnel plan: liveness needs its usable "
+                           "tolerances τ_c", EXIT_INVALID)  # fmt: skip
+            from bearnav_cli import liveness
 
-        names = {"eta_deg": "--bearing-error-deg", "fov_deg": "--live-fov"}
-        try:
-            live = liveness.measure(shown, bearing_error_deg, 60.0 if live_fov is None else live_fov)
-        except InvalidParamsError as exc:
-            raise fail(f"{names.get(exc.field or '', exc.field)}: {exc.reason}", EXIT_INVALID) from None
-    cells = shown.cells if isinstance(shown, Plan) else shown if isinstance(shown, Cells) else None
-    # plan/3 covers F (ALGORITHMS §12.7): hatch what of F no cell covers
-    coverage = composition.coverage_regions(cells, margin=0.0) if cells is not None and cells.is_funnel else None
-    fig = plot.figure_for(shown, background=background, title=title, color_by=color_by, barriers=barriers,
-                          labels=labels, cell_numbers=cell_numbers, coverage=coverage, perception=seeing,
-                          liveness=live, params=loaded.manifest.get("params"))  # fmt: skip
-    with artifacts.atomic_output(out_path) as tmp:
-        plot.save_figure(fig, str(tmp))
+            names = {"eta_deg": "--bearing-error-deg", "fov_deg": "--live-fov"}
+            try:
+                live = liveness.measure(shown, bearing_error_deg, 60.0 if live_fov is None else live_fov)
+            except InvalidParamsError as exc:
+                raise fail(f"{names.get(exc.field or '', exc.field)}: {exc.reason}", EXIT_INVALID) from None
+        cells = shown.cells if isinstance(shown, Plan) else shown if isinstance(shown, Cells) else None
+        # plan/3 covers F (ALGORITHMS §12.7): hatch what of F no cell covers
+        coverage = composition.coverage_regions(cells, margin=0.0) if cells is not None and cells.is_funnel else None
+        fig = plot.figure_for(shown, background=background, title=title, color_by=color_by, barriers=barriers,
+                              labels=labels, cell_numbers=cell_numbers, coverage=coverage, perception=seeing,
+                              liveness=live, params=loaded.manifest.get("params"))  # fmt: skip
+        with artifacts.atomic_output(out_path) as tmp:
+            plot.save_figure(fig, str(tmp))
     if seeing is not None:
         out.print(f"perception: {seeing.summary()}", highlight=False, markup=False, soft_wrap=True)
     if live is not None:

@@ -60,11 +60,11 @@ def simulate_command(
                                     progress_factory(progress)("simulate"))  # fmt: skip
     sim = report.artifact
     metrics = sim.stats
-    if bag is not None:
-        pipeline.ACTIVITY.stage, pipeline.ACTIVITY.written = f"{bag} (sim.npz and sim.json were written)", False
-        if not Quiet.enabled and not as_json and len(sim.trajectory_coords) > 50_000:  # about a second each
-            err.print(f"writing {bag} ({len(sim.trajectory_coords)} poses) ...", highlight=False, markup=False)
-        ros_bag.write(bag, sim, option="--bag", force=force)
+    if bag is not None:  # an interrupt names the bag, and what is written already; a warning the plan too
+        with pipeline.activity(f"{bag} (sim.npz and sim.json were written)", file=plan_npz):
+            if not Quiet.enabled and not as_json and len(sim.trajectory_coords) > 50_000:  # about a second each
+                err.print(f"writing {bag} ({len(sim.trajectory_coords)} poses) ...", highlight=False, markup=False)
+            ros_bag.write(bag, sim, option="--bag", force=force)
     if as_json:
         shown = {"sim": str(report.path), "ran": report.ran, "metrics": metrics}
         print_json(shown if bag is None else dict(shown, bag=str(bag)))
@@ -86,11 +86,11 @@ def simulate_command(
     if gif is not None:
         plot = plotting()  # matplotlib only when asked
 
-        pipeline.ACTIVITY.stage, pipeline.ACTIVITY.written = f"{gif} (sim.npz and sim.json were written)", False
-        if not Quiet.enabled and not as_json:  # a GIF takes seconds: say what is happening
-            err.print(f"writing {gif} (80 frames) ...", highlight=False, markup=False)
-        with artifacts.atomic_output(gif) as tmp:
-            plot.save_animation(sim, str(tmp), params=(report.manifest or {}).get("params"))
+        with pipeline.activity(f"{gif} (sim.npz and sim.json were written)", file=plan_npz):  # as the bag's
+            if not Quiet.enabled and not as_json:  # a GIF takes seconds: say what is happening
+                err.print(f"writing {gif} (80 frames) ...", highlight=False, markup=False)
+            with artifacts.atomic_output(gif) as tmp:
+                plot.save_animation(sim, str(tmp), params=(report.manifest or {}).get("params"))
         if not as_json:
             out.print(f"wrote {gif}", highlight=False)
     rate = metrics.get("success_rate")

@@ -104,54 +104,55 @@ def tags_command(
                              bearing_error_deg=bearing_error_deg, slip=slip, resolution=live_resolution)  # fmt: skip
     except InvalidParamsError as exc:  # name the option the user typed
         raise fail(f"{options.get(exc.field, exc.field)}: {exc.reason}", EXIT_INVALID) from None
-    pipeline.ACTIVITY.stage = "tags"
-    plan = pipeline.load(plan_npz, "plan").artifact
-    spec = map_.spec_of(plan.map)
-    original = None  # the YAML text the user wrote, kept as it is in the new map
-    grid = None  # the occupancy grid the new map names, when it keeps the map's own text
-    if map_yaml is not None:
-        source = read_map_source(map_yaml)
-        problem = composition.map_frame_problem(plan.map, map_.run(source))
-        if problem:
-            raise fail(f"{map_yaml}: {problem}: not the plan's map", EXIT_INVALID)
-        grid_elsewhere = "occupancy" in source.spec and map_yaml.resolve().parent != out_path.resolve().parent
-        spec = spec if grid_elsewhere else source.spec  # an occupancy image path is relative to its YAML
-        grid = None if grid_elsewhere else source.grid
-        bare_grid = source.grid is not None and "occupancy" not in source.spec  # its spec comes from options
-        if not grid_elsewhere and not bare_grid:
-            original = read_bytes(map_yaml).decode("utf-8", errors="replace")
-    try:
-        proposal = tags.propose(plan, params)
-    except InvalidParamsError as exc:  # liveness's own checks: η, the slip, a paper plan
-        where = "" if exc.field == "plan" else f"{options.get(exc.field, exc.field)}: "
-        raise fail(f"{plan_npz}: {where}{exc.reason}", EXIT_INVALID) from None
-    name = tags.tagged_name(str(spec.get("name", plan.map.name)))  # another name: re-planning it makes its own folder
-    new_spec = tags.map_spec_with_tags(spec, proposal)
-    new_spec = {"name": name, **{key: value for key, value in new_spec.items() if key != "name"}}
-    map_.run(map_.MapSource(spec=new_spec, file=str(out_path), sha256="", grid=grid))  # the map stage accepts it
-    header = (f"{artifacts.TAGS_MARKER} {proposal.count} new tags for a {fov:g}° camera, from {plan_npz} "
-              f"(and {map_yaml or 'its map'}); plan it with `bearnav plan {out_path}`")  # fmt: skip
-    text = tags.map_text_with_tags(original, proposal, name, header) if original is not None else None
-    if text is not None:
+    with pipeline.activity("tags"):  # what an interrupt, an error or a warning names
+        plan = pipeline.load(plan_npz, "plan").artifact
+        spec = map_.spec_of(plan.map)
+        original = None  # the YAML text the user wrote, kept as it is in the new map
+        grid = None  # the occupancy grid the new map names, when it keeps the map's own text
+        if map_yaml is not None:
+            source = read_map_source(map_yaml)
+            problem = composition.map_frame_problem(plan.map, map_.run(source))
+            if problem:
+                raise fail(f"{map_yaml}: {problem}: not the plan's map", EXIT_INVALID)
+            grid_elsewhere = "occupancy" in source.spec and map_yaml.resolve().parent != out_path.resolve().parent
+            spec = spec if grid_elsewhere else source.spec  # an occupancy image path is relative to its YAML
+            grid = None if grid_elsewhere else source.grid
+            bare_grid = source.grid is not None and "occupancy" not in source.spec  # its spec comes from options
+            if not grid_elsewhere and not bare_grid:
+                original = read_bytes(map_yaml).decode("utf-8", errors="replace")
         try:
-            kept = yaml.safe_load(text)
-        except yaml.YAMLError:
-            kept = None
-        meant = dict(yaml.safe_load(original), name=name, landmarks=new_spec["landmarks"])
-        if kept != meant:
-            text = None  # a layout the text edit got wrong: the map is written afresh (its comments are lost)
-    if text is None:
-        if original is not None and not Quiet.enabled:
-            err.print(f"[yellow]warning:[/yellow] {out_path}: bearnav cannot extend the landmarks of {map_yaml} "
-                      "where they are; the map is written afresh, without its comments", highlight=False,
-                      soft_wrap=True)  # fmt: skip
-        text = header + "\n" + yaml.safe_dump(new_spec, sort_keys=False, default_flow_style=None)
-    artifacts.atomic_write(out_path, lambda f: f.write(text.encode()))
-    plot = plotting()  # matplotlib is slow to import: only here
+            proposal = tags.propose(plan, params)
+        except InvalidParamsError as exc:  # liveness's own checks: η, the slip, a paper plan
+            where = "" if exc.field == "plan" else f"{options.get(exc.field, exc.field)}: "
+            raise fail(f"{plan_npz}: {where}{exc.reason}", EXIT_INVALID) from None
+        # another name: re-planning it makes its own folder
+        name = tags.tagged_name(str(spec.get("name", plan.map.name)))
+        new_spec = tags.map_spec_with_tags(spec, proposal)
+        new_spec = {"name": name, **{key: value for key, value in new_spec.items() if key != "name"}}
+        map_.run(map_.MapSource(spec=new_spec, file=str(out_path), sha256="", grid=grid))  # the map stage accepts it
+        header = (f"{artifacts.TAGS_MARKER} {proposal.count} new tags for a {fov:g}° camera, from {plan_npz} "
+                  f"(and {map_yaml or 'its map'}); plan it with `bearnav plan {out_path}`")  # fmt: skip
+        text = tags.map_text_with_tags(original, proposal, name, header) if original is not None else None
+        if text is not None:
+            try:
+                kept = yaml.safe_load(text)
+            except yaml.YAMLError:
+                kept = None
+            meant = dict(yaml.safe_load(original), name=name, landmarks=new_spec["landmarks"])
+            if kept != meant:
+                text = None  # a layout the text edit got wrong: the map is written afresh (its comments are lost)
+        if text is None:
+            if original is not None and not Quiet.enabled:
+                err.print(f"[yellow]warning:[/yellow] {out_path}: bearnav cannot extend the landmarks of {map_yaml} "
+                          "where they are; the map is written afresh, without its comments", highlight=False,
+                          soft_wrap=True)  # fmt: skip
+            text = header + "\n" + yaml.safe_dump(new_spec, sort_keys=False, default_flow_style=None)
+        artifacts.atomic_write(out_path, lambda f: f.write(text.encode()))
+        plot = plotting()  # matplotlib is slow to import: only here
 
-    fig = plot.tags_figure(proposal, plan.map)  # its title states the camera, the noise and the coverage
-    with artifacts.atomic_output(figure) as tmp:
-        plot.save_figure(fig, str(tmp))
+        fig = plot.tags_figure(proposal, plan.map)  # its title states the camera, the noise and the coverage
+        with artifacts.atomic_output(figure) as tmp:
+            plot.save_figure(fig, str(tmp))
     if as_json:
         print_json({
             "map": str(out_path), "figure": str(figure), "new_tags": proposal.count,

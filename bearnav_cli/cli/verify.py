@@ -47,34 +47,34 @@ def verify_command(
     except InvalidParamsError as exc:  # name the option the user typed
         raise fail(f"{pipeline.option_name('verify', exc.field or '')}: {exc.reason}", EXIT_INVALID) from None
     starts = params.n_starts
-    pipeline.ACTIVITY.stage = "verify"
-    loaded = pipeline.load(plan_npz, "plan")
-    samples = pipeline.load(tree, ("tree", "simplified")).artifact.collision_samples if tree else None
-    plan = loaded.artifact
-    where_speed = "--speed" if params.speed is not None else "params.simulate.speed"
-    speed = verify.loop_speed(plan, params)  # the speed verify.run drives at (the map's, else simulate's)
-    pipeline.check_value("verify", "speed", speed, where_speed, plan.map.diagonal)
-    if starts:
-        loop = pipeline.resolve_params("simulate", {}, {"speed": speed, "measurement": "displacement",
-                                                       "record_trajectories": False})  # fmt: skip
-        pipeline.check_closed_loop(plan, loop, starts, "--starts", where_speed, record=False)
-        pipeline.check_verify_starts(plan, starts)
-    world_map = _load_world(world) if world is not None else None
-    seeing = None
-    if fov is not None:  # checked before the closed loop runs
-        from bearnav_cli import perception
+    with pipeline.activity("verify"):  # what an interrupt, an error or a warning names
+        loaded = pipeline.load(plan_npz, "plan")
+        samples = pipeline.load(tree, ("tree", "simplified")).artifact.collision_samples if tree else None
+        plan = loaded.artifact
+        where_speed = "--speed" if params.speed is not None else "params.simulate.speed"
+        speed = verify.loop_speed(plan, params)  # the speed verify.run drives at (the map's, else simulate's)
+        pipeline.check_value("verify", "speed", speed, where_speed, plan.map.diagonal)
+        if starts:
+            loop = pipeline.resolve_params("simulate", {}, {"speed": speed, "measurement": "displacement",
+                                                           "record_trajectories": False})  # fmt: skip
+            pipeline.check_closed_loop(plan, loop, starts, "--starts", where_speed, record=False)
+            pipeline.check_verify_starts(plan, starts)
+        world_map = _load_world(world) if world is not None else None
+        seeing = None
+        if fov is not None:  # checked before the closed loop runs
+            from bearnav_cli import perception
 
-        check_camera(fov, noise_deg)
-    with progress_bar() as progress:
-        track = progress_factory(progress)("verify")
-        try:
-            report = verify.run(plan, params, tree_samples=samples, progress=track, world=world_map)
-        except InvalidParamsError as exc:  # a liveness option only the map refuses (--live-resolution against D)
-            if exc.field not in options:
-                raise
-            raise fail(f"{pipeline.option_name('verify', exc.field)}: {exc.reason}", EXIT_INVALID) from None
-    if fov is not None:
-        seeing = perception.perception_coverage(plan, fov, noise_deg)
+            check_camera(fov, noise_deg)
+        with progress_bar() as progress:
+            track = progress_factory(progress)("verify")
+            try:
+                report = verify.run(plan, params, tree_samples=samples, progress=track, world=world_map)
+            except InvalidParamsError as exc:  # a liveness option only the map refuses (--live-resolution against D)
+                if exc.field not in options:
+                    raise
+                raise fail(f"{pipeline.option_name('verify', exc.field)}: {exc.reason}", EXIT_INVALID) from None
+        if fov is not None:
+            seeing = perception.perception_coverage(plan, fov, noise_deg)
     if as_json:
         data = report.to_json()
         if seeing is not None:
