@@ -9,7 +9,9 @@ One module per command (``map_``, ``stage``: rrtstar to synthesize, ``verify``, 
 ``plan``, ``inspect_``, ``tags``, ``plot``, ``sweep``), registered on the app in :mod:`~bearnav_cli.cli.main`.
 No module of the package uses ``from __future__ import annotations``: typer reads the annotations
 of every command on every start, and evaluating them from strings took 4 ms of it (the few names
-imported for type checking are quoted).
+imported for type checking are quoted). numpy, scipy, shapely, yaml, logging, rich, the stages and
+the pipeline are imported inside the commands that use them, so that ``bearnav --help`` and
+``bearnav inspect`` start at once (bench/README.md "Start-up"; tests/test_cli_startup.py).
 
 ``app`` is the program (``bearnav = "bearnav_cli.cli:app"``); ``read_map_source`` reads a map
 YAML as ``bearnav plan`` does, for the benchmarks and tests. Python callers otherwise use the

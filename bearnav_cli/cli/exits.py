@@ -2,8 +2,9 @@
 
 Exit codes: 0 success, 1 the outcome failed (:data:`EXIT_OUTCOME`), 2 usage (click's own), 3 invalid
 input (:data:`EXIT_INVALID`), 70 a bug of bearnav's own (:data:`EXIT_INTERNAL`), 130 SIGINT and
-143 SIGTERM (:data:`EXIT_INTERRUPTED`, :data:`EXIT_TERMINATED`). Errors are printed by :func:`fail`
-and nowhere else.
+143 SIGTERM (:data:`EXIT_INTERRUPTED`, :data:`EXIT_TERMINATED`). An ``error:`` line is printed by
+:func:`fail` and nowhere else, an interrupt's line by :func:`handles_errors` (``bearnav sweep`` says
+itself how many of its jobs are stored).
 """
 
 import functools

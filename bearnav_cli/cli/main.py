@@ -145,6 +145,7 @@ def main(
     Quiet.enabled = quiet
 
 
+# the one command table: --help lists the commands in the order they are registered
 for _name, _command in (
     ("map", map_.map_command), ("rrtstar", stage.rrtstar_command), ("simplify", stage.simplify_command),
     ("decompose", stage.decompose_command), ("synthesize", stage.synthesize_command),
