@@ -12,6 +12,7 @@ folder (:func:`bearnav_cli.artifacts.output_folder`), so two runs never mix thei
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import importlib
 import math
@@ -20,7 +21,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 from types import ModuleType
-from typing import TYPE_CHECKING, Any, Callable
+from typing import TYPE_CHECKING, Any, Callable, Iterator
 
 from bearnav_cli import artifacts
 from bearnav_cli.datatypes import Map, replace
@@ -36,6 +37,7 @@ if TYPE_CHECKING:
 __all__ = [
     "Activity",
     "ACTIVITY",
+    "activity",
     "check_closed_loop",
     "check_map_params",
     "check_resources",
@@ -185,6 +187,27 @@ def reset_activity() -> None:
 
 def _begin(stage: str, file: str | os.PathLike | None = None) -> None:
     ACTIVITY.stage, ACTIVITY.written, ACTIVITY.file = stage, False, None if file is None else str(file)
+
+
+@contextlib.contextmanager
+def activity(stage: str, file: str | os.PathLike | None = None) -> Iterator[Activity]:
+    """Name what the block works on in :data:`ACTIVITY` (nothing written yet), and restore what it named
+    before when the block ends.
+
+    An exception leaves it named: the command's error handler, outside the block, says from it what an
+    interrupt or a failure left unwritten (and it resets :data:`ACTIVITY` before the next command).
+
+    Parameters
+    ----------
+    stage : str
+        What is being made: a command (``"verify"``) or a file (``"fig.png"``); interrupts and warnings say it.
+    file : str or path, optional
+        What it reads (warnings say ``STAGE of FILE``).
+    """
+    before = dataclasses.replace(ACTIVITY)
+    _begin(stage, file)
+    yield ACTIVITY
+    ACTIVITY.stage, ACTIVITY.written, ACTIVITY.file = before.stage, before.written, before.file
 
 
 def _committed() -> None:

@@ -15,8 +15,6 @@ from importlib import metadata
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
-import yaml
-
 from bearnav_cli import pipeline
 from bearnav_cli.datatypes import Map
 from bearnav_cli.stages import map_
@@ -48,7 +46,7 @@ def measured_maps() -> dict[str, map_.MapSource]:
 
 
 def load_map(path: Path) -> Map:
-    """Build a normalised :class:`Map` from a bearnav map YAML.
+    """Build a normalised :class:`Map` from a bearnav map YAML, read as the CLI reads it.
 
     Parameters
     ----------
@@ -59,8 +57,9 @@ def load_map(path: Path) -> Map:
     -------
     Map
     """
-    spec = yaml.safe_load(path.read_text())
-    return pipeline.compute(map_.MapSource(spec=spec, file=path.name, sha256="bench"), through="map")["map"]
+    from bearnav_cli.cli import read_map_source
+
+    return pipeline.compute(read_map_source(path), through="map")["map"]
 
 
 def run_stages(map_obj: Map, stages: Sequence[str]) -> Any:

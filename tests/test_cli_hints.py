@@ -206,13 +206,13 @@ def test_lost_set_estimator_runs_name_tags_for_live(cli, write_map, tmp_path):
 
 
 def test_simulate_words_give_the_loop_back_as_options():
-    from bearnav_cli.cli import _simulate_words
+    from bearnav_cli.cli.hints import simulate_words
     from bearnav_cli.stages import simulate
 
     params = dataclasses.asdict(simulate.Params(fov=60.0, dynamics="unicycle", occlusion=False))
-    words = _simulate_words(params, estimator="set")
+    words = simulate_words(params, estimator="set")
     assert words == ["--dynamics", "unicycle", "--fov", "60", "--no-occlusion", "--estimator", "set"], words
-    assert _simulate_words(dataclasses.asdict(simulate.Params())) == []
+    assert simulate_words(dataclasses.asdict(simulate.Params())) == []
 
 
 # --------------------------------------------------------------------------- item 7: inspect --cells, JSON

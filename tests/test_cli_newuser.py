@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 from rich.progress import Progress
 
-from bearnav_cli import cli as cli_module
+from bearnav_cli.cli import output
 from bearnav_cli.stages import map_
 
 from .conftest import REPO
@@ -162,9 +162,9 @@ def test_plan_help_lists_the_map_options(cli):
 
 
 def test_progress_shows_no_count_before_the_total_is_known():
-    progress = Progress(cli_module._CountColumn())
+    progress = Progress(output.count_column()())
     task = progress.add_task("x", total=None)
-    column = cli_module._CountColumn()
+    column = output.count_column()()
     assert str(column.render(progress.tasks[task])) == ""
     progress.update(task, completed=3, total=10)
     assert str(column.render(progress.tasks[task])) == "3/10"
@@ -173,7 +173,7 @@ def test_progress_shows_no_count_before_the_total_is_known():
 def test_stage_lines_align_the_longest_stage_name():
     from bearnav_cli.pipeline import StageReport
 
-    lines = [cli_module._report_line(StageReport(name, Path("x"), True, 1.0, "s")) for name in ("map", "synthesize")]
+    lines = [output.report_line(StageReport(name, Path("x"), True, 1.0, "s")) for name in ("map", "synthesize")]
     assert lines[0].index("ran") == lines[1].index("ran")
 
 

@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from bearnav_cli import artifacts, perception, plot
-from bearnav_cli.cli import CAMERA_OPTIONS
+from bearnav_cli.cli.options import CAMERA_OPTIONS
 
 from .test_cli_errors import assert_one_line_error
 from .test_hostile_common import small_plan

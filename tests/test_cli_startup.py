@@ -21,8 +21,8 @@ import pytest
 import yaml
 from typer.testing import CliRunner
 
-from bearnav_cli import cli as cli_module
 from bearnav_cli.cli import app
+from bearnav_cli.cli.plan import PLAN_OPTIONS
 
 from .conftest import REPO, SMALL_MAP
 
@@ -39,12 +39,11 @@ ARTIFACTS = ("map.json", "tree.npz", "simplified.npz", "cells.npz", "plan.npz", 
 #: read for their options (JSON).
 RUN = """
 import contextlib, io, json, sys
-from bearnav_cli import cli
-from bearnav_cli.cli import app
+from bearnav_cli.cli import app, options
 
 read = []
-fields = cli.params_fields
-cli.params_fields = lambda command: read.append(command) or fields(command)
+fields = options.params_fields
+options.params_fields = lambda command: read.append(command) or fields(command)
 
 codes = []
 for args in json.loads(sys.argv[1]):
@@ -111,7 +110,7 @@ def test_the_options_from_params_are_made_for_the_command_run_only():
     assert run(["--help"], ["--version"], [], params=[])[0] == [0, 0, 2]
     assert run(["simulate", "--help"], params=["simulate"])[0] == [0]
     assert run(["verify", "--help"], params=["verify"])[0] == [0]
-    assert run(["plan", "--help"], params=sorted(cli_module.PLAN_OPTIONS))[0] == [0]
+    assert run(["plan", "--help"], params=sorted(PLAN_OPTIONS))[0] == [0]
 
 
 def test_help_is_plain_text_with_the_options_defaults_and_examples():

@@ -64,21 +64,21 @@ def test_verify_reports_perception_coverage(cli, write_map, small_spec, tmp_path
 def test_tags_of_a_tags_map_counts_instead_of_repeating_the_suffix(tmp_path):
     """The default output of ``bearnav tags --map NAME_tags.yaml`` is NAME_tags2.yaml (a map planned from a map tags
     wrote, tagged again), never NAME_tags_tags.yaml; a map of another name gets NAME_tags.yaml."""
-    from bearnav_cli.cli import _tags_output
+    from bearnav_cli.cli.hints import tags_output
 
     plan = tmp_path / "plans" / "office" / "plan.npz"
-    names = {m: _tags_output(plan, tmp_path / m).name for m in
+    names = {m: tags_output(plan, tmp_path / m).name for m in
              ("office.yaml", "office_tags.yaml", "office_tags2.yaml", "my_tags_room.yaml")}  # fmt: skip
     assert names == {"office.yaml": "office_tags.yaml", "office_tags.yaml": "office_tags2.yaml",
                      "office_tags2.yaml": "office_tags3.yaml",
                      "my_tags_room.yaml": "my_tags_room_tags.yaml"}  # fmt: skip
-    assert _tags_output(plan, None) == plan.parent / "map_tags.yaml"
+    assert tags_output(plan, None) == plan.parent / "map_tags.yaml"
 
 
 def test_tags_extends_a_map_that_names_an_occupancy_grid(cli, tmp_path):
     """``bearnav tags PLAN --map M.yaml`` for a map with ``occupancy:`` beside it (what plan's blind-spot error
     prints): the new map keeps the grid and is accepted, written where tags_step said (M_tags.yaml), and plans."""
-    from bearnav_cli.cli import _tags_output
+    from bearnav_cli.cli.hints import tags_output
     from tests import mapgen
 
     made = mapgen.generate(4, "grid", params={"rrtstar": {"iterations": 300, "seed": 0}})  # a small one: 0.4 s
@@ -88,7 +88,7 @@ def test_tags_extends_a_map_that_names_an_occupancy_grid(cli, tmp_path):
     assert plan.exists()
     result = cli("tags", plan, "--fov", "360", "--map", source, "-q")
     assert result.exit_code in (0, 1), result.output  # 1: the tag budget did not reach the target
-    written = _tags_output(plan, source)
+    written = tags_output(plan, source)
     assert written == source.with_name(f"{source.stem}_tags.yaml") and written.exists()
     spec = yaml.safe_load(written.read_text())
     assert spec["occupancy"] == made.spec["occupancy"]

@@ -169,6 +169,37 @@ def test_sim_npz_and_sim_json_land_together_even_when_interrupted_between(tmp_pa
     assert again.exit_code == 0 and again.stdout.split()[1] == "fresh", again.output
 
 
+def test_sigint_while_the_gif_is_written_names_it_after_the_simulation(tmp_path, monkeypatch, built):
+    """``simulate --gif``: the simulation is written, then an interrupt inside the GIF names the GIF."""
+    from bearnav_cli import plot
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(plot, "save_animation", interrupted)
+    gif = tmp_path / "runs.gif"
+    result = invoke("simulate", built["plan"], "-o", tmp_path / "sim.npz", "--starts", "random:2", "--min-success",
+                    "0", "--gif", gif, "-q")  # fmt: skip
+    assert_clean_failure(result, 130, (f"interrupted; nothing written for {gif} (sim.npz and sim.json were written)",))
+    assert not gif.exists() and (tmp_path / "sim.npz").exists() and temp_files(tmp_path) == []
+
+
+def test_an_activity_names_its_block_and_then_what_was_named_before():
+    """``pipeline.activity``: set for the block, restored after it; an exception leaves it set, for the error
+    handler outside the block to name."""
+    pipeline.reset_activity()
+    with pipeline.activity("simulate", "plan.npz"):
+        pipeline.ACTIVITY.written = True
+        with pipeline.activity("runs.gif", file="plan.npz") as inner:
+            assert (inner.stage, inner.written, inner.file) == ("runs.gif", False, "plan.npz")
+        assert (pipeline.ACTIVITY.stage, pipeline.ACTIVITY.written) == ("simulate", True)
+    assert pipeline.ACTIVITY == pipeline.Activity()
+    with pytest.raises(KeyboardInterrupt), pipeline.activity("verify"):
+        raise KeyboardInterrupt
+    assert pipeline.ACTIVITY.stage == "verify"
+    pipeline.reset_activity()
+
+
 def test_sigterm_is_one_line_and_exit_143(tmp_path, monkeypatch, built):
     def terminated(*args, **kwargs):
         os.kill(os.getpid(), signal.SIGTERM)

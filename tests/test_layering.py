@@ -98,12 +98,32 @@ def test_imports_flow_one_way():
                 problems.append(f"{dotted} imports plot")
             if layer_name == "world" and dep == "world":  # the simulated world's parts build on each other
                 continue
+            if layer_name == "cli" and dep == "cli":  # the command line's modules: its commands use its helpers
+                continue
             if layer_name == "stages" and dep == "stages" and target.count(".") >= 2:
                 problems.append(f"{dotted} imports another stage {target}")
             # stages may import stages (one stage at most, checked above), verify may use simulate
             stage_ok = dep == "stages" and LAYERS.get(layer_name, 0) >= LAYERS["stages"]
             if dep in LAYERS and layer_name in LAYERS and not stage_ok and LAYERS[dep] >= LAYERS[layer_name]:
                 problems.append(f"{dotted} ({layer_name}) imports {target} against the layering")
+    assert not problems, "\n".join(problems)
+
+
+#: The command line's modules that are not a command: the commands build on them, and they import no command.
+CLI_SHARED = {"startup", "output", "exits", "fields", "options", "mapfile", "hints"}
+
+
+def test_cli_commands_share_helpers_not_each_other():
+    """One module per command (issue 24.2): a command imports the shared modules of ``cli`` only, never another
+    command, and only ``cli.main`` (the app) imports the commands."""
+    problems = []
+    for layer_name, dotted, tree in _modules():
+        if layer_name != "cli" or dotted == "cli.main":
+            continue
+        for target in _imports(tree):
+            parts = target.split(".")
+            if parts[:2] == ["bearnav_cli", "cli"] and len(parts) > 2 and parts[2] not in CLI_SHARED:
+                problems.append(f"{dotted} imports {target} (only cli.main imports the commands)")
     assert not problems, "\n".join(problems)
 
 

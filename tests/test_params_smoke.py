@@ -2,7 +2,7 @@
 
 The cases are discovered, not listed: for each stage's ``Params`` (map … simulate) and
 ``verify.Params``, every field whose docstring type is an enumeration (``{"a", "b"}``, read by
-:func:`bearnav_cli.cli.params_fields`, the reader the command-line options come from) and every bool
+:func:`bearnav_cli.cli.fields.params_fields`, the reader the command-line options come from) and every bool
 field, each value once, plus the named non-enum cases of the issue (:data:`EXTRA`). One test id per
 (stage, field, value): the stages before the case's come from a module-wide baseline chain, its own
 stage and the ones after it run again with the value. Each artifact made is written and loaded back
@@ -21,7 +21,8 @@ import functools
 import numpy as np
 import pytest
 
-from bearnav_cli import artifacts, cli, composition, pipeline, runtime, verify
+from bearnav_cli import artifacts, composition, pipeline, runtime, verify
+from bearnav_cli.cli import fields
 from bearnav_cli.datatypes import Outcome, Plan, Simulation
 from bearnav_cli.errors import InvalidParamsError
 from bearnav_cli.geometry import FreeSpace
@@ -99,8 +100,8 @@ TUPLES = {
 def discovered() -> list[tuple[str, str, object]]:
     """(stage, field, value) for every enumerated value and both values of every bool field, plus :data:`EXTRA`."""
     found = []
-    for stage in cli.PARAMS_MODULES:
-        for field in cli.params_fields(stage):
+    for stage in fields.PARAMS_MODULES:
+        for field in fields.params_fields(stage):
             values = field.choices or ((False, True) if field.kind is bool else ())
             found += [(stage, field.name, value) for value in (*values, *EXTRA.get((stage, field.name), ()))]
     return found
@@ -124,7 +125,7 @@ def test_the_cases_cover_the_issue_and_the_module_tuples():
              ("simulate", "odometry", False), ("simulate", "turn_first", False), ("simulate", "max_fix_error", 1.0),
              *(("decompose", "cbf_filter", v) for v in decompose.CBF_FILTERS)}  # fmt: skip
     assert named <= set(CASES)
-    enumerated = {(stage, f.name): f.choices for stage in cli.PARAMS_MODULES for f in cli.params_fields(stage)
+    enumerated = {(stage, f.name): f.choices for stage in fields.PARAMS_MODULES for f in fields.params_fields(stage)
                   if f.choices}  # fmt: skip
     for key, values in TUPLES.items():
         if values is not None:

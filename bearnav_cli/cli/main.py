@@ -1,0 +1,156 @@
+"""The ``bearnav`` typer app: its plain help, the group's own options (-q, --version) and its commands.
+
+The commands are defined one module each and registered here, in the order ``bearnav --help``
+lists them.
+"""
+
+import inspect
+from typing import Any, Callable, Optional
+
+import typer
+from typer.core import TyperArgument, TyperCommand, TyperGroup
+
+from bearnav_cli import __version__
+from bearnav_cli.cli import inspect_, map_, plan, plot, simulate, stage, sweep, tags, verify
+from bearnav_cli.cli.options import click_option
+from bearnav_cli.cli.output import QUIET_HELP, Quiet
+
+__all__ = ["app", "main"]
+
+
+def _usage_metavar(make_metavar: Callable) -> Callable:
+    """typer writes a required argument as ``{source}`` in the usage line; write its metavar (``MAP``) as is."""
+
+    def make(self: Any, ctx: Any, *, usage: bool = False) -> str:
+        if usage and self.metavar is not None and self.required:
+            return self.metavar
+        return make_metavar(self, ctx, usage=usage)
+
+    return make
+
+
+TyperArgument.make_metavar = _usage_metavar(TyperArgument.make_metavar)
+
+
+def _format_help_text(command: Any, ctx: Any, formatter: Any) -> None:
+    """A command's docstring as help: each paragraph joined and wrapped to the terminal, except that an example
+    (a line starting ``bearnav``) starts a line of its own, as typer's rich help showed them."""
+    text = inspect.cleandoc(command.help or "").partition("\f")[0]
+    with formatter.indentation():
+        for paragraph in text.split("\n\n") if text else []:
+            lines: list[str] = []
+            for line in paragraph.splitlines():
+                if lines and not line.startswith("bearnav "):
+                    lines[-1] += " " + line
+                else:
+                    lines.append(line)
+            formatter.write_paragraph()
+            for line in lines:
+                formatter.write_text(line)
+
+
+class _Command(TyperCommand):
+    """A command whose ``--help`` is click's plain layout (typer's rich one imports rich.markdown and
+    pygments, 0.1 s of every ``--help``); usage errors keep typer's rich panel.
+
+    The options generated from a ``Params`` (:func:`with_options`) are made when the command's
+    :attr:`params` are first read (to parse its command line, print its help or complete it), so
+    that a start reads the ``Params`` sources of the command it runs only.
+    """
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        # typer's callback wraps the command (functools.update_wrapper): its attributes are the command's
+        self._generated = getattr(self.callback, "generated_options", None)
+
+    @property
+    def params(self) -> list[Any]:
+        if getattr(self, "_generated", None) is not None:
+            groups, before = self._generated
+            self._generated = None
+            made = [click_option(parameter) for group in groups for parameter in group()]
+            at = next((i for i, param in enumerate(self._params) if param.name == before), len(self._params))
+            self._params[at:at] = made
+        return self._params
+
+    @params.setter
+    def params(self, value: list[Any]) -> None:
+        self._params = value
+
+    def format_help(self, ctx: Any, formatter: Any) -> None:
+        super(TyperCommand, self).format_help(ctx, formatter)  # click's, not typer's rich one
+
+    def format_help_text(self, ctx: Any, formatter: Any) -> None:
+        _format_help_text(self, ctx, formatter)
+
+
+class _Group(TyperGroup):
+    """The ``bearnav`` group, its ``--help`` plain as :class:`_Command`'s."""
+
+    def format_help(self, ctx: Any, formatter: Any) -> None:
+        super(TyperGroup, self).format_help(ctx, formatter)
+
+    def format_help_text(self, ctx: Any, formatter: Any) -> None:
+        _format_help_text(self, ctx, formatter)
+
+    def parse_args(self, ctx: Any, args: list[str]) -> list[str]:
+        if not args and self.no_args_is_help and not ctx.resilient_parsing:
+            # bare `bearnav`: click's error for it holds the help, and typer's rich error handler prints nothing
+            # (its rich help printed itself): print the plain help here, on stdout, and exit 2, as before
+            typer.echo(ctx.get_help(), color=ctx.color)
+            ctx.exit(2)
+        return super().parse_args(ctx, args)
+
+
+class _Typer(typer.Typer):
+    """typer.Typer whose commands are :class:`_Command` (plain ``--help``) unless told otherwise."""
+
+    def command(self, name: Optional[str] = None, *, cls: Optional[type] = None, **kwargs: Any) -> Callable:
+        return super().command(name, cls=cls or _Command, **kwargs)
+
+
+app = _Typer(
+    cls=_Group,
+    add_completion=True,
+    no_args_is_help=True,
+    # the plain help is as wide as the terminal, up to 120 columns (click's own limit is 80)
+    context_settings={"max_content_width": 120},
+    help="Certified bearing-only navigation controllers from a 2-D map.\n\n"
+    "Lengths are in map units; a default written '0.01 D' is 1% of D, the diagonal of the map's bounds.\n\n"
+    # a pip install has no docs/ folder: the help says what a map is, and where the full description lives
+    "A map is a YAML file with bounds [xmin, ymin, xmax, ymax], robot_radius, goal [x, y], starts (a list of "
+    "[x, y]), obstacles (each a polygon: [[x, y], ...], a rectangle: [xmin, ymin, xmax, ymax] or a circle: "
+    "{center, radius}), landmarks ([x, y] or {id, position, facing}) and optional robot: and params: sections; "
+    "or a ROS map_server YAML (plan it with --goal and --landmark). `bearnav map MAP` checks one and names any "
+    "field that is wrong. docs/maps.md and docs/cli.md of the bearnav source describe every key, command and "
+    "word of the output.\n\n"
+    "Example: bearnav plan maps/kitchen.yaml",
+)
+
+
+def _print_version(value: bool) -> None:
+    if value:
+        typer.echo(f"bearnav {__version__}")  # plain text: no rich console to import
+        raise typer.Exit(0)
+
+
+@app.callback()
+def main(
+    quiet: bool = typer.Option(False, "--quiet", "-q", help=QUIET_HELP),
+    version: bool = typer.Option(
+        False, "--version", help="Print the version and exit.", is_eager=True, callback=_print_version
+    ),
+) -> None:
+    """Certified bearing-only navigation controllers from a 2-D map."""
+    Quiet.enabled = quiet
+
+
+# the one command table: --help lists the commands in the order they are registered
+for _name, _command in (
+    ("map", map_.map_command), ("rrtstar", stage.rrtstar_command), ("simplify", stage.simplify_command),
+    ("decompose", stage.decompose_command), ("synthesize", stage.synthesize_command),
+    ("verify", verify.verify_command), ("simulate", simulate.simulate_command), ("plan", plan.plan_command),
+    ("inspect", inspect_.inspect_command), ("tags", tags.tags_command), ("plot", plot.plot_command),
+    ("sweep", sweep.sweep_command),
+):  # fmt: skip
+    app.command(_name)(_command)
