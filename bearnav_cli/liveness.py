@@ -146,11 +146,11 @@ class Liveness:
         camera = "360° camera" if g.fov >= 2.0 * math.pi - 1e-12 else f"{math.degrees(g.fov):g}° camera"
         reach = "" if math.isinf(g.max_range) else f" of range {g.max_range:g}"
         heads = "1 heading (all around)" if g.headings == 1 else f"{g.headings} headings"
-        return (f"liveness at η = {math.degrees(g.eta):.3g}°, {camera}{reach}, κ = {g.kappa:g}: "
-                f"{self.live_fraction:.0%} of D live ({self.n_live}/{len(self.live)} cells; {self.view_fraction:.0%} "
-                f"of D after one view, without turning all around); certified bearing "
-                f"error η* = {math.degrees(self.eta_star):.3g}°; measured on a {g.resolution:.3g}-map-unit grid "
-                f"with {heads}, a measurement, not a proof")  # fmt: skip
+        return (f"liveness at a bearing error of {math.degrees(g.eta):.3g}°, {camera}{reach}, wheel slip {g.kappa:g}: "
+                f"{self.live_fraction:.0%} of the certified area live ({self.n_live}/{len(self.live)} cells; "
+                f"{self.view_fraction:.0%} after one view, without turning all around); the largest bearing error "
+                f"every cell is live at: {math.degrees(self.eta_star):.3g}°; measured on a {g.resolution:.3g}-map-unit "
+                f"grid with {heads}, a measurement, not a proof")  # fmt: skip
 
     def to_json(self) -> dict[str, Any]:
         """A JSON-ready dict: degrees for angles, map units for lengths, ``null`` for non-finite numbers."""

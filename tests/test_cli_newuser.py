@@ -55,6 +55,28 @@ def test_plan_takes_the_map_options_for_a_bare_grid_then_plans_from_its_map_json
     assert json.loads(manifest.output)["params"]["cells"] == "funnel-local"
 
 
+def test_tags_of_a_bare_grid_plan_keeps_the_grid_and_needs_no_goal(cli, grid, tmp_path, monkeypatch):
+    """Issue 23: the blind-spot hint of a plan from a bare map_server YAML names that YAML as ``--map``; the map
+    ``tags`` writes names the grid as its ``occupancy:`` (the PGM stays a PGM, no polygons), takes the goal and
+    the tags from the plan (no --goal), and plans as it is."""
+    import yaml
+
+    from .test_cli_hints import commands, error_line
+
+    monkeypatch.chdir(tmp_path)  # the commands the hint prints are relative to here
+    result = cli("-q", "plan", grid.name, "--goal", "0.6,2.5", "--robot-radius", "0.15",
+                 *[word for tag in STOREROOM_TAGS[:3] for word in ("--landmark", tag)])  # fmt: skip
+    assert result.exit_code == 1, result.output
+    tags, plan = commands(error_line(result))
+    assert tags[tags.index("--map") + 1] == grid.name, tags
+    assert cli(*tags).exit_code == 0
+    written = yaml.safe_load(Path(plan[1]).read_text())
+    assert written["occupancy"] == grid.name and "obstacles" not in written and "bounds" not in written, written
+    assert written["goal"] == [0.6, 2.5] and len(written["landmarks"]) > 3, written
+    again = cli("-q", *plan)
+    assert again.exit_code == 0, again.output
+
+
 def test_a_bare_grid_without_goal_says_which_option(cli, grid, tmp_path):
     assert_one_line_error(cli("plan", grid, "-o", tmp_path / "p"), "--goal")
 

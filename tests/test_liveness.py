@@ -196,7 +196,7 @@ def test_verify_reports_liveness_only_when_asked(plan):
     )
     data = json.loads(json.dumps(report.to_json(), allow_nan=False))
     assert data["liveness"]["fov_deg"] == 360.0 and data["liveness"]["eta_deg"] == pytest.approx(0.25)
-    assert any(note.startswith("liveness at η = 0.25°") for note in report.notes)
+    assert any(note.startswith("liveness at a bearing error of 0.25°") for note in report.notes)
     assert report.failed == plain.failed  # a measurement never fails verify
 
 
@@ -234,6 +234,6 @@ def test_plot_color_by_live(cli, built, tmp_path):
     out = tmp_path / "live.png"
     result = cli("plot", built["plan"], "-o", out, "--color-by", "live", "--live-fov", "360")
     assert result.exit_code == 0, result.output
-    assert out.stat().st_size > 0 and "of D live" in result.output
+    assert out.stat().st_size > 0 and "of the certified area live" in result.output
     result = cli("plot", built["plan"], "-o", tmp_path / "x.png", "--live-fov", "60")
     assert result.exit_code == 3 and "--color-by live" in result.output

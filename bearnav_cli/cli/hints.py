@@ -58,8 +58,8 @@ def tags_output(plan_npz: Path, map_yaml: Optional[Path]) -> Path:
 
 
 def _tags_map(plan_npz: Path) -> Optional[Path]:
-    """The map YAML ``bearnav tags --map`` can extend for this plan: the one it was planned from, if that is a
-    bearnav map (a bare map_server YAML needs the options it was planned with, so the plan's own map is used)."""
+    """The map YAML ``bearnav tags --map`` can extend for this plan: the one it was planned from (a bearnav map,
+    or a bare map_server YAML, which the new map then names as its ``occupancy:``), if it is still there."""
     from bearnav_cli import artifacts
 
     source = artifacts.map_source_of(plan_npz)
@@ -69,7 +69,7 @@ def _tags_map(plan_npz: Path) -> Optional[Path]:
         spec, _ = read_yaml(source)
     except BearnavError:
         return None
-    return source if isinstance(spec, dict) and "image" not in spec else None
+    return source if isinstance(spec, dict) else None
 
 
 def tags_step(plan_npz: Path, fov: float = 360.0, max_range: Optional[float] = None,

@@ -13,7 +13,7 @@ from bearnav_cli.errors import BearnavError, InvalidMapError
 if TYPE_CHECKING:
     from bearnav_cli.stages.map_ import GridSource, MapSource
 
-__all__ = ["parse_xy", "read_bytes", "read_map_source", "read_yaml"]
+__all__ = ["is_bare_grid", "parse_xy", "read_bytes", "read_grid", "read_map_source", "read_yaml"]
 
 
 def read_bytes(path: Path, field: str | None = None, what: str = "file") -> bytes:
@@ -39,8 +39,9 @@ def read_yaml(path: Path) -> tuple[Any, bytes]:
         raise InvalidMapError(f"not valid YAML ({problem}{where})", file=str(path)) from exc
 
 
-def _grid_source(grid_yaml: Path, owner: str, field: str) -> "tuple[GridSource, list[bytes]]":
-    """Read a ROS map_server YAML and its image."""
+def read_grid(grid_yaml: Path, owner: str, field: str) -> "tuple[GridSource, list[bytes]]":
+    """Read a ROS map_server YAML and its image: the grid and the bytes that hash it (``owner`` and ``field``:
+    the file and the key or option that named it, for the error)."""
     from bearnav_cli.stages.map_ import GridSource
 
     if not grid_yaml.is_file():
@@ -51,6 +52,15 @@ def _grid_source(grid_yaml: Path, owner: str, field: str) -> "tuple[GridSource, 
     image_path = (grid_yaml.parent / meta["image"]).resolve()
     image = read_bytes(image_path, field="image", what="image")
     return GridSource(meta, image, str(grid_yaml), str(image_path)), [meta_bytes, image]
+
+
+def is_bare_grid(path: Path) -> bool:
+    """Whether ``path`` is a bare ROS map_server YAML (an ``image:`` key, no bearnav map around it)."""
+    try:
+        spec, _ = read_yaml(path)
+    except BearnavError:
+        return False
+    return isinstance(spec, dict) and "image" in spec
 
 
 def read_map_source(
@@ -88,7 +98,7 @@ def read_map_source(
             raise BearnavError(f"{given[0]}: only for a bare map_server YAML; {path} is a bearnav map, "
                                "set it there (docs/maps.md)")  # fmt: skip
     if "image" in spec:  # a bare map_server YAML: the rest comes from options
-        grid, extra = _grid_source(path, str(path), "image")
+        grid, extra = read_grid(path, str(path), "image")
         blobs = extra
         spec = {"name": path.stem}
         if goal is None:
@@ -111,7 +121,7 @@ def read_map_source(
         if "occupancy" in spec:
             if not isinstance(spec["occupancy"], str):
                 raise InvalidMapError("expected a file name", file=str(path), field="occupancy")
-            grid, extra = _grid_source(path.parent / spec["occupancy"], str(path), "occupancy")
+            grid, extra = read_grid(path.parent / spec["occupancy"], str(path), "occupancy")
             blobs += extra
     digest = hashlib.sha256()
     for blob in blobs:

@@ -161,7 +161,7 @@ def plan_command(
         from bearnav_cli.datatypes import percent
 
         raise fail(f"a {fov:g}° camera looking along the field sees no usable pair of tags from "
-                   f"{percent(1.0 - seeing.fraction_domain)} of D: add tags there; "
+                   f"{percent(1.0 - seeing.fraction_domain)} of the certified area: add tags there; "
                    + tags_step(reports[-1].path, fov, max_range, plan_words), EXIT_OUTCOME)  # fmt: skip
 
 

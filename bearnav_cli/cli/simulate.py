@@ -121,7 +121,7 @@ def _metric_rows(metrics: dict) -> list[tuple[str, str]]:
     ]
     if metrics.get("estimator") == "set":  # ALGORITHMS §12.8: how the bounded-error robot spent its time
         rows += [
-            ("success from D", num(metrics.get("success_rate_in_domain"), ".1%")),
+            ("success from the certified area", num(metrics.get("success_rate_in_domain"), ".1%")),
             ("looks per run", num(metrics.get("looks_per_run"), ".1f")),
             ("mean look (s)", num(metrics.get("look_time_mean_s"), ".2f")),
             ("truth outside its set (steps)", str(metrics.get("containment_violations"))),

@@ -8,7 +8,7 @@ import typer
 
 from bearnav_cli.cli.exits import EXIT_INVALID, EXIT_OUTCOME, fail, handles_errors
 from bearnav_cli.cli.hints import camera_words, command_text, tags_output
-from bearnav_cli.cli.mapfile import read_bytes, read_map_source
+from bearnav_cli.cli.mapfile import is_bare_grid, read_bytes, read_grid, read_map_source
 from bearnav_cli.cli.options import CAMERA_OPTIONS, JSON, QUIET
 from bearnav_cli.cli.output import FIGURE_SUFFIXES, Quiet, err, out, plotting, print_json
 from bearnav_cli.errors import InvalidParamsError
@@ -29,7 +29,10 @@ def tags_command(
         None, "--max-tags", help="At most this many new tags (exit 1 if the rule then still fails somewhere)."
     ),
     map_yaml: Optional[Path] = typer.Option(
-        None, "--map", help="The map YAML to add the tags to (default: the plan's map, written as polygons)."
+        None,
+        "--map",
+        help="The map YAML to add the tags to, kept as it is (default: the plan's map, written as polygons); "
+        "a bare map_server YAML is named by the new map as its occupancy grid.",
     ),
     out_path: Optional[Path] = typer.Option(
         None,
@@ -109,7 +112,19 @@ def tags_command(
         spec = map_.spec_of(plan.map)
         original = None  # the YAML text the user wrote, kept as it is in the new map
         grid = None  # the occupancy grid the new map names, when it keeps the map's own text
-        if map_yaml is not None:
+        if map_yaml is not None and is_bare_grid(map_yaml):
+            # a bare map_server YAML holds no goal, tags or robot: the new map wraps the grid (occupancy:, its
+            # path relative to the new map) and takes the rest from the plan's map, so the PGM stays a PGM
+            import os
+
+            grid, _ = read_grid(map_yaml, str(map_yaml), "--map")
+            wrapped = {key: value for key, value in spec.items() if key not in ("name", "bounds", "obstacles")}
+            spec = {"name": spec["name"], "occupancy": os.path.relpath(map_yaml, out_path.resolve().parent),
+                    **wrapped}  # fmt: skip
+            problem = composition.map_frame_problem(plan.map, map_.run(map_.MapSource(spec=spec, file=str(out_path), sha256="", grid=grid)))
+            if problem:
+                raise fail(f"{map_yaml}: {problem}: not the plan's occupancy grid", EXIT_INVALID)
+        elif map_yaml is not None:
             source = read_map_source(map_yaml)
             problem = composition.map_frame_problem(plan.map, map_.run(source))
             if problem:
