@@ -121,7 +121,8 @@ def tags_command(
             wrapped = {key: value for key, value in spec.items() if key not in ("name", "bounds", "obstacles")}
             spec = {"name": spec["name"], "occupancy": os.path.relpath(map_yaml, out_path.resolve().parent),
                     **wrapped}  # fmt: skip
-            problem = composition.map_frame_problem(plan.map, map_.run(map_.MapSource(spec=spec, file=str(out_path), sha256="", grid=grid)))
+            wrapper = map_.MapSource(spec=spec, file=str(out_path), sha256="", grid=grid)
+            problem = composition.map_frame_problem(plan.map, map_.run(wrapper))
             if problem:
                 raise fail(f"{map_yaml}: {problem}: not the plan's occupancy grid", EXIT_INVALID)
         elif map_yaml is not None:
