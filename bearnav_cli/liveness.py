@@ -48,7 +48,7 @@ from typing import Any
 import numpy as np
 import shapely
 
-from bearnav_cli.datatypes import Plan
+from bearnav_cli.datatypes import Plan, percent
 from bearnav_cli.errors import InvalidParamsError
 from bearnav_cli.runtime import PlanArrays, bounded, estimate, robot, step
 
@@ -147,8 +147,8 @@ class Liveness:
         reach = "" if math.isinf(g.max_range) else f" of range {g.max_range:g}"
         heads = "1 heading (all around)" if g.headings == 1 else f"{g.headings} headings"
         return (f"liveness at a bearing error of {math.degrees(g.eta):.3g}°, {camera}{reach}, wheel slip {g.kappa:g}: "
-                f"{self.live_fraction:.0%} of the certified area live ({self.n_live}/{len(self.live)} cells; "
-                f"{self.view_fraction:.0%} after one view, without turning all around); the largest bearing error "
+                f"{percent(self.live_fraction)} of the certified area live ({self.n_live}/{len(self.live)} cells; "
+                f"{percent(self.view_fraction)} after one view, without turning all around); the largest bearing error "
                 f"every cell is live at: {math.degrees(self.eta_star):.3g}°; measured on a {g.resolution:.3g}-map-unit "
                 f"grid with {heads}, a measurement, not a proof")  # fmt: skip
 
