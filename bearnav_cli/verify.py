@@ -84,7 +84,7 @@ class Params:
         (``α`` = the loop's speed). On a plan with a look-ahead ``λ > 0`` the unicycle drives the point
         ``p = x + λh`` as a single integrator (ALGORITHMS §12.6, Lemma 7), inside the certificate;
         with ``λ = 0`` it follows §7.1's rules with ``certified_heading`` on (the heading allowance,
-        ``runtime.step.heading_allowance``), outside the certificate: its steps count as uncertified
+        ``runtime.unicycle.heading_allowance``), outside the certificate: its steps count as uncertified
         and the report says so. Both run with displacements and exact motion. A run from ``D``
         **breaches** the certificate when any of its steps is not certified
         (``runtime.ControlOutput.certified``: a funnel cell's field followed, not a straight

@@ -9,6 +9,10 @@
 - :mod:`~bearnav_cli.runtime.estimate` — the fix and its fusion with odometry, and the estimate sets;
 - :mod:`~bearnav_cli.runtime.robot` — the robot's parameters (the map's ``robot:`` section) and the
   look-ahead point of a unicycle (ALGORITHMS §12.6, Lemma 7);
+- :mod:`~bearnav_cli.runtime.settings` — the step's constants (:class:`ControlSettings`), memory
+  (:class:`ControlState`) and output (:class:`ControlOutput`);
+- :mod:`~bearnav_cli.runtime.unicycle`, :mod:`~bearnav_cli.runtime.looking`, :mod:`~bearnav_cli.runtime.safety` —
+  the unicycle's, looking's and safety's rules of the step;
 - :mod:`~bearnav_cli.runtime.step` — one control step for ``R`` robots (:func:`control`);
 - :mod:`~bearnav_cli.runtime.controller` — :class:`Controller`, one robot at camera rate;
 - :mod:`~bearnav_cli.runtime.camera` — AprilTag detections in an image to world bearings and heading
@@ -34,7 +38,8 @@ _ORIGIN = {
     **dict.fromkeys(("RUNTIME_KEYS", "PlanArrays", "ring_edges", "tree_costs"), "plan_arrays"),
     **dict.fromkeys(("ROBOT_DEFAULTS", "lookahead_command", "lookahead_point"), "robot"),
     **dict.fromkeys(("DYNAMICS", "ESTIMATORS", "MEASUREMENTS", "ControlOutput", "ControlSettings", "ControlState",
-                     "bounded_control", "control", "timing"), "step"),
+                     "timing"), "settings"),
+    **dict.fromkeys(("bounded_control", "control"), "step"),
 }  # fmt: skip
 #: The submodules, also attributes of the package once imported (``runtime.step``, ``runtime.bearing``).
 _SUBMODULES = (
@@ -45,11 +50,15 @@ _SUBMODULES = (
     "controller",
     "estimate",
     "invariants",
+    "looking",
     "plan_arrays",
     "plan_file",
     "robot",
+    "safety",
     "schema",
+    "settings",
     "step",
+    "unicycle",
 )
 
 

@@ -149,7 +149,7 @@ class PlanArrays:
         Barrier constant of each cell's certificate (1/s; NaN without barrier rows).
     c_v : ndarray of float64, shape (C,)
         Lyapunov constant of each cell's certificate (1/s); with ``c_h``, what the unicycle's
-        heading allowance (:func:`bearnav_cli.runtime.step.heading_allowance`) needs.
+        heading allowance (:func:`bearnav_cli.runtime.unicycle.heading_allowance`) needs.
     goal : ndarray of float64, shape (2,)
         Derived: the root node's position (map units).
     bin_cells : ndarray of int64, shape (B, K)
