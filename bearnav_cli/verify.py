@@ -41,6 +41,7 @@ from bearnav_cli.liveness import Liveness
 from bearnav_cli.liveness import measure as measure_liveness
 from bearnav_cli.routes import MAX_ROUTE_VERTICES, route_lengths, sample_starts
 from bearnav_cli.runtime import PlanArrays
+from bearnav_cli.runtime.certificate import field_margins, gain_field
 from bearnav_cli.stages import simulate
 
 __all__ = ["CERTIFICATE_TOL", "CERTIFIED", "COVERAGE_TOL", "GOAL_FIELD_TOL", "UNIT_TOL", "Certificates", "Geometry",
@@ -196,42 +197,40 @@ def _mismatch(value: float, stored: float) -> float:
 
 
 def certificates(plan: Plan) -> Certificates:
-    """Recompute every cell's CBF, CLF and input values from the stored gain and rows (ALGORITHMS §8)."""
+    """Recompute every cell's CBF, CLF and input values from the stored gain and rows (ALGORITHMS §8).
+
+    The one re-check, :func:`~bearnav_cli.runtime.certificate.field_margins`, on hashed data only: the
+    gain, constants and stored margins of ``plan.npz`` and the rows of its cells.
+    """
     cells = plan.cells
     landmarks = plan.landmarks
-    n_lm = len(landmarks)
     count = cells.n_cells
     out = {name: np.full(count, np.nan) for name in ("value_h", "value_v", "value_u", "goal_error")}
     violation = np.zeros(count)
     margin_error = np.zeros(count)
     goal = plan.map.goal
     for c in range(count):
-        K = plan.gain[c]
-        M = K.reshape(2, n_lm, 2).sum(axis=1)  # Σ_k K_k
-        a = K @ landmarks.ravel()  # Σ_k K_k l_k
-        verts = cells.vertices(c)
-        u = a - verts @ M.T  # u_q, shape (p, 2)
-        bad = 0.0
+        M, a = gain_field(plan.gain[c], landmarks)  # Σ_k K_k, Σ_k K_k l_k
         normals, offsets = cells.barrier(c)
+        edge = cells.parent[cells.cell_node[c]] >= 0  # an edge cell; the root's cell is the goal cell
+        z, xj = cells.exit_dir[c], cells.exit_point[c]
+        m = field_margins(M, a, cells.vertices(c), z, xj, normals, offsets, plan.c_h[c], plan.c_v[c],
+                          plan.u_max[c])  # fmt: skip
+        bad = 0.0
         if len(normals):
-            h = verts @ normals.T + offsets  # h_k(v_q), shape (p, h)
-            value = float(np.max(-(u @ normals.T + plan.c_h[c] * h)))
-            out["value_h"][c] = value
-            bad = max(bad, math.inf if math.isnan(value) else value)
-        if cells.parent[cells.cell_node[c]] >= 0:  # an edge cell; the root's cell is the goal cell
-            z, xj = cells.exit_dir[c], cells.exit_point[c]
-            value = float(np.max(u @ z + plan.c_v[c] * ((verts - xj) @ z)))
-            out["value_v"][c] = value
-            bad = max(bad, value)
+            out["value_h"][c] = m.cbf
+            bad = max(bad, math.inf if math.isnan(m.cbf) else m.cbf)
+        if edge:
+            out["value_v"][c] = m.clf
+            bad = max(bad, m.clf)
         else:
             gain_c = plan.c_v[c]
             scale = max(1.0, float(np.linalg.norm(a)))
             out["goal_error"][c] = (
                 max(float(np.linalg.norm(M - gain_c * np.eye(2))), float(np.linalg.norm(a - gain_c * goal))) / scale
             )
-        value = float(np.max(np.abs(u)) - plan.u_max[c])
-        out["value_u"][c] = value
-        violation[c] = max(bad, value, 0.0)
+        out["value_u"][c] = m.input
+        violation[c] = max(bad, m.input, 0.0)
         margin_error[c] = max(
             _mismatch(out["value_h"][c], float(plan.margin_h[c])), _mismatch(out["value_v"][c], float(plan.margin_v[c]))
         )

@@ -15,6 +15,7 @@ from bearnav_cli import cell_lp
 from bearnav_cli.datatypes import CellFlag, CellStatus, replace
 from bearnav_cli.errors import ArtifactError, InvalidParamsError
 from bearnav_cli.lp import LpResult, LpSolver, LpStatus, dense_to_csr
+from bearnav_cli.runtime.certificate import Margins, vertex_margins
 from bearnav_cli.stages import synthesize as sy
 from tests.handmade import clip, hand_map, hand_plan
 
@@ -113,8 +114,8 @@ def field_of(K: np.ndarray, landmarks: np.ndarray) -> tuple[np.ndarray, np.ndarr
     return K.reshape(2, -1, 2).sum(axis=1), K @ landmarks.ravel()
 
 
-def margins_of(sol: sy.CellSolution, p: cell_lp.CellProblem, u_max: float = 1.0) -> sy.Margins:
-    return sy.vertex_margins(sol.K, p.landmarks, p.vertices, p.z, p.x_j, p.cbf_n, p.cbf_q, sol.c_h, sol.c_v, u_max)
+def margins_of(sol: sy.CellSolution, p: cell_lp.CellProblem, u_max: float = 1.0) -> Margins:
+    return vertex_margins(sol.K, p.landmarks, p.vertices, p.z, p.x_j, p.cbf_n, p.cbf_q, sol.c_h, sol.c_v, u_max)
 
 
 @pytest.fixture(scope="module")
@@ -304,7 +305,7 @@ def test_min_norm_gain_realises_the_optimal_field(solver, random_cells):
         assert np.abs(M - F[:, :2]).max() <= 1e-9 and np.abs(a - F[:, 2]).max() <= 1e-9
         # K satisfies every gain-space constraint with the LP's slacks
         S_h, S_V = field_lp.slacks(result.x)
-        m = sy.vertex_margins(K, p.landmarks, p.vertices, p.z, p.x_j, p.cbf_n, p.cbf_q, c_h, c_v, 1.0)
+        m = vertex_margins(K, p.landmarks, p.vertices, p.z, p.x_j, p.cbf_n, p.cbf_q, c_h, c_v, 1.0)
         assert np.all(m.cbf_rows <= S_h + 1e-9) and m.clf <= S_V + 1e-9 and m.input <= 1e-9
         # least norm among the gains with that field: adding any N with N G = 0 only grows it
         G = cell_lp.landmark_matrix(p.landmarks)
@@ -507,8 +508,8 @@ def test_run_on_hand_cells(hand_cells):
         for x in verts:  # the layout of DESIGN §3.2
             assert plan.gain[c] @ (landmarks - x).ravel() == pytest.approx(a - M @ x, abs=1e-12)
         n, q = hand_cells.barrier(c)
-        m = sy.vertex_margins(plan.gain[c], landmarks, verts, hand_cells.exit_dir[c], hand_cells.exit_point[c], n, q,
-                              plan.c_h[c], plan.c_v[c], 1.0)  # fmt: skip
+        m = vertex_margins(plan.gain[c], landmarks, verts, hand_cells.exit_dir[c], hand_cells.exit_point[c], n, q,
+                           plan.c_h[c], plan.c_v[c], 1.0)  # fmt: skip
         if c == 0:
             goal = hand_cells.nodes[0]
             c0 = 1.0 / np.max(np.abs(goal - verts))
@@ -565,8 +566,8 @@ def test_pipeline_cells_are_certified_and_rechecked(small_spec):
     landmarks = map_.landmarks
     for c in range(1, cells.n_cells):
         n, q = cells.barrier(c)
-        m = sy.vertex_margins(plan.gain[c], landmarks, cells.vertices(c), cells.exit_dir[c], cells.exit_point[c], n, q,
-                              plan.c_h[c], plan.c_v[c], 1.0)  # fmt: skip
+        m = vertex_margins(plan.gain[c], landmarks, cells.vertices(c), cells.exit_dir[c], cells.exit_point[c], n, q,
+                           plan.c_h[c], plan.c_v[c], 1.0)  # fmt: skip
         assert plan.margin_v[c] == pytest.approx(m.clf, abs=1e-7)
         assert plan.margin_h[c] == pytest.approx(m.cbf, abs=1e-7, nan_ok=True)
         if plan.status[c] in (CellStatus.CERTIFIED, CellStatus.RELAXED):

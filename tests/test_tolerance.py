@@ -22,7 +22,7 @@ from bearnav_cli.datatypes import CellStatus
 from bearnav_cli.errors import ArtifactError
 from bearnav_cli.funnel import cell_tolerance, exit_face, exit_sink, usable_tolerances
 from bearnav_cli.geometry import polygon_rows
-from bearnav_cli.stages.synthesize import field_margins
+from bearnav_cli.runtime.certificate import field_margins
 from tests.conftest import random_plan
 
 SEEDS = range(6)

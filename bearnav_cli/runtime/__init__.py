@@ -15,6 +15,7 @@
   the unicycle's, looking's and safety's rules of the step;
 - :mod:`~bearnav_cli.runtime.step` — one control step for ``R`` robots (:func:`control`);
 - :mod:`~bearnav_cli.runtime.controller` — :class:`Controller`, one robot at camera rate;
+- :mod:`~bearnav_cli.runtime.certificate` — the one re-check of a cell's certificate at its vertices (ALGORITHMS §8);
 - :mod:`~bearnav_cli.runtime.camera` — AprilTag detections in an image to world bearings and heading
   (:func:`observe`; ``docs/camera.md``).
 
@@ -47,6 +48,7 @@ _SUBMODULES = (
     "bounded",
     "camera",
     "cell_policy",
+    "certificate",
     "controller",
     "estimate",
     "invariants",

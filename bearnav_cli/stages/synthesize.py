@@ -5,7 +5,8 @@ this module solves it: SOLVE_CELL's κ loop (§5.3), the goal cell (§5.6), the 
 and the run over all cells.
 
 Every stored margin is recomputed at the vertices from the stored gain, and equals the
-independent check :func:`vertex_margins` (ALGORITHMS §8). Per-cell building blocks
+independent check :func:`~bearnav_cli.runtime.certificate.vertex_margins` (ALGORITHMS §8; to 1e-7: synthesize
+re-checks through the LP's vertex rows, or every funnel cell's two fields at once). Per-cell building blocks
 (:func:`solve_cell`, :func:`goal_cell_solution`, the LP builders) are public and need
 no artifact; :func:`run` applies them to :class:`~bearnav_cli.datatypes.Cells` in three
 passes (build every LP, solve them all, recover the gains), which keeps each kind of
@@ -46,11 +47,12 @@ from bearnav_cli.datatypes import CellFlag, Cells, CellStatus, Plan, tolerance_b
 from bearnav_cli.errors import ArtifactError, InvalidParamsError
 from bearnav_cli.funnel import cell_tolerance, exit_sinks, plan_tolerance_of, usable_tolerances
 from bearnav_cli.lp import LpResult, LpSolver, LpStatus
+from bearnav_cli.runtime.certificate import field_margins, gain_field, vertex_margins
 
 __all__ = [
-    "CellSolution", "DELTA_FRACTION", "GAIN_STRUCTURES", "LP_FORMS", "Margins", "Params", "PreparedCell",
-    "SolveOutcome", "VERSION", "cell_constants", "field_margins", "finish_cell", "goal_cell_solution",
-    "prepare_cell", "run", "solve_cell", "solve_prepared", "summary", "vertex_margins",
+    "CellSolution", "DELTA_FRACTION", "GAIN_STRUCTURES", "LP_FORMS", "Params", "PreparedCell", "SolveOutcome",
+    "VERSION", "cell_constants", "finish_cell", "goal_cell_solution", "prepare_cell", "run", "solve_cell",
+    "solve_prepared", "summary",
 ]  # fmt: skip
 
 VERSION = 3
@@ -136,98 +138,6 @@ class Params:
             raise InvalidParamsError(f"must be true or false, got {self.tolerant!r}", field="tolerant")
         if self.lp_form not in LP_FORMS:
             raise InvalidParamsError(f"must be one of {', '.join(LP_FORMS)}, got {self.lp_form!r}", field="lp_form")
-
-
-# --------------------------------------------------------------------------- certificates
-
-
-@dataclass(frozen=True)
-class Margins:
-    """Worst-case values of the certificate conditions over a cell's vertices (ALGORITHMS §8).
-
-    Attributes
-    ----------
-    cbf : float
-        ``max_{q,k} −(n_kᵀu_q + c_h h_k(v_q))``; NaN without barrier rows.
-    cbf_rows : ndarray, shape (h,)
-        The same maximum per barrier row (``S_h,k``).
-    clf : float
-        ``max_q zᵀu_q + c_v V(v_q)``.
-    input : float
-        ``max_q ‖u_q‖_∞ − u_max``.
-    """
-
-    cbf: float
-    cbf_rows: np.ndarray
-    clf: float
-    input: float
-
-
-def vertex_margins(K, landmarks, vertices, z, x_j, cbf_n, cbf_q, c_h, c_v, u_max) -> Margins:
-    """Re-check a gain at the vertices, without an LP (ALGORITHMS §8).
-
-    Parameters
-    ----------
-    K : ndarray, shape (2, 2n)
-        Gain over ``landmarks`` (the full ``gain[c]`` with all map landmarks works too).
-    landmarks : ndarray, shape (n, 2)
-        Positions of the landmarks ``K`` reads (map units).
-    vertices : ndarray, shape (p, 2)
-        The cell's vertices ``v_q`` (map units).
-    z, x_j : ndarray, shape (2,)
-        Unit exit direction (into the cell) and exit point (map units): ``V(x) = zᵀ(x − x_j)``.
-    cbf_n, cbf_q : ndarray, shapes (h, 2), (h,)
-        Barrier rows ``h_k(x) = n_kᵀx + q_k``; there may be none.
-    c_h, c_v : float
-        Barrier and Lyapunov constants (1/s).
-    u_max : float
-        Input bound (map units/s).
-
-    Returns
-    -------
-    Margins
-    """
-    K = np.asarray(K, float)
-    landmarks = np.asarray(landmarks, float)
-    return field_margins(K.reshape(2, -1, 2).sum(axis=1), K @ landmarks.ravel(), vertices, z, x_j, cbf_n, cbf_q,
-                         c_h, c_v, u_max)  # fmt: skip
-
-
-def field_margins(M, a, vertices, z, x_j, cbf_n, cbf_q, c_h, c_v, u_max) -> Margins:
-    """:func:`vertex_margins` of the affine field ``u(x) = a − M x`` itself.
-
-    Parameters
-    ----------
-    M : ndarray, shape (2, 2)
-        The field's linear part (1/s).
-    a : ndarray, shape (2,)
-        The field's constant part (map units/s).
-    vertices : ndarray, shape (p, 2)
-        The cell's vertices ``v_q`` (map units), where ``u_q = a − M v_q`` is evaluated.
-    z, x_j : ndarray, shape (2,)
-        Unit exit direction (into the cell) and exit point (map units): ``V(x) = zᵀ(x − x_j)``.
-    cbf_n, cbf_q : ndarray, shapes (h, 2), (h,)
-        Barrier rows ``h_k(x) = n_kᵀx + q_k``; with none, ``cbf`` is NaN.
-    c_h, c_v : float
-        Barrier and Lyapunov constants (1/s).
-    u_max : float
-        Input bound (map units/s).
-
-    Returns
-    -------
-    Margins
-    """
-    V = np.asarray(vertices, float)
-    cbf_n = np.asarray(cbf_n, float).reshape(-1, 2)
-    U = a - V @ M.T  # u at each vertex, (p, 2)
-    if len(cbf_n):
-        values = -(U @ cbf_n.T + c_h * (V @ cbf_n.T + np.asarray(cbf_q, float)))
-        rows = values.max(axis=0)
-        cbf = float(rows.max())
-    else:
-        rows, cbf = np.zeros(0), math.nan
-    clf = float(np.max(U @ z + c_v * ((V - x_j) @ z)))
-    return Margins(cbf, rows, clf, float(np.abs(U).max() - u_max))
 
 
 # --------------------------------------------------------------------------- one cell
@@ -713,7 +623,7 @@ def solve_cell(problem: CellProblem, params: Params, solver: LpSolver, funnel: b
     CellSolution
         Status 0 (first attempt), 1 (after halvings), 2 (least violation) or 3 (unbounded
         or solver error: the gain is then zero). Margins are recomputed at the vertices
-        from ``K`` (equal to :func:`vertex_margins`).
+        from ``K`` (equal to :func:`~bearnav_cli.runtime.certificate.vertex_margins`).
     """
     prepared = prepare_cell(problem, params)
     solution = finish_cell(prepared, solve_prepared(prepared, params, solver, funnel=funnel))
@@ -728,7 +638,8 @@ def _template_margins(checker: LpTemplate, upper: np.ndarray, space: str, K, lan
 
     The field ``[M, a] = [K𝟙, Kℓ]`` (in gain space: ``K``'s free entries) is put into the rows
     ``d_gᵀu(v_q) ≤ r_g − ρ_gᵀv_q`` (right-hand sides ``upper``); the slack of group ``g`` is
-    its largest excess over its ``p`` rows. The same numbers as :func:`vertex_margins`.
+    its largest excess over its ``p`` rows. The same numbers as
+    :func:`~bearnav_cli.runtime.certificate.vertex_margins` (to rounding).
     """
     if space == "field":
         theta = np.empty((2, 3))
@@ -971,9 +882,10 @@ def more_tolerant_all(solutions: Sequence[CellSolution], problems: Sequence[Cell
     tolerates ``min(h* − ε/c, ε/c)``; the best ``ε = c·h*/2``, lowered to keep
     ``|u|_∞ ≤ c·diam + ε ≤ u_max``. Since ``x_j`` lies on the face, ``h* ≥ min_k h_k(x_j)``: it
     never tolerates less than Lemma 4's field with its sink at ``x_j``. Both fields (the LP's and
-    Lemma 6's) are re-checked at the vertices (the numbers of :func:`field_margins`) and their
-    ``δ_c`` is :func:`bearnav_cli.funnel.cell_tolerance`'s; each returned solution carries the
-    chosen gain, its margins and its ``δ_c``, with the same status and constants.
+    Lemma 6's) are re-checked at the vertices (the numbers of
+    :func:`~bearnav_cli.runtime.certificate.field_margins`) and their ``δ_c`` is
+    :func:`bearnav_cli.funnel.cell_tolerance`'s; each returned solution carries the chosen gain, its
+    margins and its ``δ_c``, with the same status and constants.
 
     Parameters
     ----------
@@ -1122,8 +1034,8 @@ def cell_tolerances(cells: Cells, gain: np.ndarray, c_h: np.ndarray, c_v: np.nda
                     known: np.ndarray | None = None) -> np.ndarray:  # fmt: skip
     """``δ_c`` of every funnel cell from its gain and rows (ALGORITHMS §11.4), shape (C,), map units.
 
-    The margins are recomputed at the vertices (:func:`vertex_margins`); a cell whose margins are
-    not all positive tolerates no error (``δ_c = 0``). ``known`` (C,) gives the cells whose ``δ_c``
+    The margins are recomputed at the vertices (:func:`~bearnav_cli.runtime.certificate.field_margins`); a cell
+    whose margins are not all positive tolerates no error (``δ_c = 0``). ``known`` (C,) gives the cells whose ``δ_c``
     is already known (NaN elsewhere, and all are computed without it).
     """
     landmarks = cells.map.landmarks
@@ -1134,8 +1046,8 @@ def cell_tolerances(cells: Cells, gain: np.ndarray, c_h: np.ndarray, c_v: np.nda
         normals, offsets = cells.barrier(c)
         goal = cells.parent[cells.cell_node[c]] == -1
         z, x_j = cells.exit_dir[c], cells.exit_point[c]
-        m = vertex_margins(gain[c], landmarks, cells.vertices(c), z, x_j, normals, offsets, c_h[c], c_v[c], u_max)
-        M = gain[c].reshape(2, -1, 2).sum(axis=1)
+        M, a = gain_field(gain[c], landmarks)
+        m = field_margins(M, a, cells.vertices(c), z, x_j, normals, offsets, c_h[c], c_v[c], u_max)
         out[c] = cell_tolerance(M, normals, -m.cbf_rows, None if goal else z, None if goal else -m.clf)
     return out
 
