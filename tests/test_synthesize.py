@@ -578,3 +578,43 @@ def test_pipeline_cells_are_certified_and_rechecked(small_spec):
 def test_coincident_landmarks_are_an_input_error():
     with pytest.raises(ArtifactError):
         cell_lp.min_norm_gain(np.eye(2), np.ones(2), np.array([[1.0, 2.0], [1.0, 2.0]]))
+
+
+def _problems(cells):
+    """The :class:`cell_lp.CellProblem` of every edge cell, as :func:`sy.run` builds them."""
+    landmarks = cells.map.landmarks
+    for c in range(cells.n_cells):
+        if cells.parent[cells.cell_node[c]] == -1:
+            continue
+        rows = slice(int(cells.cell_row_offsets[c]), int(cells.cell_row_offsets[c + 1]))
+        n, q = cells.barrier(c)
+        yield c, cell_lp.CellProblem(cells.vertices(c), cells.cell_A[rows], cells.cell_b[rows], cells.exit_dir[c],
+                                     cells.exit_point[c], n, q, landmarks[cells.cell_landmarks[c]])  # fmt: skip
+
+
+@pytest.mark.parametrize("seed", [0, 3])
+def test_batched_scales_equal_the_cell_by_cell_ones(seed):
+    """The two paths to a cell's constants, bit for bit: :func:`sy.run`'s batched scales (every cell in a
+    few numpy passes) and the cell-by-cell ones (:func:`sy.prepare_cell`, :func:`sy.cell_constants`,
+    Lemma 4's terms) that :func:`sy.solve_cell` uses."""
+    from tests.conftest import random_plan
+
+    cells = random_plan(seed).cells
+    params = sy.Params()
+    edge = np.flatnonzero(cells.parent[cells.cell_node] != -1).tolist()
+    built = cell_lp.field_vertex_templates(cells.cell_vertices, cells.cell_vertex_offsets, cells.cbf_A, cells.cbf_b,
+                                           cells.cbf_offsets, cells.exit_dir, cells.exit_point, edge, params.u_max,
+                                           params.w_h, params.w_v)  # fmt: skip
+    batched = sy._batched_scales(cells, built, edge)
+    checked = 0
+    for c, problem in _problems(cells):
+        h_scale, v_max, terms = batched[c]
+        one = sy.prepare_cell(problem, params)
+        assert one.v_scale == v_max
+        assert one.h_scale == h_scale or (math.isnan(one.h_scale) and math.isnan(h_scale))
+        assert terms == sy._lemma4_terms(problem)
+        c_h, c_v = sy.cell_constants(problem, params.kappa, params.u_max)
+        assert c_v == params.kappa * params.u_max / v_max
+        assert c_h == params.kappa * params.u_max / h_scale or (math.isnan(c_h) and math.isnan(h_scale))
+        checked += 1
+    assert checked == len(edge) > 10

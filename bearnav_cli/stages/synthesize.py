@@ -410,11 +410,16 @@ def lemma4_margin(problem: CellProblem, c_v: float, u_max: float) -> float:
 
 
 def _lemma4_terms(problem: CellProblem) -> tuple[float, float]:
-    """``min_k h_k(x_j)`` and ``diam(P)`` of a cell (map units), the two geometric terms of Lemma 4."""
+    """``min_k h_k(x_j)`` and ``diam(P)`` of a cell (map units), the two geometric terms of Lemma 4.
+
+    The numbers of :func:`_batched_scales`: ``h_k(x_j)`` as the same ``einsum`` (a matrix product may
+    round it differently in the last place).
+    """
     V = problem.vertices
     diff = V[:, None, :] - V
     diam = math.sqrt(float((diff * diff).sum(axis=2).max()))
-    h_min = float(np.min(problem.cbf_n @ problem.x_j + problem.cbf_q)) if len(problem.cbf_q) else math.inf
+    h_exit = np.einsum("ki,i->k", problem.cbf_n, problem.x_j) + problem.cbf_q
+    h_min = float(np.min(h_exit)) if len(problem.cbf_q) else math.inf
     return h_min, diam
 
 
