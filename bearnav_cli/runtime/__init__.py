@@ -33,7 +33,8 @@ _ORIGIN = {
                     "camera"),
     **dict.fromkeys(("affine_field", "apply_gain", "approach_target", "barrier_values", "contains", "displacement",
                      "field", "funnel_update", "in_safe_set", "least_rank_cell", "locate",
-                     "nearest_node", "segments_clear", "switch", "update", "voronoi_owner"), "cell_policy"),
+                     "nearest_node", "switch", "update", "voronoi_owner"), "cell_policy"),
+    "segments_clear": "sight",
     "Controller": "controller",
     **dict.fromkeys(("Estimate", "Fix", "SetEstimate", "bounded_update", "fuse", "measure"), "estimate"),
     **dict.fromkeys(("RUNTIME_KEYS", "PlanArrays", "ring_edges", "tree_costs"), "plan_arrays"),
@@ -59,6 +60,7 @@ _SUBMODULES = (
     "safety",
     "schema",
     "settings",
+    "sight",
     "step",
     "unicycle",
 )

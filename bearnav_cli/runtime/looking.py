@@ -14,10 +14,10 @@ import numpy as np
 
 from bearnav_cli.runtime import bearing
 from bearnav_cli.runtime.bounded import one_look_bound
-from bearnav_cli.runtime.cell_policy import in_sight
 from bearnav_cli.runtime.estimate import Estimate, axle_bounds
 from bearnav_cli.runtime.plan_arrays import PlanArrays
 from bearnav_cli.runtime.settings import ControlSettings, ControlState
+from bearnav_cli.runtime.sight import in_sight
 
 __all__ = ["LOOK_HEADINGS", "best_bound_heading", "best_view_heading", "look_around", "views"]
 
@@ -107,7 +107,7 @@ def best_view_heading(arrays: PlanArrays, s: ControlSettings, x: np.ndarray, phi
     """The camera heading at ``x`` from which the map promises the best fix, shape (R,) rad; NaN if none.
 
     Among ``headings`` evenly spaced headings, those where at least two landmarks are in the field
-    of view, in range and in line of sight (``cell_policy.in_sight``) and spread enough for the
+    of view, in range and in line of sight (``sight.in_sight``) and spread enough for the
     ``lsq`` fix (``λ_min(Σ P_k) ≥ 1 − cos θ_min``, as :func:`bearing.reconstruct` requires); of
     those, the one nearest to ``phi`` (the direction the robot was driving: a fix there lasts when
     it drives on), ties to the largest ``λ_min(Σ P_k / d_k²)`` (the smallest predicted fix
@@ -162,7 +162,7 @@ def best_bound_heading(arrays: PlanArrays, s: ControlSettings, x: np.ndarray, ph
     """The camera heading at ``x`` whose view promises the smallest one-look bound ``ε``, shape (R,) rad.
 
     Among ``headings`` evenly spaced headings, the landmarks in the field of view, in range and in
-    line of sight from ``x`` (``cell_policy.in_sight``) give
+    line of sight from ``x`` (``sight.in_sight``) give
     :func:`~bearnav_cli.runtime.bounded.one_look_bound` at ``η = s.bearing_bound``; the least ``ε``
     wins, ties to the smallest turn from ``phi`` (ALGORITHMS §12.5). NaN where no heading sees a
     landmark.
@@ -208,7 +208,7 @@ def views(arrays: PlanArrays, x: np.ndarray, fov: float, max_range: float, headi
     """Which landmarks a camera at ``x`` sees at each of ``headings`` evenly spaced headings, (R, H, L).
 
     In the field of view ``fov`` (rad) around the heading, within ``max_range`` (map units; ``inf``:
-    any) and in line of sight (``cell_policy.in_sight``); heading ``k`` is ``−π + 2πk/H``.
+    any) and in line of sight (``sight.in_sight``); heading ``k`` is ``−π + 2πk/H``.
     ``landmarks`` (L, 2): other positions than the plan's (tags proposed for it).
 
     Parameters

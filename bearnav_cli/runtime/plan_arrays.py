@@ -115,7 +115,7 @@ class PlanArrays:
         map), for the exact straight-line checks of :func:`approach_target`.
     sight_edges : ndarray of float64, shape (E', 2, 2)
         Every ring edge of the raw obstacles (map units): what hides a landmark
-        (``cell_policy.in_sight``).
+        (``sight.in_sight``).
     certificate : {"funnel", "paper"}
         ``funnel``: the cells compose and the policy is ALGORITHMS §11.3's (least rank);
         ``paper``: per-cell certificates only.

@@ -14,10 +14,11 @@ import dataclasses
 
 import numpy as np
 
-from bearnav_cli.runtime.cell_policy import cell_slack, least_rank_cell, obstacle_clearance
+from bearnav_cli.runtime.cell_policy import cell_slack, least_rank_cell
 from bearnav_cli.runtime.estimate import Estimate
 from bearnav_cli.runtime.plan_arrays import PlanArrays
 from bearnav_cli.runtime.settings import ControlSettings, ControlState
+from bearnav_cli.runtime.sight import obstacle_clearance
 
 __all__ = ["bend_inward", "carry_inside", "certified_pace", "error_ball_pace", "steer_clear"]
 
@@ -122,7 +123,7 @@ def error_ball_pace(arrays: PlanArrays, s: ControlSettings, cell: np.ndarray, x_
     funnel plan, ALGORITHMS §11.4) is taken at full speed as it is, and so is every step on a
     paper plan (which runs as the papers ran it). The cheap bound first: the slack of ``x̂`` in its
     own funnel cell (cells are free, C1); the exact distance
-    (:func:`~bearnav_cli.runtime.cell_policy.obstacle_clearance`) only where that bound slows it.
+    (:func:`~bearnav_cli.runtime.sight.obstacle_clearance`) only where that bound slows it.
 
     Parameters
     ----------
@@ -143,7 +144,7 @@ def error_ball_pace(arrays: PlanArrays, s: ControlSettings, cell: np.ndarray, x_
         The fraction of full speed allowed, in ``[0, 1]``.
     away : ndarray, shape (R, 2)
         Where the pace is below 1: the unit direction away from the nearest obstacle piece
-        (:func:`~bearnav_cli.runtime.cell_policy.obstacle_clearance`); zero elsewhere.
+        (:func:`~bearnav_cli.runtime.sight.obstacle_clearance`); zero elsewhere.
     """
     e = np.asarray(error_bound, float).reshape(-1)
     away = np.zeros((len(e), 2))
