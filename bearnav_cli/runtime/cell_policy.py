@@ -23,8 +23,10 @@ from typing import Any
 
 import numpy as np
 
+from bearnav_cli.runtime import sight
 from bearnav_cli.runtime.plan_arrays import CHUNK, PlanArrays
-from bearnav_cli.runtime.sight import crossing_parity, obstacle_clearance, segments_clear
+from bearnav_cli.runtime.planar import points
+from bearnav_cli.runtime.sight import crossing_parity, segments_clear
 
 __all__ = [
     "affine_field",
@@ -44,18 +46,21 @@ __all__ = [
     "update",
     "voronoi_owner",
 ]
-#: Moved to :mod:`~bearnav_cli.runtime.sight`; ``stages.simulate`` still reads it as ``cell_policy.obstacle_clearance``.
-__all__ += ["obstacle_clearance"]
+
+
+def __getattr__(name: str) -> Any:
+    # obstacle_clearance moved to runtime.sight (issue 24); stages.simulate still reads it here: answer for it
+    # until it imports it from there
+    if name == "obstacle_clearance":
+        return sight.obstacle_clearance
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
 
 # --------------------------------------------------------------------------- vectorised queries
 
 
 def _cells(arrays: PlanArrays, cell: Any) -> np.ndarray:
     return np.asarray(cell, np.int64).reshape(-1)
-
-
-def _points(x: Any) -> np.ndarray:
-    return np.asarray(x, float).reshape(-1, 2)
 
 
 def contains(arrays: PlanArrays, cell: np.ndarray, x: np.ndarray, tol: float | None = None) -> np.ndarray:
@@ -76,7 +81,7 @@ def contains(arrays: PlanArrays, cell: np.ndarray, x: np.ndarray, tol: float | N
     -------
     ndarray of bool, shape (R,)
     """
-    c, p = _cells(arrays, cell), _points(x)
+    c, p = _cells(arrays, cell), points(x)
     tol = arrays.tol if tol is None else tol
     lhs = np.einsum("rpk,rk->rp", arrays.row_A[c], p)
     return np.all(lhs <= arrays.row_b[c] + tol, axis=1)
@@ -97,7 +102,7 @@ def cell_slack(arrays: PlanArrays, cell: np.ndarray, x: np.ndarray) -> np.ndarra
     x : ndarray, shape (R, 2)
         Points (map units).
     """
-    c, p = _cells(arrays, cell), _points(x)
+    c, p = _cells(arrays, cell), points(x)
     slack = arrays.row_b[c] - np.einsum("rpk,rk->rp", arrays.row_A[c], p)
     real = np.arange(arrays.row_A.shape[1]) < np.diff(arrays.cell_row_offsets)[c][:, None]
     return np.min(np.where(real, slack, math.inf), axis=1, initial=math.inf)
@@ -109,7 +114,7 @@ def nearest_node(arrays: PlanArrays, x: np.ndarray) -> np.ndarray:
     Distances are computed in chunks of robots × nodes, as differences (not through
     ``‖p‖² − 2p·x + ‖x‖²``, which loses the ties on Voronoi boundaries).
     """
-    p = _points(x)
+    p = points(x)
     nodes = arrays.nodes
     out = np.empty(len(p), np.int64)
     step = max(1, CHUNK // max(1, len(nodes)))
@@ -139,7 +144,7 @@ def barrier_values(arrays: PlanArrays, x: np.ndarray, where: np.ndarray | None =
     where : ndarray of bool, shape (R, C), optional
         The (robot, cell) pairs to evaluate; default all.
     """
-    p = _points(x)
+    p = points(x)
     if where is None:
         return np.min(np.einsum("cqk,rk->rcq", arrays.bar_A, p) + arrays.bar_b[None], axis=2, initial=math.inf)
     h = np.full(where.shape, -math.inf)
@@ -177,7 +182,7 @@ def locate(arrays: PlanArrays, x: np.ndarray, tol: float | None = None, eps_sw: 
         Switching radius (map units), paper plans: an edge cell whose exit point is within it is
         no candidate either (the robot would switch at once); ignored for funnel plans.
     """
-    p = _points(x)
+    p = points(x)
     if arrays.funnel:  # ALGORITHMS §11.3: the containing cell of least rank (the Voronoi owner outside D)
         best = least_rank_cell(arrays, p)
         outside = best < 0
@@ -225,7 +230,7 @@ def least_rank_cell(arrays: PlanArrays, x: np.ndarray, erosion: np.ndarray | flo
         Only cells of rank strictly below this count (the active cell's rank: is there a cell to
         switch to?); default all.
     """
-    p = _points(x)
+    p = points(x)
     delta = np.broadcast_to(np.asarray(erosion, float), (len(p),))
     cand = arrays.cells_near(p)  # (R, K) in (rank, index) order, -1 padding
     wanted = cand >= 0
@@ -277,7 +282,7 @@ def funnel_update(arrays: PlanArrays, cell: np.ndarray, target: np.ndarray, x: n
     relocated : ndarray of bool, shape (R,)
         Robots found outside their cell with no cell of smaller rank holding them.
     """
-    c, t, p = _cells(arrays, cell).copy(), _cells(arrays, target).copy(), _points(x)
+    c, t, p = _cells(arrays, cell).copy(), _cells(arrays, target).copy(), points(x)
     delta = np.broadcast_to(np.asarray(erosion, float), (len(p),)).copy()
     # for a robot in a cell only the cells of smaller rank matter (is there one to switch to?)
     following = (c >= 0) & (t < 0)
@@ -344,7 +349,7 @@ def switch(
         Robots found outside their (new) cell and relocated (each one is a ``left_cell``
         event; a hand-over moved on to a safer cell is not).
     """
-    c, p = _cells(arrays, cell).copy(), _points(x)
+    c, p = _cells(arrays, cell).copy(), points(x)
     up = arrays.parent_cell[c]
     edge = up >= 0
     handed = np.zeros(len(c), bool)
@@ -378,7 +383,7 @@ def in_safe_set(arrays: PlanArrays, cell: np.ndarray, x: np.ndarray) -> np.ndarr
     x : ndarray, shape (R, 2)
         Positions or their estimates (map units).
     """
-    c, p = _cells(arrays, cell), _points(x)
+    c, p = _cells(arrays, cell), points(x)
     rows = np.einsum("rqk,rk->rq", arrays.bar_A[c], p) + arrays.bar_b[c]
     return np.min(rows, axis=1, initial=math.inf) >= 0
 
@@ -403,7 +408,7 @@ def approach_target(arrays: PlanArrays, x: np.ndarray, nearest: int = 8) -> np.n
     nearest : int
         How many of the closest nodes are tried first.
     """
-    p = _points(x)
+    p = points(x)
     out = np.full(len(p), -1, np.int64)
     if not len(p):
         return out
@@ -493,7 +498,7 @@ def update(
     """
     if arrays.funnel:
         return funnel_update(arrays, cell, target, x, eps_sw, 0.0 if erosion is None else erosion, keep)
-    c, t, p = _cells(arrays, cell).copy(), _cells(arrays, target).copy(), _points(x)
+    c, t, p = _cells(arrays, cell).copy(), _cells(arrays, target).copy(), points(x)
     relocated = np.zeros(len(c), bool)
     fresh = c < 0
     if fresh.any():
@@ -523,7 +528,7 @@ def update(
 
 def displacement(arrays: PlanArrays, x: np.ndarray) -> np.ndarray:
     """The displacement output ``y = (landmarks − x).ravel()`` of each robot, shape (R, 2L)."""
-    p = _points(x)
+    p = points(x)
     return (arrays.landmarks[None, :, :] - p[:, None, :]).reshape(len(p), 2 * len(arrays.landmarks))
 
 
@@ -575,5 +580,5 @@ def affine_field(arrays: PlanArrays, cell: np.ndarray, x: np.ndarray) -> np.ndar
     x : ndarray, shape (R, 2)
         Positions or their estimates (map units).
     """
-    c, p = _cells(arrays, cell), _points(x)
+    c, p = _cells(arrays, cell), points(x)
     return arrays.field_a[c] - np.einsum("rij,rj->ri", arrays.field_M[c], p)

@@ -15,12 +15,9 @@ from __future__ import annotations
 import numpy as np
 
 from bearnav_cli.runtime.plan_arrays import CHUNK, PlanArrays
+from bearnav_cli.runtime.planar import points
 
 __all__ = ["crossing_parity", "edges_clear", "in_sight", "obstacle_clearance", "segments_clear"]
-
-
-def _points(x) -> np.ndarray:
-    return np.asarray(x, float).reshape(-1, 2)
 
 
 def _on_segment(orientation: np.ndarray, point: np.ndarray, s0: np.ndarray, s1: np.ndarray) -> np.ndarray:
@@ -45,7 +42,7 @@ def segments_clear(arrays: PlanArrays, a: np.ndarray, b: np.ndarray) -> np.ndarr
     a, b : ndarray, shape (R, 2)
         The segments' endpoints (map units).
     """
-    a, b = _points(a), _points(b)
+    a, b = points(a), points(b)
     lo, hi = arrays.free_bounds[:2], arrays.free_bounds[2:]
     ok = np.all((a >= lo) & (a <= hi) & (b >= lo) & (b <= hi), axis=1)
     return edges_clear(arrays.obstacle_edges, a, b, ok)
@@ -63,7 +60,7 @@ def edges_clear(edges: np.ndarray, a: np.ndarray, b: np.ndarray, ok: np.ndarray 
     ok : ndarray of bool, shape (R,), optional
         Only those segments are tested (the others stay ``False``); default all.
     """
-    a, b = _points(a), _points(b)
+    a, b = points(a), points(b)
     ok = np.ones(len(a), bool) if ok is None else np.array(ok, bool)
     if not len(edges) or not ok.any():
         return ok
@@ -104,7 +101,7 @@ def in_sight(arrays: PlanArrays, x: np.ndarray, landmarks: np.ndarray | None = N
     landmarks : ndarray, shape (L, 2), optional
         Other positions than the plan's landmarks (tags proposed for it; map units).
     """
-    p = _points(x)
+    p = points(x)
     lm = arrays.landmarks if landmarks is None else np.asarray(landmarks, float).reshape(-1, 2)
     d = lm[None, :, :] - p[:, None, :]
     dist = np.hypot(d[..., 0], d[..., 1])
@@ -139,7 +136,7 @@ def obstacle_clearance(arrays: PlanArrays, x: np.ndarray) -> tuple[np.ndarray, n
         Unit direction from the nearest point of the nearest piece to ``x`` (for a wall, its
         inward normal); zero where ``x`` lies on it.
     """
-    p = _points(x)
+    p = points(x)
     lo, hi = arrays.free_bounds[:2], arrays.free_bounds[2:]
     walls = np.concatenate([p - lo, hi - p], axis=1)  # x − xmin, y − ymin, xmax − x, ymax − y
     nearest_wall = np.argmin(walls, axis=1) if len(p) else np.zeros(0, np.int64)
