@@ -17,7 +17,8 @@
 - :mod:`~bearnav_cli.runtime.controller` — :class:`Controller`, one robot at camera rate;
 - :mod:`~bearnav_cli.runtime.certificate` — the one re-check of a cell's certificate at its vertices (ALGORITHMS §8);
 - :mod:`~bearnav_cli.runtime.camera` — AprilTag detections in an image to world bearings and heading
-  (:func:`observe`; ``docs/camera.md``).
+  (:func:`observe`; ``docs/camera.md``), with the camera's intrinsics and mount in
+  :mod:`~bearnav_cli.runtime.camera_model`.
 
 ``from bearnav_cli.runtime import Controller`` is all a robot needs; ``bearnav simulate`` uses the
 same step.
@@ -29,8 +30,8 @@ from typing import Any
 #: Where each name of ``__all__`` is defined: the submodules are imported when a name is first used
 #: (PEP 562), so that reading ``runtime.schema`` (every artifact load) does not import the controller.
 _ORIGIN = {
-    **dict.fromkeys(("Detection", "Intrinsics", "Mount", "Observation", "TagMap", "heading_from_tag", "observe"),
-                    "camera"),
+    **dict.fromkeys(("Detection", "Observation", "TagMap", "heading_from_tag", "observe"), "camera"),
+    **dict.fromkeys(("Intrinsics", "Mount"), "camera_model"),
     **dict.fromkeys(("affine_field", "apply_gain", "approach_target", "barrier_values", "contains", "displacement",
                      "field", "funnel_update", "in_safe_set", "least_rank_cell", "locate",
                      "nearest_node", "switch", "update", "voronoi_owner"), "cell_policy"),
@@ -48,6 +49,7 @@ _SUBMODULES = (
     "bearing",
     "bounded",
     "camera",
+    "camera_model",
     "cell_policy",
     "certificate",
     "controller",
