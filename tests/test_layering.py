@@ -23,6 +23,7 @@ LAYERS = {
     "routes": 2.5,
     "barriers": 2.5,
     "funnel": 2.5,  # build on lp and geometry
+    "cell_fields": 2.6,  # synthesize's LP-free parts of a cell's field, on cell_lp, funnel and runtime
     "composition": 2.7,  # the §11.6 checks, on funnel and geometry; verify builds on it
     "perception": 2.8,
     "liveness": 2.8,  # ALGORITHMS §12.5 on runtime and datatypes; verify reports it, cli passes it to plot
