@@ -50,16 +50,8 @@ def vertex_margins(K, landmarks, vertices, z, x_j, cbf_n, cbf_q, c_h, c_v, u_max
         Gain over ``landmarks`` (the full ``gain[c]`` with all map landmarks works too).
     landmarks : ndarray, shape (n, 2)
         Positions of the landmarks ``K`` reads (map units).
-    vertices : ndarray, shape (p, 2)
-        The cell's vertices ``v_q`` (map units).
-    z, x_j : ndarray, shape (2,)
-        Unit exit direction (into the cell) and exit point (map units): ``V(x) = zᵀ(x − x_j)``.
-    cbf_n, cbf_q : ndarray, shapes (h, 2), (h,)
-        Barrier rows ``h_k(x) = n_kᵀx + q_k``; there may be none.
-    c_h, c_v : float
-        Barrier and Lyapunov constants (1/s).
-    u_max : float
-        Input bound (map units/s).
+    vertices, z, x_j, cbf_n, cbf_q, c_h, c_v, u_max
+        The cell and its constants, as in :func:`field_margins`.
 
     Returns
     -------

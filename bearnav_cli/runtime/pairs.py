@@ -95,18 +95,8 @@ def rescale_output(beta: np.ndarray, vis: np.ndarray, lm: np.ndarray, f: np.ndar
 
     Parameters
     ----------
-    beta : ndarray, shape (R, L, 2)
-        Unit bearings, zero where not visible.
-    vis : ndarray of bool, shape (R, L)
-        Visible landmarks (with a usable bearing).
-    lm : ndarray, shape (L, 2)
-        Landmark positions (map units).
-    f : ndarray of int, shape (R,)
-        Each robot's fixed landmark.
-    sin_min : float
-        ``sin θ_min``: the least sine of an angle a solve accepts.
-    tol : float
-        Geometric tolerance (map units).
+    beta, vis, lm, f, sin_min, tol
+        As in :func:`pair_output`.
     """
     r, n_lm = vis.shape
     rows = np.arange(r)
