@@ -11,7 +11,8 @@ import pytest
 from bearnav_cli.datatypes import Map
 from bearnav_cli.errors import InvalidMapError, InvalidParamsError
 from bearnav_cli.runtime import camera
-from bearnav_cli.runtime.camera import Detection, Intrinsics, Mount, TagMap, heading_from_tag, observe
+from bearnav_cli.runtime.camera import Detection, TagMap, heading_from_tag, observe
+from bearnav_cli.runtime.camera_model import Intrinsics, Mount
 
 from .conftest import build_map
 

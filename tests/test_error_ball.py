@@ -22,9 +22,11 @@ import pytest
 import shapely
 
 from bearnav_cli.geometry import FreeSpace
-from bearnav_cli.runtime.cell_policy import least_rank_cell, obstacle_clearance
+from bearnav_cli.runtime.cell_policy import least_rank_cell
 from bearnav_cli.runtime.plan_arrays import PlanArrays
-from bearnav_cli.runtime.step import ControlSettings, error_ball_pace, steer_clear
+from bearnav_cli.runtime.safety import error_ball_pace, steer_clear
+from bearnav_cli.runtime.settings import ControlSettings
+from bearnav_cli.runtime.sight import obstacle_clearance
 from bearnav_cli.stages import simulate
 from tests.conftest import made_plan, random_plan
 

@@ -9,7 +9,8 @@ import numpy as np
 
 from bearnav_cli import runtime
 from bearnav_cli.runtime.estimate import Estimate, Fix, fuse
-from bearnav_cli.runtime.step import ControlState, look_around
+from bearnav_cli.runtime.looking import look_around
+from bearnav_cli.runtime.settings import ControlState
 
 
 def _settings(**kw):

@@ -23,10 +23,13 @@ LAYERS = {
     "routes": 2.5,
     "barriers": 2.5,
     "funnel": 2.5,  # build on lp and geometry
+    "cell_fields": 2.6,  # synthesize's LP-free parts of a cell's field, on cell_lp, funnel and runtime
     "composition": 2.7,  # the §11.6 checks, on funnel and geometry; verify builds on it
     "perception": 2.8,
     "liveness": 2.8,  # ALGORITHMS §12.5 on runtime and datatypes; verify reports it, cli passes it to plot
+    "verify_checks": 2.85,  # verify's exact checks of a plan's data, on composition, funnel, geometry and routes
     "tags": 2.9,  # issue 11 analyses on runtime, geometry and composition (tags also on lp)
+    "verify_report": 2.9,  # what verify found, on verify_checks, composition and liveness
     "world": 2.95,  # the simulated world (camera, motion, rendering) the simulate stage drives robots in
     "stages": 3,
     "verify": 3,

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 import shapely
 
-from bearnav_cli import pipeline, verify
+from bearnav_cli import pipeline, verify, verify_checks
 from bearnav_cli.datatypes import Outcome, replace
 from bearnav_cli.geometry import inflate, to_shapely
 from bearnav_cli.runtime import Controller, PlanArrays, robot, step
@@ -171,14 +171,14 @@ def test_verify_refutes_a_look_ahead_the_cells_were_not_built_for():
     plan = lookahead_plan()
     # the map now claims a larger look-ahead than the cells and obstacles were made with
     bigger = replace(plan, map=replace(plan.map, robot={**plan.map.robot, "lookahead": 2 * LAMBDA}))
-    problems = verify.check_lookahead(bigger)
+    problems = verify_checks.check_lookahead(bigger)
     assert any(p.startswith("lookahead:") for p in problems) and any(p.startswith("obstacles:") for p in problems)
     # the obstacles inflated by ρ only, with the look-ahead kept: the obstacle check alone fails
     body_only = build_map(random_spec(2, ITERATIONS))
     thin = replace(plan, map=replace(plan.map, obstacles=body_only.obstacles))
-    problems = verify.check_lookahead(thin)
+    problems = verify_checks.check_lookahead(thin)
     assert len(problems) == 1 and problems[0].startswith("obstacles:")
-    assert verify.check_lookahead(plan) == []
+    assert verify_checks.check_lookahead(plan) == []
 
 
 def test_a_robot_that_may_not_reverse_never_drives_backwards():

@@ -123,7 +123,7 @@ def test_the_heading_from_detected_tag_poses(room):
 def test_the_filter_of_a_rendered_run_never_assumes_exact_bearings(room):
     """A detector's bearings err a little: the simulated robot's filter assumes at least what the
     Controller does (with exact fixes assumed, 2 of the kitchen's 4 default starts got lost)."""
-    from bearnav_cli.runtime.step import BEARING_SIGMA
+    from bearnav_cli.runtime.settings import BEARING_SIGMA
     from bearnav_cli.stages import simulate
 
     plan = SimpleNamespace(map=room, goal_tolerance=0.1)

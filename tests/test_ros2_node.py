@@ -20,7 +20,7 @@ import pytest
 # rosbags comes with the test extra (bearnav[ros]): a broken install fails here rather than skipping
 from rosbags import typesys
 
-from bearnav_cli.runtime import Controller, camera
+from bearnav_cli.runtime import Controller, camera, camera_model
 
 from .conftest import REPO, planned_small_map
 
@@ -36,7 +36,7 @@ APRILTAG_MSGS = {
     "apriltag_msgs/msg/AprilTagDetectionArray": "std_msgs/Header header\nAprilTagDetection[] detections\n",
 }
 WIDTH, HEIGHT, F = 640, 480, 320.0
-MOUNT = camera.Mount.forward(height=0.3)
+MOUNT = camera_model.Mount.forward(height=0.3)
 TAG_SIZE, TAG_HEIGHT = 0.16, 0.3
 
 
@@ -164,7 +164,7 @@ def detections_msg(store, seen, extra=()):
 def scene(plan_path):
     """A robot at (3, 6) turned toward the most tags: (yaw, seen, poses, ideal intrinsics)."""
     tags = camera.TagMap.from_plan(plan_path)
-    ideal = camera.Intrinsics(F, F, 319.5, 239.5, WIDTH, HEIGHT)
+    ideal = camera_model.Intrinsics(F, F, 319.5, 239.5, WIDTH, HEIGHT)
     best = max(
         (view(tags, (3.0, 6.0), math.radians(a), ideal) + (math.radians(a),) for a in range(0, 360, 5)),
         key=lambda v: len(v[0]),
@@ -180,7 +180,7 @@ def test_messages_become_runtime_types(store):
     rect = ros.intrinsics_from_camera_info(info)  # the rectified image: P, no distortion
     assert (rect.fx, rect.fy, rect.cx, rect.cy, rect.distortion) == (F * 1.1, F * 1.1, 319.5, 239.5, ())
     raw = ros.intrinsics_from_camera_info(info, rectified=False)
-    assert raw == camera.Intrinsics.from_camera_info(info.k, info.d, WIDTH, HEIGHT, "plumb_bob")
+    assert raw == camera_model.Intrinsics.from_camera_info(info.k, info.d, WIDTH, HEIGHT, "plumb_bob")
     assert raw.distortion == (0.1, -0.05, 0.0, 0.0, 0.0)
     for yaw in (0.0, 1.0, -2.5, math.pi - 1e-9):
         assert ros.yaw_from_quaternion(imu(store, yaw).orientation) == pytest.approx(yaw, abs=1e-12)

@@ -372,7 +372,7 @@ def test_fuse_takes_an_exact_fix_and_carries_the_estimate_on_odometry_without_on
 
 def test_look_around_starts_at_once_without_an_estimate_and_ends_lost_after_a_revolution():
     from bearnav_cli.runtime.estimate import Estimate
-    from bearnav_cli.runtime.step import look_around
+    from bearnav_cli.runtime.looking import look_around
 
     s = _settings()
     state = runtime.ControlState.initial(np.zeros(2))
@@ -387,7 +387,7 @@ def test_look_around_starts_at_once_without_an_estimate_and_ends_lost_after_a_re
 
 
 def test_unicycle_turns_in_place_when_far_off_and_drives_when_aligned():
-    from bearnav_cli.runtime.step import unicycle_command
+    from bearnav_cli.runtime.unicycle import unicycle_command
 
     s = _settings(dynamics="unicycle", alpha=0.1)
     direction = np.array([[1.0, 0.0], [0.0, 1.0], [1.0, 0.0]])
@@ -402,7 +402,7 @@ def test_best_view_heading_points_the_camera_at_a_usable_fix():
     """Looking on purpose: at the heading it picks, the camera (60°) sees at least two landmarks in
     line of sight, and the runtime's own lsq fix from those bearings is usable."""
     from bearnav_cli.geometry import FreeSpace
-    from bearnav_cli.runtime.step import best_view_heading
+    from bearnav_cli.runtime.looking import best_view_heading
     from bench.common import run_stages
     from tests.conftest import build_map
     from tests.funnel_maps import random_spec

@@ -11,10 +11,11 @@ import numpy as np
 import pytest
 from scipy.linalg import expm
 
-from bearnav_cli import cell_lp
+from bearnav_cli import cell_fields, cell_lp
 from bearnav_cli.datatypes import CellFlag, CellStatus, replace
 from bearnav_cli.errors import ArtifactError, InvalidParamsError
 from bearnav_cli.lp import LpResult, LpSolver, LpStatus, dense_to_csr
+from bearnav_cli.runtime.certificate import Margins, vertex_margins
 from bearnav_cli.stages import synthesize as sy
 from tests.handmade import clip, hand_map, hand_plan
 
@@ -113,8 +114,8 @@ def field_of(K: np.ndarray, landmarks: np.ndarray) -> tuple[np.ndarray, np.ndarr
     return K.reshape(2, -1, 2).sum(axis=1), K @ landmarks.ravel()
 
 
-def margins_of(sol: sy.CellSolution, p: cell_lp.CellProblem, u_max: float = 1.0) -> sy.Margins:
-    return sy.vertex_margins(sol.K, p.landmarks, p.vertices, p.z, p.x_j, p.cbf_n, p.cbf_q, sol.c_h, sol.c_v, u_max)
+def margins_of(sol: cell_fields.CellSolution, p: cell_lp.CellProblem, u_max: float = 1.0) -> Margins:
+    return vertex_margins(sol.K, p.landmarks, p.vertices, p.z, p.x_j, p.cbf_n, p.cbf_q, sol.c_h, sol.c_v, u_max)
 
 
 @pytest.fixture(scope="module")
@@ -160,7 +161,7 @@ def test_params_normalise_numbers():
 
 def test_t1_unbounded_without_input_rows(solver):
     p = toy()
-    c_h, c_v = sy.cell_constants(p, 0.5, 1.0)
+    c_h, c_v = cell_fields.cell_constants(p, 0.5, 1.0)
     for lp in (cell_lp.vertex_lp_field(p, c_h, c_v, None), cell_lp.dual_lp(p, cell_lp.FIELD_MAP, c_h, c_v, None)):
         assert lp.solve(solver).status is LpStatus.UNBOUNDED
 
@@ -173,7 +174,7 @@ def test_t2_infeasible_with_unit_constants(solver):
 
 def test_t3_optimal_value_and_status(solver):
     p = toy()
-    c_h, c_v = sy.cell_constants(p, 0.5, 1.0)
+    c_h, c_v = cell_fields.cell_constants(p, 0.5, 1.0)
     assert c_v == pytest.approx(1 / 30, rel=1e-12)
     assert c_h == pytest.approx(0.5 / 6.860, rel=1e-4)
     result = cell_lp.vertex_lp_field(p, c_h, c_v, 1.0).solve(solver)
@@ -186,7 +187,7 @@ def test_t3_optimal_value_and_status(solver):
 
 def test_t4_parent_apex_forces_zero_optimum_and_stop_at_parent(solver):
     p = toy(apex="parent")
-    c_h, c_v = sy.cell_constants(p, 0.5, 1.0)
+    c_h, c_v = cell_fields.cell_constants(p, 0.5, 1.0)
     lp = cell_lp.vertex_lp_field(p, c_h, c_v, 1.0)
     result = lp.solve(solver)
     assert result.status is LpStatus.OPTIMAL
@@ -223,7 +224,7 @@ def _flow(M: np.ndarray, a: np.ndarray, x0: np.ndarray, times: np.ndarray) -> np
 @pytest.mark.parametrize("form", ["vertex", "dual"])
 def test_t5_z_toward_parent_stalls_and_inward_z_exits(solver, form):
     inward = toy()
-    c_h, c_v = sy.cell_constants(inward, 0.5, 1.0)  # T3's constants for both
+    c_h, c_v = cell_fields.cell_constants(inward, 0.5, 1.0)  # T3's constants for both
     times = np.linspace(0.0, 4000.0, 801)
     starts = np.array([[14.0, 4.0], [12.0, -4.0], [8.0, 1.0]])
     for z_sign in (-1.0, 1.0):
@@ -248,7 +249,7 @@ def test_t5_z_toward_parent_stalls_and_inward_z_exits(solver, form):
 
 def test_t6_three_forms_agree(solver):
     p = toy()
-    c_h, c_v = sy.cell_constants(p, 0.5, 1.0)
+    c_h, c_v = cell_fields.cell_constants(p, 0.5, 1.0)
     values = [
         cell_lp.vertex_lp_field(p, c_h, c_v, 1.0).solve(solver).objective,
         cell_lp.vertex_lp_gain(p, c_h, c_v, 1.0).solve(solver).objective,
@@ -264,7 +265,7 @@ def test_t6_three_forms_agree(solver):
 def test_forms_agree_on_random_cells(solver, random_cells):
     statuses = []
     for p, kappa in random_cells:
-        c_h, c_v = sy.cell_constants(p, kappa, 1.0)
+        c_h, c_v = cell_fields.cell_constants(p, kappa, 1.0)
         results = [
             cell_lp.vertex_lp_field(p, c_h, c_v, 1.0).solve(solver),
             cell_lp.vertex_lp_gain(p, c_h, c_v, 1.0, "full").solve(solver),
@@ -293,7 +294,7 @@ def test_forms_agree_on_random_cells(solver, random_cells):
 def test_min_norm_gain_realises_the_optimal_field(solver, random_cells):
     compared = 0
     for p, kappa in random_cells:
-        c_h, c_v = sy.cell_constants(p, kappa, 1.0)
+        c_h, c_v = cell_fields.cell_constants(p, kappa, 1.0)
         field_lp = cell_lp.vertex_lp_field(p, c_h, c_v, 1.0)
         result = field_lp.solve(solver)
         if result.status is not LpStatus.OPTIMAL:
@@ -304,7 +305,7 @@ def test_min_norm_gain_realises_the_optimal_field(solver, random_cells):
         assert np.abs(M - F[:, :2]).max() <= 1e-9 and np.abs(a - F[:, 2]).max() <= 1e-9
         # K satisfies every gain-space constraint with the LP's slacks
         S_h, S_V = field_lp.slacks(result.x)
-        m = sy.vertex_margins(K, p.landmarks, p.vertices, p.z, p.x_j, p.cbf_n, p.cbf_q, c_h, c_v, 1.0)
+        m = vertex_margins(K, p.landmarks, p.vertices, p.z, p.x_j, p.cbf_n, p.cbf_q, c_h, c_v, 1.0)
         assert np.all(m.cbf_rows <= S_h + 1e-9) and m.clf <= S_V + 1e-9 and m.input <= 1e-9
         # least norm among the gains with that field: adding any N with N G = 0 only grows it
         G = cell_lp.landmark_matrix(p.landmarks)
@@ -334,7 +335,7 @@ def test_optimal_field_is_not_unique_so_gain_norms_depend_on_the_vertex(solver):
     test_min_norm_gain_realises_the_optimal_field checks the form that always holds.
     """
     p = toy()
-    c_h, c_v = sy.cell_constants(p, 0.5, 1.0)
+    c_h, c_v = cell_fields.cell_constants(p, 0.5, 1.0)
     lp = cell_lp.vertex_lp_field(p, c_h, c_v, 1.0)
     best = lp.solve(solver).objective
     dense = np.zeros((len(lp.row_lower) + 1, len(lp.cost)))
@@ -358,7 +359,7 @@ def test_optimal_field_is_not_unique_so_gain_norms_depend_on_the_vertex(solver):
     small, large = gains[int(np.argmin(norms))], gains[int(np.argmax(norms))]
     assert np.linalg.norm(large) > np.linalg.norm(small) + 1e-3
     for K in (small, large):  # both optimal for the gain-space LP
-        m = margins_of(sy.CellSolution(CellStatus.CERTIFIED, K, c_h, c_v, 0, 0, 1), p)
+        m = margins_of(cell_fields.CellSolution(CellStatus.CERTIFIED, K, c_h, c_v, 0, 0, 1), p)
         assert m.input <= 1e-9 and m.clf <= 1e-9 and m.cbf <= 1e-9
         assert m.clf + float(np.sum(m.cbf_rows)) == pytest.approx(best, abs=1e-7)
 
@@ -379,7 +380,7 @@ def test_solve_cell_margins_equal_the_vertex_recheck(solver, random_cells, struc
         else:
             assert math.isnan(sol.margin_h) and math.isnan(sol.c_h)
         assert sol.K.shape == (2, 2 * len(p.landmarks))
-        c_h, c_v = sy.cell_constants(p, sol.kappa, 1.0)
+        c_h, c_v = cell_fields.cell_constants(p, sol.kappa, 1.0)
         assert sol.c_v == pytest.approx(c_v, rel=1e-12)
         if sol.status in (CellStatus.CERTIFIED, CellStatus.RELAXED):
             # a first pass with the strict CLF margin, then one with S_V <= 0
@@ -412,7 +413,7 @@ def test_status_one_after_halving(solver):
     sol = sy.solve_cell(toy(), sy.Params(kappa=2.0), solver)  # c_v = 2/15 needs zᵀu ≤ −2 at x = 15
     assert sol.status == CellStatus.RELAXED and sol.attempts >= 2
     assert sol.kappa == 2.0 * 0.5 ** (sol.attempts - 1)
-    c_h, c_v = sy.cell_constants(toy(), sol.kappa, 1.0)
+    c_h, c_v = cell_fields.cell_constants(toy(), sol.kappa, 1.0)
     assert (sol.c_h, sol.c_v) == pytest.approx((c_h, c_v), rel=1e-12)
     assert sol.margin_v <= 1e-9 and sol.margin_h <= 1e-9
 
@@ -426,7 +427,7 @@ def test_status_two_when_infeasible_at_every_kappa(solver):
     strict = sy.solve_cell(p, sy.Params(), solver)  # 7 strict, 7 with S_V <= 0, then least violation
     assert strict.status == CellStatus.NOT_CERTIFIED and strict.attempts == 15
     assert sol.kappa == 0.5 * 2.0**-6
-    assert sol.c_v == pytest.approx(sy.cell_constants(p, 0.5 * 2.0**-6, 1.0)[1], rel=1e-12)
+    assert sol.c_v == pytest.approx(cell_fields.cell_constants(p, 0.5 * 2.0**-6, 1.0)[1], rel=1e-12)
     m = margins_of(sol, p)
     assert max(m.cbf, m.clf) > 0 and m.input <= 1e-9
     assert (sol.margin_h, sol.margin_v) == pytest.approx((m.cbf, m.clf), abs=1e-7)
@@ -466,7 +467,7 @@ def test_goal_cell_field_and_barrier_margin():
     samples = np.array([[3.0, 2.5], [3.5, 0.5]])
     normals = np.array([unit(goal - o) for o in samples])  # §4.6: h_o = n_oᵀ(x − o)
     offsets = -np.einsum("ij,ij->i", normals, samples)
-    sol = sy.goal_cell_solution(vertices, goal, landmarks, normals, offsets, 2.0)
+    sol = cell_fields.goal_cell_solution(vertices, goal, landmarks, normals, offsets, 2.0)
     c = 2.0 / 3.0  # u_max / max ‖g − v‖_∞
     assert sol.status == CellStatus.GOAL and sol.c_h == sol.c_v == pytest.approx(c)
     M, a = field_of(sol.K, landmarks)
@@ -474,7 +475,7 @@ def test_goal_cell_field_and_barrier_margin():
     assert math.isnan(sol.margin_v)
     assert sol.margin_h == pytest.approx(max(-c * np.linalg.norm(goal - o) for o in samples), abs=1e-12)
     assert np.abs(a - vertices @ M.T).max() <= 2.0 + 1e-12  # the box holds at every vertex
-    bare = sy.goal_cell_solution(vertices, goal, landmarks, np.zeros((0, 2)), np.zeros(0), 2.0)
+    bare = cell_fields.goal_cell_solution(vertices, goal, landmarks, np.zeros((0, 2)), np.zeros(0), 2.0)
     assert math.isnan(bare.margin_h)
 
 
@@ -507,8 +508,8 @@ def test_run_on_hand_cells(hand_cells):
         for x in verts:  # the layout of DESIGN §3.2
             assert plan.gain[c] @ (landmarks - x).ravel() == pytest.approx(a - M @ x, abs=1e-12)
         n, q = hand_cells.barrier(c)
-        m = sy.vertex_margins(plan.gain[c], landmarks, verts, hand_cells.exit_dir[c], hand_cells.exit_point[c], n, q,
-                              plan.c_h[c], plan.c_v[c], 1.0)  # fmt: skip
+        m = vertex_margins(plan.gain[c], landmarks, verts, hand_cells.exit_dir[c], hand_cells.exit_point[c], n, q,
+                           plan.c_h[c], plan.c_v[c], 1.0)  # fmt: skip
         if c == 0:
             goal = hand_cells.nodes[0]
             c0 = 1.0 / np.max(np.abs(goal - verts))
@@ -565,8 +566,8 @@ def test_pipeline_cells_are_certified_and_rechecked(small_spec):
     landmarks = map_.landmarks
     for c in range(1, cells.n_cells):
         n, q = cells.barrier(c)
-        m = sy.vertex_margins(plan.gain[c], landmarks, cells.vertices(c), cells.exit_dir[c], cells.exit_point[c], n, q,
-                              plan.c_h[c], plan.c_v[c], 1.0)  # fmt: skip
+        m = vertex_margins(plan.gain[c], landmarks, cells.vertices(c), cells.exit_dir[c], cells.exit_point[c], n, q,
+                           plan.c_h[c], plan.c_v[c], 1.0)  # fmt: skip
         assert plan.margin_v[c] == pytest.approx(m.clf, abs=1e-7)
         assert plan.margin_h[c] == pytest.approx(m.cbf, abs=1e-7, nan_ok=True)
         if plan.status[c] in (CellStatus.CERTIFIED, CellStatus.RELAXED):
@@ -577,3 +578,43 @@ def test_pipeline_cells_are_certified_and_rechecked(small_spec):
 def test_coincident_landmarks_are_an_input_error():
     with pytest.raises(ArtifactError):
         cell_lp.min_norm_gain(np.eye(2), np.ones(2), np.array([[1.0, 2.0], [1.0, 2.0]]))
+
+
+def _problems(cells):
+    """The :class:`cell_lp.CellProblem` of every edge cell, as :func:`sy.run` builds them."""
+    landmarks = cells.map.landmarks
+    for c in range(cells.n_cells):
+        if cells.parent[cells.cell_node[c]] == -1:
+            continue
+        rows = slice(int(cells.cell_row_offsets[c]), int(cells.cell_row_offsets[c + 1]))
+        n, q = cells.barrier(c)
+        yield c, cell_lp.CellProblem(cells.vertices(c), cells.cell_A[rows], cells.cell_b[rows], cells.exit_dir[c],
+                                     cells.exit_point[c], n, q, landmarks[cells.cell_landmarks[c]])  # fmt: skip
+
+
+@pytest.mark.parametrize("seed", [0, 3])
+def test_batched_scales_equal_the_cell_by_cell_ones(seed):
+    """The two paths to a cell's constants, bit for bit: :func:`sy.run`'s batched scales (every cell in a
+    few numpy passes) and the cell-by-cell ones (:func:`sy.prepare_cell`, :func:`cell_fields.cell_constants`,
+    Lemma 4's terms) that :func:`sy.solve_cell` uses."""
+    from tests.conftest import random_plan
+
+    cells = random_plan(seed).cells
+    params = sy.Params()
+    edge = np.flatnonzero(cells.parent[cells.cell_node] != -1).tolist()
+    built = cell_lp.field_vertex_templates(cells.cell_vertices, cells.cell_vertex_offsets, cells.cbf_A, cells.cbf_b,
+                                           cells.cbf_offsets, cells.exit_dir, cells.exit_point, edge, params.u_max,
+                                           params.w_h, params.w_v)  # fmt: skip
+    batched = cell_fields.batched_scales(cells, built, edge)
+    checked = 0
+    for c, problem in _problems(cells):
+        h_scale, v_max, terms = batched[c]
+        one = sy.prepare_cell(problem, params)
+        assert one.v_scale == v_max
+        assert one.h_scale == h_scale or (math.isnan(one.h_scale) and math.isnan(h_scale))
+        assert terms == cell_fields.lemma4_terms(problem)
+        c_h, c_v = cell_fields.cell_constants(problem, params.kappa, params.u_max)
+        assert c_v == params.kappa * params.u_max / v_max
+        assert c_h == params.kappa * params.u_max / h_scale or (math.isnan(c_h) and math.isnan(h_scale))
+        checked += 1
+    assert checked == len(edge) > 10

@@ -22,7 +22,7 @@ from bearnav_cli.datatypes import CellStatus
 from bearnav_cli.errors import ArtifactError
 from bearnav_cli.funnel import cell_tolerance, exit_face, exit_sink, usable_tolerances
 from bearnav_cli.geometry import polygon_rows
-from bearnav_cli.stages.synthesize import field_margins
+from bearnav_cli.runtime.certificate import field_margins
 from tests.conftest import random_plan
 
 SEEDS = range(6)
@@ -115,16 +115,16 @@ def test_synthesis_never_tolerates_less_than_lemma_6(seed):
 
 @pytest.mark.parametrize("seed", SEEDS)
 def test_the_batched_sinks_are_each_cells_own(seed):
-    """synthesize._sinks takes every exit face in one sort: the same faces, sinks and ``h*`` as
+    """cell_fields.cell_sinks takes every exit face in one sort: the same faces, sinks and ``h*`` as
     :func:`funnel.exit_face` and :func:`funnel.exit_sink` cell by cell (ragged cells, ties included)."""
-    from bearnav_cli.stages.synthesize import _sinks
+    from bearnav_cli.cell_fields import cell_sinks
 
     cells = random_plan(seed).cells
     edge = np.flatnonzero(cells.parent[cells.cell_node] >= 0)
     verts = [cells.vertices(c) for c in edge]
     rows = [cells.barrier(c) for c in edge]
     z, x_j = cells.exit_dir[edge], cells.exit_point[edge]
-    sink, h_star = _sinks(np.concatenate(verts), np.array([len(v) for v in verts]),
+    sink, h_star = cell_sinks(np.concatenate(verts), np.array([len(v) for v in verts]),
                           np.concatenate([n for n, _ in rows]), np.concatenate([q for _, q in rows]),
                           np.array([len(q) for _, q in rows]), z, x_j)  # fmt: skip
     for k, c in enumerate(edge):

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import yaml
 
-from bearnav_cli import verify
+from bearnav_cli import routes, verify, verify_checks
 from bearnav_cli.datatypes import CellFlag, Outcome, Plan, replace
 from bearnav_cli.errors import InvalidParamsError
 from bearnav_cli.geometry import FreeSpace
@@ -57,10 +57,10 @@ def test_a_sound_plan_passes(chain):
 
 def test_a_corrupted_gain_violates_in_that_cell_only():
     plan = random_tree_plan(11)
-    base = verify.certificates(plan)
+    base = verify_checks.certificates(plan)
     assert base.violation.max() <= 1e-12 and base.margin_error.max() <= 1e-12
     for cell in range(plan.cells.n_cells):
-        cert = verify.certificates(corrupt(plan, cell))
+        cert = verify_checks.certificates(corrupt(plan, cell))
         assert cert.violation[cell] > 1e-3, cell
         others = np.delete(cert.violation, cell)
         assert others.max() <= 1e-12, cell
@@ -70,7 +70,7 @@ def test_a_corrupted_gain_violates_in_that_cell_only():
 
 
 def test_the_recomputed_values_match_the_definitions(chain):
-    cert = verify.certificates(chain)
+    cert = verify_checks.certificates(chain)
     # cell 2 = [5,10]×[0,8], u = (1/7)((5,1) − x), z = (1,0), c_v = 1/14: the CLF value is
     # max (c_v − 1/7)·V = 0 (on the exit face); the input value max ‖u‖∞ − 1 = 0 at (10, 8)
     assert cert.value_v[2] == pytest.approx(0.0, abs=1e-12)
@@ -83,7 +83,7 @@ def test_the_recomputed_values_match_the_definitions(chain):
     verts = plan.cells.vertices(2)
     u = (np.array([5.0, 1.0]) - verts) / 7.0
     expected = np.max(-(u[:, 1] + plan.c_h[2] * (verts[:, 1] - 0.5)))
-    assert verify.certificates(plan).value_h[2] == pytest.approx(expected, abs=1e-12)
+    assert verify_checks.certificates(plan).value_h[2] == pytest.approx(expected, abs=1e-12)
     assert plan.margin_h[2] == pytest.approx(expected)  # the builder's margin, computed the same way
     assert expected > 0 and verify.run(plan, verify.Params(n_starts=0)).uncertified == [2]
 
@@ -143,7 +143,7 @@ def test_flagged_cells_and_bearing_constants(chain):
     assert report.flagged["degenerate_risk"] == []
     # the unhashed manifest stats say nothing: only the hashed bits count
     for stats in ({"degenerate_risk": [2]}, {"flagged": {"degenerate_risk": [0]}}):
-        assert verify.flagged_cells(replace(plan, stats=stats)) == verify.flagged_cells(plan)
+        assert verify_checks.flagged_cells(replace(plan, stats=stats)) == verify_checks.flagged_cells(plan)
     # c̃_v = c_v/s_max, c̃_h = c_h/s_min (∞ at s_min = 0, NaN without barrier rows)
     assert np.allclose(report.c_v_tilde, chain.c_v / 20.0)
     assert np.isnan(report.c_h_tilde).all() and np.isnan(report.c_h_over_s_max).all()
@@ -170,18 +170,18 @@ def test_min_success_decides_on_the_monte_carlo():
 def test_starts_are_seeded_strictly_free_and_in_the_goal_component():
     walls = [[[4.0, 0.0], [4.5, 0.0], [4.5, 8.0], [4.0, 8.0]], [[6, 3], [7, 3], [7, 4], [6, 4]]]
     space = FreeSpace.from_map(hand_map(obstacles=walls))
-    a = verify.sample_starts(space, np.array([1.0, 1.0]), 300, np.random.default_rng(5))
-    b = verify.sample_starts(space, np.array([1.0, 1.0]), 300, np.random.default_rng(5))
+    a = routes.sample_starts(space, np.array([1.0, 1.0]), 300, np.random.default_rng(5))
+    b = routes.sample_starts(space, np.array([1.0, 1.0]), 300, np.random.default_rng(5))
     assert a.shape == (300, 2) and np.array_equal(a, b)
     assert space.points_strictly_free(a).all() and np.all(a[:, 0] < 4.0)  # the wall cuts x > 4.5 off
-    assert verify.sample_starts(space, np.array([1.0, 1.0]), 0, np.random.default_rng(5)).shape == (0, 2)
+    assert routes.sample_starts(space, np.array([1.0, 1.0]), 0, np.random.default_rng(5)).shape == (0, 2)
 
 
 def test_route_around_one_square_matches_the_hand_value():
     space = FreeSpace.from_map(hand_map(obstacles=[[[4, 3], [6, 3], [6, 5], [4, 5]]]))
     goal = np.array([8.0, 4.0])
     starts = np.array([[2.0, 4.0], [2.0, 6.0], [5.0, 1.0], [5.0, 4.0], [2.0, 3.0]])
-    lengths = verify.route_lengths(space, goal, starts)
+    lengths = routes.route_lengths(space, goal, starts)
     # around a corner each: (2,4) → (4,5) → (6,5) → (8,4); (2,6) sees the goal past (6,5)
     assert lengths[0] == pytest.approx(2 * math.sqrt(5) + 2, abs=1e-12)
     assert lengths[1] == pytest.approx(math.hypot(4, 1) + math.hypot(2, 1), abs=1e-12)
@@ -208,7 +208,7 @@ def test_route_through_two_staggered_walls():
     space = FreeSpace.from_map(hand_map(obstacles=walls))
     start, goal = np.array([1.0, 1.0]), np.array([9.0, 7.0])
     expected = math.hypot(2, 5) + 0.5 + math.hypot(2.5, 4) + 0.5 + math.hypot(2.5, 5)
-    assert verify.route_lengths(space, goal, start[None])[0] == pytest.approx(expected, abs=1e-12)
+    assert routes.route_lengths(space, goal, start[None])[0] == pytest.approx(expected, abs=1e-12)
 
 
 def test_params_are_checked():
@@ -376,13 +376,13 @@ def test_rows_widened_behind_the_polygon_fail_verify_in_that_cell(seed):
 
     plan = random_plan(seed)
     cells = plan.cells
-    assert verify.rows_not_polygon(cells, plan.map.tol) == ()  # what the planner writes passes
+    assert verify_checks.rows_not_polygon(cells, plan.map.tol) == ()  # what the planner writes passes
     c = int(np.flatnonzero(cells.parent[cells.cell_node] >= 0)[len(cells.cell_node) // 2])
     r0, r1 = cells.cell_row_offsets[c], cells.cell_row_offsets[c + 1]
     widened = cells.cell_b.copy()
     widened[r0:r1] += 0.2
     edited = replace(plan, cells=replace(cells, cell_b=widened))
-    assert verify.rows_not_polygon(edited.cells, plan.map.tol) == (c,)
+    assert verify_checks.rows_not_polygon(edited.cells, plan.map.tol) == (c,)
     report = verify.run(edited, verify.Params(n_starts=0))
     assert report.failed and report.geometry.rows_not_polygon == (c,)
     assert any("rows that are not their polygon" in r and str(c) in r for r in report.reasons)
@@ -405,11 +405,11 @@ def test_rows_of_a_non_convex_polygon_fail_even_when_each_lies_on_its_edge():
         cell_A, cell_b, cell_vertices = A, b, dart
         cell_vertex_offsets = cell_row_offsets = np.array([0, 5])
 
-    assert verify.rows_not_polygon(Dart, 1e-9) == (0,)
+    assert verify_checks.rows_not_polygon(Dart, 1e-9) == (0,)
     square = dart[[0, 1, 3, 4]]
     Dart.cell_A, Dart.cell_b = polygon_rows(square)
     Dart.cell_vertices, Dart.cell_vertex_offsets = square, np.array([0, 4])
-    assert verify.rows_not_polygon(Dart, 1e-9) == ()
+    assert verify_checks.rows_not_polygon(Dart, 1e-9) == ()
 
 
 def test_verify_reads_flags_from_the_hashed_bits_not_the_manifest_stats():
@@ -418,7 +418,7 @@ def test_verify_reads_flags_from_the_hashed_bits_not_the_manifest_stats():
     from .conftest import random_plan
 
     plan = random_plan(1)
-    honest = verify.flagged_cells(plan)
+    honest = verify_checks.flagged_cells(plan)
     edited = replace(plan, stats={**plan.stats, "flagged": {"blind_spot": ["x", "y"]}, "few_landmarks": "z"})
-    assert verify.flagged_cells(edited) == honest
+    assert verify_checks.flagged_cells(edited) == honest
     assert honest["blind_spot"] == plan.cells.flagged(CellFlag.BLIND_SPOT)

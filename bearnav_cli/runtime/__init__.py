@@ -9,10 +9,16 @@
 - :mod:`~bearnav_cli.runtime.estimate` — the fix and its fusion with odometry, and the estimate sets;
 - :mod:`~bearnav_cli.runtime.robot` — the robot's parameters (the map's ``robot:`` section) and the
   look-ahead point of a unicycle (ALGORITHMS §12.6, Lemma 7);
+- :mod:`~bearnav_cli.runtime.settings` — the step's constants (:class:`ControlSettings`), memory
+  (:class:`ControlState`) and output (:class:`ControlOutput`);
+- :mod:`~bearnav_cli.runtime.unicycle`, :mod:`~bearnav_cli.runtime.looking`, :mod:`~bearnav_cli.runtime.safety` —
+  the unicycle's, looking's and safety's rules of the step;
 - :mod:`~bearnav_cli.runtime.step` — one control step for ``R`` robots (:func:`control`);
 - :mod:`~bearnav_cli.runtime.controller` — :class:`Controller`, one robot at camera rate;
+- :mod:`~bearnav_cli.runtime.certificate` — the one re-check of a cell's certificate at its vertices (ALGORITHMS §8);
 - :mod:`~bearnav_cli.runtime.camera` — AprilTag detections in an image to world bearings and heading
-  (:func:`observe`; ``docs/camera.md``).
+  (:func:`observe`; ``docs/camera.md``), with the camera's intrinsics and mount in
+  :mod:`~bearnav_cli.runtime.camera_model`.
 
 ``from bearnav_cli.runtime import Controller`` is all a robot needs; ``bearnav simulate`` uses the
 same step.
@@ -24,32 +30,43 @@ from typing import Any
 #: Where each name of ``__all__`` is defined: the submodules are imported when a name is first used
 #: (PEP 562), so that reading ``runtime.schema`` (every artifact load) does not import the controller.
 _ORIGIN = {
-    **dict.fromkeys(("Detection", "Intrinsics", "Mount", "Observation", "TagMap", "heading_from_tag", "observe"),
-                    "camera"),
+    **dict.fromkeys(("Detection", "Observation", "TagMap", "heading_from_tag", "observe"), "camera"),
+    **dict.fromkeys(("Intrinsics", "Mount"), "camera_model"),
     **dict.fromkeys(("affine_field", "apply_gain", "approach_target", "barrier_values", "contains", "displacement",
                      "field", "funnel_update", "in_safe_set", "least_rank_cell", "locate",
-                     "nearest_node", "segments_clear", "switch", "update", "voronoi_owner"), "cell_policy"),
+                     "nearest_node", "switch", "update", "voronoi_owner"), "cell_policy"),
+    "segments_clear": "sight",
     "Controller": "controller",
     **dict.fromkeys(("Estimate", "Fix", "SetEstimate", "bounded_update", "fuse", "measure"), "estimate"),
     **dict.fromkeys(("RUNTIME_KEYS", "PlanArrays", "ring_edges", "tree_costs"), "plan_arrays"),
     **dict.fromkeys(("ROBOT_DEFAULTS", "lookahead_command", "lookahead_point"), "robot"),
     **dict.fromkeys(("DYNAMICS", "ESTIMATORS", "MEASUREMENTS", "ControlOutput", "ControlSettings", "ControlState",
-                     "bounded_control", "control", "timing"), "step"),
+                     "timing"), "settings"),
+    **dict.fromkeys(("bounded_control", "control"), "step"),
 }  # fmt: skip
 #: The submodules, also attributes of the package once imported (``runtime.step``, ``runtime.bearing``).
 _SUBMODULES = (
     "bearing",
     "bounded",
     "camera",
+    "camera_model",
     "cell_policy",
+    "certificate",
     "controller",
     "estimate",
     "invariants",
+    "looking",
+    "pairs",
     "plan_arrays",
     "plan_file",
+    "planar",
     "robot",
+    "safety",
     "schema",
+    "settings",
+    "sight",
     "step",
+    "unicycle",
 )
 
 

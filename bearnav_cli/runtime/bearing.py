@@ -37,6 +37,8 @@ import numpy as np
 
 from bearnav_cli.errors import InvalidParamsError
 from bearnav_cli.runtime.invariants import is_number
+from bearnav_cli.runtime.pairs import pair_output, rescale_output
+from bearnav_cli.runtime.planar import dot, norm, points, safe
 
 __all__ = [
     "ANGLE_SLACK",
@@ -63,8 +65,6 @@ DEFAULT_MIN_SPREAD = math.radians(2.0)
 #: positions and the subtraction of the heading each round by a few ulps, so without it a
 #: landmark placed exactly on the edge of the field of view would be visible or not at random.
 ANGLE_SLACK = 1e-12
-#: Largest number of robot × landmark-pair entries :func:`reconstruct` (``pair``) builds at once.
-_CHUNK = 1 << 20
 
 
 # --------------------------------------------------------------------------- small helpers
@@ -73,28 +73,6 @@ _CHUNK = 1 << 20
 def wrap(theta: Any) -> np.ndarray:
     """Angles mapped to ``(−π, π]`` (§0), same shape as ``theta`` (radians)."""
     return math.pi - np.mod(math.pi - np.asarray(theta, float), 2.0 * math.pi)
-
-
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """``a₁b₂ − a₂b₁`` over the last axis (broadcasting)."""
-    return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
-
-
-def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1]
-
-
-def _norm(v: np.ndarray) -> np.ndarray:
-    return np.hypot(v[..., 0], v[..., 1])
-
-
-def _safe(den: np.ndarray) -> np.ndarray:
-    """``den`` with its zeros replaced by 1, so a division never produces inf or NaN."""
-    return np.where(den != 0, den, 1.0)
-
-
-def _points(x: Any) -> np.ndarray:
-    return np.asarray(x, float).reshape(-1, 2)
 
 
 def _per_robot(value: Any, r: int, dtype: Any, name: str) -> np.ndarray:
@@ -127,9 +105,9 @@ def directions(x: Any, landmarks: Any) -> tuple[np.ndarray, np.ndarray]:
     distance : ndarray, shape (R, L)
         ``‖l_k − x‖`` (map units).
     """
-    d = _points(landmarks)[None, :, :] - _points(x)[:, None, :]
-    distance = _norm(d)
-    return d / _safe(distance)[..., None], distance
+    d = points(landmarks)[None, :, :] - points(x)[:, None, :]
+    distance = norm(d)
+    return d / safe(distance)[..., None], distance
 
 
 def in_field_of_view(x: Any, heading: Any, landmarks: Any, fov: float, *, tol: float) -> np.ndarray:
@@ -165,9 +143,9 @@ def in_field_of_view(x: Any, heading: Any, landmarks: Any, fov: float, *, tol: f
     """
     if not fov >= 0:
         raise InvalidParamsError(f"the field of view must be >= 0, got {fov}", field="fov")
-    p, lm = _points(x), _points(landmarks)
+    p, lm = points(x), points(landmarks)
     d = lm[None, :, :] - p[:, None, :]
-    visible = _norm(d) >= tol
+    visible = norm(d) >= tol
     if fov >= 2.0 * math.pi:
         return visible
     phi = _per_robot(heading, len(p), float, "heading")
@@ -374,7 +352,7 @@ def reconstruct(
         raise InvalidParamsError(message, field="min_bearing_spread")
     if not tol > 0:
         raise InvalidParamsError(f"tol must be > 0, got {tol}", field="tol")
-    lm = _points(landmarks)
+    lm = points(landmarks)
     n_lm = len(lm)
     beta = np.asarray(bearings, float)
     if beta.ndim != 3 or beta.shape[1:] != (n_lm, 2):
@@ -390,16 +368,16 @@ def reconstruct(
         return Reconstruction(np.zeros((r, 2 * n_lm)), np.zeros((r, 2)), np.zeros(r, bool))
 
     # A zero or non-finite bearing has no direction: drop it rather than let it poison a sum.
-    norm = _norm(beta)
-    vis = vis & np.isfinite(norm) & (norm > 0)
-    beta = np.where(vis[..., None], beta / np.where(vis, norm, 1.0)[..., None], 0.0)
+    length = norm(beta)
+    vis = vis & np.isfinite(length) & (length > 0)
+    beta = np.where(vis[..., None], beta / np.where(vis, length, 1.0)[..., None], 0.0)
 
     if method == "lsq":
         y, x_hat, usable = _lsq(beta, vis, lm, f, 1.0 - math.cos(min_spread), tol)
     elif method == "pair":
-        y, x_hat, usable = _pair(beta, vis, lm, f, math.sin(min_spread), tol)
+        y, x_hat, usable = pair_output(beta, vis, lm, f, math.sin(min_spread), tol)
     else:
-        y, x_hat, usable = _rescale(beta, vis, lm, f, math.sin(min_spread), tol)
+        y, x_hat, usable = rescale_output(beta, vis, lm, f, math.sin(min_spread), tol)
     # Unusable rows carry finite garbage from the masked solves; zero them so no caller uses it by accident.
     usable = usable & np.all(np.isfinite(y), axis=(1, 2)) & np.all(np.isfinite(x_hat), axis=1)
     y = np.where(usable[:, None, None], y, 0.0).reshape(r, 2 * n_lm)
@@ -410,7 +388,7 @@ def reconstruct(
 def _scaled(x_hat: np.ndarray, lm: np.ndarray, f: np.ndarray, tol: float) -> np.ndarray:
     """``(l_k − x̂)/max(‖l_f − x̂‖, tol)``, shape (R, L, 2): near ``l_f`` only the speed changes (§6.2)."""
     d = lm[None, :, :] - x_hat[:, None, :]
-    s = _norm(d[np.arange(len(f)), f])
+    s = norm(d[np.arange(len(f)), f])
     return d / np.maximum(s, tol)[:, None, None]
 
 
@@ -454,7 +432,7 @@ def refine_fix(bearings: Any, visible: Any, landmarks: Any, x_hat: Any, tol: flo
         The refined fixes (map units); rows whose weighted system is singular keep ``x_hat``.
     """
     beta, vis = np.asarray(bearings, float), np.asarray(visible, bool)
-    lm, x = _points(landmarks), _points(x_hat).copy()
+    lm, x = points(landmarks), points(x_hat).copy()
     for _ in range(iterations):
         d = lm[None] - x[:, None, :]
         w = np.where(vis, 1.0 / np.maximum(np.einsum("rlk,rlk->rl", d, d), tol * tol), 0.0)
@@ -494,7 +472,7 @@ def fix_variance(bearings: Any, visible: Any, landmarks: Any, x_hat: Any, sigma:
         visible bearings span the plane.
     """
     beta, vis = np.asarray(bearings, float), np.asarray(visible, bool)
-    d = _points(landmarks)[None] - _points(x_hat)[:, None, :]
+    d = points(landmarks)[None] - points(x_hat)[:, None, :]
     dist2 = np.maximum(np.einsum("rlk,rlk->rl", d, d), tol * tol)
     lam = _projector_sum(beta, np.where(vis, 1.0 / dist2, 0.0))[3]
     return sigma * sigma / np.maximum(lam, 1e-300)
@@ -527,8 +505,8 @@ def scaled_output(x_hat: Any, landmarks: Any, fixed: Any, tol: float) -> np.ndar
     ValueError
         If ``fixed`` is neither a scalar nor of shape (R,).
     """
-    x = _points(x_hat)
-    return _scaled(x, _points(landmarks), _per_robot(fixed, len(x), np.int64, "fixed"), tol).reshape(len(x), -1)
+    x = points(x_hat)
+    return _scaled(x, points(landmarks), _per_robot(fixed, len(x), np.int64, "fixed"), tol).reshape(len(x), -1)
 
 
 def _lsq(beta: np.ndarray, vis: np.ndarray, lm: np.ndarray, f: np.ndarray, threshold: float, tol: float):
@@ -537,7 +515,7 @@ def _lsq(beta: np.ndarray, vis: np.ndarray, lm: np.ndarray, f: np.ndarray, thres
     x_hat, ok = _intersection(beta, vis.astype(float), lm)
     solvable = (vis.sum(axis=1) >= 2) & (lam_min >= threshold) & ok
     # Noise can put the intersection behind a camera: every visible landmark must lie ahead.
-    ahead = _dot(beta, lm[None, :, :] - x_hat[:, None, :]) > 0
+    ahead = dot(beta, lm[None, :, :] - x_hat[:, None, :]) > 0
     usable = solvable & np.all(ahead | ~vis, axis=1)
     return _scaled(x_hat, lm, f, tol), x_hat, usable
 
@@ -550,98 +528,9 @@ def _intersection(beta: np.ndarray, w: np.ndarray, lm: np.ndarray) -> tuple[np.n
     total = np.sum(w, axis=1)
     centre = (w @ lm) / np.where(total > 0, total, 1.0)[:, None]
     rel = lm[None, :, :] - centre[:, None, :]
-    rhs = np.sum(w[..., None] * (rel - beta * _dot(beta, rel)[..., None]), axis=1)
+    rhs = np.sum(w[..., None] * (rel - beta * dot(beta, rel)[..., None]), axis=1)
     det = a11 * a22 - a12 * a12
     ok = det > 0
     det = np.where(ok, det, 1.0)
     adj_rhs = np.stack([a22 * rhs[:, 0] - a12 * rhs[:, 1], a11 * rhs[:, 1] - a12 * rhs[:, 0]], axis=1)
     return centre + adj_rhs / det[:, None], ok
-
-
-def _inter(lm: np.ndarray, tol: float) -> tuple[np.ndarray, np.ndarray]:
-    """Inter-landmark bearings ``g[a, b] = β^a_b = unit(l_b − l_a)`` (L, L, 2) and distances (L, L).
-
-    Landmarks closer than ``tol`` count as coincident: ``g = 0`` there, so every solve that
-    needs that line has a zero determinant and is rejected, instead of dividing by a
-    distance that may be as small as a subnormal.
-    """
-    d = lm[None, :, :] - lm[:, None, :]
-    dist = _norm(d)
-    apart = dist >= tol
-    return np.where(apart[..., None], d / np.where(apart, dist, 1.0)[..., None], 0.0), np.where(apart, dist, 0.0)
-
-
-def _best_pairs(beta: np.ndarray, vis: np.ndarray, g: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Flat index ``a·L + b`` of the visible ordered pair maximising ``κ_ab`` (§6.4) and that ``κ``, shapes (R,).
-
-    ``κ = −1`` when no pair of distinct visible landmarks exists. Ties go to the lowest index.
-    """
-    r, n_lm = vis.shape
-    best = np.zeros(r, np.int64)
-    kappa = np.full(r, -1.0)
-    distinct = ~np.eye(n_lm, dtype=bool)
-    step = max(1, _CHUNK // (n_lm * n_lm))
-    for s in range(0, r, step):  # chunks of robots bound the (R, L, L) temporaries, not a loop per robot
-        bt, vt = beta[s : s + step], vis[s : s + step]
-        at_robot = np.abs(_cross(bt[:, :, None, :], bt[:, None, :, :]))  # sin of the angle at x
-        at_b = np.abs(_cross(bt[:, None, :, :], g[None]))  # sin of the angle at l_b
-        pairs = vt[:, :, None] & vt[:, None, :] & distinct[None]
-        k = np.where(pairs, np.minimum(at_robot, at_b), -1.0).reshape(len(bt), -1)
-        best[s : s + step] = np.argmax(k, axis=1)
-        kappa[s : s + step] = k[np.arange(len(bt)), best[s : s + step]]
-    return best, kappa
-
-
-def _pair(beta: np.ndarray, vis: np.ndarray, lm: np.ndarray, f: np.ndarray, sin_min: float, tol: float):
-    """§6.4. Returns ``(ỹ (R, L, 2), x̂ (R, 2), usable (R,))``; rows not usable hold finite garbage."""
-    r, n_lm = vis.shape
-    rows = np.arange(r)
-    g, dist = _inter(lm, tol)
-    best, kappa = _best_pairs(beta, vis, g)
-    a, b = best // n_lm, best % n_lm
-    beta_a, beta_b, g_ab = beta[rows, a], beta[rows, b], g[a, b]
-    # β_a + t·β^a_b = r·β_b, by Cramer's rule on [β^a_b, −β_b]: det = cross(β_b, β^a_b).
-    conditioned = kappa >= sin_min
-    det = np.where(conditioned, _cross(beta_b, g_ab), 1.0)
-    t = _cross(beta_a, beta_b) / det
-    along = _cross(beta_a, g_ab) / det
-    usable = conditioned & (t > 0) & (along > 0)
-    rho = np.where(usable, t / _safe(dist[a, b]), 1.0)  # = 1/‖l_a − x‖
-    p = beta_a[:, None, :] + rho[:, None, None] * (lm[None, :, :] - lm[a][:, None, :])
-    # ỹ_k = p_k/‖p_f‖ = (l_k − x̂)/‖l_f − x̂‖, with ‖l_f − x̂‖ floored at tol as in §6.2.
-    scale = np.maximum(_norm(p[rows, f]), rho * tol)
-    y = p / _safe(scale)[:, None, None]
-    x_hat = lm[a] - beta_a / rho[:, None]
-    return y, x_hat, usable
-
-
-def _rescale(beta: np.ndarray, vis: np.ndarray, lm: np.ndarray, f: np.ndarray, sin_min: float, tol: float):
-    """§6.3, falling back to :func:`_pair` row by row. Returns ``(ỹ, x̂, usable)`` like :func:`_pair`."""
-    r, n_lm = vis.shape
-    rows = np.arange(r)
-    g, dist = _inter(lm, tol)
-    g_f, d_f = g[f], dist[f]  # (R, L, 2), (R, L): β^f_k and ‖l_k − l_f‖
-    beta_f = beta[rows, f]
-    # p_f + a_k β^f_k = b_k β_k, by Cramer's rule on [β^f_k, −β_k]: det = cross(β_k, β^f_k).
-    det = _cross(beta, g_f)
-    conditioned = np.abs(det) >= sin_min
-    det_safe = np.where(conditioned, det, 1.0)
-    a_k = _cross(beta_f[:, None, :], beta) / det_safe
-    b_k = _cross(beta_f[:, None, :], g_f) / det_safe
-    others = vis & (np.arange(n_lm)[None, :] != f[:, None]) & vis[rows, f][:, None]
-    consistent = others & conditioned & (a_k > 0) & (b_k > 0)
-    own = consistent.any(axis=1)
-    k = np.argmax(np.where(consistent, np.abs(det), -1.0), axis=1)
-    rho = np.where(own, a_k[rows, k] / _safe(d_f[rows, k]), 1.0)  # = 1/‖l_f − x‖
-    closed = beta_f[:, None, :] + rho[:, None, None] * (lm[None, :, :] - lm[f][:, None, :])
-    y = np.where(consistent[..., None], b_k[..., None] * beta, closed)
-    # ρ = a_k/‖l_k − l_f‖ has no lower bound (a robot far away, or crafted bearings): 1/ρ may
-    # overflow, and the caller's final finiteness check then marks the robot unusable.
-    with np.errstate(over="ignore"):
-        x_hat = lm[f] - beta_f / rho[:, None]
-    usable = own.copy()
-    if not own.all():
-        back = ~own
-        y_p, x_p, usable_p = _pair(beta[back], vis[back], lm, f[back], sin_min, tol)
-        y[back], x_hat[back], usable[back] = y_p, x_p, usable_p
-    return y, x_hat, usable

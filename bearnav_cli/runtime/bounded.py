@@ -28,9 +28,11 @@ from typing import NamedTuple
 
 import numpy as np
 
+from bearnav_cli.runtime.sight import crossing_parity
+
 __all__ = ["CENTRE_STEPS", "MAX_VERTICES", "RADIUS_PER_WIDTH", "LookBound", "bound_with", "box", "centre", "clip",
-           "cone_rows", "contains", "crossing_parity", "diameter", "grow", "intersect_cones", "look_bound",
-           "one_look_bound", "translate"]  # fmt: skip
+           "cone_rows", "contains", "diameter", "grow", "intersect_cones", "look_bound", "one_look_bound",
+           "translate"]  # fmt: skip
 
 #: Widest vertex array kept: a set with more vertices is merged down (outward) to this many. A set
 #: rarely has more than 12 (the kitchen's 28 tags all around: at most 10 in 1,000 runs).
@@ -561,28 +563,6 @@ def bound_with(look: LookBound, x: np.ndarray, landmark: np.ndarray, tol: float 
         vertices, count = _clip_pairs(vertices, count, rows, a[rows], b[rows], tol)
     tighter = np.minimum(look.bound, RADIUS_PER_WIDTH * np.minimum(look.width, _spread(vertices, count)))
     return np.where(np.isfinite(look.bound), tighter, np.inf)
-
-
-def crossing_parity(a: np.ndarray, b: np.ndarray, p: np.ndarray, valid: np.ndarray | bool = True) -> np.ndarray:
-    """Whether a ray from each point toward ``+x`` crosses the edges ``a → b`` an odd number of times, shape (R,).
-
-    The even-odd test: odd is inside a ring the edges close (a point of two overlapping rings
-    crosses both, an even number).
-
-    Parameters
-    ----------
-    a, b : ndarray, shape (R, E, 2) or (E, 2)
-        The edges' ends (map units): each point's own edges, or one set for every point.
-    p : ndarray, shape (R, 2)
-        The points (map units).
-    valid : ndarray of bool, shape (R, E), or True
-        The edges that count (padding rows do not).
-    """
-    px, py = p[:, 0, None], p[:, 1, None]
-    straddles = valid & ((a[..., 1] > py) != (b[..., 1] > py))  # never true for a level edge
-    with np.errstate(divide="ignore", invalid="ignore"):
-        cross_x = a[..., 0] + (py - a[..., 1]) * (b[..., 0] - a[..., 0]) / (b[..., 1] - a[..., 1])
-    return (np.count_nonzero(straddles & (px < cross_x), axis=1) % 2) == 1
 
 
 def contains(vertices: np.ndarray, count: np.ndarray, x: np.ndarray, tol: float = 0.0) -> np.ndarray:

@@ -9,9 +9,8 @@ Numpy only. Everything is vectorised over ``R`` robots: positions are arrays of 
 - :func:`locate` — the cell to use at a point: one whose safe set holds it, on the
   shortest route;
 - :func:`switch` — hand-over at the exit face and relocation (ALGORITHMS §7.3);
-- :func:`approach_target` / :func:`segments_clear` — the straight approach to a tree node
-  from outside every safe set, and its exact segment test;
-- :func:`obstacle_clearance` — how far a point is from the inflated obstacles and the walls;
+- :func:`approach_target` — the straight approach to a tree node from outside every safe set
+  (its exact segment test is :func:`~bearnav_cli.runtime.sight.segments_clear`);
 - :func:`update` — the whole cell policy of one step;
 - :func:`apply_gain` / :func:`field` — ``u = gain[c] @ y``; with the displacement output
   ``y = (landmarks − x).ravel()`` this is the certified affine field.
@@ -24,8 +23,10 @@ from typing import Any
 
 import numpy as np
 
-from bearnav_cli.runtime.bounded import crossing_parity
+from bearnav_cli.runtime import sight
 from bearnav_cli.runtime.plan_arrays import CHUNK, PlanArrays
+from bearnav_cli.runtime.planar import points
+from bearnav_cli.runtime.sight import crossing_parity, segments_clear
 
 __all__ = [
     "affine_field",
@@ -35,30 +36,31 @@ __all__ = [
     "cell_slack",
     "contains",
     "displacement",
-    "edges_clear",
     "field",
     "funnel_update",
     "in_safe_set",
-    "in_sight",
     "least_rank_cell",
     "locate",
     "nearest_node",
-    "obstacle_clearance",
-    "segments_clear",
     "switch",
     "update",
     "voronoi_owner",
 ]
+
+
+def __getattr__(name: str) -> Any:
+    # obstacle_clearance moved to runtime.sight (issue 24); stages.simulate still reads it here: answer for it
+    # until it imports it from there
+    if name == "obstacle_clearance":
+        return sight.obstacle_clearance
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
 
 # --------------------------------------------------------------------------- vectorised queries
 
 
 def _cells(arrays: PlanArrays, cell: Any) -> np.ndarray:
     return np.asarray(cell, np.int64).reshape(-1)
-
-
-def _points(x: Any) -> np.ndarray:
-    return np.asarray(x, float).reshape(-1, 2)
 
 
 def contains(arrays: PlanArrays, cell: np.ndarray, x: np.ndarray, tol: float | None = None) -> np.ndarray:
@@ -79,7 +81,7 @@ def contains(arrays: PlanArrays, cell: np.ndarray, x: np.ndarray, tol: float | N
     -------
     ndarray of bool, shape (R,)
     """
-    c, p = _cells(arrays, cell), _points(x)
+    c, p = _cells(arrays, cell), points(x)
     tol = arrays.tol if tol is None else tol
     lhs = np.einsum("rpk,rk->rp", arrays.row_A[c], p)
     return np.all(lhs <= arrays.row_b[c] + tol, axis=1)
@@ -100,7 +102,7 @@ def cell_slack(arrays: PlanArrays, cell: np.ndarray, x: np.ndarray) -> np.ndarra
     x : ndarray, shape (R, 2)
         Points (map units).
     """
-    c, p = _cells(arrays, cell), _points(x)
+    c, p = _cells(arrays, cell), points(x)
     slack = arrays.row_b[c] - np.einsum("rpk,rk->rp", arrays.row_A[c], p)
     real = np.arange(arrays.row_A.shape[1]) < np.diff(arrays.cell_row_offsets)[c][:, None]
     return np.min(np.where(real, slack, math.inf), axis=1, initial=math.inf)
@@ -112,7 +114,7 @@ def nearest_node(arrays: PlanArrays, x: np.ndarray) -> np.ndarray:
     Distances are computed in chunks of robots × nodes, as differences (not through
     ``‖p‖² − 2p·x + ‖x‖²``, which loses the ties on Voronoi boundaries).
     """
-    p = _points(x)
+    p = points(x)
     nodes = arrays.nodes
     out = np.empty(len(p), np.int64)
     step = max(1, CHUNK // max(1, len(nodes)))
@@ -142,7 +144,7 @@ def barrier_values(arrays: PlanArrays, x: np.ndarray, where: np.ndarray | None =
     where : ndarray of bool, shape (R, C), optional
         The (robot, cell) pairs to evaluate; default all.
     """
-    p = _points(x)
+    p = points(x)
     if where is None:
         return np.min(np.einsum("cqk,rk->rcq", arrays.bar_A, p) + arrays.bar_b[None], axis=2, initial=math.inf)
     h = np.full(where.shape, -math.inf)
@@ -180,7 +182,7 @@ def locate(arrays: PlanArrays, x: np.ndarray, tol: float | None = None, eps_sw: 
         Switching radius (map units), paper plans: an edge cell whose exit point is within it is
         no candidate either (the robot would switch at once); ignored for funnel plans.
     """
-    p = _points(x)
+    p = points(x)
     if arrays.funnel:  # ALGORITHMS §11.3: the containing cell of least rank (the Voronoi owner outside D)
         best = least_rank_cell(arrays, p)
         outside = best < 0
@@ -228,7 +230,7 @@ def least_rank_cell(arrays: PlanArrays, x: np.ndarray, erosion: np.ndarray | flo
         Only cells of rank strictly below this count (the active cell's rank: is there a cell to
         switch to?); default all.
     """
-    p = _points(x)
+    p = points(x)
     delta = np.broadcast_to(np.asarray(erosion, float), (len(p),))
     cand = arrays.cells_near(p)  # (R, K) in (rank, index) order, -1 padding
     wanted = cand >= 0
@@ -280,7 +282,7 @@ def funnel_update(arrays: PlanArrays, cell: np.ndarray, target: np.ndarray, x: n
     relocated : ndarray of bool, shape (R,)
         Robots found outside their cell with no cell of smaller rank holding them.
     """
-    c, t, p = _cells(arrays, cell).copy(), _cells(arrays, target).copy(), _points(x)
+    c, t, p = _cells(arrays, cell).copy(), _cells(arrays, target).copy(), points(x)
     delta = np.broadcast_to(np.asarray(erosion, float), (len(p),)).copy()
     # for a robot in a cell only the cells of smaller rank matter (is there one to switch to?)
     following = (c >= 0) & (t < 0)
@@ -347,7 +349,7 @@ def switch(
         Robots found outside their (new) cell and relocated (each one is a ``left_cell``
         event; a hand-over moved on to a safer cell is not).
     """
-    c, p = _cells(arrays, cell).copy(), _points(x)
+    c, p = _cells(arrays, cell).copy(), points(x)
     up = arrays.parent_cell[c]
     edge = up >= 0
     handed = np.zeros(len(c), bool)
@@ -381,154 +383,9 @@ def in_safe_set(arrays: PlanArrays, cell: np.ndarray, x: np.ndarray) -> np.ndarr
     x : ndarray, shape (R, 2)
         Positions or their estimates (map units).
     """
-    c, p = _cells(arrays, cell), _points(x)
+    c, p = _cells(arrays, cell), points(x)
     rows = np.einsum("rqk,rk->rq", arrays.bar_A[c], p) + arrays.bar_b[c]
     return np.min(rows, axis=1, initial=math.inf) >= 0
-
-
-def _on_segment(orientation: np.ndarray, point: np.ndarray, s0: np.ndarray, s1: np.ndarray) -> np.ndarray:
-    """Collinear (``orientation == 0``) and inside the bounding box of ``[s0, s1]`` (broadcast arrays)."""
-    inside = orientation == 0
-    for k in (0, 1):
-        low, high = np.minimum(s0[..., k], s1[..., k]), np.maximum(s0[..., k], s1[..., k])
-        inside &= (low <= point[..., k]) & (point[..., k] <= high)
-    return inside
-
-
-def segments_clear(arrays: PlanArrays, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Exact test that each segment ``[a_r, b_r]`` stays in the bounds and touches no obstacle edge, shape (R,).
-
-    Both endpoints are assumed free, so a segment meets the (closed) obstacles exactly when it
-    crosses or touches one of their ring edges.
-
-    Parameters
-    ----------
-    arrays : PlanArrays
-        The plan: the free bounds and the ring edges of the inflated obstacles (``obstacle_edges``).
-    a, b : ndarray, shape (R, 2)
-        The segments' endpoints (map units).
-    """
-    a, b = _points(a), _points(b)
-    lo, hi = arrays.free_bounds[:2], arrays.free_bounds[2:]
-    ok = np.all((a >= lo) & (a <= hi) & (b >= lo) & (b <= hi), axis=1)
-    return edges_clear(arrays.obstacle_edges, a, b, ok)
-
-
-def edges_clear(edges: np.ndarray, a: np.ndarray, b: np.ndarray, ok: np.ndarray | None = None) -> np.ndarray:
-    """Exact test that each segment ``[a_r, b_r]`` crosses or touches none of ``edges`` (E, 2, 2), shape (R,).
-
-    Parameters
-    ----------
-    edges : ndarray, shape (E, 2, 2)
-        The edges ``(start, end)`` to test against (map units).
-    a, b : ndarray, shape (R, 2)
-        The segments' endpoints (map units).
-    ok : ndarray of bool, shape (R,), optional
-        Only those segments are tested (the others stay ``False``); default all.
-    """
-    a, b = _points(a), _points(b)
-    ok = np.ones(len(a), bool) if ok is None else np.array(ok, bool)
-    if not len(edges) or not ok.any():
-        return ok
-    p, q = edges[:, 0], edges[:, 1]
-    step = max(1, CHUNK // len(edges))
-    for s in range(0, len(a), step):
-        A, Bp = a[s : s + step, None, :], b[s : s + step, None, :]
-        d = Bp - A
-        o1 = d[..., 0] * (p[None, :, 1] - A[..., 1]) - d[..., 1] * (p[None, :, 0] - A[..., 0])
-        o2 = d[..., 0] * (q[None, :, 1] - A[..., 1]) - d[..., 1] * (q[None, :, 0] - A[..., 0])
-        e = q - p
-        o3 = e[None, :, 0] * (A[..., 1] - p[None, :, 1]) - e[None, :, 1] * (A[..., 0] - p[None, :, 0])
-        o4 = e[None, :, 0] * (Bp[..., 1] - p[None, :, 1]) - e[None, :, 1] * (Bp[..., 0] - p[None, :, 0])
-        proper = (o1 * o2 < 0) & (o3 * o4 < 0)
-        # touching counts as a collision: an endpoint of one segment on the other (orientation 0
-        # and inside the other's bounding box)
-        touch = (
-            _on_segment(o1, p[None], A, Bp) | _on_segment(o2, q[None], A, Bp)
-            | _on_segment(o3, A, p[None], q[None]) | _on_segment(o4, Bp, p[None], q[None])
-        )  # fmt: skip
-        ok[s : s + step] &= ~np.any(proper | touch, axis=1)
-    return ok
-
-
-def obstacle_clearance(arrays: PlanArrays, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Distance from each point to the nearest inflated obstacle edge or wall of ``B_r``, and the way away from it.
-
-    Exact (point-to-segment distances over every ring edge of ``arrays.obstacle_edges``, chunked).
-    A point outside ``B_r`` gets a negative clearance (minus its distance to ``B_r``); a point
-    inside an obstacle gets its distance to that obstacle's boundary, so a caller that must tell
-    free points apart tests membership separately. The distance to a segment or a wall's
-    half-plane is convex, so ``clearance(x + δ) ≥ clearance_k(x) + away_k·δ`` for the nearest
-    piece ``k``: moving along ``away`` never brings the point closer to that piece.
-
-    Parameters
-    ----------
-    arrays : PlanArrays
-        The plan: ``obstacle_edges`` (E, 2, 2) and ``free_bounds`` (``B_r``).
-    x : ndarray, shape (R, 2)
-        Points (map units).
-
-    Returns
-    -------
-    clearance : ndarray, shape (R,)
-        Map units.
-    away : ndarray, shape (R, 2)
-        Unit direction from the nearest point of the nearest piece to ``x`` (for a wall, its
-        inward normal); zero where ``x`` lies on it.
-    """
-    p = _points(x)
-    lo, hi = arrays.free_bounds[:2], arrays.free_bounds[2:]
-    walls = np.concatenate([p - lo, hi - p], axis=1)  # x − xmin, y − ymin, xmax − x, ymax − y
-    nearest_wall = np.argmin(walls, axis=1) if len(p) else np.zeros(0, np.int64)
-    out = walls[np.arange(len(p)), nearest_wall] if len(p) else np.zeros(0)
-    normals = np.array([[1.0, 0.0], [0.0, 1.0], [-1.0, 0.0], [0.0, -1.0]])
-    away = normals[nearest_wall] if len(p) else np.zeros((0, 2))
-    edges = arrays.obstacle_edges
-    if not len(edges) or not len(p):
-        return out, away
-    a, d = edges[:, 0], edges[:, 1] - edges[:, 0]
-    length2 = np.maximum(np.einsum("ek,ek->e", d, d), arrays.tol**2)
-    step = max(1, CHUNK // len(edges))
-    for s in range(0, len(p), step):
-        rel = p[s : s + step, None, :] - a[None]  # (r, E, 2)
-        t = np.clip(np.einsum("rek,ek->re", rel, d) / length2, 0.0, 1.0)
-        gap = rel - t[..., None] * d[None]  # from each edge's nearest point to x
-        dist2 = np.einsum("rek,rek->re", gap, gap)
-        k = np.argmin(dist2, axis=1)
-        rows = np.arange(len(k))
-        dist = np.sqrt(dist2[rows, k])
-        closer = dist < out[s : s + step]
-        with np.errstate(invalid="ignore", divide="ignore"):
-            unit = np.where(dist[:, None] > 0, gap[rows, k] / dist[:, None], 0.0)
-        out[s : s + step] = np.where(closer, dist, out[s : s + step])
-        away[s : s + step] = np.where(closer[:, None], unit, away[s : s + step])
-    return out, away
-
-
-def in_sight(arrays: PlanArrays, x: np.ndarray, landmarks: np.ndarray | None = None) -> np.ndarray:
-    """Line of sight from each point to each landmark through the raw obstacles, shape (R, L) (ALGORITHMS §1).
-
-    The segment from ``x`` to ``l − tol·unit(l − x)`` must touch no raw obstacle edge, so a tag on
-    a wall is seen from the free side (:meth:`bearnav_cli.geometry.FreeSpace.visible`'s rule, exact
-    against the embedded map's rings).
-
-    Parameters
-    ----------
-    arrays : PlanArrays
-        The plan's raw obstacle edges (``sight_edges``) and landmarks.
-    x : ndarray, shape (R, 2)
-        Where the camera is (map units).
-    landmarks : ndarray, shape (L, 2), optional
-        Other positions than the plan's landmarks (tags proposed for it; map units).
-    """
-    p = _points(x)
-    lm = arrays.landmarks if landmarks is None else np.asarray(landmarks, float).reshape(-1, 2)
-    d = lm[None, :, :] - p[:, None, :]
-    dist = np.hypot(d[..., 0], d[..., 1])
-    far = dist > arrays.tol
-    ends = lm[None] - arrays.tol * d / np.where(far, dist, 1.0)[..., None]
-    out = edges_clear(arrays.sight_edges, np.repeat(p, len(lm), axis=0), ends.reshape(-1, 2), far.ravel())
-    return out.reshape(len(p), len(lm))
 
 
 #: Nodes :func:`approach_target` tests at a time, in route order, for a robot that sees none of its nearest.
@@ -551,7 +408,7 @@ def approach_target(arrays: PlanArrays, x: np.ndarray, nearest: int = 8) -> np.n
     nearest : int
         How many of the closest nodes are tried first.
     """
-    p = _points(x)
+    p = points(x)
     out = np.full(len(p), -1, np.int64)
     if not len(p):
         return out
@@ -641,7 +498,7 @@ def update(
     """
     if arrays.funnel:
         return funnel_update(arrays, cell, target, x, eps_sw, 0.0 if erosion is None else erosion, keep)
-    c, t, p = _cells(arrays, cell).copy(), _cells(arrays, target).copy(), _points(x)
+    c, t, p = _cells(arrays, cell).copy(), _cells(arrays, target).copy(), points(x)
     relocated = np.zeros(len(c), bool)
     fresh = c < 0
     if fresh.any():
@@ -671,7 +528,7 @@ def update(
 
 def displacement(arrays: PlanArrays, x: np.ndarray) -> np.ndarray:
     """The displacement output ``y = (landmarks − x).ravel()`` of each robot, shape (R, 2L)."""
-    p = _points(x)
+    p = points(x)
     return (arrays.landmarks[None, :, :] - p[:, None, :]).reshape(len(p), 2 * len(arrays.landmarks))
 
 
@@ -723,5 +580,5 @@ def affine_field(arrays: PlanArrays, cell: np.ndarray, x: np.ndarray) -> np.ndar
     x : ndarray, shape (R, 2)
         Positions or their estimates (map units).
     """
-    c, p = _cells(arrays, cell), _points(x)
+    c, p = _cells(arrays, cell), points(x)
     return arrays.field_a[c] - np.einsum("rij,rj->ri", arrays.field_M[c], p)

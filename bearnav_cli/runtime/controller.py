@@ -1,6 +1,6 @@
 """The controller a robot runs: one camera frame's bearings in, a velocity command out (DESIGN §6).
 
-Numpy only. :class:`Controller` holds one robot's :class:`~bearnav_cli.runtime.step.ControlState`
+Numpy only. :class:`Controller` holds one robot's :class:`~bearnav_cli.runtime.settings.ControlState`
 and calls :func:`~bearnav_cli.runtime.step.control`, the same step ``bearnav simulate`` advances its
 robots with, so what is simulated is what runs on the robot.
 """
@@ -15,7 +15,8 @@ import numpy as np
 from bearnav_cli.runtime.plan_arrays import PlanArrays
 from bearnav_cli.runtime.plan_file import load_plan
 from bearnav_cli.runtime.robot import lookahead_point, robot_parameters
-from bearnav_cli.runtime.step import SPEED, ControlOutput, ControlSettings, ControlState, control
+from bearnav_cli.runtime.settings import SPEED, ControlOutput, ControlSettings, ControlState
+from bearnav_cli.runtime.step import control
 
 __all__ = ["Controller"]
 
@@ -54,7 +55,7 @@ class Controller:
         uses, with the same defaults: ``dt`` is the camera period (s), by default the
         simulation's, ``min(0.0025·D/v, 0.2)`` with ``v`` = ``speed`` (``alpha`` for the
         unicycle), and ``eps_sw`` defaults to ``2·v·dt``. Pass ``bearing_sigma``, the camera's
-        angular noise (radians; default :data:`~bearnav_cli.runtime.step.BEARING_SIGMA`, 1°).
+        angular noise (radians; default :data:`~bearnav_cli.runtime.settings.BEARING_SIGMA`, 1°).
         A plan whose map says ``robot: {reverse: false}`` clamps ``v ≥ 0`` whatever
         ``clamp_reverse`` says (the option can only add the clamp). The bounds of the set estimator
         (``estimator="set"``: ``bearing_bound``, ``heading_bound``, ``slip``, ``slip_floor``) default to

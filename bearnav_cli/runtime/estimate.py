@@ -10,15 +10,12 @@ by and what a certified step is measured against (§11.4).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from bearnav_cli.runtime import bearing
-
-if TYPE_CHECKING:
-    from bearnav_cli.runtime.plan_arrays import PlanArrays
-    from bearnav_cli.runtime.step import ControlSettings, ControlState
+from bearnav_cli.runtime.plan_arrays import PlanArrays
+from bearnav_cli.runtime.settings import ControlSettings, ControlState
 
 __all__ = ["Estimate", "Fix", "SetEstimate", "axle_bounds", "bounded_update", "fuse", "measure"]
 

@@ -115,7 +115,7 @@ class PlanArrays:
         map), for the exact straight-line checks of :func:`approach_target`.
     sight_edges : ndarray of float64, shape (E', 2, 2)
         Every ring edge of the raw obstacles (map units): what hides a landmark
-        (``cell_policy.in_sight``).
+        (``sight.in_sight``).
     certificate : {"funnel", "paper"}
         ``funnel``: the cells compose and the policy is ALGORITHMS §11.3's (least rank);
         ``paper``: per-cell certificates only.
@@ -149,7 +149,7 @@ class PlanArrays:
         Barrier constant of each cell's certificate (1/s; NaN without barrier rows).
     c_v : ndarray of float64, shape (C,)
         Lyapunov constant of each cell's certificate (1/s); with ``c_h``, what the unicycle's
-        heading allowance (:func:`bearnav_cli.runtime.step.heading_allowance`) needs.
+        heading allowance (:func:`bearnav_cli.runtime.unicycle.heading_allowance`) needs.
     goal : ndarray of float64, shape (2,)
         Derived: the root node's position (map units).
     bin_cells : ndarray of int64, shape (B, K)

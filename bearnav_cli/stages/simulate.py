@@ -27,7 +27,7 @@ from bearnav_cli.runtime import ControlSettings, ControlState, PlanArrays, beari
 from bearnav_cli.runtime import bounded as runtime_bounded
 from bearnav_cli.runtime import controller as runtime_controller
 from bearnav_cli.runtime import robot as runtime_robot
-from bearnav_cli.runtime.step import ALPHA, BEARING_SIGMA, ODOMETRY_DRIFT, SPEED
+from bearnav_cli.runtime.settings import ALPHA, BEARING_SIGMA, ODOMETRY_DRIFT, SPEED
 from bearnav_cli.world import starts as world_starts
 from bearnav_cli.world.camera import CAMERAS, Camera, IdealCamera
 from bearnav_cli.world.motion import Base, Contact, body_space, initial_headings

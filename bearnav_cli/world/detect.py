@@ -13,7 +13,8 @@ from typing import Any
 import numpy as np
 
 from bearnav_cli.errors import InvalidParamsError
-from bearnav_cli.runtime.camera import Detection, Intrinsics, tag_pose_from_opencv
+from bearnav_cli.runtime.camera import Detection, tag_pose_from_opencv
+from bearnav_cli.runtime.camera_model import Intrinsics
 
 __all__ = ["TAG36H11_IDS", "detect", "detector", "estimate_pose", "tag36h11_cells"]
 

@@ -28,15 +28,8 @@ import shapely
 from bearnav_cli.errors import InvalidParamsError
 from bearnav_cli.geometry import FreeSpace, box_polygon
 from bearnav_cli.runtime import bearing
-from bearnav_cli.runtime.camera import (
-    Intrinsics,
-    Mount,
-    TagMap,
-    observe,
-    project_world,
-    tag_corners_world,
-    tag_number,
-)
+from bearnav_cli.runtime.camera import TagMap, observe, project_world, tag_corners_world, tag_number
+from bearnav_cli.runtime.camera_model import Intrinsics, Mount
 from bearnav_cli.runtime.plan_arrays import ring_edges
 from bearnav_cli.world import detect
 

@@ -5,7 +5,7 @@ publishes what it returns. Everything here is duck-typed on message attributes, 
 rclpy messages and on ``rosbags`` message dataclasses alike (the tests use the latter):
 
 - :func:`detections_from_msg`: ``apriltag_msgs/AprilTagDetectionArray`` → ``runtime.camera.Detection``;
-- :func:`intrinsics_from_camera_info`: ``sensor_msgs/CameraInfo`` → ``runtime.camera.Intrinsics``;
+- :func:`intrinsics_from_camera_info`: ``sensor_msgs/CameraInfo`` → ``runtime.camera_model.Intrinsics``;
 - :func:`yaw_from_quaternion`, :func:`pose_from_transform`, :func:`mount_from_transform`: ``geometry_msgs``;
 - :func:`twist_from_command`, :func:`fill_twist`: a :class:`~bearnav_cli.runtime.Controller` command
   → ``geometry_msgs/Twist`` in the robot's body frame (REP 103: ``x`` forward, ``y`` left).
@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from bearnav_cli.errors import InvalidParamsError
-from bearnav_cli.runtime import ESTIMATORS, Controller, camera
+from bearnav_cli.runtime import ESTIMATORS, Controller, camera, camera_model
 
 __all__ = [
     "BearnavLogic", "HEADING_SOURCES", "Settings", "Step", "camera_yaw", "detections_from_msg", "fill_twist",
@@ -84,7 +84,7 @@ def detections_from_msg(msg: Any, family: str = "", poses: Mapping[int, tuple] |
     return out
 
 
-def intrinsics_from_camera_info(msg: Any, rectified: bool = True) -> camera.Intrinsics:
+def intrinsics_from_camera_info(msg: Any, rectified: bool = True) -> camera_model.Intrinsics:
     """The camera of one ``sensor_msgs/CameraInfo``.
 
     Parameters
@@ -101,8 +101,9 @@ def intrinsics_from_camera_info(msg: Any, rectified: bool = True) -> camera.Intr
         if p.shape != (12,):
             raise InvalidParamsError(f"expected the 12 numbers of CameraInfo.p, got {p.size}", field="p")
         k = [p[0], p[1], p[2], p[4], p[5], p[6], p[8], p[9], p[10]]
-        return camera.Intrinsics.from_camera_info(k, (), width, height)
-    return camera.Intrinsics.from_camera_info(msg.k, msg.d, width, height, str(msg.distortion_model or "plumb_bob"))
+        return camera_model.Intrinsics.from_camera_info(k, (), width, height)
+    model = str(msg.distortion_model or "plumb_bob")
+    return camera_model.Intrinsics.from_camera_info(msg.k, msg.d, width, height, model)
 
 
 def yaw_from_quaternion(q: Any) -> float:
@@ -134,13 +135,13 @@ def pose_from_transform(transform: Any) -> tuple[np.ndarray, np.ndarray]:
     return rotation_from_quaternion(transform.rotation), np.array([float(t.x), float(t.y), float(t.z)])
 
 
-def mount_from_transform(transform: Any) -> camera.Mount:
+def mount_from_transform(transform: Any) -> camera_model.Mount:
     """The camera mount from the ``base_link → camera optical frame`` transform (TF)."""
     rotation, translation = pose_from_transform(transform)
-    return camera.Mount(rotation, translation)
+    return camera_model.Mount(rotation, translation)
 
 
-def camera_yaw(mount: camera.Mount) -> float:
+def camera_yaw(mount: camera_model.Mount) -> float:
     """Yaw (rad) of the camera's optical axis in the robot frame."""
     axis = mount.rotation[:, 2]
     return math.atan2(axis[1], axis[0])
@@ -255,19 +256,19 @@ class BearnavLogic:
         replaces it (from TF).
     """
 
-    def __init__(self, settings: Settings, mount: camera.Mount | None = None) -> None:
+    def __init__(self, settings: Settings, mount: camera_model.Mount | None = None) -> None:
         self.settings = settings
         self.tags = camera.TagMap.from_plan(settings.plan)
         self.controller = settings.controller()
-        self.mount = mount or camera.Mount.forward(settings.mount_height, settings.mount_yaw)
-        self.intrinsics: camera.Intrinsics | None = None
+        self.mount = mount or camera_model.Mount.forward(settings.mount_height, settings.mount_yaw)
+        self.intrinsics: camera_model.Intrinsics | None = None
         self.compass: float | None = None
         self.yaw: float | None = None  # the last heading used (tag-pose source: carried by the turn rate)
 
-    def set_mount(self, mount: camera.Mount) -> None:
+    def set_mount(self, mount: camera_model.Mount) -> None:
         self.mount = mount
 
-    def on_camera_info(self, msg: Any) -> camera.Intrinsics:
+    def on_camera_info(self, msg: Any) -> camera_model.Intrinsics:
         self.intrinsics = intrinsics_from_camera_info(msg, self.settings.rectified)
         return self.intrinsics
 
