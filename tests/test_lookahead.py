@@ -263,3 +263,34 @@ def test_a_bad_lookahead_option_exits_3_naming_the_field(cli, write_map, small_s
     result = cli("map", write_map(small_spec), "-o", tmp_path / "out.json", "--lookahead", value)
     assert_one_line_error(result, "small.yaml", "robot.lookahead")
     assert not (tmp_path / "out.json").exists()
+
+
+def test_a_look_ahead_point_a_hair_inside_an_obstacle_is_led_out_to_a_node():
+    """Slip can carry a look-ahead point just inside the obstacles inflated by ρ + λ (the cells keep only d/20
+    from them) while its body is free: ``approach_target`` gives it the node of the point just outside the
+    nearest edge (in clear sight of it, exactly), where it once gave none and the run stalled (paper_sim_circles,
+    λ = 0.9: 23 of 1,000). Deeper than 2λ, a body in an obstacle, it gives none, as for every λ = 0 point."""
+    from bearnav_cli.geometry import FreeSpace
+    from bearnav_cli.runtime import cell_policy, sight
+
+    plan = lookahead_plan()
+    arrays = PlanArrays.from_plan(plan)
+    space = FreeSpace.from_map(plan.map)
+    for depth, expect_node in ((0.2 * LAMBDA, True), (3.0 * LAMBDA, False)):
+        rings = shapely.get_parts(shapely.boundary(shapely.buffer(space.obstacles, -depth)))  # depth inside
+        x = np.concatenate([shapely.get_coordinates(shapely.line_interpolate_point(ring, np.linspace(0, 1, 16)[:-1],
+                                                                                   normalized=True))
+                            for ring in rings])  # fmt: skip
+        inside = sight.inside_obstacles(arrays, x)
+        assert inside.sum() >= 10, inside.sum()
+        got = cell_policy.approach_target(arrays, x[inside])
+        if not expect_node:
+            assert np.all(got == -1)
+            continue
+        led = got >= 0
+        assert led.mean() > 0.9, led.mean()
+        depth_in, way = sight.obstacle_clearance(arrays, x[inside][led])
+        exits = x[inside][led] - way * (depth_in + 1e3 * arrays.tol)[:, None]
+        assert not sight.inside_obstacles(arrays, exits).any()
+        lines = shapely.linestrings(np.stack([exits, arrays.nodes[got[led]]], axis=1))
+        assert not shapely.intersects(space.obstacles, lines).any()

@@ -26,7 +26,7 @@ import numpy as np
 from bearnav_cli.runtime import sight
 from bearnav_cli.runtime.plan_arrays import CHUNK, PlanArrays
 from bearnav_cli.runtime.planar import points
-from bearnav_cli.runtime.sight import crossing_parity, segments_clear
+from bearnav_cli.runtime.sight import segments_clear
 
 __all__ = [
     "affine_field",
@@ -397,7 +397,9 @@ def approach_target(arrays: PlanArrays, x: np.ndarray, nearest: int = 8) -> np.n
 
     Among the ``nearest`` closest nodes (all nodes if none of those qualifies), the one with a
     clear straight segment from ``x`` and the shortest route ``‖x − x_n‖ + cost(n)``. The node
-    lies strictly inside its own cell's safe set, so the robot is certified once it arrives.
+    lies strictly inside its own cell's safe set, so the robot is certified once it arrives. A
+    look-ahead point (``λ > 0``) up to ``2λ`` inside an inflated obstacle gets the node of the point
+    just outside its nearest edge; any other point inside one gets ``-1``.
 
     Parameters
     ----------
@@ -424,11 +426,23 @@ def approach_target(arrays: PlanArrays, x: np.ndarray, nearest: int = 8) -> np.n
     found = np.isfinite(route[np.arange(len(p)), best])
     out[found] = cand[found, best[found]]
     todo = np.flatnonzero(~found)
-    # a point inside an obstacle has no clear segment to any node: skip the scan of every node
-    # (an estimate swung into an obstacle, as a look-ahead point does while its robot turns to look)
-    edges, step = arrays.obstacle_edges, max(1, CHUNK // max(len(arrays.obstacle_edges), 1))
-    inside = [crossing_parity(edges[:, 0], edges[:, 1], p[todo[s : s + step]]) for s in range(0, len(todo), step)]
-    todo = todo[~np.concatenate(inside)] if inside else todo  # even where obstacles overlap: only a True is sure
+    # a point inside an obstacle has no clear segment to any node: no scan of every node from it
+    # (an estimate swung into an obstacle, as a look-ahead point does while its robot turns to look,
+    # or one wheel slip carried a hair past a cell that keeps only d/20 from the inflated obstacle).
+    # A look-ahead point lies up to 2λ inside the obstacles inflated by ρ + λ while its body is free
+    # (its axle, λ behind, keeps ρ): its way out is the shortest one, to the point just outside the
+    # nearest edge, and its node the one that point would approach; without one it stood there, a
+    # stall (a point deeper in, or any for λ = 0, is a body in an obstacle: no node)
+    inside = sight.inside_obstacles(arrays, p[todo])  # even where obstacles overlap: only a True is sure
+    stuck, todo = todo[inside], todo[~inside]
+    if len(stuck) and arrays.lookahead > 0.0:
+        depth, away = sight.obstacle_clearance(arrays, p[stuck])
+        exits = p[stuck] - away * (depth + 1e3 * arrays.tol)[:, None]
+        lo, hi = arrays.free_bounds[:2], arrays.free_bounds[2:]
+        ok = (depth <= 2.0 * arrays.lookahead) & np.any(away != 0.0, axis=1)
+        ok &= np.all((exits >= lo) & (exits <= hi), axis=1)
+        ok[ok] = ~sight.inside_obstacles(arrays, exits[ok])
+        out[stuck[ok]] = approach_target(arrays, exits[ok], nearest)  # outside: no deeper call
     if not len(todo):
         return out
     # the others: every node, in route order (ties in distance order, as argmin over the distance

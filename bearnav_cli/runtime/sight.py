@@ -7,7 +7,8 @@ Numpy only, vectorised over ``R`` points or segments and chunked over the edges:
 - :func:`in_sight` — line of sight from points to landmarks through the raw obstacles (ALGORITHMS §1);
 - :func:`obstacle_clearance` — the distance to the nearest inflated obstacle edge or wall, and the
   way away from it;
-- :func:`crossing_parity` — the even-odd test of points against rings of edges.
+- :func:`crossing_parity` — the even-odd test of points against rings of edges;
+  :func:`inside_obstacles` applies it to the plan's inflated obstacles.
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ import numpy as np
 from bearnav_cli.runtime.plan_arrays import CHUNK, PlanArrays
 from bearnav_cli.runtime.planar import points
 
-__all__ = ["crossing_parity", "edges_clear", "in_sight", "obstacle_clearance", "segments_clear"]
+__all__ = ["crossing_parity", "edges_clear", "in_sight", "inside_obstacles", "obstacle_clearance", "segments_clear"]
 
 
 def _on_segment(orientation: np.ndarray, point: np.ndarray, s0: np.ndarray, s1: np.ndarray) -> np.ndarray:
@@ -185,3 +186,13 @@ def crossing_parity(a: np.ndarray, b: np.ndarray, p: np.ndarray, valid: np.ndarr
     with np.errstate(divide="ignore", invalid="ignore"):
         cross_x = a[..., 0] + (py - a[..., 1]) * (b[..., 0] - a[..., 0]) / (b[..., 1] - a[..., 1])
     return (np.count_nonzero(straddles & (px < cross_x), axis=1) % 2) == 1
+
+
+def inside_obstacles(arrays: PlanArrays, p: np.ndarray) -> np.ndarray:
+    """Whether each point lies inside an inflated obstacle ring of the plan (even-odd, chunked), shape (R,).
+
+    Where obstacles overlap a point of both crosses an even number of edges: only a True is sure.
+    """
+    edges, step = arrays.obstacle_edges, max(1, CHUNK // max(len(arrays.obstacle_edges), 1))
+    parts = [crossing_parity(edges[:, 0], edges[:, 1], p[s : s + step]) for s in range(0, len(p), step)]
+    return np.concatenate(parts) if parts else np.zeros(0, bool)
