@@ -65,7 +65,7 @@ def dual_template(problem: CellProblem, L: np.ndarray, u_max: float | None, w_h:
     equality = np.ones((n_groups, 3), bool)
     equality[:, 2] = False
     return assemble(dense, filled(3 * n_groups, -INF), equality.ravel(), rhs_h, rhs_v, rhs_const.ravel(),
-                     n_theta, n_h, n_mult, w_h, w_v, least_violation)  # fmt: skip
+                    n_theta, n_h, n_mult, w_h, w_v, least_violation)  # fmt: skip
 
 
 def dual_lp(problem: CellProblem, L: np.ndarray, c_h: float, c_v: float, u_max: float | None,

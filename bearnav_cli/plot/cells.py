@@ -182,7 +182,7 @@ def plot_cells(ax: plt.Axes, cells: Cells, status: np.ndarray | None = None, *, 
         if regions is not None or color_by != "status":
             for c, region in enumerate(regions if regions is not None else active_regions(cells)):
                 add_geometry(ax, region, facecolor=faces[c], alpha=fill, edgecolor=PALETTE["white"], lw=0.5,
-                              zorder=0.5, gid="cell-fill", label=key(name(c)))  # fmt: skip
+                             zorder=0.5, gid="cell-fill", label=key(name(c)))  # fmt: skip
         else:  # paper cells by status: each status's union once, the worst on top
             polys = cell_polygons(cells)
             for value in (CellStatus.CERTIFIED, CellStatus.GOAL, CellStatus.RELAXED, CellStatus.NOT_CERTIFIED,
@@ -190,8 +190,8 @@ def plot_cells(ax: plt.Axes, cells: Cells, status: np.ndarray | None = None, *, 
                 chosen = [polys[c] for c in np.flatnonzero(np.asarray(status) == value)]
                 if chosen:
                     add_geometry(ax, shapely.union_all(chosen), facecolor=STATUS_COLORS[value], alpha=fill,
-                                  edgecolor="none", zorder=0.5, gid="cell-fill",
-                                  label=key(status_name(value)))  # fmt: skip
+                                 edgecolor="none", zorder=0.5, gid="cell-fill",
+                                 label=key(status_name(value)))  # fmt: skip
         if mappable is not None and colorbar:
             bar = ax.figure.colorbar(mappable, ax=ax, fraction=0.04, pad=0.015, shrink=0.9)
             bar.set_label(label, fontsize=8)
@@ -317,10 +317,10 @@ def plot_uncovered(ax: plt.Axes, cells: Cells, uncovered: shapely.Geometry,
         The parts of ``F`` no cell reaches (drawn in grey).
     """
     add_geometry(ax, uncovered, facecolor="none", edgecolor=UNCOVERED_COLOR, hatch="///", lw=0.6,
-                  zorder=2.7, gid="uncovered", label="free space no cell covers (part of F)")  # fmt: skip
+                 zorder=2.7, gid="uncovered", label="free space no cell covers (part of F)")  # fmt: skip
     if unreached is not None and not unreached.is_empty:
         add_geometry(ax, unreached, facecolor="none", edgecolor=UNREACHED_COLOR, hatch="\\\\", lw=0.6,
-                      zorder=2.7, gid="unreached", label="free space no cell reaches")  # fmt: skip
+                     zorder=2.7, gid="unreached", label="free space no cell reaches")  # fmt: skip
     return ax
 
 

@@ -69,14 +69,14 @@ def plot_map(ax: plt.Axes, map_: Map, *, landmarks: bool = True, starts: bool = 
     # the raw obstacles' entry first: it is the one a reader looks for
     for poly in map_.raw_obstacles:
         ax.add_patch(polygon_patch(poly, facecolor=RAW_COLOR, edgecolor="none", zorder=2, gid="obstacles",
-                                    label=shared_label("obstacles", seen)))  # fmt: skip
+                                   label=shared_label("obstacles", seen)))  # fmt: skip
     if walls and map_.planning_radius > 0:
         band = shapely.difference(shapely.box(*map_.bounds), shapely.box(*map_.free_bounds))
         add_geometry(ax, band, facecolor=INFLATED_COLOR, edgecolor="none", zorder=1, gid="inflated",
-                      label=shared_label(inflated, seen))  # fmt: skip
+                     label=shared_label(inflated, seen))  # fmt: skip
     for poly in map_.obstacles:
         ax.add_patch(polygon_patch(poly, facecolor=INFLATED_COLOR, edgecolor="none", zorder=1, gid="inflated",
-                                    label=shared_label(inflated, seen)))  # fmt: skip
+                                   label=shared_label(inflated, seen)))  # fmt: skip
     if landmarks and len(map_.landmarks):
         ax.scatter(*map_.landmarks.T, marker="^", s=40, color=LANDMARK_COLOR, edgecolor=ROLE_COLORS["edge"],
                    linewidths=0.5, zorder=6, gid="landmarks", label=LANDMARKS_LABEL)  # fmt: skip

@@ -54,7 +54,7 @@ def plot_estimate_trace(ax: plt.Axes, trace: Any, *, cmap: str = "viridis", scal
             ring = trace.x_hat[k] + scale * (ring - trace.x_hat[k])
             colour = colours(norm(trace.error[k]))
             patch = add_geometry(ax, shapely.Polygon(ring), facecolor=colour, alpha=0.55, edgecolor=colour, lw=0.4,
-                                  zorder=5)  # fmt: skip
+                                 zorder=5)  # fmt: skip
             if patch is not None:
                 patch.set_label(shared_label(label, seen))
     looked = trace.looking
