@@ -67,11 +67,11 @@ clean:
 FIGURES := docs/figures
 REPRO_FIGURES := $(FIGURES)/kitchen_paper.png $(FIGURES)/kitchen_unicycle.png $(FIGURES)/paper_b.png \
 	$(FIGURES)/kitchen_sets.png $(FIGURES)/robustness.png
-PLAN_SRC := $(wildcard bearnav_cli/*.py bearnav_cli/stages/*.py bearnav_cli/runtime/*.py)
+PLAN_SRC := $(wildcard bearnav_cli/*.py bearnav_cli/*/*.py)
 # What every figure script runs besides its own file: a change to the closed loop, the simulated
 # world (wheel slip, camera) or the drawing code redraws every figure.
 REPRO_LIB := repro/common.py bearnav_cli/stages/simulate.py $(wildcard bearnav_cli/runtime/*.py) \
-	$(wildcard bearnav_cli/world/*.py) bearnav_cli/geometry.py bearnav_cli/plot.py bearnav_cli/palette.py
+	$(wildcard bearnav_cli/world/*.py) $(wildcard bearnav_cli/geometry/*.py) $(wildcard bearnav_cli/plot/*.py) bearnav_cli/palette.py
 
 reproduce: $(STAMP) $(REPRO_FIGURES)
 	@echo "figures: $(REPRO_FIGURES) (numbers next to each as .json, .csv, .md)"

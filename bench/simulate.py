@@ -66,7 +66,7 @@ def kitchen_plan() -> Plan:
 
 
 def per_robot_loop(plan: Plan, starts: np.ndarray, params: simulate.Params) -> tuple[np.ndarray, np.ndarray]:
-    """Outcome and steps of every start, one robot at a time through ``simulate._Loop.step``.
+    """Outcome and steps of every start, one robot at a time through ``world.loop.Loop.step``.
 
     The setup is ``simulate.rollout``'s (``simulate.start_loop``), done once for all the starts;
     then each robot is stepped alone (``R = 1`` arrays) until it has an outcome.
@@ -193,7 +193,7 @@ def main(argv: list[str] | None = None) -> None:
         f"synthesize with the map's parameters; {n:,} starts from `simulate.Params(starts='random:{n}')` "
         "(`resolve_starts`, seed 0), the same starts for every configuration; `record_trajectories=False`, "
         "other parameters default unless named. *vectorised*: `simulate.rollout(plan, starts, params)`, all robots "
-        "as arrays. *per-robot loop*: `rollout`'s setup once, then `simulate._Loop.step` called with one robot "
+        "as arrays. *per-robot loop*: `rollout`'s setup once, then `world.loop.Loop.step` called with one robot "
         "(`R = 1` arrays) until that robot finishes, robot after robot: the same step function, one robot at a "
         "time. *rollout per robot*: `simulate.rollout(plan, starts[i:i+1], params)` for each robot, per-call "
         f"setup included, nothing subtracted. Both per-robot variants run on the first {n_loop} starts and are "

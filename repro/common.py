@@ -18,7 +18,8 @@ from matplotlib.lines import Line2D
 
 from bearnav_cli import artifacts, pipeline
 from bearnav_cli.datatypes import Map, Outcome, Polygon, Simulation
-from bearnav_cli.plot import OUTCOME_COLORS, OUTCOME_NAMES
+from bearnav_cli.palette import OUTCOME_COLORS
+from bearnav_cli.plot import OUTCOME_NAMES
 from bearnav_cli.stages import simulate
 
 

@@ -290,19 +290,19 @@ def test_an_artifacts_stats_and_params_are_read_only(small_spec):
 def test_a_written_file_has_the_umasks_mode_and_the_umask_is_left_alone(tmp_path, monkeypatch, mask):
     import os
 
-    artifacts._umask.cache_clear()
+    artifacts.atomic._umask.cache_clear()
     old = os.umask(mask)
     try:
         calls = []
         real = os.umask
-        monkeypatch.setattr(artifacts.os, "umask", lambda m: calls.append(m) or real(m))
+        monkeypatch.setattr(artifacts.atomic.os, "umask", lambda m: calls.append(m) or real(m))
         artifacts.atomic_write(tmp_path / "x.txt", lambda handle: handle.write(b"x"))
         assert (tmp_path / "x.txt").stat().st_mode & 0o777 == 0o666 & ~mask
         if os.path.exists("/proc/self/status"):
             assert calls == []  # read from /proc: the umask was never changed, not even briefly
     finally:
         os.umask(old)
-        artifacts._umask.cache_clear()
+        artifacts.atomic._umask.cache_clear()
 
 
 def test_manifests_record_the_input_relative_to_the_artifact(cli, write_map, small_spec, tmp_path):

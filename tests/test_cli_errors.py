@@ -155,14 +155,14 @@ def test_a_stage_output_that_fails_its_own_checks_is_an_internal_error(cli, writ
     from bearnav_cli import artifacts
     from bearnav_cli.errors import ArtifactError
 
-    checks = artifacts.validate_artifact
+    checks = artifacts.writing.validate_artifact
 
     def broken(kind, artifact, **kwargs):
         if kind == "cells":
             raise ArtifactError("a broken invariant", field="cell_b")
         return checks(kind, artifact, **kwargs)
 
-    monkeypatch.setattr(artifacts, "validate_artifact", broken)
+    monkeypatch.setattr(artifacts.writing, "validate_artifact", broken)
     result = cli("plan", write_map(small_spec), "-o", tmp_path / "plans")
     assert_internal_error(result, "decompose", "cell_b", "a bug in bearnav")
     assert not (tmp_path / "plans" / "cells.npz").exists() and (tmp_path / "plans" / "simplified.npz").exists()

@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 import shapely
 
-from bearnav_cli import artifacts, datatypes
+from bearnav_cli import artifacts, datatypes, errors
 
 from .test_hostile_common import (
     REPO,
@@ -583,7 +583,7 @@ def test_the_loader_and_the_writer_share_the_declarations(built, tmp_path):
     parent[1], parent[2] = 2, 1
     bad = datatypes.replace(loaded.artifact, parent=parent)
     manifest = dict(loaded.manifest, content_sha256=artifacts.content_hash(artifacts.entries_of(bad), "tree"))
-    with pytest.raises(datatypes.ArtifactError, match="cycle"):
+    with pytest.raises(errors.ArtifactError, match="cycle"):
         artifacts.save(tmp_path / "tree.npz", bad, manifest)
     assert list(tmp_path.iterdir()) == []
 

@@ -327,7 +327,7 @@ def test_an_unwritable_folder_is_refused(built, tmp_path, monkeypatch):
     locked = tmp_path / "locked"
     locked.mkdir()
     real = os.access
-    monkeypatch.setattr(artifacts.os, "access", lambda p, mode: False if Path(p) == locked else real(p, mode))
+    monkeypatch.setattr(artifacts.outputs.os, "access", lambda p, mode: False if Path(p) == locked else real(p, mode))
     for args in (["simplify", built["tree"], "-o", locked / "s.npz"], ["plot", built["plan"], "-o", locked / "f.png"],
                  ["plan", built["yaml"], "-o", locked / "p"]):  # fmt: skip
         assert_clean_failure(invoke(*args), 3, ("not writable",))

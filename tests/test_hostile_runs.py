@@ -133,14 +133,14 @@ def test_sigint_while_an_artifact_is_written_leaves_no_temp_file(tmp_path, monke
 
 
 def test_sigint_while_the_input_is_read(tmp_path, monkeypatch, built):
-    real = artifacts._read_file
+    real = artifacts.reading.read_file
 
     def read(path):
         if Path(path).name == "plan.npz":
             raise KeyboardInterrupt
         return real(path)
 
-    monkeypatch.setattr(artifacts, "_read_file", read)
+    monkeypatch.setattr(artifacts.reading, "read_file", read)
     result = invoke("simulate", built["plan"], "-o", tmp_path / "sim.npz", "--starts", "random:2")
     assert_clean_failure(result, 130, ("interrupted; nothing written for simulate",))
     assert list(tmp_path.iterdir()) == []
@@ -157,7 +157,7 @@ def test_sim_npz_and_sim_json_land_together_even_when_interrupted_between(tmp_pa
         if len(calls) == 1:
             raise KeyboardInterrupt
 
-    monkeypatch.setattr(artifacts.os, "replace", replace)
+    monkeypatch.setattr(artifacts.atomic.os, "replace", replace)
     out = tmp_path / "sim.npz"
     result = invoke("simulate", built["plan"], "-o", out, "--starts", "random:2", "--min-success", "0")
     monkeypatch.undo()
@@ -287,9 +287,9 @@ def _dead_pid() -> int:
 
 def test_temp_files_of_a_killed_run_are_removed_by_the_next(tmp_path, built):
     folder = copy_plan(built, tmp_path / "p")
-    stale = folder / f"{artifacts._temp_prefix(folder / 'sim.npz', _dead_pid())}abc123.tmp"
+    stale = folder / f"{artifacts.atomic._temp_prefix(folder / 'sim.npz', _dead_pid())}abc123.tmp"
     stale.write_bytes(b"PK\x03\x04 half of a simulation")
-    alive = folder / f"{artifacts._temp_prefix(folder / 'sim.npz')}def456.tmp"  # a live writer's: left alone
+    alive = folder / f"{artifacts.atomic._temp_prefix(folder / 'sim.npz')}def456.tmp"  # a live writer's: left alone
     alive.write_bytes(b"busy")
     result = invoke("-q", "simulate", folder / "plan.npz", "--starts", "random:2", "--min-success", "0")
     assert result.exit_code == 0, result.output

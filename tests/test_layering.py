@@ -89,8 +89,8 @@ def test_imports_flow_one_way():
             dep = _internal(target)
             if dep is None or dep == "__version__":
                 continue
-            if layer_name == "plot":
-                if dep not in ("datatypes", "errors", "palette", "runtime"):  # DESIGN §2: fields come from runtime
+            if layer_name == "plot":  # DESIGN §2: fields come from runtime; plot/* import each other
+                if dep not in ("datatypes", "errors", "palette", "plot", "runtime"):
                     problems.append(f"plot imports {target} (plot depends on datatypes, palette and runtime only)")
                 continue
             if layer_name == "runtime":
@@ -99,12 +99,10 @@ def test_imports_flow_one_way():
                 continue
             if dep == "plot" and layer_name != "cli":
                 problems.append(f"{dotted} imports plot")
-            if layer_name == "world" and dep == "world":  # the simulated world's parts build on each other
-                continue
-            if layer_name == "cli" and dep == "cli":  # the command line's modules: its commands use its helpers
-                continue
             if layer_name == "stages" and dep == "stages" and target.count(".") >= 2:
                 problems.append(f"{dotted} imports another stage {target}")
+            elif dep == layer_name and "." in dotted:  # a package's modules (world/*, cli/*, ...) build on each other
+                continue
             # stages may import stages (one stage at most, checked above), verify may use simulate
             stage_ok = dep == "stages" and LAYERS.get(layer_name, 0) >= LAYERS["stages"]
             if dep in LAYERS and layer_name in LAYERS and not stage_ok and LAYERS[dep] >= LAYERS[layer_name]:

@@ -49,7 +49,7 @@ def test_the_bound_of_a_row_is_one_look_bound(plan):
     visible = step.views(arrays, x, math.radians(90.0), math.inf, 4).reshape(-1, len(arrays.landmarks))
     x = np.repeat(x, 4, axis=0)
     eta = rng.uniform(1e-4, 0.02, len(x))
-    mine = liveness._bounds_of(arrays, x, visible, eta)
+    mine = liveness.live_grid.bounds_of(arrays, x, visible, eta)
     box = estimate.axle_bounds(arrays)
     theirs = [bounded.one_look_bound(x[i : i + 1], arrays.landmarks, visible[i : i + 1], eta[i], box, arrays.tol)[0]
               for i in range(len(x))]  # fmt: skip
@@ -112,7 +112,7 @@ def test_a_turn_all_around_gives_a_set_within_the_look_bound(plan, worst):
     _, error = bounded.centre(vertices, count)
     all_around = step.views(arrays, x, 2.0 * math.pi, math.inf, 1)[:, 0]
     np.testing.assert_array_equal(all_around, per_heading.any(axis=1))
-    bound = liveness._bounds_of(arrays, x, all_around, np.full(len(x), eta))
+    bound = liveness.live_grid.bounds_of(arrays, x, all_around, np.full(len(x), eta))
     seen = all_around.sum(axis=1) >= 2
     assert seen.sum() > 100
     assert np.all(error[seen] <= bound[seen] * (1 + 1e-7) + 1e-9)

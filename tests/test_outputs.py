@@ -172,7 +172,7 @@ def _dead_pid() -> int:
 
 def test_stale_staging_folders_and_temp_files_are_removed_by_the_next_write(tmp_path):
     dead = _dead_pid()
-    prefix = artifacts._temp_prefix  # the names bearnav gives
+    prefix = artifacts.atomic._temp_prefix  # the names bearnav gives
     staging = tmp_path / f"{prefix(tmp_path / 'b.mcap', dead)}k3x_9.tmp"
     (staging / "b").mkdir(parents=True)
     (staging / "b" / "b.mcap").write_bytes(b"half a bag")

@@ -18,7 +18,7 @@ import shapely  # noqa: E402
 from matplotlib import colors as mcolors  # noqa: E402
 from matplotlib.quiver import Quiver  # noqa: E402
 
-from bearnav_cli import composition, pipeline, plot, runtime  # noqa: E402
+from bearnav_cli import composition, palette, pipeline, plot, runtime  # noqa: E402
 from bearnav_cli.datatypes import CellStatus, replace  # noqa: E402
 from bearnav_cli.errors import InvalidParamsError  # noqa: E402
 from bearnav_cli.funnel import coverage_domain  # noqa: E402
@@ -395,19 +395,19 @@ def test_the_simulations_tree_and_cells_stand_apart_from_its_runs(figures):
     """The tree under the runs is not blue-green like success, and certified cells are not filled green."""
     ax = figures["sim"].axes[0]
     (tree,) = by_gid(ax, "tree")
-    assert _rgb(tree.get_edgecolor()[0]) not in {_rgb(c) for c in plot.OUTCOME_COLORS.values()}
+    assert _rgb(tree.get_edgecolor()[0]) not in {_rgb(c) for c in palette.OUTCOME_COLORS.values()}
     fills = {_rgb(a.get_facecolor()) for a in by_gid(ax, "cell-fill")}
-    assert _rgb(plot.OUTCOME_COLORS[0]) not in fills
+    assert _rgb(palette.OUTCOME_COLORS[0]) not in fills
 
 
 def test_bags_and_figures_share_the_palette():
     """One source: the bag's RGBA are the palette's colours, and plot's role names point into it."""
-    from bearnav_cli import bag, palette
+    from bearnav_cli import bag
 
     for status, color in palette.STATUS_COLORS.items():
         assert bag.STATUS_RGBA[status][:3] == pytest.approx(mcolors.to_rgb(color))
     for outcome, color in palette.OUTCOME_COLORS.items():
         assert bag.OUTCOME_RGBA[outcome][:3] == pytest.approx(mcolors.to_rgb(color))
-    assert plot.STATUS_COLORS is palette.STATUS_COLORS and plot.OUTCOME_COLORS is palette.OUTCOME_COLORS
+    assert plot.cells.STATUS_COLORS is palette.STATUS_COLORS and plot.runs.OUTCOME_COLORS is palette.OUTCOME_COLORS
     assert set(palette.ROLE_COLORS.values()) <= set(palette.PALETTE.values())
     assert len(set(palette.OUTCOME_COLORS.values())) == len(palette.OUTCOME_COLORS)  # outcomes told apart

@@ -233,10 +233,10 @@ def test_map_spec_with_tags_keeps_the_spec():
 def test_lower_bound_of_a_known_lp():
     # two points each needing two tags; they see candidates {0, 1} and {1, 2}: x = (1, 1, 1)
     seen = np.array([[1, 1, 0], [0, 1, 1], [1, 1, 1]], bool)
-    assert tags._lower_bound(seen, np.array([2, 2, 0])) == (3, pytest.approx(3.0))
+    assert tags.cover._lower_bound(seen, np.array([2, 2, 0])) == (3, pytest.approx(3.0))
     # one tag each: the shared candidate suffices
-    assert tags._lower_bound(seen, np.array([1, 1, 1]))[0] == 1
-    assert tags._lower_bound(seen, np.zeros(3, np.int64)) == (0, 0.0)
+    assert tags.cover._lower_bound(seen, np.array([1, 1, 1]))[0] == 1
+    assert tags.cover._lower_bound(seen, np.zeros(3, np.int64)) == (0, 0.0)
 
 
 def test_figure_shows_where_to_glue_the_tags():

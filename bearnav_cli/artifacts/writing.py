@@ -1,0 +1,89 @@
+"""Saving an artifact: checked against its invariants, written with its manifest, ``sim.json`` beside ``sim.npz``."""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+from bearnav_cli.artifacts.atomic import write_all
+from bearnav_cli.artifacts.manifest import entries_of, kind_of_schema
+from bearnav_cli.datatypes import Cells, Map, Plan, Simulation, Tree, validate_artifact
+from bearnav_cli.errors import ArtifactError
+from bearnav_cli.runtime.plan_file import canonical_json
+
+__all__ = ["metrics_path", "output_files", "save"]
+
+
+#: Which Python type each artifact kind holds.
+_TYPES: dict[str, type] = {
+    "map": Map, "tree": Tree, "simplified": Tree, "cells": Cells, "plan": Plan, "simulation": Simulation,
+}  # fmt: skip
+
+
+def save(path: str | os.PathLike, artifact: Any, manifest: dict, on_commit: Callable[[], None] | None = None) -> Path:
+    """Check ``artifact`` (its invariants) and write it with its ``manifest`` to ``path`` atomically.
+
+    A simulation also writes ``sim.json`` (the metrics) next to ``sim.npz``; both are committed
+    together. ``on_commit`` is called once every file is in place, before a held-back interrupt
+    is delivered.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        Where to write (``plan.npz``, ``map.json`` ...); its folder must exist.
+    artifact : Map, Tree, Cells, Plan or Simulation
+        What to write; it must fit the manifest's schema and pass :func:`validate_artifact`.
+    manifest : dict
+        Its manifest (:func:`make_manifest`), stored as the npz's ``manifest`` entry or the
+        ``"manifest"`` object of ``map.json``.
+    on_commit : callable, optional
+        Called with no argument once every file is in place (``pipeline`` records that the
+        output is written).
+
+    Returns
+    -------
+    Path
+        ``path``.
+
+    Raises
+    ------
+    ArtifactError
+        The manifest's schema does not fit the artifact, or the artifact breaks an invariant.
+    """
+    kind = kind_of_schema(manifest.get("schema", ""))
+    if kind is None or not isinstance(artifact, _TYPES[kind]):
+        raise ArtifactError(f"manifest schema {manifest.get('schema')!r} does not fit a {type(artifact).__name__}")
+    path = Path(path)
+    validate_artifact(kind, artifact)
+    entries = entries_of(artifact)
+    files: list[tuple[Path, Callable[[io.BufferedWriter], None]]] = []
+    if kind == "map":
+        document = dict(json.loads(entries["map"]), manifest=manifest)
+        text = json.dumps(document, indent=1, sort_keys=True) + "\n"
+        files.append((path, lambda handle: handle.write(text.encode())))
+    else:
+        arrays = {key: (np.array(value) if isinstance(value, str) else value) for key, value in entries.items()}
+        arrays["manifest"] = np.array(canonical_json(manifest))
+        files.append((path, lambda handle: np.savez_compressed(handle, **arrays)))
+    if kind == "simulation":
+        # sim.json next to sim.npz: the metrics, for people and scripts that do not read npz
+        metrics = json.dumps({"manifest": manifest, "metrics": manifest.get("stats", {})}, indent=1, sort_keys=True)
+        files.append((metrics_path(path), lambda handle: handle.write((metrics + "\n").encode())))
+    write_all(files, on_commit)
+    return path
+
+
+def metrics_path(path: str | os.PathLike) -> Path:
+    """``sim.json`` for ``sim.npz``: the same name with ``.json``."""
+    return Path(path).with_suffix(".json")
+
+
+def output_files(kind: str, path: str | os.PathLike) -> list[Path]:
+    """Every file an artifact of ``kind`` saved at ``path`` consists of (``sim.npz`` also has ``sim.json``)."""
+    path = Path(path)
+    return [path, metrics_path(path)] if kind == "simulation" else [path]

@@ -1,0 +1,78 @@
+"""Every artifact kind at once: the invariants of each (:data:`INVARIANTS`), the one check of an artifact's
+meaning (:func:`validate_artifact`) and :func:`replace`."""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+from bearnav_cli.datatypes.cells import Plan
+from bearnav_cli.datatypes.map_ import MAP_INVARIANTS
+from bearnav_cli.datatypes.simulation import SIMULATION_INVARIANTS
+from bearnav_cli.datatypes.tree import TREE_INVARIANTS
+from bearnav_cli.runtime.invariants import CELLS_INVARIANTS, PLAN_INVARIANTS, Invariant, validate
+
+__all__ = ["INVARIANTS", "replace", "validate_artifact"]
+
+
+#: The invariants of each artifact kind (``artifacts.KINDS`` names); every kind but ``map`` also checks
+#: its embedded map against :data:`MAP_INVARIANTS` (fields ``map.NAME``).
+INVARIANTS: dict[str, tuple[Invariant, ...]] = {
+    "map": MAP_INVARIANTS,
+    "tree": TREE_INVARIANTS,
+    "simplified": TREE_INVARIANTS,
+    "cells": CELLS_INVARIANTS,
+    "plan": CELLS_INVARIANTS + PLAN_INVARIANTS,
+    "simulation": SIMULATION_INVARIANTS,
+}
+
+
+def validate_artifact(kind: str, artifact: Any, check_map: bool = True) -> None:
+    """Check what ``artifact`` (of ``kind``) means: its map's invariants, then its own.
+
+    Parameters
+    ----------
+    kind : {"map", "tree", "simplified", "cells", "plan", "simulation"}
+        The artifact's kind, a key of :data:`INVARIANTS`.
+    artifact : Map, Tree, Cells, Plan or Simulation
+        The artifact to check; a plan is checked as its ``cells``, then as a plan.
+    check_map : bool, default True
+        Also run :data:`MAP_INVARIANTS` on the map (its fields named ``map.…``); False when
+        the map was checked already (a loader that read it once).
+
+    Raises
+    ------
+    ArtifactError
+        Naming the field (``map.goal``, ``parent`` ...) and what is wrong.
+    """
+    if kind == "map":
+        if check_map:
+            validate(MAP_INVARIANTS, artifact)
+        return
+    if check_map:
+        validate(MAP_INVARIANTS, artifact.map, prefix="map.")
+    if kind == "plan":
+        validate(CELLS_INVARIANTS, artifact.cells)
+        validate(PLAN_INVARIANTS, artifact)
+        return
+    validate(INVARIANTS[kind], artifact)
+
+
+def replace(artifact: Any, **changes: Any) -> Any:
+    """:func:`dataclasses.replace` for artifacts (they are immutable); ``map=`` works on every one.
+
+    Parameters
+    ----------
+    artifact : Map, Tree, Cells, Plan or Simulation
+        The artifact to copy.
+    **changes
+        Fields to change; a :class:`Plan`'s ``map`` is its cells' (``map=`` replaces that).
+
+    Returns
+    -------
+    Any
+        The new artifact, checked by its type.
+    """
+    if isinstance(artifact, Plan) and "map" in changes:
+        changes["cells"] = dataclasses.replace(changes.get("cells", artifact.cells), map=changes.pop("map"))
+    return dataclasses.replace(artifact, **changes)
