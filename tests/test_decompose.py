@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import shapely
 
-from bearnav_cli import barriers, geometry, pipeline
+from bearnav_cli import barriers, cell_landmarks, geometry, pipeline
 from bearnav_cli.datatypes import CellFlag, Tree
 from bearnav_cli.errors import ArtifactError, InvalidParamsError
 from bearnav_cli.geometry import FreeSpace
@@ -244,19 +244,19 @@ def test_landmark_choice_and_fixed_landmark_rules():
     square = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 2.0], [0.0, 2.0]])
     # a landmark inside the cell is never fixed while another qualifies
     landmarks = np.array([[1.0, 1.0], [5.0, 1.0], [1.0, 6.0]])
-    f, s_min, s_max, flag = decompose.fixed_landmark(landmarks, np.array([0, 1, 2]), square, 1e-12)
+    f, s_min, s_max, flag = cell_landmarks.fixed_landmark(landmarks, np.array([0, 1, 2]), square, 1e-12)
     assert f != 0 and s_min > 0
     # the line through l_f and l_k must miss the cell: (5,1) and (-3,1) line crosses the square
     landmarks = np.array([[5.0, 1.0], [-3.0, 1.0], [1.0, 7.0]])
-    f, s_min, s_max, flag = decompose.fixed_landmark(landmarks, np.array([0, 1]), square, 1e-12)
+    f, s_min, s_max, flag = cell_landmarks.fixed_landmark(landmarks, np.array([0, 1]), square, 1e-12)
     assert flag == CellFlag.DEGENERATE_RISK
-    f, s_min, s_max, flag = decompose.fixed_landmark(landmarks, np.array([0, 2]), square, 1e-12)
+    f, s_min, s_max, flag = cell_landmarks.fixed_landmark(landmarks, np.array([0, 2]), square, 1e-12)
     assert flag == CellFlag.NONE
     # s_min attained inside an edge, not at a vertex
     assert f in (0, 2)
     assert s_min == pytest.approx(3.0 if f == 0 else 5.0)
     # every candidate inside: s_min = 0 and the flag says so
-    f, s_min, s_max, flag = decompose.fixed_landmark(
+    f, s_min, s_max, flag = cell_landmarks.fixed_landmark(
         np.array([[0.5, 0.5], [1.5, 1.5]]), np.array([0, 1]), square, 1e-12
     )
     assert s_min == 0.0 and flag == CellFlag.LANDMARK_INSIDE

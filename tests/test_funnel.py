@@ -24,7 +24,7 @@ import numpy as np
 import pytest
 import shapely
 
-from bearnav_cli import artifacts, composition, pipeline, verify
+from bearnav_cli import artifacts, cell_landmarks, composition, pipeline, verify
 from bearnav_cli.cell_lp import CellProblem, min_norm_gain
 from bearnav_cli.datatypes import CellStatus, Outcome, replace
 from bearnav_cli.geometry import DEFAULT_CLEARANCE, FreeSpace
@@ -635,10 +635,10 @@ def test_landmarks_seen_from_funnel_witnesses_match_the_segment_test(map_seed):
         node = cells.cell_node[c]
         parent = cells.parent[node]
         anchors = cells.nodes[[node] if parent < 0 else [node, parent]]
-        points = decompose.witness_points(space, cells.vertices(c), anchors)
+        points = cell_landmarks.witness_points(space, cells.vertices(c), anchors)
         exact = space.visible(np.repeat(points, len(landmarks), 0), np.tile(landmarks, (len(points), 1)),
                               from_boundary=True).reshape(len(points), -1)  # fmt: skip
-        assert np.array_equal(decompose.seen_from(sight, points), exact), c
+        assert np.array_equal(cell_landmarks.seen_from(sight, points), exact), c
 
 
 @pytest.mark.parametrize("seed", range(20))

@@ -22,6 +22,7 @@ LAYERS = {
     "cell_lp": 2.5,
     "routes": 2.5,
     "barriers": 2.5,
+    "cell_landmarks": 2.5,  # the landmarks of each cell (§5.4–§5.5), on geometry and datatypes
     "funnel": 2.5,  # build on lp and geometry
     "cell_fields": 2.6,  # synthesize's LP-free parts of a cell's field, on cell_lp, funnel and runtime
     "composition": 2.7,  # the §11.6 checks, on funnel and geometry; verify builds on it

@@ -5,7 +5,7 @@ the corridor rows allow: one row per convex obstacle piece (a convex part of ``O
 edge of a non-convex part) that a spatial index says can reach it, one per wall of ``B_r``, and
 the exit row ``z·(x − x_j) ≥ 0``. When its exit face is not inside the parent cell eroded by the
 exit inset ``δ_e``, two neck rows through the ends of ``(P_j ⊖ δ_e) ∩ {V = 0}`` narrow it (§11.5
-step 2). Where the cells leave part of ``F_m`` uncovered, :func:`densify` adds leaf nodes there.
+step 2). Where the cells leave part of ``F`` uncovered, :func:`densify` adds leaf nodes there.
 
 Everything here is geometry on numpy arrays and shapely 2; :mod:`bearnav_cli.stages.decompose`
 assembles the cells.
@@ -14,10 +14,26 @@ Every name is re-exported here; the modules, each with one job:
 - :mod:`~bearnav_cli.funnel.region` — the corridor region of an edge (obstacle pieces, walls, exit row);
 - :mod:`~bearnav_cli.funnel.neck` — neck rows and each cell's exit inset;
 - :mod:`~bearnav_cli.funnel.coverage` — ``F_m`` and the parts of it the cells reach;
+- :mod:`~bearnav_cli.funnel.densify` — leaves in the pockets the cells leave (``F_m``, then the band along ``O``);
 - :mod:`~bearnav_cli.funnel.tolerance` — exit faces, their sinks and the tolerances ``δ_c``, ``τ_c``, ``δ*``.
 """
 
 from bearnav_cli.funnel.coverage import coverage_domain, reached_parts
+from bearnav_cli.funnel.densify import (
+    BAND_CORNER_TURN,
+    BAND_NODE_TRIES,
+    DENSIFY_BATCH,
+    DENSIFY_GRID,
+    DENSIFY_NEAREST,
+    WALL_LEAF_DEPTH,
+    band_candidates,
+    cells_union,
+    densify,
+    densify_leaf,
+    join_leaf,
+    pocket_mouth,
+    reached_coverage,
+)
 from bearnav_cli.funnel.neck import (
     INSET_LIMIT,
     INSET_SAMPLES,
@@ -49,6 +65,19 @@ from bearnav_cli.funnel.tolerance import (
 )
 
 __all__ = [
+    "BAND_CORNER_TURN",
+    "BAND_NODE_TRIES",
+    "DENSIFY_BATCH",
+    "DENSIFY_GRID",
+    "DENSIFY_NEAREST",
+    "WALL_LEAF_DEPTH",
+    "band_candidates",
+    "cells_union",
+    "densify",
+    "densify_leaf",
+    "join_leaf",
+    "pocket_mouth",
+    "reached_coverage",
     "INSET_LIMIT",
     "INSET_SAMPLES",
     "NECK_ANGLE",

@@ -20,19 +20,28 @@ import shapely
 import shapely.ops
 
 from bearnav_cli.barriers import cbf_rows, corridor_rows, goal_cbf_rows, wall_rows
+from bearnav_cli.cell_landmarks import cell_landmarks, fixed_landmark, seen_from, segments_seen, witness_points
 from bearnav_cli.datatypes import NEGLIGIBLE_SHARE, CellFlag, Cells, Tree, cell_list, plural
 from bearnav_cli.errors import ArtifactError, InvalidParamsError
 from bearnav_cli.funnel import (
+    BAND_NODE_TRIES,
     INSET_LIMIT,
+    WALL_LEAF_DEPTH,
     NeckChoice,
     ObstaclePieces,
     Region,
+    band_candidates,
     best_neck,
+    cells_union,
     coverage_domain,
+    densify,
+    densify_leaf,
     depth,
     exit_row_index,
     funnel_region,
+    join_leaf,
     neck_choice,
+    reached_coverage,
     reached_parts,
 )
 from bearnav_cli.geometry import (
@@ -41,7 +50,6 @@ from bearnav_cli.geometry import (
     box_polygon,
     clip,
     landmark_coverage,
-    polygon_edges,
     polygon_rows,
 )
 
@@ -220,150 +228,7 @@ def goal_cell(nodes: np.ndarray, bounds: np.ndarray, tol: float) -> np.ndarray:
     return polygon
 
 
-# --------------------------------------------------------------------------- landmarks
-
-
-def witness_points(space: FreeSpace, polygon: np.ndarray, anchors: np.ndarray) -> np.ndarray:
-    """The points a cell's landmarks must be seen from: the anchors and the vertices of the cell's
-    free part (ALGORITHMS §5.4), shape (w, 2), unique rows."""
-    cell = shapely.Polygon(polygon)
-    witnesses = [anchors]
-    if not shapely.intersects(cell, space.obstacles):  # a funnel cell (C1): its free part is itself
-        witnesses.append(polygon)
-    else:
-        for part in shapely.get_parts(shapely.difference(cell, space.obstacles)):
-            if isinstance(part, shapely.Polygon) and not part.is_empty:
-                witnesses.append(np.asarray(part.exterior.coords)[:-1])
-                witnesses.extend(np.asarray(h.coords)[:-1] for h in part.interiors)
-    return np.unique(np.concatenate(witnesses), axis=0)
-
-
-def seen_from(sight: list, points: np.ndarray) -> np.ndarray:
-    """``seen[q, k]``: landmark ``k`` is in line of sight from ``points[q]``, shape (w, L).
-
-    ``sight`` are the landmarks' visibility regions (:meth:`FreeSpace.visibility_regions`): one
-    prepared point query per landmark for all points, the segment test's answers away from shadow
-    boundaries. A point on a region's boundary counts as seeing (a vertex on a wall sees what the
-    wall does not hide).
-    """
-    seen = np.zeros((len(points), len(sight)), bool)
-    for k, region in enumerate(sight):
-        seen[:, k] = shapely.intersects_xy(region, points[:, 0], points[:, 1])
-    return seen
-
-
-def _segments_seen(space: FreeSpace, points: np.ndarray, landmarks: np.ndarray, from_boundary: bool = False):
-    """``seen[q, k]`` by the exact segment test (:meth:`FreeSpace.visible`), shape (w, L)."""
-    n_lm = len(landmarks)
-    pairs_p, pairs_l = np.repeat(points, n_lm, axis=0), np.tile(landmarks, (len(points), 1))
-    return space.visible(pairs_p, pairs_l, from_boundary=from_boundary).reshape(len(points), n_lm)
-
-
-def cell_landmarks(
-    landmarks: np.ndarray,
-    seen: np.ndarray,
-    seen_from_anchors: np.ndarray,
-    anchors: np.ndarray,
-    n_landmarks: int,
-) -> tuple[np.ndarray, bool]:
-    """The landmarks a cell's controller uses (ALGORITHMS §5.4).
-
-    Parameters
-    ----------
-    landmarks : ndarray, shape (L, 2)
-    seen : ndarray of bool, shape (w, L)
-        :func:`seen_from` the cell's :func:`witness_points`.
-    seen_from_anchors : ndarray of bool, shape (a, L)
-        :func:`seen_from` the anchors alone.
-    anchors : ndarray, shape (a, 2)
-        ``x_i, x_j`` of an edge cell, or ``g`` for the goal cell; their mean is the
-        point the landmarks are ranked by distance from.
-    n_landmarks : int
-
-    Returns
-    -------
-    chosen : ndarray of int64, shape (n,)
-        Landmark indices, nearest first, ``2 <= n <= n_landmarks``.
-    flagged : bool
-        True when fewer than 2 landmarks are visible from the whole free part (the choice
-        was then topped up).
-    """
-    n_lm = len(landmarks)
-    centre = anchors.mean(axis=0)
-    dist = np.hypot(*(landmarks - centre).T)
-    order = np.lexsort((np.arange(n_lm), dist))
-    everywhere = seen.all(axis=0)
-    chosen = [k for k in order if everywhere[k]][:n_landmarks]
-    flagged = len(chosen) < 2
-    if flagged:
-        from_ends = seen_from_anchors.all(axis=0)
-        for pool in ([k for k in order if from_ends[k]], list(order)):
-            for k in pool:
-                if len(chosen) >= 2:
-                    break
-                if k not in chosen:
-                    chosen.append(k)
-    return np.array(chosen, np.int64), flagged
-
-
-def fixed_landmark(
-    landmarks: np.ndarray, chosen: np.ndarray, polygon: np.ndarray, tol: float
-) -> tuple[int, float, float, CellFlag]:
-    """The fixed landmark ``f`` of a cell and the exact ``s_min``, ``s_max`` (ALGORITHMS §5.5).
-
-    Returns
-    -------
-    f : int
-        Landmark index.
-    s_min, s_max : float
-        ``dist(l_f, X_c)`` (0 if inside) and ``max_q ‖l_f − v_q‖``, map units.
-    flag : CellFlag
-        ``DEGENERATE_RISK`` or ``LANDMARK_INSIDE`` when rules 2 or 1 could not be met.
-    """
-    A, b = polygon_rows(polygon)
-    lm = landmarks[chosen]  # (n, 2)
-    # s_min: exact distance to the convex polygon (0 inside), every chosen landmark at once
-    edge = polygon_edges(polygon)  # (p, 2)
-    rel = lm[:, None, :] - polygon[None]  # (n, p, 2)
-    t = np.clip(np.einsum("npi,pi->np", rel, edge) / np.einsum("pi,pi->p", edge, edge), 0.0, 1.0)
-    gap = rel - t[..., None] * edge
-    inside = np.all(lm @ A.T <= b, axis=1)
-    s_min = np.where(inside, 0.0, np.sqrt(np.min(np.einsum("npi,npi->np", gap, gap), axis=1)))
-    s_max = np.sqrt(np.max(np.einsum("npi,npi->np", rel, rel), axis=1))
-    outside = s_min > tol
-    # rule 2: the cell lies strictly on one side of the line through l_f and every other l_k
-    d = lm[None, :, :] - lm[:, None, :]  # d[f, k] = l_k − l_f
-    side = (d[..., 0, None] * (polygon[None, None, :, 1] - lm[:, None, None, 1])
-            - d[..., 1, None] * (polygon[None, None, :, 0] - lm[:, None, None, 0]))  # (n, n, p)  # fmt: skip
-    scale = tol * np.hypot(d[..., 0], d[..., 1])[..., None]
-    one_side = np.all(side > scale, axis=2) | np.all(side < -scale, axis=2)
-    np.fill_diagonal(one_side, True)
-    clear = outside & one_side.all(axis=1)
-    ratio = np.where(outside, s_max / np.where(outside, s_min, 1.0), np.inf)
-    for pool, flag in ((clear, CellFlag.NONE), (outside, CellFlag.DEGENERATE_RISK)):
-        if pool.any():
-            idx = np.flatnonzero(pool)
-            best = idx[np.lexsort((chosen[idx], ratio[idx]))[0]]
-            return int(chosen[best]), float(s_min[best]), float(s_max[best]), flag
-    best = int(np.lexsort((chosen, s_max))[0])
-    return int(chosen[best]), 0.0, float(s_max[best]), CellFlag.LANDMARK_INSIDE
-
-
 # --------------------------------------------------------------------------- funnel cells (ALGORITHMS §11.5)
-
-#: Densification tries a pocket's pole, a point on it, then up to ``DENSIFY_GRID²`` grid points in it.
-DENSIFY_GRID = 16
-#: Band leaves (ALGORITHMS §12.7) sit this fraction of the barrier margin from ``O``: their cells reach
-#: within about half of that of the walls.
-WALL_LEAF_DEPTH = 0.1
-#: A band curve's vertex turning by more than this (radians) is a corner: band leaves go there first.
-BAND_CORNER_TURN = math.radians(30.0)
-#: Nodes a band leaf tries, nearest first, before its cell is given up for not keeping the floor.
-BAND_NODE_TRIES = 3
-#: Candidate points tested against the nodes in one vectorised call.
-DENSIFY_BATCH = 8
-#: Nodes (by route length) each candidate tries before all of them.
-DENSIFY_NEAREST = 16
 
 
 @dataclass
@@ -433,7 +298,7 @@ def _funnel_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) 
     # coverage of F_m, and densification (§11.5 step 3); the coverage of F is measured at the end
     free = space.component_of(goal)
     full_domain = coverage_domain(free, free_bounds, space.obstacles, margin)
-    covered = _cells_union(regions)
+    covered = cells_union(regions)
     domain, _ = reached_parts(full_domain, covered)  # the parts of F_m the tree's cells can reach
     domain_area = float(domain.area)
     uncovered = shapely.difference(domain, covered)
@@ -465,12 +330,12 @@ def _funnel_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) 
         # the first candidate whose cell keeps the floor, joined to the nearest of the nodes it
         # sees whose cell does (up to BAND_NODE_TRIES of them): a band cell that would lower the
         # plan's least τ_c is not built, and the next node, then the pocket's next candidate is tried
-        candidates = _band_candidates(pocket, offset)
+        candidates = band_candidates(pocket, offset)
         if refused and len(candidates):  # a refused leaf would be refused again: its nodes stay
             known = np.array(refused)
             candidates = candidates[~np.any(np.all(candidates[:, None, :] == known[None], axis=2), axis=1)]
         while len(candidates) and len(joinable):
-            leaf = _join_leaf(candidates, nodes, cost, near_wall, tol, joinable, nearest=True)
+            leaf = join_leaf(candidates, nodes, cost, near_wall, tol, joinable, nearest=True)
             if leaf is None:
                 return None
             p, n = leaf
@@ -481,7 +346,7 @@ def _funnel_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) 
                     trial["leaf"] = (p, n, choice)
                     return p, n
                 others = np.setdiff1d(joinable, tried, assume_unique=True)
-                other = _join_leaf(p[None], nodes, cost, near_wall, tol, others, nearest=True) \
+                other = join_leaf(p[None], nodes, cost, near_wall, tol, others, nearest=True) \
                     if len(tried) < BAND_NODE_TRIES and len(others) else None  # fmt: skip
                 if other is None:
                     break
@@ -492,12 +357,12 @@ def _funnel_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) 
         return None
 
     allowed = (1.0 - params.coverage_target) * domain_area
-    pockets = _densify(pockets, allowed, params.max_added_nodes,
-                       lambda g: _densify_leaf(g, nodes, cost, reach, tol, domain_edge), add_leaf)  # fmt: skip
+    pockets = densify(pockets, allowed, params.max_added_nodes,
+                       lambda g: densify_leaf(g, nodes, cost, reach, tol, domain_edge), add_leaf)  # fmt: skip
     uncovered_area = sum(p[1] for p in pockets)
     unreachable = [p for p in pockets if p[2]]
     if added:  # an added cell may reach into a part of F_m that no tree cell met: count that part too
-        covered = _cells_union(regions)
+        covered = cells_union(regions)
         final, _ = reached_parts(full_domain, covered)
         if final.area > domain_area * (1.0 + 1e-12):
             domain, domain_area = final, float(final.area)
@@ -545,15 +410,15 @@ def _funnel_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) 
         offset = shapely.boundary(coverage_domain(free, free_bounds, space.obstacles, depth_q))
         shapely.prepare(offset)
         near_wall = space.with_clearance(0.5 * depth_q)
-        band = _densify(band, (1.0 - params.coverage_target) * free_area, params.max_added_nodes - len(added),
+        band = densify(band, (1.0 - params.coverage_target) * free_area, params.max_added_nodes - len(added),
                         band_leaf, add_leaf)  # fmt: skip
     band_unreachable = sum(1 for p in band if p[2])
     free_after = 1.0 - sum(p[1] for p in band) / free_area if free_area > 0 else 1.0
     if len(added) > in_fm:  # the added cells may meet parts of F no cell met before: measure again
-        covered = _cells_union(regions)
-        free_area, free_after, _ = _reached_coverage(whole_free, covered)
+        covered = cells_union(regions)
+        free_area, free_after, _ = reached_coverage(whole_free, covered)
         # the band cells reach into F_m too: its recorded coverage is of the final cells, as verify recomputes it
-        domain_area, after, uncovered_area = _reached_coverage(full_domain, covered)
+        domain_area, after, uncovered_area = reached_coverage(full_domain, covered)
     if free_after < params.coverage_target and params.cover == "F":
         # the part of F_m past passages narrower than 2m (warned above) is not a band the leaves can fill
         cut_off = unreached_area > NEGLIGIBLE_SHARE * max(free_area, 1e-300)
@@ -599,194 +464,6 @@ def _funnel_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) 
     }
     return _Layout(nodes, parent, cost, [(r.polygon, r.A, r.b, r.exit_row) for r in regions], cbf,
                    np.zeros(len(nodes), np.int64), node_added, exit_inset, free_after, stats)  # fmt: skip
-
-
-def _cells_union(regions: list) -> shapely.Geometry:
-    """The union of the cells built so far (:class:`~bearnav_cli.funnel.Region` objects)."""
-    return shapely.union_all([shapely.Polygon(r.polygon) for r in regions])
-
-
-def _reached_coverage(domain: shapely.Geometry, covered: shapely.Geometry) -> tuple[float, float, float]:
-    """The parts of ``domain`` (``F`` or ``F_m``) the cells ``covered`` meet (:func:`reached_parts`): their area,
-    the share of it the cells cover, and the area they leave (map units², 1, map units²)."""
-    reached, _ = reached_parts(domain, covered)
-    area = float(reached.area)
-    left = float(shapely.difference(reached, covered).area)
-    return area, (1.0 - left / area if area > 0 else 1.0), left
-
-
-def _densify(pockets: list, allowed: float, budget: int, find_leaf: Callable, add_leaf: Callable) -> list:
-    """Add leaves until the pockets' area is at most ``allowed`` or ``budget`` leaves were added (§11.5 step 3).
-
-    Parameters
-    ----------
-    pockets : list of [geometry, area, unreachable]
-        The uncovered pockets (separate polygons); a new cell only cuts the pockets it meets.
-    allowed : float
-        The uncovered area to stop at (map units²).
-    budget : int
-        At most this many leaves.
-    find_leaf : callable
-        ``find_leaf(pocket) -> (point, node)`` or None when no node reaches the pocket.
-    add_leaf : callable
-        ``add_leaf(point, node) -> cell polygon``: adds the leaf and builds its cell.
-
-    Returns
-    -------
-    list
-        The pockets left, those no node reaches marked.
-    """
-    marks_current = True  # no node was added since the unreachable pockets were marked
-    grown_count = 0
-    while sum(p[1] for p in pockets) > allowed and grown_count < budget:
-        grown = False
-        for pocket in sorted((p for p in pockets if not p[2]), key=lambda p: -p[1]):
-            leaf = find_leaf(pocket[0])
-            if leaf is None:
-                pocket[2] = True
-                continue
-            cell = add_leaf(*leaf)
-            hit = shapely.intersects(np.array([q[0] for q in pockets], dtype=object), cell)
-            kept = [q for q, h in zip(pockets, hit, strict=True) if not h]
-            for q in (q for q, h in zip(pockets, hit, strict=True) if h):
-                kept += [[g, float(g.area), q[2]] for g in shapely.get_parts(shapely.difference(q[0], cell))
-                         if g.area > 0]  # fmt: skip
-            pockets = kept
-            grown_count += 1
-            grown = True
-            marks_current = False
-            break
-        if not grown:
-            if marks_current or not any(p[2] for p in pockets):
-                break
-            # nodes were added since the pockets were marked: they may see them now, so retry once
-            for q in pockets:
-                q[2] = False
-            marks_current = True
-    return pockets
-
-
-def _seen(points: np.ndarray, cand: np.ndarray, nodes: np.ndarray, reach: FreeSpace, tol: float) -> np.ndarray:
-    """``seen[i, k]``: node ``cand[i, k]`` is reached from ``points[i]`` by a segment free with clearance."""
-    width = cand.shape[1]
-    free = reach.segments_free(np.repeat(points, width, axis=0), nodes[cand.ravel()]).reshape(len(points), width)
-    return free & (np.hypot(*(nodes[cand] - points[:, None, :]).transpose(2, 0, 1)) > 1e3 * tol)
-
-
-def _densify_leaf(pocket: shapely.Geometry, nodes: np.ndarray, cost: np.ndarray, reach: FreeSpace, tol: float,
-                  domain_edge: shapely.Geometry | None = None) -> tuple[np.ndarray, int] | None:  # fmt: skip
-    """A leaf for an uncovered pocket: its point of largest clearance (the pole of inaccessibility, then
-    a point on its surface) and the node with the least ``‖p − x_n‖ + cost(n)`` over the nodes it sees
-    along a segment free with clearance; ``None`` when no node is reachable.
-
-    When no deep point of the pocket sees a node (a long pocket behind a bend), points where the
-    pocket meets the cells (its boundary off ``domain_edge``, the boundary of ``F_m``) are tried
-    last: a leaf there is near the tree, and its cell reaches into the pocket, so the pocket is
-    covered from its mouth inward over a few leaves.
-    """
-    pole = shapely.ops.polylabel(pocket, tolerance=max(tol, 1e-3 * math.sqrt(pocket.area)))
-    surface = shapely.point_on_surface(pocket)
-    # then a grid over the pocket, farthest from its boundary first: a large pocket whose pole sees
-    # no node may still be reached from elsewhere in it
-    x0, y0, x1, y1 = pocket.bounds
-    xs, ys = np.meshgrid(np.linspace(x0, x1, DENSIFY_GRID + 2)[1:-1], np.linspace(y0, y1, DENSIFY_GRID + 2)[1:-1])
-    grid = np.column_stack([xs.ravel(), ys.ravel()])
-    grid = grid[shapely.contains_xy(pocket, grid[:, 0], grid[:, 1])]
-    depth_in = shapely.distance(pocket.boundary, shapely.points(grid)) if len(grid) else np.zeros(0)
-    grid = grid[np.argsort(-depth_in, kind="stable")]
-    candidates = np.vstack([[pole.x, pole.y], [surface.x, surface.y], grid, _pocket_mouth(pocket, domain_edge)])
-    return _join_leaf(candidates, nodes, cost, reach, tol)
-
-
-def _join_leaf(candidates: np.ndarray, nodes: np.ndarray, cost: np.ndarray, reach: FreeSpace, tol: float,
-               eligible: np.ndarray | None = None, nearest: bool = False) -> tuple[np.ndarray, int] | None:  # fmt: skip
-    """The first of ``candidates`` (in order) free in ``reach`` that sees a node along a segment free in
-    ``reach``, and the node with the least ``‖p − x_n‖ + cost(n)`` among those it sees; None if none does.
-
-    ``eligible``: the indices of the nodes that may be joined (band leaves hang from the tree and
-    its F_m leaves, never from another band leaf, whose exit point would sit near a wall, nor from
-    a node too shallow in its own cell for the band's floor on ``τ_c``).
-    ``nearest``: the nearest node it sees instead of the cheapest route (measured on the kitchen:
-    band leaves cover 98.3% of F with it, 98.1% by route, 96.7% joined to the farthest node).
-    """
-    if eligible is not None:
-        leaf = _join_leaf(candidates, nodes[eligible], cost[eligible], reach, tol, nearest=nearest)
-        return None if leaf is None else (leaf[0], int(eligible[leaf[1]]))
-    candidates = candidates[reach.points_free(candidates)] if len(candidates) else candidates
-    # a few candidates at a time, deepest first, each against every node: most pockets are reached
-    # from their pole, and a pocket no node sees costs one pass over its grid
-    for start in range(0, len(candidates), DENSIFY_BATCH):
-        group = candidates[start : start + DENSIFY_BATCH]
-        # each candidate against its nodes in route order: the DENSIFY_NEAREST cheapest first, and all
-        # of them only for the candidates ahead of the first that sees one of those (the result is
-        # the first candidate, deepest first, that sees any node, joined to its cheapest seen node)
-        route = np.hypot(*(group[:, None, :] - nodes[None]).transpose(2, 0, 1))
-        route = route if nearest else route + cost[None]
-        order = np.argsort(route, axis=1, kind="stable")
-        # the deepest candidate alone first: it mostly sees a node (kitchen, cover F: 181 of 186
-        # groups), and then the others' segments need no test
-        head = _seen(group[:1], order[:1, :DENSIFY_NEAREST], nodes, reach, tol)
-        if head.any():
-            return group[0], int(order[0, int(np.argmax(head[0]))])
-        near = np.vstack([head, _seen(group[1:], order[1:, :DENSIFY_NEAREST], nodes, reach, tol)])
-        first = int(np.argmax(near.any(axis=1))) if near.any() else len(group)
-        if first > 0 and len(nodes) > DENSIFY_NEAREST:
-            ahead = _seen(group[:first], order[:first], nodes, reach, tol)
-            if ahead.any():
-                k = int(np.argmax(ahead.any(axis=1)))
-                return group[k], int(order[k, int(np.argmax(ahead[k]))])
-        if first < len(group):
-            return group[first], int(order[first, int(np.argmax(near[first]))])
-    return None
-
-
-def _band_candidates(pocket: shapely.Geometry, offset: shapely.Geometry) -> np.ndarray:
-    """Leaf candidates of a pocket in the band along ``O`` (ALGORITHMS §12.7), shape (k, 2).
-
-    Points of ``offset`` (the curve at the band leaf depth ``q`` from ``O`` and the walls) inside the
-    pocket: first the curve's corners, sharpest turn first, then its middle, then points spread
-    along it. A leaf there gets a cell that keeps only ``min(m, s·d) = q/20`` (``funnel.ROW_SHARE``)
-    from the piece beside it, so its cell reaches that close to the wall. At a corner, the leaf is
-    ``q`` from both walls and its cell fills the corner; from the middle of one wall, the cell keeps
-    a quarter of its distance from the other wall, and filling the corner took a fan of leaves.
-    """
-    curve = shapely.intersection(pocket, offset)
-    length = float(curve.length) if not curve.is_empty else 0.0
-    if not length > 0:
-        return np.zeros((0, 2))
-    parts = shapely.get_parts(curve)
-    lengths = shapely.length(parts)
-    parts = parts[lengths > 0][np.argsort(-lengths[lengths > 0], kind="stable")]  # longest first
-    # every part's vertices with their neighbours at once (a pocket's curve has some twenty parts):
-    # the interior vertices of an open part; every vertex of a closed one, its first preceded by the
-    # last but one (the closing repeat)
-    xy, owner = shapely.get_coordinates(parts, return_index=True)
-    starts = np.searchsorted(owner, np.arange(len(parts)))
-    ends = np.append(starts[1:], len(xy)) - 1
-    closed = np.all(xy[starts] == xy[ends], axis=1)
-    first = np.where(closed, starts, starts + 1)
-    count = np.maximum(ends - first, 0)  # vertices with a neighbour on either side
-    at = np.repeat(first - np.cumsum(count) + count, count) + np.arange(count.sum())
-    before = np.where(at == np.repeat(starts, count), np.repeat(ends - 1, count), at - 1)
-    u, v = xy[at] - xy[before], xy[at + 1] - xy[at]
-    turn = np.abs(np.arctan2(u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0], np.einsum("ij,ij->i", u, v)))
-    sharp = turn > BAND_CORNER_TURN
-    corners = xy[at][sharp][np.argsort(-turn[sharp], kind="stable")]
-    where = np.array([0.5, 0.25, 0.75, 0.1, 0.9])
-    points = shapely.get_coordinates(shapely.line_interpolate_point(parts[:4, None], where, normalized=True).ravel())
-    return np.concatenate([corners, points]).reshape(-1, 2)
-
-
-def _pocket_mouth(pocket: shapely.Geometry, domain_edge: shapely.Geometry | None) -> np.ndarray:
-    """Up to ``DENSIFY_GRID`` points spread along where ``pocket`` meets the cells, shape (k, 2)."""
-    if domain_edge is None:
-        return np.zeros((0, 2))
-    mouth = shapely.difference(pocket.boundary, domain_edge)
-    length = float(mouth.length)
-    if not length > 0:
-        return np.zeros((0, 2))
-    points = shapely.line_interpolate_point(mouth, np.linspace(0.0, 1.0, DENSIFY_GRID), normalized=True)
-    return shapely.get_coordinates(points).reshape(-1, 2)
 
 
 # --------------------------------------------------------------------------- paper cells (ALGORITHMS §4)
@@ -909,9 +586,9 @@ def run(tree: Tree, params: Params = Params(), progress: Callable[[int, int], No
     if funnel:  # cells at positive distance from O: the regions answer as the segment test does
         seen_all = seen_from(sight, flat)
     else:  # §4 cells touch O (radius 0: on P_raw itself): the exact segment test, from just off the wall
-        seen_all = _segments_seen(space, flat, landmarks, from_boundary=True)
+        seen_all = segments_seen(space, flat, landmarks, from_boundary=True)
         ends = np.concatenate(anchors)
-        seen_ends = _segments_seen(space, ends, landmarks)
+        seen_ends = segments_seen(space, ends, landmarks)
         eo = np.concatenate([[0], np.cumsum([len(a) for a in anchors])]).tolist()
     for c, (polygon, A, b, _) in enumerate(layout.regions):
         if c > 0:
