@@ -3,8 +3,9 @@
 A stage runs only when no output with the same cache key, naming the current input's content
 hash, exists and loads (every check of :func:`bearnav_cli.artifacts.load`). Parameters resolve
 as: the stage's defaults, then the map's ``params: {stage: {...}}``, then explicit overrides (the
-CLI options); every numeric one must lie in its documented range (:data:`LIMITS`) and big
-requests are checked against a memory estimate before they start (:func:`check_resources`).
+CLI options); every numeric one must lie in its documented range (:data:`bearnav_cli.limits.LIMITS`)
+and each stage refuses requests too big to finish before it starts (its ``check_resources``, called
+through :meth:`Stage.check_resources`).
 
 Every output path is checked before any work, and every run holds the lock of its output
 folder (:func:`bearnav_cli.artifacts.output_folder`), so two runs never mix their artifacts.
@@ -15,62 +16,45 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import importlib
-import math
 import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
 from types import ModuleType
-from typing import TYPE_CHECKING, Any, Callable, Iterator
+from typing import TYPE_CHECKING, Any, Callable, Iterator, Mapping
 
 from bearnav_cli import artifacts
 from bearnav_cli.datatypes import Map, replace
-from bearnav_cli.errors import ArtifactError, InternalError, InvalidMapError, InvalidParamsError, ResourceLimitError
-from bearnav_cli.runtime.plan_file import human_bytes
+from bearnav_cli.errors import ArtifactError, InternalError, InvalidMapError, InvalidParamsError
+from bearnav_cli.limits import LIMITS, check_value, option_name
 
 # The stage modules (scipy, highspy and the algorithms) are imported when a stage is used, not with
 # the pipeline: loading an artifact (`bearnav inspect`) imports only the stages whose parameters its
 # map's ``params:`` sets, to check them (:attr:`Stage.module`).
 if TYPE_CHECKING:
-    from bearnav_cli.stages import map_, rrtstar, simulate
+    from bearnav_cli.stages import map_
 
 __all__ = [
     "Activity",
     "ACTIVITY",
     "activity",
-    "check_closed_loop",
     "check_map_params",
-    "check_resources",
-    "check_value",
     "compute",
     "compute_saved",
-    "check_verify_starts",
-    "LIMITS",
     "load",
     "MAP_SUFFIXES",
-    "MAX_BORDER_SAMPLES",
-    "MAX_GRID_CELLS",
-    "MAX_RUNS",
-    "MAX_STEPS_PER_RUN",
-    "option_name",
-    "OPTION_NAMES",
+    "Origins",
     "plan",
-    "Range",
     "reset_activity",
     "resolve_params",
     "stage_manifest",
-    "RRT_BYTES_PER_GRID_CELL",
-    "RRT_BYTES_PER_ITERATION",
-    "RUN_BYTES",
     "run_map",
     "run_stage",
-    "SEED",
     "SIMULATE",
     "Stage",
     "STAGE_BY_NAME",
     "StageReport",
     "STAGES",
-    "TRAJECTORY_POINT_BYTES",
 ]
 
 #: ``progress(done, total)``, called by long stages.
@@ -93,7 +77,9 @@ class Stage:
     output_kind : str
         The artifact kind it writes.
     module : ModuleType
-        The module itself, imported on first use: ``Params``, ``VERSION``, ``run`` and ``summary``.
+        The module itself, imported on first use: ``Params``, ``VERSION``, ``run`` and ``summary``, and
+        ``check_resources(input, params, given)`` where the stage estimates its requests (``rrtstar``,
+        ``simulate``).
     filename : str
         The conventional file name of its output (``"tree.npz"``).
     """
@@ -110,6 +96,33 @@ class Stage:
     @property
     def filename(self) -> str:
         return artifacts.KINDS[self.output_kind].filename
+
+    def check_resources(self, artifact: Any, params: Any, origins: Origins) -> None:
+        """The stage's estimates on its input, before it runs (its ``check_resources``; none without one).
+
+        Parameters
+        ----------
+        artifact : Any
+            The stage's input (the map for ``rrtstar``, the plan for ``simulate``).
+        params : Params
+            Its resolved parameters.
+        origins : Origins
+            Where each parameter came from: the stage is told which were given, and the field of its
+            error, a parameter's name, becomes the option or map field that set it (``--step``,
+            ``params.rrtstar.step``).
+
+        Raises
+        ------
+        ResourceLimitError, InvalidParamsError
+            A request over a limit or the memory budget, naming the option to change.
+        """
+        check = getattr(self.module, "check_resources", None)
+        if check is None:
+            return
+        try:
+            check(artifact, params, origins.given)
+        except InvalidParamsError as exc:  # ResourceLimitError too: the same class, the field translated
+            raise type(exc)(exc.reason, field=origins.field(exc.field)) from None
 
 
 STAGES: tuple[Stage, ...] = (
@@ -214,185 +227,28 @@ def _committed() -> None:
     ACTIVITY.written = True
 
 
-# --------------------------------------------------------------------------- limits
+# --------------------------------------------------------------------------- parameters
 
 
 @dataclass(frozen=True)
-class Range:
-    """The documented range of one numeric parameter (docs/cli.md "Option limits" shows :meth:`text`).
+class Origins:
+    """Where each parameter of one stage got its value.
 
     Attributes
     ----------
-    low, high : float or None
-        Bounds (``None``: none); with ``per_diagonal`` they are multiples of the map's diagonal
-        ``D`` and are checked once the map is known.
-    low_open : bool
-        ``low`` itself is excluded.
-    integer : bool
-        The value must be an integer.
-    per_diagonal : bool
-        The bounds scale with ``D`` (a length).
+    fields : mapping of str to str
+        Parameter name to the field an error about it names: the option that set it (``--seed``), else
+        the map field that did or would (``params.rrtstar.seed``).
+    given : frozenset of str
+        The names set by the map's ``params:`` or an option, not left at their default.
     """
 
-    low: float | None = None
-    high: float | None = None
-    low_open: bool = False
-    integer: bool = False
-    per_diagonal: bool = False
+    fields: Mapping[str, str]
+    given: frozenset[str] = frozenset()
 
-    def _bound(self, value: float | None) -> str:
-        if value is None:
-            return "∞"
-        text = f"{value:g}" if not self.integer else str(int(value))
-        if self.per_diagonal:
-            return "0" if value == 0 else ("D" if value == 1 else f"{text}·D")
-        return text
-
-    def text(self) -> str:
-        """``"integer in [1, 10000000]"``, ``"(0, 10·D]"`` ..."""
-        left = "(" if self.low_open else "["
-        right = ")" if self.high is None else "]"
-        interval = f"{left}{self._bound(self.low)}, {self._bound(self.high)}{right}"
-        return f"integer in {interval}" if self.integer else interval
-
-    def describe(self) -> str:
-        """``"an integer in [1, 10000000]"``, ``"in (0, 10·D]"``: for messages."""
-        text = self.text()
-        return "an " + text if self.integer else "in " + text
-
-    def problem(self, value: Any, diagonal: float | None = None) -> str | None:
-        """What is wrong with ``value`` (None when it fits); D-relative bounds only with ``diagonal``."""
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            return f"expected a number, got {value!r}"
-        if isinstance(value, float) and not math.isfinite(value):
-            return f"must be finite ({self.describe()}), got {value}"
-        if self.integer and not (isinstance(value, int) or float(value).is_integer()):
-            return f"must be {self.describe()}, got {value!r}"
-        scale = 1.0
-        if self.per_diagonal:
-            if diagonal is None:  # the map is not known yet: only what does not depend on D
-                if self.low is None or value > self.low or (value == self.low and not self.low_open):
-                    return None
-                return f"must be {self.describe()}, got {value!r}"
-            scale = diagonal
-        low = None if self.low is None else self.low * scale
-        high = None if self.high is None else self.high * scale
-        too_low = low is not None and (value < low or (self.low_open and value == low))
-        too_high = high is not None and value > high
-        if too_low or too_high:
-            shown = f" (D = {diagonal:.4g})" if self.per_diagonal and diagonal is not None else ""
-            return f"must be {self.describe()}{shown}, got {value!r}"
-        return None
-
-
-#: Seeds: any integer numpy's ``default_rng`` takes that also fits 32 bits; negatives are refused.
-SEED = Range(0, 2**32 - 1, integer=True)
-#: Most runs ``random:N`` / ``verify --starts`` may ask for (a memory estimate may refuse fewer).
-MAX_RUNS = 1_000_000
-#: Most steps one closed-loop run may be allowed (``max_steps``, explicit or from speed and dt): about 60
-#: times what the example maps need at their speeds, a few minutes of one robot.
-MAX_STEPS_PER_RUN = 1_000_000
-#: Most cells of RRT*'s neighbour grid (3 per step along each side of the bounds).
-MAX_GRID_CELLS = 10_000_000
-#: Most border pseudo-samples of RRT* (they become collision samples every later stage reads).
-MAX_BORDER_SAMPLES = 200_000
-
-#: The range of every numeric parameter, by stage (``verify`` holds the options of ``bearnav verify``).
-LIMITS: dict[str, dict[str, Range]] = {
-    "map": {
-        "circle_segments": Range(8, 4096, integer=True),
-        "coverage_cells": Range(1, 1000, integer=True),
-    },
-    "rrtstar": {
-        "iterations": Range(1, 10_000_000, integer=True),
-        "step": Range(0, 10, low_open=True, per_diagonal=True),
-        "seed": SEED,
-        "border_spacing": Range(0, 10, per_diagonal=True),
-        "clearance": Range(0, 1, per_diagonal=True),
-    },
-    "simplify": {
-        "max_rounds": Range(1, 1000, integer=True),
-        "clearance": Range(0, 1, per_diagonal=True),
-    },
-    "decompose": {
-        "exit_inset": Range(0, 1, per_diagonal=True),
-        "coverage_target": Range(0, 1),
-        "max_added_nodes": Range(0, 100_000, integer=True),
-        "n_landmarks": Range(2, 1000, integer=True),
-        "barrier_margin": Range(0, 1, per_diagonal=True),
-    },
-    "synthesize": {
-        "u_max": Range(0, 1e6, low_open=True),
-        "kappa": Range(0, 1e6, low_open=True),
-        "halvings": Range(0, 60, integer=True),
-        "w_h": Range(0, 1e6),
-        "w_v": Range(0, 1e6),
-        "clf_margin": Range(0, 1),
-        "goal_tolerance": Range(0, 1, low_open=True, per_diagonal=True),
-    },
-    "simulate": {
-        "fov": Range(0, 360, low_open=True),
-        "noise_deg": Range(0, 180),
-        "range": Range(0, 1e6, low_open=True, per_diagonal=True),
-        "min_spread_deg": Range(0, 90, low_open=True),
-        "speed": Range(0, 1e3, low_open=True, per_diagonal=True),
-        "alpha": Range(0, 1e3, low_open=True, per_diagonal=True),
-        "beta": Range(0, 1e3, low_open=True),
-        "initial_heading": Range(-360, 360),
-        "hold_time": Range(0, 1e6, low_open=True),
-        "max_fix_error": Range(0, 1e3, low_open=True, per_diagonal=True),
-        "odometry_noise": Range(0, 1),
-        "odometry_drift": Range(0, 1),
-        "dt": Range(0, 1e3, low_open=True),
-        "goal_tolerance": Range(0, 1, low_open=True, per_diagonal=True),
-        "max_steps": Range(1, MAX_STEPS_PER_RUN, integer=True),
-        "seed": SEED,
-    },
-    "verify": {
-        "n_starts": Range(0, MAX_RUNS, integer=True),
-        "seed": SEED,
-        "speed": Range(0, 1e3, low_open=True, per_diagonal=True),
-        "min_success": Range(0, 1),
-    },
-}
-
-#: How the command line spells a parameter when it differs from ``--name-with-dashes``.
-OPTION_NAMES = {("simulate", "range"): "--range", ("verify", "n_starts"): "--starts"}
-
-
-def option_name(stage: str, name: str) -> str:
-    """The command-line option of a parameter (``--border-spacing``)."""
-    return OPTION_NAMES.get((stage, name), "--" + name.replace("_", "-"))
-
-
-def check_value(stage: str, name: str, value: Any, where: str, diagonal: float | None = None) -> None:
-    """Raise :class:`InvalidParamsError` (field ``where``) if ``value`` lies outside ``LIMITS[stage][name]``.
-
-    Parameters
-    ----------
-    stage : str
-        The stage (``"rrtstar"``, ``"simulate"``, ``"verify"``), a key of :data:`LIMITS`.
-    name : str
-        The parameter's name (``"step"``); a name without an entry in :data:`LIMITS` is not checked.
-    value : Any
-        Its value (a number; anything else is an error); None is not checked.
-    where : str
-        Where the value came from, the error's field (``--step``, ``params.rrtstar.step``).
-    diagonal : float, optional
-        The map's diagonal (map units): with it, the limits given per diagonal are checked
-        too; without it, only the absolute ones.
-
-    Raises
-    ------
-    InvalidParamsError
-        The value lies outside the range, with the range's text.
-    """
-    limit = LIMITS.get(stage, {}).get(name)
-    if limit is None or value is None:
-        return
-    problem = limit.problem(value, diagonal)
-    if problem is not None:
-        raise InvalidParamsError(problem, field=where)
+    def field(self, name: str | None) -> str | None:
+        """The field of parameter ``name`` (a name without one, or None, as it is)."""
+        return self.fields.get(name or "", name)
 
 
 def _coerce(stage: str, name: str, default: Any, value: Any, where: str) -> Any:
@@ -424,13 +280,13 @@ def _coerce(stage: str, name: str, default: Any, value: Any, where: str) -> Any:
 
 
 def _resolve(stage: str, map_params: dict | None, overrides: dict | None,
-             diagonal: float | None) -> tuple[Any, dict[str, str]]:  # fmt: skip
+             diagonal: float | None) -> tuple[Any, Origins]:  # fmt: skip
     """The stage's ``Params`` and, per parameter, where its value came from (``--seed``, ``params.rrtstar.seed``)."""
     params_type = STAGE_BY_NAME[stage].module.Params
     defaults = {f.name: f.default for f in dataclasses.fields(params_type)}
     values = dict(defaults)
     where = {name: f"params.{stage}.{name}" for name in defaults}
-    explicit: list[str] = []
+    given: set[str] = set()
     source_map = (map_params or {}).get(stage, {})
     if not isinstance(source_map, dict):
         raise InvalidParamsError("expected a mapping of options", field=f"params.{stage}")
@@ -443,18 +299,17 @@ def _resolve(stage: str, map_params: dict | None, overrides: dict | None,
                 raise InvalidParamsError(f"unknown parameter (known: {', '.join(defaults)})", field=here)
             values[name] = _coerce(stage, name, defaults[name], value, here)
             where[name] = here
-            explicit.append(str(name))
+            given.add(str(name))
     for name, value in values.items():
         check_value(stage, name, value, where[name], diagonal)
+    origins = Origins(where, frozenset(given))
     try:
         params = params_type(**values)
     except InvalidParamsError as exc:
-        field = where.get(exc.field or "", exc.field)
-        raise InvalidParamsError(exc.reason, field=field) from None
+        raise InvalidParamsError(exc.reason, field=origins.field(exc.field)) from None
     except (TypeError, ValueError, OverflowError) as exc:  # a value the Params checks did not expect
         raise InvalidParamsError(f"invalid value ({exc})", field=f"params.{stage}") from None
-    where["_explicit"] = ",".join(explicit)  # the names set by the map or an option, not left at their default
-    return params, where
+    return params, origins
 
 
 def resolve_params(stage: str, map_params: dict | None, overrides: dict | None = None,
@@ -480,7 +335,7 @@ def resolve_params(stage: str, map_params: dict | None, overrides: dict | None =
     Raises
     ------
     InvalidParamsError
-        For an unknown name, a value of the wrong type or outside its range (:data:`LIMITS`;
+        For an unknown name, a value of the wrong type or outside its range (:data:`~bearnav_cli.limits.LIMITS`;
         lengths relative to the map's diagonal only when ``diagonal`` is given), naming the
         option (``--seed``) or the map field (``params.rrtstar.seed``).
     """
@@ -517,192 +372,6 @@ def check_map_params(map_params: Any, file: str, diagonal: float | None = None) 
             resolve_params(stage, map_params, diagonal=diagonal)
         except InvalidParamsError as exc:
             raise InvalidMapError(exc.reason, file=file, field=exc.field) from exc
-
-
-# --------------------------------------------------------------------------- resource estimates
-
-#: Bytes per RRT* iteration (sample, node, parent, cost, child list, bucket slot), measured on the kitchen.
-RRT_BYTES_PER_ITERATION = 400
-#: Bytes per cell of RRT*'s neighbour grid (an empty 4-slot bucket and its bookkeeping).
-RRT_BYTES_PER_GRID_CELL = 150
-#: Bytes per closed-loop run without its trajectory (state arrays and a 201-step position ring).
-RUN_BYTES = 4_000
-#: Bytes per recorded trajectory point (position, cell, heading, run index; twice while sorting).
-TRAJECTORY_POINT_BYTES = 80
-
-
-def _too_big(what: str, need: float, where: str, fits: str) -> ResourceLimitError:
-    budget = artifacts.memory_budget()
-    return ResourceLimitError(
-        f"{what} needs about {human_bytes(need)} of memory, more than the "
-        f"{human_bytes(budget)} a run may use (half of this machine's); {fits}",
-        field=where,
-    )
-
-
-def _count(cells: float) -> float:
-    """``ceil(cells)``, kept a float beyond 2**53: a tiny step makes counts past any integer a float
-    holds exactly, or ``inf``, and those are only compared with the limits and refused."""
-    return math.ceil(cells) if cells < 2.0**53 else cells
-
-
-def _check_rrtstar(params: rrtstar.Params, map_: Map, where: dict[str, str]) -> None:
-    from bearnav_cli.stages import rrtstar
-
-    xmin, ymin, xmax, ymax = (float(v) for v in map_.bounds)  # Python floats overflow to inf quietly
-    width, height = xmax - xmin, ymax - ymin
-    cell = params.step / rrtstar.BUCKETS_PER_STEP
-    grid = _count(width / cell) * _count(height / cell)
-    if grid > MAX_GRID_CELLS:
-        smallest = rrtstar.BUCKETS_PER_STEP * math.sqrt(width * height / MAX_GRID_CELLS)
-        raise ResourceLimitError(
-            f"{params.step:g} makes RRT*'s neighbour grid {grid:.3g} cells over {width:g} x {height:g} "
-            f"(limit {MAX_GRID_CELLS:.0e}); use at least {smallest:.3g}",
-            field=where["step"],
-        )
-    spacing = params.border_spacing
-    border = 0 if spacing == 0 else 2 * (_count(width / spacing) + _count(height / spacing))
-    if border > MAX_BORDER_SAMPLES:
-        smallest = 2 * (width + height) / MAX_BORDER_SAMPLES
-        derived = "border_spacing" not in where.get("_explicit", "").split(",")
-        field = where["step"] if derived else where["border_spacing"]
-        hint = f"(step/10 = {params.border_spacing:g}) " if derived else ""
-        raise ResourceLimitError(
-            f"border pseudo-samples every {params.border_spacing:g} {hint}would be {border:,.0f} points (limit "
-            f"{MAX_BORDER_SAMPLES:,}); use a --border-spacing of at least {smallest:.3g} (or 0: none)",
-            field=field,
-        )
-    fixed = grid * RRT_BYTES_PER_GRID_CELL + border * 64
-    need = params.iterations * RRT_BYTES_PER_ITERATION + fixed
-    budget = artifacts.memory_budget()
-    if need > budget:
-        fits = max(0, (budget - fixed) // RRT_BYTES_PER_ITERATION)
-        raise _too_big(f"{params.iterations:,} iterations", need, where["iterations"], f"at most {fits:,} fit")
-
-
-def check_closed_loop(plan: Any, sim: simulate.Params, runs: int, where_runs: str, where_speed: str,
-                      record: bool, where_dt: str | None = None) -> None:  # fmt: skip
-    """Refuse closed-loop requests that cannot finish: too many steps per run, or too much memory.
-
-    Each run may take ``max_steps`` steps, ``ceil(5·L/(v·dt)) + 1000`` by default with ``L`` at most
-    ``D`` plus the largest cost-to-go in the plan; memory is about :data:`RUN_BYTES` per run plus,
-    when trajectories are recorded, :data:`TRAJECTORY_POINT_BYTES` per step of a typical run.
-
-    Parameters
-    ----------
-    plan : Plan
-        The plan to run: its map's diagonal and its cells' ``cell_rank`` (cost-to-go, map
-        units) bound the route length ``L``.
-    sim : simulate.Params
-        The simulation's parameters; gives ``speed``/``alpha`` (map units / s), ``dt`` (s)
-        through :func:`simulate.settings`, and ``max_steps``.
-    runs : int
-        Number of closed-loop runs (starts).
-    where_runs : str
-        Where ``runs`` came from (``--starts``), the field of a too-many-runs or memory error.
-    where_speed : str
-        Where the speed came from (``--speed``, ``--alpha``), the field of a too-many-steps error.
-    record : bool
-        Whether trajectories are recorded (they dominate memory).
-    where_dt : str, optional
-        Where an explicit ``dt`` came from; named instead of ``where_speed`` when set.
-
-    Raises
-    ------
-    ResourceLimitError
-        A run may take more than :data:`MAX_STEPS_PER_RUN` steps, or the runs need more memory
-        than the budget (:func:`bearnav_cli.artifacts.memory_budget`).
-    InvalidParamsError
-        More than :data:`MAX_RUNS` runs.
-    """
-    from bearnav_cli.stages import simulate
-
-    settings = simulate.settings(plan, sim)
-    diagonal = plan.map.diagonal
-    longest = float(max(plan.cells.cell_rank.max(initial=0.0), 0.0)) + diagonal
-    per_step = settings.speed * settings.dt
-    if sim.max_steps is not None:
-        steps = int(sim.max_steps)  # its range is that of MAX_STEPS_PER_RUN
-    else:
-        steps = int(simulate.step_limit(longest, settings))  # the rule each run gets, for the longest route
-        if steps > MAX_STEPS_PER_RUN:
-            raise ResourceLimitError(
-                f"at speed {settings.speed:g} with dt = {settings.dt:.3g} s one run may take up to {steps:.3g} steps "
-                f"(limit {MAX_STEPS_PER_RUN:.0e}); raise the speed or dt",
-                field=where_dt or where_speed,
-            )
-    if runs > MAX_RUNS:
-        raise InvalidParamsError(f"at most {MAX_RUNS:,} runs, got {runs:,}", field=where_runs)
-    typical = min(steps, math.ceil((longest - 0.75 * diagonal) / per_step) + 1) if per_step > 0 else steps
-    per_run = RUN_BYTES + (TRAJECTORY_POINT_BYTES * typical if record else 0)
-    need = runs * per_run
-    budget = artifacts.memory_budget()
-    if need > budget:
-        fits = budget // per_run
-        raise _too_big(f"{runs:,} runs", need, where_runs, f"at most {fits:,} fit"
-                       + (" (without recorded trajectories: params.simulate.record_trajectories false)"
-                          if record else ""))  # fmt: skip
-
-
-def check_verify_starts(plan: Any, n_starts: int, where: str = "--starts") -> None:
-    """``verify``'s starts: the closed loop's memory plus the route matrix (starts × free-space vertices).
-
-    Parameters
-    ----------
-    plan : Plan
-        The plan verified: its map's obstacle vertices (plus the 4 corners) size the route matrix.
-    n_starts : int
-        Number of starts ``verify`` draws.
-    where : str, default "--starts"
-        The option that gave ``n_starts``, the error's field.
-
-    Raises
-    ------
-    ResourceLimitError
-        The starts need more memory than the budget, with how many fit.
-    """
-    vertices = 4 + sum(len(p.exterior) + sum(len(h) for h in p.holes) for p in plan.map.obstacles)
-    per_start = RUN_BYTES + 40 * vertices
-    need = n_starts * per_start
-    budget = artifacts.memory_budget()
-    if need > budget:
-        raise _too_big(f"{n_starts:,} starts", need, where, f"at most {budget // per_start:,} fit")
-
-
-def check_resources(stage: str, params: Any, where: dict[str, str], artifact: Any) -> None:
-    """The estimates that need the stage's input: RRT*'s grid, border samples and memory; the closed loop's.
-
-    Other stages are not checked.
-
-    Parameters
-    ----------
-    stage : str
-        The stage about to run (``"rrtstar"`` or ``"simulate"`` are checked).
-    params : Params
-        Its resolved parameters (:func:`resolve_params`).
-    where : dict of str to str
-        Where each parameter came from (``--step``, ``params.rrtstar.step``), the errors' fields;
-        its ``"_explicit"`` entry lists, comma-separated, the names not left at their default.
-    artifact : Map or Plan
-        The stage's input: the map for ``rrtstar``, the plan for ``simulate``.
-
-    Raises
-    ------
-    ResourceLimitError
-        A request over a limit or the memory budget, naming the option to change.
-    InvalidParamsError
-        More than :data:`MAX_RUNS` runs.
-    """
-    if stage == "rrtstar":
-        _check_rrtstar(params, artifact, where)
-    elif stage == "simulate":
-        from bearnav_cli.stages import simulate
-
-        spec = simulate.parse_starts(params.starts)
-        runs = spec if isinstance(spec, int) else (len(artifact.map.starts) if isinstance(spec, str) else len(spec))
-        speed_where = where["alpha"] if params.dynamics == "unicycle" else where["speed"]
-        dt_where = where["dt"] if "dt" in where["_explicit"].split(",") else None
-        check_closed_loop(artifact, params, runs, where["starts"], speed_where, params.record_trajectories, dt_where)
 
 
 # --------------------------------------------------------------------------- loading and running
@@ -763,10 +432,10 @@ def _map_stage_params(source: map_.MapSource, overrides: dict | None) -> Any:
 
 def _stage_params(name: str, artifact: Any, overrides: dict | None) -> Any:
     """The ``Params`` of stage ``name`` on its input ``artifact``: the defaults, the (embedded) map's ``params:``,
-    then ``overrides``, in range for the map's diagonal; then the resource estimates (:func:`check_resources`)."""
+    then ``overrides``, in range for the map's diagonal; then the stage's estimates (:meth:`Stage.check_resources`)."""
     source_map: Map = artifact if isinstance(artifact, Map) else artifact.map
-    params, where = _resolve(name, source_map.params, overrides, source_map.diagonal)
-    check_resources(name, params, where, artifact)
+    params, origins = _resolve(name, source_map.params, overrides, source_map.diagonal)
+    STAGE_BY_NAME[name].check_resources(artifact, params, origins)
     return params
 
 
