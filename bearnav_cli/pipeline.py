@@ -33,6 +33,7 @@ from bearnav_cli.limits import LIMITS, check_value, option_name
 # map's ``params:`` sets, to check them (:attr:`Stage.module`).
 if TYPE_CHECKING:
     from bearnav_cli.stages import map_
+    from bearnav_cli.verdicts import Problem
 
 __all__ = [
     "Activity",
@@ -77,9 +78,9 @@ class Stage:
     output_kind : str
         The artifact kind it writes.
     module : ModuleType
-        The module itself, imported on first use: ``Params``, ``VERSION``, ``run`` and ``summary``, and
+        The module itself, imported on first use: ``Params``, ``VERSION``, ``run`` and ``summary``,
         ``check_resources(input, params, given)`` where the stage estimates its requests (``rrtstar``,
-        ``simulate``).
+        ``simulate``) and ``problems(result)`` where it judges its result (``rrtstar`` to ``synthesize``).
     filename : str
         The conventional file name of its output (``"tree.npz"``).
     """
@@ -123,6 +124,12 @@ class Stage:
             check(artifact, params, origins.given)
         except InvalidParamsError as exc:  # ResourceLimitError too: the same class, the field translated
             raise type(exc)(exc.reason, field=origins.field(exc.field)) from None
+
+    def problems(self, result: Any) -> list[Problem]:
+        """Why the stage's ``result`` is not usable, worst first (its ``problems``); empty when it is, or
+        when the stage judges nothing."""
+        judge = getattr(self.module, "problems", None)
+        return [] if judge is None else list(judge(result))
 
 
 STAGES: tuple[Stage, ...] = (

@@ -17,6 +17,7 @@ LAYERS = {
     "limits": 0.7,  # parameter ranges and the memory budget: the stages' checks and the pipeline's use them
     "datatypes": 1,
     "palette": 1.2,  # the figures' and bags' colours, plain data on datatypes' enums
+    "verdicts": 1.3,  # why a result is not usable: the stages' problems(), on datatypes
     "geometry": 2,
     "lp": 2,
     "occupancy": 2,

@@ -19,7 +19,7 @@ from typing import Callable
 
 import numpy as np
 
-from bearnav_cli import limits
+from bearnav_cli import limits, verdicts
 from bearnav_cli.datatypes import Map, Tree, plural
 from bearnav_cli.errors import InvalidParamsError, ResourceLimitError
 from bearnav_cli.geometry import FreeSpace
@@ -33,6 +33,7 @@ __all__ = [
     "MAX_GRID_CELLS",
     "Params",
     "POLICIES",
+    "problems",
     "rewiring_radius",
     "RRT_BYTES_PER_GRID_CELL",
     "RRT_BYTES_PER_ITERATION",
@@ -387,7 +388,7 @@ def summary(tree: Tree) -> str:
     )
 
 
-# --------------------------------------------------------------------------- checks
+# --------------------------------------------------------------------------- checks and verdict
 
 #: Most cells of RRT*'s neighbour grid (3 per step along each side of the bounds).
 MAX_GRID_CELLS = 10_000_000
@@ -450,3 +451,8 @@ def check_resources(map_: Map, params: Params, given: frozenset[str] = frozenset
         )
     fixed = grid * RRT_BYTES_PER_GRID_CELL + border * 64
     limits.check_memory(params.iterations, "iterations", RRT_BYTES_PER_ITERATION, "iterations", fixed)
+
+
+def problems(tree: Tree) -> list[verdicts.Problem]:
+    """Why the tree is not usable: no route (only its root)."""
+    return verdicts.no_route(tree.nodes)
