@@ -102,6 +102,8 @@ def test_imports_flow_one_way():
                 continue
             if layer_name == "cli" and dep == "cli":  # the command line's modules: its commands use its helpers
                 continue
+            if layer_name == "pipeline" and dep == "pipeline":  # the pipeline's modules build on each other
+                continue
             if layer_name == "stages" and dep == "stages" and target.count(".") >= 2:
                 problems.append(f"{dotted} imports another stage {target}")
             # stages may import stages (one stage at most, checked above), verify may use simulate
@@ -126,6 +128,32 @@ def test_cli_commands_share_helpers_not_each_other():
             parts = target.split(".")
             if parts[:2] == ["bearnav_cli", "cli"] and len(parts) > 2 and parts[2] not in CLI_SHARED:
                 problems.append(f"{dotted} imports {target} (only cli.main imports the commands)")
+    assert not problems, "\n".join(problems)
+
+
+def _all_imports(tree):
+    """Every import target, as :func:`_imports` gives them, plus the package of ``from bearnav_cli import x``."""
+    yield from _imports(tree)
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom) and node.module:
+            yield node.module
+
+
+def test_the_pipeline_imports_no_stage_by_name():
+    """Issue 24.3: the pipeline reaches a stage through its table only (a module path string, imported on use):
+    no module of the pipeline package, its ``__init__`` included, imports ``bearnav_cli.stages`` or a stage,
+    not even for type checking."""
+    problems = []
+    for path in sorted((PACKAGE / "pipeline").rglob("*.py")):
+        tree = ast.parse(path.read_text())
+        for target in _all_imports(tree):
+            if target == "bearnav_cli.stages" or target.startswith("bearnav_cli.stages."):
+                problems.append(f"{path.relative_to(PACKAGE)} imports {target}")
+        if path.name == "table.py":  # the one place that names the stage modules
+            continue
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Constant) and str(node.value).startswith("bearnav_cli.stages."):
+                problems.append(f"{path.relative_to(PACKAGE)} names the module {node.value} (only the table may)")
     assert not problems, "\n".join(problems)
 
 
