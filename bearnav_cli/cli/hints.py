@@ -242,7 +242,9 @@ def outcome_failure(stage: str, artifact: Any, path: Optional[Path] = None,
             step = f"`{command_text('bearnav', 'synthesize', path, '-o', plan_npz)}`, then " + tags_step(
                 plan_npz, *camera, plan_words=plan_words)  # fmt: skip
         return f"{problem.text}: add landmarks there; {step}"
-    return f"{problem.text}; `bearnav inspect {path} --cell {problem.cells[0]}` shows the first"
+    if problem.kind == verdicts.NOT_CERTIFIED:
+        return f"{problem.text}; `bearnav inspect {path} --cell {problem.cells[0]}` shows the first"
+    return problem.text
 
 
 def finish(
