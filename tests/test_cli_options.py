@@ -20,7 +20,7 @@ import sys
 import pytest
 import typer.main
 
-from bearnav_cli import pipeline, runtime, verify
+from bearnav_cli import limits, pipeline, runtime, verify
 from bearnav_cli.cli import app
 from bearnav_cli.cli import fields as cli_fields
 from bearnav_cli.cli import options as cli_options
@@ -65,7 +65,7 @@ def problems(command: str, fields: list[tuple[str, cli_fields.ParamField]]) -> l
         if option is None:
             found.append(f"{where}: no option")
             continue
-        name = pipeline.option_name(stage, field.name)
+        name = limits.option_name(stage, field.name)
         if name not in option.opts:
             found.append(f"{where}: option {option.opts}, expected {name}")
         if field.kind is bool and not option.secondary_opts:
@@ -106,7 +106,7 @@ def test_the_source_reader_equals_the_imported_dataclasses():
         assert cli_fields.params_fields(command) == cli_fields.imported_params_fields(command), command
         params_type = importlib.import_module(cli_fields.PARAMS_MODULES[command]).Params
         assert [f.name for f in cli_fields.params_fields(command)] == [f.name for f in dataclasses.fields(params_type)]
-    assert cli_fields.option_names() == pipeline.OPTION_NAMES
+    assert cli_fields.option_names() == limits.OPTION_NAMES
 
 
 def test_every_option_is_a_field_or_hand_written():

@@ -1,6 +1,6 @@
 """Hostile input, part 2: option extremes and output paths.
 
-Every numeric option has a documented range (``pipeline.LIMITS``, docs/cli.md "Option limits");
+Every numeric option has a documented range (``limits.LIMITS``, docs/cli.md "Option limits");
 big requests are checked against a memory (or step) estimate before they start; every output
 path is checked before any work. Each refused case exits 3 with one line on stderr naming the
 option (or the map field, or the path) and writes nothing.
@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from bearnav_cli import artifacts, pipeline
+from bearnav_cli import artifacts, limits
 
 from .test_hostile_common import (
     REPO,
@@ -181,7 +181,7 @@ def test_the_step_limit_names_the_step_that_fits(built, tmp_path):
 
 def test_memory_estimates_refuse_with_the_numbers(built, tmp_path, monkeypatch):
     """With a small budget every estimate refuses, saying how much it needs and what fits."""
-    monkeypatch.setattr(artifacts, "memory_budget", lambda: 50_000_000)
+    monkeypatch.setattr(limits, "memory_budget", lambda: 50_000_000)
     line = assert_clean_failure(invoke("rrtstar", built["map"], "-o", tmp_path / "t.npz", "--iterations", "1000000"))
     assert "--iterations" in line and "needs about" in line and re.search(r"at most [\d,]+ fit", line), line
     line = assert_clean_failure(invoke("simulate", built["plan"], "-o", tmp_path / "s.npz", "--starts",
@@ -197,7 +197,7 @@ def test_seed_range_is_what_numpy_takes_in_32_bits(built, tmp_path):
         result = invoke("-q", "rrtstar", built["map"], "-o", tmp_path / f"t{seed}.npz", "--seed", seed,
                         "--iterations", "50")  # fmt: skip
         assert result.exit_code in (0, 1), result.output
-    assert pipeline.SEED.text() == "integer in [0, 4294967295]"
+    assert limits.SEED.text() == "integer in [0, 4294967295]"
 
 
 def test_version_exits_0():
@@ -351,12 +351,12 @@ def test_a_really_unwritable_folder_is_refused(built, tmp_path):
 def test_every_limit_is_documented():
     text = (REPO / "docs" / "cli.md").read_text()
     rows = dict(re.findall(r"^\| ([a-z]+ `[a-z_]+`) \| ([^|]+) \|", text, flags=re.M))
-    for stage, limits in pipeline.LIMITS.items():
-        for name, limit in limits.items():
+    for stage, ranges in limits.LIMITS.items():
+        for name, limit in ranges.items():
             key = f"{stage} `{name}`"
             assert key in rows, f"{key} missing from docs/cli.md 'Option limits'"
             assert rows[key].strip() == limit.text(), key
-    assert len(rows) == sum(len(v) for v in pipeline.LIMITS.values())
+    assert len(rows) == sum(len(v) for v in limits.LIMITS.values())
 
 
 @pytest.mark.skipif(not os.environ.get("BEARNAV_HOSTILE_FULL"), reason="a GIF takes seconds: BEARNAV_HOSTILE_FULL=1")

@@ -14,8 +14,10 @@ LAYERS = {
     # the numpy-only package a robot installs: its modules import each other and errors only (checked below), so
     # it sits just above errors; datatypes and artifacts read the one artifact schema from runtime/schema.py
     "runtime": 0.5,
+    "limits": 0.7,  # parameter ranges and the memory budget: the stages' checks and the pipeline's use them
     "datatypes": 1,
     "palette": 1.2,  # the figures' and bags' colours, plain data on datatypes' enums
+    "verdicts": 1.3,  # why a result is not usable: the stages' problems(), on datatypes
     "geometry": 2,
     "lp": 2,
     "occupancy": 2,
@@ -126,6 +128,32 @@ def test_cli_commands_share_helpers_not_each_other():
             parts = target.split(".")
             if parts[:2] == ["bearnav_cli", "cli"] and len(parts) > 2 and parts[2] not in CLI_SHARED:
                 problems.append(f"{dotted} imports {target} (only cli.main imports the commands)")
+    assert not problems, "\n".join(problems)
+
+
+def _all_imports(tree):
+    """Every import target, as :func:`_imports` gives them, plus the package of ``from bearnav_cli import x``."""
+    yield from _imports(tree)
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom) and node.module:
+            yield node.module
+
+
+def test_the_pipeline_imports_no_stage_by_name():
+    """Issue 24.3: the pipeline reaches a stage through its table only (a module path string, imported on use):
+    no module of the pipeline package, its ``__init__`` included, imports ``bearnav_cli.stages`` or a stage,
+    not even for type checking."""
+    problems = []
+    for path in sorted((PACKAGE / "pipeline").rglob("*.py")):
+        tree = ast.parse(path.read_text())
+        for target in _all_imports(tree):
+            if target == "bearnav_cli.stages" or target.startswith("bearnav_cli.stages."):
+                problems.append(f"{path.relative_to(PACKAGE)} imports {target}")
+        if path.name == "table.py":  # the one place that names the stage modules
+            continue
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Constant) and str(node.value).startswith("bearnav_cli.stages."):
+                problems.append(f"{path.relative_to(PACKAGE)} names the module {node.value} (only the table may)")
     assert not problems, "\n".join(problems)
 
 

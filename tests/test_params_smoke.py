@@ -26,6 +26,8 @@ from bearnav_cli.cli import fields
 from bearnav_cli.datatypes import Outcome, Plan, Simulation
 from bearnav_cli.errors import InvalidParamsError
 from bearnav_cli.geometry import FreeSpace
+from bearnav_cli.pipeline import chain, table
+from bearnav_cli.pipeline import params as params_of
 from bearnav_cli.runtime import bearing
 from bearnav_cli.stages import decompose, map_, rrtstar, simplify, simulate, synthesize
 from bearnav_cli.world.camera import CAMERAS
@@ -43,7 +45,7 @@ SPEC = {
 #: verify's closed loop: a few starts, the same coarse step.
 VERIFY = {"n_starts": 4, "dt": 0.5}
 #: The stages in chain order and the artifact kind each writes.
-CHAIN = [(stage.name, stage.output_kind) for stage in pipeline._CHAIN]
+CHAIN = [(stage.name, stage.output_kind) for stage in table.CHAIN]
 
 #: Values that are neither an enumeration nor a bool but have an option no other test runs end to end.
 EXTRA = {("simulate", "max_fix_error"): (1.0,)}
@@ -145,13 +147,13 @@ def _run(stage: str, upstream: dict, overrides: dict | None, base: tuple | None 
         step, mine = pipeline.STAGE_BY_NAME[name], overrides if name == stage else None
         if name == "map":
             payload = map_.MapSource(spec=copy.deepcopy(SPEC), file="smoke.yaml", sha256="0")
-            params[name] = pipeline._map_stage_params(payload, mine)
+            params[name] = params_of.map_stage_params(payload, mine)
         else:
             payload = made[step.input_kind]
-            params[name] = pipeline._stage_params(name, payload, mine)
+            params[name] = params_of.stage_params(name, payload, mine)
         if base is not None and name == stage and params[name] == base[1][name]:
             return base
-        made[kind] = pipeline._execute(step, payload, params[name], None, name)
+        made[kind] = chain.execute(step, payload, params[name], None, name)
     return made, params
 
 

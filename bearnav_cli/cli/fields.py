@@ -210,15 +210,15 @@ def imported_params_fields(command: str) -> tuple[ParamField, ...]:
 
 @functools.cache
 def option_names() -> dict[tuple[str, str], str]:
-    """``pipeline.OPTION_NAMES``, read from its source (importing ``pipeline`` imports every stage)."""
+    """``limits.OPTION_NAMES``, read from its source (importing ``limits`` imports numpy)."""
     import ast
     import re
 
-    match = re.search(r"^OPTION_NAMES = (\{[^\n]*\})$", _module_source("bearnav_cli.pipeline"), re.M)
+    match = re.search(r"^OPTION_NAMES = (\{[^\n]*\})$", _module_source("bearnav_cli.limits"), re.M)
     if match is None:
-        from bearnav_cli import pipeline
+        from bearnav_cli import limits
 
-        return dict(pipeline.OPTION_NAMES)
+        return dict(limits.OPTION_NAMES)
     return ast.literal_eval(match.group(1))
 
 

@@ -213,43 +213,38 @@ def verify_steps(report: Any, plan_npz: Path, world: Optional[Path]) -> str:
     return text + (": " + "; ".join(steps) if steps else "")
 
 
-def outcome_failure(artifact: Any, path: Optional[Path] = None, camera: tuple[float, Optional[float]] = (360.0, None),
+def outcome_failure(stage: str, artifact: Any, path: Optional[Path] = None,
+                    camera: tuple[float, Optional[float]] = (360.0, None),
                     plan_words: tuple[str, ...] = ()) -> str | None:  # fmt: skip
     """Why a finished run's result is not usable (exit 1) and what to do next, or None.
 
-    ``path`` is the artifact's file (the hints name it), ``camera`` the (fov, range) the tags are
-    proposed for, ``plan_words`` the options of the re-planning command.
+    The verdict is the stage's (its first ``problems(result)``, :mod:`bearnav_cli.verdicts`); the next step
+    is added here. ``stage`` names the stage that made ``artifact``, ``path`` is the artifact's file (the
+    hints name it), ``camera`` the (fov, range) the tags are proposed for, ``plan_words`` the options of the
+    re-planning command.
     """
-    from bearnav_cli.datatypes import CellFlag, Cells, CellStatus, Plan, cell_list
+    from bearnav_cli import pipeline, verdicts
+    from bearnav_cli.datatypes import Plan
 
-    cells = getattr(artifact, "cells", artifact)  # a Plan holds its Cells
-    nodes = getattr(cells, "nodes", None)
-    added = getattr(cells, "node_added", None)  # leaves decompose added to cover F: not a route the tree found
-    if nodes is not None and len(nodes) - (0 if added is None else sum(map(bool, added))) < 2:
-        what = "no route: the tree has only its root (is the goal walled in, or did every sample fall in obstacles?)"
-        return what + (f"; `{command_text('bearnav', 'plot', path)}` draws it" if path is not None else "")
-    blind = cells.flagged(CellFlag.BLIND_SPOT) if isinstance(cells, Cells) else []
-    if blind:
-        one = len(blind) == 1
-        what = f"{'cell' if one else 'cells'} {cell_list(blind, 20)} {'has' if one else 'have'} free points that see "
-        what += "fewer than 2 landmarks"
-        if path is None:
-            return what
-        if isinstance(artifact, Plan):
+    found = pipeline.STAGE_BY_NAME[stage].problems(artifact)
+    if not found:
+        return None
+    problem = found[0]
+    if path is None:
+        return problem.text
+    if problem.kind == verdicts.NO_ROUTE:
+        return f"{problem.text}; `{command_text('bearnav', 'plot', path)}` draws it"
+    if problem.kind == verdicts.BLIND_SPOT:
+        if isinstance(artifact, Plan):  # tags places landmarks along a plan's fields
             step = tags_step(path, *camera, plan_words=plan_words)
-        else:  # cells.npz: tags places landmarks along a plan's fields
+        else:  # cells.npz: synthesize it first
             plan_npz = path.with_name("plan.npz")
             step = f"`{command_text('bearnav', 'synthesize', path, '-o', plan_npz)}`, then " + tags_step(
                 plan_npz, *camera, plan_words=plan_words)  # fmt: skip
-        return f"{what}: add landmarks there; {step}"
-    status = getattr(artifact, "status", None)
-    if status is not None:
-        bad = (status == CellStatus.NOT_CERTIFIED) | (status == CellStatus.SOLVER_FAILURE)
-        failed = [int(c) for c in bad.nonzero()[0]]
-        if failed:
-            where = f"`bearnav inspect {path} --cell {failed[0]}` shows the first" if path is not None else ""
-            return f"cells {cell_list(failed, 20)} are not certified (status 2 or 3)" + (f"; {where}" if where else "")
-    return None
+        return f"{problem.text}: add landmarks there; {step}"
+    if problem.kind == verdicts.NOT_CERTIFIED:
+        return f"{problem.text}; `bearnav inspect {path} --cell {problem.cells[0]}` shows the first"
+    return problem.text
 
 
 def finish(
@@ -268,7 +263,8 @@ def finish(
         if rows and extra:
             rows[-1].update(extra)
         print_json(rows)
-    problem = outcome_failure(reports[-1].artifact, reports[-1].path, camera, plan_words) if reports else None
+    last = reports[-1] if reports else None
+    problem = outcome_failure(last.stage, last.artifact, last.path, camera, plan_words) if last else None
     if problem:
         raise fail(problem, EXIT_OUTCOME)
 

@@ -136,7 +136,7 @@ def params_options(command: str, *, skip: tuple[str, ...] = (), only: tuple[str,
                    defaults: bool = False, prefix: str = "") -> list[inspect.Parameter]:  # fmt: skip
     """The typer options of a command's ``Params`` fields, as parameters of a command's signature.
 
-    The option is ``--field-name`` (``pipeline.OPTION_NAMES`` renames, such as ``--starts``), a
+    The option is ``--field-name`` (``limits.OPTION_NAMES`` renames, such as ``--starts``), a
     ``--name/--no-name`` flag for a bool (:data:`FLAG_OFF` names other off-switches), of the
     field's type; the help is :func:`option_help`. A stage's options default to None, "not given",
     so that the map's ``params:`` apply; ``defaults=True`` (``verify``, which has no map layer)

@@ -138,7 +138,7 @@ def plan_command(
     plan_words += tuple(word for key, value in robot.items() for word in (f"--{key.replace('_', '-')}", f"{value:g}"))
     seeing, extra = None, None
     plan = reports[-1].artifact
-    if fov is not None and outcome_failure(plan) is None:  # the camera's check, on a plan that passed the others
+    if fov is not None and outcome_failure(reports[-1].stage, plan) is None:  # the camera's, on a plan passing the rest
         from bearnav_cli import perception
 
         seeing = perception.perception_coverage(plan, fov, 1.0 if noise_deg is None else noise_deg,

@@ -37,15 +37,15 @@ def verify_command(
 
     Example: bearnav verify plans/kitchen/plan.npz --starts 500 --min-success 0.99
     """
-    from bearnav_cli import pipeline, verify  # scipy.sparse and the closed loop: only for this command
+    from bearnav_cli import limits, pipeline, verify  # scipy.sparse and the closed loop: only for this command
 
     Quiet.enabled |= quiet
     for name, value in options.items():
-        pipeline.check_value("verify", name, value, pipeline.option_name("verify", name))
+        limits.check_value("verify", name, value, limits.option_name("verify", name))
     try:
         params = verify.Params(**options)
     except InvalidParamsError as exc:  # name the option the user typed
-        raise fail(f"{pipeline.option_name('verify', exc.field or '')}: {exc.reason}", EXIT_INVALID) from None
+        raise fail(f"{limits.option_name('verify', exc.field or '')}: {exc.reason}", EXIT_INVALID) from None
     starts = params.n_starts
     with pipeline.activity("verify"):  # what an interrupt, an error or a warning names
         loaded = pipeline.load(plan_npz, "plan")
@@ -53,12 +53,14 @@ def verify_command(
         plan = loaded.artifact
         where_speed = "--speed" if params.speed is not None else "params.simulate.speed"
         speed = verify.loop_speed(plan, params)  # the speed verify.run drives at (the map's, else simulate's)
-        pipeline.check_value("verify", "speed", speed, where_speed, plan.map.diagonal)
-        if starts:
+        limits.check_value("verify", "speed", speed, where_speed, plan.map.diagonal)
+        if starts:  # the closed loop's estimates (simulate's), then the shortest routes' (verify's)
             loop = pipeline.resolve_params("simulate", {}, {"speed": speed, "measurement": "displacement",
-                                                           "record_trajectories": False})  # fmt: skip
-            pipeline.check_closed_loop(plan, loop, starts, "--starts", where_speed, record=False)
-            pipeline.check_verify_starts(plan, starts)
+                                                           "record_trajectories": False,
+                                                           "starts": f"random:{starts}"})  # fmt: skip
+            origins = pipeline.Origins({"starts": "--starts", "speed": where_speed})
+            pipeline.SIMULATE.check_resources(plan, loop, origins)
+            limits.check_verify_starts(plan, starts)
         world_map = _load_world(world) if world is not None else None
         seeing = None
         if fov is not None:  # checked before the closed loop runs
@@ -72,7 +74,7 @@ def verify_command(
             except InvalidParamsError as exc:  # a liveness option only the map refuses (--live-resolution against D)
                 if exc.field not in options:
                     raise
-                raise fail(f"{pipeline.option_name('verify', exc.field)}: {exc.reason}", EXIT_INVALID) from None
+                raise fail(f"{limits.option_name('verify', exc.field)}: {exc.reason}", EXIT_INVALID) from None
         if fov is not None:
             seeing = perception.perception_coverage(plan, fov, noise_deg)
     if as_json:

@@ -677,3 +677,14 @@ def summary(cells: Cells) -> str:
     if blind:
         text += f"; blind spots (< 2 landmarks in sight) in cells {cell_list(blind)}"
     return text
+
+
+def problems(cells: Cells) -> list:
+    """Why the cells are not usable (a list of :class:`~bearnav_cli.verdicts.Problem`, worst first): no route
+    (the tree is only its root, leaving out the nodes added to cover the free space), then blind-spot cells."""
+    from bearnav_cli import verdicts
+
+    return verdicts.no_route(cells.nodes, cells.node_added) + verdicts.blind_spots(cells)
+
+
+__all__ += ["problems"]

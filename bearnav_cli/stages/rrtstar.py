@@ -19,17 +19,24 @@ from typing import Callable
 
 import numpy as np
 
+from bearnav_cli import limits, verdicts
 from bearnav_cli.datatypes import Map, Tree, plural
-from bearnav_cli.errors import InvalidParamsError
+from bearnav_cli.errors import InvalidParamsError, ResourceLimitError
 from bearnav_cli.geometry import FreeSpace
 
 __all__ = [
     "border_samples",
     "BRUTE_FORCE_NODES",
     "BUCKETS_PER_STEP",
+    "check_resources",
+    "MAX_BORDER_SAMPLES",
+    "MAX_GRID_CELLS",
     "Params",
     "POLICIES",
+    "problems",
     "rewiring_radius",
+    "RRT_BYTES_PER_GRID_CELL",
+    "RRT_BYTES_PER_ITERATION",
     "run",
     "summary",
     "VERSION",
@@ -379,3 +386,73 @@ def summary(tree: Tree) -> str:
         f"{plural(len(tree.nodes), 'node')} from {s.get('iterations', '?')} iterations, "
         f"{s.get('random_collision_samples', '?')} collision samples + {s.get('border_samples', '?')} on the border"
     )
+
+
+# --------------------------------------------------------------------------- checks and verdict
+
+#: Most cells of RRT*'s neighbour grid (3 per step along each side of the bounds).
+MAX_GRID_CELLS = 10_000_000
+#: Most border pseudo-samples of RRT* (they become collision samples every later stage reads).
+MAX_BORDER_SAMPLES = 200_000
+#: Bytes per RRT* iteration (sample, node, parent, cost, child list, bucket slot), measured on the kitchen.
+RRT_BYTES_PER_ITERATION = 400
+#: Bytes per cell of RRT*'s neighbour grid (an empty 4-slot bucket and its bookkeeping).
+RRT_BYTES_PER_GRID_CELL = 150
+
+
+def _count(cells: float) -> float:
+    """``ceil(cells)``, kept a float beyond 2**53: a tiny step makes counts past any integer a float
+    holds exactly, or ``inf``, and those are only compared with the limits and refused."""
+    return math.ceil(cells) if cells < 2.0**53 else cells
+
+
+def check_resources(map_: Map, params: Params, given: frozenset[str] = frozenset()) -> None:
+    """Refuse a run that cannot finish before it starts: the neighbour grid, the border samples, the memory.
+
+    Parameters
+    ----------
+    map_ : Map
+        The map RRT* would run on (its bounds).
+    params : Params
+        The resolved parameters.
+    given : frozenset of str
+        The parameters set by the map's ``params:`` or an option, not left at their default: a
+        ``border_spacing`` left at ``step/10`` is blamed on ``step``.
+
+    Raises
+    ------
+    ResourceLimitError
+        The grid exceeds :data:`MAX_GRID_CELLS` (with the smallest step that fits), the border
+        :data:`MAX_BORDER_SAMPLES` (with the smallest spacing), or the iterations the memory budget
+        (with how many fit); its field is the parameter to change (``step``, ``border_spacing``,
+        ``iterations``), which the pipeline turns into the option or map field that set it.
+    """
+    xmin, ymin, xmax, ymax = (float(v) for v in map_.bounds)  # Python floats overflow to inf quietly
+    width, height = xmax - xmin, ymax - ymin
+    cell = params.step / BUCKETS_PER_STEP
+    grid = _count(width / cell) * _count(height / cell)
+    if grid > MAX_GRID_CELLS:
+        smallest = BUCKETS_PER_STEP * math.sqrt(width * height / MAX_GRID_CELLS)
+        raise ResourceLimitError(
+            f"{params.step:g} makes RRT*'s neighbour grid {grid:.3g} cells over {width:g} x {height:g} "
+            f"(limit {MAX_GRID_CELLS:.0e}); use at least {smallest:.3g}",
+            field="step",
+        )
+    spacing = params.border_spacing
+    border = 0 if spacing == 0 else 2 * (_count(width / spacing) + _count(height / spacing))
+    if border > MAX_BORDER_SAMPLES:
+        smallest = 2 * (width + height) / MAX_BORDER_SAMPLES
+        derived = "border_spacing" not in given
+        hint = f"(step/10 = {params.border_spacing:g}) " if derived else ""
+        raise ResourceLimitError(
+            f"border pseudo-samples every {params.border_spacing:g} {hint}would be {border:,.0f} points (limit "
+            f"{MAX_BORDER_SAMPLES:,}); use a --border-spacing of at least {smallest:.3g} (or 0: none)",
+            field="step" if derived else "border_spacing",
+        )
+    fixed = grid * RRT_BYTES_PER_GRID_CELL + border * 64
+    limits.check_memory(params.iterations, "iterations", RRT_BYTES_PER_ITERATION, "iterations", fixed)
+
+
+def problems(tree: Tree) -> list[verdicts.Problem]:
+    """Why the tree is not usable: no route (only its root)."""
+    return verdicts.no_route(tree.nodes)

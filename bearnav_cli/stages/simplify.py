@@ -40,6 +40,7 @@ from typing import Callable
 import numpy as np
 import shapely
 
+from bearnav_cli import verdicts
 from bearnav_cli.datatypes import Tree
 from bearnav_cli.errors import ArtifactError, InvalidParamsError
 from bearnav_cli.geometry import FreeSpace
@@ -50,6 +51,7 @@ __all__ = [
     "CTL_MODES",
     "MAX_FINISH_PASSES",
     "Params",
+    "problems",
     "RECONNECT_NEIGHBOURS",
     "run",
     "summary",
@@ -674,3 +676,8 @@ def summary(tree: Tree) -> str:
         f"{s.get('crossings_removed', '?')} crossings removed{left_text}; "
         f"{share_text} of discarded nodes reconnectable"
     )
+
+
+def problems(tree: Tree) -> list[verdicts.Problem]:
+    """Why the simplified tree is not usable: no route (only its root)."""
+    return verdicts.no_route(tree.nodes)

@@ -746,3 +746,62 @@ def summary(result: Simulation) -> str:
     others = ", ".join(f"{n} {name}" for name, n in counts.items() if name != "success" and n)
     text = f"{counts['success']}/{len(result)} runs reached the goal"
     return text + (f" ({others})" if others else "")
+
+
+def check_resources(plan, params: Params, given: frozenset[str] = frozenset()) -> None:
+    """Refuse closed-loop requests that cannot finish: too many steps per run, too many runs, or too much memory.
+
+    Each run may take ``max_steps`` steps, ``ceil(5·L/(v·dt)) + 1000`` by default with ``L`` at most
+    ``D`` plus the largest cost-to-go in the plan; memory is about ``limits.RUN_BYTES`` per run plus,
+    when trajectories are recorded, ``limits.TRAJECTORY_POINT_BYTES`` per step of a typical run.
+
+    Parameters
+    ----------
+    plan : Plan
+        The plan to run: its map's diagonal and its cells' ``cell_rank`` (cost-to-go, map units)
+        bound the route length ``L``; its map's starts count for ``starts: map``.
+    params : Params
+        The loop's parameters: ``starts`` (how many runs), ``speed``/``alpha`` and ``dt`` (through
+        :func:`settings`), ``max_steps`` and ``record_trajectories``.
+    given : frozenset of str
+        The parameters set by the map's ``params:`` or an option: an explicit ``dt`` is named by a
+        too-many-steps error instead of the speed.
+
+    Raises
+    ------
+    ResourceLimitError
+        A run may take more than ``limits.MAX_STEPS_PER_RUN`` steps (field ``dt``, ``alpha`` or
+        ``speed``), or the runs need more memory than the budget (field ``starts``).
+    InvalidParamsError
+        More than ``limits.MAX_RUNS`` runs (field ``starts``).
+    """
+    from bearnav_cli import limits
+    from bearnav_cli.errors import ResourceLimitError
+
+    spec = parse_starts(params.starts)
+    runs = spec if isinstance(spec, int) else (len(plan.map.starts) if isinstance(spec, str) else len(spec))
+    speed = "alpha" if params.dynamics == "unicycle" else "speed"
+    loop = settings(plan, params)
+    diagonal = plan.map.diagonal
+    longest = float(max(plan.cells.cell_rank.max(initial=0.0), 0.0)) + diagonal
+    per_step = loop.speed * loop.dt
+    if params.max_steps is not None:
+        steps = int(params.max_steps)  # its range is that of MAX_STEPS_PER_RUN
+    else:
+        steps = int(step_limit(longest, loop))  # the rule each run gets, for the longest route
+        if steps > limits.MAX_STEPS_PER_RUN:
+            raise ResourceLimitError(
+                f"at speed {loop.speed:g} with dt = {loop.dt:.3g} s one run may take up to {steps:.3g} steps "
+                f"(limit {limits.MAX_STEPS_PER_RUN:.0e}); raise the speed or dt",
+                field="dt" if "dt" in given else speed,
+            )
+    if runs > limits.MAX_RUNS:
+        raise InvalidParamsError(f"at most {limits.MAX_RUNS:,} runs, got {runs:,}", field="starts")
+    typical = min(steps, math.ceil((longest - 0.75 * diagonal) / per_step) + 1) if per_step > 0 else steps
+    record = params.record_trajectories
+    per_run = limits.RUN_BYTES + (limits.TRAJECTORY_POINT_BYTES * typical if record else 0)
+    note = " (without recorded trajectories: params.simulate.record_trajectories false)" if record else ""
+    limits.check_memory(runs, "runs", per_run, "starts", note=note)
+
+
+__all__ += ["check_resources"]

@@ -739,3 +739,16 @@ def summary(plan: Plan) -> str:
         parts = [f"{f.name.lower()} {np.count_nonzero(flags & f)}" for f in CellFlag if f and np.any(flags & f)]
         text += f"; {flagged} flagged cells ({', '.join(parts)})"
     return text
+
+
+def problems(plan: Plan) -> list:
+    """Why the plan is not usable (a list of :class:`~bearnav_cli.verdicts.Problem`, worst first): its cells'
+    problems (no route, blind spots), then the cells not certified (status 2 or 3)."""
+    from bearnav_cli import verdicts
+
+    cells = plan.cells
+    return (verdicts.no_route(cells.nodes, cells.node_added) + verdicts.blind_spots(cells)
+            + verdicts.not_certified(plan.status))  # fmt: skip
+
+
+__all__ += ["problems"]
