@@ -28,11 +28,10 @@ import logging
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
-from bearnav_cli import composition, runtime, verify_checks
+from bearnav_cli import composition, runtime
 from bearnav_cli.datatypes import Map, Plan, percent, plural
 from bearnav_cli.errors import ArtifactError, InvalidParamsError
 from bearnav_cli.geometry import FreeSpace
@@ -53,17 +52,6 @@ from bearnav_cli.verify_checks import (
 from bearnav_cli.verify_report import VerifyReport, duration_text
 
 __all__ = ["Params", "guarantee", "loop_speed", "run"]
-
-#: Names that moved to :mod:`bearnav_cli.verify_checks` (issue 24) and that tests of other modules still read as
-#: ``verify.X``; :func:`__getattr__` answers for them (not exported). Delete an entry once nothing reads it here.
-_MOVED = ("CERTIFICATE_TOL", "CERTIFIED")
-
-
-def __getattr__(name: str) -> Any:
-    if name in _MOVED:
-        return getattr(verify_checks, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
 
 log = logging.getLogger(__name__)
 

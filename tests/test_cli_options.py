@@ -25,7 +25,7 @@ from bearnav_cli.cli import app
 from bearnav_cli.cli import fields as cli_fields
 from bearnav_cli.cli import options as cli_options
 from bearnav_cli.cli.plan import PLAN_OPTIONS
-from bearnav_cli.runtime import step
+from bearnav_cli.runtime import settings
 from bearnav_cli.stages import simulate
 
 from .conftest import REPO
@@ -164,9 +164,10 @@ def test_simulate_and_the_controller_build_their_settings_alike(tmp_path):
     robot = runtime.Controller.from_plan(str(path)).settings
     sim = simulate.settings(plan, simulate.Params(noise_deg=1.0)).control
     assert robot == sim
-    assert robot.bearing_sigma == step.BEARING_SIGMA == math.radians(1.0)
-    assert robot.speed == simulate.Params().speed == step.SPEED and robot.alpha == simulate.Params().alpha == step.ALPHA
-    assert robot.odometry_drift == simulate.Params().odometry_drift == step.ODOMETRY_DRIFT
+    assert robot.bearing_sigma == settings.BEARING_SIGMA == math.radians(1.0)
+    assert robot.speed == simulate.Params().speed == settings.SPEED
+    assert robot.alpha == simulate.Params().alpha == settings.ALPHA
+    assert robot.odometry_drift == simulate.Params().odometry_drift == settings.ODOMETRY_DRIFT
     unicycle = runtime.Controller.from_plan(str(path), dynamics="unicycle", alpha=0.3).settings
     assert unicycle == simulate.settings(plan, simulate.Params(noise_deg=1.0, dynamics="unicycle", alpha=0.3)).control
 

@@ -24,12 +24,12 @@ import numpy as np
 import pytest
 import shapely
 
-from bearnav_cli import artifacts, cell_landmarks, composition, pipeline, verify
+from bearnav_cli import artifacts, cell_fields, cell_landmarks, composition, pipeline, verify, verify_checks
 from bearnav_cli.cell_lp import CellProblem, min_norm_gain
 from bearnav_cli.datatypes import CellStatus, Outcome, replace
 from bearnav_cli.geometry import DEFAULT_CLEARANCE, FreeSpace
 from bearnav_cli.lp import LpSolver
-from bearnav_cli.runtime import cell_policy
+from bearnav_cli.runtime import cell_policy, certificate
 from bearnav_cli.runtime.plan_arrays import PlanArrays
 from bearnav_cli.stages import decompose, simulate, synthesize
 from tests import mapgen
@@ -188,7 +188,7 @@ def test_lemma4_explicit_field(seed):
     # the same field as a gain over random landmarks, re-checked by synthesize's own checker
     landmarks = random_landmarks(rng, x_j)
     K = min_norm_gain(c * np.eye(2), c * x_j - eps * z, landmarks)
-    m = synthesize.vertex_margins(K, landmarks, vertices, z, x_j, -A[keep], b[keep], c_h, c_v, u_max)
+    m = certificate.vertex_margins(K, landmarks, vertices, z, x_j, -A[keep], b[keep], c_h, c_v, u_max)
     field_scale = 1e-8 * (c * float(np.abs(landmarks).max()) + u_max)
     assert m.cbf < 0 and abs(m.cbf - l1.max()) <= field_scale
     assert m.clf < 0 and abs(m.clf - l2.max()) <= field_scale
@@ -196,7 +196,7 @@ def test_lemma4_explicit_field(seed):
     # synthesize's ε_max (with c = c_v) is the lemma's bound for c = c_v
     problem = CellProblem(vertices, A, b, z, x_j, -A[keep], b[keep], landmarks)
     expect = min(c_v * h_xj.min(), u_max - c_v * diam)
-    assert synthesize.lemma4_margin(problem, c_v, u_max) == pytest.approx(expect, rel=1e-9, abs=1e-15)
+    assert cell_fields.lemma4_margin(problem, c_v, u_max) == pytest.approx(expect, rel=1e-9, abs=1e-15)
 
 
 LP_VARIANTS = [
@@ -224,9 +224,9 @@ def test_lemma4_lp_never_fails(seed):
     assert sol.status not in (CellStatus.NOT_CERTIFIED, CellStatus.SOLVER_FAILURE)
     assert sol.c_h >= sol.c_v > 0
     assert sol.c_v * diameter(vertices) < u_max  # the constants Lemma 4 covers
-    m = synthesize.vertex_margins(sol.K, landmarks, vertices, z, x_j, -A[keep], b[keep], sol.c_h, sol.c_v, u_max)
+    m = certificate.vertex_margins(sol.K, landmarks, vertices, z, x_j, -A[keep], b[keep], sol.c_h, sol.c_v, u_max)
     assert m.cbf <= 0.0 and m.clf < 0.0
-    assert m.input <= verify.CERTIFICATE_TOL  # the box has no margin: solver rounding only (dual form)
+    assert m.input <= verify_checks.CERTIFICATE_TOL  # the box has no margin: solver rounding only (dual form)
     assert sol.margin_h == pytest.approx(m.cbf, abs=1e-9 * u_max)
     assert sol.margin_v == pytest.approx(m.clf, abs=1e-9 * u_max)
 
@@ -456,7 +456,7 @@ def test_tamper_gain_beyond_margin(which):
             direction, margin = cells.exit_dir[c], plan.margin_v[c]
         else:  # push u out through the barrier row of least margin by twice that margin
             normals, offsets = cells.barrier(c)
-            m = synthesize.vertex_margins(plan.gain[c], landmarks, cells.vertices(c), cells.exit_dir[c],
+            m = certificate.vertex_margins(plan.gain[c], landmarks, cells.vertices(c), cells.exit_dir[c],
                                           cells.exit_point[c], normals, offsets, plan.c_h[c], plan.c_v[c],
                                           plan.u_max[c])  # fmt: skip
             k = int(np.argmax(m.cbf_rows))

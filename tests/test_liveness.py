@@ -11,7 +11,7 @@ import shapely
 
 from bearnav_cli import liveness, verify
 from bearnav_cli.errors import InvalidParamsError
-from bearnav_cli.runtime import PlanArrays, bounded, estimate, step
+from bearnav_cli.runtime import PlanArrays, bounded, estimate, looking
 
 from .conftest import random_plan
 from .handmade import hand_map, hand_plan
@@ -46,7 +46,7 @@ def test_the_bound_of_a_row_is_one_look_bound(plan):
     rng = np.random.default_rng(0)
     x0, y0, x1, y1 = arrays.bounds
     x = rng.uniform([x0, y0], [x1, y1], (60, 2))
-    visible = step.views(arrays, x, math.radians(90.0), math.inf, 4).reshape(-1, len(arrays.landmarks))
+    visible = looking.views(arrays, x, math.radians(90.0), math.inf, 4).reshape(-1, len(arrays.landmarks))
     x = np.repeat(x, 4, axis=0)
     eta = rng.uniform(1e-4, 0.02, len(x))
     mine = liveness.live_grid.bounds_of(arrays, x, visible, eta)
@@ -101,7 +101,7 @@ def test_a_turn_all_around_gives_a_set_within_the_look_bound(plan, worst):
     eta = math.radians(0.25)
     d = arrays.landmarks[None] - x[:, None]
     truth = np.arctan2(d[..., 1], d[..., 0])
-    per_heading = step.views(arrays, x, math.radians(60.0), math.inf, 36)  # (R, H, L)
+    per_heading = looking.views(arrays, x, math.radians(60.0), math.inf, 36)  # (R, H, L)
     vertices, count = bounded.box(box, len(x))
     # at the worst, each bearing errs by ±η in every view (opposite signs in two views leave only a line)
     signs = rng.choice([-1.0, 1.0], truth.shape)
@@ -110,7 +110,7 @@ def test_a_turn_all_around_gives_a_set_within_the_look_bound(plan, worst):
         vertices, count = bounded.intersect_cones(vertices, count, arrays.landmarks, truth + error,
                                                   per_heading[:, h], eta, arrays.tol)  # fmt: skip
     _, error = bounded.centre(vertices, count)
-    all_around = step.views(arrays, x, 2.0 * math.pi, math.inf, 1)[:, 0]
+    all_around = looking.views(arrays, x, 2.0 * math.pi, math.inf, 1)[:, 0]
     np.testing.assert_array_equal(all_around, per_heading.any(axis=1))
     bound = liveness.live_grid.bounds_of(arrays, x, all_around, np.full(len(x), eta))
     seen = all_around.sum(axis=1) >= 2

@@ -12,7 +12,7 @@ import shapely
 
 from bearnav_cli.datatypes import Plan
 from bearnav_cli.errors import InvalidParamsError
-from bearnav_cli.runtime import PlanArrays, bounded, estimate, robot, step
+from bearnav_cli.runtime import PlanArrays, bounded, estimate, looking, robot, settings
 
 __all__ = [
     "bounds_of",
@@ -29,7 +29,7 @@ __all__ = [
 
 
 #: Headings of the minimum over headings for a camera narrower than 360° (every 10°).
-HEADINGS = step.LOOK_HEADINGS
+HEADINGS = looking.LOOK_HEADINGS
 #: The default grid gives about this many points to the median cell ...
 POINTS_PER_CELL = 25
 #: ... and is never coarser than this fraction of the map's diagonal D.
@@ -220,7 +220,7 @@ def distinct_views(arrays: PlanArrays, points: np.ndarray, fov: float, max_range
     n_lm = len(landmarks)
     for start in range(0, len(points), _POINTS):
         p = points[start : start + _POINTS]
-        vis = step.views(arrays, p, fov, max_range, headings, landmarks)  # (P, H, L)
+        vis = looking.views(arrays, p, fov, max_range, headings, landmarks)  # (P, H, L)
         if headings == 1 or n_lm == 0:
             keep = np.ones(vis.shape[:2], bool)
         else:
@@ -286,8 +286,8 @@ def grid(plan: Plan, eta_deg: float | None = None, fov_deg: float = 60.0, kappa:
     nu : float, optional
         The slip floor ``ν`` (map units, ≥ 0); default the map's ``robot.slip_floor``, else ``1e-4·D``.
     speed : float, optional
-        ``v`` of ``ℓ = v·dt`` (map units / s, > 0; ``dt`` from ``runtime.step.timing``); default the
-        map's ``params: simulate: speed``, else ``runtime.step.SPEED``.
+        ``v`` of ``ℓ = v·dt`` (map units / s, > 0; ``dt`` from ``runtime.settings.timing``); default the
+        map's ``params: simulate: speed``, else ``runtime.settings.SPEED``.
     resolution : float, optional
         Grid spacing (map units, > 0); default :func:`default_resolution`.
     headings : int, optional
@@ -316,11 +316,11 @@ def grid(plan: Plan, eta_deg: float | None = None, fov_deg: float = 60.0, kappa:
     kappa = _number(params.get("slip", 0.0) if kappa is None else kappa, "kappa", high=1.0, high_open=True)
     floor = params.get("slip_floor")
     if nu is None:
-        nu = step.SLIP_FLOOR_PER_DIAGONAL * diagonal if floor is None else floor
+        nu = settings.SLIP_FLOOR_PER_DIAGONAL * diagonal if floor is None else floor
     nu = _number(nu, "nu", high=diagonal)
     if speed is None:
         given = (map_.params or {}).get("simulate") or {}
-        speed = given.get("speed", step.SPEED) if isinstance(given, dict) else step.SPEED
+        speed = given.get("speed", settings.SPEED) if isinstance(given, dict) else settings.SPEED
     speed = _number(speed, "speed", low=0.0, low_open=True, high=1e3 * diagonal)
     max_range = _number(max_range, "max_range", low=0.0, low_open=True)  # inf: any range
     full = fov_deg >= 360.0
@@ -348,7 +348,7 @@ def grid(plan: Plan, eta_deg: float | None = None, fov_deg: float = 60.0, kappa:
 
     eta = math.radians(eta_deg)
     fov = math.radians(fov_deg)
-    dt = step.timing(diagonal, speed)[0]
+    dt = settings.timing(diagonal, speed)[0]
     step_len = speed * dt
     swing = 2.0 * lam * math.sin(0.5 * math.radians(compass)) if lam > 0 else 0.0
     tau = np.asarray(arrays.usable_tolerance, float)

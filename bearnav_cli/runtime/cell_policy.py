@@ -48,14 +48,6 @@ __all__ = [
 ]
 
 
-def __getattr__(name: str) -> Any:
-    # obstacle_clearance moved to runtime.sight (issue 24); stages.simulate still reads it here: answer for it
-    # until it imports it from there
-    if name == "obstacle_clearance":
-        return sight.obstacle_clearance
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
 # --------------------------------------------------------------------------- vectorised queries
 
 

@@ -14,9 +14,7 @@ simulated is what runs on the robot.
 from __future__ import annotations
 
 import dataclasses
-import importlib
 import math
-from typing import Any
 
 import numpy as np
 
@@ -31,22 +29,6 @@ from bearnav_cli.runtime.settings import ControlOutput, ControlSettings, Control
 from bearnav_cli.runtime.unicycle import heading_allowance, unicycle_command
 
 __all__ = ["STALL_FIELD", "bounded_control", "control", "follow_fields"]
-
-#: Names that moved out of this module (issue 24) and the module each lives in now. ``liveness``, ``tags`` and
-#: a few tests still read them as ``step.X``; :func:`__getattr__` answers for them until they import them from
-#: their homes. Not exported (``__all__``): delete an entry once nothing reads it here.
-_MOVED = {
-    **dict.fromkeys(("ALPHA", "BEARING_SIGMA", "ODOMETRY_DRIFT", "SLIP_FLOOR_PER_DIAGONAL", "SPEED", "timing"),
-                    "settings"),
-    **dict.fromkeys(("LOOK_HEADINGS", "views"), "looking"),
-}  # fmt: skip
-
-
-def __getattr__(name: str) -> Any:
-    if name in _MOVED:
-        return getattr(importlib.import_module(f"bearnav_cli.runtime.{_MOVED[name]}"), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
 
 #: ``‖a − M x̂‖ < STALL_FIELD · u_max`` is a stall: the field has (almost) an equilibrium there.
 STALL_FIELD = 1e-6

@@ -58,7 +58,7 @@ VERSION = 5  # 4: cover = F and max_added_nodes = 600 by default; free_coverage_
 log = logging.getLogger(__name__)
 
 #: Re-exported: the cell and barrier helpers are part of this stage's interface.
-__all__ = ["Params", "run", "summary"]
+__all__ = ["Params", "VERSION", "problems", "run", "summary"]
 
 CELL_MODES = ("funnel", "funnel-local", "paper")
 COVER_DOMAINS = ("F", "F_m")  # the default first, as every choice tuple
@@ -685,6 +685,3 @@ def problems(cells: Cells) -> list:
     from bearnav_cli import verdicts
 
     return verdicts.no_route(cells.nodes, cells.node_added) + verdicts.blind_spots(cells)
-
-
-__all__ += ["problems"]

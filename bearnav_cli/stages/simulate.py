@@ -34,9 +34,9 @@ from bearnav_cli.world.loop import EstimateTrace, Loop, trace_estimates
 from bearnav_cli.world.motion import Base, Contact, body_space, initial_headings
 from bearnav_cli.world.starts import parse_starts
 
-__all__ = ["PROGRESS_EVERY", "PROGRESS_WINDOW", "Params", "Settings", "VERSION", "estimate_trace", "in_domain",
-           "make_camera", "metrics", "resolve_starts", "rollout", "run", "settings", "start_loop", "step_limit",
-           "step_limits", "summary", "tree_routes"]  # fmt: skip
+__all__ = ["PROGRESS_EVERY", "PROGRESS_WINDOW", "Params", "Settings", "VERSION", "check_resources", "estimate_trace",
+           "in_domain", "make_camera", "metrics", "resolve_starts", "rollout", "run", "settings", "start_loop",
+           "step_limit", "step_limits", "summary", "tree_routes"]  # fmt: skip
 
 VERSION = 3
 log = logging.getLogger(__name__)
@@ -308,7 +308,7 @@ def settings(plan, params: Params) -> Settings:
     The control settings come from :meth:`ControlSettings.for_plan`, the builder the robot's
     :class:`~bearnav_cli.runtime.Controller` uses; the filter assumes the bearing noise this
     simulation draws (``noise_deg``; the exact default camera's fixes are exact), and with
-    ``camera="render"`` at least the Controller's default :data:`~bearnav_cli.runtime.step.BEARING_SIGMA`.
+    ``camera="render"`` at least the Controller's default :data:`~bearnav_cli.runtime.settings.BEARING_SIGMA`.
     """
     goal_tolerance = params.goal_tolerance if params.goal_tolerance is not None else float(plan.goal_tolerance)
     sigma = math.radians(params.noise_deg)
@@ -451,10 +451,10 @@ def world_bound(params: Params, s: Settings) -> float | None:
 
 def nearest_obstacle(arrays: PlanArrays) -> Callable[[np.ndarray], np.ndarray]:
     """``toward(x)``: the unit direction from each point (R, 2) toward its nearest inflated obstacle or wall
-    (``runtime.cell_policy.obstacle_clearance``), what the worst-case errors push toward."""
+    (``runtime.sight.obstacle_clearance``), what the worst-case errors push toward."""
 
     def toward(x: np.ndarray) -> np.ndarray:
-        return -runtime.cell_policy.obstacle_clearance(arrays, x)[1]
+        return -runtime.sight.obstacle_clearance(arrays, x)[1]
 
     return toward
 
@@ -802,6 +802,3 @@ def check_resources(plan, params: Params, given: frozenset[str] = frozenset()) -
     per_run = limits.RUN_BYTES + (limits.TRAJECTORY_POINT_BYTES * typical if record else 0)
     note = " (without recorded trajectories: params.simulate.record_trajectories false)" if record else ""
     limits.check_memory(runs, "runs", per_run, "starts", note=note)
-
-
-__all__ += ["check_resources"]

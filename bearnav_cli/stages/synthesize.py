@@ -22,13 +22,11 @@ the numbers are those of the cell-by-cell functions.
 
 from __future__ import annotations
 
-import importlib
 import logging
 import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
@@ -62,20 +60,8 @@ from bearnav_cli.lp import LpResult, LpSolver, LpStatus
 
 __all__ = [
     "GAIN_STRUCTURES", "LP_FORMS", "Params", "PreparedCell", "SolveOutcome", "VERSION", "finish_cell", "prepare_cell",
-    "run", "solve_cell", "solve_prepared", "summary",
+    "problems", "run", "solve_cell", "solve_prepared", "summary",
 ]  # fmt: skip
-
-#: Names that moved out of this module (issue 24) and that tests of other modules still read as
-#: ``synthesize.X``, with their homes; :func:`__getattr__` answers for them (not exported). Delete an entry
-#: once nothing reads it here.
-_MOVED = {"lemma4_margin": "bearnav_cli.cell_fields", "vertex_margins": "bearnav_cli.runtime.certificate"}
-
-
-def __getattr__(name: str) -> Any:
-    if name in _MOVED:
-        return getattr(importlib.import_module(_MOVED[name]), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
 
 VERSION = 3
 log = logging.getLogger(__name__)
@@ -749,6 +735,3 @@ def problems(plan: Plan) -> list:
     cells = plan.cells
     return (verdicts.no_route(cells.nodes, cells.node_added) + verdicts.blind_spots(cells)
             + verdicts.not_certified(plan.status))  # fmt: skip
-
-
-__all__ += ["problems"]

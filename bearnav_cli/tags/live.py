@@ -10,7 +10,7 @@ import numpy as np
 
 from bearnav_cli import perception
 from bearnav_cli.perception import EvaluationGrid
-from bearnav_cli.runtime import bounded, estimate, step
+from bearnav_cli.runtime import bounded, estimate, looking
 from bearnav_cli.tags.candidates import Candidates, candidates
 from bearnav_cli.tags.proposal import Params, TagProposal, coverage_with, new_tag_ids
 
@@ -163,7 +163,7 @@ def propose_live_tags(plan: Any, params: Params = Params(target="live")) -> TagP
     cand = candidates(map_, width, pe_grid.space)
     x = g.points[failing]
     seen = (
-        step.views(g.arrays, x, 2.0 * math.pi, params.max_range, 1, cand.positions)[:, 0]
+        looking.views(g.arrays, x, 2.0 * math.pi, params.max_range, 1, cand.positions)[:, 0]
         if len(x)
         else np.zeros((0, len(cand.positions)), bool)
     )
