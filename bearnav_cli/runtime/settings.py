@@ -17,30 +17,20 @@ import numpy as np
 
 from bearnav_cli.runtime import bearing
 from bearnav_cli.runtime.bounded import MAX_VERTICES
+from bearnav_cli.runtime.defaults import ALPHA, ODOMETRY_DRIFT, SPEED
 from bearnav_cli.runtime.robot import ROBOT_DEFAULTS
 
 __all__ = [
-    "ALPHA", "BEARING_SIGMA", "BLIND_ERROR_PER_DIAGONAL", "DT_MAX", "DT_PER_DIAGONAL", "DYNAMICS", "ESTIMATORS",
-    "MEASUREMENTS", "ODOMETRY_DRIFT", "SLIP_FLOOR_PER_DIAGONAL", "SPEED", "ControlOutput", "ControlSettings",
-    "ControlState", "ErrorBounds", "FixSettings", "LookSettings", "LoopSettings", "UnicycleSettings", "timing",
+    "BEARING_SIGMA", "BLIND_ERROR_PER_DIAGONAL", "DT_MAX", "DT_PER_DIAGONAL", "SLIP_FLOOR_PER_DIAGONAL",
+    "ControlOutput", "ControlSettings", "ControlState", "ErrorBounds", "FixSettings", "LookSettings", "LoopSettings",
+    "UnicycleSettings", "timing",
 ]  # fmt: skip
 
-DYNAMICS = ("single", "unicycle")
-MEASUREMENTS = ("bearing", "displacement")
-#: Reference speed ``v_ref`` of the single integrator (map units / s): the one default of
-#: ``bearnav simulate``, ``bearnav verify`` and :class:`~bearnav_cli.runtime.Controller`.
-SPEED = 0.1
-#: Forward gain ``α`` of the unicycle (map units / s), likewise.
-ALPHA = 0.1
 #: Bearing noise (1σ, radians) the filter assumes when the caller does not know its camera's: 1°.
 #: Not 0: a filter that assumes exact bearings gives every fix zero variance, so after one fix the
 #: odometry's prediction (variance ``(odometry_drift·d)²``) rejects every later fix that errs by more
 #: than its 3σ: it trusts odometry over every noisy fix.
 BEARING_SIGMA = math.radians(1.0)
-#: Odometry error (1σ) per unit travelled that the filter assumes (its process noise): 5%.
-ODOMETRY_DRIFT = 0.05
-#: The estimators of the control step: bounded-error sets (ALGORITHMS §12.2) or the scalar filter.
-ESTIMATORS = ("kalman", "set")
 #: ``ν = SLIP_FLOOR_PER_DIAGONAL · D``, the odometry bound's floor per step (ALGORITHMS §12.1).
 SLIP_FLOOR_PER_DIAGONAL = 1e-4
 #: ``dt = min(DT_PER_DIAGONAL · D / v, DT_MAX)`` by default (ALGORITHMS §7.1).
