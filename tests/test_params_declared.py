@@ -75,3 +75,31 @@ def test_the_declarations_import_no_numpy():
             "print(sorted(m for m in sys.modules if m.split('.')[0] in ('numpy', 'shapely', 'scipy')))")  # fmt: skip
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO, check=True)
     assert done.stdout.strip() == "[]", done.stdout
+
+
+def _ros_settings() -> type:
+    """``Settings`` of contrib/ros2/bearnav_ros.py (numpy and the runtime only)."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("bearnav_ros_defaults", REPO / "contrib" / "ros2" / "bearnav_ros.py")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # dataclasses look their module up
+    spec.loader.exec_module(module)
+    return module.Settings
+
+
+def test_the_loop_defaults_have_one_source():
+    """simulate's ``Params``, ``ControlSettings`` and the ROS node's ``Settings`` take each shared default from
+    ``runtime.defaults.LOOP_DEFAULTS`` (the node's ``dynamics`` aside: a real base is a unicycle)."""
+    from bearnav_cli.runtime.defaults import LOOP_DEFAULTS
+    from bearnav_cli.runtime.settings import ControlSettings
+
+    simulate = {f.name: f.default for f in dataclasses.fields(params_type("simulate"))}
+    control = {f.name: f.default for f in dataclasses.fields(ControlSettings)}
+    node = {f.name: f.default for f in dataclasses.fields(_ros_settings())}
+    for name, default in LOOP_DEFAULTS.items():
+        assert simulate[name] == default, name
+        assert control[name] in (default, dataclasses.MISSING), name  # speed: ControlSettings.for_plan's SPEED
+        if name in node and name != "dynamics":
+            assert node[name] == default, name
+    assert node["clamp_reverse"] is False

@@ -9,13 +9,12 @@ from dataclasses import dataclass
 from bearnav_cli.errors import InvalidParamsError
 from bearnav_cli.params.declare import MAX_STEPS_PER_RUN, SEED, Range, param
 from bearnav_cli.runtime.defaults import (
-    ALPHA,
     DYNAMICS,
     ESTIMATORS,
+    LOOP_DEFAULTS,
     MEASUREMENTS,
     METHODS,
-    ODOMETRY_DRIFT,
-    SPEED,
+    MIN_SPREAD_DEG,
     check_camera,
 )
 
@@ -164,32 +163,32 @@ class Params:
         ``None``: the map's, else ``1e-4·D``.
     """
 
-    dynamics: str = param("single", choices=DYNAMICS)
-    measurement: str = param("bearing", choices=MEASUREMENTS)
+    dynamics: str = param(LOOP_DEFAULTS["dynamics"], choices=DYNAMICS)
+    measurement: str = param(LOOP_DEFAULTS["measurement"], choices=MEASUREMENTS)
     fov: float = param(360.0, range=Range(0, 360, low_open=True), unit="degrees")
     noise_deg: float = param(0.0, range=Range(0, 180), unit="degrees")
     range: float | None = param(
         None, range=Range(0, 1e6, low_open=True, per_diagonal=True), unit="map units", option="--range"
     )
     occlusion: bool = True
-    reconstruction: str = param("lsq", choices=METHODS)
-    min_spread_deg: float = param(2.0, range=Range(0, 90, low_open=True), unit="degrees", option=None)
-    speed: float = param(SPEED, range=_SPEED, unit="map units / s")
-    alpha: float = param(ALPHA, range=_SPEED, unit="map units / s")
-    beta: float = param(0.5, range=Range(0, 1e3, low_open=True), unit="rad / s")
-    clamp_reverse: bool = param(False, off="--allow-reverse")
-    turn_first: bool = param(True, option=None)
-    certified_heading: bool = param(True, option=None)
-    look_on_purpose: bool = param(False, option=None)
-    keep_clear: bool = True
+    reconstruction: str = param(LOOP_DEFAULTS["reconstruction"], choices=METHODS)
+    min_spread_deg: float = param(MIN_SPREAD_DEG, range=Range(0, 90, low_open=True), unit="degrees", option=None)
+    speed: float = param(LOOP_DEFAULTS["speed"], range=_SPEED, unit="map units / s")
+    alpha: float = param(LOOP_DEFAULTS["alpha"], range=_SPEED, unit="map units / s")
+    beta: float = param(LOOP_DEFAULTS["beta"], range=Range(0, 1e3, low_open=True), unit="rad / s")
+    clamp_reverse: bool = param(LOOP_DEFAULTS["clamp_reverse"], off="--allow-reverse")
+    turn_first: bool = param(LOOP_DEFAULTS["turn_first"], option=None)
+    certified_heading: bool = param(LOOP_DEFAULTS["certified_heading"], option=None)
+    look_on_purpose: bool = param(LOOP_DEFAULTS["look_on_purpose"], option=None)
+    keep_clear: bool = LOOP_DEFAULTS["keep_clear"]
     initial_heading: float | None = param(None, range=Range(-360, 360), unit="degrees", option=None)
-    hold_time: float = param(2.0, range=Range(0, 1e6, low_open=True), unit="s")
-    odometry: bool = True
+    hold_time: float = param(LOOP_DEFAULTS["hold_time"], range=Range(0, 1e6, low_open=True), unit="s")
+    odometry: bool = LOOP_DEFAULTS["odometry"]
     max_fix_error: float | None = param(
         None, range=Range(0, 1e3, low_open=True, per_diagonal=True), unit="map units", option=None
     )
     odometry_noise: float = param(0.02, range=Range(0, 1))
-    odometry_drift: float = param(ODOMETRY_DRIFT, range=Range(0, 1))
+    odometry_drift: float = param(LOOP_DEFAULTS["odometry_drift"], range=Range(0, 1))
     starts: str = "map"
     dt: float | None = param(None, range=Range(0, 1e3, low_open=True), unit="s")
     goal_tolerance: float | None = param(
@@ -199,7 +198,7 @@ class Params:
     camera: str = param("ideal", choices=CAMERAS)
     seed: int = param(0, range=SEED)
     record_trajectories: bool = param(True, option=None)
-    estimator: str = param("kalman", choices=ESTIMATORS)
+    estimator: str = param(LOOP_DEFAULTS["estimator"], choices=ESTIMATORS)
     noise_bound_deg: float | None = param(None, range=Range(0, 45, high_open=True), unit="degrees", listed=False)
     noise_worst: bool = False
     bearing_error_deg: float | None = param(None, range=Range(0, 45, high_open=True), unit="degrees", listed=False)

@@ -36,7 +36,7 @@ from typing import Any
 import numpy as np
 
 from bearnav_cli.errors import InvalidParamsError
-from bearnav_cli.runtime.defaults import METHODS
+from bearnav_cli.runtime.defaults import METHODS, MIN_SPREAD_DEG
 from bearnav_cli.runtime.pairs import pair_output, rescale_output
 from bearnav_cli.runtime.planar import dot, norm, points, safe
 
@@ -56,7 +56,7 @@ __all__ = [
 ]
 
 #: Default ``θ_min = min_bearing_spread`` (§6.2): 2°, in radians.
-DEFAULT_MIN_SPREAD = math.radians(2.0)
+DEFAULT_MIN_SPREAD = math.radians(MIN_SPREAD_DEG)
 #: Rounding allowance of the field-of-view test (radians): ``atan2`` of a difference of
 #: positions and the subtraction of the heading each round by a few ulps, so without it a
 #: landmark placed exactly on the edge of the field of view would be visible or not at random.

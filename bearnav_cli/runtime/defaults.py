@@ -11,7 +11,19 @@ from typing import Any
 
 from bearnav_cli.errors import InvalidParamsError
 
-__all__ = ["ALPHA", "check_camera", "DYNAMICS", "ESTIMATORS", "MEASUREMENTS", "METHODS", "ODOMETRY_DRIFT", "SPEED"]
+__all__ = [
+    "ALPHA",
+    "BEARING_SIGMA",
+    "LOOP_DEFAULTS",
+    "MIN_SPREAD_DEG",
+    "check_camera",
+    "DYNAMICS",
+    "ESTIMATORS",
+    "MEASUREMENTS",
+    "METHODS",
+    "ODOMETRY_DRIFT",
+    "SPEED",
+]
 
 DYNAMICS = ("single", "unicycle")
 MEASUREMENTS = ("bearing", "displacement")
@@ -26,6 +38,23 @@ SPEED = 0.1
 ALPHA = 0.1
 #: Odometry error (1σ) per unit travelled that the filter assumes (its process noise): 5%.
 ODOMETRY_DRIFT = 0.05
+#: Bearing noise (1σ, radians) the filter assumes when the caller does not know its camera's: 1°.
+#: Not 0: a filter that assumes exact bearings gives every fix zero variance, so after one fix the
+#: odometry's prediction (variance ``(odometry_drift·d)²``) rejects every later fix that errs by more
+#: than its 3σ: it trusts odometry over every noisy fix.
+BEARING_SIGMA = math.radians(1.0)
+#: ``θ_min`` of §6.2 (degrees): a pair of bearings closer than this gives no fix.
+MIN_SPREAD_DEG = 2.0
+#: The defaults of the loop's rules that :class:`~bearnav_cli.runtime.settings.ControlSettings`, ``bearnav
+#: simulate`` (:mod:`bearnav_cli.params.simulate`) and the ROS node (contrib/ros2) share, by field name.
+#: ``clamp_reverse`` is off: a base that may not drive backwards says so in its map (``robot: {reverse:
+#: false}``), which clamps wherever the plan is run; a clamped look-ahead step is not certified.
+LOOP_DEFAULTS = {
+    "dynamics": DYNAMICS[0], "measurement": MEASUREMENTS[0], "estimator": ESTIMATORS[0], "keep_clear": True,
+    "speed": SPEED, "alpha": ALPHA, "beta": 0.5, "clamp_reverse": False, "turn_first": True,
+    "certified_heading": True, "reconstruction": METHODS[0], "odometry": True, "odometry_drift": ODOMETRY_DRIFT,
+    "hold_time": 2.0, "look_on_purpose": False,
+}  # fmt: skip
 
 
 def _is_number(value: Any) -> bool:

@@ -28,7 +28,7 @@ from bearnav_cli.params import simulate as declared
 from bearnav_cli.runtime import ControlSettings, PlanArrays
 from bearnav_cli.runtime import controller as runtime_controller
 from bearnav_cli.runtime import robot as runtime_robot
-from bearnav_cli.runtime.settings import BEARING_SIGMA
+from bearnav_cli.runtime.defaults import BEARING_SIGMA
 from bearnav_cli.world import starts as world_starts
 from bearnav_cli.world.camera import Camera, IdealCamera
 from bearnav_cli.world.loop import EstimateTrace, Loop, trace_estimates
