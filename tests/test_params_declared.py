@@ -103,3 +103,21 @@ def test_the_loop_defaults_have_one_source():
         if name in node and name != "dynamics":
             assert node[name] == default, name
     assert node["clamp_reverse"] is False
+
+
+@pytest.mark.parametrize("command", sorted(set(params.MODULES) - {"map"}))  # map_.Params: the pipeline checks
+def test_params_refuse_a_value_below_the_declared_range(command):
+    """``__post_init__`` checks every declared choice and range (:func:`bearnav_cli.params.declare.check`)."""
+    from bearnav_cli.errors import InvalidParamsError
+
+    for field in dataclasses.fields(params_type(command)):
+        declaration = declared(field)
+        rng = declaration.range
+        if rng is not None and declaration.listed and rng.low is not None:
+            with pytest.raises(InvalidParamsError) as caught:
+                params_type(command)(**{field.name: rng.low if rng.low_open else rng.low - 1})
+            assert caught.value.field == field.name, (command, field.name)
+        if declaration.choices:
+            with pytest.raises(InvalidParamsError) as caught:
+                params_type(command)(**{field.name: "no-such-choice"})
+            assert caught.value.field == field.name, (command, field.name)

@@ -14,6 +14,7 @@ from typing import Any
 
 __all__ = [
     "AUTO",
+    "check",
     "Declared",
     "MAX_RUNS",
     "MAX_STEPS_PER_RUN",
@@ -73,8 +74,9 @@ class Range:
         text = self.text()
         return "an " + text if self.integer else "in " + text
 
-    def problem(self, value: Any, diagonal: float | None = None) -> str | None:
-        """What is wrong with ``value`` (None when it fits); D-relative bounds only with ``diagonal``."""
+    def problem(self, value: Any, diagonal: float | None = None, *, high: bool = True) -> str | None:
+        """What is wrong with ``value`` (None when it fits); D-relative bounds only with ``diagonal``, the high
+        bound only with ``high``."""
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             return f"expected a number, got {value!r}"
         if isinstance(value, float) and not math.isfinite(value):
@@ -82,8 +84,8 @@ class Range:
         if self.integer and not (isinstance(value, int) or float(value).is_integer()):
             return f"must be {self.describe()}, got {value!r}"
         scale = 1.0
-        if self.per_diagonal:
-            if diagonal is None:  # the map is not known yet: only what does not depend on D
+        if self.per_diagonal or not high:
+            if diagonal is None or not high:  # the map is not known yet: only what does not depend on D
                 if self.low is None or value > self.low or (value == self.low and not self.low_open):
                     return None
                 return f"must be {self.describe()}, got {value!r}"
@@ -129,6 +131,10 @@ class Declared:
     listed : bool
         The range is one of :data:`bearnav_cli.limits.LIMITS` (checked before ``Params`` is made and
         listed in docs/cli.md "Option limits"); ``False``: only ``Params`` itself checks it.
+    capped : bool
+        ``Params`` itself refuses a value above the range too; otherwise it checks the low bound and
+        the type only, and the high bound is a limit of a request (:func:`bearnav_cli.limits.check_value`),
+        which the Python API may pass.
     """
 
     range: Range | None
@@ -137,10 +143,12 @@ class Declared:
     option: str | None
     off: str | None
     listed: bool
+    capped: bool = False
 
 
 def param(default: Any, *, range: Range | None = None, choices: tuple[str, ...] = (), unit: str = "",
-          option: str | None = AUTO, off: str | None = None, listed: bool = True) -> Any:  # fmt: skip
+          option: str | None = AUTO, off: str | None = None, listed: bool = True,
+          capped: bool = False) -> Any:  # fmt: skip
     """A dataclass field with ``default`` and its declaration (:class:`Declared`) in its metadata.
 
     Parameters
@@ -160,8 +168,10 @@ def param(default: Any, *, range: Range | None = None, choices: tuple[str, ...] 
         A bool's off-switch when it is not ``--no-NAME``.
     listed : bool
         The range is one of :data:`bearnav_cli.limits.LIMITS` (``False``: ``Params`` alone checks it).
+    capped : bool
+        ``Params`` itself refuses a value above the range (:attr:`Declared.capped`).
     """
-    declared_ = Declared(range, tuple(choices), unit, option, off, listed)
+    declared_ = Declared(range, tuple(choices), unit, option, off, listed, capped)
     return dataclasses.field(default=default, metadata={"declared": declared_})
 
 
@@ -169,10 +179,42 @@ def declared(field: dataclasses.Field) -> Declared:
     """The declaration of a field (an undeclared one: no range, choices or unit; option ``--name``)."""
     found = field.metadata.get("declared")
     if found is None:
-        return Declared(None, (), "", "--" + field.name.replace("_", "-"), None, True)
+        return Declared(None, (), "", "--" + field.name.replace("_", "-"), None, True, False)
     if found.option == AUTO:
         return dataclasses.replace(found, option="--" + field.name.replace("_", "-"))
     return found
+
+
+def check(params: Any) -> None:
+    """Check a ``Params`` against its declarations: each field's choices and listed range, in field order.
+
+    A range's type and low bound are checked (its high bound too when declared ``capped``; the
+    pipeline checks the rest of a request, :func:`bearnav_cli.limits.check_value`); ``None`` is not
+    checked; ranges declared with ``listed=False`` are the class's own checks. The first check of
+    ``__post_init__`` in every ``Params``.
+
+    Parameters
+    ----------
+    params : Params
+        The dataclass instance just made.
+
+    Raises
+    ------
+    InvalidParamsError
+        For the first field outside its choices or range, naming the field.
+    """
+    from bearnav_cli.errors import InvalidParamsError
+
+    for field in dataclasses.fields(params):
+        declaration = declared(field)
+        value = getattr(params, field.name)
+        if declaration.choices and value not in declaration.choices:
+            raise InvalidParamsError(f"must be one of {', '.join(declaration.choices)}, got {value!r}",
+                                     field=field.name)  # fmt: skip
+        if declaration.range is not None and declaration.listed and value is not None:
+            problem = declaration.range.problem(value, high=declaration.capped)
+            if problem is not None:
+                raise InvalidParamsError(problem, field=field.name)
 
 
 def named_option(field: dataclasses.Field) -> str | None:

@@ -3,11 +3,9 @@
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
-from bearnav_cli.errors import InvalidParamsError
-from bearnav_cli.params.declare import Range, param
+from bearnav_cli.params.declare import Range, check, param
 
 __all__ = ["BARRIERS", "BISECTOR_RULES", "CBF_APEXES", "CBF_FILTERS", "CELL_MODES", "COVER_DOMAINS", "Params"]
 
@@ -84,9 +82,9 @@ class Params:
 
     cells: str = param("funnel", choices=CELL_MODES)
     exit_inset: float | None = param(None, range=Range(0, 1, per_diagonal=True), unit="map units")
-    coverage_target: float = param(0.99, range=Range(0, 1))
+    coverage_target: float = param(0.99, range=Range(0, 1), capped=True)
     cover: str = param("F", choices=COVER_DOMAINS)
-    max_added_nodes: int = param(600, range=Range(0, 100_000, integer=True))
+    max_added_nodes: int = param(600, range=Range(0, 100_000, integer=True), capped=True)
     bisector_rule: str = param("crossing", choices=BISECTOR_RULES)
     cbf_apex: str = param("child", choices=CBF_APEXES)
     cbf_filter: str = param("both", choices=CBF_FILTERS)
@@ -95,29 +93,4 @@ class Params:
     barrier_margin: float | None = param(None, range=Range(0, 1, per_diagonal=True), unit="map units")
 
     def __post_init__(self) -> None:
-        if self.barrier_margin is not None and not (self.barrier_margin >= 0 and math.isfinite(self.barrier_margin)):
-            raise InvalidParamsError(f"must be zero or positive, got {self.barrier_margin}", field="barrier_margin")
-        if self.exit_inset is not None and not (self.exit_inset >= 0 and math.isfinite(self.exit_inset)):
-            raise InvalidParamsError(f"must be zero or positive, got {self.exit_inset}", field="exit_inset")
-        if isinstance(self.coverage_target, bool) or not 0.0 <= self.coverage_target <= 1.0:
-            raise InvalidParamsError(f"must lie in [0, 1], got {self.coverage_target}", field="coverage_target")
-        if (
-            isinstance(self.max_added_nodes, bool)
-            or not isinstance(self.max_added_nodes, int)
-            or not (0 <= self.max_added_nodes <= 100_000)
-        ):
-            raise InvalidParamsError(f"must be an integer in [0, 100000], got {self.max_added_nodes!r}",
-                                     field="max_added_nodes")  # fmt: skip
-        for name, allowed in (
-            ("cells", CELL_MODES),
-            ("cover", COVER_DOMAINS),
-            ("barrier", BARRIERS),
-            ("bisector_rule", BISECTOR_RULES),
-            ("cbf_apex", CBF_APEXES),
-            ("cbf_filter", CBF_FILTERS),
-        ):
-            if getattr(self, name) not in allowed:
-                value = getattr(self, name)
-                raise InvalidParamsError(f"must be one of {', '.join(allowed)}, got {value!r}", field=name)
-        if not isinstance(self.n_landmarks, int) or self.n_landmarks < 2:
-            raise InvalidParamsError(f"must be an integer of at least 2, got {self.n_landmarks!r}", field="n_landmarks")
+        check(self)

@@ -2,11 +2,9 @@
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
-from bearnav_cli.errors import InvalidParamsError
-from bearnav_cli.params.declare import SEED, Range, param
+from bearnav_cli.params.declare import SEED, Range, check, param
 
 __all__ = ["POLICIES", "Params"]
 
@@ -46,15 +44,6 @@ class Params:
     clearance: float | None = param(None, range=Range(0, 1, per_diagonal=True), unit="map units")
 
     def __post_init__(self) -> None:
-        if self.iterations < 1:
-            raise InvalidParamsError(f"must be at least 1, got {self.iterations}", field="iterations")
-        if not (self.step > 0 and math.isfinite(self.step)):
-            raise InvalidParamsError(f"must be positive, got {self.step}", field="step")
-        if self.collision_policy not in POLICIES:
-            raise InvalidParamsError(f"must be one of {', '.join(POLICIES)}", field="collision_policy")
+        check(self)
         if self.border_spacing is None:
             object.__setattr__(self, "border_spacing", self.step / 10.0)
-        if not (self.border_spacing >= 0 and math.isfinite(self.border_spacing)):
-            raise InvalidParamsError(f"must be zero or positive, got {self.border_spacing}", field="border_spacing")
-        if self.clearance is not None and not (self.clearance >= 0 and math.isfinite(self.clearance)):
-            raise InvalidParamsError(f"must be zero or positive, got {self.clearance}", field="clearance")

@@ -3,11 +3,9 @@
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
-from bearnav_cli.errors import InvalidParamsError
-from bearnav_cli.params.declare import Range, param
+from bearnav_cli.params.declare import Range, check, param
 
 __all__ = ["CTL_MODES", "Params"]
 
@@ -38,9 +36,4 @@ class Params:
     clearance: float | None = param(None, range=Range(0, 1, per_diagonal=True), unit="map units")
 
     def __post_init__(self) -> None:
-        if isinstance(self.max_rounds, bool) or not isinstance(self.max_rounds, int) or self.max_rounds < 1:
-            raise InvalidParamsError(f"must be an integer >= 1, got {self.max_rounds!r}", field="max_rounds")
-        if self.ctl not in CTL_MODES:
-            raise InvalidParamsError(f"must be one of {', '.join(CTL_MODES)}, got {self.ctl!r}", field="ctl")
-        if self.clearance is not None and not (self.clearance >= 0 and math.isfinite(self.clearance)):
-            raise InvalidParamsError(f"must be zero or positive, got {self.clearance}", field="clearance")
+        check(self)

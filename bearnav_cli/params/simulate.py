@@ -7,7 +7,7 @@ import math
 from dataclasses import dataclass
 
 from bearnav_cli.errors import InvalidParamsError
-from bearnav_cli.params.declare import MAX_STEPS_PER_RUN, SEED, Range, param
+from bearnav_cli.params.declare import MAX_STEPS_PER_RUN, SEED, Range, check, param
 from bearnav_cli.runtime.defaults import (
     DYNAMICS,
     ESTIMATORS,
@@ -15,7 +15,6 @@ from bearnav_cli.runtime.defaults import (
     MEASUREMENTS,
     METHODS,
     MIN_SPREAD_DEG,
-    check_camera,
 )
 
 __all__ = ["CAMERAS", "Params"]
@@ -24,13 +23,6 @@ __all__ = ["CAMERAS", "Params"]
 CAMERAS = ("ideal", "render")
 #: A speed or a gain: up to 1000 diagonals per second.
 _SPEED = Range(0, 1e3, low_open=True, per_diagonal=True)
-
-
-def _positive(value: float | None, name: str, *, allow_none: bool = True) -> None:
-    if value is None and allow_none:
-        return
-    if value is None or isinstance(value, bool) or not (value > 0 and math.isfinite(value)):
-        raise InvalidParamsError(f"must be positive, got {value}", field=name)
 
 
 @dataclass(frozen=True)
@@ -165,14 +157,16 @@ class Params:
 
     dynamics: str = param(LOOP_DEFAULTS["dynamics"], choices=DYNAMICS)
     measurement: str = param(LOOP_DEFAULTS["measurement"], choices=MEASUREMENTS)
-    fov: float = param(360.0, range=Range(0, 360, low_open=True), unit="degrees")
+    fov: float = param(360.0, range=Range(0, 360, low_open=True), unit="degrees", capped=True)
     noise_deg: float = param(0.0, range=Range(0, 180), unit="degrees")
     range: float | None = param(
         None, range=Range(0, 1e6, low_open=True, per_diagonal=True), unit="map units", option="--range"
     )
     occlusion: bool = True
     reconstruction: str = param(LOOP_DEFAULTS["reconstruction"], choices=METHODS)
-    min_spread_deg: float = param(MIN_SPREAD_DEG, range=Range(0, 90, low_open=True), unit="degrees", option=None)
+    min_spread_deg: float = param(
+        MIN_SPREAD_DEG, range=Range(0, 90, low_open=True), unit="degrees", option=None, capped=True
+    )
     speed: float = param(LOOP_DEFAULTS["speed"], range=_SPEED, unit="map units / s")
     alpha: float = param(LOOP_DEFAULTS["alpha"], range=_SPEED, unit="map units / s")
     beta: float = param(LOOP_DEFAULTS["beta"], range=Range(0, 1e3, low_open=True), unit="rad / s")
@@ -207,26 +201,7 @@ class Params:
     slip_floor: float | None = param(None, range=Range(0), unit="map units", listed=False)
 
     def __post_init__(self) -> None:
-        for name, allowed in (("dynamics", DYNAMICS), ("measurement", MEASUREMENTS), ("reconstruction", METHODS),
-                              ("camera", CAMERAS), ("estimator", ESTIMATORS)):  # fmt: skip
-            if getattr(self, name) not in allowed:
-                raise InvalidParamsError(f"must be one of {', '.join(allowed)}, got {getattr(self, name)!r}",
-                                         field=name)  # fmt: skip
-        check_camera(self.fov, self.noise_deg, self.min_spread_deg)
-        for name in ("speed", "alpha", "beta", "hold_time"):
-            _positive(getattr(self, name), name, allow_none=False)
-        for name in ("range", "dt", "goal_tolerance"):
-            _positive(getattr(self, name), name)
-        for name in ("odometry_noise", "odometry_drift"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not (value >= 0 and math.isfinite(value)):
-                raise InvalidParamsError(f"must be zero or positive, got {value}", field=name)
-        if self.initial_heading is not None and not math.isfinite(self.initial_heading):
-            raise InvalidParamsError(f"must be finite, got {self.initial_heading}", field="initial_heading")
-        if self.max_steps is not None and (
-            isinstance(self.max_steps, bool) or int(self.max_steps) != self.max_steps or self.max_steps < 1
-        ):
-            raise InvalidParamsError(f"must be a positive integer, got {self.max_steps}", field="max_steps")
+        check(self)
         if self.noise_bound_deg is not None:
             value = self.noise_bound_deg
             if isinstance(value, bool) or not (math.isfinite(value) and 0.0 <= value < 45.0):

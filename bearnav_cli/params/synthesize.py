@@ -3,11 +3,10 @@
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 from bearnav_cli.errors import InvalidParamsError
-from bearnav_cli.params.declare import Range, param
+from bearnav_cli.params.declare import Range, check, param
 
 __all__ = ["GAIN_STRUCTURES", "LP_FORMS", "Params"]
 
@@ -64,28 +63,9 @@ class Params:
     tolerant: bool = param(True, off="--lp-field")
 
     def __post_init__(self) -> None:
+        check(self)
         for name in ("u_max", "kappa", "w_h", "w_v", "clf_margin", "goal_tolerance"):
-            value = getattr(self, name)
-            if value is None and name == "goal_tolerance":
-                continue
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-                raise InvalidParamsError(f"must be a finite number, got {value!r}", field=name)
-            object.__setattr__(self, name, float(value))
-        for name in ("u_max", "kappa"):
-            if getattr(self, name) <= 0:
-                raise InvalidParamsError(f"must be positive, got {getattr(self, name)}", field=name)
-        for name in ("w_h", "w_v", "clf_margin"):
-            if getattr(self, name) < 0:
-                raise InvalidParamsError(f"must be zero or positive, got {getattr(self, name)}", field=name)
-        if self.goal_tolerance is not None and self.goal_tolerance <= 0:
-            raise InvalidParamsError(f"must be positive, got {self.goal_tolerance}", field="goal_tolerance")
-        if isinstance(self.halvings, bool) or not isinstance(self.halvings, int) or self.halvings < 0:
-            raise InvalidParamsError(f"must be an integer of at least 0, got {self.halvings!r}", field="halvings")
-        if self.gain_structure not in GAIN_STRUCTURES:
-            raise InvalidParamsError(
-                f"must be one of {', '.join(GAIN_STRUCTURES)}, got {self.gain_structure!r}", field="gain_structure"
-            )
+            if getattr(self, name) is not None:
+                object.__setattr__(self, name, float(getattr(self, name)))
         if not isinstance(self.tolerant, bool):
             raise InvalidParamsError(f"must be true or false, got {self.tolerant!r}", field="tolerant")
-        if self.lp_form not in LP_FORMS:
-            raise InvalidParamsError(f"must be one of {', '.join(LP_FORMS)}, got {self.lp_form!r}", field="lp_form")

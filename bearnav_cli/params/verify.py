@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 from bearnav_cli.errors import InvalidParamsError
 from bearnav_cli.params import simulate
-from bearnav_cli.params.declare import MAX_RUNS, SEED, Range, param
+from bearnav_cli.params.declare import MAX_RUNS, SEED, Range, check, param
 from bearnav_cli.runtime.defaults import DYNAMICS
 
 __all__ = ["Params"]
@@ -64,7 +64,7 @@ class Params:
     seed: int = param(0, range=SEED)
     speed: float | None = param(None, range=Range(0, 1e3, low_open=True, per_diagonal=True), unit="map units / s")
     dt: float | None = param(None, range=Range(0, 1e3, low_open=True), unit="s", option=None, listed=False)
-    min_success: float | None = param(None, range=Range(0, 1))
+    min_success: float | None = param(None, range=Range(0, 1), capped=True)
     dynamics: str = param("single", choices=DYNAMICS)
     bearing_error_deg: float | None = param(
         None, range=Range(0, 45, low_open=True, high_open=True), unit="degrees", listed=False
@@ -74,13 +74,7 @@ class Params:
     live_resolution: float | None = param(None, range=Range(0, low_open=True), unit="map units", listed=False)
 
     def __post_init__(self) -> None:
-        if self.dynamics not in DYNAMICS:
-            raise InvalidParamsError(f"must be one of {', '.join(DYNAMICS)}, got {self.dynamics!r}",
-                                     field="dynamics")  # fmt: skip
-        if isinstance(self.n_starts, bool) or int(self.n_starts) != self.n_starts or self.n_starts < 0:
-            raise InvalidParamsError(f"must be a non-negative integer, got {self.n_starts}", field="n_starts")
-        if self.min_success is not None and not 0.0 <= self.min_success <= 1.0:
-            raise InvalidParamsError(f"must lie in [0, 1], got {self.min_success}", field="min_success")
+        check(self)
         simulate.Params(**({} if self.speed is None else {"speed": self.speed}), dt=self.dt)  # the loop's checks
         for name, low, high, closed in (("bearing_error_deg", 0.0, 45.0, (False, False)),
                                         ("live_fov", 0.0, 360.0, (False, True)),
