@@ -167,9 +167,9 @@ class Params:
     min_spread_deg: float = param(
         MIN_SPREAD_DEG, range=Range(0, 90, low_open=True), unit="degrees", option=None, capped=True
     )
-    speed: float = param(LOOP_DEFAULTS["speed"], range=_SPEED, unit="map units / s")
-    alpha: float = param(LOOP_DEFAULTS["alpha"], range=_SPEED, unit="map units / s")
-    beta: float = param(LOOP_DEFAULTS["beta"], range=Range(0, 1e3, low_open=True), unit="rad / s")
+    speed: float = param(LOOP_DEFAULTS["speed"], range=_SPEED, unit="map units/s")
+    alpha: float = param(LOOP_DEFAULTS["alpha"], range=_SPEED, unit="map units/s")
+    beta: float = param(LOOP_DEFAULTS["beta"], range=Range(0, 1e3, low_open=True), unit="rad/s")
     clamp_reverse: bool = param(LOOP_DEFAULTS["clamp_reverse"], off="--allow-reverse")
     turn_first: bool = param(LOOP_DEFAULTS["turn_first"], option=None)
     certified_heading: bool = param(LOOP_DEFAULTS["certified_heading"], option=None)

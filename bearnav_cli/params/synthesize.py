@@ -51,7 +51,7 @@ class Params:
         ``x_j`` in the cell. ``False``: the LP's field always.
     """
 
-    u_max: float = param(1.0, range=Range(0, 1e6, low_open=True), unit="map units / s")
+    u_max: float = param(1.0, range=Range(0, 1e6, low_open=True), unit="map units/s")
     kappa: float = param(0.5, range=Range(0, 1e6, low_open=True))
     halvings: int = param(6, range=Range(0, 60, integer=True))
     gain_structure: str = param("full", choices=GAIN_STRUCTURES)

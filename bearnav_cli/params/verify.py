@@ -62,7 +62,7 @@ class Params:
 
     n_starts: int = param(200, range=Range(0, MAX_RUNS, integer=True), option="--starts")
     seed: int = param(0, range=SEED)
-    speed: float | None = param(None, range=Range(0, 1e3, low_open=True, per_diagonal=True), unit="map units / s")
+    speed: float | None = param(None, range=Range(0, 1e3, low_open=True, per_diagonal=True), unit="map units/s")
     dt: float | None = param(None, range=Range(0, 1e3, low_open=True), unit="s", option=None, listed=False)
     min_success: float | None = param(None, range=Range(0, 1), capped=True)
     dynamics: str = param("single", choices=DYNAMICS)
