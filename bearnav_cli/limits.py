@@ -14,11 +14,12 @@ stages below the pipeline can use it.
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass
+import dataclasses
 from typing import Any
 
 from bearnav_cli.errors import InvalidParamsError, ResourceLimitError
+from bearnav_cli.params import MODULES, declare
+from bearnav_cli.params.declare import declared, named_option, params_type
 from bearnav_cli.runtime.plan_file import human_bytes, memory_budget
 
 __all__ = [
@@ -37,143 +38,35 @@ __all__ = [
 ]
 
 
-@dataclass(frozen=True)
-class Range:
-    """The documented range of one numeric parameter (docs/cli.md "Option limits" shows :meth:`text`).
-
-    Attributes
-    ----------
-    low, high : float or None
-        Bounds (``None``: none); with ``per_diagonal`` they are multiples of the map's diagonal
-        ``D`` and are checked once the map is known.
-    low_open : bool
-        ``low`` itself is excluded.
-    integer : bool
-        The value must be an integer.
-    per_diagonal : bool
-        The bounds scale with ``D`` (a length).
-    """
-
-    low: float | None = None
-    high: float | None = None
-    low_open: bool = False
-    integer: bool = False
-    per_diagonal: bool = False
-
-    def _bound(self, value: float | None) -> str:
-        if value is None:
-            return "∞"
-        text = f"{value:g}" if not self.integer else str(int(value))
-        if self.per_diagonal:
-            return "0" if value == 0 else ("D" if value == 1 else f"{text}·D")
-        return text
-
-    def text(self) -> str:
-        """``"integer in [1, 10000000]"``, ``"(0, 10·D]"`` ..."""
-        left = "(" if self.low_open else "["
-        right = ")" if self.high is None else "]"
-        interval = f"{left}{self._bound(self.low)}, {self._bound(self.high)}{right}"
-        return f"integer in {interval}" if self.integer else interval
-
-    def describe(self) -> str:
-        """``"an integer in [1, 10000000]"``, ``"in (0, 10·D]"``: for messages."""
-        text = self.text()
-        return "an " + text if self.integer else "in " + text
-
-    def problem(self, value: Any, diagonal: float | None = None) -> str | None:
-        """What is wrong with ``value`` (None when it fits); D-relative bounds only with ``diagonal``."""
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            return f"expected a number, got {value!r}"
-        if isinstance(value, float) and not math.isfinite(value):
-            return f"must be finite ({self.describe()}), got {value}"
-        if self.integer and not (isinstance(value, int) or float(value).is_integer()):
-            return f"must be {self.describe()}, got {value!r}"
-        scale = 1.0
-        if self.per_diagonal:
-            if diagonal is None:  # the map is not known yet: only what does not depend on D
-                if self.low is None or value > self.low or (value == self.low and not self.low_open):
-                    return None
-                return f"must be {self.describe()}, got {value!r}"
-            scale = diagonal
-        low = None if self.low is None else self.low * scale
-        high = None if self.high is None else self.high * scale
-        too_low = low is not None and (value < low or (self.low_open and value == low))
-        too_high = high is not None and value > high
-        if too_low or too_high:
-            shown = f" (D = {diagonal:.4g})" if self.per_diagonal and diagonal is not None else ""
-            return f"must be {self.describe()}{shown}, got {value!r}"
-        return None
+#: The range type, the seeds' range and the run and step caps, declared with the parameters
+#: (:mod:`bearnav_cli.params.declare`); the names every check of a request reads here.
+Range = declare.Range
+SEED = declare.SEED
+MAX_RUNS = declare.MAX_RUNS
+MAX_STEPS_PER_RUN = declare.MAX_STEPS_PER_RUN
 
 
-#: Seeds: any integer numpy's ``default_rng`` takes that also fits 32 bits; negatives are refused.
-SEED = Range(0, 2**32 - 1, integer=True)
-#: Most runs ``random:N`` / ``verify --starts`` may ask for (a memory estimate may refuse fewer).
-MAX_RUNS = 1_000_000
-#: Most steps one closed-loop run may be allowed (``max_steps``, explicit or from speed and dt): about 60
-#: times what the example maps need at their speeds, a few minutes of one robot.
-MAX_STEPS_PER_RUN = 1_000_000
+def _declared_limits() -> tuple[dict[str, dict[str, Range]], dict[tuple[str, str], str]]:
+    """The listed ranges of every command's fields, and the options declared by name (``--starts``, ``--range``)."""
+    found: dict[str, dict[str, Range]] = {}
+    renamed: dict[tuple[str, str], str] = {}
+    for command in MODULES:
+        found[command] = {}
+        for field in dataclasses.fields(params_type(command)):
+            declaration = declared(field)
+            if declaration.range is not None and declaration.listed:
+                found[command][field.name] = declaration.range
+            if named_option(field) is not None:
+                renamed[(command, field.name)] = named_option(field)
+    return found, renamed
 
-#: The range of every numeric parameter, by stage (``verify`` holds the options of ``bearnav verify``).
-LIMITS: dict[str, dict[str, Range]] = {
-    "map": {
-        "circle_segments": Range(8, 4096, integer=True),
-        "coverage_cells": Range(1, 1000, integer=True),
-    },
-    "rrtstar": {
-        "iterations": Range(1, 10_000_000, integer=True),
-        "step": Range(0, 10, low_open=True, per_diagonal=True),
-        "seed": SEED,
-        "border_spacing": Range(0, 10, per_diagonal=True),
-        "clearance": Range(0, 1, per_diagonal=True),
-    },
-    "simplify": {
-        "max_rounds": Range(1, 1000, integer=True),
-        "clearance": Range(0, 1, per_diagonal=True),
-    },
-    "decompose": {
-        "exit_inset": Range(0, 1, per_diagonal=True),
-        "coverage_target": Range(0, 1),
-        "max_added_nodes": Range(0, 100_000, integer=True),
-        "n_landmarks": Range(2, 1000, integer=True),
-        "barrier_margin": Range(0, 1, per_diagonal=True),
-    },
-    "synthesize": {
-        "u_max": Range(0, 1e6, low_open=True),
-        "kappa": Range(0, 1e6, low_open=True),
-        "halvings": Range(0, 60, integer=True),
-        "w_h": Range(0, 1e6),
-        "w_v": Range(0, 1e6),
-        "clf_margin": Range(0, 1),
-        "goal_tolerance": Range(0, 1, low_open=True, per_diagonal=True),
-    },
-    "simulate": {
-        "fov": Range(0, 360, low_open=True),
-        "noise_deg": Range(0, 180),
-        "range": Range(0, 1e6, low_open=True, per_diagonal=True),
-        "min_spread_deg": Range(0, 90, low_open=True),
-        "speed": Range(0, 1e3, low_open=True, per_diagonal=True),
-        "alpha": Range(0, 1e3, low_open=True, per_diagonal=True),
-        "beta": Range(0, 1e3, low_open=True),
-        "initial_heading": Range(-360, 360),
-        "hold_time": Range(0, 1e6, low_open=True),
-        "max_fix_error": Range(0, 1e3, low_open=True, per_diagonal=True),
-        "odometry_noise": Range(0, 1),
-        "odometry_drift": Range(0, 1),
-        "dt": Range(0, 1e3, low_open=True),
-        "goal_tolerance": Range(0, 1, low_open=True, per_diagonal=True),
-        "max_steps": Range(1, MAX_STEPS_PER_RUN, integer=True),
-        "seed": SEED,
-    },
-    "verify": {
-        "n_starts": Range(0, MAX_RUNS, integer=True),
-        "seed": SEED,
-        "speed": Range(0, 1e3, low_open=True, per_diagonal=True),
-        "min_success": Range(0, 1),
-    },
-}
 
-#: How the command line spells a parameter when it differs from ``--name-with-dashes``.
-OPTION_NAMES = {("simulate", "range"): "--range", ("verify", "n_starts"): "--starts"}
+#: The range of every numeric parameter, by stage (``verify`` holds the options of ``bearnav verify``): the
+#: ranges :func:`~bearnav_cli.params.declare.param` declares (those of ``Params``' own checks only aside).
+LIMITS: dict[str, dict[str, Range]]
+#: How the command line spells a parameter when its declaration names the option.
+OPTION_NAMES: dict[tuple[str, str], str]
+LIMITS, OPTION_NAMES = _declared_limits()
 
 
 def option_name(stage: str, name: str) -> str:

@@ -27,7 +27,6 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -37,6 +36,7 @@ from bearnav_cli.errors import ArtifactError, InvalidParamsError
 from bearnav_cli.geometry import FreeSpace
 from bearnav_cli.liveness import Liveness
 from bearnav_cli.liveness import measure as measure_liveness
+from bearnav_cli.params.verify import Params
 from bearnav_cli.routes import route_lengths
 from bearnav_cli.runtime import PlanArrays
 from bearnav_cli.stages import simulate
@@ -51,93 +51,9 @@ from bearnav_cli.verify_checks import (
 )
 from bearnav_cli.verify_report import VerifyReport, duration_text
 
-__all__ = ["Params", "guarantee", "loop_speed", "run"]
+__all__ = ["guarantee", "loop_speed", "run"]
 
 log = logging.getLogger(__name__)
-
-
-@dataclass(frozen=True)
-class Params:
-    """Parameters of ``bearnav verify``.
-
-    Attributes
-    ----------
-    n_starts : int
-        Random starts of the Monte-Carlo check (0 skips it).
-    seed : int
-        Seed of ``numpy.random.default_rng`` for the starts.
-    speed : float or None
-        Reference speed of the closed loop (map units / s); ``None`` means the map's ``params: simulate:
-        speed``, else simulate's default. Both are resolved by :func:`loop_speed`.
-    dt : float or None
-        Euler step (s); ``None`` takes the simulate default.
-    min_success : float or None
-        Fail when the success rate is below this fraction (``None``: never on that ground).
-    dynamics : {"single", "unicycle"}
-        Robot of the closed loop: the single integrator the certificate is stated for, or the unicycle
-        (``α`` = the loop's speed). On a plan with a look-ahead ``λ > 0`` the unicycle drives the point
-        ``p = x + λh`` as a single integrator (ALGORITHMS §12.6, Lemma 7), inside the certificate;
-        with ``λ = 0`` it follows §7.1's rules with ``certified_heading`` on (the heading allowance,
-        ``runtime.unicycle.heading_allowance``), outside the certificate: its steps count as uncertified
-        and the report says so. Both run with displacements and exact motion. A run from ``D``
-        **breaches** the certificate when any of its steps is not certified
-        (``runtime.ControlOutput.certified``: a funnel cell's field followed, not a straight
-        approach, on an exact estimate; not checked for the unicycle without a look-ahead) or when
-        its true position (``p`` with a look-ahead) lies outside every cell of ``D`` after a step;
-        any breach or collision of a run from ``D`` fails verify.
-    bearing_error_deg : float or None
-        The bound on every world-frame bearing error of the liveness report (degrees, in (0, 45));
-        ``None`` means the map's ``robot: bearing_error_deg`` plus ``compass_error_deg`` (0.2° by default).
-    live_fov : float or None
-        Measure liveness (ALGORITHMS §12.5) for a camera of this field of view (degrees, in (0, 360]).
-        ``None`` skips it. On a grid per cell, ``ε_c^look`` (the worst over the cell of the best one-look
-        bound over the headings), the live cells (``ε_c^look < τ_c − κℓ − ν``), the live fraction of ``D``
-        and the certified bearing error ``η*``: a measurement at a stated resolution, not a proof, that
-        never fails verify (:func:`bearnav_cli.liveness.measure`).
-    slip : float or None
-        The odometry error bound of the liveness report, a fraction of each step (in [0, 1)) plus a
-        floor (``κ`` and ``ν``). ``None`` means the map's ``robot: slip`` (0.03 by default); the
-        floor is the map's ``robot: slip_floor``, else ``1e-4·D``.
-    live_resolution : float or None
-        Grid spacing of the liveness report (map units, > 0). ``None`` means about 25 points in the
-        median cell, at most ``0.01·D`` (:func:`bearnav_cli.liveness.default_resolution`).
-    """
-
-    n_starts: int = 200
-    seed: int = 0
-    speed: float | None = None
-    dt: float | None = None
-    min_success: float | None = None
-    dynamics: str = "single"
-    bearing_error_deg: float | None = None
-    live_fov: float | None = None
-    slip: float | None = None
-    live_resolution: float | None = None
-
-    def __post_init__(self) -> None:
-        if self.dynamics not in runtime.DYNAMICS:
-            raise InvalidParamsError(f"must be one of {', '.join(runtime.DYNAMICS)}, got {self.dynamics!r}",
-                                     field="dynamics")  # fmt: skip
-        if isinstance(self.n_starts, bool) or int(self.n_starts) != self.n_starts or self.n_starts < 0:
-            raise InvalidParamsError(f"must be a non-negative integer, got {self.n_starts}", field="n_starts")
-        if self.min_success is not None and not 0.0 <= self.min_success <= 1.0:
-            raise InvalidParamsError(f"must lie in [0, 1], got {self.min_success}", field="min_success")
-        simulate.Params(**({} if self.speed is None else {"speed": self.speed}), dt=self.dt)  # the loop's checks
-        for name, low, high, closed in (("bearing_error_deg", 0.0, 45.0, (False, False)),
-                                        ("live_fov", 0.0, 360.0, (False, True)),
-                                        ("slip", 0.0, 1.0, (True, False)),
-                                        ("live_resolution", 0.0, math.inf, (False, False))):  # fmt: skip
-            value = getattr(self, name)
-            if value is None:
-                continue
-            number = isinstance(value, (int, float)) and not isinstance(value, bool)
-            inside = number and (value >= low if closed[0] else value > low) and (
-                value <= high if closed[1] else value < high)  # fmt: skip
-            if not inside:
-                interval = f"{'[' if closed[0] else '('}{low:g}, {high:g}{']' if closed[1] else ')'}"
-                raise InvalidParamsError(f"must lie in {interval}, got {value!r}", field=name)
-            if name != "live_fov" and self.live_fov is None:
-                raise InvalidParamsError("only with live_fov (the liveness report it belongs to)", field=name)
 
 
 def loop_speed(plan: Plan, params: Params) -> float:

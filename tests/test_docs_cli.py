@@ -150,3 +150,53 @@ def test_the_check_can_fail():
     assert "section of inspect has no example line starting with 'bearnav inspect'" in problems(no_example)
     stale = text.replace("| `simulate.min_spread_deg` |", "| `simulate.speed` |")
     assert any("simulate.speed has an option now" in p for p in problems(stale))
+
+
+# --------------------------------------------------------------------------- the tables and the declarations
+
+LIMIT_ROW = re.compile(r"^\| ([a-z]+) `([a-z_]+)` \| [^|]+ \| ([^|]+) \|", re.M)
+DEFAULT_ROW = re.compile(r"^\| `([a-z_]+)\.([a-z_]+)` \| ([^|]+) \|", re.M)
+
+
+def _shown(value: object) -> str:
+    """A default as the ``params:`` table writes it: ``none``, ``true``, ``100``, ``1.0``."""
+    return "none" if value is None else str(value).lower() if isinstance(value, bool) else repr(value)
+
+
+def declaration_problems(text: str) -> list[str]:
+    """Where docs/cli.md's "Option limits" and ``params:`` tables disagree with the ``Params`` declarations: a
+    row's option (or ``params.STAGE.NAME`` only) and unit, the ``params:``-only fields and their defaults."""
+    from bearnav_cli.params import MODULES
+    from bearnav_cli.params.declare import declared, params_type
+
+    found = []
+    for stage, name, column in LIMIT_ROW.findall(text):
+        field = {f.name: f for f in dataclasses.fields(params_type(stage))}[name]
+        declaration = declared(field)
+        where = f"`params.{stage}.{name}` only" if declaration.option is None else f"`{declaration.option}`"
+        if not column.strip().replace("`verify ", "`").startswith(where):  # verify's rows: `verify --starts`
+            found.append(f"option limits: {stage} `{name}` should name {where}")
+        if declaration.unit and f", {declaration.unit}" not in column:
+            found.append(f"option limits: {stage} `{name}` should give its unit, {declaration.unit}")
+    rows = {(stage, name): default.strip() for stage, name, default in DEFAULT_ROW.findall(text)}
+    params_only = {(stage, f.name): _shown(f.default) for stage in MODULES if stage != "verify"
+                   for f in dataclasses.fields(params_type(stage)) if declared(f).option is None}  # fmt: skip
+    if set(rows) != set(params_only):
+        found.append(f"params table: rows {sorted(set(rows) ^ set(params_only))} differ from the declarations")
+    found += [f"params table: {s}.{n} default {rows[s, n]}, declared {d}" for (s, n), d in params_only.items()
+              if (s, n) in rows and rows[s, n] != d]  # fmt: skip
+    return found
+
+
+def test_the_tables_are_the_declarations():
+    assert not declaration_problems(DOC.read_text()), "\n".join(declaration_problems(DOC.read_text()))
+
+
+def test_the_declaration_check_can_fail():
+    text = DOC.read_text()
+    assert "params table: map.coverage_cells default 10, declared 100" in declaration_problems(
+        text.replace("| `map.coverage_cells` | 100 |", "| `map.coverage_cells` | 10 |"))  # fmt: skip
+    assert "option limits: simulate `fov` should give its unit, degrees" in declaration_problems(
+        text.replace("| `--fov`, degrees |", "| `--fov` |"))  # fmt: skip
+    assert "option limits: rrtstar `step` should name `--step`" in declaration_problems(
+        text.replace("| `--step` (also on `plan`)", "| `--stride` (also on `plan`)"))  # fmt: skip

@@ -14,6 +14,7 @@ LAYERS = {
     # the numpy-only package a robot installs: its modules import each other and errors only (checked below), so
     # it sits just above errors; datatypes and artifacts read the one artifact schema from runtime/schema.py
     "runtime": 0.5,
+    "params": 0.6,  # each Params declared once (no numpy): the stages, limits and the command line read them
     "limits": 0.7,  # parameter ranges and the memory budget: the stages' checks and the pipeline's use them
     "datatypes": 1,
     "palette": 1.2,  # the figures' and bags' colours, plain data on datatypes' enums

@@ -26,11 +26,12 @@ from bearnav_cli.cli import fields
 from bearnav_cli.datatypes import Outcome, Plan, Simulation
 from bearnav_cli.errors import InvalidParamsError
 from bearnav_cli.geometry import FreeSpace
+from bearnav_cli.params import decompose, rrtstar, simplify, synthesize
+from bearnav_cli.params.simulate import CAMERAS
 from bearnav_cli.pipeline import chain, table
 from bearnav_cli.pipeline import params as params_of
 from bearnav_cli.runtime import bearing
-from bearnav_cli.stages import decompose, map_, rrtstar, simplify, simulate, synthesize
-from bearnav_cli.world.camera import CAMERAS
+from bearnav_cli.stages import map_, simulate
 
 from .conftest import SMALL_MAP
 

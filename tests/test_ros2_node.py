@@ -218,7 +218,7 @@ def reference(plan_path, scene, dynamics, frames=6):
         dynamics=dynamics,
         alpha=0.1,
         beta=0.5,
-        clamp_reverse=True,
+        clamp_reverse=False,
         hold_time=2.0,
         bearing_sigma=math.radians(1.0),
     )

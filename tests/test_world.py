@@ -7,10 +7,11 @@ import pytest
 
 from bearnav_cli.errors import InvalidParamsError
 from bearnav_cli.geometry import FreeSpace
+from bearnav_cli.params.simulate import CAMERAS
 from bearnav_cli.runtime import ControlSettings, ControlState
 from bearnav_cli.runtime.estimate import Fix, fuse
 from bearnav_cli.stages import simulate
-from bearnav_cli.world.camera import CAMERAS, IdealCamera
+from bearnav_cli.world.camera import IdealCamera
 from bearnav_cli.world.motion import Base, Contact
 
 from .handmade import hand_map, hand_plan

@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Optional
 
 from bearnav_cli.cli.exits import EXIT_OUTCOME, fail
-from bearnav_cli.cli.fields import FLAG_OFF, PARAMS_ONLY, option_name, params_fields
+from bearnav_cli.cli.fields import params_fields
 from bearnav_cli.cli.mapfile import read_yaml
 from bearnav_cli.cli.options import shown_value
 from bearnav_cli.cli.output import print_json
@@ -107,16 +107,15 @@ def simulate_words(params: dict, **changes: Any) -> list[str]:
     """The ``bearnav simulate`` options that give the loop ``params`` (with ``changes``): those off their defaults."""
     words: list[str] = []
     for field in params_fields("simulate"):
-        if field.name in PARAMS_ONLY["simulate"] or field.name not in params:
+        if field.option is None or field.name not in params:
             continue
         value = changes.get(field.name, params[field.name])
         if value == field.default or value is None:
             continue
-        name = option_name("simulate", field.name)
         if field.kind is bool:
-            words.append(name if value else FLAG_OFF.get(("simulate", field.name), "--no-" + name[2:]))
+            words.append(field.option if value else field.off)
         else:
-            words += [name, shown_value(value).strip("'")]
+            words += [field.option, shown_value(value).strip("'")]
     return words
 
 

@@ -7,7 +7,6 @@ from typing import Any, List, Optional
 import typer
 
 from bearnav_cli.cli.exits import EXIT_INVALID, fail, handles_errors
-from bearnav_cli.cli.fields import PARAMS_ONLY
 from bearnav_cli.cli.hints import command_text, finish, tags_step
 from bearnav_cli.cli.mapfile import parse_xy, read_map_source
 from bearnav_cli.cli.options import (
@@ -27,7 +26,7 @@ __all__ = ["map_command"]
 
 
 @handles_errors
-@with_options(functools.partial(params_options, "map", skip=PARAMS_ONLY["map"]), before="goal")
+@with_options(functools.partial(params_options, "map"), before="goal")
 def map_command(
     source: Path = MAP_ARG,
     out_path: Optional[Path] = typer.Option(None, "-o", "--out", help="Output (default plans/<name>/map.json)."),

@@ -12,7 +12,7 @@ from typing import Any, Callable, Optional
 import typer
 
 from bearnav_cli.cli.exits import EXIT_INVALID, fail
-from bearnav_cli.cli.fields import FLAG_OFF, ParamField, option_name, params_fields
+from bearnav_cli.cli.fields import ParamField, params_fields
 from bearnav_cli.cli.output import QUIET_HELP
 from bearnav_cli.errors import InvalidParamsError
 
@@ -124,31 +124,30 @@ def option_help(command: str, field: ParamField, *, with_default: bool = True, p
         notes.append("one of " + ", ".join(field.choices))
     if with_default and field.default is not None:
         if field.kind is bool:
-            name = option_name(command, field.name)
-            shown = name if field.default else FLAG_OFF.get((command, field.name), "--no-" + name[2:])
+            shown = field.option if field.default else field.off
         else:
             shown = shown_value(field.default)
         notes.append(f"default: {shown}")
     return prefix + text + (f" ({'; '.join(notes)})" if notes else "") + "."
 
 
-def params_options(command: str, *, skip: tuple[str, ...] = (), only: tuple[str, ...] | None = None,
-                   defaults: bool = False, prefix: str = "") -> list[inspect.Parameter]:  # fmt: skip
+def params_options(command: str, *, only: tuple[str, ...] | None = None, defaults: bool = False,
+                   prefix: str = "") -> list[inspect.Parameter]:  # fmt: skip
     """The typer options of a command's ``Params`` fields, as parameters of a command's signature.
 
-    The option is ``--field-name`` (``limits.OPTION_NAMES`` renames, such as ``--starts``), a
-    ``--name/--no-name`` flag for a bool (:data:`FLAG_OFF` names other off-switches), of the
-    field's type; the help is :func:`option_help`. A stage's options default to None, "not given",
-    so that the map's ``params:`` apply; ``defaults=True`` (``verify``, which has no map layer)
-    gives typer the dataclass's defaults instead. ``skip`` leaves fields without an option
-    (``params:`` only), ``only`` keeps just those fields.
+    The option is the field's declared one (``--field-name``, or a name such as ``--starts``), a
+    ``--name/--no-name`` flag for a bool (or the off-switch it declares), of the field's type; the
+    help is :func:`option_help`. A stage's options default to None, "not given", so that the map's
+    ``params:`` apply; ``defaults=True`` (``verify``, which has no map layer) gives typer the
+    dataclass's defaults instead. Fields declared without an option (``params:`` only) are left
+    out; ``only`` keeps just those fields.
     """
     options = []
     for field in params_fields(command):
-        if field.name in skip or (only is not None and field.name not in only):
+        if (field.option is None and only is None) or (only is not None and field.name not in only):
             continue
-        name = option_name(command, field.name)
-        declared = f"{name}/{FLAG_OFF.get((command, field.name), '--no-' + name[2:])}" if field.kind is bool else name
+        name = field.option or "--" + field.name.replace("_", "-")
+        declared = f"{name}/{field.off}" if field.kind is bool else name
         default = field.default if defaults else None
         kind = field.kind if default is not None else Optional[field.kind]
         help_text = option_help(command, field, with_default=not defaults, prefix=prefix)

@@ -7,7 +7,6 @@ from typing import Any, Optional
 import typer
 
 from bearnav_cli.cli.exits import EXIT_INVALID, EXIT_OUTCOME, fail, handles_errors
-from bearnav_cli.cli.fields import PARAMS_ONLY
 from bearnav_cli.cli.hints import WORDS_NOTE, simulation_steps
 from bearnav_cli.cli.options import FORCE, JSON, QUIET, params_options, with_options
 from bearnav_cli.cli.output import Quiet, err, out, plotting, print_json, progress_bar, progress_factory, report_line
@@ -16,7 +15,7 @@ __all__ = ["simulate_command"]
 
 
 @handles_errors
-@with_options(functools.partial(params_options, "simulate", skip=PARAMS_ONLY["simulate"]), before="min_success")
+@with_options(functools.partial(params_options, "simulate"), before="min_success")
 def simulate_command(
     plan_npz: Path = typer.Argument(
         ..., metavar="PLAN_NPZ", help="plan.npz from `bearnav synthesize` or `bearnav plan`."

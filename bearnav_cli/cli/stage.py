@@ -8,7 +8,6 @@ from typing import Any, Optional
 import typer
 
 from bearnav_cli.cli.exits import handles_errors
-from bearnav_cli.cli.fields import PARAMS_ONLY
 from bearnav_cli.cli.hints import finish, plan_guarantee
 from bearnav_cli.cli.options import FORCE, JSON, QUIET, params_options, with_options
 from bearnav_cli.cli.output import Quiet, out, progress_bar, progress_factory, report_line
@@ -17,7 +16,7 @@ __all__ = ["decompose_command", "rrtstar_command", "simplify_command", "synthesi
 
 
 @handles_errors
-@with_options(functools.partial(params_options, "rrtstar", skip=PARAMS_ONLY["rrtstar"]))
+@with_options(functools.partial(params_options, "rrtstar"))
 def rrtstar_command(
     map_json: Path = typer.Argument(..., metavar="MAP_JSON", help="map.json from `bearnav map`."),
     out_path: Optional[Path] = typer.Option(None, "-o", "--out", help="Output (default tree.npz next to the input)."),
@@ -35,7 +34,7 @@ def rrtstar_command(
 
 
 @handles_errors
-@with_options(functools.partial(params_options, "simplify", skip=PARAMS_ONLY["simplify"]))
+@with_options(functools.partial(params_options, "simplify"))
 def simplify_command(
     tree_npz: Path = typer.Argument(..., metavar="TREE_NPZ", help="tree.npz from `bearnav rrtstar`."),
     out_path: Optional[Path] = typer.Option(
@@ -55,7 +54,7 @@ def simplify_command(
 
 
 @handles_errors
-@with_options(functools.partial(params_options, "decompose", skip=PARAMS_ONLY["decompose"]))
+@with_options(functools.partial(params_options, "decompose"))
 def decompose_command(
     tree_npz: Path = typer.Argument(..., metavar="SIMPLIFIED_NPZ", help="simplified.npz from `bearnav simplify`."),
     out_path: Optional[Path] = typer.Option(None, "-o", "--out", help="Output (default cells.npz next to the input)."),
@@ -73,7 +72,7 @@ def decompose_command(
 
 
 @handles_errors
-@with_options(functools.partial(params_options, "synthesize", skip=PARAMS_ONLY["synthesize"]))
+@with_options(functools.partial(params_options, "synthesize"))
 def synthesize_command(
     cells_npz: Path = typer.Argument(..., metavar="CELLS_NPZ", help="cells.npz from `bearnav decompose`."),
     out_path: Optional[Path] = typer.Option(None, "-o", "--out", help="Output (default plan.npz next to the input)."),

@@ -7,7 +7,6 @@ from typing import Any, Optional
 import typer
 
 from bearnav_cli.cli.exits import EXIT_INVALID, EXIT_OUTCOME, fail, handles_errors
-from bearnav_cli.cli.fields import PARAMS_ONLY
 from bearnav_cli.cli.hints import WORDS_NOTE, verify_steps
 from bearnav_cli.cli.mapfile import read_map_source
 from bearnav_cli.cli.options import JSON, QUIET, check_camera, params_options, with_options
@@ -18,7 +17,7 @@ __all__ = ["verify_command"]
 
 
 @handles_errors
-@with_options(functools.partial(params_options, "verify", skip=PARAMS_ONLY["verify"], defaults=True), before="tree")
+@with_options(functools.partial(params_options, "verify", defaults=True), before="tree")
 def verify_command(
     plan_npz: Path = typer.Argument(..., metavar="PLAN_NPZ", help="plan.npz from `bearnav synthesize`."),
     tree: Optional[Path] = typer.Option(None, help="tree.npz whose collision samples the plan must keep."),

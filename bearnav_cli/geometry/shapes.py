@@ -8,12 +8,11 @@ import numpy as np
 import shapely
 
 from bearnav_cli.datatypes import Polygon
+from bearnav_cli.params.map_ import CIRCLE_SEGMENTS
 
-__all__ = ["BUFFER_QUAD_SEGS", "circle_polygon", "CIRCLE_SEGMENTS", "from_shapely", "inflate", "to_shapely"]
+__all__ = ["BUFFER_QUAD_SEGS", "circle_polygon", "from_shapely", "inflate", "to_shapely"]
 
 
-#: Vertices of a polygonised circle (ALGORITHMS §1): the 64-gon circumscribes the disc.
-CIRCLE_SEGMENTS = 64
 #: Segments per quarter circle of the round joins used for inflation.
 BUFFER_QUAD_SEGS = 16
 

@@ -13,7 +13,8 @@ import shapely
 from bearnav_cli import composition
 from bearnav_cli.errors import InvalidParamsError
 from bearnav_cli.geometry import FreeSpace
-from bearnav_cli.runtime import bearing, cell_policy
+from bearnav_cli.runtime import cell_policy
+from bearnav_cli.runtime.defaults import check_camera
 from bearnav_cli.runtime.invariants import is_number
 from bearnav_cli.runtime.plan_arrays import PlanArrays
 
@@ -55,7 +56,7 @@ def check_params(fov_deg: float, noise_deg: float, max_range: float = math.inf, 
         Grid spacing (map units), finite and ``> 0``; ``None``: ``D/100``.
     """
 
-    bearing.check_camera(fov_deg, noise_deg, min_spread_deg)
+    check_camera(fov_deg, noise_deg, min_spread_deg)
     if not is_number(max_range) or not max_range > 0:
         raise InvalidParamsError(f"must be positive, got {max_range!r}", field="range")
     if error_target is not None and (not is_number(error_target) or not (error_target > 0 and

@@ -40,8 +40,8 @@ _ORIGIN = {
     **dict.fromkeys(("Estimate", "Fix", "SetEstimate", "bounded_update", "fuse", "measure"), "estimate"),
     **dict.fromkeys(("RUNTIME_KEYS", "PlanArrays", "ring_edges", "tree_costs"), "plan_arrays"),
     **dict.fromkeys(("ROBOT_DEFAULTS", "lookahead_command", "lookahead_point"), "robot"),
-    **dict.fromkeys(("DYNAMICS", "ESTIMATORS", "MEASUREMENTS", "ControlOutput", "ControlSettings", "ControlState",
-                     "timing"), "settings"),
+    **dict.fromkeys(("DYNAMICS", "ESTIMATORS", "MEASUREMENTS"), "defaults"),
+    **dict.fromkeys(("ControlOutput", "ControlSettings", "ControlState", "timing"), "settings"),
     **dict.fromkeys(("bounded_control", "control"), "step"),
 }  # fmt: skip
 #: The submodules, also attributes of the package once imported (``runtime.step``, ``runtime.bearing``).
@@ -53,6 +53,7 @@ _SUBMODULES = (
     "cell_policy",
     "certificate",
     "controller",
+    "defaults",
     "estimate",
     "invariants",
     "looking",

@@ -36,19 +36,17 @@ from typing import Any
 import numpy as np
 
 from bearnav_cli.errors import InvalidParamsError
-from bearnav_cli.runtime.invariants import is_number
+from bearnav_cli.runtime.defaults import METHODS, MIN_SPREAD_DEG
 from bearnav_cli.runtime.pairs import pair_output, rescale_output
 from bearnav_cli.runtime.planar import dot, norm, points, safe
 
 __all__ = [
     "ANGLE_SLACK",
-    "check_camera",
     "DEFAULT_MIN_SPREAD",
     "directions",
     "fix_variance",
     "in_field_of_view",
     "in_range",
-    "METHODS",
     "noisy_bearings",
     "reconstruct",
     "Reconstruction",
@@ -57,10 +55,8 @@ __all__ = [
     "wrap",
 ]
 
-#: Reconstruction methods of §6.2–6.4 (the first is the default).
-METHODS = ("lsq", "pair", "rescale")
 #: Default ``θ_min = min_bearing_spread`` (§6.2): 2°, in radians.
-DEFAULT_MIN_SPREAD = math.radians(2.0)
+DEFAULT_MIN_SPREAD = math.radians(MIN_SPREAD_DEG)
 #: Rounding allowance of the field-of-view test (radians): ``atan2`` of a difference of
 #: positions and the subtraction of the heading each round by a few ulps, so without it a
 #: landmark placed exactly on the edge of the field of view would be visible or not at random.
@@ -152,35 +148,6 @@ def in_field_of_view(x: Any, heading: Any, landmarks: Any, fov: float, *, tol: f
     off = wrap(np.arctan2(d[..., 1], d[..., 0]) - phi[:, None])
     # A NaN heading compares False: nothing is visible, no NaN leaks out.
     return visible & (np.abs(off) <= 0.5 * fov + ANGLE_SLACK)
-
-
-def check_camera(fov_deg: Any, noise_deg: Any, min_spread_deg: Any = 2.0) -> None:
-    """Raise :class:`InvalidParamsError` naming the field for a camera outside its ranges.
-
-    The one check of ``bearnav simulate``, ``bearnav tags`` and the perception report; booleans
-    are not numbers.
-
-    Parameters
-    ----------
-    fov_deg : float
-        Horizontal field of view (degrees), in ``(0, 360]``; the error names field ``fov``.
-    noise_deg : float
-        Bearing noise, 1σ (degrees), finite and ``≥ 0``.
-    min_spread_deg : float
-        ``θ_min`` of §6.2 (degrees), in ``(0, 90]``; the error names ``min_spread_deg``.
-
-    Raises
-    ------
-    InvalidParamsError
-        For the first value out of its range, naming its field.
-    """
-
-    if not is_number(fov_deg) or not 0 < fov_deg <= 360:
-        raise InvalidParamsError(f"must be in (0, 360] degrees, got {fov_deg!r}", field="fov")
-    if not is_number(noise_deg) or not (noise_deg >= 0 and math.isfinite(noise_deg)):
-        raise InvalidParamsError(f"must be zero or positive, got {noise_deg!r}", field="noise_deg")
-    if not is_number(min_spread_deg) or not 0 < min_spread_deg <= 90:
-        raise InvalidParamsError(f"must be in (0, 90] degrees, got {min_spread_deg!r}", field="min_spread_deg")
 
 
 def in_range(x: Any, landmarks: Any, max_range: float) -> np.ndarray:

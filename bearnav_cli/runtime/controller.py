@@ -55,7 +55,7 @@ class Controller:
         uses, with the same defaults: ``dt`` is the camera period (s), by default the
         simulation's, ``min(0.0025·D/v, 0.2)`` with ``v`` = ``speed`` (``alpha`` for the
         unicycle), and ``eps_sw`` defaults to ``2·v·dt``. Pass ``bearing_sigma``, the camera's
-        angular noise (radians; default :data:`~bearnav_cli.runtime.settings.BEARING_SIGMA`, 1°).
+        angular noise (radians; default :data:`~bearnav_cli.runtime.defaults.BEARING_SIGMA`, 1°).
         A plan whose map says ``robot: {reverse: false}`` clamps ``v ≥ 0`` whatever
         ``clamp_reverse`` says (the option can only add the clamp). The bounds of the set estimator
         (``estimator="set"``: ``bearing_bound``, ``heading_bound``, ``slip``, ``slip_floor``) default to

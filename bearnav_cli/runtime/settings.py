@@ -17,30 +17,15 @@ import numpy as np
 
 from bearnav_cli.runtime import bearing
 from bearnav_cli.runtime.bounded import MAX_VERTICES
+from bearnav_cli.runtime.defaults import ALPHA, BEARING_SIGMA, LOOP_DEFAULTS, ODOMETRY_DRIFT, SPEED
 from bearnav_cli.runtime.robot import ROBOT_DEFAULTS
 
 __all__ = [
-    "ALPHA", "BEARING_SIGMA", "BLIND_ERROR_PER_DIAGONAL", "DT_MAX", "DT_PER_DIAGONAL", "DYNAMICS", "ESTIMATORS",
-    "MEASUREMENTS", "ODOMETRY_DRIFT", "SLIP_FLOOR_PER_DIAGONAL", "SPEED", "ControlOutput", "ControlSettings",
-    "ControlState", "ErrorBounds", "FixSettings", "LookSettings", "LoopSettings", "UnicycleSettings", "timing",
+    "BLIND_ERROR_PER_DIAGONAL", "DT_MAX", "DT_PER_DIAGONAL", "SLIP_FLOOR_PER_DIAGONAL",
+    "ControlOutput", "ControlSettings", "ControlState", "ErrorBounds", "FixSettings", "LookSettings", "LoopSettings",
+    "UnicycleSettings", "timing",
 ]  # fmt: skip
 
-DYNAMICS = ("single", "unicycle")
-MEASUREMENTS = ("bearing", "displacement")
-#: Reference speed ``v_ref`` of the single integrator (map units / s): the one default of
-#: ``bearnav simulate``, ``bearnav verify`` and :class:`~bearnav_cli.runtime.Controller`.
-SPEED = 0.1
-#: Forward gain ``α`` of the unicycle (map units / s), likewise.
-ALPHA = 0.1
-#: Bearing noise (1σ, radians) the filter assumes when the caller does not know its camera's: 1°.
-#: Not 0: a filter that assumes exact bearings gives every fix zero variance, so after one fix the
-#: odometry's prediction (variance ``(odometry_drift·d)²``) rejects every later fix that errs by more
-#: than its 3σ: it trusts odometry over every noisy fix.
-BEARING_SIGMA = math.radians(1.0)
-#: Odometry error (1σ) per unit travelled that the filter assumes (its process noise): 5%.
-ODOMETRY_DRIFT = 0.05
-#: The estimators of the control step: bounded-error sets (ALGORITHMS §12.2) or the scalar filter.
-ESTIMATORS = ("kalman", "set")
 #: ``ν = SLIP_FLOOR_PER_DIAGONAL · D``, the odometry bound's floor per step (ALGORITHMS §12.1).
 SLIP_FLOOR_PER_DIAGONAL = 1e-4
 #: ``dt = min(DT_PER_DIAGONAL · D / v, DT_MAX)`` by default (ALGORITHMS §7.1).
@@ -92,10 +77,10 @@ class LoopSettings:
     dt: float
     eps_sw: float
     tol: float
-    dynamics: str = "single"
-    measurement: str = "bearing"
-    estimator: str = "kalman"
-    keep_clear: bool = True
+    dynamics: str = LOOP_DEFAULTS["dynamics"]
+    measurement: str = LOOP_DEFAULTS["measurement"]
+    estimator: str = LOOP_DEFAULTS["estimator"]
+    keep_clear: bool = LOOP_DEFAULTS["keep_clear"]
 
 
 @dataclass(frozen=True)
@@ -118,11 +103,11 @@ class UnicycleSettings:
         §7.1's rule alone. (The look-ahead law replaces it.)
     """
 
-    alpha: float = ALPHA
-    beta: float = 0.5
-    clamp_reverse: bool = False
-    turn_first: bool = True
-    certified_heading: bool = True
+    alpha: float = LOOP_DEFAULTS["alpha"]
+    beta: float = LOOP_DEFAULTS["beta"]
+    clamp_reverse: bool = LOOP_DEFAULTS["clamp_reverse"]
+    turn_first: bool = LOOP_DEFAULTS["turn_first"]
+    certified_heading: bool = LOOP_DEFAULTS["certified_heading"]
 
 
 @dataclass(frozen=True)
@@ -158,13 +143,13 @@ class FixSettings:
         ``bearnav simulate``); 0: ``hold_time`` only.
     """
 
-    reconstruction: str = "lsq"
+    reconstruction: str = LOOP_DEFAULTS["reconstruction"]
     min_spread: float = bearing.DEFAULT_MIN_SPREAD
     bearing_sigma: float = BEARING_SIGMA
     max_fix_error: float = math.inf
-    odometry: bool = True
+    odometry: bool = LOOP_DEFAULTS["odometry"]
     odometry_drift: float = ODOMETRY_DRIFT
-    hold_time: float = 2.0
+    hold_time: float = LOOP_DEFAULTS["hold_time"]
     blind_error: float = 0.0
 
 
@@ -186,7 +171,7 @@ class LookSettings:
 
     fov: float = 2.0 * math.pi
     max_range: float = math.inf
-    look_on_purpose: bool = False
+    look_on_purpose: bool = LOOP_DEFAULTS["look_on_purpose"]
 
 
 @dataclass(frozen=True)

@@ -52,124 +52,16 @@ from bearnav_cli.geometry import (
     landmark_coverage,
     polygon_rows,
 )
+from bearnav_cli.params.decompose import (
+    Params,
+)
 
 VERSION = 5  # 4: cover = F and max_added_nodes = 600 by default; free_coverage_m of the final cells;
 # 5: rows keep d/20 from a piece, not d/4 (funnel.ROW_SHARE)
 log = logging.getLogger(__name__)
 
 #: Re-exported: the cell and barrier helpers are part of this stage's interface.
-__all__ = ["Params", "VERSION", "problems", "run", "summary"]
-
-CELL_MODES = ("funnel", "funnel-local", "paper")
-COVER_DOMAINS = ("F", "F_m")  # the default first, as every choice tuple
-BARRIERS = ("corridor", "wedge")
-BISECTOR_RULES = ("crossing", "parent")
-CBF_APEXES = ("child", "parent")
-CBF_FILTERS = ("both", "projection", "cell")
-
-
-@dataclass(frozen=True)
-class Params:
-    """Parameters of the decomposition (ALGORITHMS §4, §5.4, §11).
-
-    Attributes
-    ----------
-    cells : {"funnel", "funnel-local", "paper"}
-        ``funnel`` (default): obstacle-free convex cells that hand the robot on from one to the
-        next (ALGORITHMS §11.5): the corridor around each tree edge, narrowed where its exit
-        would leave the next cell, with cells added until they cover ``coverage_target`` of the
-        free space at least the barrier margin from obstacles and walls. ``funnel-local``
-        starts each region from the §4.1 cell (bisector rows). ``paper``: the §4 cells with
-        per-cell barrier rows, to reproduce the papers (the options below marked *paper* apply).
-    exit_inset : float or None
-        Funnel: how far inside the next cell each cell's exit lies (map units, ALGORITHMS §12.4).
-        ``None`` (default): per cell, the inset that makes the position error the cell tolerates
-        largest (``funnel.best_neck``); a number: that inset in every cell, capped at 98% of the
-        exit point's depth in the next cell (warns). In the symbols of docs/algorithms.md the
-        inset is ``δ_e,c`` and the tolerance ``τ_c = min(h*/2, δ_e,c/2)``.
-    coverage_target : float
-        Funnel: add cells until they cover this fraction of the free space at least the barrier
-        margin from obstacles and walls (``cover = F_m``, ALGORITHMS §11.5 step 3), then, with
-        ``cover = F``, of all the free space.
-    cover : {"F", "F_m"}
-        Funnel: the area the added cells fill. ``F`` (default): all the free space (ALGORITHMS
-        §12.7): after ``F_m``, leaves in the band along the obstacles and walls,
-        ``WALL_LEAF_DEPTH·m`` from ``O`` (the band curve's corners first), whose cells reach within
-        about a quarter of that of the walls, so robots parked there start inside the certificate. A
-        band cell never lowers the least ``τ_c`` of the cells before the band: a leaf whose cell
-        would is joined to the next node (up to ``BAND_NODE_TRIES``) or left out, and the warning
-        says so. Kitchen, seeds 0–4: 99.0% of ``F``, the same least ``τ_c`` as ``F_m``, about 1.8×
-        the cells. ``F_m``: only the free space at least the barrier margin from obstacles and
-        walls (ALGORITHMS §11.5); the band nearer to them stays outside the certified area
-        (kitchen: 99.0% of ``F_m``, 89.1% of the free space), for about half the planning time.
-    max_added_nodes : int
-        Funnel: at most this many leaf nodes are added by densification, ``F_m`` and the band
-        together. The band along a cluttered floor's obstacles needs many (the made office and
-        clutter maps: 290–370 for 99% of ``F``; 200 left them at 97.8–99.0%).
-    bisector_rule : {"crossing", "parent"}
-        *paper* and ``funnel-local``. ``crossing`` drops every bisector that crosses the edge (the authors' code);
-        ``parent`` drops only the parent's (paper B's text; can cut the edge, warns, and a tree where it cuts
-        an exit face away is refused with an error naming the cell).
-    cbf_apex : {"child", "parent"}
-        Apex of the barrier wedge; ``parent`` reproduces the paper's degenerate LP (warns).
-    cbf_filter : {"both", "projection", "cell"}
-        Which collision samples a barrier may come from: projection onto the edge within
-        the edge, inside the cell, or both.
-    n_landmarks : int
-        Landmarks per cell controller (the nearest visible ones, at least 2).
-    barrier : {"corridor", "wedge"}
-        ``corridor`` (default): one separating half-plane between the tree edge (the goal for
-        the goal cell) and every convex piece of the inflated obstacles near the cell, and one
-        per wall within the margin, so the safe set is obstacle-free (docs/choices.md).
-        ``wedge``: ALGORITHMS §4.5–4.6 as written, lines through collision samples; its safe
-        set overlaps the obstacles between samples.
-    barrier_margin : float or None
-        How far the safe set keeps from the obstacles and walls (map units). ``None`` means
-        ``0.01·D``. With ``m`` the margin, a ``corridor`` barrier row is moved ``min(m, d/2)``
-        toward the edge (``d`` the piece's distance from it); a funnel cell's row keeps
-        ``min(m, d/20)`` (``funnel.ROW_SHARE``), and ``F_m`` is the free space at least ``m`` from
-        ``O``.
-    """
-
-    cells: str = "funnel"
-    exit_inset: float | None = None
-    coverage_target: float = 0.99
-    cover: str = "F"
-    max_added_nodes: int = 600
-    bisector_rule: str = "crossing"
-    cbf_apex: str = "child"
-    cbf_filter: str = "both"
-    n_landmarks: int = 4
-    barrier: str = "corridor"
-    barrier_margin: float | None = None
-
-    def __post_init__(self) -> None:
-        if self.barrier_margin is not None and not (self.barrier_margin >= 0 and math.isfinite(self.barrier_margin)):
-            raise InvalidParamsError(f"must be zero or positive, got {self.barrier_margin}", field="barrier_margin")
-        if self.exit_inset is not None and not (self.exit_inset >= 0 and math.isfinite(self.exit_inset)):
-            raise InvalidParamsError(f"must be zero or positive, got {self.exit_inset}", field="exit_inset")
-        if isinstance(self.coverage_target, bool) or not 0.0 <= self.coverage_target <= 1.0:
-            raise InvalidParamsError(f"must lie in [0, 1], got {self.coverage_target}", field="coverage_target")
-        if (
-            isinstance(self.max_added_nodes, bool)
-            or not isinstance(self.max_added_nodes, int)
-            or not (0 <= self.max_added_nodes <= 100_000)
-        ):
-            raise InvalidParamsError(f"must be an integer in [0, 100000], got {self.max_added_nodes!r}",
-                                     field="max_added_nodes")  # fmt: skip
-        for name, allowed in (
-            ("cells", CELL_MODES),
-            ("cover", COVER_DOMAINS),
-            ("barrier", BARRIERS),
-            ("bisector_rule", BISECTOR_RULES),
-            ("cbf_apex", CBF_APEXES),
-            ("cbf_filter", CBF_FILTERS),
-        ):
-            if getattr(self, name) not in allowed:
-                value = getattr(self, name)
-                raise InvalidParamsError(f"must be one of {', '.join(allowed)}, got {value!r}", field=name)
-        if not isinstance(self.n_landmarks, int) or self.n_landmarks < 2:
-            raise InvalidParamsError(f"must be an integer of at least 2, got {self.n_landmarks!r}", field="n_landmarks")
+__all__ = ["VERSION", "problems", "run", "summary"]
 
 
 # --------------------------------------------------------------------------- cells

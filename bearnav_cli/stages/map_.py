@@ -21,7 +21,6 @@ from bearnav_cli import occupancy
 from bearnav_cli.datatypes import NEGLIGIBLE_SHARE, Map, plural, replace
 from bearnav_cli.errors import InvalidMapError
 from bearnav_cli.geometry import (
-    CIRCLE_SEGMENTS,
     FreeSpace,
     box_polygon,
     circle_polygon,
@@ -30,10 +29,11 @@ from bearnav_cli.geometry import (
     landmark_coverage,
     to_shapely,
 )
+from bearnav_cli.params.map_ import Params
 from bearnav_cli.runtime.plan_arrays import ring_edges
 from bearnav_cli.runtime.robot import ROBOT_DEFAULTS, ROBOT_KEYS
 
-__all__ = ["GridSource", "MAP_KEYS", "MapSource", "Params", "VERSION", "infer_facing", "listed_obstacles", "run",
+__all__ = ["GridSource", "MAP_KEYS", "MapSource", "VERSION", "infer_facing", "listed_obstacles", "run",
            "spec_of", "summary"]  # fmt: skip
 
 VERSION = 2  # 2: landmarks have a facing
@@ -53,25 +53,6 @@ MAP_KEYS = (
     "params",
     "robot",
 )
-
-
-@dataclass(frozen=True)
-class Params:
-    """Parameters of the map stage.
-
-    Attributes
-    ----------
-    circle_segments : int
-        Vertices of the polygon that replaces a circle (it contains the disc).
-    unknown : {"obstacle", "free"}
-        How unknown cells of an occupancy grid count.
-    coverage_cells : int
-        The landmark-coverage check uses a grid of spacing ``D / coverage_cells``.
-    """
-
-    circle_segments: int = CIRCLE_SEGMENTS
-    unknown: str = "obstacle"
-    coverage_cells: int = 100
 
 
 @dataclass(frozen=True)

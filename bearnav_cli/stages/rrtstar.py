@@ -14,15 +14,15 @@ for the neighbours whose cost could improve.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
 
 from bearnav_cli import limits, verdicts
 from bearnav_cli.datatypes import Map, Tree, plural
-from bearnav_cli.errors import InvalidParamsError, ResourceLimitError
+from bearnav_cli.errors import ResourceLimitError
 from bearnav_cli.geometry import FreeSpace
+from bearnav_cli.params.rrtstar import Params
 
 __all__ = [
     "border_samples",
@@ -31,8 +31,6 @@ __all__ = [
     "check_resources",
     "MAX_BORDER_SAMPLES",
     "MAX_GRID_CELLS",
-    "Params",
-    "POLICIES",
     "problems",
     "rewiring_radius",
     "RRT_BYTES_PER_GRID_CELL",
@@ -43,57 +41,9 @@ __all__ = [
 ]
 
 VERSION = 1
-POLICIES = ("skip", "extend")
 #: Buckets per step length along each axis: smaller buckets make nearest-node queries in a
 #: dense tree cheaper, at the price of more buckets to visit for a radius query.
 BUCKETS_PER_STEP = 3
-
-
-@dataclass(frozen=True)
-class Params:
-    """Parameters of RRT* (ALGORITHMS §2).
-
-    Attributes
-    ----------
-    iterations : int
-        Random samples drawn, collision samples included.
-    step : float
-        Steering distance η (map units); also caps the rewiring radius.
-    seed : int
-        Seed of ``numpy.random.default_rng``.
-    collision_policy : {"skip", "extend"}
-        After storing a collision sample, end the iteration (``skip``, paper B) or
-        keep steering toward it (``extend``, the authors' code).
-    border_spacing : float or None
-        Largest gap between border pseudo-samples (map units); ``None`` means
-        ``step / 10``; ``0`` turns them off.
-    clearance : float or None
-        Smallest distance of every tree edge from the inflated obstacles and the walls (map
-        units); ``None`` means ``0.01·D`` (D the bounds' diagonal); ``0`` is the plain
-        RRT* (ALGORITHMS §2). Capped at half the goal's own clearance. The barrier rows of
-        ``decompose`` need it: a node on an obstacle's boundary leaves a robot no room.
-    """
-
-    iterations: int = 1500
-    step: float = 1.0
-    seed: int = 0
-    collision_policy: str = "skip"
-    border_spacing: float | None = None
-    clearance: float | None = None
-
-    def __post_init__(self) -> None:
-        if self.iterations < 1:
-            raise InvalidParamsError(f"must be at least 1, got {self.iterations}", field="iterations")
-        if not (self.step > 0 and math.isfinite(self.step)):
-            raise InvalidParamsError(f"must be positive, got {self.step}", field="step")
-        if self.collision_policy not in POLICIES:
-            raise InvalidParamsError(f"must be one of {', '.join(POLICIES)}", field="collision_policy")
-        if self.border_spacing is None:
-            object.__setattr__(self, "border_spacing", self.step / 10.0)
-        if not (self.border_spacing >= 0 and math.isfinite(self.border_spacing)):
-            raise InvalidParamsError(f"must be zero or positive, got {self.border_spacing}", field="border_spacing")
-        if self.clearance is not None and not (self.clearance >= 0 and math.isfinite(self.clearance)):
-            raise InvalidParamsError(f"must be zero or positive, got {self.clearance}", field="clearance")
 
 
 def rewiring_radius(n: int, free_area: float, step: float) -> float:

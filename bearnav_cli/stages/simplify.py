@@ -34,7 +34,6 @@ from __future__ import annotations
 import heapq
 import logging
 import math
-from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
@@ -42,15 +41,14 @@ import shapely
 
 from bearnav_cli import verdicts
 from bearnav_cli.datatypes import Tree
-from bearnav_cli.errors import ArtifactError, InvalidParamsError
+from bearnav_cli.errors import ArtifactError
 from bearnav_cli.geometry import FreeSpace
+from bearnav_cli.params.simplify import Params
 
 __all__ = [
     "bfs_levels",
     "count_crossings",
-    "CTL_MODES",
     "MAX_FINISH_PASSES",
-    "Params",
     "problems",
     "RECONNECT_NEIGHBOURS",
     "run",
@@ -60,45 +58,12 @@ __all__ = [
 ]
 
 VERSION = 2  # 2: finishing RC | CtL passes when max_rounds stops the loop; crossings_remaining
-CTL_MODES = ("middle", "extremes")
 #: Output nodes tried per discarded node for the ``discarded_reconnectable`` statistic.
 RECONNECT_NEIGHBOURS = 8
 #: Bound on the finishing RC | CtL passes (each strictly shortens the total edge length, so they end;
 #: a cascade ends in a handful of passes in practice, see :func:`_finish`).
 MAX_FINISH_PASSES = 100
 log = logging.getLogger(__name__)
-
-
-@dataclass(frozen=True)
-class Params:
-    """Parameters of the simplification (ALGORITHMS §3).
-
-    Attributes
-    ----------
-    max_rounds : int
-        Upper bound on the rounds of shortcuts, leaf cutting and crossing removal (at least 1).
-        A round is PPR | CtL | RC | CtL.
-    ctl : {"middle", "extremes"}
-        Which leaves leaf cutting (CtL) keeps among the leaf children of one parent, sorted by
-        angle from the incoming edge: the middle one, or the first and last.
-    clearance : float or None
-        Smallest distance of every new (shortcut) edge from the inflated obstacles and the
-        walls (map units); ``None`` means ``0.01·D``, capped at half the goal's clearance,
-        as in ``rrtstar``; ``0`` is the paper's
-        simplification as written (ALGORITHMS §3).
-    """
-
-    max_rounds: int = 10
-    ctl: str = "middle"
-    clearance: float | None = None
-
-    def __post_init__(self) -> None:
-        if isinstance(self.max_rounds, bool) or not isinstance(self.max_rounds, int) or self.max_rounds < 1:
-            raise InvalidParamsError(f"must be an integer >= 1, got {self.max_rounds!r}", field="max_rounds")
-        if self.ctl not in CTL_MODES:
-            raise InvalidParamsError(f"must be one of {', '.join(CTL_MODES)}, got {self.ctl!r}", field="ctl")
-        if self.clearance is not None and not (self.clearance >= 0 and math.isfinite(self.clearance)):
-            raise InvalidParamsError(f"must be zero or positive, got {self.clearance}", field="clearance")
 
 
 def bfs_levels(parent: np.ndarray) -> list[np.ndarray]:

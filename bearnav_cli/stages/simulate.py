@@ -24,12 +24,13 @@ from bearnav_cli import runtime
 from bearnav_cli.datatypes import Outcome, Simulation, replace
 from bearnav_cli.errors import InvalidParamsError
 from bearnav_cli.geometry import FreeSpace
-from bearnav_cli.runtime import ControlSettings, PlanArrays, bearing
+from bearnav_cli.params import simulate as declared
+from bearnav_cli.runtime import ControlSettings, PlanArrays
 from bearnav_cli.runtime import controller as runtime_controller
 from bearnav_cli.runtime import robot as runtime_robot
-from bearnav_cli.runtime.settings import ALPHA, BEARING_SIGMA, ODOMETRY_DRIFT, SPEED
+from bearnav_cli.runtime.defaults import BEARING_SIGMA
 from bearnav_cli.world import starts as world_starts
-from bearnav_cli.world.camera import CAMERAS, Camera, IdealCamera
+from bearnav_cli.world.camera import Camera, IdealCamera
 from bearnav_cli.world.loop import EstimateTrace, Loop, trace_estimates
 from bearnav_cli.world.motion import Base, Contact, body_space, initial_headings
 from bearnav_cli.world.starts import parse_starts
@@ -51,219 +52,12 @@ def _radians(degrees: float | None) -> float | None:
     return None if degrees is None else math.radians(degrees)
 
 
-def _positive(value: float | None, name: str, *, allow_none: bool = True) -> None:
-    if value is None and allow_none:
-        return
-    if value is None or isinstance(value, bool) or not (value > 0 and math.isfinite(value)):
-        raise InvalidParamsError(f"must be positive, got {value}", field=name)
-
-
-@dataclass(frozen=True)
-class Params:
-    """Parameters of the closed loop (ALGORITHMS §6–§7).
-
-    Attributes
-    ----------
-    dynamics : {"single", "unicycle"}
-        Single integrator ``ẋ = v_ref·unit(ũ)`` or unicycle ``v = α cos e``, ``ω = β sin e``; on a
-        plan with a look-ahead λ, the unicycle's point λ ahead driven as a single integrator
-        (ALGORITHMS §12.6, docs/runtime.md).
-    measurement : {"bearing", "displacement"}
-        What the controller is fed: bearings (reconstructed, §6) or true displacements.
-    fov : float
-        Camera field of view (degrees, in (0, 360]); centred on the camera heading (the
-        unicycle's yaw, or the single integrator's last command direction).
-    noise_deg : float
-        Standard deviation of the Gaussian bearing-angle noise (degrees, >= 0).
-    range : float or None
-        Largest distance at which a landmark is seen (map units); ``None`` for unlimited.
-    occlusion : bool
-        Landmarks hidden by the raw obstacles are not seen (line of sight, ALGORITHMS §1).
-    reconstruction : {"lsq", "pair", "rescale"}
-        Bearing reconstruction (§6); ``x̂`` for switching always comes from ``lsq``.
-    min_spread_deg : float
-        ``θ_min`` of §6.2 (degrees).
-    speed : float
-        Reference speed ``v_ref`` of the single integrator (map units / s).
-    alpha : float
-        Unicycle forward gain ``α`` (map units / s): it drives at ``v = α cos e``, ``e`` its heading
-        error (ALGORITHMS §7.1).
-    beta : float
-        Unicycle turn gain ``β`` (rad / s): it turns at ``ω = β sin e``; also the rate at which a
-        robot turns to look around (``hold_time``).
-    clamp_reverse : bool
-        Unicycle never drives backwards (``v >= 0``); also set by the map's ``robot: {reverse: false}``.
-        On a look-ahead plan the clamped steps are not certified.
-    turn_first : bool
-        Unicycle forward speed ``α cos³ e`` instead of ALGORITHMS §7.1's ``α cos e``: far off its
-        field it slows down to turn rather than sweep a wide arc past an obstacle corner.
-    certified_heading : bool
-        Unicycle on a funnel plan without a look-ahead: forward only within the heading allowance
-        that keeps the velocity inside the cell's certified conditions
-        (``runtime.step.heading_allowance``); the look-ahead law replaces it.
-    look_on_purpose : bool
-        Without a fix, first turn toward the nearest heading where the map promises a usable pair of
-        tags (``runtime.step.best_view_heading``), then look all around; off (default): the
-        revolution at once.
-    keep_clear : bool
-        On a funnel plan, a step beyond the certified tolerance ``δ*`` is slowed so that the
-        estimate's error ball (3σ), grown by the step, never reaches an obstacle, and bent away
-        from the nearest one as it slows; a robot that cannot
-        move waits for fixes. Off: full speed on any estimate.
-    initial_heading : float or None
-        Initial heading (degrees); ``None``: toward the active cell's exit point (the goal
-        in the goal cell).
-    hold_time : float
-        Seconds without a usable reconstruction before the robot stops to look around (a
-        revolution at ``beta``); then the run is ``lost`` (§7.5).
-    odometry : bool
-        Between fixes, carry ``x̂`` forward with the commanded motion (wheel odometry: it errs by
-        the wheel slip, ``odometry_noise``) for ``hold_time``, and on while the filter's 3σ stays
-        within the barrier margin; off: the paper's hold policy as written (§7.5).
-    odometry_noise : float
-        Wheel slip ``σ`` of the simulated base (default 0.02): odometry alone errs by ``≈ σ·d``
-        (standard deviation, along and across the path) over a straight run of length ``d`` (per run
-        a scale error and a heading bias, both ``N(0, σ²)``, plus per-step jitter of the same size).
-        0 is the exact motion that the certificates assume (§7.1,
-        :class:`bearnav_cli.world.motion.Base`); ``verify`` runs with it.
-    odometry_drift : float
-        Odometry error (1σ) per unit travelled that the controller's filter assumes, its process
-        noise (default 0.05 = 5% of the distance travelled). The default is
-        :class:`~bearnav_cli.runtime.ControlSettings`'s. More than the slip (2σ = 4% rms per step,
-        ``σ·d`` over a run), and added up linearly, as the per-run slip adds up:
-        :func:`bearnav_cli.runtime.estimate.fuse` grows the
-        estimate's σ by ``drift·ℓ`` per step of length ``ℓ`` (``σ ← σ + drift·ℓ``, so ``drift·d``
-        after ``d`` blind), and its 3σ covers the default slip over a hold (``docs/choices.md``).
-    max_fix_error : float or None
-        Use a noisy fix only if its predicted 3σ position error (from ``noise_deg`` and the
-        bearing geometry, :func:`bearnav_cli.runtime.bearing.fix_variance`) is at most this (map units);
-        ``None``: every usable fix.
-    starts : str
-        ``map`` (the map's starts), ``random:N`` (N uniform free starts in the goal's
-        component, seeded), ``domain:N`` (N uniform starts in the certified domain ``D``, the union
-        of a funnel plan's cells, seeded) or ``x,y;x,y;...``. With a look-ahead unicycle
-        (ALGORITHMS §12.6) a start is the look-ahead point's; the axle begins ``λ`` behind it.
-    dt : float or None
-        Euler step (s); ``None`` means ``min(0.0025·D/v, 0.2)``, ``v = speed`` or ``alpha``.
-    goal_tolerance : float or None
-        Success radius (map units); ``None`` takes the plan's.
-    max_steps : int or None
-        Step limit of every run; ``None`` means ``ceil(5·L_route/(v·dt)) + 1000`` per run, with
-        ``L_route = ‖x₀ − x_n‖ + cost(n)`` and ``n`` the start's nearest tree node.
-    camera : {"ideal", "render"}
-        ``ideal``: exact bearings to the tags in view, with the ``fov``, ``noise_deg``, ``range`` and
-        ``occlusion`` above (ALGORITHMS §6.1, :class:`bearnav_cli.world.camera.IdealCamera`);
-        ``render``: camera frames drawn and the AprilTags detected in them (needs
-        ``bearnav[camera]``; its figures go to the metrics under ``camera``,
-        ``bearnav_cli.world.render.RenderedCamera``).
-    seed : int
-        Seeds the bearing noise, the wheel slip and the random starts (separate streams).
-    record_trajectories : bool
-        Keep every robot's trajectory (``verify`` turns this off).
-    estimator : {"kalman", "set"}
-        How the robot knows where it is: ``set``, a bound on its position error that holds while
-        the errors stay within the robot section's bounds (ALGORITHMS §12.2–12.3): it drives only
-        while the bound is within the error the cell
-        tolerates, and stops to look otherwise; ``kalman``, a scalar filter of the position and its standard
-        deviation, with the pace rule of ``keep_clear``.
-    noise_bound_deg : float or None
-        Bounded noise instead of ``noise_deg`` (degrees, in [0, 45)): every bearing error uniform
-        in ``[−η, η]`` and every odometry error within ``κ‖d̂‖ + ν`` (ALGORITHMS §12.8); the set
-        estimator assumes this ``η`` unless ``bearing_error_deg`` is given.
-    noise_worst : bool
-        Every error at its bound (``noise_bound_deg``, else the bound the robot assumes), turned
-        so that the truth lies nearer to the nearest obstacle than the estimate says (bearings, and
-        odometry pushed toward it).
-    bearing_error_deg : float or None
-        The bound on every bearing error the set estimator assumes (degrees, ``η_cam``); ``None``: the
-        map's ``robot.bearing_error_deg`` (default 0.2), or ``noise_bound_deg`` when that is given.
-    compass_error_deg : float or None
-        The compass (heading) error bound, added to the bearing bound (degrees; ``η = η_cam + ψ``);
-        ``None``: the map's.
-    slip : float or None
-        The odometry error bound as a fraction of each step (``κ``); ``None``: the map's ``robot.slip``
-        (0.03).
-    slip_floor : float or None
-        The odometry error bound's floor, added on every step that translates (map units; ``ν``);
-        ``None``: the map's, else ``1e-4·D``.
-    """
-
-    dynamics: str = "single"
-    measurement: str = "bearing"
-    fov: float = 360.0
-    noise_deg: float = 0.0
-    range: float | None = None
-    occlusion: bool = True
-    reconstruction: str = "lsq"
-    min_spread_deg: float = 2.0
-    speed: float = SPEED
-    alpha: float = ALPHA
-    beta: float = 0.5
-    clamp_reverse: bool = False
-    turn_first: bool = True
-    certified_heading: bool = True
-    look_on_purpose: bool = False
-    keep_clear: bool = True
-    initial_heading: float | None = None
-    hold_time: float = 2.0
-    odometry: bool = True
-    max_fix_error: float | None = None
-    odometry_noise: float = 0.02
-    odometry_drift: float = ODOMETRY_DRIFT
-    starts: str = "map"
-    dt: float | None = None
-    goal_tolerance: float | None = None
-    max_steps: int | None = None
-    camera: str = "ideal"
-    seed: int = 0
-    record_trajectories: bool = True
-    estimator: str = "kalman"
-    noise_bound_deg: float | None = None
-    noise_worst: bool = False
-    bearing_error_deg: float | None = None
-    compass_error_deg: float | None = None
-    slip: float | None = None
-    slip_floor: float | None = None
+class Params(declared.Params):
+    # the declaration's docstring (numpydoc, every field): this class only checks ``starts``' syntax too
+    __doc__ = declared.Params.__doc__
 
     def __post_init__(self) -> None:
-        for name, allowed in (("dynamics", runtime.DYNAMICS), ("measurement", runtime.MEASUREMENTS),
-                              ("reconstruction", bearing.METHODS), ("camera", CAMERAS),
-                              ("estimator", runtime.ESTIMATORS)):  # fmt: skip
-            if getattr(self, name) not in allowed:
-                raise InvalidParamsError(f"must be one of {', '.join(allowed)}, got {getattr(self, name)!r}",
-                                         field=name)  # fmt: skip
-        bearing.check_camera(self.fov, self.noise_deg, self.min_spread_deg)
-        for name in ("speed", "alpha", "beta", "hold_time"):
-            _positive(getattr(self, name), name, allow_none=False)
-        for name in ("range", "dt", "goal_tolerance"):
-            _positive(getattr(self, name), name)
-        for name in ("odometry_noise", "odometry_drift"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not (value >= 0 and math.isfinite(value)):
-                raise InvalidParamsError(f"must be zero or positive, got {value}", field=name)
-        if self.initial_heading is not None and not math.isfinite(self.initial_heading):
-            raise InvalidParamsError(f"must be finite, got {self.initial_heading}", field="initial_heading")
-        if self.max_steps is not None and (
-            isinstance(self.max_steps, bool) or int(self.max_steps) != self.max_steps or self.max_steps < 1
-        ):
-            raise InvalidParamsError(f"must be a positive integer, got {self.max_steps}", field="max_steps")
-        if self.noise_bound_deg is not None:
-            value = self.noise_bound_deg
-            if isinstance(value, bool) or not (math.isfinite(value) and 0.0 <= value < 45.0):
-                raise InvalidParamsError(f"must be a bound in degrees in [0, 45), got {value}", field="noise_bound_deg")
-            if self.noise_deg:
-                raise InvalidParamsError("give either a bound (noise_bound_deg) or a Gaussian noise_deg, not both",
-                                         field="noise_bound_deg")  # fmt: skip
-        if self.noise_worst and self.noise_deg:
-            raise InvalidParamsError("the worst case is of bounded errors, not of a Gaussian noise_deg",
-                                     field="noise_worst")  # fmt: skip
-        for name in ("bearing_error_deg", "compass_error_deg", "slip", "slip_floor"):
-            value = getattr(self, name)
-            if value is not None and (isinstance(value, bool) or not (math.isfinite(value) and value >= 0.0)):
-                raise InvalidParamsError(f"must be zero or positive, got {value}", field=name)
-        if (self.bearing_error_deg or 0.0) + (self.compass_error_deg or 0.0) >= 45.0:
-            raise InvalidParamsError("the bearing error bound (camera plus compass) must be below 45 degrees",
-                                     field="bearing_error_deg")  # fmt: skip
+        super().__post_init__()
         parse_starts(self.starts)  # syntax only; positions are checked against the map in run()
 
 

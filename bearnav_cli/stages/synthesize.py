@@ -54,96 +54,18 @@ from bearnav_cli.cell_lp import (
     vertex_template,
 )
 from bearnav_cli.datatypes import CellFlag, Cells, CellStatus, Plan, tolerance_by_area
-from bearnav_cli.errors import ArtifactError, InvalidParamsError
+from bearnav_cli.errors import ArtifactError
 from bearnav_cli.funnel import plan_tolerance_of, usable_tolerances
 from bearnav_cli.lp import LpResult, LpSolver, LpStatus
+from bearnav_cli.params.synthesize import Params
 
 __all__ = [
-    "GAIN_STRUCTURES", "LP_FORMS", "Params", "PreparedCell", "SolveOutcome", "VERSION", "finish_cell", "prepare_cell",
-    "problems", "run", "solve_cell", "solve_prepared", "summary",
+    "PreparedCell", "SolveOutcome", "VERSION", "finish_cell", "prepare_cell", "problems", "run", "solve_cell",
+    "solve_prepared", "summary",
 ]  # fmt: skip
 
 VERSION = 3
 log = logging.getLogger(__name__)
-
-GAIN_STRUCTURES = ("full", "diag", "scalar")
-LP_FORMS = ("vertex", "dual")
-
-
-@dataclass(frozen=True)
-class Params:
-    """Parameters of the synthesis (ALGORITHMS §5).
-
-    Attributes
-    ----------
-    u_max : float
-        Input box ``|u_1|, |u_2| ≤ u_max`` (map units per second).
-    kappa : float
-        Initial scale of the rates in each cell's barrier and exit conditions, halved while the LP
-        is infeasible. It is ``κ_h = κ_v`` of the constants ``c_h``, ``c_v`` (§5.3).
-    halvings : int
-        How many times ``kappa`` may be halved after an infeasible LP before the
-        least-violation solve (so ``halvings + 1`` feasibility attempts).
-    gain_structure : {"full", "diag", "scalar"}
-        The controller gain of each cell: any 2×2 matrix, diagonal, or a multiple of the identity.
-        ``full`` is solved in field space (the minimum-norm gain ``K_k`` by Lemma 3), the others in
-        gain space.
-    lp_form : {"vertex", "dual"}
-        Constraints at the cell's vertices, or through LP duality (§5.2).
-    w_h, w_v : float
-        Objective weights of the CBF and CLF slacks.
-    clf_margin : float
-        The CLF slack must satisfy ``S_V <= −clf_margin·u_max`` (a finite-time exit and no
-        equilibrium in the cell); ``0`` is ALGORITHMS §5.2 as written. A cell that cannot
-        meet it at any κ is solved with ``S_V <= 0`` and gets status 1.
-    goal_tolerance : float or None
-        Success radius around the goal (map units); ``None`` means ``0.01·D``.
-    tolerant : bool
-        Funnel cells: keep whichever of two fields tolerates the larger position error, the LP's or
-        one that heads straight for the exit point (ALGORITHMS §11.4). The second is Lemma 4's
-        field ``c_v(x_j − x) − εz`` (``ε`` chosen for the largest tolerance ``δ_c``). The LP
-        maximises the sum of its margins, which leaves ``δ_c`` at a fraction of a millimetre on
-        the example maps; Lemma 4's field tolerates half the depth of
-        ``x_j`` in the cell. ``False``: the LP's field always.
-    """
-
-    u_max: float = 1.0
-    kappa: float = 0.5
-    halvings: int = 6
-    gain_structure: str = "full"
-    lp_form: str = "vertex"
-    w_h: float = 1.0
-    w_v: float = 1.0
-    clf_margin: float = 0.01
-    goal_tolerance: float | None = None
-    tolerant: bool = True
-
-    def __post_init__(self) -> None:
-        for name in ("u_max", "kappa", "w_h", "w_v", "clf_margin", "goal_tolerance"):
-            value = getattr(self, name)
-            if value is None and name == "goal_tolerance":
-                continue
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-                raise InvalidParamsError(f"must be a finite number, got {value!r}", field=name)
-            object.__setattr__(self, name, float(value))
-        for name in ("u_max", "kappa"):
-            if getattr(self, name) <= 0:
-                raise InvalidParamsError(f"must be positive, got {getattr(self, name)}", field=name)
-        for name in ("w_h", "w_v", "clf_margin"):
-            if getattr(self, name) < 0:
-                raise InvalidParamsError(f"must be zero or positive, got {getattr(self, name)}", field=name)
-        if self.goal_tolerance is not None and self.goal_tolerance <= 0:
-            raise InvalidParamsError(f"must be positive, got {self.goal_tolerance}", field="goal_tolerance")
-        if isinstance(self.halvings, bool) or not isinstance(self.halvings, int) or self.halvings < 0:
-            raise InvalidParamsError(f"must be an integer of at least 0, got {self.halvings!r}", field="halvings")
-        if self.gain_structure not in GAIN_STRUCTURES:
-            raise InvalidParamsError(
-                f"must be one of {', '.join(GAIN_STRUCTURES)}, got {self.gain_structure!r}", field="gain_structure"
-            )
-        if not isinstance(self.tolerant, bool):
-            raise InvalidParamsError(f"must be true or false, got {self.tolerant!r}", field="tolerant")
-        if self.lp_form not in LP_FORMS:
-            raise InvalidParamsError(f"must be one of {', '.join(LP_FORMS)}, got {self.lp_form!r}", field="lp_form")
 
 
 # --------------------------------------------------------------------------- one cell

@@ -19,10 +19,7 @@ import shapely
 from bearnav_cli.geometry import FreeSpace
 from bearnav_cli.runtime import bearing
 
-__all__ = ["CAMERAS", "Camera", "IdealCamera"]
-
-#: The simulated cameras ``bearnav simulate --camera`` chooses from.
-CAMERAS = ("ideal", "render")
+__all__ = ["Camera", "IdealCamera"]
 
 
 class Camera(Protocol):

@@ -31,24 +31,11 @@ from sensor_msgs.msg import CameraInfo, Imu
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # bearnav_ros.py sits next to this file
 from bearnav_ros import BearnavLogic, Settings, fill_twist, mount_from_transform, pose_from_transform  # noqa: E402
 
-#: Parameter -> default (types follow the defaults; angles in radians, lengths in metres = map units).
+#: Parameter -> default (types follow the defaults; angles in radians, lengths in metres = map units): the
+#: ``Settings`` fields' defaults (the loop's from ``runtime.defaults``), then the node's frames and topics.
 PARAMETERS = {
     "plan": "",
-    "dynamics": "unicycle",
-    "speed": 0.1,
-    "alpha": 0.1,
-    "beta": 0.5,
-    "clamp_reverse": True,
-    "hold_time": 2.0,
-    "period": 0.1,
-    "bearing_sigma": 0.017453292519943295,
-    "estimator": "kalman",
-    "heading_source": "imu",
-    "yaw_offset": 0.0,
-    "family": "",
-    "rectified": True,
-    "mount_height": 0.0,
-    "mount_yaw": 0.0,
+    **{name: field.default for name, field in Settings.__dataclass_fields__.items() if name != "plan"},
     "base_frame": "base_link",
     "tag_frame_format": "{family}:{id}",
     "detections_topic": "detections",

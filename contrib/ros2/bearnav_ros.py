@@ -25,6 +25,7 @@ import numpy as np
 
 from bearnav_cli.errors import InvalidParamsError
 from bearnav_cli.runtime import ESTIMATORS, Controller, camera, camera_model
+from bearnav_cli.runtime.defaults import BEARING_SIGMA, LOOP_DEFAULTS
 
 __all__ = [
     "BearnavLogic", "HEADING_SOURCES", "Settings", "Step", "camera_yaw", "detections_from_msg", "fill_twist",
@@ -187,14 +188,14 @@ class Settings:
 
     plan: str
     dynamics: str = "unicycle"
-    speed: float = 0.1
-    alpha: float = 0.1
-    beta: float = 0.5
-    clamp_reverse: bool = True
-    hold_time: float = 2.0
+    speed: float = LOOP_DEFAULTS["speed"]
+    alpha: float = LOOP_DEFAULTS["alpha"]
+    beta: float = LOOP_DEFAULTS["beta"]
+    clamp_reverse: bool = LOOP_DEFAULTS["clamp_reverse"]
+    hold_time: float = LOOP_DEFAULTS["hold_time"]
     period: float = 0.1
-    bearing_sigma: float = math.radians(1.0)
-    estimator: str = "kalman"
+    bearing_sigma: float = BEARING_SIGMA
+    estimator: str = LOOP_DEFAULTS["estimator"]
     heading_source: str = "imu"
     yaw_offset: float = 0.0
     family: str = ""
