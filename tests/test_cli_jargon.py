@@ -18,6 +18,7 @@ from .test_docs_cli import ANSI, command_names
 
 JARGON = re.compile(
     r"§|\bALGORITHMS\b|\bDESIGN\b|\bLemma\b|(?<![\w/])(?:bearnav_cli|runtime|funnel)\.\w|\([CL]\d\)|\bissue \d"
+    r"|δ\*|x̂"  # the old plan-wide tolerance and the estimate's symbol: "the position error ...", "the estimate"
 )
 
 

@@ -47,7 +47,7 @@ class Params:
     occlusion : bool
         Landmarks hidden by the raw obstacles are not seen (line of sight, ALGORITHMS §1).
     reconstruction : {"lsq", "pair", "rescale"}
-        Bearing reconstruction (§6); ``x̂`` for switching always comes from ``lsq``.
+        Bearing reconstruction (§6); the position estimate that picks the cell always comes from ``lsq``.
     min_spread_deg : float
         ``θ_min`` of §6.2 (degrees).
     speed : float
@@ -73,7 +73,7 @@ class Params:
         tags (``runtime.step.best_view_heading``), then look all around; off (default): the
         revolution at once.
     keep_clear : bool
-        On a funnel plan, a step beyond the certified tolerance ``δ*`` is slowed so that the
+        On a funnel plan, a step beyond the position error the cell tolerates is slowed so that the
         estimate's error ball (3σ), grown by the step, never reaches an obstacle, and bent away
         from the nearest one as it slows; a robot that cannot
         move waits for fixes. Off: full speed on any estimate.
@@ -84,7 +84,7 @@ class Params:
         Seconds without a usable reconstruction before the robot stops to look around (a
         revolution at ``beta``); then the run is ``lost`` (§7.5).
     odometry : bool
-        Between fixes, carry ``x̂`` forward with the commanded motion (wheel odometry: it errs by
+        Between fixes, carry the position estimate forward with the commanded motion (wheel odometry: it errs by
         the wheel slip, ``odometry_noise``) for ``hold_time``, and on while the filter's 3σ stays
         within the barrier margin; off: the paper's hold policy as written (§7.5).
     odometry_noise : float
