@@ -440,7 +440,7 @@ def check_lookahead(plan: Plan, space: FreeSpace | None = None) -> list[str]:
             missing = shapely.difference(wanted, shapely.buffer(stored, map_.tol))
             free = shapely.difference(shapely.box(*map_.bounds), stored)
             gap = shapely.distance(raw, free) if not free.is_empty else math.inf
-            problems.append(f"obstacles: the plan's obstacles do not contain the raw obstacles inflated by ρ + λ = "
-                            f"{radius:g} ({missing.area:.3g} map units² missing; a free point lies {gap:.6g} from a "
-                            f"raw obstacle)")  # fmt: skip
+            problems.append(f"obstacles: the plan's obstacles do not contain the raw obstacles inflated by the "
+                            f"radius plus the look-ahead, {radius:g} ({missing.area:.3g} map units² missing; a free "
+                            f"point lies {gap:.6g} from a raw obstacle)")  # fmt: skip
     return problems

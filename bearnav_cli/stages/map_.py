@@ -439,7 +439,11 @@ def _validate(reader: _Reader, map_: Map, params: Params, culprit: str | None = 
     passed these checks without it, so only the look-ahead's inflation can break them); ``warn``
     off skips the landmark-coverage warning.
     """
-    blame = "" if culprit is None else f" once the obstacles are inflated by ρ + λ = {map_.planning_radius:g}"
+    blame = (
+        ""
+        if culprit is None
+        else (f" once the obstacles are inflated by the robot radius plus the look-ahead, {map_.planning_radius:g}")
+    )
 
     def fail(field: str, message: str) -> InvalidMapError:
         return reader.fail(field if culprit is None else culprit, message + blame)
