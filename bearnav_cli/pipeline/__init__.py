@@ -24,8 +24,8 @@ This package re-exports what the command line, ``sweep``, the benchmarks and the
 from bearnav_cli.pipeline.chain import compute, compute_saved
 from bearnav_cli.pipeline.current import ACTIVITY, Activity, activity, reset_activity
 from bearnav_cli.pipeline.files import StageReport, load, plan, run_map, run_stage
-from bearnav_cli.pipeline.params import Origins, check_map_params, resolve_params
-from bearnav_cli.pipeline.table import SIMULATE, STAGE_BY_NAME, STAGES, Progress, Stage
+from bearnav_cli.pipeline.params import check_map_params, resolve_params
+from bearnav_cli.pipeline.table import SIMULATE, STAGE_BY_NAME, STAGES, Origins, Progress, Stage
 
 __all__ = [
     "ACTIVITY",

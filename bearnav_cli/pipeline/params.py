@@ -10,36 +10,14 @@ each value came from, so that every error names the option or map field that set
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass
-from typing import Any, Mapping
+from typing import Any
 
 from bearnav_cli.datatypes import Map
 from bearnav_cli.errors import InvalidMapError, InvalidParamsError
 from bearnav_cli.limits import LIMITS, check_value, option_name
-from bearnav_cli.pipeline.table import STAGE_BY_NAME
+from bearnav_cli.pipeline.table import STAGE_BY_NAME, Origins
 
-__all__ = ["check_map_params", "map_stage_params", "Origins", "resolve", "resolve_params", "stage_params"]
-
-
-@dataclass(frozen=True)
-class Origins:
-    """Where each parameter of one stage got its value.
-
-    Attributes
-    ----------
-    fields : mapping of str to str
-        Parameter name to the field an error about it names: the option that set it (``--seed``), else
-        the map field that did or would (``params.rrtstar.seed``).
-    given : frozenset of str
-        The names set by the map's ``params:`` or an option, not left at their default.
-    """
-
-    fields: Mapping[str, str]
-    given: frozenset[str] = frozenset()
-
-    def field(self, name: str | None) -> str | None:
-        """The field of parameter ``name`` (a name without one, or None, as it is)."""
-        return self.fields.get(name or "", name)
+__all__ = ["check_map_params", "map_stage_params", "resolve", "resolve_params", "stage_params"]
 
 
 def _coerce(stage: str, name: str, default: Any, value: Any, where: str) -> Any:

@@ -27,16 +27,15 @@ from __future__ import annotations
 import importlib
 from dataclasses import dataclass
 from types import ModuleType
-from typing import TYPE_CHECKING, Any, Callable
+from typing import TYPE_CHECKING, Any, Callable, Mapping
 
 from bearnav_cli import artifacts
 from bearnav_cli.errors import InvalidParamsError
 
 if TYPE_CHECKING:
-    from bearnav_cli.pipeline.params import Origins
     from bearnav_cli.verdicts import Problem
 
-__all__ = ["CHAIN", "HOOKS", "Progress", "REQUIRED", "SIMULATE", "Stage", "STAGE_BY_NAME", "STAGES"]
+__all__ = ["CHAIN", "HOOKS", "Origins", "Progress", "REQUIRED", "SIMULATE", "Stage", "STAGE_BY_NAME", "STAGES"]
 
 #: ``progress(done, total)``, called by long stages.
 Progress = Callable[[int, int], None]
@@ -45,6 +44,27 @@ Progress = Callable[[int, int], None]
 REQUIRED = ("VERSION", "Params", "run", "summary")
 #: What a stage module may define, with its parameters: without it, the table's default (:class:`Stage`).
 HOOKS = {"check_resources": ("input", "params", "given"), "problems": ("result",)}
+
+
+@dataclass(frozen=True)
+class Origins:
+    """Where each parameter of one stage got its value (what the hooks' errors name).
+
+    Attributes
+    ----------
+    fields : mapping of str to str
+        Parameter name to the field an error about it names: the option that set it (``--seed``), else
+        the map field that did or would (``params.rrtstar.seed``).
+    given : frozenset of str
+        The names set by the map's ``params:`` or an option, not left at their default.
+    """
+
+    fields: Mapping[str, str]
+    given: frozenset[str] = frozenset()
+
+    def field(self, name: str | None) -> str | None:
+        """The field of parameter ``name`` (a name without one, or None, as it is)."""
+        return self.fields.get(name or "", name)
 
 
 @dataclass(frozen=True)
