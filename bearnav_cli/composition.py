@@ -27,7 +27,7 @@ from typing import NamedTuple
 import numpy as np
 import shapely
 
-from bearnav_cli.datatypes import Cells, Map, Plan, cell_list, tolerance_by_area
+from bearnav_cli.datatypes import Cells, Map, Plan, cell_list, cell_polygons, tolerance_by_area
 from bearnav_cli.funnel import (
     cell_tolerance,
     coverage_domain,
@@ -123,13 +123,6 @@ class Composition:
             "usable_tolerance": "cells whose stored usable tolerance τ_c exceeds min(δ_c, δ_e,c/2)",
         }
         return [f"{len(v)} {words[k]}: {cell_list(v)}" for k, v in self.failures.items() if v] + self.notes
-
-
-def cell_polygons(cells) -> np.ndarray:
-    """Every cell as a shapely polygon, object array of shape (C,)."""
-    out = np.empty(cells.n_cells, dtype=object)
-    out[:] = [shapely.Polygon(cells.vertices(c)) for c in range(cells.n_cells)]
-    return out
 
 
 def _parent_cells(plan: Plan) -> np.ndarray:

@@ -25,7 +25,7 @@ import numpy as np
 import shapely
 
 from bearnav_cli import composition
-from bearnav_cli.datatypes import CellFlag, CellStatus, Plan
+from bearnav_cli.datatypes import CellFlag, CellStatus, Plan, cell_polygons
 from bearnav_cli.funnel import coverage_domain, reached_parts
 from bearnav_cli.geometry import FreeSpace, inflate
 from bearnav_cli.routes import sample_starts
@@ -265,7 +265,7 @@ def check_geometry(plan: Plan, space: FreeSpace, tree_samples: np.ndarray | None
     cells, map_ = plan.cells, plan.map
     tol = map_.tol
     box = space.box
-    polygons = [shapely.Polygon(cells.vertices(c)) for c in range(cells.n_cells)]
+    polygons = cell_polygons(cells)
     union = shapely.union_all([p.buffer(0) if not p.is_valid else p for p in polygons])
     uncovered = float(shapely.difference(box, union).area)
     lo, hi = map_.bounds[:2] - tol, map_.bounds[2:] + tol

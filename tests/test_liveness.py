@@ -139,10 +139,10 @@ def test_eta_star_re_evaluated_is_live(plan, wide):
 
 def test_live_fraction_is_the_area_of_the_live_cells_the_policy_uses(plan, wide):
     assert 0.0 <= wide.live_fraction <= wide.cover_fraction <= 1.0
-    from bearnav_cli.plot import active_regions, cell_polygons
+    from bearnav_cli.datatypes import active_regions, cell_polygons
 
     cells = plan.cells
-    regions = active_regions(cells)
+    regions = active_regions(cell_polygons(cells), cells.cell_rank)
     domain = shapely.union_all(cell_polygons(cells)).area
     share = sum(regions[c].area for c in np.flatnonzero(wide.live)) / domain
     assert wide.live_fraction == pytest.approx(share, rel=1e-9, abs=1e-12)

@@ -18,7 +18,7 @@ import shapely  # noqa: E402
 from matplotlib import colors as mcolors  # noqa: E402
 from matplotlib.quiver import Quiver  # noqa: E402
 
-from bearnav_cli import composition, palette, pipeline, plot, runtime  # noqa: E402
+from bearnav_cli import composition, datatypes, palette, pipeline, plot, runtime  # noqa: E402
 from bearnav_cli.datatypes import CellStatus, replace  # noqa: E402
 from bearnav_cli.errors import InvalidParamsError  # noqa: E402
 from bearnav_cli.funnel import coverage_domain  # noqa: E402
@@ -146,8 +146,8 @@ def test_an_uncertified_cell_is_hatched_red(small_plan, draw, bad):
 
 def test_active_regions_are_where_the_runtime_uses_each_cell(small_plan):
     cells = small_plan.cells
-    regions = plot.active_regions(cells)
-    total = shapely.union_all(plot.cell_polygons(cells)).area
+    regions = plot.cell_regions(cells)
+    total = shapely.union_all(datatypes.cell_polygons(cells)).area
     assert sum(r.area for r in regions) == pytest.approx(total, rel=1e-9)  # a partition of D: no stacking
     rng = np.random.default_rng(0)
     points = rng.uniform(cells.map.bounds[:2], cells.map.bounds[2:], (3000, 2))

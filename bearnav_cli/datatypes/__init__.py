@@ -24,6 +24,8 @@ from bearnav_cli.datatypes.cells import (
     Cells,
     CellStatus,
     Plan,
+    active_regions,
+    cell_polygons,
     tolerance_by_area,
 )
 from bearnav_cli.datatypes.frozen import FrozenDict, freeze, frozen_array, ragged, thaw
@@ -36,6 +38,8 @@ from bearnav_cli.datatypes.words import NEGLIGIBLE_SHARE, cell_list, percent, pl
 __all__ = [
     "AREA_QUANTILES",
     "CELL_KEYS",
+    "active_regions",
+    "cell_polygons",
     "cell_list",
     "CellFlag",
     "Cells",

@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+import shapely
 
 from bearnav_cli.datatypes.frozen import data_keys, freeze, freeze_fields, ragged
 from bearnav_cli.datatypes.map_ import Map
@@ -26,6 +27,8 @@ __all__ = [
     "CellStatus",
     "Plan",
     "PLAN_KEYS",
+    "active_regions",
+    "cell_polygons",
     "tolerance_by_area",
 ]
 
@@ -180,6 +183,39 @@ class Cells:
 
 #: The quantiles of :func:`tolerance_by_area`, by name.
 AREA_QUANTILES = {"p10": 0.1, "median": 0.5, "p90": 0.9}
+
+
+def cell_polygons(cells: Cells) -> np.ndarray:
+    """Every cell as a shapely polygon, object array of shape (C,)."""
+    out = np.empty(cells.n_cells, dtype=object)
+    out[:] = [shapely.Polygon(cells.vertices(c)) for c in range(cells.n_cells)]
+    return out
+
+
+def active_regions(polygons: Any, rank: np.ndarray) -> list:
+    """Where each cell drives the robot under the funnel policy (ALGORITHMS §11.3).
+
+    Cell ``c``'s region is ``P_c`` less every cell of smaller rank (ties: lower index), i.e. the
+    points where :func:`bearnav_cli.runtime.least_rank_cell` returns ``c``. The regions do not
+    overlap and their union is ``D``; a cell whose region is empty is never used.
+
+    Parameters
+    ----------
+    polygons : sequence of shapely.Polygon, length C
+        The cells (:func:`cell_polygons`).
+    rank : ndarray, shape (C,)
+        Each cell's rank (``cell_rank``).
+
+    Returns
+    -------
+    list of shapely geometries, length C
+    """
+    regions: list = [shapely.Polygon()] * len(polygons)
+    taken = shapely.Polygon()
+    for c in np.lexsort((np.arange(len(polygons)), np.asarray(rank, float))):
+        regions[c] = shapely.difference(polygons[c], taken)
+        taken = shapely.union(taken, polygons[c])
+    return regions
 
 
 def tolerance_by_area(cells: Cells, usable: np.ndarray) -> dict[str, float]:

@@ -30,7 +30,7 @@ around); a heading whose view is a subset of another's at the same point can onl
 not evaluated.
 
 The **live fraction** of ``D`` is the area where the cell the funnel policy uses (the least-rank
-cell holding the point, ``plot.active_regions``'s regions) is live, over the area of ``D``
+cell holding the point, ``datatypes.active_regions``) is live, over the area of ``D``
 (shapely, exact for the polygons); :attr:`Liveness.cover_fraction` is the area some live cell
 covers. The cells of a plan overlap a great deal (the kitchen's areas sum to 4.5 times its ``D``),
 so neither is a sum of cell areas.

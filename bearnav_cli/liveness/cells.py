@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 import shapely
 
-from bearnav_cli.datatypes import Plan, percent
+from bearnav_cli.datatypes import Plan, active_regions, percent
 from bearnav_cli.liveness.live_grid import LiveGrid, bounds_of, distinct_views, grid
 from bearnav_cli.runtime import PlanArrays
 
@@ -148,16 +148,6 @@ def _point_min(values: np.ndarray, row_point: np.ndarray, n_points: int) -> np.n
     return out
 
 
-def _active_regions(polygons: list[shapely.Polygon], rank: np.ndarray) -> list[shapely.Geometry]:
-    """``P_c`` less every cell of smaller rank (ties: lower index): where the policy uses cell ``c``."""
-    regions: list[shapely.Geometry] = [shapely.Polygon()] * len(polygons)
-    taken: shapely.Geometry = shapely.Polygon()
-    for c in np.lexsort((np.arange(len(polygons)), rank)):
-        regions[c] = shapely.difference(polygons[c], taken)
-        taken = shapely.union(taken, polygons[c])
-    return regions
-
-
 def measure(plan: Plan, eta_deg: float | None = None, fov_deg: float = 60.0, kappa: float | None = None,
             nu: float | None = None, speed: float | None = None, resolution: float | None = None,
             headings: int | None = None, max_range: float = math.inf,
@@ -217,7 +207,7 @@ def evaluate(g: LiveGrid, landmarks: np.ndarray | None = None,
     rank = np.asarray(arrays.cell_rank, float)
     domain = shapely.union_all(polygons)
     area = float(domain.area)
-    regions = _active_regions(polygons, rank)
+    regions = active_regions(polygons, rank)
     live_area = sum(float(regions[c].area) for c in np.flatnonzero(live))
     view_area = sum(float(regions[c].area) for c in np.flatnonzero(view_live))
     cover = float(shapely.union_all([polygons[c] for c in np.flatnonzero(live)]).area) if live.any() else 0.0

@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 import shapely
 
-from bearnav_cli import composition
+from bearnav_cli.datatypes import cell_polygons
 from bearnav_cli.errors import InvalidParamsError
 from bearnav_cli.geometry import FreeSpace
 from bearnav_cli.runtime import cell_policy
@@ -196,7 +196,7 @@ def evaluation_grid(plan: Any, spacing: float | None = None) -> EvaluationGrid:
     grid, step = bounds_grid(map_, spacing)
     space = FreeSpace.from_map(map_)
     in_free = space.points_free(grid)
-    cells = composition.cell_polygons(plan.cells)
+    cells = cell_polygons(plan.cells)
     domain = shapely.union_all(cells) if len(cells) else shapely.Polygon()
     shapely.prepare(domain)
     in_domain = np.zeros(len(grid), bool)

@@ -21,9 +21,8 @@ from bearnav_cli.plot.cells import (
     COLOR_BY,
     LIVE_COLORS,
     NEVER_ACTIVE_LABEL,
-    active_regions,
     cell_number_keys,
-    cell_polygons,
+    cell_regions,
     label_cells,
     plot_barriers,
     plot_cells,
@@ -73,12 +72,11 @@ from bearnav_cli.plot.tags import (
 )
 
 __all__ = [
-    "active_regions",
     "ADDED_COLOR",
     "AXIS_UNITS",
     "cell_number_keys",
     "CELL_NUMBER_LABEL",
-    "cell_polygons",
+    "cell_regions",
     "CENTRED",
     "COLOR_BY",
     "CORNERS",

@@ -1,6 +1,6 @@
 """The cells' layers: fills by rank, tolerance, status or liveness, outlines, exit faces, barriers, indices.
 
-A funnel cell is drawn where it is active (:func:`active_regions`, where the funnel policy drives
+A funnel cell is drawn where it is active (:func:`cell_regions`, where the funnel policy drives
 with it); the uncovered free space and the barrier lines are layers of their own.
 """
 
@@ -17,7 +17,7 @@ from matplotlib.collections import LineCollection
 from matplotlib.patches import PathPatch
 from matplotlib.path import Path as MplPath
 
-from bearnav_cli.datatypes import Cells, CellStatus
+from bearnav_cli.datatypes import Cells, CellStatus, active_regions, cell_polygons
 from bearnav_cli.errors import InvalidParamsError
 from bearnav_cli.palette import PALETTE, ROLE_COLORS, STATUS_COLORS
 from bearnav_cli.plot.labels import CENTRED, label_key, place_labels
@@ -33,11 +33,10 @@ from bearnav_cli.plot.style import (
 )
 
 __all__ = [
-    "active_regions",
+    "cell_regions",
     "cell_anchors",
     "CELL_NUMBER_LABEL",
     "cell_number_keys",
-    "cell_polygons",
     "COLOR_BY",
     "label_cells",
     "LIVE_COLORS",
@@ -56,25 +55,9 @@ COLOR_BY = ("rank", "tolerance", "status", "live")
 LIVE_COLORS = {True: ROLE_COLORS["live"], False: ROLE_COLORS["not live"]}
 
 
-def cell_polygons(cells: Cells) -> list[shapely.Polygon]:
-    """Every cell as a shapely polygon."""
-    return [shapely.Polygon(cells.vertices(c)) for c in range(cells.n_cells)]
-
-
-def active_regions(cells: Cells) -> list[shapely.Geometry]:
-    """Where each cell drives the robot under the funnel policy (ALGORITHMS §11.3).
-
-    Cell ``c``'s region is ``P_c`` less every cell of smaller rank (ties: lower index), i.e. the
-    points where :func:`bearnav_cli.runtime.least_rank_cell` returns ``c``. The regions do not
-    overlap and their union is ``D``; a cell whose region is empty is never used.
-    """
-    polys = cell_polygons(cells)
-    regions: list[shapely.Geometry] = [shapely.Polygon()] * cells.n_cells
-    taken: shapely.Geometry = shapely.Polygon()
-    for c in np.lexsort((np.arange(cells.n_cells), cells.cell_rank)):
-        regions[c] = shapely.difference(polys[c], taken)
-        taken = shapely.union(taken, polys[c])
-    return regions
+def cell_regions(cells: Cells) -> list[shapely.Geometry]:
+    """:func:`~bearnav_cli.datatypes.active_regions` of ``cells``: where each cell drives the robot."""
+    return active_regions(cell_polygons(cells), cells.cell_rank)
 
 
 def _cell_colors(cells: Cells, color_by: str, status: np.ndarray | None, tolerance: np.ndarray | None,
@@ -138,7 +121,7 @@ def plot_cells(ax: plt.Axes, cells: Cells, status: np.ndarray | None = None, *, 
     color_by : {"rank", "tolerance", "status", "live"}, optional
         Fill colour; default ``rank`` for funnel cells, else ``status`` when given (else outlines only);
         ``live``: green where the cell is live, vermillion where it is not (``live``).
-        Each point is filled once, with the colour of its least-rank cell (:func:`active_regions`, where
+        Each point is filled once, with the colour of its least-rank cell (:func:`cell_regions`, where
         the funnel policy drives with that cell); paper cells by status fill each status's union, the
         worst on top.
     tolerance : ndarray, shape (C,), optional
@@ -168,7 +151,7 @@ def plot_cells(ax: plt.Axes, cells: Cells, status: np.ndarray | None = None, *, 
 
     if color_by is None:
         color_by = "rank" if cells.is_funnel else ("status" if status is not None else "")
-    regions = active_regions(cells) if cells.is_funnel else None
+    regions = cell_regions(cells) if cells.is_funnel else None
     if color_by:
         faces, mappable, label = _cell_colors(cells, color_by, status, tolerance, live)
 
@@ -180,7 +163,7 @@ def plot_cells(ax: plt.Axes, cells: Cells, status: np.ndarray | None = None, *, 
             return None  # the colour bar says what the colour is
 
         if regions is not None or color_by != "status":
-            for c, region in enumerate(regions if regions is not None else active_regions(cells)):
+            for c, region in enumerate(regions if regions is not None else cell_regions(cells)):
                 add_geometry(ax, region, facecolor=faces[c], alpha=fill, edgecolor=PALETTE["white"], lw=0.5,
                              zorder=0.5, gid="cell-fill", label=key(name(c)))  # fmt: skip
         else:  # paper cells by status: each status's union once, the worst on top
@@ -254,7 +237,7 @@ def label_cells(ax: plt.Axes, cells: Cells, *, regions: Sequence[shapely.Geometr
     cells : Cells
         The cells whose indices are written.
     regions : sequence of shapely geometry, optional
-        :func:`active_regions` of funnel cells (computed when not given; paper cells have none).
+        :func:`cell_regions` of funnel cells (computed when not given; paper cells have none).
     legend : bool
         Add legend entries for the two kinds of index (:func:`label_key`).
     avoid : array_like, shape (m, 2), optional
@@ -266,7 +249,7 @@ def label_cells(ax: plt.Axes, cells: Cells, *, regions: Sequence[shapely.Geometr
         The indices written (gid ``cell-number``).
     """
     if regions is None and cells.is_funnel:
-        regions = active_regions(cells)
+        regions = cell_regions(cells)
     points, active = cell_anchors(cells, regions)
     if legend:
         cell_number_keys(ax, cells, active)
@@ -292,10 +275,10 @@ def cell_number_keys(ax: plt.Axes, cells: Cells, active: np.ndarray | None = Non
     cells : Cells
         The cells whose indices are written.
     active : ndarray of bool, shape (C,), optional
-        Whether each cell is ever active (computed from :func:`active_regions` when not given).
+        Whether each cell is ever active (computed from :func:`cell_regions` when not given).
     """
     if active is None:
-        active = cell_anchors(cells, active_regions(cells) if cells.is_funnel else None)[1]
+        active = cell_anchors(cells, cell_regions(cells) if cells.is_funnel else None)[1]
     label_key(ax, "12", CELL_NUMBER_LABEL)
     if not np.all(active):
         label_key(ax, "12", NEVER_ACTIVE_LABEL, **_NEVER_ACTIVE_STYLE)

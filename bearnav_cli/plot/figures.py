@@ -13,9 +13,9 @@ from bearnav_cli.errors import InvalidParamsError
 from bearnav_cli.palette import OUTCOME_COLORS, ROLE_COLORS
 from bearnav_cli.plot.cells import (
     COLOR_BY,
-    active_regions,
     cell_anchors,
     cell_number_keys,
+    cell_regions,
     label_cells,
     plot_barriers,
     plot_cells,
@@ -226,7 +226,7 @@ def figure_for(artifact: Any, *, background: Sequence[Any] = (), title: str | No
                    tolerance=plan.usable_tolerance if plan is not None else None,
                    live=None if liveness is None else liveness.live)  # fmt: skip
         if cell_numbers:  # the legend entries now, the indices once the layout is settled
-            regions = active_regions(cells) if cells.is_funnel else None
+            regions = cell_regions(cells) if cells.is_funnel else None
             cell_number_keys(ax, cells, cell_anchors(cells, regions)[1])
         if cells.is_funnel and coverage is not None:
             plot_uncovered(ax, cells, coverage.uncovered, coverage.unreached)
