@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 import shapely
 
-from bearnav_cli.datatypes import Plan, active_regions, percent
+from bearnav_cli.datatypes import Plan, percent
 from bearnav_cli.liveness.live_grid import LiveGrid, bounds_of, distinct_views, grid
 from bearnav_cli.runtime import PlanArrays
 
@@ -204,10 +204,7 @@ def evaluate(g: LiveGrid, landmarks: np.ndarray | None = None,
         eps_view = _cell_max(_point_min(row_eps, row_point, len(points))[pair_point], pair_cell, n_cells)
     view_live = eps_view < margin
 
-    rank = np.asarray(arrays.cell_rank, float)
-    domain = shapely.union_all(polygons)
-    area = float(domain.area)
-    regions = active_regions(polygons, rank)
+    area, regions = g.area, g.regions
     live_area = sum(float(regions[c].area) for c in np.flatnonzero(live))
     view_area = sum(float(regions[c].area) for c in np.flatnonzero(view_live))
     cover = float(shapely.union_all([polygons[c] for c in np.flatnonzero(live)]).area) if live.any() else 0.0

@@ -3,6 +3,7 @@ and the bound ``ε(x, S)`` of a look at each point (``runtime.bounded.one_look_b
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 from typing import Any
@@ -10,7 +11,7 @@ from typing import Any
 import numpy as np
 import shapely
 
-from bearnav_cli.datatypes import Plan
+from bearnav_cli.datatypes import Plan, active_regions
 from bearnav_cli.errors import InvalidParamsError
 from bearnav_cli.runtime import PlanArrays, bounded, estimate, looking, robot, settings
 
@@ -98,6 +99,18 @@ class LiveGrid:
     resolution: float
     headings: int
     max_range: float
+
+    # the cells do not depend on the tags: every evaluation on this grid (tags --for live: before and
+    # after) shares their active regions and their area
+    @functools.cached_property
+    def regions(self) -> list:
+        """Where each cell drives the robot (:func:`~bearnav_cli.datatypes.active_regions`), length C."""
+        return active_regions(self.polygons, self.arrays.cell_rank)
+
+    @functools.cached_property
+    def area(self) -> float:
+        """The area of ``D``, the union of the cells (map units²)."""
+        return float(shapely.union_all(self.polygons).area)
 
     def point_margin(self) -> np.ndarray:
         """The least margin of the cells holding each point, shape (P,) map units: below it, every such cell
