@@ -143,8 +143,7 @@ class FreeSpace:
     def planning_clearance(self, requested: float | None, goal: np.ndarray, diagonal: float) -> float:
         """The clearance a planner uses: ``requested`` (``None``: ``DEFAULT_CLEARANCE·D``), capped at
         half the goal's own clearance so that the root can still connect (map units)."""
-        wanted = DEFAULT_CLEARANCE * diagonal if requested is None else float(requested)
-        return max(0.0, min(wanted, 0.5 * self.wall_clearance(goal)))
+        return max(0.0, min(barrier_margin(requested, diagonal), 0.5 * self.wall_clearance(goal)))
 
     @cached_property
     def box(self) -> shapely.Polygon:
