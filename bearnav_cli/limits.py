@@ -19,7 +19,7 @@ from typing import Any
 
 from bearnav_cli.errors import InvalidParamsError, ResourceLimitError
 from bearnav_cli.params import MODULES, declare
-from bearnav_cli.params.declare import declared, named_option, params_type
+from bearnav_cli.params.declare import declared, params_type
 from bearnav_cli.runtime.plan_file import human_bytes, memory_budget
 
 __all__ = [
@@ -30,7 +30,6 @@ __all__ = [
     "MAX_RUNS",
     "MAX_STEPS_PER_RUN",
     "option_name",
-    "OPTION_NAMES",
     "Range",
     "RUN_BYTES",
     "SEED",
@@ -46,32 +45,27 @@ MAX_RUNS = declare.MAX_RUNS
 MAX_STEPS_PER_RUN = declare.MAX_STEPS_PER_RUN
 
 
-def _declared_limits() -> tuple[dict[str, dict[str, Range]], dict[tuple[str, str], str]]:
-    """The listed ranges of every command's fields, and the options declared by name (``--starts``, ``--range``)."""
+def _declared_limits() -> dict[str, dict[str, Range]]:
+    """The listed ranges of every command's fields."""
     found: dict[str, dict[str, Range]] = {}
-    renamed: dict[tuple[str, str], str] = {}
     for command in MODULES:
         found[command] = {}
         for field in dataclasses.fields(params_type(command)):
             declaration = declared(field)
             if declaration.range is not None and declaration.listed:
                 found[command][field.name] = declaration.range
-            if named_option(field) is not None:
-                renamed[(command, field.name)] = named_option(field)
-    return found, renamed
+    return found
 
 
 #: The range of every numeric parameter, by stage (``verify`` holds the options of ``bearnav verify``): the
 #: ranges :func:`~bearnav_cli.params.declare.param` declares (those of ``Params``' own checks only aside).
-LIMITS: dict[str, dict[str, Range]]
-#: How the command line spells a parameter when its declaration names the option.
-OPTION_NAMES: dict[tuple[str, str], str]
-LIMITS, OPTION_NAMES = _declared_limits()
+LIMITS: dict[str, dict[str, Range]] = _declared_limits()
 
 
 def option_name(stage: str, name: str) -> str:
-    """The command-line option of a parameter (``--border-spacing``)."""
-    return OPTION_NAMES.get((stage, name), "--" + name.replace("_", "-"))
+    """The command-line option of a parameter (``--border-spacing``; ``--starts`` for verify's ``n_starts``):
+    :func:`bearnav_cli.params.declare.option_name`, the one place that reads it from the declaration."""
+    return declare.option_name(stage, name)
 
 
 def check_value(stage: str, name: str, value: Any, where: str, diagonal: float | None = None) -> None:

@@ -16,8 +16,6 @@ from bearnav_cli.params import MODULES as PARAMS_MODULES
 __all__ = [
     "PARAMS_ONLY",
     "ParamField",
-    "option_name",
-    "option_names",
     "params_fields",
 ]
 
@@ -129,20 +127,3 @@ def params_fields(command: str) -> tuple[ParamField, ...]:
                                  docs.get(field.name, ("", ()))[0], declaration.choices, declaration.option,
                                  off))  # fmt: skip
     return tuple(fields)
-
-
-def option_names() -> dict[tuple[str, str], str]:
-    """``{(command, field): option}`` of the options declared by name (``--starts``), every command's."""
-    import dataclasses
-
-    from bearnav_cli.params.declare import named_option, params_type
-
-    return {(command, field.name): named_option(field) for command in PARAMS_MODULES
-            for field in dataclasses.fields(params_type(command)) if named_option(field) is not None}  # fmt: skip
-
-
-def option_name(command: str, name: str) -> str:
-    """The option of a command's field: ``--field-name`` unless its declaration names another (``--starts``)."""
-    from bearnav_cli.params.declare import option_name as declared_option
-
-    return declared_option(command, name)

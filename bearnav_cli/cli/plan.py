@@ -7,7 +7,6 @@ from typing import Any, List, Optional
 import typer
 
 from bearnav_cli.cli.exits import EXIT_INVALID, EXIT_OUTCOME, fail, handles_errors
-from bearnav_cli.cli.fields import option_name
 from bearnav_cli.cli.hints import camera_words, finish, outcome_failure, plan_guarantee, tags_step
 from bearnav_cli.cli.mapfile import parse_xy, read_map_source
 from bearnav_cli.cli.options import (
@@ -89,6 +88,7 @@ def plan_command(
     bearnav plan lab.yaml --goal 1,1 --landmark 0,2 --landmark 4,0 (a bare map_server YAML)
     """
     from bearnav_cli import pipeline
+    from bearnav_cli.limits import option_name
 
     Quiet.enabled |= quiet
     cells = options["cells"]
