@@ -14,7 +14,9 @@ from typing import Any
 
 from bearnav_cli.datatypes import CellFlag, CellStatus, cell_list
 
-__all__ = ["blind_spots", "BLIND_SPOT", "no_route", "NO_ROUTE", "not_certified", "NOT_CERTIFIED", "Problem"]
+__all__ = [
+    "blind_spots", "BLIND_SPOT", "cell_problems", "no_route", "NO_ROUTE", "not_certified", "NOT_CERTIFIED", "Problem",
+]  # fmt: skip
 
 #: The kinds of :class:`Problem`.
 NO_ROUTE, BLIND_SPOT, NOT_CERTIFIED = "no route", "blind spot", "not certified"
@@ -64,6 +66,12 @@ def blind_spots(cells: Any) -> list[Problem]:
     one = len(blind) == 1
     text = f"{'cell' if one else 'cells'} {cell_list(blind, 20)} {'has' if one else 'have'} free points that see "
     return [Problem(BLIND_SPOT, text + "fewer than 2 landmarks", tuple(int(c) for c in blind))]
+
+
+def cell_problems(cells: Any) -> list[Problem]:
+    """The problems of a set of cells, worst first: no route (the tree is only its root, the nodes added to cover
+    the free space left out), then blind-spot cells (what ``decompose`` judges, and ``synthesize`` before its own)."""
+    return no_route(cells.nodes, cells.node_added) + blind_spots(cells)
 
 
 def not_certified(status: Any) -> list[Problem]:

@@ -19,6 +19,7 @@ import numpy as np
 import shapely
 import shapely.ops
 
+from bearnav_cli import verdicts
 from bearnav_cli.barriers import cbf_rows, corridor_rows, goal_cbf_rows, wall_rows
 from bearnav_cli.cell_landmarks import cell_landmarks, fixed_landmark, seen_from, segments_seen, witness_points
 from bearnav_cli.datatypes import NEGLIGIBLE_SHARE, CellFlag, Cells, Tree, cell_list, plural
@@ -571,9 +572,7 @@ def summary(cells: Cells) -> str:
     return text
 
 
-def problems(cells: Cells) -> list:
+def problems(cells: Cells) -> list[verdicts.Problem]:
     """Why the cells are not usable (a list of :class:`~bearnav_cli.verdicts.Problem`, worst first): no route
     (the tree is only its root, leaving out the nodes added to cover the free space), then blind-spot cells."""
-    from bearnav_cli import verdicts
-
-    return verdicts.no_route(cells.nodes, cells.node_added) + verdicts.blind_spots(cells)
+    return verdicts.cell_problems(cells)

@@ -30,6 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from bearnav_cli import verdicts
 from bearnav_cli.cell_fields import (
     CellSolution,
     batched_scales,
@@ -649,11 +650,7 @@ def summary(plan: Plan) -> str:
     return text
 
 
-def problems(plan: Plan) -> list:
+def problems(plan: Plan) -> list[verdicts.Problem]:
     """Why the plan is not usable (a list of :class:`~bearnav_cli.verdicts.Problem`, worst first): its cells'
     problems (no route, blind spots), then the cells not certified (status 2 or 3)."""
-    from bearnav_cli import verdicts
-
-    cells = plan.cells
-    return (verdicts.no_route(cells.nodes, cells.node_added) + verdicts.blind_spots(cells)
-            + verdicts.not_certified(plan.status))  # fmt: skip
+    return verdicts.cell_problems(plan.cells) + verdicts.not_certified(plan.status)
