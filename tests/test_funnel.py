@@ -550,7 +550,7 @@ def test_densification():
     capped = decompose.run(tree, decompose.Params(max_added_nodes=3, cover="F_m"))
     assert np.count_nonzero(capped.node_added) == min(3, len(added))
     assert bare.stats["free_coverage_m"] <= capped.stats["free_coverage_m"] <= dense.stats["free_coverage_m"]
-    clear = space.with_clearance(space.planning_clearance(None, map_.goal, map_.diagonal))
+    clear = space.planning_space(None, map_.goal, map_.diagonal)
     assert clear.segments_free(dense.nodes[added], dense.nodes[dense.parent[added]]).all()
     # ranks of the new leaves are their route lengths
     step = np.linalg.norm(dense.nodes[added] - dense.nodes[dense.parent[added]], axis=1)

@@ -496,3 +496,31 @@ def test_nearest_nodes_by_k_d_tree_equal_the_brute_force(grid):
     finally:
         simplify._KDTREE_PAIRS = saved
     assert np.array_equal(tree[1], brute[1]) and np.array_equal(tree[0], brute[0])
+
+
+@pytest.mark.parametrize("goal", [(0.45, 0.45), (0.4, 7.5), (10, 0.5)], ids=["corner", "wall", "bottom"])
+def test_a_goal_by_a_wall_relaxes_the_clearance_only_near_it(goal):
+    """A goal nearer the walls than twice the clearance lowers it only within GOAL_OPENING clearances
+    (FreeSpace.planning_space): the tree still grows from the root, and every edge of the tree and of
+    its simplification that passes farther from the goal keeps the full clearance."""
+    from bearnav_cli.geometry import GOAL_OPENING, barrier_margin
+
+    spec = copy.deepcopy(CLUTTER)
+    spec["goal"] = list(goal)
+    map_ = make_map(spec=spec)
+    space = FreeSpace.from_map(map_)
+    c = barrier_margin(None, map_.diagonal)
+    assert space.wall_clearance(map_.goal) < 2 * c  # the case the opening is for
+    tree = rrtstar.run(map_, rrtstar.Params(iterations=800, seed=3))
+    out = simplify.run(tree)
+    walls = shapely.union(shapely.box(*space.bounds).exterior, space.obstacles)
+    far = shapely.Point(map_.goal).buffer(GOAL_OPENING * c, quad_segs=64)
+    for t in (tree, out):
+        assert len(t.nodes) > 50
+        child = np.flatnonzero(t.parent >= 0)
+        edges = shapely.linestrings(np.stack([t.nodes[child], t.nodes[t.parent[child]]], axis=1))
+        outside = shapely.difference(edges, far)  # the parts of the edges outside the goal's opening
+        gap = shapely.distance(outside[~shapely.is_empty(outside)], walls)
+        assert gap.min() >= c * (1 - 1e-6)
+        # near the goal the edges keep half the goal's own clearance
+        assert shapely.distance(edges, walls).min() >= 0.5 * space.wall_clearance(map_.goal) * (1 - 1e-6)

@@ -13,7 +13,13 @@ Every name is re-exported here; the modules, each with one job:
 """
 
 from bearnav_cli.geometry.convex import box_polygon, clip, convex_pieces, drop_collinear, polygon_edges, polygon_rows
-from bearnav_cli.geometry.free_space import DEFAULT_CLEARANCE, FreeSpace, barrier_margin, landmark_coverage
+from bearnav_cli.geometry.free_space import (
+    DEFAULT_CLEARANCE,
+    GOAL_OPENING,
+    FreeSpace,
+    barrier_margin,
+    landmark_coverage,
+)
 from bearnav_cli.geometry.shapes import (
     BUFFER_QUAD_SEGS,
     CIRCLE_SEGMENTS,
@@ -34,6 +40,7 @@ __all__ = [
     "DEFAULT_CLEARANCE",
     "drop_collinear",
     "FreeSpace",
+    "GOAL_OPENING",
     "from_shapely",
     "inflate",
     "landmark_coverage",

@@ -17,11 +17,24 @@ import shapely
 from bearnav_cli.datatypes import Map
 from bearnav_cli.geometry.shapes import inflate, to_shapely
 
-__all__ = ["barrier_margin", "DEFAULT_CLEARANCE", "FreeSpace", "landmark_coverage", "MEMO_ENTRIES", "SPACE_CACHE"]
+__all__ = [
+    "barrier_margin",
+    "DEFAULT_CLEARANCE",
+    "FreeSpace",
+    "GOAL_OPENING",
+    "landmark_coverage",
+    "MEMO_ENTRIES",
+    "SPACE_CACHE",
+]
 
 
 #: Default clearance of tree edges and barrier margin, as a fraction of the bounds' diagonal D.
 DEFAULT_CLEARANCE = 0.01
+#: The radius, in planning clearances, of the neighbourhood of a goal near a wall in which the tree keeps only half
+#: the goal's own clearance (:meth:`FreeSpace.planning_space`). From a goal with clearance ``g`` a path must travel
+#: at least ``c − g`` to reach clearance ``c`` (the clearance is 1-Lipschitz), ``(c − g)/sin(α/2)`` out of a
+#: corner of angle ``α``; four clearances cover every corner wider than 29°.
+GOAL_OPENING = 4.0
 
 
 def barrier_margin(requested: float | None, diagonal: float) -> float:
@@ -140,10 +153,40 @@ class FreeSpace:
         """Distance from a point to ``O`` and to the walls ``∂B`` (map units)."""
         return float(self.clearance(np.asarray(point, float).reshape(1, 2))[0])
 
-    def planning_clearance(self, requested: float | None, goal: np.ndarray, diagonal: float) -> float:
-        """The clearance a planner uses: ``requested`` (``None``: ``DEFAULT_CLEARANCE·D``), capped at
-        half the goal's own clearance so that the root can still connect (map units)."""
-        return max(0.0, min(barrier_margin(requested, diagonal), 0.5 * self.wall_clearance(goal)))
+    def planning_space(self, requested: float | None, goal: np.ndarray, diagonal: float) -> FreeSpace:
+        """The space a planner keeps its edges in: clear by ``requested`` (``None``: ``DEFAULT_CLEARANCE·D``),
+        except near a goal that is itself nearer ``O`` or the walls than twice that.
+
+        There, within :data:`GOAL_OPENING` clearances of the goal, the edges keep half the goal's own
+        clearance instead, so that the root can connect. Only that neighbourhood is relaxed: a goal
+        in a corner no longer lowers the clearance of the whole tree (which set every node near a
+        wall, and so every cell's exit inset and tolerance, by the goal's corner: the paper maps'
+        goals lie 1 unit from two walls).
+
+        Parameters
+        ----------
+        requested : float or None
+            The clearance asked for (map units; ``None``: :func:`barrier_margin`'s default).
+        goal : ndarray, shape (2,)
+            The tree's root (map units).
+        diagonal : float
+            ``D``, the diagonal of the map's bounds (map units).
+
+        Returns
+        -------
+        FreeSpace
+            :meth:`with_clearance` of the clearance, with the goal's opening carved out of it.
+        """
+        clearance = max(0.0, barrier_margin(requested, diagonal))
+        grown = self.with_clearance(clearance)
+        near = 0.5 * self.wall_clearance(goal)
+        if near >= clearance:
+            return grown
+        disc = shapely.buffer(shapely.Point(np.asarray(goal, float)), GOAL_OPENING * clearance, quad_segs=32)
+        opening = shapely.difference(disc, self.with_clearance(near).obstacles)
+        obstacles = shapely.difference(grown.obstacles, opening)
+        shapely.prepare(obstacles)
+        return FreeSpace(self.bounds, self.tol, obstacles, self.raw_obstacles, self.sight_bounds)
 
     @cached_property
     def box(self) -> shapely.Polygon:

@@ -32,7 +32,8 @@ class Params:
     clearance : float or None
         Smallest distance of every tree edge from the inflated obstacles and the walls (map
         units); ``None`` means ``0.01·D`` (D the bounds' diagonal); ``0`` is the plain
-        RRT* (ALGORITHMS §2). Capped at half the goal's own clearance. The barrier rows of
+        RRT* (ALGORITHMS §2). Within four clearances of a goal nearer the walls than twice
+        it, half the goal's own clearance (``FreeSpace.planning_space``). The barrier rows of
         ``decompose`` need it: a node on an obstacle's boundary leaves a robot no room.
     """
 

@@ -26,8 +26,8 @@ class Params:
         angle from the incoming edge: the middle one, or the first and last.
     clearance : float or None
         Smallest distance of every new (shortcut) edge from the inflated obstacles and the
-        walls (map units); ``None`` means ``0.01·D``, capped at half the goal's clearance,
-        as in ``rrtstar``; ``0`` is the paper's
+        walls (map units); ``None`` means ``0.01·D``, relaxed near a goal by a wall as in
+        ``rrtstar``; ``0`` is the paper's
         simplification as written (ALGORITHMS §3).
     """
 

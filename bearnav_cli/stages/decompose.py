@@ -201,8 +201,7 @@ def _funnel_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) 
     # the boundary of F_m, a hair thick: a pocket's boundary off it is where the pocket meets the cells
     domain_edge = shapely.buffer(domain.boundary, 1e3 * tol)
     shapely.prepare(domain_edge)
-    clearance = space.planning_clearance(None, goal, map_.diagonal)
-    reach = space.with_clearance(clearance)
+    reach = space.planning_space(None, goal, map_.diagonal)
     added = []
 
     trial = {}  # the band leaf band_leaf accepted last, with its built cell: (point, node, NeckChoice)

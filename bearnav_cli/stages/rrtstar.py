@@ -21,7 +21,7 @@ import numpy as np
 from bearnav_cli import limits, verdicts
 from bearnav_cli.datatypes import Map, Tree, plural
 from bearnav_cli.errors import ResourceLimitError
-from bearnav_cli.geometry import FreeSpace
+from bearnav_cli.geometry import FreeSpace, barrier_margin
 from bearnav_cli.params.rrtstar import Params
 
 __all__ = [
@@ -226,8 +226,8 @@ def run(map_: Map, params: Params = Params(), progress: Callable[[int, int], Non
     # independent of the tree: one vectorised call; a sample in the band B \ B_r lies in a wall
     in_obstacle = space.in_obstacle(samples) | ~space.in_bounds(samples)
     free_area = space.free_area
-    clearance = space.planning_clearance(params.clearance, map_.goal, map_.diagonal)
-    space = space.with_clearance(clearance)  # edges keep their distance; samples are still tested against O
+    clearance = barrier_margin(params.clearance, map_.diagonal)
+    space = space.planning_space(params.clearance, map_.goal, map_.diagonal)  # samples are still tested against O
 
     capacity = params.iterations + 1
     nodes = np.empty((capacity, 2))

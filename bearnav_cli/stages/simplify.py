@@ -42,7 +42,7 @@ import shapely
 from bearnav_cli import verdicts
 from bearnav_cli.datatypes import Tree
 from bearnav_cli.errors import ArtifactError
-from bearnav_cli.geometry import FreeSpace
+from bearnav_cli.geometry import FreeSpace, barrier_margin
 from bearnav_cli.params.simplify import Params
 
 __all__ = [
@@ -577,9 +577,8 @@ def run(tree: Tree, params: Params = Params(), progress: Callable[[int, int], No
     if len(nodes) == 1:
         return Tree(tree.map, tree.nodes, tree.parent, tree.cost, tree.collision_samples, stats)
     true_space = FreeSpace.from_map(tree.map)
-    clearance = true_space.planning_clearance(params.clearance, tree.map.goal, tree.map.diagonal)
-    stats["clearance"] = clearance
-    space = true_space.with_clearance(clearance)
+    stats["clearance"] = barrier_margin(params.clearance, tree.map.diagonal)
+    space = true_space.planning_space(params.clearance, tree.map.goal, tree.map.diagonal)
     tol = tree.map.tol
 
     def cut(nodes, parent, cost):
