@@ -99,12 +99,24 @@ OPTION_CASES = [
     ("simulate", "plan", ["--beta", "inf", "--dynamics", "unicycle"], "--beta"),
     ("simulate", "plan", ["--min-success", "2"], "--min-success"),
     ("simulate", "plan", ["--dynamics", "teleport"], "--dynamics"),
+    # issue 22's bounded noise: negative, non-finite or >= 45 degrees
+    ("simulate", "plan", ["--noise-bound-deg", "-1"], "--noise-bound-deg"),
+    ("simulate", "plan", ["--noise-bound-deg", "nan"], "--noise-bound-deg"),
+    ("simulate", "plan", ["--noise-bound-deg", "inf"], "--noise-bound-deg"),
+    ("simulate", "plan", ["--noise-bound-deg", "45"], "--noise-bound-deg"),
+    ("simulate", "plan", ["--compass-error-deg", "-0.1"], "--compass-error-deg"),
+    ("simulate", "plan", ["--slip", "-1"], "--slip"),
+    ("simulate", "plan", ["--slip-floor", "inf"], "--slip-floor"),
     ("verify", "plan", ["--seed", "-1"], "--seed"),
     ("verify", "plan", ["--starts", "10000000"], "--starts"),
     ("verify", "plan", ["--starts", "-1"], "--starts"),
     ("verify", "plan", ["--speed", "0"], "--speed"),
     ("verify", "plan", ["--speed", "1e-12"], "--speed"),
     ("verify", "plan", ["--min-success", "2"], "--min-success"),
+    ("verify", "plan", ["--live-fov", "0"], "--live-fov"),
+    ("verify", "plan", ["--live-fov", "60", "--bearing-error-deg", "45"], "--bearing-error-deg"),
+    ("verify", "plan", ["--live-fov", "60", "--slip", "1"], "--slip"),
+    ("verify", "plan", ["--live-fov", "60", "--live-resolution", "0"], "--live-resolution"),
 ]
 
 
