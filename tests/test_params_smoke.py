@@ -71,12 +71,6 @@ XFAIL: dict[tuple[str, str, object], tuple[str, type[Exception]]] = {
         "funnel-local refuses it with ArtifactError 'nodes: cell of node 1: the exit row was cut away'",
         InvalidParamsError,
     ),
-    ("decompose", "cbf_apex", "parent"): (
-        "cells=paper, barrier=wedge, cbf_apex=parent (the paper's degenerate LP, documented to warn): synthesize "
-        "still certifies (status 0 or 1) the 15 cells whose wedge row is not positive at x_j, so "
-        "verify.check_geometry reports them as bad_barriers and bearnav verify fails the plan",
-        AssertionError,
-    ),
 }
 #: The tuple of allowed values each enumerated field is checked against (the docstring must list them all).
 TUPLES = {

@@ -60,7 +60,8 @@ class Params:
         ``parent`` drops only the parent's (paper B's text; can cut the edge, warns, and a tree where it cuts
         an exit face away is refused with an error naming the cell).
     cbf_apex : {"child", "parent"}
-        Apex of the barrier wedge; ``parent`` reproduces the paper's degenerate LP (warns).
+        Apex of the barrier wedge; ``parent`` reproduces the paper's degenerate LP (warns). Its wedge is
+        zero at the exit point, so ``synthesize`` certifies no cell that has one.
     cbf_filter : {"both", "projection", "cell"}
         Which collision samples a barrier may come from: projection onto the edge within
         the edge, inside the cell, or both.

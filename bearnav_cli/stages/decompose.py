@@ -371,7 +371,10 @@ def _paper_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) -
     if params.bisector_rule == "parent":
         log.warning("bisector_rule=parent: a third node's bisector can cut an edge out of its cell")
     if params.cbf_apex == "parent":
-        log.warning("cbf_apex=parent: the barrier and Lyapunov rows force a zero-margin LP (ALGORITHMS §4.5)")
+        log.warning(
+            "cbf_apex=parent: the barrier and Lyapunov rows force a zero-margin LP (ALGORITHMS §4.5); "
+            "synthesize certifies no cell whose wedge is zero at its exit point"
+        )
     flags = np.zeros(n, np.int64)
     regions, cbf = [], []
     for c in range(n):
