@@ -70,6 +70,7 @@ OPTION_CASES = [
     ("decompose", "simplified", ["--n-landmarks", "1"], "--n-landmarks"),
     ("decompose", "simplified", ["--n-landmarks", str(10**6)], "--n-landmarks"),
     ("decompose", "simplified", ["--cells", "hexagons"], "--cells"),
+    ("decompose", "simplified", ["--bisector-rule", "parent"], "--bisector-rule"),  # paper B's text: not offered
     ("synthesize", "cells", ["--u-max", "0"], "--u-max"),
     ("synthesize", "cells", ["--u-max", "1e300"], "--u-max"),
     ("synthesize", "cells", ["--kappa", "nan"], "--kappa"),
