@@ -46,19 +46,19 @@ MAX_STEPS_PER_RUN = declare.MAX_STEPS_PER_RUN
 
 
 def _declared_limits() -> dict[str, dict[str, Range]]:
-    """The listed ranges of every command's fields."""
+    """The declared ranges of every command's fields."""
     found: dict[str, dict[str, Range]] = {}
     for command in MODULES:
         found[command] = {}
         for field in dataclasses.fields(params_type(command)):
             declaration = declared(field)
-            if declaration.range is not None and declaration.listed:
+            if declaration.range is not None:
                 found[command][field.name] = declaration.range
     return found
 
 
 #: The range of every numeric parameter, by stage (``verify`` holds the options of ``bearnav verify``): the
-#: ranges :func:`~bearnav_cli.params.declare.param` declares (those of ``Params``' own checks only aside).
+#: ranges :func:`~bearnav_cli.params.declare.param` declares.
 LIMITS: dict[str, dict[str, Range]] = _declared_limits()
 
 

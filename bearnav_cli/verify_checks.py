@@ -4,9 +4,9 @@
   vertices from the stored gain and rows only (:func:`bearnav_cli.runtime.certificate.field_margins`,
   numpy, no LP, nothing from ``synthesize``), and the cells whose claimed certificate it refutes;
 - :func:`flagged_cells` — decomposition's flags, from the hashed ``cell_flags`` bits only;
-- :func:`check_geometry` — the cells cover the bounds, lie inside them, contain their edge; barrier
-  rows are unit-norm and positive at the exit point; tree edges are free; the collision samples are
-  those of ``tree.npz`` when it is given;
+- :func:`check_geometry` — the cells cover the bounds, lie inside them, contain their edge; a certified
+  cell's barrier rows are unit-norm and positive at the exit point; tree edges are free; the collision
+  samples are those of ``tree.npz`` when it is given;
 - :func:`unreached_regions` / :func:`reached_starts` — the free regions the tree never reached, and
   random starts outside them;
 - :func:`check_lookahead` — the look-ahead plan's ``λ`` and inflation against its map.
@@ -29,9 +29,9 @@ from bearnav_cli.datatypes import CellFlag, CellStatus, Plan, cell_polygons
 from bearnav_cli.funnel import coverage_domain, reached_parts
 from bearnav_cli.geometry import FreeSpace, inflate
 from bearnav_cli.routes import sample_starts
-from bearnav_cli.runtime.certificate import field_margins, gain_field
+from bearnav_cli.runtime.certificate import UNIT_TOL, barrier_fault, field_margins, gain_field
 
-__all__ = ["CERTIFICATE_TOL", "CERTIFIED", "COVERAGE_TOL", "GOAL_FIELD_TOL", "UNIT_TOL", "Certificates", "Geometry",
+__all__ = ["CERTIFICATE_TOL", "CERTIFIED", "COVERAGE_TOL", "GOAL_FIELD_TOL", "Certificates", "Geometry",
            "Unreached", "certificate_problems", "certificates", "check_geometry", "check_lookahead", "flagged_cells",
            "reached_starts", "rows_not_polygon", "unreached_regions"]  # fmt: skip
 
@@ -41,9 +41,6 @@ CERTIFICATE_TOL = 1e-7
 GOAL_FIELD_TOL = 1e-9
 #: Uncovered area allowed, as a fraction of ``area(B)``.
 COVERAGE_TOL = 1e-9
-#: Allowed deviation of a barrier normal's norm from 1.
-UNIT_TOL = 1e-9
-
 CERTIFIED = (CellStatus.CERTIFIED, CellStatus.RELAXED, CellStatus.GOAL)
 
 
@@ -177,7 +174,9 @@ class Geometry:
     edges_outside_cell : tuple of int
         Cells that do not contain their node and exit point (the goal cell: the goal).
     bad_barriers : tuple of int
-        Cells with a barrier normal not of unit norm, or ``h(x_j) <= 0`` in an edge cell.
+        Cells claiming a certificate (status 0, 1, 4) whose barrier rows cannot carry it: a normal not of
+        unit norm, or ``h(x_j) <= 0`` in an edge cell (:func:`~bearnav_cli.runtime.certificate.barrier_fault`,
+        the judgement by which ``synthesize`` certifies no such cell; one not certified is reported as such).
     rows_not_polygon : tuple of int
         Cells whose half-plane rows ``cell_A x ≤ cell_b`` (what the runtime tests) are not exactly
         the polygon of their stored vertices (where the certificate was checked): see
@@ -280,12 +279,8 @@ def check_geometry(plan: Plan, space: FreeSpace, tree_samples: np.ndarray | None
         anchors = np.stack([cells.nodes[node], cells.nodes[j]]) if j >= 0 else map_.goal[None, :]
         if np.any(anchors @ A.T > b + tol):
             off_edge.append(c)
-        normals, offsets = cells.barrier(c)
-        if len(normals):
-            unit = np.abs(np.hypot(normals[:, 0], normals[:, 1]) - 1.0) <= UNIT_TOL
-            positive = normals @ cells.nodes[j] + offsets > 0 if j >= 0 else np.ones(len(normals), bool)
-            if not (unit.all() and positive.all()):
-                bad_rows.append(c)
+        if int(plan.status[c]) in CERTIFIED and barrier_fault(*cells.barrier(c), cells.nodes[j] if j >= 0 else None):
+            bad_rows.append(c)
     children = np.flatnonzero(cells.parent >= 0)
     free = space.segments_free(cells.nodes[children], cells.nodes[cells.parent[children]])
     unchanged = None

@@ -173,7 +173,9 @@ def declaration_problems(text: str) -> list[str]:
     for stage, name, column in LIMIT_ROW.findall(text):
         field = {f.name: f for f in dataclasses.fields(params_type(stage))}[name]
         declaration = declared(field)
-        where = f"`params.{stage}.{name}` only" if declaration.option is None else f"`{declaration.option}`"
+        # a field without an option: the map's params: section sets it, except verify's (no map: the Python API)
+        only = f"`verify.Params.{name}` only" if stage == "verify" else f"`params.{stage}.{name}` only"
+        where = only if declaration.option is None else f"`{declaration.option}`"
         if not column.strip().replace("`verify ", "`").startswith(where):  # verify's rows: `verify --starts`
             found.append(f"option limits: {stage} `{name}` should name {where}")
         if declaration.unit and f", {declaration.unit}" not in column:

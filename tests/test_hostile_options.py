@@ -70,6 +70,7 @@ OPTION_CASES = [
     ("decompose", "simplified", ["--n-landmarks", "1"], "--n-landmarks"),
     ("decompose", "simplified", ["--n-landmarks", str(10**6)], "--n-landmarks"),
     ("decompose", "simplified", ["--cells", "hexagons"], "--cells"),
+    ("decompose", "simplified", ["--bisector-rule", "parent"], "--bisector-rule"),  # paper B's text: not offered
     ("synthesize", "cells", ["--u-max", "0"], "--u-max"),
     ("synthesize", "cells", ["--u-max", "1e300"], "--u-max"),
     ("synthesize", "cells", ["--kappa", "nan"], "--kappa"),
@@ -99,12 +100,24 @@ OPTION_CASES = [
     ("simulate", "plan", ["--beta", "inf", "--dynamics", "unicycle"], "--beta"),
     ("simulate", "plan", ["--min-success", "2"], "--min-success"),
     ("simulate", "plan", ["--dynamics", "teleport"], "--dynamics"),
+    # issue 22's bounded noise: negative, non-finite or >= 45 degrees
+    ("simulate", "plan", ["--noise-bound-deg", "-1"], "--noise-bound-deg"),
+    ("simulate", "plan", ["--noise-bound-deg", "nan"], "--noise-bound-deg"),
+    ("simulate", "plan", ["--noise-bound-deg", "inf"], "--noise-bound-deg"),
+    ("simulate", "plan", ["--noise-bound-deg", "45"], "--noise-bound-deg"),
+    ("simulate", "plan", ["--compass-error-deg", "-0.1"], "--compass-error-deg"),
+    ("simulate", "plan", ["--slip", "-1"], "--slip"),
+    ("simulate", "plan", ["--slip-floor", "inf"], "--slip-floor"),
     ("verify", "plan", ["--seed", "-1"], "--seed"),
     ("verify", "plan", ["--starts", "10000000"], "--starts"),
     ("verify", "plan", ["--starts", "-1"], "--starts"),
     ("verify", "plan", ["--speed", "0"], "--speed"),
     ("verify", "plan", ["--speed", "1e-12"], "--speed"),
     ("verify", "plan", ["--min-success", "2"], "--min-success"),
+    ("verify", "plan", ["--live-fov", "0"], "--live-fov"),
+    ("verify", "plan", ["--live-fov", "60", "--bearing-error-deg", "45"], "--bearing-error-deg"),
+    ("verify", "plan", ["--live-fov", "60", "--slip", "1"], "--slip"),
+    ("verify", "plan", ["--live-fov", "60", "--live-resolution", "0"], "--live-resolution"),
 ]
 
 

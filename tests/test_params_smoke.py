@@ -9,8 +9,7 @@ stage and the ones after it run again with the value. Each artifact made is writ
 (its type's invariants, the content hash, the manifest's ``params`` holding the value); a plan's cells
 are re-checked (``verify.check_geometry``, ``composition.check`` for a funnel plan); a simulation's
 outcomes are valid codes and its trajectories lie in the map's bounds. A field that acts only with
-another setting runs every value with it (:data:`WITH`); the values that fail are strict xfails
-naming the bug (:data:`XFAIL`), the library is not changed here.
+another setting runs every value with it (:data:`WITH`).
 """
 
 from __future__ import annotations
@@ -24,7 +23,6 @@ import pytest
 from bearnav_cli import artifacts, composition, pipeline, runtime, verify, verify_checks
 from bearnav_cli.cli import fields
 from bearnav_cli.datatypes import Outcome, Plan, Simulation
-from bearnav_cli.errors import InvalidParamsError
 from bearnav_cli.geometry import FreeSpace
 from bearnav_cli.params import decompose, rrtstar, simplify, synthesize
 from bearnav_cli.params.simulate import CAMERAS
@@ -63,21 +61,6 @@ WITH = {
 #: ``camera="render"`` draws frames and detects tags with OpenCV, seconds per run: it has its own tests,
 #: tests/test_render.py (test_the_controller_reaches_the_goal_from_rendered_frames) and tests/test_world.py.
 SKIPPED = {("simulate", "camera", "render")}
-#: Real bugs these cases found (reported, not fixed here): (stage, field, value) -> the reason.
-XFAIL: dict[tuple[str, str, object], tuple[str, type[Exception]]] = {
-    ("decompose", "bisector_rule", "parent"): (
-        "cells=paper, bisector_rule=parent: on this tree the rule cuts an exit face away, and decompose refuses it "
-        "with a one-line InvalidParamsError naming the cell (it used to be a bare ValueError, an internal error); "
-        "funnel-local refuses it with ArtifactError 'nodes: cell of node 1: the exit row was cut away'",
-        InvalidParamsError,
-    ),
-    ("decompose", "cbf_apex", "parent"): (
-        "cells=paper, barrier=wedge, cbf_apex=parent (the paper's degenerate LP, documented to warn): synthesize "
-        "still certifies (status 0 or 1) the 15 cells whose wedge row is not positive at x_j, so "
-        "verify.check_geometry reports them as bad_barriers and bearnav verify fails the plan",
-        AssertionError,
-    ),
-}
 #: The tuple of allowed values each enumerated field is checked against (the docstring must list them all).
 TUPLES = {
     ("map", "unknown"): None,  # no module tuple: map_.run checks the literal pair (it only acts on a grid)
@@ -113,9 +96,6 @@ def discovered() -> list[tuple[str, str, object]]:
 def _param(case: tuple[str, str, object]):
     if case in SKIPPED:
         return pytest.param(*case, marks=pytest.mark.skip(reason="camera=render: see tests/test_render.py"))
-    if case in XFAIL:
-        reason, error = XFAIL[case]
-        return pytest.param(*case, marks=pytest.mark.xfail(strict=True, reason=reason, raises=error))
     return pytest.param(*case)
 
 
@@ -124,7 +104,7 @@ CASES = discovered()
 
 def test_the_cases_cover_the_issue_and_the_module_tuples():
     """The issue's named options are among the cases; every enumerated field lists its module's tuple."""
-    named = {("decompose", "bisector_rule", "parent"), ("decompose", "barrier", "wedge"),
+    named = {("decompose", "bisector_rule", "crossing"), ("decompose", "barrier", "wedge"),
              ("simulate", "odometry", False), ("simulate", "turn_first", False), ("simulate", "max_fix_error", 1.0),
              *(("decompose", "cbf_filter", v) for v in decompose.CBF_FILTERS)}  # fmt: skip
     assert named <= set(CASES)

@@ -15,7 +15,7 @@ from bearnav_cli import cell_fields, cell_lp
 from bearnav_cli.datatypes import CellFlag, CellStatus, replace
 from bearnav_cli.errors import ArtifactError, InvalidParamsError
 from bearnav_cli.lp import LpResult, LpSolver, LpStatus, dense_to_csr
-from bearnav_cli.runtime.certificate import Margins, vertex_margins
+from bearnav_cli.runtime.certificate import Margins, barrier_fault, vertex_margins
 from bearnav_cli.stages import synthesize as sy
 from tests.handmade import clip, hand_map, hand_plan
 
@@ -201,6 +201,28 @@ def test_t4_parent_apex_forces_zero_optimum_and_stop_at_parent(solver):
             extreme = probe.solve(solver)
             assert extreme.status is LpStatus.OPTIMAL
             assert abs(extreme.objective) <= 1e-9
+
+
+def test_barrier_rows_that_cannot_carry_a_certificate():
+    """One judgement of the rows for synthesize and verify: unit normals, positive at ``x_j`` in an edge cell."""
+    assert barrier_fault(np.zeros((0, 2)), np.zeros(0), TOY_XJ) is None
+    assert barrier_fault(toy().cbf_n, toy().cbf_q, TOY_XJ) is None
+    assert barrier_fault([[1.0, 0.0]], [-1.0]) is None  # the goal cell has no exit point
+    assert "not unit-norm" in barrier_fault([[2.0, 0.0]], [1.0], TOY_XJ)
+    assert "not unit-norm" in barrier_fault([[math.nan, 0.0]], [1.0], TOY_XJ)
+    assert "not positive at the exit point" in barrier_fault([[1.0, 0.0]], [math.nan], TOY_XJ)
+    assert "not positive at the exit point" in barrier_fault([[1.0, 0.0]], [-0.5], TOY_XJ)
+
+
+def test_a_wedge_zero_at_x_j_is_not_certified(solver, caplog):
+    """``cbf_apex=parent``: the LP is solved, but its wedge is zero at ``x_j``, rows ``verify`` refutes: not
+    certified (status 2), and the warning says why."""
+    p = toy(apex="parent")
+    with caplog.at_level(logging.WARNING, logger=sy.__name__):
+        sol = sy.solve_cell(p, sy.Params(), solver)
+    assert sol.status == CellStatus.NOT_CERTIFIED
+    assert "not positive at the exit point" in caplog.text
+    assert sy.solve_cell(toy(), sy.Params(), solver).status == CellStatus.CERTIFIED
 
 
 def _flow(M: np.ndarray, a: np.ndarray, x0: np.ndarray, times: np.ndarray) -> np.ndarray:

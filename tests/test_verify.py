@@ -11,7 +11,7 @@ import pytest
 import yaml
 
 from bearnav_cli import routes, verify, verify_checks
-from bearnav_cli.datatypes import CellFlag, Outcome, Plan, replace
+from bearnav_cli.datatypes import CellFlag, CellStatus, Outcome, Plan, replace
 from bearnav_cli.errors import InvalidParamsError
 from bearnav_cli.geometry import FreeSpace
 from bearnav_cli.stages import simulate
@@ -131,6 +131,11 @@ def test_geometry_failures_are_reported():
     assert report.failed and len(report.reasons) == 3
     same = verify.run(plan, verify.Params(n_starts=0), tree_samples=np.zeros((0, 2)))
     assert same.geometry.samples_unchanged is True
+    # the same rows in a cell that claims no certificate: reported as not certified, nothing refuted
+    status = plan.status.copy()
+    status[2] = CellStatus.NOT_CERTIFIED
+    claimless = verify.run(replace(plan, status=status), verify.Params(n_starts=0))
+    assert claimless.geometry.bad_barriers == () and claimless.uncertified == [2] and claimless.failed
 
 
 def test_flagged_cells_and_bearing_constants(chain):

@@ -199,6 +199,10 @@ def _inspect_cell(path: Path, artifact: Any, c: int, as_json: bool) -> None:
                     usable_tolerance=None if np.isnan(usable) else usable,
                     exit_inset=None if np.isnan(inset) else inset,
                     margin_h=float(plan.margin_h[c]), margin_v=float(plan.margin_v[c]))  # fmt: skip
+        if status == CellStatus.NOT_CERTIFIED:  # why: the judgement synthesize and verify make of the rows
+            from bearnav_cli.runtime.certificate import barrier_fault
+
+            info["barrier_fault"] = barrier_fault(*cells.barrier(c), cells.nodes[parent] if parent >= 0 else None)
     if as_json:
         print_json(info)
         return
@@ -214,6 +218,11 @@ def _inspect_cell(path: Path, artifact: Any, c: int, as_json: bool) -> None:
     if plan is not None:
         tol_text = "none" if info["tolerance"] is None else f"{info['tolerance']:.4g} map units"
         lines.append(f"status    {info['status_code']} {info['status']}; δ_c (position error tolerated) {tol_text}")
+        if info.get("barrier_fault"):
+            lines.append(f"why       {info['barrier_fault']} (its barrier rows cannot carry a certificate)")
+        elif status == CellStatus.NOT_CERTIFIED:
+            lines.append(f"why       no κ made the LP feasible (least-violation margins: barrier "
+                         f"{info['margin_h']:.3g}, progress {info['margin_v']:.3g})")  # fmt: skip
         if info["usable_tolerance"] is not None:
             inset = info["exit_inset"]
             inset_text = "no exit (goal cell)" if inset is None else f"exit inset δ_e,c {inset:.4g}"

@@ -8,28 +8,13 @@ import inspect
 from typing import Any, Callable, Optional
 
 import typer
-from typer.core import TyperArgument, TyperCommand, TyperGroup
+from typer.core import TyperCommand, TyperGroup
 
 from bearnav_cli import __version__
 from bearnav_cli.cli import inspect_, map_, plan, plot, simulate, stage, sweep, tags, verify
-from bearnav_cli.cli.options import click_option
 from bearnav_cli.cli.output import QUIET_HELP, Quiet
 
 __all__ = ["app", "main"]
-
-
-def _usage_metavar(make_metavar: Callable) -> Callable:
-    """typer writes a required argument as ``{source}`` in the usage line; write its metavar (``MAP``) as is."""
-
-    def make(self: Any, ctx: Any, *, usage: bool = False) -> str:
-        if usage and self.metavar is not None and self.required:
-            return self.metavar
-        return make_metavar(self, ctx, usage=usage)
-
-    return make
-
-
-TyperArgument.make_metavar = _usage_metavar(TyperArgument.make_metavar)
 
 
 def _format_help_text(command: Any, ctx: Any, formatter: Any) -> None:
@@ -55,7 +40,8 @@ class _Command(TyperCommand):
 
     The options generated from a ``Params`` (:func:`with_options`) are made when the command's
     :attr:`params` are first read (to parse its command line, print its help or complete it), so
-    that a start reads the ``Params`` sources of the command it runs only.
+    that a start reads the ``Params`` sources of the command it runs only. Its usage line writes a
+    required argument as its metavar (``MAP``), where typer writes ``{MAP}``.
     """
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
@@ -68,7 +54,7 @@ class _Command(TyperCommand):
         if getattr(self, "_generated", None) is not None:
             groups, before = self._generated
             self._generated = None
-            made = [click_option(parameter) for group in groups for parameter in group()]
+            made = [option for group in groups for option in group()]
             at = next((i for i, param in enumerate(self._params) if param.name == before), len(self._params))
             self._params[at:at] = made
         return self._params
@@ -76,6 +62,14 @@ class _Command(TyperCommand):
     @params.setter
     def params(self, value: list[Any]) -> None:
         self._params = value
+
+    def collect_usage_pieces(self, ctx: Any) -> list[str]:
+        # click's pieces, except that a required argument is its metavar (MAP): typer's writes itself {MAP}
+        pieces = [self.options_metavar] if self.options_metavar else []
+        for param in self.get_params(ctx):
+            named = param.param_type_name == "argument" and param.required and param.metavar is not None
+            pieces.extend([param.metavar] if named else param.get_usage_pieces(ctx))
+        return pieces
 
     def format_help(self, ctx: Any, formatter: Any) -> None:
         super(TyperCommand, self).format_help(ctx, formatter)  # click's, not typer's rich one

@@ -4,6 +4,8 @@
 A stage's fields become its command's options here, with help from the field's docstring and the
 default of the dataclass (:func:`params_options`); they are made when a command's options are first
 read (:func:`with_options`), so that a start reads the ``Params`` sources of the command it runs only.
+They are ``typer.core.TyperOption`` objects, the class of typer's own options, made directly: no private
+typer function turns them into click options.
 """
 
 import inspect
@@ -26,7 +28,6 @@ __all__ = [
     "MAP_ARG",
     "QUIET",
     "check_camera",
-    "click_option",
     "option_help",
     "params_options",
     "shown_value",
@@ -132,36 +133,40 @@ def option_help(command: str, field: ParamField, *, with_default: bool = True, p
 
 
 def params_options(command: str, *, only: tuple[str, ...] | None = None, defaults: bool = False,
-                   prefix: str = "") -> list[inspect.Parameter]:  # fmt: skip
-    """The typer options of a command's ``Params`` fields, as parameters of a command's signature.
+                   prefix: str = "") -> list[Any]:  # fmt: skip
+    """The click options of a command's ``Params`` fields (``typer.core.TyperOption``, as typer makes its own).
 
     The option is the field's declared one (``--field-name``, or a name such as ``--starts``), a
     ``--name/--no-name`` flag for a bool (or the off-switch it declares), of the field's type; the
     help is :func:`option_help`. A stage's options default to None, "not given", so that the map's
-    ``params:`` apply; ``defaults=True`` (``verify``, which has no map layer) gives typer the
-    dataclass's defaults instead. Fields declared without an option (``params:`` only) are left
-    out; ``only`` keeps just those fields.
+    ``params:`` apply; ``defaults=True`` (``verify``, which has no map layer) gives the dataclass's
+    defaults instead, shown in the help as typer shows a default (``[default: 200]``). Fields declared
+    without an option (``params:`` only) are left out; ``only`` keeps just those fields.
     """
+    from typer.core import TyperOption
+
     options = []
     for field in params_fields(command):
         if (field.option is None and only is None) or (only is not None and field.name not in only):
             continue
+        if field.kind not in (int, float, str, bool):  # click converts these by itself; typer would convert others
+            raise TypeError(f"option {field.name}: a {field.kind} needs typer's conversion")
         name = field.option or "--" + field.name.replace("_", "-")
-        declared = f"{name}/{field.off}" if field.kind is bool else name
-        default = field.default if defaults else None
-        kind = field.kind if default is not None else Optional[field.kind]
+        flag = field.kind is bool
         help_text = option_help(command, field, with_default=not defaults, prefix=prefix)
-        options.append(inspect.Parameter(field.name, inspect.Parameter.KEYWORD_ONLY, annotation=kind,
-                                         default=typer.Option(default, declared, help=help_text)))  # fmt: skip
+        # what typer.Option(default, declared, help=...) in a signature makes: a bool is a flag with its
+        # off-switch (click's own bool type), any other kind click's type of that Python type
+        options.append(TyperOption(param_decls=[field.name, f"{name}/{field.off}" if flag else name],
+                                   type=None if flag else field.kind, is_flag=flag or None,
+                                   default=field.default if defaults else None, show_default=True,
+                                   help=help_text))  # fmt: skip
     return options
 
 
-def with_options(
-    *groups: Callable[[], list[inspect.Parameter]], before: str = "force"
-) -> Callable[[Callable], Callable]:
+def with_options(*groups: Callable[[], list[Any]], before: str = "force") -> Callable[[Callable], Callable]:
     """Give a command the generated options, among its own before ``before``.
 
-    Each group is called, for its options (:func:`params_options`), when the command's click
+    Each group is called, for its click options (:func:`params_options`), when the command's
     options are first read (:class:`_Command`), not when the program starts: typer reads the
     command's own signature, less its ``**options``, in which the command takes the generated
     ones, keyed by field name.
@@ -176,15 +181,3 @@ def with_options(
         return command
 
     return decorate
-
-
-def click_option(parameter: inspect.Parameter) -> Any:
-    """The click option typer makes of a generated option (:func:`params_options`), as of a signature's."""
-    from typer.main import get_click_param
-    from typer.models import ParamMeta
-
-    option, convertor = get_click_param(ParamMeta(name=parameter.name, default=parameter.default,
-                                                  annotation=parameter.annotation))  # fmt: skip
-    if convertor is not None:  # typer converts paths and enums after parsing; a field is an int, float, str or bool
-        raise TypeError(f"option {parameter.name}: a {parameter.annotation} needs typer's conversion")
-    return option

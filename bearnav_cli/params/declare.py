@@ -128,9 +128,6 @@ class Declared:
         The command-line option (``--starts``); ``None``: set in the map's ``params:`` only.
     off : str or None
         A bool's off-switch when it is not ``--no-NAME`` (``--allow-reverse``).
-    listed : bool
-        The range is one of :data:`bearnav_cli.limits.LIMITS` (checked before ``Params`` is made and
-        listed in docs/cli.md "Option limits"); ``False``: only ``Params`` itself checks it.
     capped : bool
         ``Params`` itself refuses a value above the range too; otherwise it checks the low bound and
         the type only, and the high bound is a limit of a request (:func:`bearnav_cli.limits.check_value`),
@@ -142,13 +139,11 @@ class Declared:
     unit: str
     option: str | None
     off: str | None
-    listed: bool
     capped: bool = False
 
 
 def param(default: Any, *, range: Range | None = None, choices: tuple[str, ...] = (), unit: str = "",
-          option: str | None = AUTO, off: str | None = None, listed: bool = True,
-          capped: bool = False) -> Any:  # fmt: skip
+          option: str | None = AUTO, off: str | None = None, capped: bool = False) -> Any:  # fmt: skip
     """A dataclass field with ``default`` and its declaration (:class:`Declared`) in its metadata.
 
     Parameters
@@ -166,12 +161,10 @@ def param(default: Any, *, range: Range | None = None, choices: tuple[str, ...] 
         later), a name (``--starts``), or ``None`` for a field of the map's ``params:`` only.
     off : str, optional
         A bool's off-switch when it is not ``--no-NAME``.
-    listed : bool
-        The range is one of :data:`bearnav_cli.limits.LIMITS` (``False``: ``Params`` alone checks it).
     capped : bool
         ``Params`` itself refuses a value above the range (:attr:`Declared.capped`).
     """
-    declared_ = Declared(range, tuple(choices), unit, option, off, listed, capped)
+    declared_ = Declared(range, tuple(choices), unit, option, off, capped)
     return dataclasses.field(default=default, metadata={"declared": declared_})
 
 
@@ -179,19 +172,18 @@ def declared(field: dataclasses.Field) -> Declared:
     """The declaration of a field (an undeclared one: no range, choices or unit; option ``--name``)."""
     found = field.metadata.get("declared")
     if found is None:
-        return Declared(None, (), "", "--" + field.name.replace("_", "-"), None, True, False)
+        return Declared(None, (), "", "--" + field.name.replace("_", "-"), None, False)
     if found.option == AUTO:
         return dataclasses.replace(found, option="--" + field.name.replace("_", "-"))
     return found
 
 
 def check(params: Any) -> None:
-    """Check a ``Params`` against its declarations: each field's choices and listed range, in field order.
+    """Check a ``Params`` against its declarations: each field's choices and range, in field order.
 
     A range's type and low bound are checked (its high bound too when declared ``capped``; the
     pipeline checks the rest of a request, :func:`bearnav_cli.limits.check_value`); ``None`` is not
-    checked; ranges declared with ``listed=False`` are the class's own checks. The first check of
-    ``__post_init__`` in every ``Params``.
+    checked. The first check of ``__post_init__`` in every ``Params``.
 
     Parameters
     ----------
@@ -211,7 +203,7 @@ def check(params: Any) -> None:
         if declaration.choices and value not in declaration.choices:
             raise InvalidParamsError(f"must be one of {', '.join(declaration.choices)}, got {value!r}",
                                      field=field.name)  # fmt: skip
-        if declaration.range is not None and declaration.listed and value is not None:
+        if declaration.range is not None and value is not None:
             problem = declaration.range.problem(value, high=declaration.capped)
             if problem is not None:
                 raise InvalidParamsError(problem, field=field.name)

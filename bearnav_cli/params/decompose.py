@@ -12,7 +12,9 @@ __all__ = ["BARRIERS", "BISECTOR_RULES", "CBF_APEXES", "CBF_FILTERS", "CELL_MODE
 CELL_MODES = ("funnel", "funnel-local", "paper")
 COVER_DOMAINS = ("F", "F_m")  # the default first, as every choice tuple
 BARRIERS = ("corridor", "wedge")
-BISECTOR_RULES = ("crossing", "parent")
+#: Paper B's text keeps every bisector but the parent's: on our trees that cuts the edge out of nearly
+#: every edge cell (kitchen 130 of 132, paper_b_circles 99 of 102), so it is not offered (issue 24).
+BISECTOR_RULES = ("crossing",)
 CBF_APEXES = ("child", "parent")
 CBF_FILTERS = ("both", "projection", "cell")
 
@@ -55,12 +57,12 @@ class Params:
         Funnel: at most this many leaf nodes are added by densification, ``F_m`` and the band
         together. The band along a cluttered floor's obstacles needs many (the made office and
         clutter maps: 290–370 for 99% of ``F``; 200 left them at 97.8–99.0%).
-    bisector_rule : {"crossing", "parent"}
-        *paper* and ``funnel-local``. ``crossing`` drops every bisector that crosses the edge (the authors' code);
-        ``parent`` drops only the parent's (paper B's text; can cut the edge, warns, and a tree where it cuts
-        an exit face away is refused with an error naming the cell).
+    bisector_rule : {"crossing"}
+        *paper* and ``funnel-local``. ``crossing`` drops every bisector that crosses the edge (the authors' code).
+        Paper B's text drops only the parent's, which cuts the edge out of nearly every cell of a tree: not offered.
     cbf_apex : {"child", "parent"}
-        Apex of the barrier wedge; ``parent`` reproduces the paper's degenerate LP (warns).
+        Apex of the barrier wedge; ``parent`` reproduces the paper's degenerate LP (warns). Its wedge is
+        zero at the exit point, so ``synthesize`` certifies no cell that has one.
     cbf_filter : {"both", "projection", "cell"}
         Which collision samples a barrier may come from: projection onto the edge within
         the edge, inside the cell, or both.

@@ -2,11 +2,13 @@
 
 A cell's field ``u(x) = a − M x`` is certified when, at every vertex ``v_q`` (the conditions are
 affine in ``x``, so the vertices decide), the barrier conditions ``n_kᵀu_q + c_h h_k(v_q) ≥ 0``, the
-progress condition ``zᵀu_q + c_v V(v_q) < 0`` and the input bound ``‖u_q‖_∞ ≤ u_max`` hold.
+progress condition ``zᵀu_q + c_v V(v_q) < 0`` and the input bound ``‖u_q‖_∞ ≤ u_max`` hold, on barrier
+rows that can carry a certificate at all (:func:`barrier_fault`).
 :func:`vertex_margins` (of a gain) and :func:`field_margins` (of a field) compute their worst
 values without an LP. ``bearnav verify`` re-checks every plan with them, ``bearnav synthesize``
 certifies the goal cell and computes ``δ_c`` with them, and the tests compare synthesize's own
-(faster) re-checks with them. It needs nothing but numpy, as everything under ``runtime/`` does.
+(faster) re-checks with them; both judge the barrier rows with :func:`barrier_fault`. It needs
+nothing but numpy, as everything under ``runtime/`` does.
 """
 
 from __future__ import annotations
@@ -16,7 +18,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Margins", "field_margins", "gain_field", "vertex_margins"]
+__all__ = ["Margins", "UNIT_TOL", "barrier_fault", "field_margins", "gain_field", "vertex_margins"]
+
+#: Allowed deviation of a barrier normal's norm from 1.
+UNIT_TOL = 1e-9
 
 
 @dataclass(frozen=True)
@@ -116,3 +121,39 @@ def field_margins(M, a, vertices, z, x_j, cbf_n, cbf_q, c_h, c_v, u_max) -> Marg
         rows, cbf = np.zeros(0), math.nan
     clf = float(np.max(U @ z + c_v * ((V - x_j) @ z)))
     return Margins(cbf, rows, clf, float(np.abs(U).max() - u_max))
+
+
+def barrier_fault(normals, offsets, x_j=None) -> str | None:
+    """Why a cell's barrier rows cannot carry its certificate, in words; None when they can (ALGORITHMS §8).
+
+    Every normal ``n_k`` must be of unit norm (within :data:`UNIT_TOL`: the margins and the tolerance are
+    distances), and in an edge cell every row must be positive at the exit point, ``h_k(x_j) > 0``: the
+    field drives the robot to ``x_j``, where a row that is zero or negative leaves the barrier and the
+    progress conditions no margin (the paper's wedge with its apex at ``x_j``, ``cbf_apex=parent``, is
+    zero there). ``synthesize`` certifies no cell with a fault, and ``verify`` refutes a certified one.
+
+    Parameters
+    ----------
+    normals, offsets : ndarray, shapes (h, 2), (h,)
+        The barrier rows ``h_k(x) = n_kᵀx + q_k``; none is no fault.
+    x_j : ndarray, shape (2,), optional
+        The edge's parent node ``x_j`` (map units); None for the goal cell, which has no exit.
+
+    Returns
+    -------
+    str or None
+    """
+    normals = np.asarray(normals, float).reshape(-1, 2)
+    if not len(normals):
+        return None
+    off_unit = np.flatnonzero(~(np.abs(np.hypot(normals[:, 0], normals[:, 1]) - 1.0) <= UNIT_TOL))  # NaN too
+    if off_unit.size:
+        return f"barrier row {int(off_unit[0])} is not unit-norm"
+    if x_j is None:
+        return None
+    at_exit = normals @ np.asarray(x_j, float) + np.asarray(offsets, float)
+    not_positive = np.flatnonzero(~(at_exit > 0))  # a NaN offset too
+    if not_positive.size:
+        k = int(not_positive[0])
+        return f"barrier row {k} is not positive at the exit point, h(x_j) = {at_exit[k]:.3g}"
+    return None

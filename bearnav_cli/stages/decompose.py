@@ -23,7 +23,7 @@ from bearnav_cli import verdicts
 from bearnav_cli.barriers import cbf_rows, corridor_rows, goal_cbf_rows, wall_rows
 from bearnav_cli.cell_landmarks import cell_landmarks, fixed_landmark, seen_from, segments_seen, witness_points
 from bearnav_cli.datatypes import NEGLIGIBLE_SHARE, CellFlag, Cells, Tree, cell_list, plural
-from bearnav_cli.errors import ArtifactError, InvalidParamsError
+from bearnav_cli.errors import ArtifactError
 from bearnav_cli.funnel import (
     BAND_NODE_TRIES,
     INSET_LIMIT,
@@ -97,16 +97,15 @@ def _bisector_cell(nodes: np.ndarray, i: int, skip: np.ndarray, start: np.ndarra
     return polygon
 
 
-def edge_cell(nodes: np.ndarray, i: int, j: int, bounds: np.ndarray, tol: float, rule: str) -> np.ndarray:
-    """The edge cell ``X_ij`` of ALGORITHMS §4.1 as a CCW polygon, shape (p, 2)."""
+def edge_cell(nodes: np.ndarray, i: int, j: int, bounds: np.ndarray, tol: float) -> np.ndarray:
+    """The edge cell ``X_ij`` of ALGORITHMS §4.1 as a CCW polygon, shape (p, 2): the bisectors that cross the
+    edge dropped (``bisector_rule=crossing``, the authors' code), so the cell holds the edge and its exit face."""
     xi, xj = nodes[i], nodes[j]
     z = (xi - xj) / np.hypot(*(xi - xj))
     polygon = clip(box_polygon(bounds), -z, -(z @ xj), tol)  # exit half-plane z·(x − x_j) >= 0
-    skip = np.zeros(len(nodes), bool)
+    # drop the parent's bisector and every one that crosses [x_i, x_j]: x_j not strictly inside H_ik
+    skip = np.hypot(*(nodes - xj).T) <= np.hypot(*(xi - xj)) + tol
     skip[j] = True
-    if rule == "crossing":
-        # drop every bisector that crosses [x_i, x_j]: x_j not strictly inside H_ik
-        skip |= np.hypot(*(nodes - xj).T) <= np.hypot(*(xi - xj)) + tol
     polygon = _bisector_cell(nodes, i, skip, polygon, tol)
     if len(polygon) < 3:
         raise ArtifactError(f"cell of node {i} degenerated while clipping (Lemma 1 rules this out)", field="nodes")
@@ -155,7 +154,7 @@ def _funnel_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) 
                             "collision-free edges; re-run rrtstar and simplify", field="nodes")  # fmt: skip
 
     def region_of(i: int, j: int, all_nodes: np.ndarray) -> Region:
-        start = edge_cell(all_nodes, i, j, free_bounds, tol, params.bisector_rule) if local else None
+        start = edge_cell(all_nodes, i, j, free_bounds, tol) if local else None
         try:
             return funnel_region(pieces, free_bounds, all_nodes[[i, j]], margin, tol, start)
         except ValueError as exc:
@@ -367,10 +366,11 @@ def _paper_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) -
     nodes, parent, samples = tree.nodes, tree.parent, tree.collision_samples
     tol, bounds = map_.tol, space.bounds
     n = len(nodes)
-    if params.bisector_rule == "parent":
-        log.warning("bisector_rule=parent: a third node's bisector can cut an edge out of its cell")
     if params.cbf_apex == "parent":
-        log.warning("cbf_apex=parent: the barrier and Lyapunov rows force a zero-margin LP (ALGORITHMS §4.5)")
+        log.warning(
+            "cbf_apex=parent: the barrier and Lyapunov rows force a zero-margin LP (ALGORITHMS §4.5); "
+            "synthesize certifies no cell whose wedge is zero at its exit point"
+        )
     flags = np.zeros(n, np.int64)
     regions, cbf = [], []
     for c in range(n):
@@ -384,7 +384,7 @@ def _paper_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) -
             exit_row = -1
         else:
             j = parent[c]
-            polygon = edge_cell(nodes, c, j, bounds, tol, params.bisector_rule)
+            polygon = edge_cell(nodes, c, j, bounds, tol)
             A, b = polygon_rows(polygon)
             if params.barrier == "corridor":
                 normals, offsets, _ = corridor_rows(
@@ -399,17 +399,7 @@ def _paper_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) -
                 flags[c] |= CellFlag.SAMPLE_ON_EDGE
                 log.warning("cell %d: a collision sample on the edge line was skipped", c)
             z = (nodes[c] - nodes[j]) / np.hypot(*(nodes[c] - nodes[j]))
-            try:
-                exit_row = exit_row_index(A, b, z, nodes[j], tol)
-            except ValueError:
-                if params.bisector_rule != "parent":
-                    raise  # the crossing rule keeps every edge in its cell: a bug, not the input
-                # the paper's rule lets a third node's bisector cut the edge's exit face away (§4.2):
-                # there is no cell to certify, so the option is refused for this tree, in one line
-                raise InvalidParamsError(
-                    f"parent cut the exit face of cell {c} (edge {c} -> {j}) away on this tree; use crossing",
-                    field="bisector_rule",
-                ) from None
+            exit_row = exit_row_index(A, b, z, nodes[j], tol)  # edge_cell keeps the face: a ValueError is a bug
         regions.append((polygon, A, b, exit_row))
         cbf.append((normals, offsets))
     return _Layout(nodes, parent, np.array(tree.cost, float), regions, cbf, flags, np.zeros(n, bool),

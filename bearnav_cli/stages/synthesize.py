@@ -26,7 +26,7 @@ import logging
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -54,19 +54,22 @@ from bearnav_cli.cell_lp import (
     theta_from_gain,
     vertex_template,
 )
-from bearnav_cli.datatypes import CellFlag, Cells, CellStatus, Plan, tolerance_by_area
+from bearnav_cli.datatypes import CellFlag, Cells, CellStatus, Plan, cell_list, plural, tolerance_by_area
 from bearnav_cli.errors import ArtifactError
 from bearnav_cli.funnel import plan_tolerance_of, usable_tolerances
 from bearnav_cli.lp import LpResult, LpSolver, LpStatus
 from bearnav_cli.params.synthesize import Params
+from bearnav_cli.runtime.certificate import barrier_fault
 
 __all__ = [
-    "PreparedCell", "SolveOutcome", "VERSION", "finish_cell", "prepare_cell", "problems", "run", "solve_cell",
-    "solve_prepared", "summary",
+    "PreparedCell", "SolveOutcome", "VERSION", "finish_cell", "judged", "prepare_cell", "problems", "run",
+    "solve_cell", "solve_prepared", "summary",
 ]  # fmt: skip
 
 VERSION = 3
 log = logging.getLogger(__name__)
+#: The statuses that claim a certificate (``verify`` re-checks these).
+_CLAIMED = (CellStatus.CERTIFIED, CellStatus.RELAXED, CellStatus.GOAL)
 
 
 # --------------------------------------------------------------------------- one cell
@@ -398,16 +401,49 @@ def solve_cell(problem: CellProblem, params: Params, solver: LpSolver, funnel: b
     Returns
     -------
     CellSolution
-        Status 0 (first attempt), 1 (after halvings), 2 (least violation) or 3 (unbounded
-        or solver error: the gain is then zero). Margins are recomputed at the vertices
-        from ``K`` (equal to :func:`~bearnav_cli.runtime.certificate.vertex_margins`).
+        Status 0 (first attempt), 1 (after halvings), 2 (least violation, or barrier rows that
+        cannot carry a certificate: :func:`judged`) or 3 (unbounded or solver error: the gain is
+        then zero). Margins are recomputed at the vertices from ``K`` (equal to
+        :func:`~bearnav_cli.runtime.certificate.vertex_margins`).
     """
     prepared = prepare_cell(problem, params)
     solution = finish_cell(prepared, solve_prepared(prepared, params, solver, funnel=funnel))
+    solution, fault = judged(solution, problem.cbf_n, problem.cbf_q, problem.x_j)
+    if fault is not None:
+        log.warning("cell not certified: %s", fault)
     certified = solution.status in (CellStatus.CERTIFIED, CellStatus.RELAXED)
     if funnel and params.tolerant and certified:
         return more_tolerant(solution, problem, params.u_max)
     return solution
+
+
+def judged(solution: CellSolution, cbf_n: np.ndarray, cbf_q: np.ndarray,
+           x_j: np.ndarray | None) -> tuple[CellSolution, str | None]:  # fmt: skip
+    """``solution``, not certified (status 2, the gain kept) when its cell's barrier rows cannot carry a
+    certificate, and why: ``verify``'s judgement of the rows, :func:`~bearnav_cli.runtime.certificate.barrier_fault`.
+
+    The LP's conditions hold at the vertices whatever the rows are; the rows themselves are what
+    ``verify`` refutes (the paper's wedge with its apex at ``x_j``, ``cbf_apex=parent``, is zero
+    there), so a cell with such rows is never certified.
+
+    Parameters
+    ----------
+    solution : CellSolution
+        The cell's solution; one that claims no certificate is returned as it is.
+    cbf_n, cbf_q : ndarray, shapes (h, 2), (h,)
+        The cell's barrier rows.
+    x_j : ndarray, shape (2,), or None
+        The edge's parent node; None for the goal cell.
+
+    Returns
+    -------
+    tuple of CellSolution and (str or None)
+        The solution, and the fault that took its certificate away (None: none did).
+    """
+    if solution.status not in _CLAIMED:
+        return solution, None
+    fault = barrier_fault(cbf_n, cbf_q, x_j)
+    return (solution, None) if fault is None else (replace(solution, status=CellStatus.NOT_CERTIFIED), fault)
 
 
 def _template_margins(checker: LpTemplate, upper: np.ndarray, space: str, K, landmarks, p) -> tuple[float, float]:
@@ -526,6 +562,17 @@ def run(cells: Cells, params: Params = Params(), progress: Callable[[int, int], 
             log.warning("cell %d not certified: least-violation margins h %.3g, V %.3g", c, sol.margin_h, sol.margin_v)
         elif sol.status == CellStatus.SOLVER_FAILURE:
             log.warning("cell %d: solver failure (unbounded or error)", c)
+    faults = {}  # verify's judgement of the barrier rows, before any cell counts as certified
+    for c in range(C):
+        j = cells.parent[cells.cell_node[c]]
+        solutions[c], fault = judged(solutions[c], cells.cbf_A[ho[c] : ho[c + 1]], cells.cbf_b[ho[c] : ho[c + 1]],
+                                     cells.nodes[j] if j >= 0 else None)  # fmt: skip
+        if fault is not None:
+            faults[c] = fault
+    if faults:
+        first = min(faults)
+        log.warning("%s not certified, their barrier rows unfit for a certificate (cell %d: %s): %s",
+                    plural(len(faults), "cell"), first, faults[first], cell_list(sorted(faults)))  # fmt: skip
     if tolerant:
         chosen = [c for c in outcomes if solutions[c].status in (CellStatus.CERTIFIED, CellStatus.RELAXED)]
         picked = more_tolerant_all([solutions[c] for c in chosen], [prepared[c].problem for c in chosen],
