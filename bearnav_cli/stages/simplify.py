@@ -15,9 +15,11 @@ that point, one round at a time. When
 ``max_rounds`` stops the loop during such a cascade, the rounds are followed by
 *finishing passes* of RC | CtL only (:func:`_finish`), which never lengthen a route
 and never add an edge that is not a piece of an existing one, until RC finds nothing
-and CtL cuts nothing. ``stats["crossings_remaining"]`` is then counted by a fresh scan
-of all edges (:func:`count_crossings`); it is 0 unless the pass bound was reached. The
-same scan counts ``stats["crossings_at_nodes"]``, the crossings RC leaves by definition.
+and CtL cuts nothing. ``stats["crossings_remaining"]`` is then 0, and
+``stats["crossings_at_nodes"]``, the crossings RC leaves by definition, is the number of
+pairs the last RC found blocked by a node (:func:`_split_crossings` keeps them, the same
+pairs a fresh scan finds); only when the pass bound stops the passes are both counted by
+a fresh scan of all edges (:func:`count_crossings`).
 
 Indices: deleted leaves are dropped by an order-preserving compaction and RC
 appends its new node after all others, so every "ascending index" rule sees the
@@ -25,8 +27,14 @@ same order as with stable indices, and the final renumbering (root → 0, then
 ascending old index) is already in place.
 
 Speed: PPR is vectorised per BFS level (exactly the sequential result, see
-:func:`_shortcut`), CtL is pure numpy, and RC finds candidate pairs once with a
-``shapely.STRtree`` and afterwards re-tests only the split edges (:func:`_remove_crossings`).
+:func:`_shortcut`), CtL is pure numpy. RC's first pass scans all edge pairs whose
+boxes meet (a ``shapely.STRtree``) and keeps, per edge, the edges that may meet it
+(:class:`_Neighbours`), against which it re-tests only the split edges; each later pass
+scans only the edges PPR changed since and the pairs the previous pass found blocked by a
+node (:func:`_split_crossings`), and the result is the one a scan of all pairs gives. The
+number of crossings RC removes still grows faster than the number of nodes (PPR's long
+edges cross more often in a denser tree), so RC does too, at a fraction of a millisecond
+per insertion.
 """
 
 from __future__ import annotations
@@ -49,6 +57,7 @@ __all__ = [
     "bfs_levels",
     "count_crossings",
     "MAX_FINISH_PASSES",
+    "MEET_SLACK",
     "problems",
     "RECONNECT_NEIGHBOURS",
     "run",
@@ -244,34 +253,34 @@ class _NearNodes:
 
     A node within ``tol`` of a point lies in the point's cell or one of the eight around it, so a
     query looks up nine cells and measures only the nodes it finds there (almost always none).
+    Positions are kept as Python floats: RC's loop asks about one point at a time.
     """
 
     def __init__(self, nodes: np.ndarray, tol: float):
         self.tol = tol
-        self.cells: dict[tuple[int, int], list[np.ndarray]] = {}
-        for p in np.asarray(nodes, float).reshape(-1, 2):
-            self.add(p)
+        self.cells: dict[tuple[int, int], list[tuple[float, float]]] = {}
+        for x, y in np.asarray(nodes, float).reshape(-1, 2).tolist():
+            self.add(x, y)
 
-    def _keys(self, pts: np.ndarray):
-        cell = np.floor(pts / self.tol).astype(np.int64)
-        return zip(cell[:, 0].tolist(), cell[:, 1].tolist(), strict=True)
+    def add(self, x: float, y: float) -> None:
+        """File the node at ``(x, y)``."""
+        self.cells.setdefault((math.floor(x / self.tol), math.floor(y / self.tol)), []).append((x, y))
 
-    def add(self, p: np.ndarray) -> None:
-        for key in self._keys(p[None]):
-            self.cells.setdefault(key, []).append(p)
+    def clear(self, x: float, y: float) -> bool:
+        """Whether every node lies farther than ``tol`` from ``(x, y)``."""
+        tol, cells = self.tol, self.cells
+        bx, by = math.floor(x / tol), math.floor(y / tol)
+        for dx in (-1, 0, 1):
+            for dy in (-1, 0, 1):
+                near = cells.get((bx + dx, by + dy))
+                if near and any(math.dist(q, (x, y)) <= tol for q in near):
+                    return False
+        return True
 
     def clear_of(self, pts: np.ndarray) -> np.ndarray:
         """Whether every node lies farther than ``tol`` from each point; shape (n,) bool."""
         pts = np.asarray(pts, float).reshape(-1, 2)
-        ok = np.ones(len(pts), bool)
-        cells = self.cells
-        for row, (bx, by) in enumerate(self._keys(pts)):
-            for key in ((bx + dx, by + dy) for dx in (-1, 0, 1) for dy in (-1, 0, 1)):
-                near = cells.get(key)
-                if near and any(math.dist(q, pts[row]) <= self.tol for q in near):
-                    ok[row] = False
-                    break
-        return ok
+        return np.fromiter((self.clear(x, y) for x, y in pts.tolist()), bool, len(pts))
 
 
 def _crossing(nodes, parent, e, f, near: _NearNodes | None, tol: float) -> tuple[np.ndarray, np.ndarray]:
@@ -308,12 +317,12 @@ def _crossing(nodes, parent, e, f, near: _NearNodes | None, tol: float) -> tuple
     return ok, k
 
 
-def _in_subtree(v: int, parent: np.ndarray, roots: tuple[int, int]) -> bool:
+def _in_subtree(v: int, parent: list[int], roots: tuple[int, int]) -> bool:
     """Whether ``v`` lies in the subtree of either root: walk up from ``v`` (O(depth))."""
     while v >= 0:
         if v in roots:
             return True
-        v = int(parent[v])
+        v = parent[v]
     return False
 
 
@@ -325,6 +334,278 @@ def _box_pairs(nodes, parent, tol: float) -> tuple[np.ndarray, np.ndarray]:
     boxes = shapely.box(lo[:, 0], lo[:, 1], hi[:, 0], hi[:, 1])
     qa, qb = shapely.STRtree(boxes).query(boxes)
     return kids[qa[qa != qb]], kids[qb[qa != qb]]
+
+
+#: Slack of :func:`_may_meet`, in units of ``tol`` (``1e-9·D``): far above the rounding of a split
+#: point carried along its edge (at most about ``5e-8·D``, for a piece of length ``2·tol`` on an edge
+#: of length ``D``), far below any edge's length.
+MEET_SLACK = 1e4
+
+
+def _may_meet(a, b, c, d, common: np.ndarray, slack: float) -> np.ndarray:
+    """Whether segments ``[a, b]`` and ``[c, d]`` can hold pieces that cross properly, pairwise.
+
+    False where the two endpoints of one segment lie on the same side of the other's line, both
+    farther than ``slack`` from it (the segments, and every piece of them up to rounding far below
+    ``slack``, are disjoint), and where the segments have a ``common`` end and meet at more than
+    1e-3 rad (pieces of two rays from one point cannot cross). Nearly parallel and collinear
+    segments are kept, conservatively.
+
+    Parameters
+    ----------
+    a, b, c, d : ndarray, shape (m, 2)
+        The segments' endpoints (map units).
+    common : ndarray of bool, shape (m,)
+        The segments share an endpoint (the same node).
+    slack : float
+        Map units.
+
+    Returns
+    -------
+    ndarray of bool, shape (m,)
+    """
+    r, s = b - a, d - c
+    len_r, len_s = np.hypot(r[:, 0], r[:, 1]), np.hypot(s[:, 0], s[:, 1])
+    gap_r, gap_s = slack * len_r, slack * len_s  # cross products are signed distances × the length
+    side_c = r[:, 0] * (c[:, 1] - a[:, 1]) - r[:, 1] * (c[:, 0] - a[:, 0])
+    side_d = r[:, 0] * (d[:, 1] - a[:, 1]) - r[:, 1] * (d[:, 0] - a[:, 0])
+    side_a = s[:, 0] * (a[:, 1] - c[:, 1]) - s[:, 1] * (a[:, 0] - c[:, 0])
+    side_b = s[:, 0] * (b[:, 1] - c[:, 1]) - s[:, 1] * (b[:, 0] - c[:, 0])
+    apart = ((side_c > gap_r) & (side_d > gap_r)) | ((side_c < -gap_r) & (side_d < -gap_r))
+    apart |= ((side_a > gap_s) & (side_b > gap_s)) | ((side_a < -gap_s) & (side_b < -gap_s))
+    # within 1e-3 rad the rounding of a split point is no longer negligible against the angle
+    den = r[:, 0] * s[:, 1] - r[:, 1] * s[:, 0]
+    apart |= common & (np.abs(den) > 1e-3 * len_r * len_s)
+    return ~apart
+
+
+class _Neighbours:
+    """For each edge of a tree (named by its child), the edges that may meet it (:func:`_may_meet`).
+
+    The tree's edges are RC's *origins*: every later edge is a piece of one of them, so two pieces
+    can only cross properly if their origins may meet. Candidates come from an STRtree of the
+    edges' boxes grown by ``tol``; :func:`_may_meet` then drops the pairs that lie apart, which a
+    box overlap keeps in numbers that grow with the square of the density (PPR makes long edges).
+    The endpoints are copied: RC re-hangs nodes while it asks.
+    """
+
+    def __init__(self, nodes: np.ndarray, parent: np.ndarray, tol: float):
+        self.a = np.array(nodes, float)
+        self.up = np.maximum(parent, 0)
+        self.b = self.a[self.up]
+        lo, hi = np.minimum(self.a, self.b) - tol, np.maximum(self.a, self.b) + tol
+        self.boxes = shapely.box(lo[:, 0], lo[:, 1], hi[:, 0], hi[:, 1])
+        self.tree = shapely.STRtree(self.boxes[1:])
+        extent = float(np.max(np.ptp(self.a, axis=0))) if len(self.a) else 0.0
+        self.slack = max(MEET_SLACK * tol, 1e-6 * extent)
+        self.lists: dict[int, np.ndarray] = {}
+        self.start: np.ndarray | None = None
+
+    def pairs(self, edges: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Ordered pairs ``(e, f)``, ``e`` in ``edges``, ``f != e``, that may meet (``f`` ascending per ``e``)."""
+        qa, qb = self.tree.query(self.boxes[edges])
+        e, f = edges[qa], qb + 1
+        e, f = e[e != f], f[e != f]
+        up = self.up
+        common = (e == up[f]) | (up[e] == f) | (up[e] == up[f])
+        keep = _may_meet(self.a[e], self.b[e], self.a[f], self.b[f], common, self.slack)
+        e, f = e[keep], f[keep]
+        order = np.lexsort((f, e))
+        return e[order], f[order]
+
+    def index_all(self) -> tuple[np.ndarray, np.ndarray]:
+        """Every pair ``(e, f)``, ``e < f``, that may meet; the lists of all edges are filed on the way."""
+        e, f = self.pairs(np.arange(1, len(self.a)))
+        self.start = np.searchsorted(e, np.arange(len(self.a) + 1))
+        self.all_f = f
+        upper = e < f
+        return e[upper], f[upper]
+
+    def of(self, edge: int) -> np.ndarray:
+        """The edges that may meet ``edge``, ascending."""
+        if self.start is not None:
+            return self.all_f[self.start[edge] : self.start[edge + 1]]
+        found = self.lists.get(edge)
+        if found is None:
+            found = self.lists[edge] = self.pairs(np.array([edge]))[1]
+        return found
+
+
+def _remove_crossings(nodes, parent, cost, tol: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """RC: split properly crossing edges until none is left (ALGORITHMS §3).
+
+    :func:`_split_crossings` from scratch, without what it carries to the next pass.
+
+    Returns
+    -------
+    nodes (M, 2), parent (M,), cost (M,), insertions
+    """
+    return _split_crossings(nodes, parent, cost, tol)[:4]
+
+
+def _split_crossings(
+    nodes, parent, cost, tol: float, carried: tuple[np.ndarray, np.ndarray] | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, np.ndarray]:
+    """RC: split properly crossing edges until none is left (ALGORITHMS §3).
+
+    Order: each step takes the lexicographically smallest crossing pair ``(i, j)``,
+    ``i < j`` (edges named by their child), among the current edges, i.e. the scan
+    "ascending i, then the smallest j > i" restarted after every insertion. A heap
+    holds every crossing pair; entries of edges changed since are dropped when popped.
+
+    Every later edge is a sub-segment of a starting edge (its *origin*), so two
+    edges can only cross if their origins may meet (:class:`_Neighbours`); that
+    relation bounds every re-test. ``cost`` is trusted (PPR recomputes it just before).
+
+    The pairs that cross but for a node within ``tol`` of the crossing point (*blocked*)
+    are kept, and returned for the next pass: every pair of final edges that crosses was
+    tested once both had their final form (at the start, or when the later one changed),
+    and was then either blocked, or pushed and, when popped, split (so not final) or
+    found blocked by a node added since.
+
+    Parameters
+    ----------
+    nodes : ndarray, shape (N, 2)
+    parent : ndarray of int, shape (N,)
+    cost : ndarray, shape (N,)
+    tol : float
+    carried : (stale, blocked), optional
+        What the previous pass returned, carried through the tree's changes since: ``stale``
+        (N,) bool marks the edges changed since (a new parent), ``blocked`` (m, 2) the blocked
+        pairs of that pass whose edges are both still there. Two unchanged edges outside
+        ``blocked`` did not cross then and cannot now (nodes never move and only vanish, which
+        can only unblock a pair), so the start scans only the stale edges and ``blocked``, and
+        finds the same crossings as a scan of all pairs. ``None``: scan all pairs.
+
+    Returns
+    -------
+    nodes (M, 2), parent (M,), cost (M,), insertions, blocked (b, 2) int
+        ``blocked``: the blocked pairs of the result, ``(e, f)`` with ``e < f``, sorted.
+    """
+    n0 = len(nodes)
+    if n0 < 4:  # two edges without a common endpoint need four nodes
+        return nodes, parent, cost, 0, np.zeros((0, 2), np.int64)
+    neighbours = _Neighbours(nodes, parent, tol)
+    if carried is None or carried[0][1:].all():
+        qa, qb = neighbours.index_all()
+    else:
+        stale, old_blocked = carried
+        e, f = neighbours.pairs(np.flatnonzero(stale[1:]) + 1)
+        once = ~stale[f] | (e < f)  # a pair of two stale edges is found from both sides
+        e, f = e[once], f[once]
+        kept = old_blocked[~(stale[old_blocked[:, 0]] | stale[old_blocked[:, 1]])]
+        qa = np.concatenate([np.minimum(e, f), kept[:, 0]])
+        qb = np.concatenate([np.maximum(e, f), kept[:, 1]])
+    near = _NearNodes(nodes, tol)
+    ok, k = _crossing(nodes, parent, qa, qb, None, tol)
+    clear = near.clear_of(k[ok])
+    blocked = [(i, j, 0, 0) for i, j in zip(qa[ok][~clear].tolist(), qb[ok][~clear].tolist(), strict=True)]
+    sel = np.flatnonzero(ok)[clear]
+    found = zip(qa[sel].tolist(), qb[sel].tolist(), k[sel].tolist(), strict=True)
+    heap = [(i, j, 0, 0, kx, ky) for i, j, (kx, ky) in found]
+    if not heap:
+        return nodes, parent, cost, 0, _pairs_array([(i, j) for i, j, _, _ in blocked])
+    heapq.heapify(heap)
+
+    cap = n0 + len(heap) + 1  # each insertion removes at least one crossing pair
+    nodes = np.concatenate([nodes, np.empty((cap - n0, 2))])
+    parent = np.concatenate([parent, np.full(cap - n0, -1, np.int64)])
+    # scalar state as Python lists: the loop reads and writes it one item at a time
+    xy = nodes[:n0].tolist()
+    up = parent[:n0].tolist()
+    cst = cost.tolist()
+    length: list[float | None] = [None] * n0  # math.dist of each edge, filled when first needed
+    origin = list(range(n0))
+    version = [0] * n0
+    extra: dict[int, list[int]] = {}  # origin → nodes added whose edge lies on it
+    has_extra = np.zeros(n0, bool)
+    children: list[list[int]] = [[] for _ in range(n0)]
+    for c in range(1, n0):
+        children[up[c]].append(c)
+    n = n0
+    while heap:
+        i, j, vi, vj, kx, ky = heapq.heappop(heap)
+        if version[i] != vi or version[j] != vj:
+            continue  # an edge changed since the pair was found; its new pieces were re-tested
+        if not near.clear(kx, ky):  # a node added since lies within tol: blocked for good
+            blocked.append((i, j, vi, vj))
+            continue
+        if n == len(nodes):  # the bound above holds in exact arithmetic; stay safe under rounding
+            nodes, parent = np.concatenate([nodes, nodes]), np.concatenate([parent, parent])
+        k = [kx, ky]
+        pi, pj = up[i], up[j]
+        c_i = cst[pi] + math.dist(k, xy[pi])
+        c_j = cst[pj] + math.dist(k, xy[pj])
+        candidates = ((pi, c_i), (pj, c_j)) if c_i <= c_j else ((pj, c_j), (pi, c_i))
+        # cycle guard: a parent inside subtree(i) ∪ subtree(j) would hang the new node below itself
+        p, c_k = next((q, c) for q, c in candidates if not _in_subtree(q, up, (i, j)))
+        new = n
+        n += 1
+        nodes[new], parent[new] = k, p
+        xy.append(k)
+        up.append(p)
+        cst.append(c_k)
+        length.append(None)
+        version.append(0)
+        o_new = origin[i] if p == pi else origin[j]
+        origin.append(o_new)
+        extra.setdefault(o_new, []).append(new)
+        has_extra[o_new] = True
+        near.add(kx, ky)
+        children[pi].remove(i)
+        children[pj].remove(j)
+        children[p].append(new)
+        children.append([i, j])
+        parent[i] = parent[j] = up[i] = up[j] = new
+        length[i] = length[j] = None
+        stack = [i, j]  # costs change in the two moved subtrees only
+        while stack:
+            v = stack.pop()
+            edge = length[v]
+            if edge is None:
+                edge = length[v] = math.dist(xy[v], xy[up[v]])
+            cst[v] = cst[up[v]] + edge
+            stack.extend(children[v])
+        version[i] += 1
+        version[j] += 1
+        # re-test the three changed edges against every piece of their origins' neighbours
+        # (only the pieces whose own box meets the changed edge's: a proper crossing lies in both)
+        edge_ids, cands = [], []
+        for e in (i, j, new):
+            cand = neighbours.of(origin[e])
+            split = cand[has_extra[cand]]
+            if split.size:
+                cand = np.concatenate([cand, *(extra[s] for s in split.tolist())])
+            edge_ids.append(np.full(cand.size, e))
+            cands.append(cand)
+        es, fs = np.concatenate(edge_ids), np.concatenate(cands)
+        a, b, c, d = nodes[es], nodes[parent[es]], nodes[fs], nodes[parent[fs]]
+        meets = np.all((np.minimum(c, d) <= np.maximum(a, b) + tol) & (np.maximum(c, d) >= np.minimum(a, b) - tol), 1)
+        es, fs = es[meets], fs[meets]
+        ok, k = _crossing(nodes, parent, es, fs, None, tol)
+        for e, f, (kx, ky) in zip(es[ok].tolist(), fs[ok].tolist(), k[ok].tolist(), strict=True):
+            lo_, hi_ = min(e, f), max(e, f)
+            if near.clear(kx, ky):
+                heapq.heappush(heap, (lo_, hi_, version[lo_], version[hi_], kx, ky))
+            else:
+                blocked.append((lo_, hi_, version[lo_], version[hi_]))
+    final = [(e, f) for e, f, ve, vf in blocked if version[e] == ve and version[f] == vf]
+    return nodes[:n], parent[:n], np.array(cst), n - n0, _pairs_array(final)
+
+
+def _pairs_array(pairs: list[tuple[int, int]]) -> np.ndarray:
+    """Distinct pairs as a sorted int64 array, shape (m, 2)."""
+    if not pairs:
+        return np.zeros((0, 2), np.int64)
+    return np.unique(np.array(pairs, np.int64), axis=0)
+
+
+def _carry(carried: tuple[np.ndarray, np.ndarray], keep: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """RC's carried state (:func:`_split_crossings`) after a compaction that keeps the nodes ``keep``."""
+    stale, blocked = carried
+    new_index = np.cumsum(keep) - 1
+    blocked = blocked[keep[blocked].all(axis=1)] if len(blocked) else blocked
+    return stale[keep], new_index[blocked]
 
 
 def count_crossings(nodes: np.ndarray, parent: np.ndarray, tol: float) -> tuple[int, int]:
@@ -359,113 +640,9 @@ def count_crossings(nodes: np.ndarray, parent: np.ndarray, tol: float) -> tuple[
     return int(proper.sum()), int((~proper).sum())
 
 
-def _remove_crossings(nodes, parent, cost, tol: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
-    """RC: split properly crossing edges until none is left (ALGORITHMS §3).
-
-    Order: each step takes the lexicographically smallest crossing pair ``(i, j)``,
-    ``i < j`` (edges named by their child), among the current edges, i.e. the scan
-    "ascending i, then the smallest j > i" restarted after every insertion. A heap
-    holds every crossing pair; entries of edges changed since are dropped when popped.
-
-    Every later edge is a sub-segment of a starting edge (its *origin*), so two
-    edges can only cross if their origins' bounding boxes (grown by ``tol``)
-    overlap; that neighbour relation, found once with an STRtree, bounds every
-    re-test. ``cost`` is trusted (PPR recomputes it just before).
-
-    Returns
-    -------
-    nodes (M, 2), parent (M,), cost (M,), insertions
-    """
-    n0 = len(nodes)
-    if n0 < 4:  # two edges without a common endpoint need four nodes
-        return nodes, parent, cost, 0
-    qa, qb = _box_pairs(nodes, parent, tol)
-    order = np.argsort(qa, kind="stable")
-    nb_list, nb_start = qb[order], np.searchsorted(qa[order], np.arange(n0 + 1))
-    near = _NearNodes(nodes, tol)
-    upper = qa < qb
-    qa, qb = qa[upper], qb[upper]
-    ok, k = _crossing(nodes, parent, qa, qb, near, tol)
-    found = zip(qa[ok].tolist(), qb[ok].tolist(), k[ok].tolist(), strict=True)
-    heap = [(i, j, 0, 0, kx, ky) for i, j, (kx, ky) in found]
-    if not heap:
-        return nodes, parent, cost, 0
-    heapq.heapify(heap)
-
-    cap = n0 + len(heap) + 1  # each insertion removes at least one crossing pair
-    nodes = np.concatenate([nodes, np.empty((cap - n0, 2))])
-    parent = np.concatenate([parent, np.full(cap - n0, -1, np.int64)])
-    cost = np.concatenate([cost, np.zeros(cap - n0)])
-    origin = np.arange(cap)
-    version = [0] * cap
-    extra: dict[int, list[int]] = {}  # origin → nodes added whose edge lies on it
-    has_extra = np.zeros(n0, bool)
-    children: list[list[int]] = [[] for _ in range(cap)]
-    for c in range(1, n0):
-        children[parent[c]].append(c)
-    n = n0
-    while heap:
-        i, j, vi, vj, kx, ky = heapq.heappop(heap)
-        if version[i] != vi or version[j] != vj:
-            continue  # an edge changed since the pair was found; its new pieces were re-tested
-        k = np.array([kx, ky])
-        if not near.clear_of(k[None])[0]:  # a node added since lies within tol: never valid again
-            continue
-        if n == len(nodes):  # the bound above holds in exact arithmetic; stay safe under rounding
-            nodes, parent = np.concatenate([nodes, nodes]), np.concatenate([parent, parent])
-            cost, origin = np.concatenate([cost, cost]), np.concatenate([origin, origin])
-            version += [0] * n
-            children += [[] for _ in range(n)]
-        pi, pj = int(parent[i]), int(parent[j])
-        c_i = cost[pi] + math.dist(k, nodes[pi])
-        c_j = cost[pj] + math.dist(k, nodes[pj])
-        candidates = ((pi, c_i), (pj, c_j)) if c_i <= c_j else ((pj, c_j), (pi, c_i))
-        # cycle guard: a parent inside subtree(i) ∪ subtree(j) would hang the new node below itself
-        p, c_k = next((q, c) for q, c in candidates if not _in_subtree(q, parent, (i, j)))
-        new = n
-        n += 1
-        nodes[new], parent[new], cost[new] = k, p, c_k
-        origin[new] = origin[i] if p == pi else origin[j]
-        extra.setdefault(int(origin[new]), []).append(new)
-        has_extra[origin[new]] = True
-        near.add(k)
-        children[pi].remove(i)
-        children[pj].remove(j)
-        children[p].append(new)
-        children[new] = [i, j]
-        parent[i] = parent[j] = new
-        stack = [i, j]  # costs change in the two moved subtrees only
-        while stack:
-            v = stack.pop()
-            cost[v] = cost[parent[v]] + math.dist(nodes[v], nodes[parent[v]])
-            stack.extend(children[v])
-        version[i] += 1
-        version[j] += 1
-        # re-test the three changed edges against every piece of their origins' neighbours
-        # (only the pieces whose own box meets the changed edge's: a proper crossing lies in both
-        # boxes, and an origin's neighbours are many once PPR has made long edges)
-        edge_ids, cands = [], []
-        for e in (i, j, new):
-            o = origin[e]
-            cand = nb_list[nb_start[o] : nb_start[o + 1]]
-            split = cand[has_extra[cand]]
-            if split.size:
-                cand = np.concatenate([cand, *(extra[int(s)] for s in split)])
-            ends = nodes[[e, parent[e]]]
-            lo, hi = ends.min(axis=0) - tol, ends.max(axis=0) + tol
-            c, d = nodes[cand], nodes[parent[cand]]
-            cand = cand[np.all((np.minimum(c, d) <= hi) & (np.maximum(c, d) >= lo), axis=1)]
-            edge_ids.append(np.full(cand.size, e))
-            cands.append(cand)
-        es, fs = np.concatenate(edge_ids), np.concatenate(cands)
-        ok, k = _crossing(nodes, parent, es, fs, near, tol)
-        for e, f, (kx, ky) in zip(es[ok].tolist(), fs[ok].tolist(), k[ok].tolist(), strict=True):
-            lo_, hi_ = min(e, f), max(e, f)
-            heapq.heappush(heap, (lo_, hi_, version[lo_], version[hi_], kx, ky))
-    return nodes[:n], parent[:n], cost[:n], n - n0
-
-
-def _finish(nodes, parent, cost, tol: float, cut) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, int, bool]:
+def _finish(
+    nodes, parent, cost, tol: float, cut, carried: tuple[np.ndarray, np.ndarray]
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, int, bool, tuple[np.ndarray, np.ndarray]]:
     """RC | CtL until RC finds no crossing (or CtL cuts nothing after it): the fixed point of both.
 
     Run after the rounds when ``max_rounds`` stopped them while something still changed:
@@ -482,25 +659,30 @@ def _finish(nodes, parent, cost, tol: float, cut) -> tuple[np.ndarray, np.ndarra
         The tree after the last round (``cost`` consistent, as RC trusts it).
     tol : float
     cut : callable
-        ``cut(nodes, parent, cost) -> (nodes, cost, parent)``: CtL and compaction.
+        ``cut(nodes, parent, cost) -> (nodes, cost, parent, keep)``: CtL and compaction.
+    carried : (stale, blocked)
+        What the last RC carries to this tree (:func:`_split_crossings`).
 
     Returns
     -------
-    nodes, parent, cost, passes, insertions, done
-        ``done`` is False only if the guard stopped the passes.
+    nodes, parent, cost, passes, insertions, done, carried
+        ``done`` is False only if the guard stopped the passes; ``carried`` is what the last RC
+        carries to the result (its blocked pairs are the result's when ``done``).
     """
     passes = insertions = 0
     while passes < MAX_FINISH_PASSES:
         passes += 1
-        nodes, parent, cost, added = _remove_crossings(nodes, parent, cost, tol)
+        nodes, parent, cost, added, blocked = _split_crossings(nodes, parent, cost, tol, carried)
         insertions += added
+        carried = (np.zeros(len(nodes), bool), blocked)
         if added == 0:  # the tree is the previous CtL's output: CtL would cut nothing either
-            return nodes, parent, cost, passes, insertions, True
+            return nodes, parent, cost, passes, insertions, True, carried
         size = len(nodes)
-        nodes, cost, parent = cut(nodes, parent, cost)
+        nodes, cost, parent, keep = cut(nodes, parent, cost)
+        carried = _carry(carried, keep)
         if len(nodes) == size:
-            return nodes, parent, cost, passes, insertions, True
-    return nodes, parent, cost, passes, insertions, False
+            return nodes, parent, cost, passes, insertions, True, carried
+    return nodes, parent, cost, passes, insertions, False, carried
 
 
 def _reconnectable(before: np.ndarray, after: np.ndarray, space: FreeSpace) -> float:
@@ -548,8 +730,8 @@ def run(tree: Tree, params: Params = Params(), progress: Callable[[int, int], No
         0 when the last round changed nothing) and ``finish_crossings_removed`` (their
         RC insertions); ``crossings_removed`` (RC insertions, finishing passes included);
         ``ppr_rewires`` (accepted grandparent hops); ``leaves_cut``;
-        ``crossings_remaining`` (properly crossing edge pairs left, by a fresh scan:
-        0 unless ``MAX_FINISH_PASSES`` was reached); ``crossings_at_nodes`` (pairs that
+        ``crossings_remaining`` (properly crossing edge pairs left: 0 unless
+        ``MAX_FINISH_PASSES`` was reached, then by a fresh scan); ``crossings_at_nodes`` (pairs that
         cross at a point within ``tol`` of a third node, which RC skips by definition;
         see :func:`count_crossings`); ``discarded_reconnectable`` (see
         :func:`_reconnectable`; reported, not enforced).
@@ -584,19 +766,25 @@ def run(tree: Tree, params: Params = Params(), progress: Callable[[int, int], No
     def cut(nodes, parent, cost):
         keep = _cut_leaves(nodes, parent, params.ctl)
         stats["leaves_cut"] += int(len(keep) - keep.sum())
-        return _compact(keep, nodes, cost, parent=parent)
+        return (*_compact(keep, nodes, cost, parent=parent), keep)
 
-    changed = True
+    changed, done = True, True
+    # what each RC leaves the next (see _split_crossings): all edges are stale before the first
+    carried = (np.ones(len(nodes), bool), np.zeros((0, 2), np.int64))
     for rnd in range(1, params.max_rounds + 1):
         size_before = len(nodes)
+        before = parent.copy()
         hops = _shortcut(nodes, parent, space, bfs_levels(parent))
         stats["ppr_rewires"] += hops
+        carried = (carried[0] | (parent != before), carried[1])  # a hop gives an edge a new parent
         cost = tree_costs(nodes, parent, bfs_levels(parent))
-        nodes, cost, parent = cut(nodes, parent, cost)
+        nodes, cost, parent, keep = cut(nodes, parent, cost)
+        carried = _carry(carried, keep)
         after_first_cut = len(nodes)
-        nodes, parent, cost, added = _remove_crossings(nodes, parent, cost, tol)
+        nodes, parent, cost, added, blocked = _split_crossings(nodes, parent, cost, tol, carried)
         stats["crossings_removed"] += added
-        nodes, cost, parent = cut(nodes, parent, cost)
+        nodes, cost, parent, keep = cut(nodes, parent, cost)
+        carried = _carry((np.zeros(len(keep), bool), blocked), keep)
         stats["rounds"] = rnd
         stats["nodes_per_round"].append(len(nodes))
         log.info("simplify round %d: %d nodes", rnd, len(nodes))
@@ -606,14 +794,17 @@ def run(tree: Tree, params: Params = Params(), progress: Callable[[int, int], No
         if not changed:
             break
     if changed:  # max_rounds stopped the loop: bring RC and CtL to their fixed point
-        nodes, parent, cost, passes, added, done = _finish(nodes, parent, cost, tol, cut)
+        nodes, parent, cost, passes, added, done, carried = _finish(nodes, parent, cost, tol, cut, carried)
         stats["finish_passes"] = passes
         stats["finish_crossings_removed"] = added
         stats["crossings_removed"] += added
         log.info("simplify: %d finishing RC | CtL passes, %d crossings removed: %d nodes", passes, added, len(nodes))
         if not done:
             log.warning("simplify: finishing passes stopped after %d (MAX_FINISH_PASSES)", passes)
-    stats["crossings_remaining"], stats["crossings_at_nodes"] = count_crossings(nodes, parent, tol)
+    if changed and not done:  # the bound stopped the passes after a cut: only a fresh scan knows
+        stats["crossings_remaining"], stats["crossings_at_nodes"] = count_crossings(nodes, parent, tol)
+    else:  # the last RC's result stands (nothing changed after it, or CtL cut nothing)
+        stats["crossings_remaining"], stats["crossings_at_nodes"] = 0, len(carried[1])
 
     stats["discarded_reconnectable"] = _reconnectable(tree.nodes, nodes, true_space)
     return Tree(tree.map, nodes, parent, cost, tree.collision_samples, stats)
