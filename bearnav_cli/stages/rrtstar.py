@@ -5,10 +5,15 @@ inflated obstacles are stored in ``collision_samples`` instead of being thrown
 away; border pseudo-samples on the bounds are appended after them. Edge tests
 are exact segment-against-polygon tests through :class:`~bearnav_cli.geometry.FreeSpace`.
 
-Speed comes from three things: every sample's collision status is decided in one
-vectorised call up front (it does not depend on the tree), neighbours come from
-a uniform bucket grid (:class:`_BucketGrid`), and edges are tested lazily, only
-for the neighbours whose cost could improve.
+Speed comes from four things: every sample's collision status is decided in one
+vectorised call up front (it does not depend on the tree); the nodes within a step
+of a sample come from a bucket grid kept sorted by bucket (:class:`_BucketGrid`)
+in one gather, which serves both the nearest node and, when the sample lies within a
+step of it, the neighbours; an iteration tests its edges in one exact call (the
+nearest node's, the first parent candidates', and those of every neighbour that the
+cheapest possible new node could rewire), only for the neighbours whose cost could
+improve; and the loop reads scalars as Python floats. The tree is the one the
+straightforward loop grows (ALGORITHMS §2), decision for decision.
 """
 
 from __future__ import annotations
@@ -31,6 +36,8 @@ __all__ = [
     "check_resources",
     "MAX_BORDER_SAMPLES",
     "MAX_GRID_CELLS",
+    "PARENT_CANDIDATES_FIRST",
+    "UNSORTED_NODES",
     "problems",
     "rewiring_radius",
     "RRT_BYTES_PER_GRID_CELL",
@@ -95,107 +102,112 @@ def border_samples(bounds: np.ndarray, spacing: float) -> np.ndarray:
     return np.concatenate(out)
 
 
+#: Parent candidates whose edges are tested with the others of an iteration; the rest only if all
+#: of these are blocked (the first free one wins, and it is almost always among them).
+PARENT_CANDIDATES_FIRST = 4
 #: Below this many nodes, nearest-neighbour queries scan every node instead of the buckets.
 BRUTE_FORCE_NODES = 512
+#: Nodes inserted since the grid's last sort, which every query measures on top of its buckets;
+#: one more sorts the grid again (an argsort of all nodes).
+UNSORTED_NODES = 128
 
 
 class _BucketGrid:
-    """Uniform grid of buckets holding node indices, for nearest and radius queries.
+    """Uniform grid of buckets for nearest and radius queries over the nodes.
 
-    Each bucket is a growable int64 array; a query gathers the buckets around the
-    point and finishes with one vectorised distance computation.
+    The nodes sorted so far are kept ordered by bucket (``ix·ny + iy``, then index), so the
+    buckets of one grid column within a block are one slice, found by one ``searchsorted``
+    for the whole block; the nodes inserted since (the *tail*, at most :data:`UNSORTED_NODES`)
+    are measured by every query. A query gathers the block's slices and the tail and
+    finishes with one vectorised distance computation. Nothing is stored per bucket, so a
+    large grid costs no memory.
     """
 
     def __init__(self, bounds: np.ndarray, cell: float, nodes: np.ndarray):
         self.origin = np.asarray(bounds[:2], float)
+        self.ox, self.oy = (float(v) for v in self.origin)
         self.cell = cell
         self.shape = (
             max(1, math.ceil((bounds[2] - bounds[0]) / cell)),
             max(1, math.ceil((bounds[3] - bounds[1]) / cell)),
         )
         self.nodes = nodes  # shared, filled by the caller
-        self.members: list[np.ndarray] = [np.empty(4, np.int64) for _ in range(self.shape[0] * self.shape[1])]
-        self.counts = np.zeros(self.shape[0] * self.shape[1], np.int64)
+        self.order = np.zeros(0, np.int64)  # sorted nodes, by (bucket, index)
+        self.keys = np.zeros(0, np.int64)  # their buckets, ascending
+        self.sorted = 0  # nodes 0 … sorted − 1 are in ``order``; the tail follows
         self.size = 0  # nodes inserted so far (indices 0 … size − 1)
+        self.offsets: dict[tuple[int, int], np.ndarray] = {}  # a block's search keys, by its shape, less its first
 
-    def _cell_of(self, p: np.ndarray) -> tuple[int, int]:
-        ix = min(max(int((p[0] - self.origin[0]) // self.cell), 0), self.shape[0] - 1)
-        iy = min(max(int((p[1] - self.origin[1]) // self.cell), 0), self.shape[1] - 1)
+    def _cell_of(self, x: float, y: float) -> tuple[int, int]:
+        ix = min(max(int((x - self.ox) // self.cell), 0), self.shape[0] - 1)
+        iy = min(max(int((y - self.oy) // self.cell), 0), self.shape[1] - 1)
         return ix, iy
 
     def insert(self, index: int) -> None:
-        ix, iy = self._cell_of(self.nodes[index])
+        """Add node ``index`` (the next one: nodes are inserted in index order)."""
+        self.size = index + 1
+        if self.size - self.sorted > UNSORTED_NODES:
+            self._sort()
+
+    def _sort(self) -> None:
+        p = self.nodes[: self.size]
+        ix = np.clip((p[:, 0] - self.ox) // self.cell, 0, self.shape[0] - 1).astype(np.int64)
+        iy = np.clip((p[:, 1] - self.oy) // self.cell, 0, self.shape[1] - 1).astype(np.int64)
         flat = ix * self.shape[1] + iy
-        count = self.counts[flat]
-        bucket = self.members[flat]
-        if count == len(bucket):
-            bucket = np.concatenate([bucket, np.empty(len(bucket), np.int64)])
-            self.members[flat] = bucket
-        bucket[count] = index
-        self.counts[flat] = count + 1
-        self.size = max(self.size, index + 1)
+        self.order = np.argsort(flat, kind="stable")
+        self.keys = flat[self.order]
+        self.sorted = self.size
 
-    def _ring_cells(self, ix: int, iy: int, ring: int) -> list[int]:
-        """Flat ids of the buckets at Chebyshev distance exactly ``ring`` from bucket (ix, iy)."""
+    def block(self, x: float, y: float, reach: int) -> np.ndarray:
+        """Indices of the nodes in the buckets within ``reach`` buckets (Chebyshev) of the point's, and of the tail.
+
+        Every node outside lies farther than ``reach·cell`` from the point.
+        """
         nx, ny = self.shape
-        if ring == 0:
-            return [ix * ny + iy]
-        x0, x1, y0, y1 = ix - ring, ix + ring, iy - ring, iy + ring
-        cells = []
-        for jx in (x0, x1):  # the left and right columns, full height
-            if 0 <= jx < nx:
-                cells.extend(jx * ny + jy for jy in range(max(y0, 0), min(y1, ny - 1) + 1))
-        for jy in (y0, y1):  # the top and bottom rows, without the corners already taken
-            if 0 <= jy < ny:
-                cells.extend(jx * ny + jy for jx in range(max(x0 + 1, 0), min(x1 - 1, nx - 1) + 1))
-        return cells
-
-    def _gather(self, cells: list[int]) -> np.ndarray:
-        """Node indices held in the given buckets."""
-        counts = self.counts
-        parts = [self.members[c][: counts[c]] for c in cells if counts[c]]
+        ix, iy = self._cell_of(x, y)
+        x0, x1 = max(ix - reach, 0), min(ix + reach, nx - 1)
+        y0, y1 = max(iy - reach, 0), min(iy + reach, ny - 1)
+        # each column's buckets y0 … y1 are one run of the sorted keys: its two ends in one search
+        shape = (x1 - x0 + 1, y1 - y0 + 1)
+        offsets = self.offsets.get(shape)
+        if offsets is None:
+            offsets = self.offsets[shape] = (np.arange(shape[0])[:, None] * ny + [0, shape[1]]).ravel()
+        ends = np.searchsorted(self.keys, offsets + (x0 * ny + y0)).tolist()
+        order = self.order
+        parts = [order[a:b] for a, b in zip(ends[::2], ends[1::2], strict=True) if b > a]
+        if self.size > self.sorted:
+            parts.append(np.arange(self.sorted, self.size))
         if not parts:
             return np.empty(0, np.int64)
         return parts[0] if len(parts) == 1 else np.concatenate(parts)
 
-    def nearest(self, p: np.ndarray) -> int:
-        """Index of the node nearest to ``p`` (ties: lowest index)."""
+    def nearest(self, x: float, y: float, reach: int = 1) -> int:
+        """Index of the node nearest to ``(x, y)`` (ties: lowest index), searching from ``reach`` buckets out."""
         if self.size <= BRUTE_FORCE_NODES:
             # A young tree in a large map leaves most buckets empty, and the ring scan would
             # visit thousands of them; one vectorised pass over a few hundred nodes is cheaper.
-            d = self.nodes[: self.size] - p
+            d = self.nodes[: self.size] - (x, y)
             return int(np.argmin(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1]))
-        ix, iy = self._cell_of(p)
-        best_d2, best = math.inf, -1
-        ring = 0
-        max_ring = max(self.shape)
-        while ring <= max_ring:
-            idx = self._gather(self._ring_cells(ix, iy, ring))
-            if len(idx):
-                d = self.nodes[idx] - p
-                d2 = d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1]
-                k = int(np.argmin(d2))
-                low = d2[k]
-                if low < best_d2 or (low == best_d2 and idx[k] < best):
-                    ties = idx[d2 == low]
-                    best_d2, best = low, int(ties.min())
-            # every bucket at ring distance > ring lies farther than ring·cell from p
-            if best >= 0 and math.sqrt(best_d2) <= ring * self.cell:
-                break
-            ring += 1
-        return best
+        while True:
+            idx = self.block(x, y, reach)
+            if not len(idx):
+                reach *= 2
+                continue
+            d = self.nodes[idx] - (x, y)
+            d2 = d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1]
+            low = d2.min()
+            # every node outside the block lies at least reach·cell from the point
+            if math.sqrt(low) < reach * self.cell or reach > max(self.shape):
+                return int(idx[d2 == low].min())
+            # the nearest lies within √low: a block reaching past it holds it
+            reach = max(reach + 1, int(math.sqrt(low) // self.cell) + 1)
 
-    def within(self, p: np.ndarray, radius: float) -> np.ndarray:
-        """Sorted indices of nodes with ``‖x − p‖ ≤ radius``."""
+    def within(self, x: float, y: float, radius: float) -> np.ndarray:
+        """Sorted indices of nodes with ``‖node − (x, y)‖ ≤ radius``."""
         if radius <= 0:
             return np.empty(0, np.int64)
-        ix, iy = self._cell_of(p)
-        reach = max(1, math.ceil(radius / self.cell))
-        nx, ny = self.shape
-        xs = range(max(ix - reach, 0), min(ix + reach, nx - 1) + 1)
-        ys = range(max(iy - reach, 0), min(iy + reach, ny - 1) + 1)
-        idx = self._gather([jx * ny + jy for jx in xs for jy in ys])
-        d = self.nodes[idx] - p
+        idx = self.block(x, y, max(1, math.ceil(radius / self.cell)))
+        d = self.nodes[idx] - (x, y)
         keep = d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] <= radius * radius
         return np.sort(idx[keep])
 
@@ -240,41 +252,88 @@ def run(map_: Map, params: Params = Params(), progress: Callable[[int, int], Non
     grid.insert(0)
     report_every = max(1, params.iterations // 100)
     skipped_duplicates = 0
+    # per-sample values as Python floats: the loop reads them one at a time
+    sample_xy = samples.tolist()
+    blocked = (in_obstacle & (params.collision_policy == "skip")).tolist()
+    gx, gy = (float(v) for v in map_.goal)
+    xy = [(gx, gy)]  # node positions as Python floats, alongside ``nodes``
+    px, py = np.empty(capacity), np.empty(capacity)  # and as columns, for distances to many nodes
+    px[0], py[0] = gx, gy
 
     for it in range(params.iterations):
         if progress is not None and it % report_every == 0:
             progress(it, params.iterations)
-        xr = samples[it]
-        if in_obstacle[it] and params.collision_policy == "skip":
+        if blocked[it]:
             continue
-        vn = grid.nearest(xr)
-        delta = xr - nodes[vn]
-        dist = math.hypot(delta[0], delta[1])
-        xn = xr if dist <= eta else nodes[vn] + (eta / dist) * delta
+        x, y = sample_xy[it]
+        # one gather serves the nearest node and, when the sample is within a step of it, the
+        # neighbours too: every node outside the block lies farther than a step from the sample
+        if n <= BRUTE_FORCE_NODES:
+            # a young tree in a large map leaves most buckets empty: measure every node
+            around, reach = np.arange(n), math.inf
+        else:
+            around, reach = grid.block(x, y, BUCKETS_PER_STEP), BUCKETS_PER_STEP * grid.cell
+        ax, ay = px[around] - x, py[around] - y
+        d2 = ax * ax + ay * ay
+        low = d2.min() if len(d2) else math.inf
+        if math.sqrt(low) < reach:
+            vn = int(around[d2 == low].min())
+        else:  # a sparse part of the tree: search farther out, past the nearest gathered node if any
+            vn = grid.nearest(x, y, 2 * BUCKETS_PER_STEP if low == math.inf else int(math.sqrt(low) // grid.cell) + 1)
+        vx, vy = xy[vn]
+        dx, dy = x - vx, y - vy
+        dist = math.hypot(dx, dy)
+        if dist > eta:
+            scale = eta / dist
+            x, y = vx + scale * dx, vy + scale * dy
         if min(dist, eta) <= tol:
             skipped_duplicates += 1
             continue
-        if not space.segments_free(nodes[vn], xn, known_in_box=True)[0]:
+        # a sample beyond a step lies in a sparse part of the tree, where the steered edge is often
+        # blocked: test it alone first; near the tree it is almost always free and joins the batch
+        first = [] if dist > eta else [vn]
+        if dist > eta and not space.segments_free(nodes[vn], (x, y), known_in_box=True)[0]:
             continue
 
         radius = rewiring_radius(n, free_area, eta)
-        near = grid.within(xn, radius)
+        if radius <= 0:
+            near = np.empty(0, np.int64)
+        elif dist <= eta and radius <= reach:  # the sample is the new node: its neighbours were gathered
+            near = np.sort(around[d2 <= radius * radius])
+        else:
+            near = grid.within(x, y, radius)
         near = near[near != vn]
-        d_near = np.hypot(nodes[near, 0] - xn[0], nodes[near, 1] - xn[1])
-        # choose the parent: candidates by (cost, index); the first free edge wins
-        best_parent, best_cost = vn, cost[vn] + math.hypot(xn[0] - nodes[vn, 0], xn[1] - nodes[vn, 1])
-        through = cost[near] + d_near
+        d_near = np.hypot(px[near] - x, py[near] - y)
+        # parent candidates: cheaper than through the nearest node, by (cost, index)
+        best_parent, best_cost = vn, float(cost[vn]) + math.hypot(x - vx, y - vy)
+        cost_near = cost[near]
+        through = cost_near + d_near
         better = (through < best_cost) | ((through == best_cost) & (near < vn))
-        if better.any():
-            cand = near[better]
-            order = np.lexsort((cand, through[better]))
-            cand, cand_cost = cand[order], through[better][order]
-            free = space.segments_free(nodes[cand], xn, known_in_box=True)
-            hit = np.flatnonzero(free)
-            if len(hit):
-                best_parent, best_cost = int(cand[hit[0]]), float(cand_cost[hit[0]])
+        cand = near[better]
+        order = np.lexsort((cand, through[better]))
+        cand, cand_cost = cand[order], through[better][order]
+        # rewiring candidates for the cheapest cost the new node can get: a superset of those
+        # for the cost it does get (costs and sums round monotonically)
+        lowest = min(best_cost, float(cand_cost[0])) if len(cand) else best_cost
+        maybe = np.flatnonzero(cost_near - (lowest + d_near) > tol)
+        # the edges this iteration tests, in one exact call: the nearest node's (unless tested), the
+        # first few parent candidates (the first free one in (cost, index) order wins, and that is
+        # almost always among them) and the rewiring candidates
+        head = cand[:PARENT_CANDIDATES_FIRST]
+        ends = np.concatenate([first, head, near[maybe]]).astype(np.int64)
+        free = space.segments_free(nodes[ends], (x, y), known_in_box=True) if len(ends) else np.ones(0, bool)
+        if first and not free[0]:
+            continue
+        free = free[len(first) :]
+        hit = np.flatnonzero(free[: len(head)])
+        if not len(hit) and len(cand) > len(head):  # all of them blocked: test the others
+            hit = len(head) + np.flatnonzero(space.segments_free(nodes[cand[len(head) :]], (x, y), known_in_box=True))
+        if len(hit):
+            best_parent, best_cost = int(cand[hit[0]]), float(cand_cost[hit[0]])
         new = n
-        nodes[new] = xn
+        nodes[new] = x, y
+        px[new], py[new] = x, y
+        xy.append((x, y))
         parent[new] = best_parent
         cost[new] = best_cost
         children.append([])
@@ -283,13 +342,13 @@ def run(map_: Map, params: Params = Params(), progress: Callable[[int, int], Non
         n += 1
 
         # rewire the neighbours that get cheaper through the new node
-        gain = cost[near] - (best_cost + d_near)
-        cand_mask = (gain > tol) & (near != best_parent)
-        if cand_mask.any():
-            cand = near[cand_mask]
-            free = space.segments_free(nodes[cand], xn, known_in_box=True)
-            for v, dv in zip(cand[free], d_near[cand_mask][free], strict=True):
-                v = int(v)
+        gain = cost_near - (best_cost + d_near)
+        rewire = np.flatnonzero((gain > tol) & (near != best_parent))
+        if len(rewire):
+            free_near = np.zeros(len(near), bool)
+            free_near[maybe] = free[len(head) :]
+            rewire = rewire[free_near[rewire]]
+            for v, dv in zip(near[rewire].tolist(), d_near[rewire].tolist(), strict=True):
                 new_cost = best_cost + dv
                 if new_cost < cost[v] - tol:  # costs only fall during rewiring: re-check
                     children[parent[v]].remove(v)
@@ -322,11 +381,10 @@ def run(map_: Map, params: Params = Params(), progress: Callable[[int, int], Non
 
 def _shift_subtree(root: int, delta: float, cost: np.ndarray, children: list[list[int]]) -> None:
     """Add ``delta`` to the cost of ``root`` and of every descendant."""
-    stack = [root]
-    while stack:
-        v = stack.pop()
-        cost[v] += delta
-        stack.extend(children[v])
+    subtree = [root]
+    for v in subtree:  # the list grows while it is walked: breadth first
+        subtree.extend(children[v])
+    cost[subtree] += delta  # one addition per node, as one at a time would do
 
 
 def summary(tree: Tree) -> str:
