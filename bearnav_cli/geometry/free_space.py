@@ -189,6 +189,11 @@ class FreeSpace:
         return FreeSpace(self.bounds, self.tol, obstacles, self.raw_obstacles, self.sight_bounds)
 
     @cached_property
+    def _no_obstacles(self) -> bool:
+        """Whether ``O`` is empty (asked by every segment test, so RRT* once per iteration)."""
+        return bool(self.obstacles.is_empty)
+
+    @cached_property
     def box(self) -> shapely.Polygon:
         """The robot's bounds ``B_r`` (:attr:`bounds`) as a polygon."""
         return shapely.box(*self.bounds)
@@ -256,7 +261,7 @@ class FreeSpace:
         coords[:, 0] = a
         coords[:, 1] = b
         if known_in_box:
-            if self.obstacles.is_empty:
+            if self._no_obstacles:
                 return np.ones(len(coords), bool)
             return ~shapely.intersects(self.obstacles, shapely.linestrings(coords))
         lo, hi = self._box_limits

@@ -34,6 +34,7 @@ __all__ = [
     "BRUTE_FORCE_NODES",
     "BUCKETS_PER_STEP",
     "check_resources",
+    "DENSE_BUCKETS",
     "MAX_BORDER_SAMPLES",
     "MAX_GRID_CELLS",
     "PARENT_CANDIDATES_FIRST",
@@ -110,6 +111,9 @@ BRUTE_FORCE_NODES = 512
 #: Nodes inserted since the grid's last sort, which every query measures on top of its buckets;
 #: one more sorts the grid again (an argsort of all nodes).
 UNSORTED_NODES = 128
+#: Up to this many buckets, the grid also keeps where each bucket's run starts (one bincount per sort),
+#: so a query reads its runs' ends instead of searching for them.
+DENSE_BUCKETS = 1 << 16
 
 
 class _BucketGrid:
@@ -117,8 +121,9 @@ class _BucketGrid:
 
     The nodes sorted so far are kept ordered by bucket (``ix·ny + iy``, then index), so the
     buckets of one grid column within a block are one slice, found by one ``searchsorted``
-    for the whole block; the nodes inserted since (the *tail*, at most :data:`UNSORTED_NODES`)
-    are measured by every query. A query gathers the block's slices and the tail and
+    for the whole block (or read from the runs' starts, up to :data:`DENSE_BUCKETS`); the
+    nodes inserted since (the *tail*, at most :data:`UNSORTED_NODES`) are measured by every
+    query. A query gathers the block's slices and the tail and
     finishes with one vectorised distance computation. Nothing is stored per bucket, so a
     large grid costs no memory.
     """
@@ -137,6 +142,8 @@ class _BucketGrid:
         self.sorted = 0  # nodes 0 … sorted − 1 are in ``order``; the tail follows
         self.size = 0  # nodes inserted so far (indices 0 … size − 1)
         self.offsets: dict[tuple[int, int], np.ndarray] = {}  # a block's search keys, by its shape, less its first
+        self.starts: np.ndarray | None = None  # where each bucket's run starts in ``order`` (dense grids)
+        self.ids = np.arange(len(nodes))
 
     def _cell_of(self, x: float, y: float) -> tuple[int, int]:
         ix = min(max(int((x - self.ox) // self.cell), 0), self.shape[0] - 1)
@@ -157,6 +164,9 @@ class _BucketGrid:
         self.order = np.argsort(flat, kind="stable")
         self.keys = flat[self.order]
         self.sorted = self.size
+        cells = self.shape[0] * self.shape[1]
+        if cells <= DENSE_BUCKETS:
+            self.starts = np.concatenate([[0], np.cumsum(np.bincount(flat, minlength=cells))])
 
     def block(self, x: float, y: float, reach: int) -> np.ndarray:
         """Indices of the nodes in the buckets within ``reach`` buckets (Chebyshev) of the point's, and of the tail.
@@ -172,11 +182,12 @@ class _BucketGrid:
         offsets = self.offsets.get(shape)
         if offsets is None:
             offsets = self.offsets[shape] = (np.arange(shape[0])[:, None] * ny + [0, shape[1]]).ravel()
-        ends = np.searchsorted(self.keys, offsets + (x0 * ny + y0)).tolist()
+        keys = offsets + (x0 * ny + y0)
+        ends = (self.starts[keys] if self.starts is not None else np.searchsorted(self.keys, keys)).tolist()
         order = self.order
         parts = [order[a:b] for a, b in zip(ends[::2], ends[1::2], strict=True) if b > a]
         if self.size > self.sorted:
-            parts.append(np.arange(self.sorted, self.size))
+            parts.append(self.ids[self.sorted : self.size])
         if not parts:
             return np.empty(0, np.int64)
         return parts[0] if len(parts) == 1 else np.concatenate(parts)
@@ -269,17 +280,22 @@ def run(map_: Map, params: Params = Params(), progress: Callable[[int, int], Non
         # one gather serves the nearest node and, when the sample is within a step of it, the
         # neighbours too: every node outside the block lies farther than a step from the sample
         if n <= BRUTE_FORCE_NODES:
-            # a young tree in a large map leaves most buckets empty: measure every node
-            around, reach = np.arange(n), math.inf
+            # a young tree in a large map leaves most buckets empty: measure every node; in index
+            # order, the first minimum has the lowest index
+            around, reach = grid.ids[:n], math.inf
+            ax, ay = px[:n] - x, py[:n] - y
+            d2 = ax * ax + ay * ay
+            vn = int(np.argmin(d2))
         else:
             around, reach = grid.block(x, y, BUCKETS_PER_STEP), BUCKETS_PER_STEP * grid.cell
-        ax, ay = px[around] - x, py[around] - y
-        d2 = ax * ax + ay * ay
-        low = d2.min() if len(d2) else math.inf
-        if math.sqrt(low) < reach:
-            vn = int(around[d2 == low].min())
-        else:  # a sparse part of the tree: search farther out, past the nearest gathered node if any
-            vn = grid.nearest(x, y, 2 * BUCKETS_PER_STEP if low == math.inf else int(math.sqrt(low) // grid.cell) + 1)
+            ax, ay = px[around] - x, py[around] - y
+            d2 = ax * ax + ay * ay
+            low = d2.min() if len(d2) else math.inf
+            if math.sqrt(low) < reach:
+                vn = int(around[d2 == low].min())
+            else:  # a sparse part of the tree: search farther out, past the nearest gathered node if any
+                far = 2 * BUCKETS_PER_STEP if low == math.inf else int(math.sqrt(low) // grid.cell) + 1
+                vn = grid.nearest(x, y, far)
         vx, vy = xy[vn]
         dx, dy = x - vx, y - vy
         dist = math.hypot(dx, dy)
@@ -300,6 +316,9 @@ def run(map_: Map, params: Params = Params(), progress: Callable[[int, int], Non
             near = np.empty(0, np.int64)
         elif dist <= eta and radius <= reach:  # the sample is the new node: its neighbours were gathered
             near = np.sort(around[d2 <= radius * radius])
+        elif n <= BRUTE_FORCE_NODES:
+            ax, ay = px[:n] - x, py[:n] - y
+            near = np.flatnonzero(ax * ax + ay * ay <= radius * radius)
         else:
             near = grid.within(x, y, radius)
         near = near[near != vn]
