@@ -301,17 +301,25 @@ def _crossing(nodes, parent, e, f, near: _NearNodes | None, tol: float) -> tuple
     e, f = np.minimum(e, f), np.maximum(e, f)  # k is computed on the lower edge, whichever side asks
     pe, pf = parent[e], parent[f]
     a, b, c, d = nodes[e], nodes[pe], nodes[f], nodes[pf]
-    r, s, w = b - a, d - c, c - a
+    r, s = b - a, d - c
     den = r[:, 0] * s[:, 1] - r[:, 1] * s[:, 0]
     ok = (e != f) & (e != pf) & (pe != f) & (pe != pf)
     ok &= np.abs(den) > tol * np.maximum(np.hypot(r[:, 0], r[:, 1]), np.hypot(s[:, 0], s[:, 1]))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = (w[:, 0] * s[:, 1] - w[:, 1] * s[:, 0]) / den
-        u = (w[:, 0] * r[:, 1] - w[:, 1] * r[:, 0]) / den
-    ok &= (t > 0) & (t < 1) & (u > 0) & (u < 1)
-    k = a + t[:, None] * r
+    # each further test only for the pairs still in play (few: most candidate pairs miss), where den ≠ 0
+    idx = np.flatnonzero(ok)
+    w = c[idx] - a[idx]
+    t = (w[:, 0] * s[idx, 1] - w[:, 1] * s[idx, 0]) / den[idx]
+    u = (w[:, 0] * r[idx, 1] - w[:, 1] * r[idx, 0]) / den[idx]
+    inside = (t > 0) & (t < 1) & (u > 0) & (u < 1)
+    idx, t = idx[inside], t[inside]
+    k_in = a[idx] + t[:, None] * r[idx]
+    clear = np.ones(len(idx), bool)
     for end in (a, b, c, d):
-        ok &= np.hypot(k[:, 0] - end[:, 0], k[:, 1] - end[:, 1]) > tol
+        clear &= np.hypot(k_in[:, 0] - end[idx, 0], k_in[:, 1] - end[idx, 1]) > tol
+    ok[:] = False
+    ok[idx] = clear
+    k = np.full((len(e), 2), np.nan)
+    k[idx] = k_in
     if near is not None and ok.any():
         ok[ok] = near.clear_of(k[ok])
     return ok, k
@@ -401,11 +409,15 @@ class _Neighbours:
         self.lists: dict[int, np.ndarray] = {}
         self.start: np.ndarray | None = None
 
-    def pairs(self, edges: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Ordered pairs ``(e, f)``, ``e`` in ``edges``, ``f != e``, that may meet (``f`` ascending per ``e``)."""
+    def pairs(self, edges: np.ndarray, upper: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        """Ordered pairs ``(e, f)``, ``e`` in ``edges``, ``f != e`` (``upper``: ``f > e``), that may meet.
+
+        Sorted by ``e``, then ``f``.
+        """
         qa, qb = self.tree.query(self.boxes[edges])
         e, f = edges[qa], qb + 1
-        e, f = e[e != f], f[e != f]
+        keep = e < f if upper else e != f
+        e, f = e[keep], f[keep]
         up = self.up
         common = (e == up[f]) | (up[e] == f) | (up[e] == up[f])
         keep = _may_meet(self.a[e], self.b[e], self.a[f], self.b[f], common, self.slack)
@@ -415,11 +427,12 @@ class _Neighbours:
 
     def index_all(self) -> tuple[np.ndarray, np.ndarray]:
         """Every pair ``(e, f)``, ``e < f``, that may meet; the lists of all edges are filed on the way."""
-        e, f = self.pairs(np.arange(1, len(self.a)))
-        self.start = np.searchsorted(e, np.arange(len(self.a) + 1))
-        self.all_f = f
-        upper = e < f
-        return e[upper], f[upper]
+        e, f = self.pairs(np.arange(1, len(self.a)), upper=True)  # half the pairs to judge
+        both_e, both_f = np.concatenate([e, f]), np.concatenate([f, e])
+        order = np.lexsort((both_f, both_e))
+        self.start = np.searchsorted(both_e[order], np.arange(len(self.a) + 1))
+        self.all_f = both_f[order]
+        return e, f
 
     def of(self, edge: int) -> np.ndarray:
         """The edges that may meet ``edge``, ascending."""
@@ -575,7 +588,8 @@ def _split_crossings(
             cand = neighbours.of(origin[e])
             split = cand[has_extra[cand]]
             if split.size:
-                cand = np.concatenate([cand, *(extra[s] for s in split.tolist())])
+                pieces = [piece for s in split.tolist() for piece in extra[s]]
+                cand = np.concatenate([cand, np.array(pieces, np.int64)])
             edge_ids.append(np.full(cand.size, e))
             cands.append(cand)
         es, fs = np.concatenate(edge_ids), np.concatenate(cands)
