@@ -31,19 +31,33 @@ from typing import Callable
 
 import numpy as np
 import shapely
-from common import BENCH_DIR, README, REPO_DIR, load_map, machine_line, markdown_table, replace_section, timed
+from common import (
+    BENCH_DIR,
+    MADE_SEED,
+    README,
+    REPO_DIR,
+    load_map,
+    machine_line,
+    markdown_table,
+    replace_section,
+    timed,
+)
+from made_maps import KINDS
 from ompl import base as ob
 from ompl import geometric as og
 from ompl import util as ou
 
+from bearnav_cli import pipeline
 from bearnav_cli.datatypes import Map, Tree
 from bearnav_cli.geometry import FreeSpace
+from bearnav_cli.stages import map_ as map_stage
 from bearnav_cli.stages import rrtstar
 
-#: (name, map file, RRT* step) of the compared maps.
+#: (name, map file or ``made_maps.py`` kind, RRT* step) of the compared maps; the growth table uses the first.
 MAPS = (
     ("kitchen", REPO_DIR / "maps" / "kitchen.yaml", 1.0),
     ("box500", BENCH_DIR / "maps" / "box500.yaml", 25.0),
+    ("office", "office", 1.0),  # rooms off a corridor, 14 × 9 m, that nobody tuned bearnav for
 )
 ITERATIONS = (1500, 10_000)
 SEEDS = (0, 1, 2, 3, 4)
@@ -124,6 +138,15 @@ def best_cost_to(tree: Tree, space: FreeSpace, target: np.ndarray) -> float:
         return math.inf
     reach = tree.cost[free] + np.hypot(*(tree.nodes[free] - target).T)
     return float(reach.min())
+
+
+def map_of(source: Path | str) -> Map:
+    """The normalised map of a map file, or of a ``made_maps.py`` kind (seed :data:`MADE_SEED`)."""
+    if isinstance(source, Path):
+        return load_map(source)
+    spec = KINDS[source](MADE_SEED)
+    made = map_stage.MapSource(spec=spec, file=f"{spec['name']}.yaml", sha256="bench")
+    return pipeline.compute(made, through="map")["map"]
 
 
 def run_ours(map_: Map, space: FreeSpace, step: float, iterations: int, seed: int) -> tuple[Result, Tree]:
@@ -216,8 +239,8 @@ def cost_cell(costs: list[float]) -> str:
 def compare(iteration_counts: tuple[int, ...], seeds: tuple[int, ...]) -> str:
     """Side-by-side table of our RRT* and OMPL's RRTstar, plus OMPL's callback counts."""
     rows, count_rows = [], []
-    for name, path, step in MAPS:
-        map_ = load_map(path)
+    for name, source, step in MAPS:
+        map_ = map_of(source)
         space = FreeSpace.from_map(map_)
         for n in iteration_counts:
             ours, theirs = [], []
@@ -249,8 +272,8 @@ def load_simplify() -> tuple[ModuleType | None, str]:
 
 def growth(iteration_counts: tuple[int, ...], runs: int) -> str:
     """Our RRT* time (and ``simplify`` time) against n log n on the kitchen map."""
-    name, path, step = MAPS[0]
-    map_ = load_map(path)
+    name, source, step = MAPS[0]
+    map_ = map_of(source)
     space = FreeSpace.from_map(map_)
     simplify, reason = load_simplify()
     times: dict[int, list[float]] = {n: [] for n in iteration_counts}
