@@ -322,9 +322,14 @@ def run(map_: Map, params: Params = Params(), progress: Callable[[int, int], Non
         else:
             near = grid.within(x, y, radius)
         near = near[near != vn]
+        best_parent, best_cost = vn, float(cost[vn]) + math.hypot(x - vx, y - vy)
+        if not len(near):  # no parent to choose and none to rewire (a sparse part of the tree)
+            if first and not space.segments_free(nodes[vn], (x, y), known_in_box=True)[0]:
+                continue
+            n = _add_node(n, x, y, best_parent, best_cost, nodes, px, py, xy, parent, cost, children, grid)
+            continue
         d_near = np.hypot(px[near] - x, py[near] - y)
         # parent candidates: cheaper than through the nearest node, by (cost, index)
-        best_parent, best_cost = vn, float(cost[vn]) + math.hypot(x - vx, y - vy)
         cost_near = cost[near]
         through = cost_near + d_near
         better = (through < best_cost) | ((through == best_cost) & (near < vn))
@@ -350,15 +355,7 @@ def run(map_: Map, params: Params = Params(), progress: Callable[[int, int], Non
         if len(hit):
             best_parent, best_cost = int(cand[hit[0]]), float(cand_cost[hit[0]])
         new = n
-        nodes[new] = x, y
-        px[new], py[new] = x, y
-        xy.append((x, y))
-        parent[new] = best_parent
-        cost[new] = best_cost
-        children.append([])
-        children[best_parent].append(new)
-        grid.insert(new)
-        n += 1
+        n = _add_node(n, x, y, best_parent, best_cost, nodes, px, py, xy, parent, cost, children, grid)
 
         # rewire the neighbours that get cheaper through the new node
         gain = cost_near - (best_cost + d_near)
@@ -396,6 +393,19 @@ def run(map_: Map, params: Params = Params(), progress: Callable[[int, int], Non
         collision_samples=np.concatenate([random_hits, border]),
         stats=stats,
     )
+
+
+def _add_node(n, x, y, up, c, nodes, px, py, xy, parent, cost, children, grid) -> int:
+    """Store node ``n`` at ``(x, y)`` below ``up`` with cost ``c``, in every view of the tree; returns ``n + 1``."""
+    nodes[n] = x, y
+    px[n], py[n] = x, y
+    xy.append((x, y))
+    parent[n] = up
+    cost[n] = c
+    children.append([])
+    children[up].append(n)
+    grid.insert(n)
+    return n + 1
 
 
 def _shift_subtree(root: int, delta: float, cost: np.ndarray, children: list[list[int]]) -> None:
