@@ -473,8 +473,8 @@ def _split_crossings(
     The pairs that cross but for a node within ``tol`` of the crossing point (*blocked*)
     are kept, and returned for the next pass: every pair of final edges that crosses was
     tested once both had their final form (at the start, or when the later one changed),
-    and was then either blocked, or pushed and, when popped, split (so not final) or
-    found blocked by a node added since.
+    and was then either found blocked at the start, or pushed and, when popped, split (so
+    not final) or found blocked.
 
     Parameters
     ----------
@@ -540,7 +540,7 @@ def _split_crossings(
         i, j, vi, vj, kx, ky = heapq.heappop(heap)
         if version[i] != vi or version[j] != vj:
             continue  # an edge changed since the pair was found; its new pieces were re-tested
-        if not near.clear(kx, ky):  # a node added since lies within tol: blocked for good
+        if not near.clear(kx, ky):  # a node lies within tol (added since, for the first entries): blocked
             blocked.append((i, j, vi, vj))
             continue
         if n == len(nodes):  # the bound above holds in exact arithmetic; stay safe under rounding
@@ -581,28 +581,29 @@ def _split_crossings(
             stack.extend(children[v])
         version[i] += 1
         version[j] += 1
-        # re-test the three changed edges against every piece of their origins' neighbours
-        # (only the pieces whose own box meets the changed edge's: a proper crossing lies in both)
+        # re-test the three changed edges against every piece of their origins' neighbours (the
+        # new edge lies on i's origin or j's, whose pieces are gathered once)
         edge_ids, cands = [], []
+        pieces_of: dict[int, np.ndarray] = {}
         for e in (i, j, new):
-            cand = neighbours.of(origin[e])
-            split = cand[has_extra[cand]]
-            if split.size:
-                pieces = [piece for s in split.tolist() for piece in extra[s]]
-                cand = np.concatenate([cand, np.array(pieces, np.int64)])
+            o = origin[e]
+            cand = pieces_of.get(o)
+            if cand is None:
+                cand = neighbours.of(o)
+                split = cand[has_extra[cand]]
+                if split.size:
+                    pieces = [piece for s in split.tolist() for piece in extra[s]]
+                    cand = np.concatenate([cand, np.array(pieces, np.int64)])
+                pieces_of[o] = cand
             edge_ids.append(np.full(cand.size, e))
             cands.append(cand)
         es, fs = np.concatenate(edge_ids), np.concatenate(cands)
-        a, b, c, d = nodes[es], nodes[parent[es]], nodes[fs], nodes[parent[fs]]
-        meets = np.all((np.minimum(c, d) <= np.maximum(a, b) + tol) & (np.maximum(c, d) >= np.minimum(a, b) - tol), 1)
-        es, fs = es[meets], fs[meets]
         ok, k = _crossing(nodes, parent, es, fs, None, tol)
+        # the node test waits for the pop, which makes it anyway (nodes are only added): most of
+        # these entries go stale before that
         for e, f, (kx, ky) in zip(es[ok].tolist(), fs[ok].tolist(), k[ok].tolist(), strict=True):
             lo_, hi_ = min(e, f), max(e, f)
-            if near.clear(kx, ky):
-                heapq.heappush(heap, (lo_, hi_, version[lo_], version[hi_], kx, ky))
-            else:
-                blocked.append((lo_, hi_, version[lo_], version[hi_]))
+            heapq.heappush(heap, (lo_, hi_, version[lo_], version[hi_], kx, ky))
     final = [(e, f) for e, f, ve, vf in blocked if version[e] == ve and version[f] == vf]
     return nodes[:n], parent[:n], np.array(cst), n - n0, _pairs_array(final)
 
