@@ -433,7 +433,8 @@ MAX_GRID_CELLS = 10_000_000
 MAX_BORDER_SAMPLES = 200_000
 #: Bytes per RRT* iteration (sample, node, parent, cost, child list, bucket slot), measured on the kitchen.
 RRT_BYTES_PER_ITERATION = 400
-#: Bytes per cell of RRT*'s neighbour grid (an empty 4-slot bucket and its bookkeeping).
+#: Bytes per cell of RRT*'s neighbour grid, as budgeted: measured when every bucket was an array of its own
+#: (150); the sorted grid keeps 8 bytes per bucket up to ``DENSE_BUCKETS`` and none beyond, so this over-counts.
 RRT_BYTES_PER_GRID_CELL = 150
 
 
