@@ -412,7 +412,9 @@ def _shift_subtree(root: int, delta: float, cost: np.ndarray, children: list[lis
     """Add ``delta`` to the cost of ``root`` and of every descendant."""
     subtree = [root]
     for v in subtree:  # the list grows while it is walked: breadth first
-        subtree.extend(children[v])
+        below = children[v]
+        if below:  # most nodes are leaves
+            subtree.extend(below)
     cost[subtree] += delta  # one addition per node, as one at a time would do
 
 
