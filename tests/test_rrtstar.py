@@ -142,3 +142,22 @@ def test_no_route_when_every_sample_hits_obstacles(cli, write_map, tmp_path):
     tree = artifacts.load(tmp_path / "plans" / "pocket" / "tree.npz").artifact
     assert tree.stats["random_collision_samples"] == 5  # the precondition of this test
     assert result.exit_code == 1 and "no route" in result.output
+
+
+def test_bucket_grid_answers_as_a_scan_of_every_node():
+    """Nearest (ties: lowest index) and radius queries of the sorted grid, tail included, match brute force."""
+    rng = np.random.default_rng(5)
+    bounds = np.array([0.0, 0.0, 10.0, 6.0])
+    # lattice points give exact distance ties; random ones fill the buckets unevenly
+    lattice = np.stack(np.meshgrid(np.arange(0.5, 10, 1.5), np.arange(0.5, 6, 1.5)), -1).reshape(-1, 2)
+    nodes = np.concatenate([lattice, rng.uniform(bounds[:2], bounds[2:], (700, 2))])
+    grid = rrtstar._BucketGrid(bounds, 0.4, nodes)
+    for index in range(len(nodes)):
+        grid.insert(index)
+    assert grid.sorted < grid.size  # the newest nodes are in the tail
+    queries = np.concatenate([lattice + [0.75, 0.75], rng.uniform(bounds[:2], bounds[2:], (200, 2)), [[0.0, 0.0]]])
+    for x, y in queries.tolist():
+        d2 = ((nodes - (x, y)) ** 2).sum(axis=1)
+        assert grid.nearest(x, y) == int(np.flatnonzero(d2 == d2.min()).min())
+        for radius in (0.3, 1.0, 2.5):
+            assert grid.within(x, y, radius).tolist() == np.flatnonzero(d2 <= radius * radius).tolist()

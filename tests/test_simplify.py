@@ -524,3 +524,53 @@ def test_a_goal_by_a_wall_relaxes_the_clearance_only_near_it(goal):
         assert gap.min() >= c * (1 - 1e-6)
         # near the goal the edges keep half the goal's own clearance
         assert shapely.distance(edges, walls).min() >= 0.5 * space.wall_clearance(map_.goal) * (1 - 1e-6)
+
+
+def test_rc_pass_with_carried_state_is_a_full_scan(clutter):
+    """A later RC pass scans only the edges PPR changed and the blocked pairs, and finds what a full scan finds."""
+    tree = rrtstar.run(clutter, rrtstar.Params(iterations=3000, step=2.0, seed=5))  # 6 pairs blocked after round 3
+    space = FreeSpace.from_map(clutter)
+    nodes, parent = np.array(tree.nodes), np.array(tree.parent)
+    carried = (np.ones(len(nodes), bool), np.zeros((0, 2), np.int64))
+    carried_blocked = 0
+    for _ in range(4):
+        carried_blocked += len(carried[1])
+        before = parent.copy()
+        simplify._shortcut(nodes, parent, space, simplify.bfs_levels(parent))
+        carried = (carried[0] | (parent != before), carried[1])
+        cost = simplify.tree_costs(nodes, parent, simplify.bfs_levels(parent))
+        keep = simplify._cut_leaves(nodes, parent, "middle")
+        nodes, cost, parent = simplify._compact(keep, nodes, cost, parent=parent)
+        carried = simplify._carry(carried, keep)
+        full = simplify._split_crossings(nodes, parent, cost, clutter.tol)
+        *result, blocked = simplify._split_crossings(nodes, parent, cost, clutter.tol, carried)
+        for a, b in zip(result, full[:4], strict=True):
+            assert np.array_equal(a, b)
+        assert np.array_equal(blocked, full[4])
+        nodes, parent, cost = result[:3]
+        keep = simplify._cut_leaves(nodes, parent, "middle")
+        nodes, cost, parent = simplify._compact(keep, nodes, cost, parent=parent)
+        carried = simplify._carry((np.zeros(len(keep), bool), blocked), keep)
+    assert carried_blocked > 0  # the blocked pairs were carried, not only the stale edges
+    assert simplify.count_crossings(nodes, parent, clutter.tol)[1] == len(carried[1])
+
+
+def test_may_meet_keeps_every_pair_whose_pieces_cross():
+    """Pieces of two segments that cross properly (RC's test) belong to segments that may meet."""
+    rng = np.random.default_rng(11)
+    m = 4000
+    ends = rng.uniform(0, 10, (m, 4, 2))
+    # pieces: sub-segments of each segment, cut at random points as RC cuts (a + t·r)
+    t = np.sort(rng.uniform(0, 1, (m, 2, 2)), axis=2)
+    a, b, c, d = ends[:, 0], ends[:, 1], ends[:, 2], ends[:, 3]
+    pieces = np.stack(
+        [a + t[:, 0, :1] * (b - a), a + t[:, 0, 1:] * (b - a), c + t[:, 1, :1] * (d - c), c + t[:, 1, 1:] * (d - c)], 1
+    )
+    nodes = pieces.reshape(-1, 2)
+    parent = np.arange(len(nodes)) + 1  # edge 4q → 4q+1 and 4q+2 → 4q+3
+    e, f = np.arange(m) * 4, np.arange(m) * 4 + 2
+    crossing, _ = simplify._crossing(nodes, parent, e, f, None, 1e-9)
+    assert crossing.sum() > 100
+    meet = simplify._may_meet(a, b, c, d, np.zeros(m, bool), simplify.MEET_SLACK * 1e-9)
+    assert meet[crossing].all()
+    assert not meet.all()  # and it does drop pairs
