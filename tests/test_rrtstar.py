@@ -161,3 +161,14 @@ def test_bucket_grid_answers_as_a_scan_of_every_node():
         assert grid.nearest(x, y) == int(np.flatnonzero(d2 == d2.min()).min())
         for radius in (0.3, 1.0, 2.5):
             assert grid.within(x, y, radius).tolist() == np.flatnonzero(d2 <= radius * radius).tolist()
+
+
+def test_one_segment_test_is_the_batched_one(small_map):
+    """FreeSpace.segment_free (RRT*'s single edge) answers as segments_free does."""
+    space = FreeSpace.from_map(small_map)
+    rng = np.random.default_rng(2)
+    lo, hi = space.bounds[:2], space.bounds[2:]
+    a, b = rng.uniform(lo, hi, (300, 2)), rng.uniform(lo, hi, (300, 2))
+    batched = space.segments_free(a, b, known_in_box=True)
+    assert 0 < batched.sum() < len(batched)
+    assert [space.segment_free(*p, *q) for p, q in zip(a.tolist(), b.tolist(), strict=True)] == batched.tolist()

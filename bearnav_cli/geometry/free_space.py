@@ -276,6 +276,15 @@ class FreeSpace:
             free[free] = ~shapely.intersects(self.obstacles, shapely.linestrings(coords[free]))
         return free
 
+    def segment_free(self, ax: float, ay: float, bx: float, by: float) -> bool:
+        """:meth:`segments_free` of one segment whose ends lie in ``B`` (``known_in_box``), from four floats.
+
+        The same exact test, without the array handling: RRT* asks it once per iteration.
+        """
+        if self._no_obstacles:
+            return True
+        return not shapely.intersects(self.obstacles, shapely.linestrings([[(ax, ay), (bx, by)]]))[0]
+
     def visible(self, points: np.ndarray, targets: np.ndarray, *, from_boundary: bool = False) -> np.ndarray:
         """Line of sight from points to landmarks through the raw obstacles.
 

@@ -285,7 +285,7 @@ def run(map_: Map, params: Params = Params(), progress: Callable[[int, int], Non
             around, reach = grid.ids[:n], math.inf
             ax, ay = px[:n] - x, py[:n] - y
             d2 = ax * ax + ay * ay
-            vn = int(np.argmin(d2))
+            vn = int(d2.argmin())
         else:
             around, reach = grid.block(x, y, BUCKETS_PER_STEP), BUCKETS_PER_STEP * grid.cell
             ax, ay = px[around] - x, py[around] - y
@@ -308,7 +308,7 @@ def run(map_: Map, params: Params = Params(), progress: Callable[[int, int], Non
         # a sample beyond a step lies in a sparse part of the tree, where the steered edge is often
         # blocked: test it alone first; near the tree it is almost always free and joins the batch
         first = [] if dist > eta else [vn]
-        if dist > eta and not space.segments_free(nodes[vn], (x, y), known_in_box=True)[0]:
+        if dist > eta and not space.segment_free(vx, vy, x, y):
             continue
 
         radius = rewiring_radius(n, free_area, eta)
@@ -324,7 +324,7 @@ def run(map_: Map, params: Params = Params(), progress: Callable[[int, int], Non
         near = near[near != vn]
         best_parent, best_cost = vn, float(cost[vn]) + math.hypot(x - vx, y - vy)
         if not len(near):  # no parent to choose and none to rewire (a sparse part of the tree)
-            if first and not space.segments_free(nodes[vn], (x, y), known_in_box=True)[0]:
+            if first and not space.segment_free(vx, vy, x, y):
                 continue
             n = _add_node(n, x, y, best_parent, best_cost, nodes, px, py, xy, parent, cost, children, grid)
             continue
