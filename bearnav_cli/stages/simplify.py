@@ -498,6 +498,8 @@ def _split_crossings(
     n0 = len(nodes)
     if n0 < 4:  # two edges without a common endpoint need four nodes
         return nodes, parent, cost, 0, np.zeros((0, 2), np.int64)
+    if carried is not None and not carried[0][1:].any() and not len(carried[1]):
+        return nodes, parent, cost, 0, carried[1]  # nothing changed and nothing was blocked: nothing crosses
     neighbours = _Neighbours(nodes, parent, tol)
     if carried is None or carried[0][1:].all():
         qa, qb = neighbours.index_all()
