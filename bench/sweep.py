@@ -26,6 +26,7 @@ from __future__ import annotations
 import argparse
 import csv
 import os
+import shutil
 import statistics
 import subprocess
 import sys
@@ -61,11 +62,26 @@ def table(store: Path) -> list[dict]:
         return [{c: row[c] for c in sweep.DETERMINISTIC_COLUMNS} for row in csv.DictReader(handle)]
 
 
+def priority_note() -> str:
+    """A sentence on the benchmark's scheduling priority when it was raised (empty when it was not)."""
+    niceness = os.getpriority(os.PRIO_PROCESS, 0)
+    if niceness >= 0:
+        return ""
+    return (f" The benchmark and its sweeps ran at niceness {niceness}, so the other work on the machine "
+            "ran on what the sweep left idle (the second core during `--jobs 1`).")  # fmt: skip
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--full", action="store_true", help="the whole robustness sweep (256 jobs)")
     parser.add_argument("--rounds", type=int, default=1, help="rounds (default 1)")
     parser.add_argument("--readme", action="store_true", help=f"replace the '{SECTION}' section of {README}")
+    parser.add_argument(
+        "--keep",
+        type=Path,
+        help="copy the `--jobs 1` store here (a new folder), e.g. "
+        "sweeps/robustness, so that `make reproduce` draws the figure from it without running a job",
+    )
     args = parser.parse_args()
     from distributed import LocalCluster
 
@@ -93,6 +109,8 @@ def main() -> None:
                 times[name].append(seconds)
                 tables[name] = table(store)
                 print(f"round {r + 1}: {name}: {seconds:.1f} s", file=sys.stderr, flush=True)
+        if args.keep is not None:
+            shutil.copytree(Path(tmp) / "store-0-0", args.keep)
     after = load_snapshot()
     same = all(t == tables["--jobs 1"] for t in tables.values())
     one = statistics.median(times["--jobs 1"])
@@ -112,7 +130,7 @@ def main() -> None:
         "started beforehand (its start-up not timed). "
         f"Medians over {args.rounds} round(s), the order rotating. Speed-up = time of `--jobs 1` / time.",
         machine_line(("numpy", "shapely", "distributed")),
-        load_line(before, after),
+        load_line(before, after) + priority_note(),
         markdown_table(["configuration", "wall s", "speed-up"], rows),
         f"The three tables are {'identical' if same else 'NOT identical'} (every column but the times; "
         f"{failed} failed jobs). Speed-up with 2 processes: {two:.2f}× (target ≥ {TARGET}× on 2 cores: "
