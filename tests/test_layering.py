@@ -19,6 +19,7 @@ LAYERS = {
     "datatypes": 1,
     "palette": 1.2,  # the figures' and bags' colours, plain data on datatypes' enums
     "verdicts": 1.3,  # why a result is not usable: the stages' problems(), on datatypes
+    "crossings": 1.5,  # RC, the crossing edges of a tree (numpy and shapely only); simplify runs it
     "geometry": 2,
     "lp": 2,
     "occupancy": 2,

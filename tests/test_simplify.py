@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 import shapely
 
+from bearnav_cli import crossings
 from bearnav_cli.datatypes import Tree
 from bearnav_cli.errors import InvalidParamsError
 from bearnav_cli.geometry import FreeSpace
@@ -212,8 +213,8 @@ def test_count_crossings_matches_the_brute_force_scan(clutter):
     simplify._shortcut(nodes, parent, FreeSpace.from_map(clutter), simplify.bfs_levels(parent))
     expected = len(proper_crossings(nodes, parent, clutter.tol))
     assert expected > 50  # PPR's shortcuts cross a lot before RC
-    assert simplify.count_crossings(nodes, parent, clutter.tol)[0] == expected
-    assert simplify.count_crossings(tree.nodes[:3], tree.parent[:3], clutter.tol) == (0, 0)
+    assert crossings.count_crossings(nodes, parent, clutter.tol)[0] == expected
+    assert crossings.count_crossings(tree.nodes[:3], tree.parent[:3], clutter.tol) == (0, 0)
 
 
 def test_summary_names_finishing_passes_and_crossings_left(case):
@@ -414,7 +415,7 @@ def test_rc_cycle_guard_overrides_a_cheaper_parent_inside_the_subtree():
     forged = np.array([0.0, 0.0, -10.0, 4.0])  # C_i = -10 + 2 < C_j = 0 + 2: naive choice is p_i = 2
     result = []  # in a daemon thread: without the guard the cost update would loop round the cycle
     worker = threading.Thread(
-        target=lambda: result.append(simplify._remove_crossings(nodes, parent, forged, 1e-9)), daemon=True
+        target=lambda: result.append(crossings.remove_crossings(nodes, parent, forged, 1e-9)), daemon=True
     )
     worker.start()
     worker.join(timeout=20)
@@ -433,7 +434,7 @@ def test_rc_alone_keeps_costs_consistent_and_leaves_no_crossing(clutter):
     nodes, parent = np.array(tree.nodes), np.array(tree.parent)
     simplify._shortcut(nodes, parent, FreeSpace.from_map(clutter), simplify.bfs_levels(parent))
     cost = simplify.tree_costs(nodes, parent, simplify.bfs_levels(parent))
-    nodes, parent, cost, added = simplify._remove_crossings(nodes, parent, cost, clutter.tol)
+    nodes, parent, cost, added = crossings.remove_crossings(nodes, parent, cost, clutter.tol)
     assert added > 0 and proper_crossings(nodes, parent, clutter.tol) == []
     fresh = simplify.tree_costs(nodes, parent, simplify.bfs_levels(parent))
     assert np.allclose(cost, fresh, rtol=0, atol=clutter.tol)
@@ -541,18 +542,18 @@ def test_rc_pass_with_carried_state_is_a_full_scan(clutter):
         cost = simplify.tree_costs(nodes, parent, simplify.bfs_levels(parent))
         keep = simplify._cut_leaves(nodes, parent, "middle")
         nodes, cost, parent = simplify._compact(keep, nodes, cost, parent=parent)
-        carried = simplify._carry(carried, keep)
-        full = simplify._split_crossings(nodes, parent, cost, clutter.tol)
-        *result, blocked = simplify._split_crossings(nodes, parent, cost, clutter.tol, carried)
+        carried = crossings.carry(carried, keep)
+        full = crossings.split_crossings(nodes, parent, cost, clutter.tol)
+        *result, blocked = crossings.split_crossings(nodes, parent, cost, clutter.tol, carried)
         for a, b in zip(result, full[:4], strict=True):
             assert np.array_equal(a, b)
         assert np.array_equal(blocked, full[4])
         nodes, parent, cost = result[:3]
         keep = simplify._cut_leaves(nodes, parent, "middle")
         nodes, cost, parent = simplify._compact(keep, nodes, cost, parent=parent)
-        carried = simplify._carry((np.zeros(len(keep), bool), blocked), keep)
+        carried = crossings.carry((np.zeros(len(keep), bool), blocked), keep)
     assert carried_blocked > 0  # the blocked pairs were carried, not only the stale edges
-    assert simplify.count_crossings(nodes, parent, clutter.tol)[1] == len(carried[1])
+    assert crossings.count_crossings(nodes, parent, clutter.tol)[1] == len(carried[1])
 
 
 def test_may_meet_keeps_every_pair_whose_pieces_cross():
@@ -569,8 +570,8 @@ def test_may_meet_keeps_every_pair_whose_pieces_cross():
     nodes = pieces.reshape(-1, 2)
     parent = np.arange(len(nodes)) + 1  # edge 4q → 4q+1 and 4q+2 → 4q+3
     e, f = np.arange(m) * 4, np.arange(m) * 4 + 2
-    crossing, _ = simplify._crossing(nodes, parent, e, f, None, 1e-9)
+    crossing, _ = crossings.crossing(nodes, parent, e, f, None, 1e-9)
     assert crossing.sum() > 100
-    meet = simplify._may_meet(a, b, c, d, np.zeros(m, bool), simplify.MEET_SLACK * 1e-9)
+    meet = crossings.may_meet(a, b, c, d, np.zeros(m, bool), crossings.MEET_SLACK * 1e-9)
     assert meet[crossing].all()
     assert not meet.all()  # and it does drop pairs

@@ -17,9 +17,9 @@ that point, one round at a time. When
 and never add an edge that is not a piece of an existing one, until RC finds nothing
 and CtL cuts nothing. ``stats["crossings_remaining"]`` is then 0, and
 ``stats["crossings_at_nodes"]``, the crossings RC leaves by definition, is the number of
-pairs the last RC found blocked by a node (:func:`_split_crossings` keeps them, the same
+pairs the last RC found blocked by a node (:func:`~bearnav_cli.crossings.split_crossings` keeps them, the same
 pairs a fresh scan finds); only when the pass bound stops the passes are both counted by
-a fresh scan of all edges (:func:`count_crossings`).
+a fresh scan of all edges (:func:`~bearnav_cli.crossings.count_crossings`).
 
 Indices: deleted leaves are dropped by an order-preserving compaction and RC
 appends its new node after all others, so every "ascending index" rule sees the
@@ -29,9 +29,9 @@ ascending old index) is already in place.
 Speed: PPR is vectorised per BFS level (exactly the sequential result, see
 :func:`_shortcut`), CtL is pure numpy. RC's first pass scans all edge pairs whose
 boxes meet (a ``shapely.STRtree``) and keeps, per edge, the edges that may meet it
-(:class:`_Neighbours`), against which it re-tests only the split edges; each later pass
+(:class:`~bearnav_cli.crossings.Neighbours`), against which it re-tests only the split edges; each later pass
 scans only the edges PPR changed since and the pairs the previous pass found blocked by a
-node (:func:`_split_crossings`), and the result is the one a scan of all pairs gives. The
+node (:func:`~bearnav_cli.crossings.split_crossings`), and the result is the one a scan of all pairs gives. The
 number of crossings RC removes still grows faster than the number of nodes (PPR's long
 edges cross more often in a denser tree), so RC does too, at a fraction of a millisecond
 per insertion.
@@ -39,15 +39,13 @@ per insertion.
 
 from __future__ import annotations
 
-import heapq
 import logging
-import math
 from typing import Callable
 
 import numpy as np
-import shapely
 
 from bearnav_cli import verdicts
+from bearnav_cli.crossings import carry, count_crossings, split_crossings
 from bearnav_cli.datatypes import Tree
 from bearnav_cli.errors import ArtifactError
 from bearnav_cli.geometry import FreeSpace, barrier_margin
@@ -55,9 +53,7 @@ from bearnav_cli.params.simplify import Params
 
 __all__ = [
     "bfs_levels",
-    "count_crossings",
     "MAX_FINISH_PASSES",
-    "MEET_SLACK",
     "problems",
     "RECONNECT_NEIGHBOURS",
     "run",
@@ -248,415 +244,6 @@ def _brute_nearest(points: np.ndarray, nodes: np.ndarray, k: int) -> tuple[np.nd
     return dist, index
 
 
-class _NearNodes:
-    """Is any node within ``tol`` of a point? Every node filed under its grid cell (side ``tol``).
-
-    A node within ``tol`` of a point lies in the point's cell or one of the eight around it, so a
-    query looks up nine cells and measures only the nodes it finds there (almost always none).
-    Positions are kept as Python floats: RC's loop asks about one point at a time.
-    """
-
-    def __init__(self, nodes: np.ndarray, tol: float):
-        self.tol = tol
-        self.cells: dict[tuple[int, int], list[tuple[float, float]]] = {}
-        for x, y in np.asarray(nodes, float).reshape(-1, 2).tolist():
-            self.add(x, y)
-
-    def add(self, x: float, y: float) -> None:
-        """File the node at ``(x, y)``."""
-        self.cells.setdefault((math.floor(x / self.tol), math.floor(y / self.tol)), []).append((x, y))
-
-    def clear(self, x: float, y: float) -> bool:
-        """Whether every node lies farther than ``tol`` from ``(x, y)``."""
-        tol, cells = self.tol, self.cells
-        bx, by = math.floor(x / tol), math.floor(y / tol)
-        for dx in (-1, 0, 1):
-            for dy in (-1, 0, 1):
-                near = cells.get((bx + dx, by + dy))
-                if near and any(math.dist(q, (x, y)) <= tol for q in near):
-                    return False
-        return True
-
-    def clear_of(self, pts: np.ndarray) -> np.ndarray:
-        """Whether every node lies farther than ``tol`` from each point; shape (n,) bool."""
-        pts = np.asarray(pts, float).reshape(-1, 2)
-        return np.fromiter((self.clear(x, y) for x, y in pts.tolist()), bool, len(pts))
-
-
-def _crossing(nodes, parent, e, f, near: _NearNodes | None, tol: float) -> tuple[np.ndarray, np.ndarray]:
-    """Proper crossings of edges ``(e, parent[e])`` and ``(f, parent[f])``, pairwise.
-
-    A pair crosses properly when the edges share no endpoint, are not parallel
-    (``|cross(r, s)| > tol·max(|r|, |s|)``: the shorter edge turns by more than
-    ``tol`` over its length), meet at ``k`` inside both, and ``k`` lies farther than
-    ``tol`` from the four endpoints and from every node (``near``; ``None`` leaves
-    out this last test).
-
-    Returns
-    -------
-    ok : ndarray of bool, shape (m,)
-    k : ndarray, shape (m, 2)
-        Crossing points (meaningful where ``ok``).
-    """
-    e, f = np.minimum(e, f), np.maximum(e, f)  # k is computed on the lower edge, whichever side asks
-    pe, pf = parent[e], parent[f]
-    a, b, c, d = nodes[e], nodes[pe], nodes[f], nodes[pf]
-    r, s = b - a, d - c
-    den = r[:, 0] * s[:, 1] - r[:, 1] * s[:, 0]
-    ok = (e != f) & (e != pf) & (pe != f) & (pe != pf)
-    ok &= np.abs(den) > tol * np.maximum(np.hypot(r[:, 0], r[:, 1]), np.hypot(s[:, 0], s[:, 1]))
-    # each further test only for the pairs still in play (few: most candidate pairs miss), where den ≠ 0
-    idx = np.flatnonzero(ok)
-    w = c[idx] - a[idx]
-    t = (w[:, 0] * s[idx, 1] - w[:, 1] * s[idx, 0]) / den[idx]
-    u = (w[:, 0] * r[idx, 1] - w[:, 1] * r[idx, 0]) / den[idx]
-    inside = (t > 0) & (t < 1) & (u > 0) & (u < 1)
-    idx, t = idx[inside], t[inside]
-    k_in = a[idx] + t[:, None] * r[idx]
-    clear = np.ones(len(idx), bool)
-    for end in (a, b, c, d):
-        clear &= np.hypot(k_in[:, 0] - end[idx, 0], k_in[:, 1] - end[idx, 1]) > tol
-    ok[:] = False
-    ok[idx] = clear
-    k = np.full((len(e), 2), np.nan)
-    k[idx] = k_in
-    if near is not None and ok.any():
-        ok[ok] = near.clear_of(k[ok])
-    return ok, k
-
-
-def _in_subtree(v: int, parent: list[int], roots: tuple[int, int]) -> bool:
-    """Whether ``v`` lies in the subtree of either root: walk up from ``v`` (O(depth))."""
-    while v >= 0:
-        if v in roots:
-            return True
-        v = parent[v]
-    return False
-
-
-def _box_pairs(nodes, parent, tol: float) -> tuple[np.ndarray, np.ndarray]:
-    """Ordered pairs ``(e, f)``, ``e != f``, of edges (named by their child) whose boxes, grown by ``tol``, meet."""
-    kids = np.arange(1, len(nodes))
-    a, b = nodes[kids], nodes[parent[kids]]
-    lo, hi = np.minimum(a, b) - tol, np.maximum(a, b) + tol
-    boxes = shapely.box(lo[:, 0], lo[:, 1], hi[:, 0], hi[:, 1])
-    qa, qb = shapely.STRtree(boxes).query(boxes)
-    return kids[qa[qa != qb]], kids[qb[qa != qb]]
-
-
-#: Slack of :func:`_may_meet`, in units of ``tol`` (``1e-9·D``): far above the rounding of a split
-#: point carried along its edge (at most about ``5e-8·D``, for a piece of length ``2·tol`` on an edge
-#: of length ``D``), far below any edge's length.
-MEET_SLACK = 1e4
-
-
-def _may_meet(a, b, c, d, common: np.ndarray, slack: float) -> np.ndarray:
-    """Whether segments ``[a, b]`` and ``[c, d]`` can hold pieces that cross properly, pairwise.
-
-    False where the two endpoints of one segment lie on the same side of the other's line, both
-    farther than ``slack`` from it (the segments, and every piece of them up to rounding far below
-    ``slack``, are disjoint), and where the segments have a ``common`` end and meet at more than
-    1e-3 rad (pieces of two rays from one point cannot cross). Nearly parallel and collinear
-    segments are kept, conservatively.
-
-    Parameters
-    ----------
-    a, b, c, d : ndarray, shape (m, 2)
-        The segments' endpoints (map units).
-    common : ndarray of bool, shape (m,)
-        The segments share an endpoint (the same node).
-    slack : float
-        Map units.
-
-    Returns
-    -------
-    ndarray of bool, shape (m,)
-    """
-    r, s = b - a, d - c
-    len_r, len_s = np.hypot(r[:, 0], r[:, 1]), np.hypot(s[:, 0], s[:, 1])
-    gap_r, gap_s = slack * len_r, slack * len_s  # cross products are signed distances × the length
-    side_c = r[:, 0] * (c[:, 1] - a[:, 1]) - r[:, 1] * (c[:, 0] - a[:, 0])
-    side_d = r[:, 0] * (d[:, 1] - a[:, 1]) - r[:, 1] * (d[:, 0] - a[:, 0])
-    side_a = s[:, 0] * (a[:, 1] - c[:, 1]) - s[:, 1] * (a[:, 0] - c[:, 0])
-    side_b = s[:, 0] * (b[:, 1] - c[:, 1]) - s[:, 1] * (b[:, 0] - c[:, 0])
-    apart = ((side_c > gap_r) & (side_d > gap_r)) | ((side_c < -gap_r) & (side_d < -gap_r))
-    apart |= ((side_a > gap_s) & (side_b > gap_s)) | ((side_a < -gap_s) & (side_b < -gap_s))
-    # within 1e-3 rad the rounding of a split point is no longer negligible against the angle
-    den = r[:, 0] * s[:, 1] - r[:, 1] * s[:, 0]
-    apart |= common & (np.abs(den) > 1e-3 * len_r * len_s)
-    return ~apart
-
-
-class _Neighbours:
-    """For each edge of a tree (named by its child), the edges that may meet it (:func:`_may_meet`).
-
-    The tree's edges are RC's *origins*: every later edge is a piece of one of them, so two pieces
-    can only cross properly if their origins may meet. Candidates come from an STRtree of the
-    edges' boxes grown by ``tol``; :func:`_may_meet` then drops the pairs that lie apart, which a
-    box overlap keeps in numbers that grow with the square of the density (PPR makes long edges).
-    The endpoints are copied: RC re-hangs nodes while it asks.
-    """
-
-    def __init__(self, nodes: np.ndarray, parent: np.ndarray, tol: float):
-        self.a = np.array(nodes, float)
-        self.up = np.maximum(parent, 0)
-        self.b = self.a[self.up]
-        lo, hi = np.minimum(self.a, self.b) - tol, np.maximum(self.a, self.b) + tol
-        self.boxes = shapely.box(lo[:, 0], lo[:, 1], hi[:, 0], hi[:, 1])
-        self.tree = shapely.STRtree(self.boxes[1:])
-        extent = float(np.max(np.ptp(self.a, axis=0))) if len(self.a) else 0.0
-        self.slack = max(MEET_SLACK * tol, 1e-6 * extent)
-        self.lists: dict[int, np.ndarray] = {}
-        self.start: np.ndarray | None = None
-
-    def pairs(self, edges: np.ndarray, upper: bool = False) -> tuple[np.ndarray, np.ndarray]:
-        """Ordered pairs ``(e, f)``, ``e`` in ``edges``, ``f != e`` (``upper``: ``f > e``), that may meet.
-
-        Sorted by ``e``, then ``f``.
-        """
-        qa, qb = self.tree.query(self.boxes[edges])
-        e, f = edges[qa], qb + 1
-        keep = e < f if upper else e != f
-        e, f = e[keep], f[keep]
-        up = self.up
-        common = (e == up[f]) | (up[e] == f) | (up[e] == up[f])
-        keep = _may_meet(self.a[e], self.b[e], self.a[f], self.b[f], common, self.slack)
-        e, f = e[keep], f[keep]
-        order = np.lexsort((f, e))
-        return e[order], f[order]
-
-    def index_all(self) -> tuple[np.ndarray, np.ndarray]:
-        """Every pair ``(e, f)``, ``e < f``, that may meet; the lists of all edges are filed on the way."""
-        e, f = self.pairs(np.arange(1, len(self.a)), upper=True)  # half the pairs to judge
-        both_e, both_f = np.concatenate([e, f]), np.concatenate([f, e])
-        order = np.lexsort((both_f, both_e))
-        self.start = np.searchsorted(both_e[order], np.arange(len(self.a) + 1))
-        self.all_f = both_f[order]
-        return e, f
-
-    def of(self, edge: int) -> np.ndarray:
-        """The edges that may meet ``edge``, ascending."""
-        if self.start is not None:
-            return self.all_f[self.start[edge] : self.start[edge + 1]]
-        found = self.lists.get(edge)
-        if found is None:
-            found = self.lists[edge] = self.pairs(np.array([edge]))[1]
-        return found
-
-
-def _remove_crossings(nodes, parent, cost, tol: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
-    """RC: split properly crossing edges until none is left (ALGORITHMS §3).
-
-    :func:`_split_crossings` from scratch, without what it carries to the next pass.
-
-    Returns
-    -------
-    nodes (M, 2), parent (M,), cost (M,), insertions
-    """
-    return _split_crossings(nodes, parent, cost, tol)[:4]
-
-
-def _split_crossings(
-    nodes, parent, cost, tol: float, carried: tuple[np.ndarray, np.ndarray] | None = None
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, np.ndarray]:
-    """RC: split properly crossing edges until none is left (ALGORITHMS §3).
-
-    Order: each step takes the lexicographically smallest crossing pair ``(i, j)``,
-    ``i < j`` (edges named by their child), among the current edges, i.e. the scan
-    "ascending i, then the smallest j > i" restarted after every insertion. A heap
-    holds every crossing pair; entries of edges changed since are dropped when popped.
-
-    Every later edge is a sub-segment of a starting edge (its *origin*), so two
-    edges can only cross if their origins may meet (:class:`_Neighbours`); that
-    relation bounds every re-test. ``cost`` is trusted (PPR recomputes it just before).
-
-    The pairs that cross but for a node within ``tol`` of the crossing point (*blocked*)
-    are kept, and returned for the next pass: every pair of final edges that crosses was
-    tested once both had their final form (at the start, or when the later one changed),
-    and was then either found blocked at the start, or pushed and, when popped, split (so
-    not final) or found blocked.
-
-    Parameters
-    ----------
-    nodes : ndarray, shape (N, 2)
-    parent : ndarray of int, shape (N,)
-    cost : ndarray, shape (N,)
-    tol : float
-    carried : (stale, blocked), optional
-        What the previous pass returned, carried through the tree's changes since: ``stale``
-        (N,) bool marks the edges changed since (a new parent), ``blocked`` (m, 2) the blocked
-        pairs of that pass whose edges are both still there. Two unchanged edges outside
-        ``blocked`` did not cross then and cannot now (nodes never move and only vanish, which
-        can only unblock a pair), so the start scans only the stale edges and ``blocked``, and
-        finds the same crossings as a scan of all pairs. ``None``: scan all pairs.
-
-    Returns
-    -------
-    nodes (M, 2), parent (M,), cost (M,), insertions, blocked (b, 2) int
-        ``blocked``: the blocked pairs of the result, ``(e, f)`` with ``e < f``, sorted.
-    """
-    n0 = len(nodes)
-    if n0 < 4:  # two edges without a common endpoint need four nodes
-        return nodes, parent, cost, 0, np.zeros((0, 2), np.int64)
-    if carried is not None and not carried[0][1:].any() and not len(carried[1]):
-        return nodes, parent, cost, 0, carried[1]  # nothing changed and nothing was blocked: nothing crosses
-    neighbours = _Neighbours(nodes, parent, tol)
-    if carried is None or carried[0][1:].all():
-        qa, qb = neighbours.index_all()
-    else:
-        stale, old_blocked = carried
-        e, f = neighbours.pairs(np.flatnonzero(stale[1:]) + 1)
-        once = ~stale[f] | (e < f)  # a pair of two stale edges is found from both sides
-        e, f = e[once], f[once]
-        kept = old_blocked[~(stale[old_blocked[:, 0]] | stale[old_blocked[:, 1]])]
-        qa = np.concatenate([np.minimum(e, f), kept[:, 0]])
-        qb = np.concatenate([np.maximum(e, f), kept[:, 1]])
-    near = _NearNodes(nodes, tol)
-    ok, k = _crossing(nodes, parent, qa, qb, None, tol)
-    clear = near.clear_of(k[ok])
-    blocked = [(i, j, 0, 0) for i, j in zip(qa[ok][~clear].tolist(), qb[ok][~clear].tolist(), strict=True)]
-    sel = np.flatnonzero(ok)[clear]
-    found = zip(qa[sel].tolist(), qb[sel].tolist(), k[sel].tolist(), strict=True)
-    heap = [(i, j, 0, 0, kx, ky) for i, j, (kx, ky) in found]
-    if not heap:
-        return nodes, parent, cost, 0, _pairs_array([(i, j) for i, j, _, _ in blocked])
-    heapq.heapify(heap)
-
-    cap = n0 + len(heap) + 1  # each insertion removes at least one crossing pair
-    nodes = np.concatenate([nodes, np.empty((cap - n0, 2))])
-    parent = np.concatenate([parent, np.full(cap - n0, -1, np.int64)])
-    # scalar state as Python lists: the loop reads and writes it one item at a time
-    xy = nodes[:n0].tolist()
-    up = parent[:n0].tolist()
-    cst = cost.tolist()
-    length: list[float | None] = [None] * n0  # math.dist of each edge, filled when first needed
-    origin = list(range(n0))
-    version = [0] * n0
-    extra: dict[int, list[int]] = {}  # origin → nodes added whose edge lies on it
-    has_extra = np.zeros(n0, bool)
-    children: list[list[int]] = [[] for _ in range(n0)]
-    for c in range(1, n0):
-        children[up[c]].append(c)
-    n = n0
-    while heap:
-        i, j, vi, vj, kx, ky = heapq.heappop(heap)
-        if version[i] != vi or version[j] != vj:
-            continue  # an edge changed since the pair was found; its new pieces were re-tested
-        if not near.clear(kx, ky):  # a node lies within tol (added since, for the first entries): blocked
-            blocked.append((i, j, vi, vj))
-            continue
-        if n == len(nodes):  # the bound above holds in exact arithmetic; stay safe under rounding
-            nodes, parent = np.concatenate([nodes, nodes]), np.concatenate([parent, parent])
-        k = [kx, ky]
-        pi, pj = up[i], up[j]
-        c_i = cst[pi] + math.dist(k, xy[pi])
-        c_j = cst[pj] + math.dist(k, xy[pj])
-        candidates = ((pi, c_i), (pj, c_j)) if c_i <= c_j else ((pj, c_j), (pi, c_i))
-        # cycle guard: a parent inside subtree(i) ∪ subtree(j) would hang the new node below itself
-        p, c_k = next((q, c) for q, c in candidates if not _in_subtree(q, up, (i, j)))
-        new = n
-        n += 1
-        nodes[new], parent[new] = k, p
-        xy.append(k)
-        up.append(p)
-        cst.append(c_k)
-        length.append(None)
-        version.append(0)
-        o_new = origin[i] if p == pi else origin[j]
-        origin.append(o_new)
-        extra.setdefault(o_new, []).append(new)
-        has_extra[o_new] = True
-        near.add(kx, ky)
-        children[pi].remove(i)
-        children[pj].remove(j)
-        children[p].append(new)
-        children.append([i, j])
-        parent[i] = parent[j] = up[i] = up[j] = new
-        length[i] = length[j] = None
-        stack = [i, j]  # costs change in the two moved subtrees only
-        while stack:
-            v = stack.pop()
-            edge = length[v]
-            if edge is None:
-                edge = length[v] = math.dist(xy[v], xy[up[v]])
-            cst[v] = cst[up[v]] + edge
-            stack.extend(children[v])
-        version[i] += 1
-        version[j] += 1
-        # re-test the three changed edges against every piece of their origins' neighbours (the
-        # new edge lies on i's origin or j's, whose pieces are gathered once)
-        edge_ids, cands = [], []
-        pieces_of: dict[int, np.ndarray] = {}
-        for e in (i, j, new):
-            o = origin[e]
-            cand = pieces_of.get(o)
-            if cand is None:
-                cand = neighbours.of(o)
-                split = cand[has_extra[cand]]
-                if split.size:
-                    pieces = [piece for s in split.tolist() for piece in extra[s]]
-                    cand = np.concatenate([cand, np.array(pieces, np.int64)])
-                pieces_of[o] = cand
-            edge_ids.append(np.full(cand.size, e))
-            cands.append(cand)
-        es, fs = np.concatenate(edge_ids), np.concatenate(cands)
-        ok, k = _crossing(nodes, parent, es, fs, None, tol)
-        # the node test waits for the pop, which makes it anyway (nodes are only added): most of
-        # these entries go stale before that
-        for e, f, (kx, ky) in zip(es[ok].tolist(), fs[ok].tolist(), k[ok].tolist(), strict=True):
-            lo_, hi_ = min(e, f), max(e, f)
-            heapq.heappush(heap, (lo_, hi_, version[lo_], version[hi_], kx, ky))
-    final = [(e, f) for e, f, ve, vf in blocked if version[e] == ve and version[f] == vf]
-    return nodes[:n], parent[:n], np.array(cst), n - n0, _pairs_array(final)
-
-
-def _pairs_array(pairs: list[tuple[int, int]]) -> np.ndarray:
-    """Distinct pairs as a sorted int64 array, shape (m, 2)."""
-    if not pairs:
-        return np.zeros((0, 2), np.int64)
-    return np.unique(np.array(pairs, np.int64), axis=0)
-
-
-def _carry(carried: tuple[np.ndarray, np.ndarray], keep: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """RC's carried state (:func:`_split_crossings`) after a compaction that keeps the nodes ``keep``."""
-    stale, blocked = carried
-    new_index = np.cumsum(keep) - 1
-    blocked = blocked[keep[blocked].all(axis=1)] if len(blocked) else blocked
-    return stale[keep], new_index[blocked]
-
-
-def count_crossings(nodes: np.ndarray, parent: np.ndarray, tol: float) -> tuple[int, int]:
-    """Edge pairs that cross, by a fresh scan of all pairs: properly, and at a node.
-
-    Parameters
-    ----------
-    nodes : ndarray, shape (N, 2)
-        Node positions (map units); the edges are ``nodes[i] → nodes[parent[i]]``.
-    parent : ndarray of int, shape (N,)
-        ``-1`` at node 0 only.
-    tol : float
-        The map's tolerance (map units).
-
-    Returns
-    -------
-    proper : int
-        Unordered pairs ``{e, f}`` that cross properly (:func:`_crossing`), the pairs RC
-        splits; 0 at RC's fixed point.
-    at_nodes : int
-        Pairs that would cross properly but for a node within ``tol`` of the crossing
-        point (not one of their four endpoints): RC skips them by definition (ALGORITHMS
-        §3, edge cases). Typically a bundle of collinear edges that PPR laid through an
-        RC node, met by the edge that node was made to split.
-    """
-    if len(nodes) < 4:
-        return 0, 0
-    qa, qb = _box_pairs(nodes, parent, tol)
-    upper = qa < qb
-    ok, k = _crossing(nodes, parent, qa[upper], qb[upper], None, tol)
-    proper = _NearNodes(nodes, tol).clear_of(k[ok]) if ok.any() else np.zeros(0, bool)
-    return int(proper.sum()), int((~proper).sum())
-
-
 def _finish(
     nodes, parent, cost, tol: float, cut, carried: tuple[np.ndarray, np.ndarray]
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, int, bool, tuple[np.ndarray, np.ndarray]]:
@@ -678,7 +265,7 @@ def _finish(
     cut : callable
         ``cut(nodes, parent, cost) -> (nodes, cost, parent, keep)``: CtL and compaction.
     carried : (stale, blocked)
-        What the last RC carries to this tree (:func:`_split_crossings`).
+        What the last RC carries to this tree (:func:`~bearnav_cli.crossings.split_crossings`).
 
     Returns
     -------
@@ -689,14 +276,14 @@ def _finish(
     passes = insertions = 0
     while passes < MAX_FINISH_PASSES:
         passes += 1
-        nodes, parent, cost, added, blocked = _split_crossings(nodes, parent, cost, tol, carried)
+        nodes, parent, cost, added, blocked = split_crossings(nodes, parent, cost, tol, carried)
         insertions += added
         carried = (np.zeros(len(nodes), bool), blocked)
         if added == 0:  # the tree is the previous CtL's output: CtL would cut nothing either
             return nodes, parent, cost, passes, insertions, True, carried
         size = len(nodes)
         nodes, cost, parent, keep = cut(nodes, parent, cost)
-        carried = _carry(carried, keep)
+        carried = carry(carried, keep)
         if len(nodes) == size:
             return nodes, parent, cost, passes, insertions, True, carried
     return nodes, parent, cost, passes, insertions, False, carried
@@ -750,7 +337,7 @@ def run(tree: Tree, params: Params = Params(), progress: Callable[[int, int], No
         ``crossings_remaining`` (properly crossing edge pairs left: 0 unless
         ``MAX_FINISH_PASSES`` was reached, then by a fresh scan); ``crossings_at_nodes`` (pairs that
         cross at a point within ``tol`` of a third node, which RC skips by definition;
-        see :func:`count_crossings`); ``discarded_reconnectable`` (see
+        see :func:`~bearnav_cli.crossings.count_crossings`); ``discarded_reconnectable`` (see
         :func:`_reconnectable`; reported, not enforced).
 
     Raises
@@ -786,7 +373,7 @@ def run(tree: Tree, params: Params = Params(), progress: Callable[[int, int], No
         return (*_compact(keep, nodes, cost, parent=parent), keep)
 
     changed, done = True, True
-    # what each RC leaves the next (see _split_crossings): all edges are stale before the first
+    # what each RC leaves the next (see split_crossings): all edges are stale before the first
     carried = (np.ones(len(nodes), bool), np.zeros((0, 2), np.int64))
     for rnd in range(1, params.max_rounds + 1):
         size_before = len(nodes)
@@ -796,12 +383,12 @@ def run(tree: Tree, params: Params = Params(), progress: Callable[[int, int], No
         carried = (carried[0] | (parent != before), carried[1])  # a hop gives an edge a new parent
         cost = tree_costs(nodes, parent, bfs_levels(parent))
         nodes, cost, parent, keep = cut(nodes, parent, cost)
-        carried = _carry(carried, keep)
+        carried = carry(carried, keep)
         after_first_cut = len(nodes)
-        nodes, parent, cost, added, blocked = _split_crossings(nodes, parent, cost, tol, carried)
+        nodes, parent, cost, added, blocked = split_crossings(nodes, parent, cost, tol, carried)
         stats["crossings_removed"] += added
         nodes, cost, parent, keep = cut(nodes, parent, cost)
-        carried = _carry((np.zeros(len(keep), bool), blocked), keep)
+        carried = carry((np.zeros(len(keep), bool), blocked), keep)
         stats["rounds"] = rnd
         stats["nodes_per_round"].append(len(nodes))
         log.info("simplify round %d: %d nodes", rnd, len(nodes))
