@@ -64,8 +64,9 @@ STORE = "ros2_jazzy"
 INSTALL_HINT = "writing ROS 2 bags needs the rosbags package: pip install 'bearnav[ros]'"
 
 #: RGBA of each cell status: the figures' colours (:data:`bearnav_cli.palette.STATUS_COLORS`), opaque enough for lines.
-STATUS_RGBA = {status: rgba(color, 1.0 if status == CellStatus.SOLVER_FAILURE else 0.9)
-               for status, color in STATUS_COLORS.items()}  # fmt: skip
+STATUS_RGBA = {
+    status: rgba(color, 1.0 if status == CellStatus.SOLVER_FAILURE else 0.9) for status, color in STATUS_COLORS.items()
+}
 #: RGBA of each run outcome: the figures' colours (:data:`bearnav_cli.palette.OUTCOME_COLORS`).
 OUTCOME_RGBA = {outcome: rgba(color) for outcome, color in OUTCOME_COLORS.items()}
 
@@ -81,8 +82,17 @@ def _rosbags(option: str | None = "--bag") -> Any:
 
     def qos(durability: Any) -> Any:
         zero = QosTime(0, 0)  # 0: the middleware's default (infinite)
-        return Qos(QosHistory.KEEP_LAST, 1 if durability is QosDurability.TRANSIENT_LOCAL else 10,
-                   QosReliability.RELIABLE, durability, zero, zero, QosLiveliness.AUTOMATIC, zero, False)  # fmt: skip
+        return Qos(
+            QosHistory.KEEP_LAST,
+            1 if durability is QosDurability.TRANSIENT_LOCAL else 10,
+            QosReliability.RELIABLE,
+            durability,
+            zero,
+            zero,
+            QosLiveliness.AUTOMATIC,
+            zero,
+            False,
+        )
 
     return {
         "Writer": Writer,
@@ -132,11 +142,17 @@ def _checked_path(path: str | os.PathLike, option: str | None, force: bool) -> P
     if path.name in ("", ".", ".."):
         raise OutputPathError("give the bag a name (NAME.mcap or NAME)", file=str(path), option=option)
     if suffix.lower() == ".mcap" and suffix != ".mcap":
-        raise OutputPathError(f"extension {suffix!r}: write .mcap in lower case (rosbags reads only .mcap files)",
-                              file=str(path), option=option)  # fmt: skip
+        raise OutputPathError(
+            f"extension {suffix!r}: write .mcap in lower case (rosbags reads only .mcap files)",
+            file=str(path),
+            option=option,
+        )
     if suffix not in SUFFIXES:
-        raise OutputPathError(f"extension {path.suffix!r}: expected .mcap (one MCAP file) or no extension "
-                              "(a ROS 2 bag folder)", file=str(path), option=option)  # fmt: skip
+        raise OutputPathError(
+            f"extension {path.suffix!r}: expected .mcap (one MCAP file) or no extension (a ROS 2 bag folder)",
+            file=str(path),
+            option=option,
+        )
     folder = path.parent
     if not folder.is_dir():
         what = "is a file, not a folder" if folder.exists() else "does not exist (create it first)"
@@ -153,11 +169,16 @@ def _checked_path(path: str | os.PathLike, option: str | None, force: bool) -> P
         raise OutputPathError("is a symbolic link; give a new name", file=str(path), option=option)
     elif path.exists():
         if not path.is_dir():
-            raise OutputPathError("is a file; a bag without an extension is a folder (or give NAME.mcap)",
-                                  file=str(path), option=option)  # fmt: skip
+            raise OutputPathError(
+                "is a file; a bag without an extension is a folder (or give NAME.mcap)", file=str(path), option=option
+            )
         if any(path.iterdir()) and artifacts.written_by(path) != artifacts.Origin("bag"):
-            raise OutputPathError("is a folder but not a ROS 2 bag written by bearnav (metadata.yaml and MCAP "
-                                  "files only); give a new name", file=str(path), option=option)  # fmt: skip
+            raise OutputPathError(
+                "is a folder but not a ROS 2 bag written by bearnav (metadata.yaml and MCAP "
+                "files only); give a new name",
+                file=str(path),
+                option=option,
+            )
     return path
 
 
@@ -194,19 +215,40 @@ def _markers(sim: Simulation, ns: int, types: dict) -> list:
     markers: list = []
     counts: dict[str, int] = {}
 
-    def add(namespace: str, kind: int, points: Any = (), color: tuple = (0.0, 0.0, 0.0, 1.0),
-            scale: tuple = (width, 0.0, 0.0), at: tuple = (0.0, 0.0), text: str = "") -> None:  # fmt: skip
+    def add(
+        namespace: str,
+        kind: int,
+        points: Any = (),
+        color: tuple = (0.0, 0.0, 0.0, 1.0),
+        scale: tuple = (width, 0.0, 0.0),
+        at: tuple = (0.0, 0.0),
+        text: str = "",
+    ) -> None:
         ident = counts.get(namespace, 0)
         counts[namespace] = ident + 1
-        markers.append(marker_t(
-            header=_header(ns, types), ns=namespace, id=ident, type=kind, action=marker_t.ADD,
-            pose=_pose(at[0], at[1], 0.0, types), scale=vector_t(x=scale[0], y=scale[1], z=scale[2]),
-            color=color_t(r=color[0], g=color[1], b=color[2], a=color[3]), lifetime=duration(sec=0, nanosec=0),
-            frame_locked=False, points=[point_t(x=float(x), y=float(y), z=0.0) for x, y in points], colors=[],
-            texture_resource="", texture=texture(header=_header(ns, types), format="", data=np.zeros(0, np.uint8)),
-            uv_coordinates=[], text=text, mesh_resource="",
-            mesh_file=mesh(filename="", data=np.zeros(0, np.uint8)), mesh_use_embedded_materials=False,
-        ))  # fmt: skip
+        markers.append(
+            marker_t(
+                header=_header(ns, types),
+                ns=namespace,
+                id=ident,
+                type=kind,
+                action=marker_t.ADD,
+                pose=_pose(at[0], at[1], 0.0, types),
+                scale=vector_t(x=scale[0], y=scale[1], z=scale[2]),
+                color=color_t(r=color[0], g=color[1], b=color[2], a=color[3]),
+                lifetime=duration(sec=0, nanosec=0),
+                frame_locked=False,
+                points=[point_t(x=float(x), y=float(y), z=0.0) for x, y in points],
+                colors=[],
+                texture_resource="",
+                texture=texture(header=_header(ns, types), format="", data=np.zeros(0, np.uint8)),
+                uv_coordinates=[],
+                text=text,
+                mesh_resource="",
+                mesh_file=mesh(filename="", data=np.zeros(0, np.uint8)),
+                mesh_use_embedded_materials=False,
+            )
+        )
 
     def ring(vertices: np.ndarray) -> np.ndarray:
         return np.vstack([vertices, vertices[:1]])
@@ -214,9 +256,10 @@ def _markers(sim: Simulation, ns: int, types: dict) -> list:
     xmin, ymin, xmax, ymax = bounds
     add("bounds", marker_t.LINE_STRIP, ring(np.array([[xmin, ymin], [xmax, ymin], [xmax, ymax], [xmin, ymax]])))
     # the figures' colours (bearnav_cli.palette), so that a bag and a figure of one run read alike
-    for namespace, polygons, color in (("obstacles", sim.map.raw_obstacles, rgba(ROLE_COLORS["raw obstacle"])),
-                                       ("inflated", sim.map.obstacles,
-                                        rgba(ROLE_COLORS["inflated obstacle"], 0.8))):  # fmt: skip
+    for namespace, polygons, color in (
+        ("obstacles", sim.map.raw_obstacles, rgba(ROLE_COLORS["raw obstacle"])),
+        ("inflated", sim.map.obstacles, rgba(ROLE_COLORS["inflated obstacle"], 0.8)),
+    ):
         for polygon in polygons:
             for vertices in (polygon.exterior, *polygon.holes):
                 add(namespace, marker_t.LINE_STRIP, ring(vertices), color)
@@ -227,13 +270,24 @@ def _markers(sim: Simulation, ns: int, types: dict) -> list:
     tag = 0.02 * size
     for ident, (x, y) in zip(sim.map.landmark_ids, sim.map.landmarks, strict=True):
         add("tags", marker_t.CUBE, color=rgba(ROLE_COLORS["landmark"]), scale=(tag, tag, tag), at=(x, y))
-        add("tag_ids", marker_t.TEXT_VIEW_FACING, color=rgba(ROLE_COLORS["text"]), scale=(0, 0, 1.5 * tag),
-            at=(x, y + 1.2 * tag), text=str(ident))  # fmt: skip
+        add(
+            "tag_ids",
+            marker_t.TEXT_VIEW_FACING,
+            color=rgba(ROLE_COLORS["text"]),
+            scale=(0, 0, 1.5 * tag),
+            at=(x, y + 1.2 * tag),
+            text=str(ident),
+        )
     child = np.flatnonzero(sim.parent >= 0)
     edges = np.stack([sim.nodes[child], sim.nodes[sim.parent[child]]], axis=1).reshape(-1, 2)
     add("tree", marker_t.LINE_LIST, edges, rgba(ROLE_COLORS["background tree"], 0.7), (0.5 * width, 0, 0))
-    add("goal", marker_t.SPHERE, color=rgba(ROLE_COLORS["goal"]), scale=(2 * tag, 2 * tag, 2 * tag),
-        at=tuple(sim.map.goal))  # fmt: skip
+    add(
+        "goal",
+        marker_t.SPHERE,
+        color=rgba(ROLE_COLORS["goal"]),
+        scale=(2 * tag, 2 * tag, 2 * tag),
+        at=tuple(sim.map.goal),
+    )
     for r, outcome in enumerate(sim.outcome):
         add("runs", marker_t.LINE_STRIP, sim.trajectory(r), OUTCOME_RGBA.get(int(outcome), (0, 0, 0, 1)))
     return markers
@@ -253,8 +307,9 @@ def _put(built: Path, path: Path, staging: Path) -> None:
         os.replace(built, path)
 
 
-def write(path: str | os.PathLike, sim: Simulation, *, t0_ns: int = 0, option: str | None = "--bag",
-          force: bool = False) -> dict[str, int]:  # fmt: skip
+def write(
+    path: str | os.PathLike, sim: Simulation, *, t0_ns: int = 0, option: str | None = "--bag", force: bool = False
+) -> dict[str, int]:
     """Write ``sim`` as a ROS 2 bag (module docstring: topics, types, times); return topic -> messages.
 
     Parameters
@@ -304,8 +359,10 @@ def write(path: str | os.PathLike, sim: Simulation, *, t0_ns: int = 0, option: s
             counts["/bearnav/markers"] += 1
             for r in range(len(sim.outcome)):
                 begin, end = int(offsets[r]), int(offsets[r + 1])
-                poses = [pose_t(header=_header(int(stamps[p]), types), pose=_pose(*coords[p], heading[p], types))
-                         for p in range(begin, end)]  # fmt: skip
+                poses = [
+                    pose_t(header=_header(int(stamps[p]), types), pose=_pose(*coords[p], heading[p], types))
+                    for p in range(begin, end)
+                ]
                 start = int(stamps[begin]) if end > begin else t0_ns
                 message = path_t(header=_header(start, types), poses=poses)
                 writer.write(connection["/bearnav/path"], start, serialize(message, message.__msgtype__))

@@ -30,10 +30,21 @@ from bearnav_cli.funnel import cell_tolerance, exit_sinks
 from bearnav_cli.runtime.certificate import field_margins, gain_field, vertex_margins
 
 __all__ = [
-    "DELTA_FRACTION", "CellSolution", "batched_scales", "cell_constants", "cell_sinks", "cell_tolerances",
-    "checked_v_max", "constant_scales", "goal_cell_solution", "grouped_gains", "lemma4_margin", "lemma4_terms",
-    "more_tolerant", "more_tolerant_all",
-]  # fmt: skip
+    "DELTA_FRACTION",
+    "CellSolution",
+    "batched_scales",
+    "cell_constants",
+    "cell_sinks",
+    "cell_tolerances",
+    "checked_v_max",
+    "constant_scales",
+    "goal_cell_solution",
+    "grouped_gains",
+    "lemma4_margin",
+    "lemma4_terms",
+    "more_tolerant",
+    "more_tolerant_all",
+]
 
 #: ``δ = DELTA_FRACTION · diam(X)`` floors the worst barrier violation in ``c_h`` (§5.3).
 DELTA_FRACTION = 0.05
@@ -216,8 +227,9 @@ def lemma4_terms(problem: CellProblem) -> tuple[float, float]:
     return h_min, diam
 
 
-def goal_cell_solution(vertices: np.ndarray, goal: np.ndarray, landmarks: np.ndarray, cbf_n: np.ndarray,
-                       cbf_q: np.ndarray, u_max: float) -> CellSolution:  # fmt: skip
+def goal_cell_solution(
+    vertices: np.ndarray, goal: np.ndarray, landmarks: np.ndarray, cbf_n: np.ndarray, cbf_q: np.ndarray, u_max: float
+) -> CellSolution:
     """The goal cell's straight-to-goal field ``u = c(g − x)`` (ALGORITHMS §5.6).
 
     ``c = u_max / max_q ‖g − v_q‖_∞``; ``c_h = c_v = c``; ``K = [cI, cg](GᵀG)⁻¹Gᵀ``;
@@ -251,8 +263,9 @@ def goal_cell_solution(vertices: np.ndarray, goal: np.ndarray, landmarks: np.nda
     return CellSolution(CellStatus.GOAL, K, c_h, c, m.cbf, math.nan, 0)
 
 
-def more_tolerant(solution: CellSolution, problem: CellProblem, u_max: float,
-                  terms: tuple[float, float] | None = None) -> CellSolution:  # fmt: skip
+def more_tolerant(
+    solution: CellSolution, problem: CellProblem, u_max: float, terms: tuple[float, float] | None = None
+) -> CellSolution:
     """Of a certified funnel cell's LP field and Lemma 6's field, the one with the larger ``δ_c`` (§12.4).
 
     One cell of :func:`more_tolerant_all`.
@@ -271,8 +284,12 @@ def more_tolerant(solution: CellSolution, problem: CellProblem, u_max: float,
     return more_tolerant_all([solution], [problem], u_max, [terms])[0]
 
 
-def more_tolerant_all(solutions: Sequence[CellSolution], problems: Sequence[CellProblem], u_max: float,
-                      terms: Sequence[tuple[float, float] | None] | None = None) -> list[CellSolution]:  # fmt: skip
+def more_tolerant_all(
+    solutions: Sequence[CellSolution],
+    problems: Sequence[CellProblem],
+    u_max: float,
+    terms: Sequence[tuple[float, float] | None] | None = None,
+) -> list[CellSolution]:
     """:func:`more_tolerant` of many certified funnel cells at once (every cell's vertices and rows in one pass).
 
     Lemma 6's field (ALGORITHMS §12.4) ``u = c(x* − x) − εz`` with ``c = c_v`` and its sink ``x*``
@@ -347,16 +364,19 @@ def more_tolerant_all(solutions: Sequence[CellSolution], problems: Sequence[Cell
     has_rows = n_h > 0
     U = a[:, v_cell] - np.einsum("fcij,cj->fci", M[:, v_cell], V)  # (2, ΣP, 2): u at every vertex
     pair_n = N[pair_row]
-    values = -(np.einsum("fpi,pi->fp", U[:, pair_vertex], pair_n)
-               + c_h[h_cell[pair_row]] * (np.einsum("pi,pi->p", V[pair_vertex], pair_n) + Q[pair_row]))  # fmt: skip
+    values = -(
+        np.einsum("fpi,pi->fp", U[:, pair_vertex], pair_n)
+        + c_h[h_cell[pair_row]] * (np.einsum("pi,pi->p", V[pair_vertex], pair_n) + Q[pair_row])
+    )
     cbf = np.full((2, C), -np.inf)
     if len(Q):
         row_max = np.maximum.reduceat(values, row_start, axis=1)
         cbf[:, has_rows] = np.maximum.reduceat(row_max, h_start[has_rows], axis=1)
     else:
         row_max = np.zeros((2, 0))
-    progress = np.einsum("fpi,pi->fp", U, z[v_cell]) + c_v[:, v_cell] * np.einsum("pi,pi->p", V - x_j[v_cell],
-                                                                                  z[v_cell])  # fmt: skip
+    progress = np.einsum("fpi,pi->fp", U, z[v_cell]) + c_v[:, v_cell] * np.einsum(
+        "pi,pi->p", V - x_j[v_cell], z[v_cell]
+    )
     clf = np.maximum.reduceat(progress, v_start, axis=1)
     peak = np.maximum.reduceat(np.abs(U).max(axis=2), v_start, axis=1)
     # δ_c = min over the barrier rows and the exit direction of margin / ‖Mᵀn‖ (funnel.cell_tolerance)
@@ -385,8 +405,20 @@ def more_tolerant_all(solutions: Sequence[CellSolution], problems: Sequence[Cell
     for k, sol in enumerate(solutions):
         f = int(lemma6_l[k])
         K, c_k = (gains[k], c_l[k]) if f else (sol.K, sol.c_v)
-        out.append(CellSolution(sol.status, K, sol.c_h, c_k, cbf_l[f][k] if n_h_l[k] else math.nan, clf_l[f][k],
-                                sol.attempts, sol.kappa, sol.objective, delta_l[f][k]))  # fmt: skip
+        out.append(
+            CellSolution(
+                sol.status,
+                K,
+                sol.c_h,
+                c_k,
+                cbf_l[f][k] if n_h_l[k] else math.nan,
+                clf_l[f][k],
+                sol.attempts,
+                sol.kappa,
+                sol.objective,
+                delta_l[f][k],
+            )
+        )
     return out
 
 
@@ -415,8 +447,9 @@ def grouped_gains(M: np.ndarray, a: np.ndarray, landmarks: Sequence[np.ndarray],
     return out
 
 
-def cell_sinks(V: np.ndarray, n_v: np.ndarray, N: np.ndarray, Q: np.ndarray, n_h: np.ndarray, z: np.ndarray,
-           x_j: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+def cell_sinks(
+    V: np.ndarray, n_v: np.ndarray, N: np.ndarray, Q: np.ndarray, n_h: np.ndarray, z: np.ndarray, x_j: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """Lemma 6's sink ``x*`` (C, 2) and side depth ``h*`` (C,) of every cell (:func:`funnel.exit_sinks`).
 
     The cells come ragged. Each exit face is :func:`funnel.exit_face`'s (the two vertices nearest the
@@ -451,8 +484,9 @@ def cell_sinks(V: np.ndarray, n_v: np.ndarray, N: np.ndarray, Q: np.ndarray, n_h
     return sinks, depths
 
 
-def cell_tolerances(cells: Cells, gain: np.ndarray, c_h: np.ndarray, c_v: np.ndarray, u_max: float,
-                    known: np.ndarray | None = None) -> np.ndarray:  # fmt: skip
+def cell_tolerances(
+    cells: Cells, gain: np.ndarray, c_h: np.ndarray, c_v: np.ndarray, u_max: float, known: np.ndarray | None = None
+) -> np.ndarray:
     """``δ_c`` of every funnel cell from its gain and rows (ALGORITHMS §11.4), shape (C,), map units.
 
     The margins are recomputed at the vertices (:func:`~bearnav_cli.runtime.certificate.field_margins`); a cell

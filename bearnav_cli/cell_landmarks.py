@@ -163,8 +163,9 @@ def fixed_landmark(
     outside = s_min > tol
     # rule 2: the cell lies strictly on one side of the line through l_f and every other l_k
     d = lm[None, :, :] - lm[:, None, :]  # d[f, k] = l_k − l_f
-    side = (d[..., 0, None] * (polygon[None, None, :, 1] - lm[:, None, None, 1])
-            - d[..., 1, None] * (polygon[None, None, :, 0] - lm[:, None, None, 0]))  # (n, n, p)  # fmt: skip
+    side = d[..., 0, None] * (polygon[None, None, :, 1] - lm[:, None, None, 1]) - d[..., 1, None] * (
+        polygon[None, None, :, 0] - lm[:, None, None, 0]
+    )  # (n, n, p)
     scale = tol * np.hypot(d[..., 0], d[..., 1])[..., None]
     one_side = np.all(side > scale, axis=2) | np.all(side < -scale, axis=2)
     np.fill_diagonal(one_side, True)

@@ -39,9 +39,18 @@ from bearnav_cli.funnel import (
 from bearnav_cli.geometry import FreeSpace, barrier_margin
 
 __all__ = [
-    "PAPER_CLAIM", "Composition", "CoverageRegions", "check", "coverage", "coverage_margin", "coverage_regions",
-    "covered_fraction", "robot_words", "time_bound", "world_violations",
-]  # fmt: skip
+    "PAPER_CLAIM",
+    "Composition",
+    "CoverageRegions",
+    "check",
+    "coverage",
+    "coverage_margin",
+    "coverage_regions",
+    "covered_fraction",
+    "robot_words",
+    "time_bound",
+    "world_violations",
+]
 
 #: Relative agreement of a recomputed tolerance with the stored one.
 TOLERANCE_RTOL = 1e-6
@@ -155,9 +164,21 @@ def check(plan: Plan, speed: float, space: FreeSpace | None = None) -> Compositi
     tol = map_.tol
     space = FreeSpace.from_map(map_) if space is None else space
     up = _parent_cells(plan)
-    failures: dict[str, list[int]] = {k: [] for k in ("c1_free", "c2_edge", "c3_exit_row", "c4_exit_contained",
-                                                      "barrier_rows", "l1_barrier", "l2_progress", "rank",
-                                                      "tolerance", "usable_tolerance")}  # fmt: skip
+    failures: dict[str, list[int]] = {
+        k: []
+        for k in (
+            "c1_free",
+            "c2_edge",
+            "c3_exit_row",
+            "c4_exit_contained",
+            "barrier_rows",
+            "l1_barrier",
+            "l2_progress",
+            "rank",
+            "tolerance",
+            "usable_tolerance",
+        )
+    }
     failures["c1_free"] = world_violations(plan, space)
     tolerance = np.zeros(cells.n_cells)
     inset = cells.exit_inset
@@ -215,16 +236,32 @@ def check(plan: Plan, speed: float, space: FreeSpace | None = None) -> Compositi
     plan_tolerance = plan_tolerance_of(usable)
     notes = []
     if not math.isclose(plan_tolerance, plan.plan_tolerance, rel_tol=TOLERANCE_RTOL, abs_tol=1e-12):
-        notes.append(f"stored plan tolerance {plan.plan_tolerance:.6g} differs from the recomputed min τ_c "
-                     f"{plan_tolerance:.6g}")  # fmt: skip
+        notes.append(
+            f"stored plan tolerance {plan.plan_tolerance:.6g} differs from the recomputed min τ_c {plan_tolerance:.6g}"
+        )
     regions = coverage_regions(cells, space, coverage_margin(plan))
     free_regions = coverage_regions(cells, space, 0.0)
     if not math.isclose(covered_fraction(free_regions), float(cells.free_coverage), rel_tol=1e-6, abs_tol=1e-9):
-        notes.append(f"stored coverage of F {cells.free_coverage:.6g} differs from the recomputed "
-                     f"{covered_fraction(free_regions):.6g}")  # fmt: skip
-    return Composition(failures, tolerance, plan_tolerance, covered_fraction(regions), float(cells.free_coverage),
-                       time_bound(plan, speed), speed, notes, regions, slack, usable, covered_fraction(free_regions),
-                       free_regions, tolerance_by_area(cells, usable))  # fmt: skip
+        notes.append(
+            f"stored coverage of F {cells.free_coverage:.6g} differs from the recomputed "
+            f"{covered_fraction(free_regions):.6g}"
+        )
+    return Composition(
+        failures,
+        tolerance,
+        plan_tolerance,
+        covered_fraction(regions),
+        float(cells.free_coverage),
+        time_bound(plan, speed),
+        speed,
+        notes,
+        regions,
+        slack,
+        usable,
+        covered_fraction(free_regions),
+        free_regions,
+        tolerance_by_area(cells, usable),
+    )
 
 
 def world_violations(plan: Plan, space: FreeSpace) -> list[int]:
@@ -272,8 +309,12 @@ def coverage_margin(artifact: Cells | Plan) -> float:
     """
     stats = artifact.stats if isinstance(artifact.stats, dict) else {}
     recorded = stats.get("barrier_margin")
-    if isinstance(recorded, (int, float)) and not isinstance(recorded, bool) and math.isfinite(recorded) \
-            and recorded > 0:  # fmt: skip
+    if (
+        isinstance(recorded, (int, float))
+        and not isinstance(recorded, bool)
+        and math.isfinite(recorded)
+        and recorded > 0
+    ):
         return float(recorded)
     map_ = artifact.map
     requested = map_.params.get("decompose", {}).get("barrier_margin") if isinstance(map_.params, dict) else None

@@ -109,8 +109,23 @@ def _has_raw_pass_model(highs: highspy.Highs) -> bool:
     """Whether ``Highs.passModel`` accepts numpy arrays directly (the 15-argument LP form)."""
     empty = np.zeros(0)
     try:
-        highs.passModel(0, 0, 0, _ROWWISE, _MINIMIZE, 0.0, empty, empty, empty, empty, empty,
-                        np.zeros(1, np.int32), np.zeros(0, np.int32), empty, np.zeros(0, np.int32))  # fmt: skip
+        highs.passModel(
+            0,
+            0,
+            0,
+            _ROWWISE,
+            _MINIMIZE,
+            0.0,
+            empty,
+            empty,
+            empty,
+            empty,
+            empty,
+            np.zeros(1, np.int32),
+            np.zeros(0, np.int32),
+            empty,
+            np.zeros(0, np.int32),
+        )
     except TypeError:
         return False
     return True
@@ -284,9 +299,23 @@ class LpSolver:
         """
         n, m, cost, indptr, indices, values, row_lower, row_upper, col_lower, col_upper = model
         if self._raw:
-            return (n, m, len(values), _ROWWISE, _MINIMIZE, 0.0, _f64(cost), _f64(col_lower), _f64(col_upper),
-                    _f64(row_lower), _f64(row_upper), _i32(indptr), _i32(indices), _f64(values),
-                    _continuous(n))  # fmt: skip
+            return (
+                n,
+                m,
+                len(values),
+                _ROWWISE,
+                _MINIMIZE,
+                0.0,
+                _f64(cost),
+                _f64(col_lower),
+                _f64(col_upper),
+                _f64(row_lower),
+                _f64(row_upper),
+                _i32(indptr),
+                _i32(indices),
+                _f64(values),
+                _continuous(n),
+            )
         return (highs_lp(*model),)
 
 

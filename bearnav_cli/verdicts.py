@@ -15,8 +15,15 @@ from typing import Any
 from bearnav_cli.datatypes import CellFlag, CellStatus, cell_list
 
 __all__ = [
-    "blind_spots", "BLIND_SPOT", "cell_problems", "no_route", "NO_ROUTE", "not_certified", "NOT_CERTIFIED", "Problem",
-]  # fmt: skip
+    "blind_spots",
+    "BLIND_SPOT",
+    "cell_problems",
+    "no_route",
+    "NO_ROUTE",
+    "not_certified",
+    "NOT_CERTIFIED",
+    "Problem",
+]
 
 #: The kinds of :class:`Problem`.
 NO_ROUTE, BLIND_SPOT, NOT_CERTIFIED = "no route", "blind spot", "not certified"
@@ -54,8 +61,12 @@ def no_route(nodes: Any, added: Any = None) -> list[Problem]:
     found = len(nodes) - (0 if added is None else sum(map(bool, added)))
     if found >= 2:
         return []
-    return [Problem(NO_ROUTE, "no route: the tree has only its root (is the goal walled in, or did every sample "
-                              "fall in obstacles?)")]  # fmt: skip
+    return [
+        Problem(
+            NO_ROUTE,
+            "no route: the tree has only its root (is the goal walled in, or did every sample fall in obstacles?)",
+        )
+    ]
 
 
 def blind_spots(cells: Any) -> list[Problem]:

@@ -73,8 +73,14 @@ def _liveness(plan: Plan, params: Params, speed: float) -> tuple[Liveness | None
         return None, "liveness: not measured, a paper plan has no usable position tolerance"
     names = {"eta_deg": "bearing_error_deg", "fov_deg": "live_fov", "kappa": "slip", "resolution": "live_resolution"}
     try:
-        return measure_liveness(plan, params.bearing_error_deg, params.live_fov, kappa=params.slip, speed=speed,
-                                resolution=params.live_resolution), None  # fmt: skip
+        return measure_liveness(
+            plan,
+            params.bearing_error_deg,
+            params.live_fov,
+            kappa=params.slip,
+            speed=speed,
+            resolution=params.live_resolution,
+        ), None
     except InvalidParamsError as exc:  # a value only the map can refuse (the grid against D): the user's option
         if exc.field in names:
             raise InvalidParamsError(exc.reason, field=names[exc.field]) from None
@@ -104,8 +110,14 @@ def guarantee(plan: Plan, report: VerifyReport) -> str:
     if report.failed:
         return "guarantee: none, the plan fails verification (above)"
     runs = report.rollouts
-    measured = (f"measured only: {plural(len(runs), 'closed-loop run')} with exact positions (`bearnav simulate` adds "
-                "a camera and noise)") if runs is not None and len(runs) else "nothing measured (no runs)"  # fmt: skip
+    measured = (
+        (
+            f"measured only: {plural(len(runs), 'closed-loop run')} with exact positions (`bearnav simulate` adds "
+            "a camera and noise)"
+        )
+        if runs is not None and len(runs)
+        else "nothing measured (no runs)"
+    )
     if comp is None:  # a paper plan: per-cell certificates (§4), no composition theorem
         return f"guarantee: {composition.PAPER_CLAIM}; {measured}"
     robot = runtime.robot.robot_parameters(plan.map.robot)
@@ -115,21 +127,29 @@ def guarantee(plan: Plan, report: VerifyReport) -> str:
     tol = comp.usable_by_area
     eta = float(robot["bearing_error_deg"]) + float(robot["compass_error_deg"] or 0.0)
     if report.liveness is not None:
-        measured += (f", and at η = {math.degrees(report.liveness.grid.eta):.3g}°: "
-                     f"{report.liveness.live_fraction:.0%} of the certified area where a look all around is sure to "
-                     "be good enough (on a grid)")  # fmt: skip
-    proven = (f"proven from the plan file, {who} that starts in the certified area ({percent(comp.coverage_free)} of "
-              f"the free space) and knows its position to within what the cell it is in tolerates (at least "
-              f"{comp.plan_tolerance:.3g} map units, {tol['median']:.3g} at the median point) reaches the goal "
-              f"without touching an obstacle or a wall, at speed {comp.speed:g} map units/s in "
-              f"{duration_text(comp.time_bound)} (a worst case, from the least progress each cell's certificate "
-              "guarantees, not an estimate of a run's time)")  # fmt: skip
-    bounded = (f"with bearings erring by at most η = {eta:g}° and wheel slip within {robot['slip']:g} of each step "
-               "(the map's robot section) the `simulate --estimator set` robot moves only where it knows that much, "
-               "and never gets stuck where a look all around is good enough (`--live-fov F` measures where; "
-               "`bearnav tags --for live` adds tags until it is everywhere)")  # fmt: skip
-    uncovered = ("not covered: starts outside the certified area, errors beyond those bounds, places where the camera "
-                 "sees fewer than two tags (`bearnav verify --fov F` measures them)")  # fmt: skip
+        measured += (
+            f", and at η = {math.degrees(report.liveness.grid.eta):.3g}°: "
+            f"{report.liveness.live_fraction:.0%} of the certified area where a look all around is sure to "
+            "be good enough (on a grid)"
+        )
+    proven = (
+        f"proven from the plan file, {who} that starts in the certified area ({percent(comp.coverage_free)} of "
+        f"the free space) and knows its position to within what the cell it is in tolerates (at least "
+        f"{comp.plan_tolerance:.3g} map units, {tol['median']:.3g} at the median point) reaches the goal "
+        f"without touching an obstacle or a wall, at speed {comp.speed:g} map units/s in "
+        f"{duration_text(comp.time_bound)} (a worst case, from the least progress each cell's certificate "
+        "guarantees, not an estimate of a run's time)"
+    )
+    bounded = (
+        f"with bearings erring by at most η = {eta:g}° and wheel slip within {robot['slip']:g} of each step "
+        "(the map's robot section) the `simulate --estimator set` robot moves only where it knows that much, "
+        "and never gets stuck where a look all around is good enough (`--live-fov F` measures where; "
+        "`bearnav tags --for live` adds tags until it is everywhere)"
+    )
+    uncovered = (
+        "not covered: starts outside the certified area, errors beyond those bounds, places where the camera "
+        "sees fewer than two tags (`bearnav verify --fov F` measures them)"
+    )
     return f"guarantee: {proven}; {bounded}; {measured}; {uncovered}"
 
 
@@ -195,9 +215,16 @@ def run(
             starts = reached_starts(space, plan.map.goal, params.n_starts, rng, unreached.avoid)
             # the certificates are stated for the displacement output and the exact motion of §7.1:
             # bearings and wheel slip are `bearnav simulate`'s job
-            sim = simulate.Params(speed=speed, alpha=speed, dt=params.dt, measurement="displacement",
-                                  odometry_noise=0.0, dynamics=params.dynamics, certified_heading=True,
-                                  record_trajectories=False)  # fmt: skip
+            sim = simulate.Params(
+                speed=speed,
+                alpha=speed,
+                dt=params.dt,
+                measurement="displacement",
+                odometry_noise=0.0,
+                dynamics=params.dynamics,
+                certified_heading=True,
+                record_trajectories=False,
+            )
             breach = np.zeros(len(starts), bool)
             # the unicycle without a look-ahead is outside the certificate: no step of it is certified
             steps_certified = params.dynamics != "unicycle" or arrays.lookahead > 0
@@ -213,9 +240,11 @@ def run(
     route = route_lengths(space, plan.map.goal, starts) if len(starts) else np.zeros(0)
     uncovered = None
     if params.dynamics == "unicycle" and plan.map.lookahead <= 0 and params.n_starts > 0:
-        uncovered = ("the unicycle on a plan without a look-ahead (λ = 0) is outside the certificate: its steps count "
-                     "as uncertified, and a breach is only a true position outside D; plan with `--lookahead L`, "
-                     "L at least the speed over the turn rate, to drive it inside")  # fmt: skip
+        uncovered = (
+            "the unicycle on a plan without a look-ahead (λ = 0) is outside the certificate: its steps count "
+            "as uncertified, and a breach is only a true position outside D; plan with `--lookahead L`, "
+            "L at least the speed over the turn rate, to drive it inside"
+        )
     report = VerifyReport(
         status=np.asarray(plan.status),
         certificates=cert,

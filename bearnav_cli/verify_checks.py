@@ -31,9 +31,23 @@ from bearnav_cli.geometry import FreeSpace, inflate
 from bearnav_cli.routes import sample_starts
 from bearnav_cli.runtime.certificate import UNIT_TOL, barrier_fault, field_margins, gain_field
 
-__all__ = ["CERTIFICATE_TOL", "CERTIFIED", "COVERAGE_TOL", "GOAL_FIELD_TOL", "Certificates", "Geometry",
-           "Unreached", "certificate_problems", "certificates", "check_geometry", "check_lookahead", "flagged_cells",
-           "reached_starts", "rows_not_polygon", "unreached_regions"]  # fmt: skip
+__all__ = [
+    "CERTIFICATE_TOL",
+    "CERTIFIED",
+    "COVERAGE_TOL",
+    "GOAL_FIELD_TOL",
+    "Certificates",
+    "Geometry",
+    "Unreached",
+    "certificate_problems",
+    "certificates",
+    "check_geometry",
+    "check_lookahead",
+    "flagged_cells",
+    "reached_starts",
+    "rows_not_polygon",
+    "unreached_regions",
+]
 
 #: Largest violation (and margin mismatch) a certified cell may show (ALGORITHMS §8).
 CERTIFICATE_TOL = 1e-7
@@ -102,8 +116,7 @@ def certificates(plan: Plan) -> Certificates:
         normals, offsets = cells.barrier(c)
         edge = cells.parent[cells.cell_node[c]] >= 0  # an edge cell; the root's cell is the goal cell
         z, xj = cells.exit_dir[c], cells.exit_point[c]
-        m = field_margins(M, a, cells.vertices(c), z, xj, normals, offsets, plan.c_h[c], plan.c_v[c],
-                          plan.u_max[c])  # fmt: skip
+        m = field_margins(M, a, cells.vertices(c), z, xj, normals, offsets, plan.c_h[c], plan.c_v[c], plan.u_max[c])
         bad = 0.0
         if len(normals):
             out["value_h"][c] = m.cbf
@@ -354,8 +367,11 @@ def unreached_regions(plan: Plan, space: FreeSpace, regions: composition.Coverag
     else:
         cells = plan.cells
         child = np.flatnonzero(cells.parent >= 0)
-        edges = shapely.linestrings(np.stack([cells.nodes[child], cells.nodes[cells.parent[child]]], axis=1)) \
-            if len(child) else np.array([shapely.Point(map_.goal)])  # fmt: skip
+        edges = (
+            shapely.linestrings(np.stack([cells.nodes[child], cells.nodes[cells.parent[child]]], axis=1))
+            if len(child)
+            else np.array([shapely.Point(map_.goal)])
+        )
         full = coverage_domain(component, space.bounds, space.obstacles, margin)
         region = reached_parts(full, shapely.union_all(np.concatenate([edges, [shapely.Point(map_.goal)]])))[1]
     parts = [p for p in shapely.get_parts(region) if p.area > 0]
@@ -365,8 +381,7 @@ def unreached_regions(plan: Plan, space: FreeSpace, regions: composition.Coverag
     return Unreached(region, avoid, float(sum(p.area for p in parts)), float(component.area), points)
 
 
-def reached_starts(space: FreeSpace, goal: np.ndarray, count: int, rng: np.random.Generator,
-                    avoid: Any) -> np.ndarray:  # fmt: skip
+def reached_starts(space: FreeSpace, goal: np.ndarray, count: int, rng: np.random.Generator, avoid: Any) -> np.ndarray:
     """``count`` starts of :func:`~bearnav_cli.routes.sample_starts` outside ``avoid`` (redrawn from one generator).
 
     Parameters
@@ -423,8 +438,10 @@ def check_lookahead(plan: Plan, space: FreeSpace | None = None) -> list[str]:
     map_ = plan.map
     built = float(plan.cells.lookahead)
     if not abs(built - map_.lookahead) <= map_.tol:
-        problems.append(f"lookahead: the plan's λ = {built:g} differs from its map's robot.lookahead "
-                        f"{map_.lookahead:g} (the cells were built for another robot)")  # fmt: skip
+        problems.append(
+            f"lookahead: the plan's λ = {built:g} differs from its map's robot.lookahead "
+            f"{map_.lookahead:g} (the cells were built for another robot)"
+        )
     radius = map_.planning_radius
     space = FreeSpace.from_map(map_) if space is None else space
     raw, stored = space.raw_obstacles, space.obstacles
@@ -435,7 +452,9 @@ def check_lookahead(plan: Plan, space: FreeSpace | None = None) -> list[str]:
             missing = shapely.difference(wanted, shapely.buffer(stored, map_.tol))
             free = shapely.difference(shapely.box(*map_.bounds), stored)
             gap = shapely.distance(raw, free) if not free.is_empty else math.inf
-            problems.append(f"obstacles: the plan's obstacles do not contain the raw obstacles inflated by the "
-                            f"radius plus the look-ahead, {radius:g} ({missing.area:.3g} map units² missing; a free "
-                            f"point lies {gap:.6g} from a raw obstacle)")  # fmt: skip
+            problems.append(
+                f"obstacles: the plan's obstacles do not contain the raw obstacles inflated by the "
+                f"radius plus the look-ahead, {radius:g} ({missing.area:.3g} map units² missing; a free "
+                f"point lies {gap:.6g} from a raw obstacle)"
+            )
     return problems

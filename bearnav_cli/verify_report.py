@@ -189,8 +189,9 @@ class VerifyReport:
         """Why the plan fails verification (empty when it passes)."""
         out = []
         if self.uncertified:
-            out.append(f"{plural(len(self.uncertified), 'cell')} not certified (status 2 or 3): "
-                       f"{cell_list(self.uncertified)}")  # fmt: skip
+            out.append(
+                f"{plural(len(self.uncertified), 'cell')} not certified (status 2 or 3): {cell_list(self.uncertified)}"
+            )
         if self.false_certificates:
             items = [f"{c} ({why})" for c, why in sorted(self.false_certificates.items())]
             out.append(f"{len(items)} certified cells fail the recomputation: {cell_list(items)}")
@@ -218,22 +219,30 @@ class VerifyReport:
             out.extend(self.composition.problems)
             if self.rollouts is not None and self.in_domain.any() and self.success_in_domain < 1.0:
                 bad = np.flatnonzero(self.in_domain & (self.rollouts.outcome != Outcome.SUCCESS))
-                out.append(f"{len(bad)} runs from the certified domain did not reach the goal (the theorem says "
-                           f"every one does: a bug): starts {cell_list(bad)}")  # fmt: skip
+                out.append(
+                    f"{len(bad)} runs from the certified domain did not reach the goal (the theorem says "
+                    f"every one does: a bug): starts {cell_list(bad)}"
+                )
         if self.rollouts is not None and len(self.rollouts):
             hit = np.flatnonzero(self._collided(certified=True))
             if hit.size:
                 whence = " from the certified domain" if self.composition is not None else ""
-                out.append(f"{hit.size} of {len(self.rollouts)} closed-loop runs{whence} collided (any collision "
-                           f"fails, whatever --min-success says): starts {cell_list(hit)}")  # fmt: skip
+                out.append(
+                    f"{hit.size} of {len(self.rollouts)} closed-loop runs{whence} collided (any collision "
+                    f"fails, whatever --min-success says): starts {cell_list(hit)}"
+                )
         if self.breaches is not None and self.breaches.any():
             bad = np.flatnonzero(self.breaches)
-            out.append(f"{bad.size} runs from the certified domain breached it (a step not certified, or a true "
-                       f"position outside every cell): starts {cell_list(bad)}")  # fmt: skip
+            out.append(
+                f"{bad.size} runs from the certified domain breached it (a step not certified, or a true "
+                f"position outside every cell): starts {cell_list(bad)}"
+            )
         out.extend(self.lookahead_problems)
         if self.world_cells:
-            out.append(f"{len(self.world_cells)} cells no longer hold in the world (C1: they leave B_r or meet an "
-                       f"obstacle): {cell_list(self.world_cells)}")  # fmt: skip
+            out.append(
+                f"{len(self.world_cells)} cells no longer hold in the world (C1: they leave B_r or meet an "
+                f"obstacle): {cell_list(self.world_cells)}"
+            )
         if self.min_success is not None and not self.success_rate >= self.min_success:
             out.append(f"success rate {self.success_rate:.1%} below --min-success {self.min_success:.1%}")
         return out
@@ -257,12 +266,16 @@ class VerifyReport:
         if self.rollouts is not None and len(self.rollouts):
             outside = np.flatnonzero(self._collided(certified=False))
             if outside.size:
-                out.append(f"{outside.size} of {len(self.rollouts)} closed-loop runs from outside the certified "
-                           f"domain collided (measured, not certified: those starts lie in the sliver of free "
-                           f"space no cell covers, by an obstacle or a wall): starts {cell_list(outside)}")  # fmt: skip
+                out.append(
+                    f"{outside.size} of {len(self.rollouts)} closed-loop runs from outside the certified "
+                    f"domain collided (measured, not certified: those starts lie in the sliver of free "
+                    f"space no cell covers, by an obstacle or a wall): starts {cell_list(outside)}"
+                )
         if len(self.route) and np.isnan(self.route).all():
-            out.append(f"the shortest-route ratio was not computed: the free space has more than "
-                       f"{MAX_ROUTE_VERTICES:,} corners (the straight-line ratio is given)")  # fmt: skip
+            out.append(
+                f"the shortest-route ratio was not computed: the free space has more than "
+                f"{MAX_ROUTE_VERTICES:,} corners (the straight-line ratio is given)"
+            )
         if self.liveness is not None:
             out.append(self.liveness.summary())
         if self.liveness_note is not None:
@@ -274,8 +287,10 @@ class VerifyReport:
         more = f" … ({len(u.parts)} in all)" if len(u.parts) > 5 else ""
         share = f" ({u.area / u.free_area:.1%} of the free space)" if u.free_area > 0 else ""
         regions = "1 free region" if len(u.parts) == 1 else f"{len(u.parts)} free regions"
-        return out + [f"{regions} the tree never reached, {u.area:.3g} map units²{share}, at (x, y) "
-                      f"area: {where}{more}; no start was drawn there, the plan says nothing about them"]  # fmt: skip
+        return out + [
+            f"{regions} the tree never reached, {u.area:.3g} map units²{share}, at (x, y) "
+            f"area: {where}{more}; no start was drawn there, the plan says nothing about them"
+        ]
 
     @property
     def failed(self) -> bool:
@@ -289,11 +304,13 @@ class VerifyReport:
         comp = self.composition
         if comp is not None:
             tau = comp.usable_by_area
-            text = (f"{certified}/{n} funnel cells certified, composition {'proved' if comp.ok else 'FAILS'}, "
-                    f"{100 * comp.coverage_free:.1f}% of the free space covered ({100 * comp.coverage:.1f}% of it "
-                    f"away from the walls), a position error of {comp.plan_tolerance:.3g} tolerated everywhere "
-                    f"({tau['median']:.3g} at the median point, under {tau['p10']:.3g} on 10% of the area), "
-                    f"worst-case time to goal {duration_text(comp.time_bound)}")  # fmt: skip
+            text = (
+                f"{certified}/{n} funnel cells certified, composition {'proved' if comp.ok else 'FAILS'}, "
+                f"{100 * comp.coverage_free:.1f}% of the free space covered ({100 * comp.coverage:.1f}% of it "
+                f"away from the walls), a position error of {comp.plan_tolerance:.3g} tolerated everywhere "
+                f"({tau['median']:.3g} at the median point, under {tau['p10']:.3g} on 10% of the area), "
+                f"worst-case time to goal {duration_text(comp.time_bound)}"
+            )
             if self.rollouts is not None and len(self.rollouts):
                 d = self.in_domain
                 ok = self.rollouts.outcome == Outcome.SUCCESS
@@ -374,28 +391,37 @@ class VerifyReport:
                 min_success=self.min_success,
             )
         if self.rollouts is not None:
-            mc.update(runs_from_domain=int(self.in_domain.sum()),
-                      success_rate_in_domain=_finite_or_none([self.success_in_domain])[0],
-                      success_rate_outside_domain=_finite_or_none([self.success_outside_domain])[0],
-                      certified_step_fraction=self.rollouts.certified_fraction,
-                      breaches=None if self.breaches is None else int(self.breaches.sum()))  # fmt: skip
+            mc.update(
+                runs_from_domain=int(self.in_domain.sum()),
+                success_rate_in_domain=_finite_or_none([self.success_in_domain])[0],
+                success_rate_outside_domain=_finite_or_none([self.success_outside_domain])[0],
+                certified_step_fraction=self.rollouts.certified_fraction,
+                breaches=None if self.breaches is None else int(self.breaches.sum()),
+            )
         out["monte_carlo"] = mc
         if self.composition is not None:
             comp = self.composition
             out["composition"] = {
-                "proved": comp.ok, "failures": comp.failures, "problems": comp.problems,
-                "coverage": comp.coverage, "coverage_free": comp.coverage_free,
+                "proved": comp.ok,
+                "failures": comp.failures,
+                "problems": comp.problems,
+                "coverage": comp.coverage,
+                "coverage_free": comp.coverage_free,
                 "stored_coverage": comp.stored_coverage,
                 "plan_tolerance": _finite_or_none([comp.plan_tolerance])[0],
                 "usable_tolerance_by_area": comp.usable_by_area,
-                "time_bound_s": _finite_or_none([comp.time_bound])[0], "speed": comp.speed,
-            }  # fmt: skip
+                "time_bound_s": _finite_or_none([comp.time_bound])[0],
+                "speed": comp.speed,
+            }
         if self.world_cells is not None:
             out["world_cells"] = self.world_cells
         if self.unreached is not None:
             u = self.unreached
-            out["unreached"] = {"area": u.area, "free_area": u.free_area,
-                                "parts": [{"point": [x, y], "area": a} for x, y, a in u.parts]}  # fmt: skip
+            out["unreached"] = {
+                "area": u.area,
+                "free_area": u.free_area,
+                "parts": [{"point": [x, y], "area": a} for x, y, a in u.parts],
+            }
         if self.liveness is not None:
             out["liveness"] = self.liveness.to_json()
         out["notes"] = self.notes

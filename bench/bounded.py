@@ -35,8 +35,15 @@ from bearnav_cli.stages.map_ import MapSource
 SECTION = "bounded"
 #: The look-ahead λ each map's unicycle is planned with (map units): about 1% of its diagonal, and
 #: at least its speed over a turn rate of 1 rad/s.
-LOOKAHEAD = {"kitchen": 0.1, "paper_sim_circles": 0.5, "paper_b_circles": 0.5, "storeroom": 0.1, "office0": 0.1,
-             "maze0": 0.1, "clutter0": 0.1}  # fmt: skip
+LOOKAHEAD = {
+    "kitchen": 0.1,
+    "paper_sim_circles": 0.5,
+    "paper_b_circles": 0.5,
+    "storeroom": 0.1,
+    "office0": 0.1,
+    "maze0": 0.1,
+    "clutter0": 0.1,
+}
 
 
 def plan_of(source: MapSource, spec: dict, lookahead: float):
@@ -50,11 +57,18 @@ def one(plan, label: str, starts: str, **options) -> tuple[list, float]:
     seconds, sim = timed(simulate.run, plan, params)
     m = sim.stats
     looks = m.get("looks_per_run")
-    row = [label, f"{100 * (m['success_rate_in_domain'] or 0):.1f}%", m["outcomes"]["collision"],
-           m["containment_violations"], m["inconsistencies"], f"{100 * m['certified_step_fraction']:.2f}%",
-           "—" if looks is None else f"{looks:.1f}",
-           "—" if m.get("look_time_mean_s") is None else f"{m['look_time_mean_s']:.2f} s",
-           f"{m['time_mean_s']:.0f} s" if m.get("time_mean_s") else "—", f"{seconds:.1f} s"]  # fmt: skip
+    row = [
+        label,
+        f"{100 * (m['success_rate_in_domain'] or 0):.1f}%",
+        m["outcomes"]["collision"],
+        m["containment_violations"],
+        m["inconsistencies"],
+        f"{100 * m['certified_step_fraction']:.2f}%",
+        "—" if looks is None else f"{looks:.1f}",
+        "—" if m.get("look_time_mean_s") is None else f"{m['look_time_mean_s']:.2f} s",
+        f"{m['time_mean_s']:.0f} s" if m.get("time_mean_s") else "—",
+        f"{seconds:.1f} s",
+    ]
     return row, seconds
 
 
@@ -73,15 +87,24 @@ def main() -> None:
         for dynamics, lam in (("single", 0.0), ("unicycle", LOOKAHEAD[name])):
             tag = f"{name}, {dynamics}" + (f" λ={lam:g}" if lam else "")
             first = plan_of(source, source.spec, lam)
-            seconds, proposal = timed(tags.propose_live_tags, first,
-                                      tags.Params(target="live", bearing_error_deg=args.eta))  # fmt: skip
+            seconds, proposal = timed(
+                tags.propose_live_tags, first, tags.Params(target="live", bearing_error_deg=args.eta)
+            )
             plan = plan_of(source, tags.map_spec_with_tags(source.spec, proposal), lam)
             now, wider = liveness.measure(plan, args.eta), liveness.measure(plan, 0.5)
             before = proposal.live_before
-            live_rows.append([tag, len(first.map.landmarks), proposal.count,
-                              f"{seconds:.0f} s", f"{100 * before.live_fraction:.1f}% → {100 * now.live_fraction:.1f}%",
-                              f"{math.degrees(before.eta_star):.3f}° → {math.degrees(now.eta_star):.3f}°",
-                              f"{100 * now.view_fraction:.1f}%", f"{100 * wider.live_fraction:.1f}%"])  # fmt: skip
+            live_rows.append(
+                [
+                    tag,
+                    len(first.map.landmarks),
+                    proposal.count,
+                    f"{seconds:.0f} s",
+                    f"{100 * before.live_fraction:.1f}% → {100 * now.live_fraction:.1f}%",
+                    f"{math.degrees(before.eta_star):.3f}° → {math.degrees(now.eta_star):.3f}°",
+                    f"{100 * now.view_fraction:.1f}%",
+                    f"{100 * wider.live_fraction:.1f}%",
+                ]
+            )
             print(" | ".join(map(str, live_rows[-1])), flush=True)
             base = {"dynamics": dynamics, "noise_bound_deg": args.eta}
             kalman, t_kalman = one(plan, f"{tag}: kalman", starts, estimator="kalman", **base)
@@ -91,22 +114,43 @@ def main() -> None:
             rows += [kalman, uniform, worst]
             if dynamics == "single":  # the stress test: Gaussian σ = 1°, beyond any bound the robot assumes
                 stress = {"dynamics": dynamics, "noise_deg": 1.0}
-                rows += [one(plan, f"{tag}: kalman, Gaussian σ=1°", starts, estimator="kalman", **stress)[0],
-                         one(plan, f"{tag}: set, Gaussian σ=1°", starts, estimator="set", **stress)[0]]  # fmt: skip
+                rows += [
+                    one(plan, f"{tag}: kalman, Gaussian σ=1°", starts, estimator="kalman", **stress)[0],
+                    one(plan, f"{tag}: set, Gaussian σ=1°", starts, estimator="set", **stress)[0],
+                ]
             print(*(" | ".join(map(str, r)) for r in rows[-(5 if dynamics == "single" else 3) :]), sep="\n", flush=True)
-    live_headers = ["plan", "tags of the map", "added (--for live)", "placing took",
-                    f"live at η = {args.eta}° (before → after)", "η* (before → after)",
-                    "live after one view (no turn all around)", "live at η = 0.5°"]  # fmt: skip
-    headers = ["plan: estimator", "success from D", "collisions", "truth outside set", "empty sets",
-               "certified moving steps", "looks / run", "mean look", "mean run", "wall (set/kalman)"]  # fmt: skip
-    body = (f"Each map planned (rrtstar seed 0), then `bearnav tags --for live --bearing-error-deg {args.eta}` "
-            f"(`tags.propose_live_tags`), then planned again with those tags. Liveness measured by "
-            f"`bearnav verify --live-fov 60` on the default grid; a look turns all around.\n\n"
-            + markdown_table(live_headers, live_rows)
-            + f"\n\n{args.starts} starts uniform in D, 60° camera, bearing errors within η = {args.eta}° "
-            f"(world frame), "
-            f"odometry within κ‖d̂‖ + ν (κ = 0.03, ν = 1e-4·D). {machine_line(('numpy', 'shapely'))}\n\n"
-            + markdown_table(headers, rows))  # fmt: skip
+    live_headers = [
+        "plan",
+        "tags of the map",
+        "added (--for live)",
+        "placing took",
+        f"live at η = {args.eta}° (before → after)",
+        "η* (before → after)",
+        "live after one view (no turn all around)",
+        "live at η = 0.5°",
+    ]
+    headers = [
+        "plan: estimator",
+        "success from D",
+        "collisions",
+        "truth outside set",
+        "empty sets",
+        "certified moving steps",
+        "looks / run",
+        "mean look",
+        "mean run",
+        "wall (set/kalman)",
+    ]
+    body = (
+        f"Each map planned (rrtstar seed 0), then `bearnav tags --for live --bearing-error-deg {args.eta}` "
+        f"(`tags.propose_live_tags`), then planned again with those tags. Liveness measured by "
+        f"`bearnav verify --live-fov 60` on the default grid; a look turns all around.\n\n"
+        + markdown_table(live_headers, live_rows)
+        + f"\n\n{args.starts} starts uniform in D, 60° camera, bearing errors within η = {args.eta}° "
+        f"(world frame), "
+        f"odometry within κ‖d̂‖ + ν (κ = 0.03, ν = 1e-4·D). {machine_line(('numpy', 'shapely'))}\n\n"
+        + markdown_table(headers, rows)
+    )
     print(body)
     if args.readme:
         replace_section(SECTION, body)

@@ -50,13 +50,20 @@ def measure(name: str, seed: int, starts: int) -> list:
     inside = int(report.in_domain.sum())
     outside = len(report.in_domain) - inside
     return [
-        f"`{name}`", seed, cells.n_cells, int(cells.node_added.sum()), failed,
+        f"`{name}`",
+        seed,
+        cells.n_cells,
+        int(cells.node_added.sum()),
+        failed,
         "all pass" if comp.ok else "; ".join(comp.problems),
-        f"{comp.coverage:.1%}", f"{cells.stats.get('unreached_area', 0.0):.3g}", f"{plan.plan_tolerance:.3g}",
+        f"{comp.coverage:.1%}",
+        f"{cells.stats.get('unreached_area', 0.0):.3g}",
+        f"{plan.plan_tolerance:.3g}",
         "pass" if not report.failed else "FAIL: " + "; ".join(report.reasons),
-        f"{report.success_in_domain:.0%} of {inside}", outside,
+        f"{report.success_in_domain:.0%} of {inside}",
+        outside,
         f"{elapsed:.2f}",
-    ]  # fmt: skip
+    ]
 
 
 def main() -> None:
@@ -70,16 +77,31 @@ def main() -> None:
         for seed in SEEDS:
             rows.append(measure(name, seed, args.starts))
             print(" | ".join(str(c) for c in rows[-1]), flush=True)
-    headers = ["map", "seed", "cells", "added", "status 2/3", "§11.6 checks", "F_m covered (reached part)",
-               "F_m cut off (units²)", "δ*", "verify", "success from D", "starts outside D", "plan s"]  # fmt: skip
+    headers = [
+        "map",
+        "seed",
+        "cells",
+        "added",
+        "status 2/3",
+        "§11.6 checks",
+        "F_m covered (reached part)",
+        "F_m cut off (units²)",
+        "δ*",
+        "verify",
+        "success from D",
+        "starts outside D",
+        "plan s",
+    ]
     ok = sum(r[4] == 0 and r[5] == "all pass" and r[9] == "pass" for r in rows)
-    body = "\n\n".join([
-        "## Example maps × seeds 0–4",
-        "`bench/examples.py`: " + __doc__.split("\n\n")[1].replace("\n", " ").strip(),
-        machine_line(("numpy", "shapely", "highspy")),
-        markdown_table(headers, rows),
-        f"{ok} of {len(rows)} plans: no cell with status 2 or 3, every §11.6 check passes, verify passes.",
-    ])  # fmt: skip
+    body = "\n\n".join(
+        [
+            "## Example maps × seeds 0–4",
+            "`bench/examples.py`: " + __doc__.split("\n\n")[1].replace("\n", " ").strip(),
+            machine_line(("numpy", "shapely", "highspy")),
+            markdown_table(headers, rows),
+            f"{ok} of {len(rows)} plans: no cell with status 2 or 3, every §11.6 check passes, verify passes.",
+        ]
+    )
     print(body)
     if args.readme:
         replace_section(SECTION, body)

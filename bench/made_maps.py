@@ -50,8 +50,9 @@ def _raw(obstacles: list[dict]) -> shapely.Geometry:
     return shapely.union_all(parts)
 
 
-def _finish(name: str, bounds: list[float], obstacles: list[dict], rng: np.random.Generator,
-            radius: float = 0.15) -> dict:  # fmt: skip
+def _finish(
+    name: str, bounds: list[float], obstacles: list[dict], rng: np.random.Generator, radius: float = 0.15
+) -> dict:
     """Goal, two starts and the tags on the free space's boundary, for the obstacles given."""
     box = shapely.box(*bounds)
     free = box.difference(_raw(obstacles))

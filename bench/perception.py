@@ -73,8 +73,12 @@ def closed_loop(plan_obj, starts: np.ndarray, noise: float) -> dict:
     params = pipeline.resolve_params("simulate", plan_obj.map.params, overrides)
     sim = simulate.rollout(plan_obj, starts, params)
     counts = sim.counts()
-    return {"success": float(np.mean(sim.outcome == 0)), "collision": counts["collision"], "lost": counts["lost"],
-            "other": len(starts) - counts["success"] - counts["collision"] - counts["lost"]}  # fmt: skip
+    return {
+        "success": float(np.mean(sim.outcome == 0)),
+        "collision": counts["collision"],
+        "lost": counts["lost"],
+        "other": len(starts) - counts["success"] - counts["collision"] - counts["lost"],
+    }
 
 
 #: The kitchen as it was first drawn: its first twelve tags (``tag0``–``tag11``); the other sixteen
@@ -98,15 +102,36 @@ def measure(name: str, map_yaml: Path, work: Path, n_starts: int, max_tags: int 
     n_own = len(own.map.landmarks)
     tagged = work / f"{name}_tags.yaml"
     budget = [] if max_tags is None else ["--max-tags", str(max_tags)]
-    proposal = subprocess.run([*BEARNAV, "tags", str(work / name / "plan.npz"), "--fov", str(FOV), "--noise-deg", "1",
-                               *budget, "-o", str(tagged), "--json"], capture_output=True, text=True)  # fmt: skip
+    proposal = subprocess.run(
+        [
+            *BEARNAV,
+            "tags",
+            str(work / name / "plan.npz"),
+            "--fov",
+            str(FOV),
+            "--noise-deg",
+            "1",
+            *budget,
+            "-o",
+            str(tagged),
+            "--json",
+        ],
+        capture_output=True,
+        text=True,
+    )
     if proposal.returncode not in (0, 1) or not tagged.exists():
         raise RuntimeError(f"bearnav tags {name}: {proposal.stderr.strip()}")
     report = json.loads(proposal.stdout) if proposal.stdout.strip().startswith("{") else {}
     code_tags, with_tags = plan(tagged, work / f"{name}_tags")
-    row = {"map": name, "own_tags": n_own, "plan_exit": code, "tags_after": len(with_tags.map.landmarks),
-           "tags_exit": proposal.returncode, "lower_bound": report.get("lower_bound"),
-           "plan_exit_after": code_tags}  # fmt: skip
+    row = {
+        "map": name,
+        "own_tags": n_own,
+        "plan_exit": code,
+        "tags_after": len(with_tags.map.landmarks),
+        "tags_exit": proposal.returncode,
+        "lower_bound": report.get("lower_bound"),
+        "plan_exit_after": code_tags,
+    }
     for label, p in (("own", own), ("after", with_tags)):
         starts = sample_in_domain(p.cells, n_starts, np.random.default_rng(0))
         for noise in NOISES:
@@ -153,11 +178,13 @@ def main() -> None:
                 cell(r["after_2"]),
             ]
             for r in rows
-        ],  # fmt: skip
+        ],
     )
-    text = (f"{machine_line()} {args.starts} starts in D per plan, 60° unicycle, default wheel slip, "
-            "each map's own `params: simulate:`; "
-            f"`PYTHONPATH=.:bench python bench/perception.py`\n\n{table}")  # fmt: skip
+    text = (
+        f"{machine_line()} {args.starts} starts in D per plan, 60° unicycle, default wheel slip, "
+        "each map's own `params: simulate:`; "
+        f"`PYTHONPATH=.:bench python bench/perception.py`\n\n{table}"
+    )
     print(text)
     if args.readme:
         replace_section("Perception", text)

@@ -185,16 +185,31 @@ def whole_process_text(w: dict[str, Any], rounds: int) -> str:
         ["`python -c pass` (bare interpreter)", *timed("python"), "", ""],
     ]
     rows += [
-        [f"stage `{name}` (`elapsed_s` of {filename})", f"{w['stages'][name]:.3f}", "",
-         f"{w['stages_cached'][name]:.3f}", ""]
+        [
+            f"stage `{name}` (`elapsed_s` of {filename})",
+            f"{w['stages'][name]:.3f}",
+            "",
+            f"{w['stages_cached'][name]:.3f}",
+            "",
+        ]
         for name, filename in STAGE_FILES
-    ]  # fmt: skip
+    ]
     rows += [
-        ["all stages (sum of `elapsed_s`, median over runs)", f"{w['stage_sum']:.3f}", "",
-         f"{w['stage_sum_cached']:.3f}", ""],
-        ["rest: whole process − stages (start-up, imports, artifact I/O, hashing)", f"{w['rest']:.3f}", "",
-         f"{w['rest_cached']:.3f}", ""],
-    ]  # fmt: skip
+        [
+            "all stages (sum of `elapsed_s`, median over runs)",
+            f"{w['stage_sum']:.3f}",
+            "",
+            f"{w['stage_sum_cached']:.3f}",
+            "",
+        ],
+        [
+            "rest: whole process − stages (start-up, imports, artifact I/O, hashing)",
+            f"{w['rest']:.3f}",
+            "",
+            f"{w['rest_cached']:.3f}",
+            "",
+        ],
+    ]
     inherited = "inherited environment" + (" (`PYTHONDONTWRITEBYTECODE=1`)" if w["no_bytecode"] else "")
     headers = ["what", f"{inherited}: median s", "min – max s", "byte-code cached: median s", "min – max s"]
 
@@ -277,8 +292,14 @@ def example_maps() -> list[Prepared]:
     for path in EXAMPLE_MAPS:
         simplified = prepare(path)
         kind = "occupancy grid" if "occupancy" in read_map_source(path).spec else "polygons"
-        out.append(Prepared(path.stem, f"`maps/{path.name}` ({kind})", simplified,
-                            pipeline.resolve_params("decompose", simplified.map.params)))  # fmt: skip
+        out.append(
+            Prepared(
+                path.stem,
+                f"`maps/{path.name}` ({kind})",
+                simplified,
+                pipeline.resolve_params("decompose", simplified.map.params),
+            )
+        )
     return out
 
 
@@ -291,8 +312,7 @@ def random_map(folder: Path, seed: int, kind: str, external: Path | None) -> tup
     return path, f"`{external.name} {seed} --kind {kind}`"
 
 
-def random_maps(folder: Path, kinds: tuple[str, ...],
-                external: Path | None = None) -> tuple[list[Prepared], list[str]]:  # fmt: skip
+def random_maps(folder: Path, kinds: tuple[str, ...], external: Path | None = None) -> tuple[list[Prepared], list[str]]:
     """The first seed of each kind whose map plans to a simplified tree, and the skipped ones (with why)."""
     out, skipped = [], []
     for kind in kinds:
@@ -304,8 +324,14 @@ def random_maps(folder: Path, kinds: tuple[str, ...],
                 skipped.append(f"{shown} ({type(exc).__name__}: {exc})")
                 log(f"  skipped {kind} seed {seed}: {exc}")
                 continue
-            out.append(Prepared(f"random {kind} {seed}", shown, simplified,
-                                pipeline.resolve_params("decompose", simplified.map.params)))  # fmt: skip
+            out.append(
+                Prepared(
+                    f"random {kind} {seed}",
+                    shown,
+                    simplified,
+                    pipeline.resolve_params("decompose", simplified.map.params),
+                )
+            )
             break
         else:
             skipped.append(f"no seed of kind {kind} among {RANDOM_SEEDS[kind]} planned")
@@ -347,28 +373,37 @@ def pct(value: float | None) -> str:
     return "—" if value is None else f"{100 * value:.1f}%"
 
 
-def decompose_text(maps: list[Prepared], skipped: list[str], rounds: int, target: float, limit: int,
-                   generator: str, kinds: tuple[str, ...]) -> str:  # fmt: skip
+def decompose_text(
+    maps: list[Prepared],
+    skipped: list[str],
+    rounds: int,
+    target: float,
+    limit: int,
+    generator: str,
+    kinds: tuple[str, ...],
+) -> str:
     rows, short, ratios = [], [], []
     for m in maps:
         log(f"decompose: {m.label} ({len(m.simplified.nodes)} nodes) × {rounds} rounds …")
         d = compare_decompose(m, rounds)
         bare, dense, paper = d["bare"], d["dense"], d["paper"]
-        rows.append([
-            m.source,
-            f"{len(m.simplified.nodes)}",
-            f"{bare['s']:.3f}",
-            f"{bare['cells']}",
-            pct(bare["after"]),
-            f"{dense['s']:.3f}",
-            f"{dense['cells']}",
-            f"{pct(dense['before'])} → {pct(dense['after'])}",
-            f"{dense['added']}",
-            f"{dense['s'] / bare['s']:.2f}",
-            f"{paper['s']:.3f}",
-            f"{paper['cells']}",
-            f"{paper['s'] / dense['s']:.2f}",
-        ])  # fmt: skip
+        rows.append(
+            [
+                m.source,
+                f"{len(m.simplified.nodes)}",
+                f"{bare['s']:.3f}",
+                f"{bare['cells']}",
+                pct(bare["after"]),
+                f"{dense['s']:.3f}",
+                f"{dense['cells']}",
+                f"{pct(dense['before'])} → {pct(dense['after'])}",
+                f"{dense['added']}",
+                f"{dense['s'] / bare['s']:.2f}",
+                f"{paper['s']:.3f}",
+                f"{paper['cells']}",
+                f"{paper['s'] / dense['s']:.2f}",
+            ]
+        )
         ratios.append(dense["s"] / bare["s"])
         if dense["after"] is not None and dense["after"] < target:
             short.append(f"{m.source} ({pct(dense['after'])} after {dense['added']} added nodes)")
@@ -423,11 +458,13 @@ def decompose_text(maps: list[Prepared], skipped: list[str], rounds: int, target
 def main(argv: list[str] | None = None) -> None:
     """Run the benchmark, print the section and, with ``--readme``, record it."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--quick", action="store_true",
-                        help="smoke test: 3 plan runs, 1 decompose round, kitchen and one clutter map")  # fmt: skip
+    parser.add_argument(
+        "--quick", action="store_true", help="smoke test: 3 plan runs, 1 decompose round, kitchen and one clutter map"
+    )
     parser.add_argument("--readme", action="store_true", help=f"replace the '{SECTION}' section of {README}")
-    parser.add_argument("--external", type=Path, metavar="PATH",
-                        help="random maps from this script (PATH SEED --kind KIND -o FILE)")  # fmt: skip
+    parser.add_argument(
+        "--external", type=Path, metavar="PATH", help="random maps from this script (PATH SEED --kind KIND -o FILE)"
+    )
     args = parser.parse_args(argv)
     plan_rounds = 3 if args.quick else PLAN_ROUNDS
     dec_rounds = 1 if args.quick else DECOMPOSE_ROUNDS
@@ -444,8 +481,9 @@ def main(argv: list[str] | None = None) -> None:
         extra, skipped = random_maps(Path(tmp), kinds, args.external)
         generator = f"`{args.external.name}`" if args.external else "`tests/mapgen.py`"
         defaults = decompose.Params()
-        dec = decompose_text(maps + extra, skipped, dec_rounds, defaults.coverage_target, defaults.max_added_nodes,
-                             generator, kinds)  # fmt: skip
+        dec = decompose_text(
+            maps + extra, skipped, dec_rounds, defaults.coverage_target, defaults.max_added_nodes, generator, kinds
+        )
     load_after = load_snapshot()
 
     command = f"`bench/plan.py{' --quick' if args.quick else ''}`"
@@ -458,8 +496,14 @@ def main(argv: list[str] | None = None) -> None:
         "same run. (2) decompose "
         "time and cell count against the coverage of F_m, before and after densification (ALGORITHMS §11.5)."
     )
-    parts = ["## Plan", intro, machine_line(("numpy", "shapely", "highspy")), load_line(load_before, load_after),
-             whole_process_text(w, plan_rounds), dec]  # fmt: skip
+    parts = [
+        "## Plan",
+        intro,
+        machine_line(("numpy", "shapely", "highspy")),
+        load_line(load_before, load_after),
+        whole_process_text(w, plan_rounds),
+        dec,
+    ]
     body = "\n\n".join(parts)
     print(body)
     if args.readme:

@@ -85,8 +85,9 @@ def rollout_per_robot(plan: Plan, starts: np.ndarray, params: simulate.Params) -
     return np.concatenate([r.outcome for r in runs]), np.concatenate([r.steps for r in runs])
 
 
-def compare(plan: Plan, starts: np.ndarray, params: simulate.Params, n_loop: int,
-            rounds: int) -> tuple[dict[str, float], dict]:  # fmt: skip
+def compare(
+    plan: Plan, starts: np.ndarray, params: simulate.Params, n_loop: int, rounds: int
+) -> tuple[dict[str, float], dict]:
     """Median seconds of the three variants (the per-robot ones on ``starts[:n_loop]``), and their results."""
     clock = time.perf_counter
     subset = starts[:n_loop]
@@ -123,8 +124,12 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--readme", action="store_true", help=f"replace the '{SECTION}' section of {README}")
     parser.add_argument("--robots", type=int, default=None, help=f"random starts (default {ROBOTS}; 100 quick)")
     parser.add_argument("--rounds", type=int, default=None, help=f"rounds (default {ROUNDS}; 1 quick)")
-    parser.add_argument("--loop-robots", type=int, default=None,
-                        help=f"starts run one at a time, scaled to all (default {LOOP_ROBOTS}; 20 quick)")  # fmt: skip
+    parser.add_argument(
+        "--loop-robots",
+        type=int,
+        default=None,
+        help=f"starts run one at a time, scaled to all (default {LOOP_ROBOTS}; 20 quick)",
+    )
     args = parser.parse_args(argv)
     n = args.robots or (100 if args.quick else ROBOTS)
     rounds = args.rounds or (1 if args.quick else ROUNDS)
@@ -149,28 +154,32 @@ def main(argv: list[str] | None = None) -> None:
             same = [
                 bool(np.array_equal(vec.outcome[:n_loop], o) and np.array_equal(vec.steps[:n_loop], s))
                 for o, s in (res["loop"], res["per_call"])
-            ]  # fmt: skip
+            ]
             identical = "yes" if all(same) else f"NO (loop {same[0]}, rollout per robot {same[1]})"
             checks.append((label, all(same)))
         else:
             identical = "n/a (noise or slip)"
         share = vec.steps[:n_loop].sum() / max(1, vec.steps.sum())
-        rows.append([
-            label,
-            f"{n:,}",
-            outcomes,
-            f"{int(vec.steps.max()):,}",
-            f"{int(vec.steps.sum()):,}",
-            f"{t['vectorised']:.2f}",
-            f"{loop_s:.1f}",
-            f"{call_s:.1f}",
-            f"{ratio:.1f}",
-            f"{call_ratio:.1f}",
-            f"{share * n / n_loop:.2f}",
-            identical,
-        ])  # fmt: skip
-        log(f"  vectorised {t['vectorised']:.2f} s, per-robot loop {loop_s:.1f} s (×{ratio:.1f}), "
-            f"rollout per robot {call_s:.1f} s (×{call_ratio:.1f}), identical: {identical}")  # fmt: skip
+        rows.append(
+            [
+                label,
+                f"{n:,}",
+                outcomes,
+                f"{int(vec.steps.max()):,}",
+                f"{int(vec.steps.sum()):,}",
+                f"{t['vectorised']:.2f}",
+                f"{loop_s:.1f}",
+                f"{call_s:.1f}",
+                f"{ratio:.1f}",
+                f"{call_ratio:.1f}",
+                f"{share * n / n_loop:.2f}",
+                identical,
+            ]
+        )
+        log(
+            f"  vectorised {t['vectorised']:.2f} s, per-robot loop {loop_s:.1f} s (×{ratio:.1f}), "
+            f"rollout per robot {call_s:.1f} s (×{call_ratio:.1f}), identical: {identical}"
+        )
         if not overrides:
             if n >= BUDGET_ROBOTS:
                 met = "met" if t["vectorised"] < BUDGET_S else "NOT met"
@@ -183,10 +192,20 @@ def main(argv: list[str] | None = None) -> None:
                 f"{ratio:.1f}×; calling `rollout` once per robot takes {call_s:.1f} s ({call_ratio:.1f}×)."
             )
 
-    headers = ["configuration", "robots", "outcomes (vectorised)", "lock-step iterations", "robot-steps",
-               "vectorised median s", "per-robot loop median s (scaled)", "rollout per robot median s (scaled)",
-               "speed-up (loop / vectorised)", "speed-up (rollout per robot / vectorised)",
-               "subset step share × scale", "same outcomes and steps"]  # fmt: skip
+    headers = [
+        "configuration",
+        "robots",
+        "outcomes (vectorised)",
+        "lock-step iterations",
+        "robot-steps",
+        "vectorised median s",
+        "per-robot loop median s (scaled)",
+        "rollout per robot median s (scaled)",
+        "speed-up (loop / vectorised)",
+        "speed-up (rollout per robot / vectorised)",
+        "subset step share × scale",
+        "same outcomes and steps",
+    ]
     command = f"`bench/simulate.py{' --quick' if args.quick else ''}`"
     text = (
         f"{command}: the plan of `maps/kitchen.yaml`, built in-process by map → rrtstar → simplify → decompose → "

@@ -67,8 +67,10 @@ def priority_note() -> str:
     niceness = os.getpriority(os.PRIO_PROCESS, 0)
     if niceness >= 0:
         return ""
-    return (f" The benchmark and its sweeps ran at niceness {niceness}, so the other work on the machine "
-            "ran on what the sweep left idle (the second core during `--jobs 1`).")  # fmt: skip
+    return (
+        f" The benchmark and its sweeps ran at niceness {niceness}, so the other work on the machine "
+        "ran on what the sweep left idle (the second core during `--jobs 1`)."
+    )
 
 
 def main() -> None:
@@ -99,8 +101,11 @@ def main() -> None:
     ):
         sweep_yaml = Path(tmp) / "robustness.yaml"
         sweep_yaml.write_text(yaml.safe_dump(spec, sort_keys=False))
-        configs = {"--jobs 1": ["--jobs", "1"], "--jobs 2": ["--jobs", "2"],
-                   "LocalCluster, 2 workers": ["--scheduler", cluster.scheduler_address]}  # fmt: skip
+        configs = {
+            "--jobs 1": ["--jobs", "1"],
+            "--jobs 2": ["--jobs", "2"],
+            "LocalCluster, 2 workers": ["--scheduler", cluster.scheduler_address],
+        }
         names = list(configs)
         for r in range(args.rounds):
             for name in names[r % len(names) :] + names[: r % len(names)]:
@@ -120,22 +125,25 @@ def main() -> None:
     sample = tables["--jobs 1"]
     failed = sum(1 for row in sample if row["status"] != "done")
     two = one / statistics.median(times["--jobs 2"])
-    body = "\n\n".join([
-        "## Sweep",
-        f"`bench/sweep.py`: `bearnav sweep` of `repro/robustness.yaml` (the robustness figure of `make reproduce`), "
-        f"{grid}: {n_jobs} jobs of {spec['starts'].split(':')[1]} random starts on {len(spec['maps'])} maps, both tag "
-        f"sets, dynamics {', '.join(spec['dynamics'])}. Each configuration is the whole command in a subprocess "
-        "into an empty store (its 8 plans included, interpreter start-up included), by wall clock: `--jobs 1`, "
-        "`--jobs 2`, and `--scheduler` on a `distributed.LocalCluster` of 2 single-threaded worker processes "
-        "started beforehand (its start-up not timed). "
-        f"Medians over {args.rounds} round(s), the order rotating. Speed-up = time of `--jobs 1` / time.",
-        machine_line(("numpy", "shapely", "distributed")),
-        load_line(before, after) + priority_note(),
-        markdown_table(["configuration", "wall s", "speed-up"], rows),
-        f"The three tables are {'identical' if same else 'NOT identical'} (every column but the times; "
-        f"{failed} failed jobs). Speed-up with 2 processes: {two:.2f}× (target ≥ {TARGET}× on 2 cores: "
-        f"{'met' if two >= TARGET else 'NOT met'}).",
-    ])  # fmt: skip
+    body = "\n\n".join(
+        [
+            "## Sweep",
+            "`bench/sweep.py`: `bearnav sweep` of `repro/robustness.yaml` (the robustness figure of "
+            f"`make reproduce`), {grid}: {n_jobs} jobs of {spec['starts'].split(':')[1]} random starts on "
+            f"{len(spec['maps'])} maps, both tag sets, dynamics {', '.join(spec['dynamics'])}. Each configuration "
+            "is the whole command in a subprocess "
+            "into an empty store (its 8 plans included, interpreter start-up included), by wall clock: `--jobs 1`, "
+            "`--jobs 2`, and `--scheduler` on a `distributed.LocalCluster` of 2 single-threaded worker processes "
+            "started beforehand (its start-up not timed). "
+            f"Medians over {args.rounds} round(s), the order rotating. Speed-up = time of `--jobs 1` / time.",
+            machine_line(("numpy", "shapely", "distributed")),
+            load_line(before, after) + priority_note(),
+            markdown_table(["configuration", "wall s", "speed-up"], rows),
+            f"The three tables are {'identical' if same else 'NOT identical'} (every column but the times; "
+            f"{failed} failed jobs). Speed-up with 2 processes: {two:.2f}× (target ≥ {TARGET}× on 2 cores: "
+            f"{'met' if two >= TARGET else 'NOT met'}).",
+        ]
+    )
     print(body)
     print(env_note, file=sys.stderr)
     if args.readme:

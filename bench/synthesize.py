@@ -91,24 +91,42 @@ def edge_problems(cells: Cells) -> list[cell_lp.CellProblem]:
         A, b = cells.rows(c)
         n, q = cells.barrier(c)
         used = cells.cell_landmarks[c]
-        problems.append(cell_lp.CellProblem(cells.vertices(c), A, b, cells.exit_dir[c], cells.exit_point[c], n, q,
-                                               cells.map.landmarks[used]))  # fmt: skip
+        problems.append(
+            cell_lp.CellProblem(
+                cells.vertices(c), A, b, cells.exit_dir[c], cells.exit_point[c], n, q, cells.map.landmarks[used]
+            )
+        )
     return problems
 
 
 def highs_lp(arrays: tuple[np.ndarray, ...]) -> highspy.HighsLp:
     """A ``HighsLp`` from the arguments of :meth:`LpSolver.solve`."""
     cost, indptr, indices, values, row_lower, row_upper, col_lower, col_upper = arrays
-    return lp_module.highs_lp(len(cost), len(row_lower), cost, indptr, indices, values, row_lower, row_upper,
-                              col_lower, col_upper)  # fmt: skip
+    return lp_module.highs_lp(
+        len(cost), len(row_lower), cost, indptr, indices, values, row_lower, row_upper, col_lower, col_upper
+    )
 
 
 def raw_args(arrays: tuple[np.ndarray, ...]) -> tuple:
     """Arguments of the array form of ``Highs.passModel`` (what ``LpSolver`` calls)."""
     cost, indptr, indices, values, row_lower, row_upper, col_lower, col_upper = arrays
-    return (len(cost), len(row_lower), len(values), int(highspy.MatrixFormat.kRowwise), int(highspy.ObjSense.kMinimize),
-            0.0, cost, col_lower, col_upper, row_lower, row_upper, indptr.astype(np.int32), indices.astype(np.int32),
-            values, np.zeros(len(cost), np.int32))  # fmt: skip
+    return (
+        len(cost),
+        len(row_lower),
+        len(values),
+        int(highspy.MatrixFormat.kRowwise),
+        int(highspy.ObjSense.kMinimize),
+        0.0,
+        cost,
+        col_lower,
+        col_upper,
+        row_lower,
+        row_upper,
+        indptr.astype(np.int32),
+        indices.astype(np.int32),
+        values,
+        np.zeros(len(cost), np.int32),
+    )
 
 
 def bare_highs() -> highspy.Highs:
@@ -169,8 +187,12 @@ def compare(cells: Cells, params: synthesize.Params, rounds: int, also: synthesi
             highs.passModel(lp)
             highs.run()
 
-    variants = [("stage", stage), ("solve_cell", per_cell(ours)), ("arrays", per_cell(arrays)),
-                ("highs_lp", per_cell(bare))]  # fmt: skip
+    variants = [
+        ("stage", stage),
+        ("solve_cell", per_cell(ours)),
+        ("arrays", per_cell(arrays)),
+        ("highs_lp", per_cell(bare)),
+    ]
     if also is not None:
         variants.append(("stage_also", stage_also))
     times = {name: np.zeros((rounds, len(problems))) for name, _ in variants}
@@ -216,22 +238,26 @@ def main(argv: list[str] | None = None) -> None:
         also = dataclasses.replace(params, tolerant=False) if default and cells.is_funnel else None
         t = compare(cells, params, rounds, also)
         if int(t["lps"].sum()) != plan.stats["lp_solves"]:
-            mismatches.append(f"{structure} / {form}: solve_cell solved {int(t['lps'].sum())} LPs, the stage "
-                              f"{plan.stats['lp_solves']}")  # fmt: skip
+            mismatches.append(
+                f"{structure} / {form}: solve_cell solved {int(t['lps'].sum())} LPs, the stage "
+                f"{plan.stats['lp_solves']}"
+            )
         stage_ms = 1e3 * t["stage"] / cells.n_cells
         ours_ms, arrays_ms, lp_ms = 1e3 * t["solve_cell"], 1e3 * t["arrays"], 1e3 * t["highs_lp"]
-        rows.append([
-            f"{structure} / {form}" + (" (default)" if (structure, form) == CONFIGS[0] else ""),
-            f"{t['lps'].sum() / n_edge:.2f}",
-            f"{stage_ms:.3f}",
-            f"{ours_ms.mean():.3f}",
-            f"{np.median(ours_ms):.3f}",
-            f"{arrays_ms.mean():.3f}",
-            f"{lp_ms.mean():.3f}",
-            f"{t['stage'] / (t['arrays'].sum()):.2f}",
-            f"{ours_ms.sum() / arrays_ms.sum():.2f}",
-            f"{ours_ms.sum() / lp_ms.sum():.2f}",
-        ])  # fmt: skip
+        rows.append(
+            [
+                f"{structure} / {form}" + (" (default)" if (structure, form) == CONFIGS[0] else ""),
+                f"{t['lps'].sum() / n_edge:.2f}",
+                f"{stage_ms:.3f}",
+                f"{ours_ms.mean():.3f}",
+                f"{np.median(ours_ms):.3f}",
+                f"{arrays_ms.mean():.3f}",
+                f"{lp_ms.mean():.3f}",
+                f"{t['stage'] / (t['arrays'].sum()):.2f}",
+                f"{ours_ms.sum() / arrays_ms.sum():.2f}",
+                f"{ours_ms.sum() / lp_ms.sum():.2f}",
+            ]
+        )
         if (structure, form) == CONFIGS[0]:
             ratio = t["stage"] / t["arrays"].sum()
             verdict = (
@@ -242,9 +268,12 @@ def main(argv: list[str] | None = None) -> None:
                 f"{1e3 * t['arrays'].mean():.2f} ms, so the ratio budget leaves "
                 f"{1e3 * t['arrays'].mean() * (BUDGET_RATIO - 1):.2f} ms per cell for everything Python does: "
                 "building the LP, the gain of Lemma 3 and the vertex re-check"
-                + (", the choice of the more tolerant field and the tolerances δ_c (stage only)."
-                   if cells.is_funnel else ".")
-            )  # fmt: skip
+                + (
+                    ", the choice of the more tolerant field and the tolerances δ_c (stage only)."
+                    if cells.is_funnel
+                    else "."
+                )
+            )
             if also is not None:
                 also_ratio = t["stage_also"] / t["arrays"].sum()
                 verdict += (
@@ -254,9 +283,18 @@ def main(argv: list[str] | None = None) -> None:
                     f"{1e3 * (t['stage'] - t['stage_also']) / cells.n_cells:.3f} ms per cell."
                 )
 
-    headers = ["gain / LP form", "LPs per edge cell", "stage ms/cell", "solve_cell mean ms", "solve_cell median ms",
-               "bare arrays mean ms", "bare HighsLp mean ms", "stage / bare arrays", "solve_cell / bare arrays",
-               "solve_cell / bare HighsLp"]  # fmt: skip
+    headers = [
+        "gain / LP form",
+        "LPs per edge cell",
+        "stage ms/cell",
+        "solve_cell mean ms",
+        "solve_cell median ms",
+        "bare arrays mean ms",
+        "bare HighsLp mean ms",
+        "stage / bare arrays",
+        "solve_cell / bare arrays",
+        "solve_cell / bare HighsLp",
+    ]
     command = f"`bench/synthesize.py{' --quick' if args.quick else ''}`"
     if cells.is_funnel:
         how = (
@@ -274,14 +312,21 @@ def main(argv: list[str] | None = None) -> None:
         "recovery, vertex re-check). *bare arrays*: `Highs.passModel` with the pre-built numpy arrays (the array "
         "form `LpSolver` uses) + `run`; *bare HighsLp*: `passModel` of pre-built `HighsLp` objects + `run`; both "
         "on exactly the LPs `solve_cell` solved (recorded by a wrapping `LpSolver`), per edge cell. "
-        + ("The number of recorded LPs equals the stage's `stats['lp_solves']` in every configuration. "
-           if not mismatches else "The recorded LPs do NOT match the stage's `lp_solves`: " + "; ".join(mismatches)
-           + ". ")
+        + (
+            "The number of recorded LPs equals the stage's `stats['lp_solves']` in every configuration. "
+            if not mismatches
+            else "The recorded LPs do NOT match the stage's `lp_solves`: " + "; ".join(mismatches) + ". "
+        )
         + "Ratios are of total times. One pass over the cells per variant and round, the order rotating; medians "
         f"over {rounds} rounds. Budget: under {BUDGET_MS:g} ms per cell and at most {BUDGET_RATIO:g}× bare HiGHS."
-    )  # fmt: skip
-    parts = ["## Synthesis", text, machine_line(("numpy", "highspy")), load_line(load_before, load_snapshot()),
-             markdown_table(headers, rows)]  # fmt: skip
+    )
+    parts = [
+        "## Synthesis",
+        text,
+        machine_line(("numpy", "highspy")),
+        load_line(load_before, load_snapshot()),
+        markdown_table(headers, rows),
+    ]
     body = "\n\n".join(parts + ([verdict] if verdict else []))
     print(body)
     if args.readme:

@@ -60,9 +60,15 @@ def measure(source: MapSource, seed: int, cover: str) -> dict:
 
     seconds, plan = timed(plan_it)
     cells = plan.cells
-    return {"least": plan.plan_tolerance, "median": tolerance_by_area(cells, plan.usable_tolerance)["median"],
-            "F": cells.free_coverage, "F_m": cells.stats["free_coverage_m"], "cells": cells.n_cells,
-            "bad": int(np.isin(plan.status, [2, 3]).sum()), "s": seconds}  # fmt: skip
+    return {
+        "least": plan.plan_tolerance,
+        "median": tolerance_by_area(cells, plan.usable_tolerance)["median"],
+        "F": cells.free_coverage,
+        "F_m": cells.stats["free_coverage_m"],
+        "cells": cells.n_cells,
+        "bad": int(np.isin(plan.status, [2, 3]).sum()),
+        "s": seconds,
+    }
 
 
 def row(name: str, cover: str, runs: list[dict], seeds: list[int]) -> list[str]:
@@ -79,10 +85,20 @@ def row(name: str, cover: str, runs: list[dict], seeds: list[int]) -> list[str]:
     else:
         before_least, least_ratio, median_ratio = "—", "—", "—"
         medians = f"— → {1e2 * statistics.median(median):.2f}"
-    return [name, cover, before_least, ", ".join(f"{1e3 * v:.1f}" for v in least), least_ratio, medians, median_ratio,
-            f"{100 * min(r['F'] for r in runs):.1f}–{100 * max(r['F'] for r in runs):.1f}%",
-            f"{100 * min(r['F_m'] for r in runs):.1f}%", f"{statistics.median(r['cells'] for r in runs):.0f}",
-            str(sum(r["bad"] for r in runs)), f"{statistics.median(r['s'] for r in runs):.2f} s"]  # fmt: skip
+    return [
+        name,
+        cover,
+        before_least,
+        ", ".join(f"{1e3 * v:.1f}" for v in least),
+        least_ratio,
+        medians,
+        median_ratio,
+        f"{100 * min(r['F'] for r in runs):.1f}–{100 * max(r['F'] for r in runs):.1f}%",
+        f"{100 * min(r['F_m'] for r in runs):.1f}%",
+        f"{statistics.median(r['cells'] for r in runs):.0f}",
+        str(sum(r["bad"] for r in runs)),
+        f"{statistics.median(r['s'] for r in runs):.2f} s",
+    ]
 
 
 def main() -> None:
@@ -98,12 +114,24 @@ def main() -> None:
         for cover in args.cover.split(","):
             rows.append(row(name, cover, [measure(source, s, cover) for s in seeds], seeds))
             print(" | ".join(rows[-1]), flush=True)
-    headers = ["map", "cover", "δ* before, per seed (mm)", "least τ_c after, per seed (mm)", "least / δ* (worst seed)",
-               "median τ_c by area, before → after (cm)", "ratio (worst seed)", "F covered", "F_m covered",
-               "cells (median)", "not certified", "plan in memory (median)"]  # fmt: skip
-    body = (f"`bench/tolerance.py`, rrtstar seeds {args.seeds}; made maps `made_maps.py` seed {MADE_SEED}; "
-            f"medians by cell area, then over the seeds. {machine_line()}\n\n"
-            + markdown_table(headers, rows))  # fmt: skip
+    headers = [
+        "map",
+        "cover",
+        "δ* before, per seed (mm)",
+        "least τ_c after, per seed (mm)",
+        "least / δ* (worst seed)",
+        "median τ_c by area, before → after (cm)",
+        "ratio (worst seed)",
+        "F covered",
+        "F_m covered",
+        "cells (median)",
+        "not certified",
+        "plan in memory (median)",
+    ]
+    body = (
+        f"`bench/tolerance.py`, rrtstar seeds {args.seeds}; made maps `made_maps.py` seed {MADE_SEED}; "
+        f"medians by cell area, then over the seeds. {machine_line()}\n\n" + markdown_table(headers, rows)
+    )
     print(body)
     if args.readme:
         replace_section(SECTION, body)

@@ -30,8 +30,14 @@ BORDER_COLOR = "#9467bd"
 def legend_below(ax: plt.Axes, handles: list | None = None) -> None:
     """A compact legend under ``ax`` (the map itself stays unobstructed)."""
     found, _ = ax.get_legend_handles_labels()
-    ax.legend(handles=found + (handles or []), loc="upper center", bbox_to_anchor=(0.5, -0.04), ncol=4,
-              fontsize=7, frameon=False)  # fmt: skip
+    ax.legend(
+        handles=found + (handles or []),
+        loc="upper center",
+        bbox_to_anchor=(0.5, -0.04),
+        ncol=4,
+        fontsize=7,
+        frameon=False,
+    )
 
 
 def panel_samples(ax: plt.Axes, tree) -> None:
@@ -47,9 +53,14 @@ def panel_samples(ax: plt.Axes, tree) -> None:
 
 def main() -> None:
     """Draw the four panels and write the numbers."""
-    args = arguments(__doc__.splitlines()[0], [
-        ("tree", "tree.npz (RRT*)"), ("simplified", "simplified.npz"), ("plan", "plan.npz"),
-    ])  # fmt: skip
+    args = arguments(
+        __doc__.splitlines()[0],
+        [
+            ("tree", "tree.npz (RRT*)"),
+            ("simplified", "simplified.npz"),
+            ("plan", "plan.npz"),
+        ],
+    )
     tree, tree_src = load(args.tree, "tree")
     simplified, simplified_src = load(args.simplified, "simplified")
     plan, plan_src = load(args.plan, "plan")
@@ -68,8 +79,10 @@ def main() -> None:
 
     panel_samples(b, tree)
     n_random = int(tree.stats.get("random_collision_samples", len(tree.collision_samples)))
-    b.set_title(f"(b) RRT*: {len(tree.nodes)} nodes, {n_random} collision samples "
-                f"(+{len(tree.collision_samples) - n_random} on the border)")  # fmt: skip
+    b.set_title(
+        f"(b) RRT*: {len(tree.nodes)} nodes, {n_random} collision samples "
+        f"(+{len(tree.collision_samples) - n_random} on the border)"
+    )
 
     plot.plot_map(c, map_, landmarks=False, starts=False)
     plot.plot_tree(c, tree, color="#9ecae1", lw=0.5, alpha=0.8, label="RRT* tree")
@@ -79,8 +92,7 @@ def main() -> None:
     plot.plot_map(d, map_, landmarks=True)
     plot.plot_tree(d, plan.cells, color="#9ecae1", lw=0.6, alpha=0.7, label="simplified tree")
     draw_runs(d, runs)
-    d.set_title(f"(d) {runs.counts()['success']}/{len(runs)} starts reach the goal "
-                "(single integrator, bearings, 360°)")  # fmt: skip
+    d.set_title(f"(d) {runs.counts()['success']}/{len(runs)} starts reach the goal (single integrator, bearings, 360°)")
 
     legend_below(
         a,
@@ -98,21 +110,31 @@ def main() -> None:
     fig.tight_layout()
     plot.save_figure(fig, str(args.out))
 
-    write_json(args.out.with_suffix(".json"), {
-        "figure": str(args.out),
-        "map": map_.name,
-        "inputs": {"tree": tree_src, "simplified": simplified_src, "plan": plan_src},
-        "configuration_space": {"raw_obstacles": len(map_.raw_obstacles), "obstacles": len(map_.obstacles),
-                                "robot_radius": float(map_.robot_radius),
-                                "landmarks": len(map_.landmarks), "starts": len(map_.starts)},
-        "rrtstar": {"nodes": len(tree.nodes), "collision_samples": len(tree.collision_samples),
-                    "random_collision_samples": n_random,
-                    "border_samples": len(tree.collision_samples) - n_random,
-                    "iterations": tree.stats.get("iterations")},
-        "simplified": {"nodes": len(simplified.nodes), "rounds": simplified.stats.get("rounds")},
-        "plan": {"cells": plan.cells.n_cells, "status_counts": plan.stats.get("status_counts")},
-        "trajectories": experiment(runs, params),
-    })  # fmt: skip
+    write_json(
+        args.out.with_suffix(".json"),
+        {
+            "figure": str(args.out),
+            "map": map_.name,
+            "inputs": {"tree": tree_src, "simplified": simplified_src, "plan": plan_src},
+            "configuration_space": {
+                "raw_obstacles": len(map_.raw_obstacles),
+                "obstacles": len(map_.obstacles),
+                "robot_radius": float(map_.robot_radius),
+                "landmarks": len(map_.landmarks),
+                "starts": len(map_.starts),
+            },
+            "rrtstar": {
+                "nodes": len(tree.nodes),
+                "collision_samples": len(tree.collision_samples),
+                "random_collision_samples": n_random,
+                "border_samples": len(tree.collision_samples) - n_random,
+                "iterations": tree.stats.get("iterations"),
+            },
+            "simplified": {"nodes": len(simplified.nodes), "rounds": simplified.stats.get("rounds")},
+            "plan": {"cells": plan.cells.n_cells, "status_counts": plan.stats.get("status_counts")},
+            "trajectories": experiment(runs, params),
+        },
+    )
     print(f"wrote {args.out} and {args.out.with_suffix('.json')}: {simulate.summary(runs)}")
 
 

@@ -34,8 +34,11 @@ def main() -> None:
     fig, ax = plt.subplots(figsize=(9.0, 8.0 * (ymax - ymin) / (xmax - xmin) + 0.8))
     plot.plot_map(ax, plan.map)
     plot.plot_estimate_trace(ax, trace, scale=SCALE)
-    ax.set_title(f"{plan.map.name}: one run's estimate sets ({FOV_DEG:g}° camera, bearing errors within "
-                 f"{ETA_DEG:g}°, {len(trace.error)} of them)", fontsize=10)  # fmt: skip
+    ax.set_title(
+        f"{plan.map.name}: one run's estimate sets ({FOV_DEG:g}° camera, bearing errors within "
+        f"{ETA_DEG:g}°, {len(trace.error)} of them)",
+        fontsize=10,
+    )
     ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.04), ncol=3, fontsize=7, frameon=False)
     fig.tight_layout()
     plot.save_figure(fig, str(args.out))

@@ -39,8 +39,9 @@ def draw_cones(ax: plt.Axes, runs: Simulation, fov: float, radius: float) -> Non
         heading = runs.trajectory_heading[offsets[r] : offsets[r + 1]]
         for k in np.linspace(0, len(path) - 1, CONES + 2)[1:-1].astype(int):
             yaw = math.degrees(heading[k])
-            ax.add_patch(Wedge(tuple(path[k]), radius, yaw - fov / 2, yaw + fov / 2, color="#1f77b4", alpha=0.18,
-                               lw=0, zorder=3))  # fmt: skip
+            ax.add_patch(
+                Wedge(tuple(path[k]), radius, yaw - fov / 2, yaw + fov / 2, color="#1f77b4", alpha=0.18, lw=0, zorder=3)
+            )
 
 
 def main() -> None:
@@ -57,21 +58,36 @@ def main() -> None:
     plot.plot_tree(ax, plan.cells, color="#9ecae1", lw=0.6, alpha=0.7, label="simplified tree")
     draw_cones(ax, runs, params.fov, 0.05 * map_.diagonal)
     draw_runs(ax, runs)
-    ax.set_title(f"{map_.name}: {runs.counts()['success']}/{len(runs)} starts reach the goal "
-                 f"(unicycle, bearings, {params.fov:g}° field of view)", fontsize=10)  # fmt: skip
+    ax.set_title(
+        f"{map_.name}: {runs.counts()['success']}/{len(runs)} starts reach the goal "
+        f"(unicycle, bearings, {params.fov:g}° field of view)",
+        fontsize=10,
+    )
     found, _ = ax.get_legend_handles_labels()
     cone = Wedge((0, 0), 1, 0, 60, color="#1f77b4", alpha=0.3, label=f"camera view ({params.fov:g}°)")
-    ax.legend(handles=found + outcome_handles(runs) + [cone], loc="upper center", bbox_to_anchor=(0.5, -0.05),
-              ncol=4, fontsize=7, frameon=False)  # fmt: skip
+    ax.legend(
+        handles=found + outcome_handles(runs) + [cone],
+        loc="upper center",
+        bbox_to_anchor=(0.5, -0.05),
+        ncol=4,
+        fontsize=7,
+        frameon=False,
+    )
     fig.tight_layout()
     plot.save_figure(fig, str(args.out))
 
     record = experiment(runs, params)
     for row, held in zip(record["per_run"], runs.hold_steps, strict=True):
         row["time_without_fix_s"] = round(float(held * runs.dt), 6)
-    write_json(args.out.with_suffix(".json"), {
-        "figure": str(args.out), "map": map_.name, "inputs": {"plan": plan_src}, "trajectories": record,
-    })  # fmt: skip
+    write_json(
+        args.out.with_suffix(".json"),
+        {
+            "figure": str(args.out),
+            "map": map_.name,
+            "inputs": {"plan": plan_src},
+            "trajectories": record,
+        },
+    )
     print(f"wrote {args.out} and {args.out.with_suffix('.json')}: {simulate.summary(runs)}")
 
 

@@ -32,16 +32,24 @@ CENTER = (130.0, 110.0)
 
 def style_handles(solid: str, dashed: str) -> list[Line2D]:
     """Legend entries saying what the solid and the dashed paths are."""
-    return [Line2D([], [], color="black", lw=1.1, ls="-", label=solid),
-            Line2D([], [], color="black", lw=1.1, ls="--", label=dashed)]  # fmt: skip
+    return [
+        Line2D([], [], color="black", lw=1.1, ls="-", label=solid),
+        Line2D([], [], color="black", lw=1.1, ls="--", label=dashed),
+    ]
 
 
 def outline(ax: plt.Axes, map_) -> None:
     """The undeformed raw obstacles as dotted outlines (for comparison with the rotated ones)."""
     for k, poly in enumerate(map_.raw_obstacles):
         ring = list(poly.exterior) + [poly.exterior[0]]
-        ax.plot(*zip(*ring, strict=True), color="#4d4d4d", lw=0.8, ls=":", zorder=3,
-                label="undeformed obstacles" if k == 0 else None)  # fmt: skip
+        ax.plot(
+            *zip(*ring, strict=True),
+            color="#4d4d4d",
+            lw=0.8,
+            ls=":",
+            zorder=3,
+            label="undeformed obstacles" if k == 0 else None,
+        )
 
 
 def rate(runs: Simulation) -> str:
@@ -57,13 +65,17 @@ def main() -> None:
 
     single = sim_params(plan, dynamics="single", measurement="bearing", fov=360.0)
     unicycle = sim_params(plan, dynamics="unicycle", measurement="bearing", fov=60.0)
-    original = {"single_bearing": (single, simulate.rollout(plan, starts, single)),
-                "unicycle_bearing_fov60": (unicycle, simulate.rollout(plan, starts, unicycle))}  # fmt: skip
+    original = {
+        "single_bearing": (single, simulate.rollout(plan, starts, single)),
+        "unicycle_bearing_fov60": (unicycle, simulate.rollout(plan, starts, unicycle)),
+    }
 
     world = rotate_map(map_, ANGLE_DEG, CENTER)
     displacement = sim_params(plan, dynamics="single", measurement="displacement", fov=360.0)
-    deformed = {name: (params, simulate.rollout(plan, world.starts, params, world=world))
-                for name, params in (("single_displacement", displacement), ("single_bearing", single))}  # fmt: skip
+    deformed = {
+        name: (params, simulate.rollout(plan, world.starts, params, world=world))
+        for name, params in (("single_displacement", displacement), ("single_bearing", single))
+    }
 
     xmin, ymin, xmax, ymax = map_.bounds
     fig, (left, right) = plt.subplots(1, 2, figsize=(14.0, 7.0 * (ymax - ymin) / (xmax - xmin) + 1.0))
@@ -77,31 +89,41 @@ def main() -> None:
         draw_runs(ax, dashed, linestyle="--")
         found, _ = ax.get_legend_handles_labels()
         handles = found + outcome_handles(solid, dashed) + style_handles(*labels)
-        ax.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.05), ncol=4, fontsize=7,
-                  frameon=False)  # fmt: skip
+        ax.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.05), ncol=4, fontsize=7, frameon=False)
         ax.tick_params(labelsize=7)
     plot.plot_tree(left, plan.cells, color="#9ecae1", lw=0.6, alpha=0.7, label=None)
     outline(right, map_)
     (_, s), (_, u) = original.values()
-    left.set_title(f"(a) {map_.name}, bearings: {rate(s)} reach the goal (single integrator), "
-                   f"{rate(u)} (unicycle, 60°)", fontsize=9)  # fmt: skip
+    left.set_title(
+        f"(a) {map_.name}, bearings: {rate(s)} reach the goal (single integrator), {rate(u)} (unicycle, 60°)",
+        fontsize=9,
+    )
     (_, d), (_, b) = deformed.values()
-    right.set_title(f"(b) rotated {ANGLE_DEG:g}° about {CENTER}, undeformed controllers: "
-                    f"{rate(d)} (displacements), {rate(b)} (bearings)", fontsize=9)  # fmt: skip
+    right.set_title(
+        f"(b) rotated {ANGLE_DEG:g}° about {CENTER}, undeformed controllers: "
+        f"{rate(d)} (displacements), {rate(b)} (bearings)",
+        fontsize=9,
+    )
     fig.tight_layout()
     plot.save_figure(fig, str(args.out))
 
-    write_json(args.out.with_suffix(".json"), {
-        "figure": str(args.out),
-        "map": map_.name,
-        "inputs": {"plan": plan_src},
-        "original": {name: experiment(r, p) for name, (p, r) in original.items()},
-        "deformation": {"rotation_deg": ANGLE_DEG, "center": list(CENTER),
-                        "rotated": ["obstacles", "raw_obstacles", "landmarks", "starts"],
-                        "kept": ["bounds", "goal", "cells", "controllers"],
-                        "starts": world.starts.tolist(),
-                        "runs": {name: experiment(r, p) for name, (p, r) in deformed.items()}},
-    })  # fmt: skip
+    write_json(
+        args.out.with_suffix(".json"),
+        {
+            "figure": str(args.out),
+            "map": map_.name,
+            "inputs": {"plan": plan_src},
+            "original": {name: experiment(r, p) for name, (p, r) in original.items()},
+            "deformation": {
+                "rotation_deg": ANGLE_DEG,
+                "center": list(CENTER),
+                "rotated": ["obstacles", "raw_obstacles", "landmarks", "starts"],
+                "kept": ["bounds", "goal", "cells", "controllers"],
+                "starts": world.starts.tolist(),
+                "runs": {name: experiment(r, p) for name, (p, r) in deformed.items()},
+            },
+        },
+    )
     for name, (_, runs) in {**original, **{f"deformed_{k}": v for k, v in deformed.items()}}.items():
         print(f"{name}: {simulate.summary(runs)}")
     print(f"wrote {args.out} and {args.out.with_suffix('.json')}")

@@ -83,8 +83,12 @@ def random_spec(seed: int, iterations: int = 300, rrt_seed: int = 0) -> dict:
         elif rng.random() < 0.6 and rects:  # on a side of a rectangle
             x0, y0, x1, y1 = rects[int(rng.integers(len(rects)))]
             side, t = int(rng.integers(4)), rng.uniform(0.1, 0.9)
-            p = [[x0 + t * (x1 - x0), y0], [x1, y0 + t * (y1 - y0)], [x0 + t * (x1 - x0), y1],
-                 [x0, y0 + t * (y1 - y0)]][side]  # fmt: skip
+            p = [
+                [x0 + t * (x1 - x0), y0],
+                [x1, y0 + t * (y1 - y0)],
+                [x0 + t * (x1 - x0), y1],
+                [x0, y0 + t * (y1 - y0)],
+            ][side]
         elif discs:  # a vertex of a disc's polygon: exactly on its boundary
             c, r = discs[int(rng.integers(len(discs)))]
             p = circle_polygon(c, r)[int(rng.integers(CIRCLE_SEGMENTS))].tolist()

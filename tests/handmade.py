@@ -56,15 +56,26 @@ def first_cells(cells: Cells, count: int) -> Cells:
     h = cells.cbf_offsets[count]
     return replace(
         cells,
-        cell_node=cells.cell_node[:count], cell_A=cells.cell_A[:r], cell_b=cells.cell_b[:r],
-        cell_row_offsets=cells.cell_row_offsets[: count + 1], cell_vertices=cells.cell_vertices[:r],
-        cell_vertex_offsets=cells.cell_vertex_offsets[: count + 1], exit_point=cells.exit_point[:count],
-        exit_dir=cells.exit_dir[:count], cbf_A=cells.cbf_A[:h], cbf_b=cells.cbf_b[:h],
-        cbf_offsets=cells.cbf_offsets[: count + 1], cell_landmarks=cells.cell_landmarks[:count],
-        fixed_landmark=cells.fixed_landmark[:count], s_min=cells.s_min[:count], s_max=cells.s_max[:count],
-        cell_flags=cells.cell_flags[:count], cell_exit_row=cells.cell_exit_row[:count],
-        cell_rank=cells.cell_rank[:count], exit_inset=cells.exit_inset[:count],
-    )  # fmt: skip
+        cell_node=cells.cell_node[:count],
+        cell_A=cells.cell_A[:r],
+        cell_b=cells.cell_b[:r],
+        cell_row_offsets=cells.cell_row_offsets[: count + 1],
+        cell_vertices=cells.cell_vertices[:r],
+        cell_vertex_offsets=cells.cell_vertex_offsets[: count + 1],
+        exit_point=cells.exit_point[:count],
+        exit_dir=cells.exit_dir[:count],
+        cbf_A=cells.cbf_A[:h],
+        cbf_b=cells.cbf_b[:h],
+        cbf_offsets=cells.cbf_offsets[: count + 1],
+        cell_landmarks=cells.cell_landmarks[:count],
+        fixed_landmark=cells.fixed_landmark[:count],
+        s_min=cells.s_min[:count],
+        s_max=cells.s_max[:count],
+        cell_flags=cells.cell_flags[:count],
+        cell_exit_row=cells.cell_exit_row[:count],
+        cell_rank=cells.cell_rank[:count],
+        exit_inset=cells.exit_inset[:count],
+    )
 
 
 def cell_polygons(nodes: np.ndarray, parent: np.ndarray, bounds: np.ndarray) -> list[np.ndarray]:
@@ -208,6 +219,15 @@ def paper_exit_row(A: np.ndarray, b: np.ndarray, z: np.ndarray, x_j: np.ndarray)
 
 def write_plan(path, plan: Plan):
     """Save ``plan`` as ``plan.npz`` at ``path`` with a manifest and its content hash (what a robot loads)."""
-    manifest = artifacts.make_manifest("plan", plan, stage="synthesize", stage_version=1, params={}, input_path=None,
-                                       input_hash="0", summary="", elapsed_s=0.0)  # fmt: skip
+    manifest = artifacts.make_manifest(
+        "plan",
+        plan,
+        stage="synthesize",
+        stage_version=1,
+        params={},
+        input_path=None,
+        input_hash="0",
+        summary="",
+        elapsed_s=0.0,
+    )
     return artifacts.save(path, plan, manifest)

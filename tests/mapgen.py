@@ -302,8 +302,11 @@ def maze_passages(rng: np.random.Generator, nx: int, ny: int, start: tuple[int, 
     seen[start] = True
     while stack:
         i, j = stack[-1]
-        nbrs = [(i + di, j + dj) for di, dj in ((1, 0), (-1, 0), (0, 1), (0, -1))
-                if 0 <= i + di < nx and 0 <= j + dj < ny and not seen[i + di, j + dj]]  # fmt: skip
+        nbrs = [
+            (i + di, j + dj)
+            for di, dj in ((1, 0), (-1, 0), (0, 1), (0, -1))
+            if 0 <= i + di < nx and 0 <= j + dj < ny and not seen[i + di, j + dj]
+        ]
         if not nbrs:
             stack.pop()
             continue
@@ -410,8 +413,10 @@ def _attempt(rng: np.random.Generator, seed: int, kind: str) -> MadeMap | None:
     # polygon inside its circle here) errs on the side of less free space
     grown = radius * 1.02 + 1e-3
     box = shapely.box(*bounds)
-    free = shapely.difference(shapely.box(bounds[0] + grown, bounds[1] + grown, bounds[2] - grown, bounds[3] - grown),
-                              shapely.buffer(raw, grown))  # fmt: skip
+    free = shapely.difference(
+        shapely.box(bounds[0] + grown, bounds[1] + grown, bounds[2] - grown, bounds[3] - grown),
+        shapely.buffer(raw, grown),
+    )
     parts = sorted(shapely.get_parts(free), key=lambda p: -p.area)
     if not parts or parts[0].area < MIN_COMPONENT_SHARE * box.area:
         return None
@@ -450,8 +455,14 @@ def _points_in(region: shapely.Geometry, rng: np.random.Generator, n: int) -> li
     return None
 
 
-def _tags(box: shapely.Geometry, raw: shapely.Geometry, reach: shapely.Geometry, grown: float,
-          rng: np.random.Generator, most: int) -> list[list[float]]:  # fmt: skip
+def _tags(
+    box: shapely.Geometry,
+    raw: shapely.Geometry,
+    reach: shapely.Geometry,
+    grown: float,
+    rng: np.random.Generator,
+    most: int,
+) -> list[list[float]]:
     """Tags on the walls and faces next to the reachable free space, one every 2–4 units of face, ``most`` at most.
 
     The faces are the boundary of the raw free space (the bounds less the raw obstacles), so a tag lies

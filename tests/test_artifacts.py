@@ -227,8 +227,11 @@ def test_every_artifact_has_the_dtypes_and_shapes_the_schema_declares(small_spec
     from bearnav_cli.runtime import PlanArrays, schema
     from bearnav_cli.stages import map_
 
-    made = pipeline.compute(map_.MapSource(spec=small_spec, file="small.yaml", sha256="0"), through="simulate",
-                            overrides={"simulate": {"record_trajectories": True}})  # fmt: skip
+    made = pipeline.compute(
+        map_.MapSource(spec=small_spec, file="small.yaml", sha256="0"),
+        through="simulate",
+        overrides={"simulate": {"record_trajectories": True}},
+    )
     plan = made["plan"]
     cells = plan.cells
     sizes = {

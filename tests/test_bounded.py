@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 import shapely
 
-from bearnav_cli.runtime import PlanArrays, bounded, least_rank_cell
+from bearnav_cli.runtime import PlanArrays, bounded, least_rank_cell, look_bound
 from bearnav_cli.stages import simulate
 from tests.conftest import random_plan
 
@@ -45,8 +45,14 @@ def test_clip_is_the_intersection_with_the_half_plane(seed):
     for i in range(len(count)):
         unit = a[i] / np.linalg.norm(a[i])
         origin, along, big = unit * b[i] / np.linalg.norm(a[i]), np.array([-unit[1], unit[0]]), 1e3
-        half = shapely.Polygon([origin + along * big, origin - along * big, origin - along * big - unit * big,
-                                origin + along * big - unit * big])  # fmt: skip
+        half = shapely.Polygon(
+            [
+                origin + along * big,
+                origin - along * big,
+                origin - along * big - unit * big,
+                origin + along * big - unit * big,
+            ]
+        )
         expected = polygon(vertices, count, i).intersection(half)
         assert abs(polygon(out, n, i).area - expected.area) <= 1e-9 * max(1.0, expected.area)
         if n[i] >= 3:
@@ -106,7 +112,7 @@ def test_lemma_5_and_the_static_bound(seed):
     vertices, count = bounded.intersect_cones(vertices, count, landmarks, measured, visible, eta, 1e-9)
     assert np.all(count > 0)
     assert bounded.contains(vertices, count, x, 1e-9).all()
-    static = bounded.one_look_bound(x, landmarks, visible, eta, bounds, 1e-9)
+    static = look_bound.one_look_bound(x, landmarks, visible, eta, bounds, 1e-9)
     _, error = bounded.centre(vertices, count)
     assert np.all(error <= static * (1 + 1e-7) + 1e-7)  # both clipped with slack
     # the prediction: moved by the measured displacement and grown by its bound, it holds the truth again
@@ -165,7 +171,7 @@ def test_the_static_bound_holds_at_the_worst_errors_and_is_tighter_than_diam_k(s
     d = landmarks[None] - x[:, None]
     truth = np.arctan2(d[..., 1], d[..., 0])
     bounds = np.array([0.0, 0.0, 10.0, 10.0])
-    static = bounded.one_look_bound(x, landmarks, visible, eta, bounds, 1e-9)
+    static = look_bound.one_look_bound(x, landmarks, visible, eta, bounds, 1e-9)
     for _ in range(4):
         measured = truth + rng.choice([-1.0, 1.0], size=truth.shape) * eta
         vertices, count = bounded.intersect_cones(*bounded.box(bounds, r), landmarks, measured, visible, eta, 1e-9)
@@ -190,11 +196,16 @@ def test_bound_with_one_more_landmark_is_an_upper_bound_on_the_exact_one(seed):
     x = rng.uniform(0.5, 9.5, size=(r, 2))
     visible = rng.random((r, n_lm)) < 0.5
     bounds = np.array([0.0, 0.0, 10.0, 10.0])
-    look = bounded.look_bound(x, landmarks, visible, eta, bounds, 1e-9)
-    cheap = bounded.bound_with(look, x, extra, 1e-9)
-    exact = np.array([bounded.one_look_bound(x[i : i + 1], np.vstack([landmarks, extra[i]]),
-                                             np.append(visible[i], True)[None], eta, bounds, 1e-9)[0]
-                      for i in range(r)])  # fmt: skip
+    look = look_bound.look_bound(x, landmarks, visible, eta, bounds, 1e-9)
+    cheap = look_bound.bound_with(look, x, extra, 1e-9)
+    exact = np.array(
+        [
+            look_bound.one_look_bound(
+                x[i : i + 1], np.vstack([landmarks, extra[i]]), np.append(visible[i], True)[None], eta, bounds, 1e-9
+            )[0]
+            for i in range(r)
+        ]
+    )
     assert np.all(exact <= cheap * (1 + 1e-9) + 1e-12)
     assert np.all(cheap <= look.bound * (1 + 1e-12))
     assert np.mean(cheap < 0.9 * look.bound) > 0.3  # the landmark often helps (where it crosses the others)
@@ -204,8 +215,9 @@ def test_cones_of_inconsistent_bearings_empty_the_set():
     landmarks = np.array([[0.0, 0.0], [10.0, 0.0]])
     vertices, count = bounded.box(np.array([-20.0, -20.0, 20.0, 20.0]), 1)
     # both landmarks seen in the same direction: no point lies in both cones
-    vertices, count = bounded.intersect_cones(vertices, count, landmarks, np.array([[0.0, math.pi]]),
-                                              np.ones((1, 2), bool), math.radians(1.0))  # fmt: skip
+    vertices, count = bounded.intersect_cones(
+        vertices, count, landmarks, np.array([[0.0, math.pi]]), np.ones((1, 2), bool), math.radians(1.0)
+    )
     assert count[0] == 0
     x_hat, error = bounded.centre(vertices, count)
     assert np.isnan(x_hat).all() and np.isinf(error).all()
@@ -220,8 +232,15 @@ def test_the_set_estimator_keeps_the_truth_and_the_certificate(seed, worst, fov)
     and every certified step ends in the certified domain D (Theorem 2, in discrete time)."""
     plan = random_plan(seed)
     arrays = PlanArrays.from_plan(plan)
-    params = simulate.Params(estimator="set", noise_bound_deg=0.25, noise_worst=worst, fov=fov,
-                             starts="domain:12", seed=seed, record_trajectories=False)  # fmt: skip
+    params = simulate.Params(
+        estimator="set",
+        noise_bound_deg=0.25,
+        noise_worst=worst,
+        fov=fov,
+        starts="domain:12",
+        seed=seed,
+        record_trajectories=False,
+    )
     outside = []
 
     def watch(runs, x, certified):
@@ -240,8 +259,9 @@ def test_the_set_estimator_keeps_the_truth_and_the_certificate(seed, worst, fov)
 def test_a_broken_bound_is_counted_not_a_crash():
     """Gaussian noise far beyond the assumed bound: empty sets are counted and the runs end normally."""
     plan = random_plan(1)
-    params = simulate.Params(estimator="set", noise_deg=3.0, bearing_error_deg=0.05, starts="domain:6",
-                             record_trajectories=False)  # fmt: skip
+    params = simulate.Params(
+        estimator="set", noise_deg=3.0, bearing_error_deg=0.05, starts="domain:6", record_trajectories=False
+    )
     sim = simulate.run(plan, params)
     assert sim.stats["inconsistencies"] > 0
     assert sim.stats["containment_violations"] >= 0
@@ -271,8 +291,16 @@ def test_the_look_ahead_unicycle_under_the_set_estimator(worst):
     arrays = PlanArrays.from_plan(plan)
     assert arrays.lookahead == pytest.approx(0.1)
     # safety, not arrival, is asserted: 8 starts for their first 600 steps (most look around for most of a run)
-    params = simulate.Params(estimator="set", dynamics="unicycle", noise_bound_deg=0.25, noise_worst=worst, fov=60.0,
-                             starts="domain:8", max_steps=600, record_trajectories=False)  # fmt: skip
+    params = simulate.Params(
+        estimator="set",
+        dynamics="unicycle",
+        noise_bound_deg=0.25,
+        noise_worst=worst,
+        fov=60.0,
+        starts="domain:8",
+        max_steps=600,
+        record_trajectories=False,
+    )
     outside = []
 
     def watch(runs, x, certified):

@@ -87,8 +87,9 @@ def test_heading_from_tag_poses_and_parallax():
         np.testing.assert_allclose(obs.bearings, _truth(positions=tags.positions), atol=1e-9)
         for det, f in zip(dets, tags.facing, strict=True):
             if math.isfinite(f):
-                assert heading_from_tag(det.pose[0], f, mount) == pytest.approx(math.remainder(heading, 2 * math.pi),
-                                                                                abs=1e-9)  # fmt: skip
+                assert heading_from_tag(det.pose[0], f, mount) == pytest.approx(
+                    math.remainder(heading, 2 * math.pi), abs=1e-9
+                )
 
 
 def test_opencv_pose_convention():
@@ -163,8 +164,12 @@ def test_tag_map_from_plan_json_and_tag_numbers():
     old = {"landmarks": [{"id": "tag4", "position": [1, 2]}, {"id": "5", "position": [3, 4]}]}
     tags = TagMap.from_map_json(old)
     assert tags.numbers.tolist() == [4, 5] and np.isnan(tags.facing).all() and tags.index(5) == 1
-    new = {"landmarks": [{"id": "tag4", "position": [1, 2], "facing": 90.0}, {"id": "x", "position": [3, 4],
-                                                                             "facing": None}]}  # fmt: skip
+    new = {
+        "landmarks": [
+            {"id": "tag4", "position": [1, 2], "facing": 90.0},
+            {"id": "x", "position": [3, 4], "facing": None},
+        ]
+    }
     tags = TagMap.from_map_json(new)
     assert tags.facing[0] == pytest.approx(math.pi / 2) and math.isnan(tags.facing[1]) and tags.index(-1) == -1
     with pytest.raises(InvalidParamsError, match="same detector id"):
@@ -176,18 +181,19 @@ def test_tag_map_from_plan_json_and_tag_numbers():
 
 def _facing_spec() -> dict:
     return {
-        "bounds": [0, 0, 10, 8], "goal": [1, 1],
+        "bounds": [0, 0, 10, 8],
+        "goal": [1, 1],
         "obstacles": [{"rectangle": [4, 4, 6, 5]}],
         "landmarks": [
-            [0, 4],                                      # left wall: faces +x
-            {"id": "tag1", "position": [5, 4]},          # bottom face of the block: faces -y
-            {"id": "tag2", "position": [4, 5]},          # its top-left corner (convex): the bisector
-            {"id": "tag3", "position": [0, 8]},          # the room's top-left corner (concave)
-            {"id": "tag4", "position": [5, 2]},          # free-standing
+            [0, 4],  # left wall: faces +x
+            {"id": "tag1", "position": [5, 4]},  # bottom face of the block: faces -y
+            {"id": "tag2", "position": [4, 5]},  # its top-left corner (convex): the bisector
+            {"id": "tag3", "position": [0, 8]},  # the room's top-left corner (concave)
+            {"id": "tag4", "position": [5, 2]},  # free-standing
             {"id": "tag5", "position": [10, 3], "facing": 100},  # explicit: kept
             {"id": "tag6", "position": [6, 4.5], "facing": None},  # explicit: free-standing
         ],
-    }  # fmt: skip
+    }
 
 
 def test_facing_is_inferred_on_walls_and_kept_when_given():
@@ -220,8 +226,9 @@ def test_facing_round_trips_through_map_json():
     np.testing.assert_array_equal(tags.facing, m.landmark_facing)
 
 
-@pytest.mark.parametrize(("value", "message"), [("north", "expected a number"), (math.inf, "finite"),
-                                                 (True, "expected a number")])  # fmt: skip
+@pytest.mark.parametrize(
+    ("value", "message"), [("north", "expected a number"), (math.inf, "finite"), (True, "expected a number")]
+)
 def test_a_bad_facing_is_a_map_error(value, message):
     spec = _facing_spec()
     spec["landmarks"][1]["facing"] = value
@@ -275,8 +282,9 @@ def test_a_good_pose_and_a_whole_float_id_are_kept():
 def test_a_far_pose_gives_a_finite_bearing_or_none():
     intr, mount = Intrinsics.from_fov(640, 480, math.radians(60.0)), Mount.forward(height=0.3)
     for t in ([1e300, 0.0, 0.0], [0.0, 0.0, 1e300], np.full(3, 1e300), [1e-300, 0.0, 0.0]):
-        det = Detection(int(NUMBERS[0]), [[300.0, 220.0], [340.0, 220.0], [340.0, 260.0], [300.0, 260.0]],
-                        (np.eye(3), t))  # fmt: skip
+        det = Detection(
+            int(NUMBERS[0]), [[300.0, 220.0], [340.0, 220.0], [340.0, 260.0], [300.0, 260.0]], (np.eye(3), t)
+        )
         with np.errstate(all="raise"):  # no RuntimeWarning either
             obs = observe([det], intr, mount, _tags(), heading=HEADING)
         assert np.isfinite(obs.bearings).all()

@@ -150,8 +150,9 @@ def assert_internal_error(result, *words):
         assert word in lines[0], (word, lines[0])
 
 
-def test_a_stage_output_that_fails_its_own_checks_is_an_internal_error(cli, write_map, small_spec, tmp_path,
-                                                                         monkeypatch):  # fmt: skip
+def test_a_stage_output_that_fails_its_own_checks_is_an_internal_error(
+    cli, write_map, small_spec, tmp_path, monkeypatch
+):
     from bearnav_cli import artifacts
     from bearnav_cli.errors import ArtifactError
 

@@ -195,8 +195,19 @@ def test_lost_set_estimator_runs_name_tags_for_live(cli, write_map, tmp_path):
     ``bearnav tags --for live`` at the bound simulated, not the fix rule."""
     write_map(dict(BLIND_MAP, name="corners", landmarks=[[0, 3], [0, 0], [4, 0], [4, 3]]), "corners.yaml")
     assert cli("-q", "plan", "corners.yaml").exit_code == 0
-    result = cli("-q", "simulate", "plans/corners/plan.npz", "--fov", "60", "--starts", "random:4", "--estimator",
-                 "set", "--noise-bound-deg", "8")  # fmt: skip
+    result = cli(
+        "-q",
+        "simulate",
+        "plans/corners/plan.npz",
+        "--fov",
+        "60",
+        "--starts",
+        "random:4",
+        "--estimator",
+        "set",
+        "--noise-bound-deg",
+        "8",
+    )
     assert result.exit_code == 1, result.output
     line = error_line(result)
     assert "lost" in line and "not live" in line, line
@@ -270,8 +281,9 @@ def test_make_demo_installs_bearnav_alone_and_make_test_the_test_extra(tmp_path)
     venv = tmp_path / "venv"  # never made: -n prints the recipes
 
     def recipes(target: str) -> str:
-        return subprocess.run(["make", "-n", "-C", str(REPO), target, f"VENV={venv}"], capture_output=True,
-                              text=True, check=True).stdout  # fmt: skip
+        return subprocess.run(
+            ["make", "-n", "-C", str(REPO), target, f"VENV={venv}"], capture_output=True, text=True, check=True
+        ).stdout
 
     demo, test = recipes("demo"), recipes("test")
     assert "pip install --quiet -e ." in demo and "[test]" not in demo, demo
@@ -281,8 +293,12 @@ def test_make_demo_installs_bearnav_alone_and_make_test_the_test_extra(tmp_path)
 def test_verify_failing_in_a_moved_world_names_the_replan_in_it(cli, write_map):
     write_map(dict(BLIND_MAP, name="corners", landmarks=[[0, 3], [0, 0], [4, 0], [4, 3]]), "corners.yaml")
     assert cli("-q", "plan", "corners.yaml").exit_code == 0
-    moved = dict(BLIND_MAP, name="moved", obstacles=[{"rectangle": [1.5, 0.8, 2.6, 2.2]}],
-                 landmarks=[[0, 3], [0, 0], [4, 0], [4, 3]])  # fmt: skip
+    moved = dict(
+        BLIND_MAP,
+        name="moved",
+        obstacles=[{"rectangle": [1.5, 0.8, 2.6, 2.2]}],
+        landmarks=[[0, 3], [0, 0], [4, 0], [4, 3]],
+    )
     write_map(moved, "moved.yaml")
     result = cli("verify", "plans/corners/plan.npz", "--starts", "0", "--world", "moved.yaml")
     assert result.exit_code == 1, result.output
@@ -300,9 +316,16 @@ def test_verify_ends_with_what_is_proven_measured_and_not_covered(cli, built):
     result = cli("verify", built["plan"], "--starts", "2")
     assert result.exit_code == 0, result.output
     line = next(line for line in result.output.splitlines() if line.strip().startswith("guarantee:"))
-    for words in ("proven from the plan file", f"radius {plan.map.robot_radius:g}", "starts in the certified area",
-                  "tolerates", "a worst case", "η = 0.2°", "measured only: 2 closed-loop runs",
-                  "not covered"):  # fmt: skip
+    for words in (
+        "proven from the plan file",
+        f"radius {plan.map.robot_radius:g}",
+        "starts in the certified area",
+        "tolerates",
+        "a worst case",
+        "η = 0.2°",
+        "measured only: 2 closed-loop runs",
+        "not covered",
+    ):
         assert words in line, (words, line)
     assert "worst-case time to goal ≤" in result.output  # the summary labels the loose bound too
     quiet = cli("-q", "verify", built["plan"], "--starts", "0")

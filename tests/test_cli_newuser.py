@@ -40,8 +40,20 @@ def landmark_options() -> list[str]:
 
 
 def test_plan_takes_the_map_options_for_a_bare_grid_then_plans_from_its_map_json(cli, grid, tmp_path):
-    result = cli("-q", "plan", grid, "--goal", "0.6,2.5", "--robot-radius", "0.15", "--start", "5.3,0.6",
-                 *landmark_options(), "-o", tmp_path / "bare")  # fmt: skip
+    result = cli(
+        "-q",
+        "plan",
+        grid,
+        "--goal",
+        "0.6,2.5",
+        "--robot-radius",
+        "0.15",
+        "--start",
+        "5.3,0.6",
+        *landmark_options(),
+        "-o",
+        tmp_path / "bare",
+    )
     assert result.exit_code == 0, result.output
     assert (tmp_path / "bare" / "plan.npz").is_file()
     again = cli("plan", tmp_path / "bare" / "map.json")  # its own folder by default: every stage fresh
@@ -64,8 +76,16 @@ def test_tags_of_a_bare_grid_plan_keeps_the_grid_and_needs_no_goal(cli, grid, tm
     from .test_cli_hints import commands, error_line
 
     monkeypatch.chdir(tmp_path)  # the commands the hint prints are relative to here
-    result = cli("-q", "plan", grid.name, "--goal", "0.6,2.5", "--robot-radius", "0.15",
-                 *[word for tag in STOREROOM_TAGS[:3] for word in ("--landmark", tag)])  # fmt: skip
+    result = cli(
+        "-q",
+        "plan",
+        grid.name,
+        "--goal",
+        "0.6,2.5",
+        "--robot-radius",
+        "0.15",
+        *[word for tag in STOREROOM_TAGS[:3] for word in ("--landmark", tag)],
+    )
     assert result.exit_code == 1, result.output
     tags, plan = commands(error_line(result))
     assert tags[tags.index("--map") + 1] == grid.name, tags

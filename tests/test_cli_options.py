@@ -96,8 +96,9 @@ def test_a_field_without_its_docstring_entry_fails():
     without = doc.replace("    iterations : int\n        Random samples drawn, collision samples included.\n", "")
     assert without != doc
     docs = cli_fields._attribute_docs(without)
-    fields = [(stage, dataclasses.replace(f, doc=docs.get(f.name, ("", ()))[0])) for stage, f in
-              expected_fields("rrtstar")]  # fmt: skip
+    fields = [
+        (stage, dataclasses.replace(f, doc=docs.get(f.name, ("", ()))[0])) for stage, f in expected_fields("rrtstar")
+    ]
     assert problems("rrtstar", fields) == ["rrtstar rrtstar.iterations: no docstring entry under Attributes"]
 
 
@@ -109,11 +110,32 @@ def test_the_fields_are_the_imported_dataclasses():
 
 def test_every_option_is_a_field_or_hand_written():
     """The generated options are exactly the fields; the hand-written ones are not fields."""
-    hand_written = {"out_path", "out_dir", "force", "quiet", "as_json", "goal", "landmark", "start", "robot_radius",
-                    "lookahead", "min_success", "gif", "bag", "tree", "world", "fov", "noise_deg", "max_range",
-                    "help",
-                    # plan's error bounds: the map's robot section, spelled as simulate's fields are
-                    "bearing_error_deg", "compass_error_deg", "slip", "slip_floor"}  # fmt: skip
+    hand_written = {
+        "out_path",
+        "out_dir",
+        "force",
+        "quiet",
+        "as_json",
+        "goal",
+        "landmark",
+        "start",
+        "robot_radius",
+        "lookahead",
+        "min_success",
+        "gif",
+        "bag",
+        "tree",
+        "world",
+        "fov",
+        "noise_deg",
+        "max_range",
+        "help",
+        # plan's error bounds: the map's robot section, spelled as simulate's fields are
+        "bearing_error_deg",
+        "compass_error_deg",
+        "slip",
+        "slip_floor",
+    }
     for command in COMMANDS:
         names = {p.name for p in click_command(command).params if p.param_type_name == "option"}
         fields = {f.name for _, f in expected_fields(command)}
@@ -156,8 +178,17 @@ def test_simulate_and_the_controller_build_their_settings_alike(tmp_path):
 
     plan = verify_plan_fixture_free()
     path = tmp_path / "plan.npz"
-    manifest = artifacts.make_manifest("plan", plan, stage="synthesize", stage_version=1, params={}, input_path=None,
-                                       input_hash="0", summary="", elapsed_s=0.0)  # fmt: skip
+    manifest = artifacts.make_manifest(
+        "plan",
+        plan,
+        stage="synthesize",
+        stage_version=1,
+        params={},
+        input_path=None,
+        input_hash="0",
+        summary="",
+        elapsed_s=0.0,
+    )
     artifacts.save(path, plan, manifest)
     robot = runtime.Controller.from_plan(str(path)).settings
     sim = simulate.settings(plan, simulate.Params(noise_deg=1.0)).control
@@ -182,8 +213,9 @@ def test_verify_and_its_command_drive_at_the_maps_speed(cli, small_spec, write_m
     report = verify.run(plan, verify.Params(n_starts=3))
     assert from_cli == report.rollouts.speed == verify.loop_speed(plan, verify.Params()) == 0.2
     assert verify.loop_speed(plan, verify.Params(speed=0.3)) == 0.3
-    plan_without = dataclasses.replace(plan, cells=dataclasses.replace(plan.cells, map=dataclasses.replace(
-        plan.map, params={})))  # fmt: skip
+    plan_without = dataclasses.replace(
+        plan, cells=dataclasses.replace(plan.cells, map=dataclasses.replace(plan.map, params={}))
+    )
     assert verify.loop_speed(plan_without, verify.Params()) == simulate.Params().speed
 
 
@@ -192,12 +224,13 @@ def test_verify_and_its_command_drive_at_the_maps_speed(cli, small_spec, write_m
 
 def test_importing_the_cli_imports_no_heavy_library():
     heavy = ("numpy", "scipy", "shapely", "highspy", "matplotlib", "yaml")
-    code = ("import bearnav_cli.cli, sys; "
-            f"print(sorted(m for m in sys.modules if m.split('.')[0] in {set(heavy)!r}))")  # fmt: skip
+    code = f"import bearnav_cli.cli, sys; print(sorted(m for m in sys.modules if m.split('.')[0] in {set(heavy)!r}))"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO, check=True)
     assert out.stdout.strip() == "[]", out.stdout
-    code = ("import bearnav_cli.cli, json, sys; "
-            "print(json.dumps(sorted(m for m in sys.modules if m.startswith('bearnav_cli.'))))")  # fmt: skip
+    code = (
+        "import bearnav_cli.cli, json, sys; "
+        "print(json.dumps(sorted(m for m in sys.modules if m.startswith('bearnav_cli.'))))"
+    )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO, check=True)
     modules = json.loads(out.stdout)
     # the command line's own modules (one per command among them), the errors and the table of the Params

@@ -138,8 +138,9 @@ def test_plot_refuses_a_bad_camera_in_one_line_and_writes_nothing(cli, built, tm
 
 def test_verify_names_the_camera_options_it_shares(cli, built):
     assert_one_line_error(cli("verify", built["plan"], "--fov", "400", "--starts", "0"), "--fov")
-    assert_one_line_error(cli("verify", built["plan"], "--fov", "60", "--noise-deg", "-1", "--starts", "0"),
-                          "--noise-deg")  # fmt: skip
+    assert_one_line_error(
+        cli("verify", built["plan"], "--fov", "60", "--noise-deg", "-1", "--starts", "0"), "--noise-deg"
+    )
     # one table of option names for map, plot and verify: every field the camera check can name
     for field in ("fov", "noise_deg", "range"):
         assert CAMERA_OPTIONS[field].startswith("--")

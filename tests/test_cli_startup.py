@@ -29,8 +29,18 @@ from .conftest import REPO, SMALL_MAP
 #: Never imported by ``--help`` or ``inspect``.
 HEAVY = ("scipy", "highspy", "matplotlib", "yaml", "PIL", "cv2", "rosbags", "typer.rich_utils")
 #: Not imported by ``--help`` either (``inspect`` needs them: the artifact, its checks, the printed summary).
-NOT_FOR_HELP = (*HEAVY, "numpy", "shapely", "rich", "logging", "bearnav_cli.pipeline", "bearnav_cli.artifacts",
-                "bearnav_cli.datatypes", "bearnav_cli.runtime", "bearnav_cli.stages")  # fmt: skip
+NOT_FOR_HELP = (
+    *HEAVY,
+    "numpy",
+    "shapely",
+    "rich",
+    "logging",
+    "bearnav_cli.pipeline",
+    "bearnav_cli.artifacts",
+    "bearnav_cli.datatypes",
+    "bearnav_cli.runtime",
+    "bearnav_cli.stages",
+)
 #: Modules of those packages that import no numpy: the choices and defaults a ``Params`` declaration shows.
 NUMPY_FREE = ("bearnav_cli.runtime", "bearnav_cli.runtime.defaults")
 #: Each artifact kind the map stage and the planning stages write, and the simulation.
@@ -61,8 +71,12 @@ print(json.dumps({"codes": codes, "modules": sorted(sys.modules), "params": sort
 def run(*commands: list[str], params: list[str] | None = None) -> tuple[list[int], set[str]]:
     """Exit codes of the commands, run one after the other in a fresh interpreter, and the modules it imported;
     with ``params``, also checks which commands' ``Params`` were read for their options."""
-    done = subprocess.run([sys.executable, "-c", RUN, json.dumps([[str(a) for a in c] for c in commands])],
-                          capture_output=True, text=True, cwd=REPO)  # fmt: skip
+    done = subprocess.run(
+        [sys.executable, "-c", RUN, json.dumps([[str(a) for a in c] for c in commands])],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+    )
     assert done.returncode == 0, done.stderr
     result = json.loads(done.stdout)
     if params is not None:
@@ -90,8 +104,9 @@ def plans(tmp_path_factory) -> dict[str, Path]:
         folder = root / name
         result = runner.invoke(app, ["-q", "plan", str(path), "-o", str(folder), *options])
         assert result.exit_code == 0, result.output
-        result = runner.invoke(app, ["-q", "simulate", str(folder / "plan.npz"), "--starts", "random:3",
-                                     "--min-success", "0"])  # fmt: skip
+        result = runner.invoke(
+            app, ["-q", "simulate", str(folder / "plan.npz"), "--starts", "random:3", "--min-success", "0"]
+        )
         assert result.exit_code == 0, result.output
         folders[name] = folder
     return folders
@@ -99,8 +114,22 @@ def plans(tmp_path_factory) -> dict[str, Path]:
 
 def test_importing_the_cli_and_every_help_import_no_numpy_rich_or_stage():
     commands = [["--help"], ["--version"], []]  # bare `bearnav` prints the help too (exit 2)
-    commands += [[name, "--help"] for name in ("map", "rrtstar", "simplify", "decompose", "synthesize", "verify",
-                                               "simulate", "plan", "inspect", "tags", "plot")]  # fmt: skip
+    commands += [
+        [name, "--help"]
+        for name in (
+            "map",
+            "rrtstar",
+            "simplify",
+            "decompose",
+            "synthesize",
+            "verify",
+            "simulate",
+            "plan",
+            "inspect",
+            "tags",
+            "plot",
+        )
+    ]
     codes, modules = run(*commands)
     assert codes == [0, 0, 2] + [0] * (len(commands) - 3)
     # typer.rich_utils among them: typer's rich help imports rich.markdown and pygments, 0.1 s of every --help
@@ -138,8 +167,11 @@ def test_usage_errors_keep_their_panel():
 
 
 def test_inspect_imports_the_loader_and_numpy_only(plans):
-    codes, modules = run(*(["inspect", plans["bare"] / name] for name in ARTIFACTS),
-                         ["inspect", plans["bare"] / "plan.npz", "--cell", "0"], params=[])  # fmt: skip
+    codes, modules = run(
+        *(["inspect", plans["bare"] / name] for name in ARTIFACTS),
+        ["inspect", plans["bare"] / "plan.npz", "--cell", "0"],
+        params=[],
+    )
     assert codes == [0] * (len(ARTIFACTS) + 1)
     found = imported(modules, (*HEAVY, "bearnav_cli.stages", "bearnav_cli.verify", "bearnav_cli.geometry"))
     assert not found, found
@@ -148,9 +180,14 @@ def test_inspect_imports_the_loader_and_numpy_only(plans):
     # the schema, the robot section's defaults the map type reads, and the one copy of the file reader
     # and the invariants the robot's loader shares (numpy only, no controller); the defaults the declared
     # ``Params`` show (no numpy), which ``limits`` reads
-    assert runtime == ["bearnav_cli.runtime", "bearnav_cli.runtime.defaults", "bearnav_cli.runtime.invariants",
-                       "bearnav_cli.runtime.plan_file", "bearnav_cli.runtime.robot",
-                       "bearnav_cli.runtime.schema"], runtime  # fmt: skip
+    assert runtime == [
+        "bearnav_cli.runtime",
+        "bearnav_cli.runtime.defaults",
+        "bearnav_cli.runtime.invariants",
+        "bearnav_cli.runtime.plan_file",
+        "bearnav_cli.runtime.robot",
+        "bearnav_cli.runtime.schema",
+    ], runtime
 
 
 def test_inspect_imports_the_stages_the_maps_params_name(plans):

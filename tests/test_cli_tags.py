@@ -46,8 +46,13 @@ def test_tags_with_too_few_tags_allowed_reports_and_exits_1(cli, write_map, smal
 
 def test_tags_and_verify_refuse_bad_camera_options_in_one_line(cli, write_map, small_spec, tmp_path):
     plan = _plan(cli, write_map, small_spec, tmp_path)
-    for args, option in ((("--fov", "0"), "--fov"), (("--fov", "400"), "--fov"), (("--noise-deg", "-1"), "--noise-deg"),
-                         (("--range", "-2"), "--range"), (("--max-tags", "-1"), "--max-tags")):  # fmt: skip
+    for args, option in (
+        (("--fov", "0"), "--fov"),
+        (("--fov", "400"), "--fov"),
+        (("--noise-deg", "-1"), "--noise-deg"),
+        (("--range", "-2"), "--range"),
+        (("--max-tags", "-1"), "--max-tags"),
+    ):
         result = cli("tags", plan, *args, "-o", tmp_path / "bad.yaml")
         assert_one_line_error(result, option)
         assert not (tmp_path / "bad.yaml").exists()
@@ -67,11 +72,16 @@ def test_tags_of_a_tags_map_counts_instead_of_repeating_the_suffix(tmp_path):
     from bearnav_cli.cli.hints import tags_output
 
     plan = tmp_path / "plans" / "office" / "plan.npz"
-    names = {m: tags_output(plan, tmp_path / m).name for m in
-             ("office.yaml", "office_tags.yaml", "office_tags2.yaml", "my_tags_room.yaml")}  # fmt: skip
-    assert names == {"office.yaml": "office_tags.yaml", "office_tags.yaml": "office_tags2.yaml",
-                     "office_tags2.yaml": "office_tags3.yaml",
-                     "my_tags_room.yaml": "my_tags_room_tags.yaml"}  # fmt: skip
+    names = {
+        m: tags_output(plan, tmp_path / m).name
+        for m in ("office.yaml", "office_tags.yaml", "office_tags2.yaml", "my_tags_room.yaml")
+    }
+    assert names == {
+        "office.yaml": "office_tags.yaml",
+        "office_tags.yaml": "office_tags2.yaml",
+        "office_tags2.yaml": "office_tags3.yaml",
+        "my_tags_room.yaml": "my_tags_room_tags.yaml",
+    }
     assert tags_output(plan, None) == plan.parent / "map_tags.yaml"
 
 

@@ -328,12 +328,16 @@ def test_one_free_space_per_content_and_its_results_are_a_fresh_computation():
     map_ = build_map(SMALL_MAP)
     copy = replace(map_, params=dict(map_.params))
     assert copy is not map_ and FreeSpace.from_map(copy) is FreeSpace.from_map(map_)
-    moved = replace(map_, obstacles=tuple(geometry.from_shapely(shapely.affinity.translate(
-        geometry.to_shapely(map_.obstacles[0]), 0.01))) + tuple(map_.obstacles[1:]))  # fmt: skip
+    moved = replace(
+        map_,
+        obstacles=tuple(geometry.from_shapely(shapely.affinity.translate(geometry.to_shapely(map_.obstacles[0]), 0.01)))
+        + tuple(map_.obstacles[1:]),
+    )
     assert FreeSpace.from_map(moved) is not FreeSpace.from_map(map_)
     space, fresh = FreeSpace.from_map(map_), FreeSpace._build(map_)
-    for first, second in zip(space.visibility_regions(map_.landmarks), fresh.visibility_regions(map_.landmarks),
-                             strict=True):  # fmt: skip
+    for first, second in zip(
+        space.visibility_regions(map_.landmarks), fresh.visibility_regions(map_.landmarks), strict=True
+    ):
         assert shapely.equals_exact(first, second, 0.0)
     points, counts = geometry.landmark_coverage(map_, space)
     counts[:] = -1  # a caller's edit of what it got does not reach what the space keeps

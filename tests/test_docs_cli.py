@@ -181,12 +181,20 @@ def declaration_problems(text: str) -> list[str]:
         if declaration.unit and f", {declaration.unit}" not in column:
             found.append(f"option limits: {stage} `{name}` should give its unit, {declaration.unit}")
     rows = {(stage, name): default.strip() for stage, name, default in DEFAULT_ROW.findall(text)}
-    params_only = {(stage, f.name): _shown(f.default) for stage in MODULES if stage != "verify"
-                   for f in dataclasses.fields(params_type(stage)) if declared(f).option is None}  # fmt: skip
+    params_only = {
+        (stage, f.name): _shown(f.default)
+        for stage in MODULES
+        if stage != "verify"
+        for f in dataclasses.fields(params_type(stage))
+        if declared(f).option is None
+    }
     if set(rows) != set(params_only):
         found.append(f"params table: rows {sorted(set(rows) ^ set(params_only))} differ from the declarations")
-    found += [f"params table: {s}.{n} default {rows[s, n]}, declared {d}" for (s, n), d in params_only.items()
-              if (s, n) in rows and rows[s, n] != d]  # fmt: skip
+    found += [
+        f"params table: {s}.{n} default {rows[s, n]}, declared {d}"
+        for (s, n), d in params_only.items()
+        if (s, n) in rows and rows[s, n] != d
+    ]
     return found
 
 
@@ -197,8 +205,11 @@ def test_the_tables_are_the_declarations():
 def test_the_declaration_check_can_fail():
     text = DOC.read_text()
     assert "params table: map.coverage_cells default 10, declared 100" in declaration_problems(
-        text.replace("| `map.coverage_cells` | 100 |", "| `map.coverage_cells` | 10 |"))  # fmt: skip
+        text.replace("| `map.coverage_cells` | 100 |", "| `map.coverage_cells` | 10 |")
+    )
     assert "option limits: simulate `fov` should give its unit, degrees" in declaration_problems(
-        text.replace("| `--fov`, degrees |", "| `--fov` |"))  # fmt: skip
+        text.replace("| `--fov`, degrees |", "| `--fov` |")
+    )
     assert "option limits: rrtstar `step` should name `--step`" in declaration_problems(
-        text.replace("| `--step` (also on `plan`)", "| `--stride` (also on `plan`)"))  # fmt: skip
+        text.replace("| `--step` (also on `plan`)", "| `--stride` (also on `plan`)")
+    )

@@ -36,8 +36,11 @@ def _quiet(caplog):
     caplog.set_level(logging.ERROR)  # random maps have blind spots: the map stage warns
 
 
-PLANS = {"random 1": lambda: random_plan(1), "random 4": lambda: random_plan(4),
-         "rooms 2": lambda: made_plan(2, "rooms")}  # fmt: skip
+PLANS = {
+    "random 1": lambda: random_plan(1),
+    "random 4": lambda: random_plan(4),
+    "rooms 2": lambda: made_plan(2, "rooms"),
+}
 
 
 def _points_in_bounds(plan, n: int, seed: int) -> np.ndarray:
@@ -148,8 +151,9 @@ def test_no_robot_inside_its_error_ball_collides(name):
     starts = x[least_rank_cell(arrays, x) >= 0][:24]
     # 2,000 steps: the property is about collisions, and a robot still lost then would only time out
     # later (the made rooms map has two that ran to 4,372 steps, 40% of the test's time)
-    params = simulate.Params(dynamics="unicycle", fov=60.0, noise_deg=2.0, record_trajectories=False, seed=1,
-                             max_steps=2000)  # fmt: skip
+    params = simulate.Params(
+        dynamics="unicycle", fov=60.0, noise_deg=2.0, record_trajectories=False, seed=1, max_steps=2000
+    )
     outcome, inside = _drive(plan, starts, params)
     assert not any(inside), "a robot whose estimate's 3σ ball held it collided"
     assert np.mean(outcome == simulate.Outcome.SUCCESS) >= 0.8

@@ -323,8 +323,17 @@ def check_bounded_errors(plan, seed: int, worst: bool) -> None:
     run that does not arrive is lost or out of steps, never stalled (the maps' own few tags leave cells not live:
     ``bearnav tags --for live`` is what makes every look good enough, measured in bench/README.md)."""
     # 300 steps a run (the suite's time): the properties are of every step taken, not of arriving
-    params = simulate.Params(starts="domain:1", fov=60.0, estimator="set", noise_bound_deg=0.25, noise_worst=worst,
-                             seed=seed, speed=SPEED, max_steps=300, record_trajectories=False)  # fmt: skip
+    params = simulate.Params(
+        starts="domain:1",
+        fov=60.0,
+        estimator="set",
+        noise_bound_deg=0.25,
+        noise_worst=worst,
+        seed=seed,
+        speed=SPEED,
+        max_steps=300,
+        record_trajectories=False,
+    )
     stats = simulate.run(plan, params).stats
     assert stats["outcomes"]["collision"] == 0 and stats["outcomes"]["stall"] == 0, stats["outcomes"]
     assert stats["containment_violations"] == 0 and stats["inconsistencies"] == 0
@@ -456,9 +465,18 @@ def test_tamper_gain_beyond_margin(which):
             direction, margin = cells.exit_dir[c], plan.margin_v[c]
         else:  # push u out through the barrier row of least margin by twice that margin
             normals, offsets = cells.barrier(c)
-            m = certificate.vertex_margins(plan.gain[c], landmarks, cells.vertices(c), cells.exit_dir[c],
-                                          cells.exit_point[c], normals, offsets, plan.c_h[c], plan.c_v[c],
-                                          plan.u_max[c])  # fmt: skip
+            m = certificate.vertex_margins(
+                plan.gain[c],
+                landmarks,
+                cells.vertices(c),
+                cells.exit_dir[c],
+                cells.exit_point[c],
+                normals,
+                offsets,
+                plan.c_h[c],
+                plan.c_v[c],
+                plan.u_max[c],
+            )
             k = int(np.argmax(m.cbf_rows))
             direction, margin = -normals[k], m.cbf_rows[k]
         assert margin < 0
@@ -520,8 +538,9 @@ def own_coverage(cells, map_) -> float:
     free = shapely.difference(box, space.obstacles)
     goal = shapely.Point(map_.goal)
     component = next(p for p in shapely.get_parts(free) if p.intersects(goal))
-    domain = shapely.difference(shapely.intersection(component, shapely.buffer(box, -m, join_style="mitre")),
-                                shapely.buffer(space.obstacles, m))  # fmt: skip
+    domain = shapely.difference(
+        shapely.intersection(component, shapely.buffer(box, -m, join_style="mitre")), shapely.buffer(space.obstacles, m)
+    )
     union = shapely.union_all([shapely.Polygon(cells.vertices(c)) for c in range(cells.n_cells)])
     return float(shapely.intersection(domain, union).area / domain.area)
 
@@ -636,8 +655,9 @@ def test_landmarks_seen_from_funnel_witnesses_match_the_segment_test(map_seed):
         parent = cells.parent[node]
         anchors = cells.nodes[[node] if parent < 0 else [node, parent]]
         points = cell_landmarks.witness_points(space, cells.vertices(c), anchors)
-        exact = space.visible(np.repeat(points, len(landmarks), 0), np.tile(landmarks, (len(points), 1)),
-                              from_boundary=True).reshape(len(points), -1)  # fmt: skip
+        exact = space.visible(
+            np.repeat(points, len(landmarks), 0), np.tile(landmarks, (len(points), 1)), from_boundary=True
+        ).reshape(len(points), -1)
         assert np.array_equal(cell_landmarks.seen_from(sight, points), exact), c
 
 
@@ -655,8 +675,19 @@ def test_the_field_space_builder_is_the_general_vertex_lp(seed):
     for u_max in (None, 1.0):
         fast = cell_lp.vertex_template(problem, cell_lp.FIELD_MAP, u_max, 1.0, 2.0)
         general = cell_lp.vertex_template(problem, general_L, u_max, 1.0, 2.0)
-        for name in ("cost", "A_indptr", "A_indices", "A_values", "col_lower", "col_upper", "lower", "rhs_h",
-                     "rhs_v", "rhs_const", "vertex_rows"):  # fmt: skip
+        for name in (
+            "cost",
+            "A_indptr",
+            "A_indices",
+            "A_values",
+            "col_lower",
+            "col_upper",
+            "lower",
+            "rhs_h",
+            "rhs_v",
+            "rhs_const",
+            "vertex_rows",
+        ):
             np.testing.assert_array_equal(getattr(fast, name), getattr(general, name), err_msg=name)
 
 
@@ -714,9 +745,11 @@ def test_the_unicycle_keeps_the_certificate_from_the_certified_domain():
     """With the heading allowance, unicycle runs from D reach the goal without a collision."""
     plan = make_plan(2, 0)
     starts = sample_in_cells(plan.cells, 60, np.random.default_rng(2))
-    runs = simulate.rollout(plan, starts, simulate.Params(dynamics="unicycle", measurement="displacement",
-                                                          record_trajectories=False,
-                                                          speed=SPEED))  # fmt: skip
+    runs = simulate.rollout(
+        plan,
+        starts,
+        simulate.Params(dynamics="unicycle", measurement="displacement", record_trajectories=False, speed=SPEED),
+    )
     assert runs.start_in_domain.all()
     assert np.all(runs.outcome == Outcome.SUCCESS), runs.counts()
 
@@ -733,8 +766,15 @@ def test_a_robot_outside_every_cell_with_no_node_in_sight_gets_no_command():
     assert cell_policy.approach_target(arrays, inside)[0] == -1
     s = step.ControlSettings(speed=0.1, dt=0.1, eps_sw=0.02, tol=arrays.tol, measurement="displacement")
     n = len(arrays.landmarks)
-    out = step.control(arrays, s, step.ControlState.initial(np.zeros(1)), np.zeros((1, n, 2)),
-                       np.ones((1, n), bool), np.zeros(1), x_true=inside)  # fmt: skip
+    out = step.control(
+        arrays,
+        s,
+        step.ControlState.initial(np.zeros(1)),
+        np.zeros((1, n, 2)),
+        np.ones((1, n), bool),
+        np.zeros(1),
+        x_true=inside,
+    )
     assert np.all(out.velocity == 0.0) and out.stalled[0] and not out.certified[0]
 
 

@@ -187,8 +187,13 @@ def _object_entry(src: Path, dst: Path) -> Path:
 
 
 #: A number entry of each kind, stored as text / as the wrong dtype.
-NUMBER_ENTRY = {"tree": "parent", "simplified": "parent", "cells": "cell_flags", "plan": "cell_flags",
-                "simulation": "outcome"}  # fmt: skip
+NUMBER_ENTRY = {
+    "tree": "parent",
+    "simplified": "parent",
+    "cells": "cell_flags",
+    "plan": "cell_flags",
+    "simulation": "outcome",
+}
 
 
 def _as_text(manifest: dict, entries: dict) -> None:
@@ -203,7 +208,8 @@ def _unsigned(manifest: dict, entries: dict) -> None:
 
 def _retired(manifest: dict) -> None:
     manifest["schema"] = {"cells": "bearnav.cells/1", "plan": "bearnav.plan/1"}[
-        artifacts.kind_of_schema(manifest["schema"])]  # fmt: skip
+        artifacts.kind_of_schema(manifest["schema"])
+    ]
 
 
 @dataclass(frozen=True)
@@ -505,8 +511,13 @@ SIM_EDITS = {
     "cell-status-unknown": (_set_entry("cell_status", 0, 9), "cell_status"),
     "cell-offsets-decreasing": (_offsets_decreasing("cell_vertex_offsets"), "cell_vertex_offsets"),
 }
-KIND_EDITS = {"tree": TREE_EDITS, "simplified": TREE_EDITS, "cells": CELL_EDITS,
-              "plan": {**CELL_EDITS, **PLAN_EDITS}, "simulation": SIM_EDITS}  # fmt: skip
+KIND_EDITS = {
+    "tree": TREE_EDITS,
+    "simplified": TREE_EDITS,
+    "cells": CELL_EDITS,
+    "plan": {**CELL_EDITS, **PLAN_EDITS},
+    "simulation": SIM_EDITS,
+}
 
 
 def _meaning_cases():

@@ -189,15 +189,32 @@ def copy_plan(built: dict[str, Path], target: Path) -> Path:
 def run_program(*args: Any, cwd: Path | None = None, env: dict | None = None, timeout: float = 120):
     """Run the installed ``bearnav`` program (a real process: signals, locks)."""
     full_env = dict(os.environ, **(env or {}))
-    return subprocess.run([str(BEARNAV), *map(str, args)], cwd=cwd, env=full_env, capture_output=True, text=True,
-                          timeout=timeout)  # fmt: skip
+    return subprocess.run(
+        [str(BEARNAV), *map(str, args)], cwd=cwd, env=full_env, capture_output=True, text=True, timeout=timeout
+    )
 
 
 __all__ = [
-    "BEARNAV", "REPO", "SEEDS", "assert_clean_failure", "copy_plan", "edit_embedded_map", "invoke", "read_npz",
-    "rehash", "rewrite_json", "rewrite_npz", "run_program", "small_plan", "small_spec", "snapshot", "stderr_lines",
-    "temp_files", "write_npz", "write_yaml",
-]  # fmt: skip
+    "BEARNAV",
+    "REPO",
+    "SEEDS",
+    "assert_clean_failure",
+    "copy_plan",
+    "edit_embedded_map",
+    "invoke",
+    "read_npz",
+    "rehash",
+    "rewrite_json",
+    "rewrite_npz",
+    "run_program",
+    "small_plan",
+    "small_spec",
+    "snapshot",
+    "stderr_lines",
+    "temp_files",
+    "write_npz",
+    "write_yaml",
+]
 
 
 def deflate_damaged(data: bytes, path: Path) -> bytes:

@@ -122,13 +122,19 @@ OPTION_CASES = [
 
 
 def _output(command: str, tmp_path: Path) -> list:
-    name = {"rrtstar": "tree.npz", "simplify": "simplified.npz", "decompose": "cells.npz",
-            "synthesize": "plan.npz", "simulate": "sim.npz"}.get(command)  # fmt: skip
+    name = {
+        "rrtstar": "tree.npz",
+        "simplify": "simplified.npz",
+        "decompose": "cells.npz",
+        "synthesize": "plan.npz",
+        "simulate": "sim.npz",
+    }.get(command)
     return ["-o", tmp_path / "out" / name] if name else []
 
 
-@pytest.mark.parametrize("command, kind, options, word", OPTION_CASES,
-                         ids=[f"{c}-{' '.join(o)}" for c, _, o, _ in OPTION_CASES])  # fmt: skip
+@pytest.mark.parametrize(
+    "command, kind, options, word", OPTION_CASES, ids=[f"{c}-{' '.join(o)}" for c, _, o, _ in OPTION_CASES]
+)
 def test_odd_option_is_one_line_exit_3_naming_it(built, tmp_path, command, kind, options, word):
     folder = copy_plan(built, tmp_path / "plan")
     (tmp_path / "out").mkdir()
@@ -187,8 +193,9 @@ def test_odd_map_params_are_one_line_naming_the_field(tmp_path, params, word):
 def test_the_step_limit_names_the_step_that_fits(built, tmp_path):
     line = assert_clean_failure(invoke("rrtstar", built["map"], "-o", tmp_path / "t.npz", "--step", "1e-4"), 3)
     assert re.search(r"use at least \d", line), line
-    line = assert_clean_failure(invoke("rrtstar", built["map"], "-o", tmp_path / "t.npz", "--border-spacing",
-                                       "1e-5"), 3)  # fmt: skip
+    line = assert_clean_failure(
+        invoke("rrtstar", built["map"], "-o", tmp_path / "t.npz", "--border-spacing", "1e-5"), 3
+    )
     assert "--border-spacing" in line and re.search(r"at least \d", line), line
 
 
@@ -197,8 +204,9 @@ def test_memory_estimates_refuse_with_the_numbers(built, tmp_path, monkeypatch):
     monkeypatch.setattr(limits, "memory_budget", lambda: 50_000_000)
     line = assert_clean_failure(invoke("rrtstar", built["map"], "-o", tmp_path / "t.npz", "--iterations", "1000000"))
     assert "--iterations" in line and "needs about" in line and re.search(r"at most [\d,]+ fit", line), line
-    line = assert_clean_failure(invoke("simulate", built["plan"], "-o", tmp_path / "s.npz", "--starts",
-                                       "random:100000"))  # fmt: skip
+    line = assert_clean_failure(
+        invoke("simulate", built["plan"], "-o", tmp_path / "s.npz", "--starts", "random:100000")
+    )
     assert "--starts" in line and "needs about" in line and "at most" in line, line
     line = assert_clean_failure(invoke("verify", built["plan"], "--starts", "100000"))
     assert "--starts" in line and "needs about" in line, line
@@ -207,8 +215,9 @@ def test_memory_estimates_refuse_with_the_numbers(built, tmp_path, monkeypatch):
 
 def test_seed_range_is_what_numpy_takes_in_32_bits(built, tmp_path):
     for seed in ("0", str(2**32 - 1)):
-        result = invoke("-q", "rrtstar", built["map"], "-o", tmp_path / f"t{seed}.npz", "--seed", seed,
-                        "--iterations", "50")  # fmt: skip
+        result = invoke(
+            "-q", "rrtstar", built["map"], "-o", tmp_path / f"t{seed}.npz", "--seed", seed, "--iterations", "50"
+        )
         assert result.exit_code in (0, 1), result.output
     assert limits.SEED.text() == "integer in [0, 4294967295]"
 
@@ -301,8 +310,9 @@ def test_a_missing_parent_folder_is_created(built, tmp_path, command):
     assert target.is_file() and temp_files(tmp_path) == []
 
 
-@pytest.mark.parametrize("how, word", [("folder", "is a folder"), ("extension", "extension"),
-                                       ("parent-file", "is a file")])  # fmt: skip
+@pytest.mark.parametrize(
+    "how, word", [("folder", "is a folder"), ("extension", "extension"), ("parent-file", "is a file")]
+)
 def test_gif_path_is_checked_before_the_simulation_runs(built, tmp_path, how, word):
     if how == "folder":
         gif = tmp_path / "anim.gif"
@@ -341,8 +351,11 @@ def test_an_unwritable_folder_is_refused(built, tmp_path, monkeypatch):
     locked.mkdir()
     real = os.access
     monkeypatch.setattr(artifacts.outputs.os, "access", lambda p, mode: False if Path(p) == locked else real(p, mode))
-    for args in (["simplify", built["tree"], "-o", locked / "s.npz"], ["plot", built["plan"], "-o", locked / "f.png"],
-                 ["plan", built["yaml"], "-o", locked / "p"]):  # fmt: skip
+    for args in (
+        ["simplify", built["tree"], "-o", locked / "s.npz"],
+        ["plot", built["plan"], "-o", locked / "f.png"],
+        ["plan", built["yaml"], "-o", locked / "p"],
+    ):
         assert_clean_failure(invoke(*args), 3, ("not writable",))
     assert list(locked.iterdir()) == []
 
@@ -375,7 +388,18 @@ def test_every_limit_is_documented():
 @pytest.mark.skipif(not os.environ.get("BEARNAV_HOSTILE_FULL"), reason="a GIF takes seconds: BEARNAV_HOSTILE_FULL=1")
 def test_gif_into_a_missing_folder_is_created(built, tmp_path):
     gif = tmp_path / "new" / "anim.gif"
-    result = invoke("-q", "simulate", built["plan"], "-o", tmp_path / "sim.npz", "--starts", "random:2",
-                    "--min-success", "0", "--gif", gif)  # fmt: skip
+    result = invoke(
+        "-q",
+        "simulate",
+        built["plan"],
+        "-o",
+        tmp_path / "sim.npz",
+        "--starts",
+        "random:2",
+        "--min-success",
+        "0",
+        "--gif",
+        gif,
+    )
     assert result.exit_code == 0, result.output
     assert gif.is_file() and temp_files(tmp_path) == []

@@ -85,8 +85,13 @@ def plan_small(folder: Path, *extra: str, yaml_path: Path | None = None):
 
 # --------------------------------------------------------------------------- interrupts, in-process
 
-STAGE_MODULES = {"map": map_, "rrtstar": rrtstar, "simplify": simplify, "decompose": decompose,
-                 "synthesize": synthesize}  # fmt: skip
+STAGE_MODULES = {
+    "map": map_,
+    "rrtstar": rrtstar,
+    "simplify": simplify,
+    "decompose": decompose,
+    "synthesize": synthesize,
+}
 
 
 @pytest.mark.parametrize("stage", list(STAGE_MODULES))
@@ -178,8 +183,19 @@ def test_sigint_while_the_gif_is_written_names_it_after_the_simulation(tmp_path,
 
     monkeypatch.setattr(plot, "save_animation", interrupted)
     gif = tmp_path / "runs.gif"
-    result = invoke("simulate", built["plan"], "-o", tmp_path / "sim.npz", "--starts", "random:2", "--min-success",
-                    "0", "--gif", gif, "-q")  # fmt: skip
+    result = invoke(
+        "simulate",
+        built["plan"],
+        "-o",
+        tmp_path / "sim.npz",
+        "--starts",
+        "random:2",
+        "--min-success",
+        "0",
+        "--gif",
+        gif,
+        "-q",
+    )
     assert_clean_failure(result, 130, (f"interrupted; nothing written for {gif} (sim.npz and sim.json were written)",))
     assert not gif.exists() and (tmp_path / "sim.npz").exists() and temp_files(tmp_path) == []
 
@@ -226,8 +242,9 @@ def _interrupt_at(args: list, cwd: Path, delay: float, sig: int = signal.SIGINT)
     """Run ``bearnav args`` and send ``sig`` after ``delay`` s; the result's ``signalled`` says whether the
     program was still running when the signal was sent (else it had finished first, and the run
     tested nothing about the signal)."""
-    process = subprocess.Popen([str(BEARNAV), *map(str, args)], cwd=cwd, stdout=subprocess.PIPE,
-                               stderr=subprocess.PIPE, text=True)  # fmt: skip
+    process = subprocess.Popen(
+        [str(BEARNAV), *map(str, args)], cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
     time.sleep(delay)
     running = process.poll() is None
     process.send_signal(sig)
@@ -305,8 +322,9 @@ def _kill_simulate(tmp_path: Path, built: dict, delay: float) -> None:
     sim, metrics = folder / "sim.npz", folder / "sim.json"
     if sim.exists():
         pipeline.load(sim)  # never half-written
-    again = run_program("-q", "simulate", folder / "plan.npz", "--starts", "random:40", "--min-success", "0",
-                        cwd=tmp_path)  # fmt: skip
+    again = run_program(
+        "-q", "simulate", folder / "plan.npz", "--starts", "random:40", "--min-success", "0", cwd=tmp_path
+    )
     assert again.returncode == 0, again.stderr
     assert temp_files(folder) == []
     assert json.loads(metrics.read_text())["manifest"] == artifacts.read_manifest(sim)
@@ -360,10 +378,15 @@ def test_a_second_run_into_a_locked_folder_refuses_in_one_line(tmp_path, built):
 def test_the_lock_of_a_killed_run_is_released(tmp_path, built):
     folder = tmp_path / "p"
     holder = subprocess.Popen(
-        [sys.executable, "-c", "import sys, time\nfrom bearnav_cli import artifacts\n"
-         f"with artifacts.output_folder({str(folder)!r}):\n    print('held', flush=True)\n    time.sleep(60)"],
-        stdout=subprocess.PIPE, text=True,
-    )  # fmt: skip
+        [
+            sys.executable,
+            "-c",
+            "import sys, time\nfrom bearnav_cli import artifacts\n"
+            f"with artifacts.output_folder({str(folder)!r}):\n    print('held', flush=True)\n    time.sleep(60)",
+        ],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
     assert holder.stdout.readline().strip() == "held"
     busy = run_program("-q", "plan", built["yaml"], "-o", folder, cwd=tmp_path)
     assert_clean_failure(busy, 3, ("another bearnav run",), stderr=busy.stderr)
@@ -376,9 +399,16 @@ def test_the_lock_of_a_killed_run_is_released(tmp_path, built):
 def _race(tmp_path: Path, reference: dict) -> None:
     yaml_path = write_yaml(tmp_path / "small.yaml", small_spec())
     folder = tmp_path / "p"
-    processes = [subprocess.Popen([str(BEARNAV), "-q", "plan", str(yaml_path), "-o", str(folder), "--seed", str(s)],
-                                  cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-                 for s in (0, 1)]  # fmt: skip
+    processes = [
+        subprocess.Popen(
+            [str(BEARNAV), "-q", "plan", str(yaml_path), "-o", str(folder), "--seed", str(s)],
+            cwd=tmp_path,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        for s in (0, 1)
+    ]
     results = [p.communicate(timeout=120) + (p.returncode,) for p in processes]
     assert any(code == 0 for _, _, code in results), results
     for _, err, code in results:
@@ -433,9 +463,13 @@ def _stale_other_params(folder: Path) -> None:
     assert invoke("-q", "decompose", folder / "simplified.npz", "--coverage-target", "0.5").exit_code == 0
 
 
-HISTORIES = {"another-maps-plan": _other_map_then_small, "same-map-other-yaml-file": _same_map_other_file,
-             "other-seed": _other_seed, "damaged-and-cyclic-artifacts": _damaged,
-             "a-stage-run-alone-with-other-options": _stale_other_params}  # fmt: skip
+HISTORIES = {
+    "another-maps-plan": _other_map_then_small,
+    "same-map-other-yaml-file": _same_map_other_file,
+    "other-seed": _other_seed,
+    "damaged-and-cyclic-artifacts": _damaged,
+    "a-stage-run-alone-with-other-options": _stale_other_params,
+}
 
 
 #: Histories that leave what bearnav will not replace without --force: another map's plan folder, a
@@ -478,8 +512,11 @@ def wall_map(name: str, gap: float) -> dict:
     return dict(WALL_MAP, name=name, obstacles=[{"rectangle": [3.9, 0, 4.1, low]}, {"rectangle": [3.9, high, 4.1, 5]}])
 
 
-GAPS = {"doorway-narrower-than-the-robot": 0.3, "gap-0.2mm-wider-than-the-robot": 0.4002,
-        "passage-narrower-than-the-margin": 0.45}  # fmt: skip
+GAPS = {
+    "doorway-narrower-than-the-robot": 0.3,
+    "gap-0.2mm-wider-than-the-robot": 0.4002,
+    "passage-narrower-than-the-margin": 0.45,
+}
 
 
 @pytest.mark.parametrize("case", list(GAPS))
@@ -531,10 +568,14 @@ def test_coordinates_times_1000(tmp_path):
 
     spec["bounds"], spec["goal"], spec["starts"] = grow(spec["bounds"]), grow(spec["goal"]), grow(spec["starts"])
     spec["robot_radius"] *= scale
-    spec["landmarks"] = [grow(lm) if isinstance(lm, list) else dict(lm, position=grow(lm["position"]))
-                         for lm in spec["landmarks"]]  # fmt: skip
-    spec["obstacles"] = [{"polygon": grow(spec["obstacles"][0]["polygon"])}, {"rectangle": grow([4, 4, 6, 5])},
-                         {"circle": {"center": grow([8, 2]), "radius": 0.5 * scale}}]  # fmt: skip
+    spec["landmarks"] = [
+        grow(lm) if isinstance(lm, list) else dict(lm, position=grow(lm["position"])) for lm in spec["landmarks"]
+    ]
+    spec["obstacles"] = [
+        {"polygon": grow(spec["obstacles"][0]["polygon"])},
+        {"rectangle": grow([4, 4, 6, 5])},
+        {"circle": {"center": grow([8, 2]), "radius": 0.5 * scale}},
+    ]
     spec["params"] = {"rrtstar": {"iterations": 400, "step": 1000.0, "seed": 0}}
     path = write_yaml(tmp_path / "big.yaml", spec)
     result = invoke("-q", "plan", path, "-o", tmp_path / "p")
@@ -551,11 +592,17 @@ def test_2000_obstacles(tmp_path):
     rng = np.random.default_rng(0)
     centres = rng.uniform(1, 99, size=(2000, 2))
     spec = small_spec()
-    spec.update(name="crowd", bounds=[0, 0, 100, 100], goal=[0.5, 0.5], starts=[],
-                obstacles=[{"circle": {"center": c.round(3).tolist(), "radius": 0.3}} for c in centres
-                           if np.hypot(*(c - 0.5)) > 3],
-                landmarks=[[0, 0], [100, 0], [0, 100], [100, 100], [50, 0], [0, 50]],
-                params={"rrtstar": {"iterations": 1500, "step": 2.0}})  # fmt: skip
+    spec.update(
+        name="crowd",
+        bounds=[0, 0, 100, 100],
+        goal=[0.5, 0.5],
+        starts=[],
+        obstacles=[
+            {"circle": {"center": c.round(3).tolist(), "radius": 0.3}} for c in centres if np.hypot(*(c - 0.5)) > 3
+        ],
+        landmarks=[[0, 0], [100, 0], [0, 100], [100, 100], [50, 0], [0, 50]],
+        params={"rrtstar": {"iterations": 1500, "step": 2.0}},
+    )
     path = write_yaml(tmp_path / "crowd.yaml", spec)
     made = invoke("-q", "map", path, "-o", tmp_path / "p" / "map.json")
     assert made.exit_code == 0, made.output

@@ -11,7 +11,7 @@ import shapely
 
 from bearnav_cli import liveness, verify
 from bearnav_cli.errors import InvalidParamsError
-from bearnav_cli.runtime import PlanArrays, bounded, estimate, looking
+from bearnav_cli.runtime import PlanArrays, bounded, estimate, look_bound, looking
 
 from .conftest import random_plan
 from .handmade import hand_map, hand_plan
@@ -51,8 +51,10 @@ def test_the_bound_of_a_row_is_one_look_bound(plan):
     eta = rng.uniform(1e-4, 0.02, len(x))
     mine = liveness.live_grid.bounds_of(arrays, x, visible, eta)
     box = estimate.axle_bounds(arrays)
-    theirs = [bounded.one_look_bound(x[i : i + 1], arrays.landmarks, visible[i : i + 1], eta[i], box, arrays.tol)[0]
-              for i in range(len(x))]  # fmt: skip
+    theirs = [
+        look_bound.one_look_bound(x[i : i + 1], arrays.landmarks, visible[i : i + 1], eta[i], box, arrays.tol)[0]
+        for i in range(len(x))
+    ]
     np.testing.assert_allclose(mine, theirs, rtol=1e-9, atol=1e-9)
 
 
@@ -107,8 +109,9 @@ def test_a_turn_all_around_gives_a_set_within_the_look_bound(plan, worst):
     signs = rng.choice([-1.0, 1.0], truth.shape)
     for h in range(per_heading.shape[1]):
         error = signs * eta if worst else rng.uniform(-eta, eta, truth.shape)
-        vertices, count = bounded.intersect_cones(vertices, count, arrays.landmarks, truth + error,
-                                                  per_heading[:, h], eta, arrays.tol)  # fmt: skip
+        vertices, count = bounded.intersect_cones(
+            vertices, count, arrays.landmarks, truth + error, per_heading[:, h], eta, arrays.tol
+        )
     _, error = bounded.centre(vertices, count)
     all_around = looking.views(arrays, x, 2.0 * math.pi, math.inf, 1)[:, 0]
     np.testing.assert_array_equal(all_around, per_heading.any(axis=1))
@@ -211,8 +214,19 @@ def built(tmp_path_factory):
 
 
 def test_verify_cli_json_has_liveness(cli, built):
-    result = cli("verify", built["plan"], "--starts", "0", "--live-fov", "60", "--bearing-error-deg", "0.3",
-                 "--live-resolution", "0.3", "--json")  # fmt: skip
+    result = cli(
+        "verify",
+        built["plan"],
+        "--starts",
+        "0",
+        "--live-fov",
+        "60",
+        "--bearing-error-deg",
+        "0.3",
+        "--live-resolution",
+        "0.3",
+        "--json",
+    )
     assert result.exit_code == 0, result.output
     data = json.loads(result.output)
     assert data["liveness"]["fov_deg"] == 60.0 and data["liveness"]["headings"] == 36

@@ -94,11 +94,19 @@ def test_the_control_step_drives_the_look_ahead_point_along_the_field():
     p = domain_starts(arrays, 50, rng)
     theta = rng.uniform(-math.pi, math.pi, len(p))
     x = robot.lookahead_point(p, theta, -LAMBDA)
-    s = step.ControlSettings.for_plan(plan.map.diagonal, plan.map.tol, dynamics="unicycle", measurement="displacement",
-                                      bearing_sigma=0.0)  # fmt: skip
+    s = step.ControlSettings.for_plan(
+        plan.map.diagonal, plan.map.tol, dynamics="unicycle", measurement="displacement", bearing_sigma=0.0
+    )
     n = len(arrays.landmarks)
-    out = step.control(arrays, s, step.ControlState.initial(theta), np.zeros((len(p), n, 2)),
-                       np.ones((len(p), n), bool), theta, x_true=x)  # fmt: skip
+    out = step.control(
+        arrays,
+        s,
+        step.ControlState.initial(theta),
+        np.zeros((len(p), n, 2)),
+        np.ones((len(p), n), bool),
+        theta,
+        x_true=x,
+    )
     cell = out.state.cell
     assert np.all(cell >= 0) and np.all(out.certified)
     u = arrays.field_a[cell] - np.einsum("rij,rj->ri", arrays.field_M[cell], p)
@@ -114,13 +122,15 @@ def test_without_a_look_ahead_the_unicycle_keeps_its_law_and_is_never_certified(
     assert plan.map.lookahead == 0.0 and "robot" not in plan.map.to_json()
     arrays = PlanArrays.from_plan(plan)
     starts = domain_starts(arrays, 40, np.random.default_rng(4))
-    params = simulate.Params(dynamics="unicycle", measurement="displacement", odometry_noise=0.0,
-                             record_trajectories=False)  # fmt: skip
+    params = simulate.Params(
+        dynamics="unicycle", measurement="displacement", odometry_noise=0.0, record_trajectories=False
+    )
     runs = simulate.rollout(plan, starts, params)
     assert np.all(runs.outcome == Outcome.SUCCESS), runs.counts()
     assert runs.certified_steps.sum() == 0 and runs.steps.sum() > 0
-    single = simulate.rollout(plan, starts, simulate.Params(measurement="displacement", odometry_noise=0.0,
-                                                            record_trajectories=False))  # fmt: skip
+    single = simulate.rollout(
+        plan, starts, simulate.Params(measurement="displacement", odometry_noise=0.0, record_trajectories=False)
+    )
     assert single.certified_fraction == 1.0
 
 
@@ -186,8 +196,7 @@ def test_a_robot_that_may_not_reverse_never_drives_backwards():
     assert plan.map.robot["reverse"] is False
     assert simulate.settings(plan, simulate.Params(dynamics="unicycle")).control.clamp_reverse
     starts = simulate.resolve_starts(plan, simulate.Params(starts="domain:40", seed=2))
-    params = simulate.Params(dynamics="unicycle", measurement="displacement", odometry_noise=0.0,
-                             initial_heading=180.0)  # fmt: skip
+    params = simulate.Params(dynamics="unicycle", measurement="displacement", odometry_noise=0.0, initial_heading=180.0)
     runs = simulate.rollout(plan, starts, params)
     assert runs.counts()["collision"] == 0 and np.all(runs.min_clearance >= 0.0)
     heading, coords, offsets = runs.trajectory_heading, runs.trajectory_coords, runs.trajectory_offsets
@@ -233,13 +242,24 @@ def test_a_map_without_a_robot_section_keeps_its_map_json(cli, write_map, small_
 
 def test_the_robot_section_and_the_lookahead_option(cli, write_map, small_spec, tmp_path):
     spec = copy.deepcopy(small_spec)
-    spec["robot"] = {"lookahead": 0.1, "bearing_error_deg": 0.25, "slip": 0.05, "max_turn_rate": 1.5,
-                     "reverse": False, "compass_error_deg": None}  # fmt: skip
+    spec["robot"] = {
+        "lookahead": 0.1,
+        "bearing_error_deg": 0.25,
+        "slip": 0.05,
+        "max_turn_rate": 1.5,
+        "reverse": False,
+        "compass_error_deg": None,
+    }
     built = build_map(spec)
     assert built.lookahead == 0.1 and built.planning_radius == pytest.approx(0.3)
     np.testing.assert_allclose(built.free_bounds, [0.3, 0.3, 9.7, 7.7])
-    assert built.robot_json() == {"lookahead": 0.1, "bearing_error_deg": 0.25, "slip": 0.05, "max_turn_rate": 1.5,
-                                  "reverse": False}  # fmt: skip
+    assert built.robot_json() == {
+        "lookahead": 0.1,
+        "bearing_error_deg": 0.25,
+        "slip": 0.05,
+        "max_turn_rate": 1.5,
+        "reverse": False,
+    }
     assert type(built).from_json(built.to_json()).to_json_text() == built.to_json_text()
     # obstacles inflated by ρ + λ, raw ones unchanged
     plain = build_map(small_spec)
@@ -278,9 +298,14 @@ def test_a_look_ahead_point_a_hair_inside_an_obstacle_is_led_out_to_a_node():
     space = FreeSpace.from_map(plan.map)
     for depth, expect_node in ((0.2 * LAMBDA, True), (3.0 * LAMBDA, False)):
         rings = shapely.get_parts(shapely.boundary(shapely.buffer(space.obstacles, -depth)))  # depth inside
-        x = np.concatenate([shapely.get_coordinates(shapely.line_interpolate_point(ring, np.linspace(0, 1, 16)[:-1],
-                                                                                   normalized=True))
-                            for ring in rings])  # fmt: skip
+        x = np.concatenate(
+            [
+                shapely.get_coordinates(
+                    shapely.line_interpolate_point(ring, np.linspace(0, 1, 16)[:-1], normalized=True)
+                )
+                for ring in rings
+            ]
+        )
         inside = sight.inside_obstacles(arrays, x)
         assert inside.sum() >= 10, inside.sum()
         got = cell_policy.approach_target(arrays, x[inside])

@@ -397,8 +397,9 @@ def test_a_grid_image_that_is_not_a_regular_file_is_one_line_naming_it(cli, tmp_
     elif special == "folder":
         os.mkdir(target)
     grid = tmp_path / "grid.yaml"
-    grid.write_text(f"image: {target}\nresolution: 0.05\norigin: [0, 0, 0]\nnegate: 0\n"
-                    "occupied_thresh: 0.65\nfree_thresh: 0.2\n")  # fmt: skip
+    grid.write_text(
+        f"image: {target}\nresolution: 0.05\norigin: [0, 0, 0]\nnegate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.2\n"
+    )
     result = cli("map", grid, "--goal", "1,1", "-o", tmp_path / "map.json")
     assert result.exit_code == 3, result.output
     line = result.output.strip()

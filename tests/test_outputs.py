@@ -134,8 +134,11 @@ def test_tags_refuses_a_yaml_it_did_not_write_without_force(cli, office):
 
 def test_map_text_with_tags_edits_block_and_flow_lists():
     proposal = SimpleNamespace(ids=("t9",), positions=np.array([[1.5, 0.0]]))  # what the edit reads of one
-    for text in (HAND_WRITTEN, yaml.safe_dump(SMALL_MAP, sort_keys=False, default_flow_style=None),
-                 "landmarks:\n- [0, 8]\nname: x  # old\n"):  # fmt: skip
+    for text in (
+        HAND_WRITTEN,
+        yaml.safe_dump(SMALL_MAP, sort_keys=False, default_flow_style=None),
+        "landmarks:\n- [0, 8]\nname: x  # old\n",
+    ):
         new = tags.map_text_with_tags(text, proposal, "x_tags", "# bearnav tags: test")
         spec = yaml.safe_load(new)
         assert spec["name"] == "x_tags" and spec["landmarks"][-1] == {"id": "t9", "position": [1.5, 0.0]}

@@ -49,8 +49,9 @@ def test_a_field_without_a_range_fails_the_check():
 
 def test_limits_are_the_declarations():
     for command in params.MODULES:
-        ranges = {f.name: declared(f).range for f in dataclasses.fields(params_type(command))
-                  if declared(f).range is not None}  # fmt: skip
+        ranges = {
+            f.name: declared(f).range for f in dataclasses.fields(params_type(command)) if declared(f).range is not None
+        }
         assert limits.LIMITS[command] == ranges, command
 
 
@@ -70,9 +71,11 @@ def test_the_docstring_choices_are_the_declared_ones():
 
 
 def test_the_declarations_import_no_numpy():
-    code = ("import sys, importlib; from bearnav_cli import params\n"
-            "for m in params.MODULES.values(): importlib.import_module(m)\n"
-            "print(sorted(m for m in sys.modules if m.split('.')[0] in ('numpy', 'shapely', 'scipy')))")  # fmt: skip
+    code = (
+        "import sys, importlib; from bearnav_cli import params\n"
+        "for m in params.MODULES.values(): importlib.import_module(m)\n"
+        "print(sorted(m for m in sys.modules if m.split('.')[0] in ('numpy', 'shapely', 'scipy')))"
+    )
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO, check=True)
     assert done.stdout.strip() == "[]", done.stdout
 

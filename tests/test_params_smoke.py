@@ -104,12 +104,18 @@ CASES = discovered()
 
 def test_the_cases_cover_the_issue_and_the_module_tuples():
     """The issue's named options are among the cases; every enumerated field lists its module's tuple."""
-    named = {("decompose", "bisector_rule", "crossing"), ("decompose", "barrier", "wedge"),
-             ("simulate", "odometry", False), ("simulate", "turn_first", False), ("simulate", "max_fix_error", 1.0),
-             *(("decompose", "cbf_filter", v) for v in decompose.CBF_FILTERS)}  # fmt: skip
+    named = {
+        ("decompose", "bisector_rule", "crossing"),
+        ("decompose", "barrier", "wedge"),
+        ("simulate", "odometry", False),
+        ("simulate", "turn_first", False),
+        ("simulate", "max_fix_error", 1.0),
+        *(("decompose", "cbf_filter", v) for v in decompose.CBF_FILTERS),
+    }
     assert named <= set(CASES)
-    enumerated = {(stage, f.name): f.choices for stage in fields.PARAMS_MODULES for f in fields.params_fields(stage)
-                  if f.choices}  # fmt: skip
+    enumerated = {
+        (stage, f.name): f.choices for stage in fields.PARAMS_MODULES for f in fields.params_fields(stage) if f.choices
+    }
     for key, values in TUPLES.items():
         if values is not None:
             assert enumerated[key] == tuple(values), key
@@ -174,9 +180,18 @@ def round_trip(tmp_path, stage: str, kind: str, artifact, params) -> dict:
     if id(artifact) in _CHECKED:
         return _CHECKED[id(artifact)]
     version = pipeline.STAGE_BY_NAME[stage].module.VERSION
-    manifest = artifacts.make_manifest(kind, artifact, stage=stage, stage_version=version,
-                                       params=artifacts.params_dict(params), input_path=None, input_hash="0",
-                                       summary="", elapsed_s=0.0, stats=getattr(artifact, "stats", None))  # fmt: skip
+    manifest = artifacts.make_manifest(
+        kind,
+        artifact,
+        stage=stage,
+        stage_version=version,
+        params=artifacts.params_dict(params),
+        input_path=None,
+        input_hash="0",
+        summary="",
+        elapsed_s=0.0,
+        stats=getattr(artifact, "stats", None),
+    )
     path = artifacts.save(tmp_path / artifacts.KINDS[kind].filename, artifact, manifest)
     loaded = artifacts.load(path, expect=kind)
     assert type(loaded.artifact) is type(artifact)

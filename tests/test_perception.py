@@ -38,8 +38,11 @@ def _quiet(caplog):
 
 
 def plans():
-    return [("random 0", lambda: random_plan(0)), ("random 3", lambda: random_plan(3)),
-            ("rooms 2", lambda: made_plan(2, "rooms"))]  # fmt: skip
+    return [
+        ("random 0", lambda: random_plan(0)),
+        ("random 3", lambda: random_plan(3)),
+        ("rooms 2", lambda: made_plan(2, "rooms")),
+    ]
 
 
 def spacing_of(plan) -> float:
@@ -149,8 +152,9 @@ def test_noise_scales_the_predicted_error_and_not_the_rule():
 def test_landmarks_override_and_default_grid():
     plan = random_plan(0)
     own = perception.perception_coverage(plan, 60, 1.0)
-    same = perception.perception_coverage(plan, 60, 1.0, landmarks=plan.map.landmarks,
-                                          landmark_ids=plan.map.landmark_ids)  # fmt: skip
+    same = perception.perception_coverage(
+        plan, 60, 1.0, landmarks=plan.map.landmarks, landmark_ids=plan.map.landmark_ids
+    )
     assert own.landmark_ids == plan.map.landmark_ids and same.landmark_ids == own.landmark_ids
     assert np.array_equal(own.holds, same.holds) and own.fraction_domain == same.fraction_domain
     assert own.spacing == pytest.approx(plan.map.diagonal / perception.GRID_CELLS)
@@ -239,8 +243,9 @@ def _own_critical_headings(space, x, lm, fov_deg, max_range):
     return edges, mids
 
 
-@pytest.mark.parametrize("seed,fov,max_range", [(0, 60.0, math.inf), (1, 200.0, math.inf), (5, 270.0, math.inf),
-                                               (3, 300.0, 3.0)])  # fmt: skip
+@pytest.mark.parametrize(
+    "seed,fov,max_range", [(0, 60.0, math.inf), (1, 200.0, math.inf), (5, 270.0, math.inf), (3, 300.0, 3.0)]
+)
 def test_heading_coverage_matches_a_brute_force_over_headings(seed, fov, max_range):
     map_ = random_map(seed)
     cov = perception.heading_coverage(map_, fov, max_range, spacing=map_.diagonal / CELLS)
@@ -316,8 +321,9 @@ def test_two_tags_far_apart_give_a_closed_form():
         cov = perception.heading_coverage(map_, fov, spacing=s)
         x = cov.points
         d = map_.landmarks[None] - x[:, None]
-        both = np.all(space.visible(np.repeat(x, 2, axis=0), np.tile(map_.landmarks, (len(x), 1))).reshape(-1, 2),
-                      axis=1)  # fmt: skip
+        both = np.all(
+            space.visible(np.repeat(x, 2, axis=0), np.tile(map_.landmarks, (len(x), 1))).reshape(-1, 2), axis=1
+        )
         u = d / np.linalg.norm(d, axis=2)[..., None]
         angle = np.degrees(np.arccos(np.clip(np.sum(u[:, 0] * u[:, 1], axis=1), -1, 1)))
         expected = both & (angle >= 2.0) & (angle <= min(fov, 178.0))

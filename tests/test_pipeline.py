@@ -47,8 +47,10 @@ def test_every_stage_module_defines_what_the_table_needs_and_its_hooks_as_docume
             assert len(parameters) == len(names), (stage.module_name, hook, parameters)
         public = {name for name in module.__all__ if callable(getattr(module, name, None))}
         assert not {name for name in public if "check" in name or "problem" in name} - set(HOOKS), stage.module_name
-    assert defined == {"check_resources": ["rrtstar", "simulate"],
-                       "problems": ["rrtstar", "simplify", "decompose", "synthesize"]}  # fmt: skip
+    assert defined == {
+        "check_resources": ["rrtstar", "simulate"],
+        "problems": ["rrtstar", "simplify", "decompose", "synthesize"],
+    }
 
 
 def test_stages_name_their_own_parameter_and_the_table_the_field_that_set_it():
@@ -66,10 +68,21 @@ def test_stages_name_their_own_parameter_and_the_table_the_field_that_set_it():
 
 def test_a_derived_border_spacing_is_blamed_on_the_step():
     """The ``_explicit`` string of old is :attr:`Origins.given`: a spacing left at step/10 names ``step``."""
-    thin = build_map({"name": "thin", "bounds": [0, 0, 100, 0.1], "robot_radius": 0.001, "goal": [0.05, 0.05],
-                      "starts": [[99, 0.05]], "obstacles": [], "landmarks": [[0, 0], [100, 0.1]]})  # fmt: skip
-    cases = (({"step": 0.005}, "--step", "(step/10 = 0.0005)"),
-             ({"step": 0.005, "border_spacing": 0.0005}, "--border-spacing", "0.0005 would"))  # fmt: skip
+    thin = build_map(
+        {
+            "name": "thin",
+            "bounds": [0, 0, 100, 0.1],
+            "robot_radius": 0.001,
+            "goal": [0.05, 0.05],
+            "starts": [[99, 0.05]],
+            "obstacles": [],
+            "landmarks": [[0, 0], [100, 0.1]],
+        }
+    )
+    cases = (
+        ({"step": 0.005}, "--step", "(step/10 = 0.0005)"),
+        ({"step": 0.005, "border_spacing": 0.0005}, "--border-spacing", "0.0005 would"),
+    )
     for overrides, field, words in cases:
         with pytest.raises(ResourceLimitError) as raised:
             pipeline_params.stage_params("rrtstar", thin, overrides)
@@ -94,8 +107,9 @@ def test_the_closed_loop_estimate_names_dt_only_when_given():
             simulate.check_resources(plan, slow, given)
         assert raised.value.field == field
     with pytest.raises(InvalidParamsError) as raised:
-        pipeline.SIMULATE.check_resources(plan, simulate.Params(starts="random:2000000"),
-                                          pipeline.Origins({"starts": "--starts"}))  # fmt: skip
+        pipeline.SIMULATE.check_resources(
+            plan, simulate.Params(starts="random:2000000"), pipeline.Origins({"starts": "--starts"})
+        )
     assert raised.value.field == "--starts" and "at most 1,000,000 runs" in raised.value.reason
 
 
@@ -109,6 +123,7 @@ def test_problems_are_the_stages_verdicts_worst_first():
     found = pipeline.STAGE_BY_NAME["synthesize"].problems(dataclasses.replace(plan, status=status))
     assert [(p.kind, p.cells) for p in found] == [(verdicts.NOT_CERTIFIED, (3, 5))]
     assert found[0].text == "cells 3, 5 are not certified (status 2 or 3)"
-    root = dataclasses.replace(made["tree"], nodes=made["tree"].nodes[:1], parent=made["tree"].parent[:1],
-                               cost=made["tree"].cost[:1])  # fmt: skip
+    root = dataclasses.replace(
+        made["tree"], nodes=made["tree"].nodes[:1], parent=made["tree"].parent[:1], cost=made["tree"].cost[:1]
+    )
     assert [p.kind for p in pipeline.STAGE_BY_NAME["rrtstar"].problems(root)] == [verdicts.NO_ROUTE]

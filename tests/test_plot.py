@@ -100,8 +100,9 @@ def test_arrows_cover_the_certified_domain(small_plan):
     points, _ = plot.field_samples(small_plan, arrows=20)
     fb = small_plan.map.free_bounds
     step = max(fb[2] - fb[0], fb[3] - fb[1]) / 20
-    grid = np.stack(np.meshgrid(np.arange(fb[0] + step / 2, fb[2], step), np.arange(fb[1] + step / 2, fb[3], step)),
-                    axis=-1).reshape(-1, 2)  # fmt: skip
+    grid = np.stack(
+        np.meshgrid(np.arange(fb[0] + step / 2, fb[2], step), np.arange(fb[1] + step / 2, fb[3], step)), axis=-1
+    ).reshape(-1, 2)
     arrays = runtime.PlanArrays.from_plan(small_plan)
     inside = FreeSpace.from_map(small_plan.map).points_free(grid) & (runtime.least_rank_cell(arrays, grid) >= 0)
     assert len(points) == inside.sum()
@@ -197,8 +198,17 @@ def test_colour_by_rank_tolerance_and_status(small_plan, draw):
 
 def test_legend_names_every_layer(small_plan, draw):
     texts = " | ".join(legend_texts(draw(small_plan, coverage=composition.coverage_regions(small_plan.cells))))
-    for word in ("obstacles", "inflated by the robot radius", "tree", "added nodes", "landmarks", "goal",
-                 "no cell covers", "exit faces", "field direction"):  # fmt: skip
+    for word in (
+        "obstacles",
+        "inflated by the robot radius",
+        "tree",
+        "added nodes",
+        "landmarks",
+        "goal",
+        "no cell covers",
+        "exit faces",
+        "field direction",
+    ):
         assert word in texts, word
 
 
@@ -236,8 +246,9 @@ def test_cli_plot_writes_a_png_and_rejects_a_bad_colour(cli, write_map, small_sp
     assert cli("plot", plan, "-o", "y.png", "--barriers", "--labels").exit_code == 0
     assert_one_line_error(cli("plot", plan, "-o", "z.png", "--color-by", "colour"), "--color-by", "rank")
     assert not (tmp_path / "z.png").exists()
-    assert_one_line_error(cli("plot", tmp_path / "plans" / "small" / "cells.npz", "-o", "z.png", "--color-by",
-                              "tolerance"), "color_by")  # fmt: skip
+    assert_one_line_error(
+        cli("plot", tmp_path / "plans" / "small" / "cells.npz", "-o", "z.png", "--color-by", "tolerance"), "color_by"
+    )
 
 
 def test_no_arrows_draws_no_field(small_plan, draw):
@@ -251,8 +262,7 @@ def test_importing_plot_keeps_the_callers_backend():
     import subprocess
     import sys
 
-    code = ("import matplotlib; matplotlib.use('svg'); import bearnav_cli.plot; "
-            "print(matplotlib.get_backend())")  # fmt: skip
+    code = "import matplotlib; matplotlib.use('svg'); import bearnav_cli.plot; print(matplotlib.get_backend())"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip().lower() == "svg"
 
@@ -310,9 +320,13 @@ def unexplained_marks(ax) -> set:
     """
     entries = set(legend_texts(ax))
     has_bar = len(ax.figure.axes) > 1
-    return {(a.get_gid(), a.get_label()) for a in drawn(ax)
-            if a.get_label().lstrip("_") not in entries and a.get_gid() != "bounds"
-            and not (a.get_gid() == "cell-fill" and has_bar)}  # fmt: skip
+    return {
+        (a.get_gid(), a.get_label())
+        for a in drawn(ax)
+        if a.get_label().lstrip("_") not in entries
+        and a.get_gid() != "bounds"
+        and not (a.get_gid() == "cell-fill" and has_bar)
+    }
 
 
 def overlapping_labels(fig) -> list:
@@ -321,8 +335,12 @@ def overlapping_labels(fig) -> list:
     renderer = fig.canvas.get_renderer()
     texts = [t for t in ax.texts if t.get_visible() and t.get_text()]
     boxes = [t.get_window_extent(renderer) for t in texts]
-    return [(a.get_text(), b.get_text()) for i, a in enumerate(texts) for j, b in enumerate(texts)
-            if j > i and boxes[i].overlaps(boxes[j])]  # fmt: skip
+    return [
+        (a.get_text(), b.get_text())
+        for i, a in enumerate(texts)
+        for j, b in enumerate(texts)
+        if j > i and boxes[i].overlaps(boxes[j])
+    ]
 
 
 def colours_outside_the_palette(ax) -> set:
@@ -359,8 +377,10 @@ def assert_reads_well(fig) -> None:
     assert not overlapping_labels(fig)
     renderer = fig.canvas.get_renderer()
     page = fig.bbox
-    for box in [t.get_window_extent(renderer) for t in ax.texts] + [ax.title.get_window_extent(renderer),
-                                                                     legend.get_window_extent(renderer)]:  # fmt: skip
+    for box in [t.get_window_extent(renderer) for t in ax.texts] + [
+        ax.title.get_window_extent(renderer),
+        legend.get_window_extent(renderer),
+    ]:
         assert page.x0 - 1 <= box.x0 and box.x1 <= page.x1 + 1 and page.y0 - 1 <= box.y0 and box.y1 <= page.y1 + 1
     assert not colours_outside_the_palette(ax)
 
@@ -383,8 +403,15 @@ def test_cell_indices_give_way_to_landmark_ids(figures, small_plan):
 
 def test_titles_state_the_configuration(figures, small_plan):
     sim_title = figures["sim"].axes[0].get_title()
-    for words in ("small — simulate", "of 2 runs reached the goal", "the map's starts", "fov 90°",
-                  "bearing noise 0.5° (1σ)", "unicycle dynamics", "kalman estimator"):  # fmt: skip
+    for words in (
+        "small — simulate",
+        "of 2 runs reached the goal",
+        "the map's starts",
+        "fov 90°",
+        "bearing noise 0.5° (1σ)",
+        "unicycle dynamics",
+        "kalman estimator",
+    ):
         assert words in sim_title, words
     assert figures["plan"].axes[0].get_title().startswith(f"small — plan: {small_plan.cells.n_cells} funnel cells")
     assert figures["tree"].axes[0].get_title().startswith("small — simplified tree:")

@@ -127,7 +127,10 @@ def test_the_filter_of_a_rendered_run_never_assumes_exact_bearings(room):
     from bearnav_cli.stages import simulate
 
     plan = SimpleNamespace(map=room, goal_tolerance=0.1)
-    for noise, camera, expected in ((0.0, "ideal", 0.0), (0.0, "render", BEARING_SIGMA),
-                                    (3.0, "render", math.radians(3.0))):  # fmt: skip
+    for noise, camera, expected in (
+        (0.0, "ideal", 0.0),
+        (0.0, "render", BEARING_SIGMA),
+        (3.0, "render", math.radians(3.0)),
+    ):
         s = simulate.settings(plan, simulate.Params(noise_deg=noise, camera=camera, fov=90.0))
         assert s.control.bearing_sigma == pytest.approx(expected)

@@ -28,8 +28,7 @@ def test_rotate_map_turns_obstacles_landmarks_and_starts_about_the_center():
 
     np.testing.assert_allclose(turned.landmarks, quarter_turn(map_.landmarks), atol=1e-12)
     np.testing.assert_allclose(turned.starts, quarter_turn(map_.starts), atol=1e-12)
-    for before, after in zip(map_.obstacles + map_.raw_obstacles, turned.obstacles + turned.raw_obstacles,
-                             strict=True):  # fmt: skip
+    for before, after in zip(map_.obstacles + map_.raw_obstacles, turned.obstacles + turned.raw_obstacles, strict=True):
         np.testing.assert_allclose(after.exterior, quarter_turn(before.exterior), atol=1e-12)
     np.testing.assert_array_equal(turned.goal, map_.goal)
     np.testing.assert_array_equal(turned.bounds, map_.bounds)

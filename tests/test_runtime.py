@@ -78,10 +78,21 @@ def test_every_node_needs_a_cell(chain):
     fewer = first_cells(chain.cells, 2)
     with pytest.raises(ArtifactError, match="exactly one cell"):
         PlanArrays.from_plan(
-            Plan(fewer, chain.gain[:2], chain.c_h[:2], chain.c_v[:2], chain.u_max[:2], chain.margin_h[:2],
-                 chain.margin_v[:2], chain.status[:2], chain.goal_tolerance, chain.tolerance[:2],
-                 chain.usable_tolerance[:2], chain.plan_tolerance)
-        )  # fmt: skip
+            Plan(
+                fewer,
+                chain.gain[:2],
+                chain.c_h[:2],
+                chain.c_v[:2],
+                chain.u_max[:2],
+                chain.margin_h[:2],
+                chain.margin_v[:2],
+                chain.status[:2],
+                chain.goal_tolerance,
+                chain.tolerance[:2],
+                chain.usable_tolerance[:2],
+                chain.plan_tolerance,
+            )
+        )
 
 
 def test_field_is_the_gain_applied_to_displacements(chain, arrays):
@@ -322,8 +333,12 @@ def test_tree_costs_by_pointer_doubling():
 def test_params_are_checked():
     from bearnav_cli.errors import InvalidParamsError
 
-    for kwargs, name in (({"speed": 0}, "speed"), ({"dt": -1.0}, "dt"), ({"max_steps": 0}, "max_steps"),
-                         ({"goal_tolerance": 0.0}, "goal_tolerance")):  # fmt: skip
+    for kwargs, name in (
+        ({"speed": 0}, "speed"),
+        ({"dt": -1.0}, "dt"),
+        ({"max_steps": 0}, "max_steps"),
+        ({"goal_tolerance": 0.0}, "goal_tolerance"),
+    ):
         with pytest.raises(InvalidParamsError) as err:
             simulate.Params(**kwargs)
         assert err.value.field == name
@@ -378,10 +393,10 @@ def test_look_around_starts_at_once_without_an_estimate_and_ends_lost_after_a_re
     state = runtime.ControlState.initial(np.zeros(2))
     no = np.zeros(2, bool)
     for hold, lost in ((s.dt, False), (2 * math.pi / s.beta + 2 * s.dt, True)):
-        est = Estimate(np.zeros((2, 2)), np.full(2, np.inf), no, np.array([False, True]), no, np.full(2, hold),
-                       np.full(2, np.inf))  # fmt: skip
-        scanning, is_lost, spin, turn, _ = look_around(s, state, est, np.array([[0.0, 1.0], [1.0, 0.0]]),
-                                                       np.zeros(2))  # fmt: skip
+        est = Estimate(
+            np.zeros((2, 2)), np.full(2, np.inf), no, np.array([False, True]), no, np.full(2, hold), np.full(2, np.inf)
+        )
+        scanning, is_lost, spin, turn, _ = look_around(s, state, est, np.array([[0.0, 1.0], [1.0, 0.0]]), np.zeros(2))
         assert scanning.tolist() == [True, False] and is_lost.tolist() == [lost, False]
         assert spin[0] == 1.0 and turn.tolist() == [s.beta, 0.0]  # toward the last command (+90°)
 

@@ -45,8 +45,13 @@ print(json.dumps({"u": u.tolist(), "cell": ctl.cell, "lost": ctl.lost, "foreign"
 
 
 def _build(out: Path) -> Path:
-    done = subprocess.run([sys.executable, str(REPO / "tools" / "build_runtime.py"), "-o", str(out)],
-                          capture_output=True, text=True, check=True, timeout=60)  # fmt: skip
+    done = subprocess.run(
+        [sys.executable, str(REPO / "tools" / "build_runtime.py"), "-o", str(out)],
+        capture_output=True,
+        text=True,
+        check=True,
+        timeout=60,
+    )
     wheel = Path(done.stdout.strip())
     assert wheel == out / f"bearnav_runtime-{bearnav_cli.__version__}-py3-none-any.whl" and wheel.is_file()
     return wheel
@@ -89,8 +94,23 @@ def test_a_robot_runs_a_plan_from_the_wheel_with_numpy_alone(tmp_path):
     """pip installs the wheel (offline), and its Controller runs a plan with only the stdlib and numpy importable."""
     wheel = _build(tmp_path / "dist")
     site = tmp_path / "site"
-    subprocess.run([sys.executable, "-m", "pip", "install", "--isolated", "--no-index", "--no-deps", "--quiet",
-                    "--target", str(site), str(wheel)], check=True, timeout=120)  # fmt: skip
+    subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "pip",
+            "install",
+            "--isolated",
+            "--no-index",
+            "--no-deps",
+            "--quiet",
+            "--target",
+            str(site),
+            str(wheel),
+        ],
+        check=True,
+        timeout=120,
+    )
     info = f"bearnav_runtime-{bearnav_cli.__version__}.dist-info"
     assert sorted(p.name for p in site.iterdir()) == ["bearnav_cli", info]
     numpy_only = tmp_path / "numpy_only"  # numpy (and its bundled libraries) without the rest of site-packages
@@ -101,16 +121,30 @@ def test_a_robot_runs_a_plan_from_the_wheel_with_numpy_alone(tmp_path):
             (numpy_only / entry.name).symlink_to(entry, target_is_directory=entry.is_dir())
 
     spec = copy.deepcopy(SMALL_MAP)
-    made = pipeline.compute(map_.MapSource(spec=spec, file="small.yaml", sha256="0"),
-                            overrides={"rrtstar": {"iterations": 150}})  # fmt: skip
+    made = pipeline.compute(
+        map_.MapSource(spec=spec, file="small.yaml", sha256="0"), overrides={"rrtstar": {"iterations": 150}}
+    )
     plan = made["plan"]
-    manifest = artifacts.make_manifest("plan", plan, stage="synthesize", stage_version=1, params={}, input_path=None,
-                                       input_hash="0", summary="", elapsed_s=0.0)  # fmt: skip
+    manifest = artifacts.make_manifest(
+        "plan",
+        plan,
+        stage="synthesize",
+        stage_version=1,
+        params={},
+        input_path=None,
+        input_hash="0",
+        summary="",
+        elapsed_s=0.0,
+    )
     plan_path = artifacts.save(tmp_path / "plan.npz", plan, manifest)
     start = SMALL_MAP["starts"][0]
 
-    done = subprocess.run([sys.executable, "-I", "-S", "-c", _ROBOT, str(site), str(numpy_only), str(plan_path),
-                           json.dumps(start)], capture_output=True, text=True, timeout=60)  # fmt: skip
+    done = subprocess.run(
+        [sys.executable, "-I", "-S", "-c", _ROBOT, str(site), str(numpy_only), str(plan_path), json.dumps(start)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert done.returncode == 0, done.stderr
     out = json.loads(done.stdout)
     assert out["foreign"] == [], out["foreign"]

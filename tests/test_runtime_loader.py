@@ -227,8 +227,9 @@ def test_a_good_plan_loads_in_both_and_drives(plan_path):
     robot = Controller.from_plan(str(plan_path))
     assert np.array_equal(robot.arrays.gain, loaded.artifact.gain)
     assert np.array_equal(robot.arrays.cell_vertices, PlanArrays.from_plan(loaded.artifact).cell_vertices)
-    assert loaded.manifest["content_sha256"] == plan_file.content_hash(plan_file.parse_npz(
-        plan_path.read_bytes(), str(plan_path))[1])  # fmt: skip
+    assert loaded.manifest["content_sha256"] == plan_file.content_hash(
+        plan_file.parse_npz(plan_path.read_bytes(), str(plan_path))[1]
+    )
     x = np.array([9.0, 7.0])  # a start of the map
     landmarks = robot.arrays.landmarks
     bearings = (landmarks - x) / np.hypot(*(landmarks - x).T)[:, None]

@@ -116,12 +116,15 @@ def test_the_field_of_view_shows_with_the_default_wheel_slip(plans):
     error bound grows linearly with the distance, so a long blind stretch ends in a look-around.)"""
     plan, _ = plans["paper_b_circles"]
     slips = {"exact": {"odometry_noise": 0.0}, "default": {}}
-    runs = {(fov, slip): simulate.rollout(plan, plan.map.starts, params_for(plan, fov=fov, **slips[slip]))
-            for fov, slip in ((360.0, "default"), (60.0, "exact"), (60.0, "default"))}  # fmt: skip
+    runs = {
+        (fov, slip): simulate.rollout(plan, plan.map.starts, params_for(plan, fov=fov, **slips[slip]))
+        for fov, slip in ((360.0, "default"), (60.0, "exact"), (60.0, "default"))
+    }
 
     def same(a, b):  # up to rounding: 1e-6·D (exact: 2e-7 on this 250-unit map; slip: units)
         return np.array_equal(a.trajectory_offsets, b.trajectory_offsets) and np.allclose(
-            a.trajectory_coords, b.trajectory_coords, rtol=0.0, atol=1e-6 * plan.map.diagonal)  # fmt: skip
+            a.trajectory_coords, b.trajectory_coords, rtol=0.0, atol=1e-6 * plan.map.diagonal
+        )
 
     assert not runs[(360.0, "default")].hold_steps.any()
     narrow = runs[(60.0, "exact")]
@@ -138,8 +141,9 @@ def test_no_noise_free_run_collides_on_the_kitchen(plans):
     plan, _ = plans["kitchen"]
     for changes in ({}, {"fov": 60.0}, {"fov": 90.0, "dynamics": "unicycle"}):
         params = params_for(plan, starts="random:80", odometry_noise=0.0, **changes)
-        run = simulate.rollout(plan, simulate.resolve_starts(plan, params), dataclasses.replace(
-            params, record_trajectories=False))  # fmt: skip
+        run = simulate.rollout(
+            plan, simulate.resolve_starts(plan, params), dataclasses.replace(params, record_trajectories=False)
+        )
         assert run.counts()["collision"] == 0, (changes, run.counts())
     assert run.success_rate >= 0.95
 
@@ -150,8 +154,7 @@ def test_kitchen_random_starts_with_a_narrow_noisy_camera(plans, dynamics):
     (the fixes are fused with odometry; the default 2% wheel slip makes that odometry imperfect;
     ``bench/simulate.py`` measures noise on 1,000 starts)."""
     plan, _ = plans["kitchen"]
-    params = params_for(plan, starts="random:80", fov=60.0, noise_deg=1.0, dynamics=dynamics,
-                        record_trajectories=False)  # fmt: skip
+    params = params_for(plan, starts="random:80", fov=60.0, noise_deg=1.0, dynamics=dynamics, record_trajectories=False)
     assert params.odometry_noise == 0.02
     run = simulate.rollout(plan, simulate.resolve_starts(plan, params), params)
     assert run.success_rate >= 0.95, run.counts()
@@ -214,7 +217,10 @@ def test_sim_artifact_round_trip_and_metrics(plans, tmp_path):
     for name in ("certified_steps", "start_in_domain", "final_cell", "max_steps", "route_length"):
         assert np.array_equal(getattr(loaded.artifact, name), getattr(sim, name)), name
     assert (loaded.artifact.speed, loaded.artifact.eps_sw, loaded.artifact.goal_tolerance) == (
-        sim.speed, sim.eps_sw, sim.goal_tolerance)  # fmt: skip
+        sim.speed,
+        sim.eps_sw,
+        sim.goal_tolerance,
+    )
     assert loaded.artifact.success_rate == sim.success_rate and loaded.artifact.counts() == sim.counts()
     assert loaded.manifest["params"]["odometry_noise"] == 0.02 and loaded.manifest["params"]["camera"] == "ideal"
     metrics = json.loads((tmp_path / "sim.json").read_text())["metrics"]
@@ -266,9 +272,15 @@ def test_simulate_cli_table_json_and_exit_code(plans, tmp_path):
 
 
 def test_params_are_checked():
-    for kwargs, name in (({"fov": 0.0}, "fov"), ({"noise_deg": -1.0}, "noise_deg"), ({"dynamics": "car"}, "dynamics"),
-                         ({"starts": "random:0"}, "starts"), ({"hold_time": 0.0}, "hold_time"),
-                         ({"camera": "tv"}, "camera"), ({"odometry_noise": -0.01}, "odometry_noise")):  # fmt: skip
+    for kwargs, name in (
+        ({"fov": 0.0}, "fov"),
+        ({"noise_deg": -1.0}, "noise_deg"),
+        ({"dynamics": "car"}, "dynamics"),
+        ({"starts": "random:0"}, "starts"),
+        ({"hold_time": 0.0}, "hold_time"),
+        ({"camera": "tv"}, "camera"),
+        ({"odometry_noise": -0.01}, "odometry_noise"),
+    ):
         with pytest.raises(InvalidParamsError) as err:
             simulate.Params(**kwargs)
         assert err.value.field == name
@@ -309,8 +321,13 @@ def test_the_back_of_a_thin_wall_shadows_a_tag_on_its_front():
 
     from tests.conftest import build_map
 
-    spec = {"name": "thin", "bounds": [0, 0, 6, 13], "goal": [4, 1], "landmarks": [[2.058, 7.647], [6, 0], [0, 13]],
-            "obstacles": [{"rectangle": [1.99, 4.993, 2.058, 10.475]}]}  # fmt: skip
+    spec = {
+        "name": "thin",
+        "bounds": [0, 0, 6, 13],
+        "goal": [4, 1],
+        "landmarks": [[2.058, 7.647], [6, 0], [0, 13]],
+        "obstacles": [{"rectangle": [1.99, 4.993, 2.058, 10.475]}],
+    }
     space = FreeSpace.from_map(build_map(spec))
     tag = np.array([[2.058, 7.647]])
     rng = np.random.default_rng(0)
@@ -333,17 +350,27 @@ def test_visibility_regions_agree_on_made_maps_and_a_ring(kind):
     from tests.conftest import build_made, build_map
 
     space = FreeSpace.from_map(build_made(mapgen.generate(3, kind)))
-    frame = {"name": "frame", "bounds": [0, 0, 8, 8], "goal": [1, 1], "landmarks": [[0, 8], [8, 0], [8, 8]],
-             "obstacles": [{"rectangle": [2, 2, 6, 3]}, {"rectangle": [2, 5, 6, 6]}, {"rectangle": [2, 3, 3, 5]},
-                           {"rectangle": [5, 3, 6, 5]}]}  # fmt: skip
+    frame = {
+        "name": "frame",
+        "bounds": [0, 0, 8, 8],
+        "goal": [1, 1],
+        "landmarks": [[0, 8], [8, 0], [8, 8]],
+        "obstacles": [
+            {"rectangle": [2, 2, 6, 3]},
+            {"rectangle": [2, 5, 6, 6]},
+            {"rectangle": [2, 3, 3, 5]},
+            {"rectangle": [5, 3, 6, 5]},
+        ],
+    }
     ring = FreeSpace.from_map(build_map(frame))
     assert len(shapely.get_parts(ring.raw_obstacles)[0].interiors) == 1  # the four walls make one ring
     rng = np.random.default_rng(7)
     for sp in (space, ring):
         x0, y0, x1, y1 = sp.bounds
         boundary = shapely.boundary(sp.raw_obstacles)
-        on_edges = np.asarray(shapely.get_coordinates(shapely.line_interpolate_point(
-            boundary, rng.uniform(0, 1, 6), normalized=True)))  # fmt: skip
+        on_edges = np.asarray(
+            shapely.get_coordinates(shapely.line_interpolate_point(boundary, rng.uniform(0, 1, 6), normalized=True))
+        )
         tags = np.vstack([on_edges, rng.uniform([x0, y0], [x1, y1], (6, 2))])
         pts = rng.uniform([x0, y0], [x1, y1], (1500, 2))
         pts = pts[sp.points_free(pts)]
@@ -392,8 +419,9 @@ def test_verify_world_names_the_cells_a_moved_chair_breaks(plans):
     from bearnav_cli.stages import map_
 
     plan, path = plans["kitchen"]
-    result = CliRunner().invoke(app, ["verify", str(path), "--starts", "0", "--world",
-                                      str(REPO / "maps" / "kitchen_moved.yaml"), "--json"])  # fmt: skip
+    result = CliRunner().invoke(
+        app, ["verify", str(path), "--starts", "0", "--world", str(REPO / "maps" / "kitchen_moved.yaml"), "--json"]
+    )
     assert result.exit_code == 1
     listed = json.loads(result.stdout)["world_cells"]
     world = FreeSpace.from_map(artifacts.load(path).artifact.map)  # the plan's own world: no cell meets it

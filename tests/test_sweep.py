@@ -21,19 +21,30 @@ from typer.testing import CliRunner
 from bearnav_cli import sweep
 from bearnav_cli.cli import app
 
-SWEEP = {"name": "small", "maps": ["maps/tiny*.yaml"], "fov": [360, 180], "noise_deg": [0, 0.5],
-         "dynamics": ["single"], "starts": "random:20"}  # fmt: skip
+SWEEP = {
+    "name": "small",
+    "maps": ["maps/tiny*.yaml"],
+    "fov": [360, 180],
+    "noise_deg": [0, 0.5],
+    "dynamics": ["single"],
+    "starts": "random:20",
+}
 
 
 def tiny_map(i: int) -> dict:
     """A 4 × 3 box with one rectangle (shifted by ``i``) and six tags; a robot fast enough for 80-step runs."""
     return {
-        "name": f"tiny{i}", "bounds": [0, 0, 4, 3], "robot_radius": 0.1, "goal": [0.4, 0.4],
+        "name": f"tiny{i}",
+        "bounds": [0, 0, 4, 3],
+        "robot_radius": 0.1,
+        "goal": [0.4, 0.4],
         "obstacles": [{"rectangle": [1.5 + 0.3 * i, 1.0, 2.5 + 0.3 * i, 2.0]}],
         "landmarks": [[0, 3], [4, 0], [4, 3], [2, 0], [0, 1.5], [2, 3]],
-        "params": {"rrtstar": {"iterations": 120, "seed": 0},
-                   "simulate": {"dt": 0.1, "speed": 1.0, "alpha": 1.0, "beta": 2.0}},
-    }  # fmt: skip
+        "params": {
+            "rrtstar": {"iterations": 120, "seed": 0},
+            "simulate": {"dt": 0.1, "speed": 1.0, "alpha": 1.0, "beta": 2.0},
+        },
+    }
 
 
 @pytest.fixture
@@ -150,7 +161,9 @@ def test_a_failed_job_is_recorded_and_the_sweep_goes_on(folder, monkeypatch):
     with (folder / "sweeps" / "small" / "results.csv").open() as handle:
         rows = list(csv.DictReader(handle))
     assert [(r["fov"], r["status"], r["error"]) for r in rows] == [
-        ("360.0", "done", ""), ("180.0", "failed", "RuntimeError: camera broke")]  # fmt: skip
+        ("360.0", "done", ""),
+        ("180.0", "failed", "RuntimeError: camera broke"),
+    ]
     monkeypatch.setattr(simulate, "run", run)  # fixed: the failed job runs again, the other stays
     result = invoke("small.yaml", "--json")
     assert result.exit_code == 0, result.output

@@ -372,9 +372,14 @@ def test_optimal_field_is_not_unique_so_gain_norms_depend_on_the_vertex(solver):
             probe = np.zeros(len(lp.cost))
             probe[j] = sign
             face = dataclasses.replace(
-                lp, cost=probe, A_indptr=indptr, A_indices=indices, A_values=values,
-                row_lower=np.r_[lp.row_lower, -np.inf], row_upper=np.r_[lp.row_upper, best + 1e-9],
-            )  # fmt: skip
+                lp,
+                cost=probe,
+                A_indptr=indptr,
+                A_indices=indices,
+                A_values=values,
+                row_lower=np.r_[lp.row_lower, -np.inf],
+                row_upper=np.r_[lp.row_upper, best + 1e-9],
+            )
             F = face.solve(solver).x[:6].reshape(2, 3)
             gains.append(cell_lp.min_norm_gain(F[:, :2], F[:, 2], p.landmarks))
     norms = [np.linalg.norm(K) for K in gains]
@@ -530,8 +535,18 @@ def test_run_on_hand_cells(hand_cells):
         for x in verts:  # the layout of DESIGN §3.2
             assert plan.gain[c] @ (landmarks - x).ravel() == pytest.approx(a - M @ x, abs=1e-12)
         n, q = hand_cells.barrier(c)
-        m = vertex_margins(plan.gain[c], landmarks, verts, hand_cells.exit_dir[c], hand_cells.exit_point[c], n, q,
-                           plan.c_h[c], plan.c_v[c], 1.0)  # fmt: skip
+        m = vertex_margins(
+            plan.gain[c],
+            landmarks,
+            verts,
+            hand_cells.exit_dir[c],
+            hand_cells.exit_point[c],
+            n,
+            q,
+            plan.c_h[c],
+            plan.c_v[c],
+            1.0,
+        )
         if c == 0:
             goal = hand_cells.nodes[0]
             c0 = 1.0 / np.max(np.abs(goal - verts))
@@ -545,8 +560,7 @@ def test_run_on_hand_cells(hand_cells):
         elif c:
             assert math.isnan(plan.margin_h[c]) and math.isnan(plan.c_h[c])
     stats = json.loads(json.dumps(plan.stats, allow_nan=False))
-    assert stats["status_counts"] == {"certified": 2, "relaxed": 0, "not_certified": 0, "solver_failure": 0,
-                                      "goal": 1}  # fmt: skip
+    assert stats["status_counts"] == {"certified": 2, "relaxed": 0, "not_certified": 0, "solver_failure": 0, "goal": 1}
     assert stats["flagged"]["few_landmarks"] == [1] and stats["flagged"]["blind_spot"] == [2]
     assert stats["attempts"] == [0, 1, 1]
     assert stats["zero_clf_margin"] == [c for c in (1, 2) if plan.margin_v[c] > -1e-9]
@@ -588,8 +602,18 @@ def test_pipeline_cells_are_certified_and_rechecked(small_spec):
     landmarks = map_.landmarks
     for c in range(1, cells.n_cells):
         n, q = cells.barrier(c)
-        m = vertex_margins(plan.gain[c], landmarks, cells.vertices(c), cells.exit_dir[c], cells.exit_point[c], n, q,
-                           plan.c_h[c], plan.c_v[c], 1.0)  # fmt: skip
+        m = vertex_margins(
+            plan.gain[c],
+            landmarks,
+            cells.vertices(c),
+            cells.exit_dir[c],
+            cells.exit_point[c],
+            n,
+            q,
+            plan.c_h[c],
+            plan.c_v[c],
+            1.0,
+        )
         assert plan.margin_v[c] == pytest.approx(m.clf, abs=1e-7)
         assert plan.margin_h[c] == pytest.approx(m.cbf, abs=1e-7, nan_ok=True)
         if plan.status[c] in (CellStatus.CERTIFIED, CellStatus.RELAXED):
@@ -610,8 +634,19 @@ def _problems(cells):
             continue
         rows = slice(int(cells.cell_row_offsets[c]), int(cells.cell_row_offsets[c + 1]))
         n, q = cells.barrier(c)
-        yield c, cell_lp.CellProblem(cells.vertices(c), cells.cell_A[rows], cells.cell_b[rows], cells.exit_dir[c],
-                                     cells.exit_point[c], n, q, landmarks[cells.cell_landmarks[c]])  # fmt: skip
+        yield (
+            c,
+            cell_lp.CellProblem(
+                cells.vertices(c),
+                cells.cell_A[rows],
+                cells.cell_b[rows],
+                cells.exit_dir[c],
+                cells.exit_point[c],
+                n,
+                q,
+                landmarks[cells.cell_landmarks[c]],
+            ),
+        )
 
 
 @pytest.mark.parametrize("seed", [0, 3])
@@ -624,9 +659,19 @@ def test_batched_scales_equal_the_cell_by_cell_ones(seed):
     cells = random_plan(seed).cells
     params = sy.Params()
     edge = np.flatnonzero(cells.parent[cells.cell_node] != -1).tolist()
-    built = cell_lp.field_vertex_templates(cells.cell_vertices, cells.cell_vertex_offsets, cells.cbf_A, cells.cbf_b,
-                                           cells.cbf_offsets, cells.exit_dir, cells.exit_point, edge, params.u_max,
-                                           params.w_h, params.w_v)  # fmt: skip
+    built = cell_lp.field_vertex_templates(
+        cells.cell_vertices,
+        cells.cell_vertex_offsets,
+        cells.cbf_A,
+        cells.cbf_b,
+        cells.cbf_offsets,
+        cells.exit_dir,
+        cells.exit_point,
+        edge,
+        params.u_max,
+        params.w_h,
+        params.w_v,
+    )
     batched = cell_fields.batched_scales(cells, built, edge)
     checked = 0
     for c, problem in _problems(cells):

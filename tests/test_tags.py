@@ -71,8 +71,9 @@ def on_boundary(map_, points: np.ndarray) -> np.ndarray:
     xmin, ymin, xmax, ymax = map_.bounds
     x, y = points[:, 0], points[:, 1]
     in_box = (x >= xmin) & (x <= xmax) & (y >= ymin) & (y <= ymax)
-    wall = in_box & ((np.abs(x - xmin) <= tol) | (np.abs(x - xmax) <= tol) | (np.abs(y - ymin) <= tol)
-                     | (np.abs(y - ymax) <= tol))  # fmt: skip
+    wall = in_box & (
+        (np.abs(x - xmin) <= tol) | (np.abs(x - xmax) <= tol) | (np.abs(y - ymin) <= tol) | (np.abs(y - ymax) <= tol)
+    )
     raw = shapely.union_all([shapely.Polygon(p.exterior, p.holes) for p in map_.raw_obstacles])
     edge = shapely.distance(raw.boundary, shapely.points(points)) <= tol if not raw.is_empty else wall & False
     return in_box & (wall | edge)
@@ -93,8 +94,9 @@ def test_proposal_properties(source, seed):
     assert prop.after.fraction_domain >= prop.before.fraction_domain
     assert len(prop.uncoverable) == round((1 - prop.coverable_fraction) * n_d)
     # re-evaluated independently with the new landmarks: at least what the proposal reports
-    again = perception.perception_coverage(plan, prop.params.fov_deg, prop.params.noise_deg,
-                                           spacing=prop.params.spacing, landmarks=prop.landmarks)  # fmt: skip
+    again = perception.perception_coverage(
+        plan, prop.params.fov_deg, prop.params.noise_deg, spacing=prop.params.spacing, landmarks=prop.landmarks
+    )
     assert again.fraction_domain >= prop.after.fraction_domain
     assert again.fraction_free >= prop.after.fraction_free
     # where the tags go: on a raw obstacle's boundary or a wall, facing free space
@@ -137,13 +139,23 @@ def test_replanning_with_the_tags_keeps_the_cells():
     assert prop.count > 0
     new_map = build_map(tags.map_spec_with_tags(spec, prop))
     cells2 = decompose.run(replace(tree, map=new_map), params)
-    for key in ("cell_vertices", "cell_vertex_offsets", "cell_A", "cell_b", "cell_row_offsets", "exit_point",
-                "exit_dir", "cell_rank", "cell_node"):  # fmt: skip
+    for key in (
+        "cell_vertices",
+        "cell_vertex_offsets",
+        "cell_A",
+        "cell_b",
+        "cell_row_offsets",
+        "exit_point",
+        "exit_dir",
+        "cell_rank",
+        "cell_node",
+    ):
         assert np.array_equal(getattr(cells, key), getattr(cells2, key)), key
     plan2 = synthesize.run(cells2, pipeline.resolve_params("synthesize", new_map.params))
     # the re-made plan, with the new map's own tags, keeps what the proposal reported (to a grid point)
-    again = perception.perception_coverage(plan2, prop.params.fov_deg, prop.params.noise_deg,
-                                           spacing=prop.params.spacing)  # fmt: skip
+    again = perception.perception_coverage(
+        plan2, prop.params.fov_deg, prop.params.noise_deg, spacing=prop.params.spacing
+    )
     assert again.landmark_ids == prop.landmark_ids
     assert again.fraction_domain >= prop.after.fraction_domain - 1.0 / again.in_domain.sum()
 

@@ -47,8 +47,9 @@ def test_the_tags_make_cells_live_and_nothing_less_live(proposal):
 
 def test_live_after_is_the_liveness_of_the_map_with_the_tags(proposal):
     plan, p = proposal
-    again = liveness.measure(plan, 0.5, 60.0, resolution=COARSE * plan.map.diagonal,
-                             landmarks=np.vstack([plan.map.landmarks, p.positions]))  # fmt: skip
+    again = liveness.measure(
+        plan, 0.5, 60.0, resolution=COARSE * plan.map.diagonal, landmarks=np.vstack([plan.map.landmarks, p.positions])
+    )
     np.testing.assert_array_equal(again.live, p.live_after.live)
     np.testing.assert_allclose(again.eps_look, p.live_after.eps_look)
 
@@ -95,8 +96,9 @@ def test_an_unknown_target_is_refused():
 def test_cli_tags_for_live(cli, write_map, small_spec, tmp_path):
     plan = _plan(cli, write_map, small_spec, tmp_path)
     out = tmp_path / "live.yaml"
-    result = cli("tags", plan, "--for", "live", "--bearing-error-deg", "0.3", "--live-resolution", "0.3", "-o", out,
-                 "--json")  # fmt: skip
+    result = cli(
+        "tags", plan, "--for", "live", "--bearing-error-deg", "0.3", "--live-resolution", "0.3", "-o", out, "--json"
+    )
     assert result.exit_code in (0, 1), result.output
     data = json.loads(result.output) if result.exit_code == 0 else None
     assert out.exists() and out.with_suffix(".png").exists()
@@ -105,9 +107,10 @@ def test_cli_tags_for_live(cli, write_map, small_spec, tmp_path):
     if data is not None:
         assert data["for"] == "live" and data["live_after"] >= data["live_before"]
         assert math.isclose(data["eta_deg"], 0.3)
-    assert_one_line_error(cli("tags", plan, "--bearing-error-deg", "0.3", "-o", tmp_path / "x.yaml"),
-                          "--for live")  # fmt: skip
+    assert_one_line_error(cli("tags", plan, "--bearing-error-deg", "0.3", "-o", tmp_path / "x.yaml"), "--for live")
     assert_one_line_error(cli("tags", plan, "--for", "both", "-o", tmp_path / "x.yaml"), "--for")
-    assert_one_line_error(cli("tags", plan, "--for", "live", "--bearing-error-deg", "50", "-o", tmp_path / "x.yaml"),
-                          "--bearing-error-deg")  # fmt: skip
+    assert_one_line_error(
+        cli("tags", plan, "--for", "live", "--bearing-error-deg", "50", "-o", tmp_path / "x.yaml"),
+        "--bearing-error-deg",
+    )
     assert not (tmp_path / "x.yaml").exists()

@@ -29,8 +29,17 @@ SEEDS = range(6)
 
 
 def _save(path, plan):
-    manifest = artifacts.make_manifest("plan", plan, stage="synthesize", stage_version=1, params={}, input_path=None,
-                                       input_hash="0", summary="", elapsed_s=0.0)  # fmt: skip
+    manifest = artifacts.make_manifest(
+        "plan",
+        plan,
+        stage="synthesize",
+        stage_version=1,
+        params={},
+        input_path=None,
+        input_hash="0",
+        summary="",
+        elapsed_s=0.0,
+    )
     return artifacts.save(path, plan, manifest)
 
 
@@ -124,9 +133,15 @@ def test_the_batched_sinks_are_each_cells_own(seed):
     verts = [cells.vertices(c) for c in edge]
     rows = [cells.barrier(c) for c in edge]
     z, x_j = cells.exit_dir[edge], cells.exit_point[edge]
-    sink, h_star = cell_sinks(np.concatenate(verts), np.array([len(v) for v in verts]),
-                          np.concatenate([n for n, _ in rows]), np.concatenate([q for _, q in rows]),
-                          np.array([len(q) for _, q in rows]), z, x_j)  # fmt: skip
+    sink, h_star = cell_sinks(
+        np.concatenate(verts),
+        np.array([len(v) for v in verts]),
+        np.concatenate([n for n, _ in rows]),
+        np.concatenate([q for _, q in rows]),
+        np.array([len(q) for _, q in rows]),
+        z,
+        x_j,
+    )
     for k, c in enumerate(edge):
         one_sink, one_h = exit_sink(exit_face(verts[k], z[k], x_j[k]), *rows[k])
         assert np.allclose(sink[k], one_sink, atol=1e-12) and h_star[k] == pytest.approx(one_h, abs=1e-12), c

@@ -109,9 +109,20 @@ def test_false_margins_uncertified_cells_and_goal_fields_fail(chain):
 
 def test_removing_a_cell_makes_coverage_fail(chain):
     fewer = first_cells(chain.cells, 2)
-    plan = Plan(fewer, chain.gain[:2], chain.c_h[:2], chain.c_v[:2], chain.u_max[:2], chain.margin_h[:2],
-                chain.margin_v[:2], chain.status[:2], chain.goal_tolerance, chain.tolerance[:2],
-                chain.usable_tolerance[:2], chain.plan_tolerance)  # fmt: skip
+    plan = Plan(
+        fewer,
+        chain.gain[:2],
+        chain.c_h[:2],
+        chain.c_v[:2],
+        chain.u_max[:2],
+        chain.margin_h[:2],
+        chain.margin_v[:2],
+        chain.status[:2],
+        chain.goal_tolerance,
+        chain.tolerance[:2],
+        chain.usable_tolerance[:2],
+        chain.plan_tolerance,
+    )
     report = verify.run(plan, FAST)
     assert report.failed and not report.geometry.coverage_ok
     assert report.geometry.uncovered_area == pytest.approx(3.0 * 8.0)  # cell 2 alone held 7 ≤ x ≤ 10
@@ -152,8 +163,10 @@ def test_flagged_cells_and_bearing_constants(chain):
     # c̃_v = c_v/s_max, c̃_h = c_h/s_min (∞ at s_min = 0, NaN without barrier rows)
     assert np.allclose(report.c_v_tilde, chain.c_v / 20.0)
     assert np.isnan(report.c_h_tilde).all() and np.isnan(report.c_h_over_s_max).all()
-    with_rows = hand_plan(hand_map(), barriers={0: (np.array([[1.0, 0.0]]), np.array([1.0])),
-                                                1: (np.array([[0.0, 1.0]]), np.array([0.0]))})  # fmt: skip
+    with_rows = hand_plan(
+        hand_map(),
+        barriers={0: (np.array([[1.0, 0.0]]), np.array([1.0])), 1: (np.array([[0.0, 1.0]]), np.array([0.0]))},
+    )
     with_rows = replace(with_rows, cells=replace(with_rows.cells, s_min=np.array([0.0, 2.0, 4.0])))
     report = verify.run(with_rows, verify.Params(n_starts=0))
     assert report.c_h_tilde[0] == math.inf and report.c_h_tilde[1] == pytest.approx(with_rows.c_h[1] / 2.0)
@@ -217,8 +230,11 @@ def test_route_through_two_staggered_walls():
 
 
 def test_params_are_checked():
-    for kwargs, name in (({"n_starts": -1}, "n_starts"), ({"min_success": 1.5}, "min_success"),
-                         ({"speed": 0.0}, "speed")):  # fmt: skip
+    for kwargs, name in (
+        ({"n_starts": -1}, "n_starts"),
+        ({"min_success": 1.5}, "min_success"),
+        ({"speed": 0.0}, "speed"),
+    ):
         with pytest.raises(InvalidParamsError) as err:
             verify.Params(**kwargs)
         assert err.value.field == name

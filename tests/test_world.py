@@ -68,8 +68,9 @@ def test_without_slip_the_base_moves_exactly_as_commanded_and_draws_nothing():
     assert np.array_equal(q, x + 0.2 * u) and np.allclose(heading, np.arctan2(u[:, 1], u[:, 0]))
     assert rng.bit_generator.state == state
     uni = Base("unicycle", 0.2, 0.0, 1, rng)
-    q, heading = uni.step(np.arange(1), x[:1], np.array([np.pi / 2]), u[:1], np.array([0.1]), np.array([0.5]),
-                          np.zeros(1, bool), u[:1])  # fmt: skip
+    q, heading = uni.step(
+        np.arange(1), x[:1], np.array([np.pi / 2]), u[:1], np.array([0.1]), np.array([0.5]), np.zeros(1, bool), u[:1]
+    )
     assert np.allclose(q, [[0.0, 0.02]]) and np.allclose(heading, [np.pi / 2 + 0.1])
 
 

@@ -150,8 +150,9 @@ def _commit(pairs: list[tuple[Path, Path]], on_commit: Callable[[], None] | None
         raise interrupted
 
 
-def write_all(files: list[tuple[Path, Callable[[io.BufferedWriter], None]]],
-              on_commit: Callable[[], None] | None = None) -> None:  # fmt: skip
+def write_all(
+    files: list[tuple[Path, Callable[[io.BufferedWriter], None]]], on_commit: Callable[[], None] | None = None
+) -> None:
     """Write several files atomically and together: every temp file first, then one commit."""
     written: list[tuple[Path, Path]] = []
     try:

@@ -153,10 +153,15 @@ def cache_key(stage: str, stage_version: int, params: dict, input_hash: str) -> 
     """
     return sha256_text(
         canonical_json(
-            {"stage": stage, "stage_version": stage_version, "params": params, "input": input_hash,
-             "format": ARTIFACT_FORMAT}
+            {
+                "stage": stage,
+                "stage_version": stage_version,
+                "params": params,
+                "input": input_hash,
+                "format": ARTIFACT_FORMAT,
+            }
         )
-    )  # fmt: skip
+    )
 
 
 def software_versions() -> dict[str, str]:

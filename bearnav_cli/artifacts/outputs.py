@@ -37,8 +37,12 @@ def _check_writable_folder(folder: Path, option: str | None) -> None:
         raise OutputPathError("folder is not writable", file=str(probe), option=option)
 
 
-def check_output_file(path: str | os.PathLike, suffixes: tuple[str, ...], option: str | None = "-o/--out",
-                      inputs: tuple[str | os.PathLike, ...] = ()) -> Path:  # fmt: skip
+def check_output_file(
+    path: str | os.PathLike,
+    suffixes: tuple[str, ...],
+    option: str | None = "-o/--out",
+    inputs: tuple[str | os.PathLike, ...] = (),
+) -> Path:
     """Refuse an output path before any work: wrong extension, a folder, the input itself, an unwritable folder.
 
     Missing parent folders are fine (they are created when the file is written).
@@ -81,8 +85,9 @@ def check_output_file(path: str | os.PathLike, suffixes: tuple[str, ...], option
     return path
 
 
-def check_output_folder(folder: str | os.PathLike, names: tuple[str, ...] = (),
-                        option: str | None = "-o/--out") -> Path:  # fmt: skip
+def check_output_folder(
+    folder: str | os.PathLike, names: tuple[str, ...] = (), option: str | None = "-o/--out"
+) -> Path:
     """Refuse an output folder before any work: a file there, a folder where one of ``names`` goes, unwritable.
 
     Parameters
@@ -134,12 +139,14 @@ def check_distinct(outputs: dict[str, str | os.PathLike | None]) -> None:
         real = Path(os.path.realpath(given))
         for other, other_real, other_given in seen:
             if real == other_real:
-                raise OutputPathError(f"is also the output of {other}; give each output its own path",
-                                      file=str(given), option=option)  # fmt: skip
+                raise OutputPathError(
+                    f"is also the output of {other}; give each output its own path", file=str(given), option=option
+                )
             if other_real in real.parents or real in other_real.parents:
                 outer, inner = (other_given, str(given)) if other_real in real.parents else (str(given), other_given)
-                raise OutputPathError(f"{inner} would lie inside {outer}; give each output its own path",
-                                      file=str(given), option=option)  # fmt: skip
+                raise OutputPathError(
+                    f"{inner} would lie inside {outer}; give each output its own path", file=str(given), option=option
+                )
         seen.append((option, real, str(given)))
 
 

@@ -74,8 +74,9 @@ def _bag_folder_origin(path: Path) -> Origin | None:
     if not metadata.is_file() or BAG_MARKER not in metadata.read_text(errors="replace"):
         return None
     # what bearnav writes there: metadata.yaml and the MCAP file; anything else is someone's
-    if any(child.name != "metadata.yaml" and (child.suffix != ".mcap" or not child.is_file())
-           for child in path.iterdir()):  # fmt: skip
+    if any(
+        child.name != "metadata.yaml" and (child.suffix != ".mcap" or not child.is_file()) for child in path.iterdir()
+    ):
         return None
     return Origin("bag")
 
@@ -130,8 +131,9 @@ def written_by(path: str | os.PathLike) -> Origin | None:
     return None
 
 
-def check_overwrite(path: str | os.PathLike, command: str, *, force: bool = False,
-                    option: str | None = "-o/--out") -> None:  # fmt: skip
+def check_overwrite(
+    path: str | os.PathLike, command: str, *, force: bool = False, option: str | None = "-o/--out"
+) -> None:
     """Refuse to replace ``path`` unless it is missing, an output of ``command`` (:func:`written_by`), or ``force``.
 
     Parameters
@@ -155,15 +157,27 @@ def check_overwrite(path: str | os.PathLike, command: str, *, force: bool = Fals
         return
     origin = written_by(path)
     if origin is None:
-        raise OutputPathError("exists and was not written by bearnav; give another name, or --force to replace it",
-                              file=str(path), option=option)  # fmt: skip
+        raise OutputPathError(
+            "exists and was not written by bearnav; give another name, or --force to replace it",
+            file=str(path),
+            option=option,
+        )
     if origin.command != command:
-        raise OutputPathError(f"is an output of bearnav {origin.command}, not {command}; give another name, or "
-                              "--force to replace it", file=str(path), option=option)  # fmt: skip
+        raise OutputPathError(
+            f"is an output of bearnav {origin.command}, not {command}; give another name, or --force to replace it",
+            file=str(path),
+            option=option,
+        )
 
 
-def check_plan_folder(folder: str | os.PathLike, names: tuple[str, ...], map_name: str, *, force: bool = False,
-                      option: str | None = "-o/--out") -> None:  # fmt: skip
+def check_plan_folder(
+    folder: str | os.PathLike,
+    names: tuple[str, ...],
+    map_name: str,
+    *,
+    force: bool = False,
+    option: str | None = "-o/--out",
+) -> None:
     """Refuse a plan folder that holds the artifacts of another map (a plan folder belongs to one map).
 
     The same map planned again (other parameters, an edited YAML, another file with the same
@@ -192,6 +206,9 @@ def check_plan_folder(folder: str | os.PathLike, names: tuple[str, ...], map_nam
     for name in names:
         origin = written_by(Path(folder) / name) if os.path.lexists(Path(folder) / name) else None
         if origin is not None and origin.map_name is not None and origin.map_name != map_name:
-            raise OutputPathError(f"holds the plan of the map {origin.map_name!r} ({name}), not of {map_name!r}; "
-                                  "give another folder, or --force to replace it", file=str(folder),
-                                  option=option)  # fmt: skip
+            raise OutputPathError(
+                f"holds the plan of the map {origin.map_name!r} ({name}), not of {map_name!r}; "
+                "give another folder, or --force to replace it",
+                file=str(folder),
+                option=option,
+            )

@@ -133,9 +133,12 @@ def _check_manifest(manifest: dict, path: Path, expect: tuple[str, ...] | None) 
     kind = kind_of_schema(schema)
     if kind is None:
         if schema in RETIRED_SCHEMAS:
-            raise ArtifactError(f"is a {schema} artifact, which this version no longer reads "
-                                f"({RETIRED_SCHEMAS[schema]}; {_rerun_hint(schema, path, manifest)})", file=str(path),
-                                field="manifest.schema")  # fmt: skip
+            raise ArtifactError(
+                f"is a {schema} artifact, which this version no longer reads "
+                f"({RETIRED_SCHEMAS[schema]}; {_rerun_hint(schema, path, manifest)})",
+                file=str(path),
+                field="manifest.schema",
+            )
         raise ArtifactError(f"unknown schema {schema!r}", file=str(path), field="manifest.schema")
     if expect and kind not in expect:
         names = " or ".join(KINDS[w].schema for w in expect)
@@ -259,8 +262,11 @@ def _check_companion(path: Path, manifest: dict) -> None:
     if not isinstance(other, dict) or other.get("schema") != manifest["schema"]:
         return
     if other != json.loads(canonical_json(manifest)):
-        raise ArtifactError(f"{metrics.name} beside it holds another run's metrics (a write was cut between the "
-                            "two files): re-run the simulation with --force", file=str(path))  # fmt: skip
+        raise ArtifactError(
+            f"{metrics.name} beside it holds another run's metrics (a write was cut between the "
+            "two files): re-run the simulation with --force",
+            file=str(path),
+        )
 
 
 def fresh(path: str | os.PathLike, kind: str, key: str, input_hash: str) -> Loaded | None:

@@ -15,8 +15,14 @@ BOX_DIRECTIONS = np.array([[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]])
 BOX_DIRECTIONS.setflags(write=False)
 
 
-def dual_template(problem: CellProblem, L: np.ndarray, u_max: float | None, w_h: float = 1.0, w_v: float = 1.0,
-                  least_violation: bool = False) -> LpTemplate:  # fmt: skip
+def dual_template(
+    problem: CellProblem,
+    L: np.ndarray,
+    u_max: float | None,
+    w_h: float = 1.0,
+    w_v: float = 1.0,
+    least_violation: bool = False,
+) -> LpTemplate:
     """The dual form of (P) with open constants (see :func:`dual_lp`).
 
     Groups: the ``h`` barrier rows (``d = −n_k``), the CLF (``d = z``), then the four box
@@ -64,12 +70,32 @@ def dual_template(problem: CellProblem, L: np.ndarray, u_max: float | None, w_h:
     rhs_const[:, 2] = u_max if u_max is not None else 0.0
     equality = np.ones((n_groups, 3), bool)
     equality[:, 2] = False
-    return assemble(dense, filled(3 * n_groups, -INF), equality.ravel(), rhs_h, rhs_v, rhs_const.ravel(),
-                    n_theta, n_h, n_mult, w_h, w_v, least_violation)  # fmt: skip
+    return assemble(
+        dense,
+        filled(3 * n_groups, -INF),
+        equality.ravel(),
+        rhs_h,
+        rhs_v,
+        rhs_const.ravel(),
+        n_theta,
+        n_h,
+        n_mult,
+        w_h,
+        w_v,
+        least_violation,
+    )
 
 
-def dual_lp(problem: CellProblem, L: np.ndarray, c_h: float, c_v: float, u_max: float | None,
-            w_h: float = 1.0, w_v: float = 1.0, least_violation: bool = False) -> CellLp:  # fmt: skip
+def dual_lp(
+    problem: CellProblem,
+    L: np.ndarray,
+    c_h: float,
+    c_v: float,
+    u_max: float | None,
+    w_h: float = 1.0,
+    w_v: float = 1.0,
+    least_violation: bool = False,
+) -> CellLp:
     """The dual form of (P): multipliers ``λ_g ≥ 0`` per group instead of vertex rows (§5.2).
 
     Rows per group ``g``: ``A_xᵀλ_g + Mᵀd_g = ρ_g`` (two equalities) and

@@ -74,9 +74,19 @@ class CellProblem:
 
 
 _F64 = np.dtype(np.float64)
-_PROBLEM_SHAPES = tuple((name, shape, len(shape)) for name, shape in (
-    ("vertices", (-1, 2)), ("A", (-1, 2)), ("b", (-1,)), ("z", (2,)), ("x_j", (2,)), ("cbf_n", (-1, 2)),
-    ("cbf_q", (-1,)), ("landmarks", (-1, 2))))  # fmt: skip
+_PROBLEM_SHAPES = tuple(
+    (name, shape, len(shape))
+    for name, shape in (
+        ("vertices", (-1, 2)),
+        ("A", (-1, 2)),
+        ("b", (-1,)),
+        ("z", (2,)),
+        ("x_j", (2,)),
+        ("cbf_n", (-1, 2)),
+        ("cbf_q", (-1,)),
+        ("landmarks", (-1, 2)),
+    )
+)
 
 
 def landmark_matrix(landmarks: np.ndarray) -> np.ndarray:

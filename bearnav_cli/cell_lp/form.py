@@ -54,8 +54,16 @@ class CellLp:
 
     def arrays(self) -> tuple[np.ndarray, ...]:
         """The arguments of :meth:`LpSolver.solve`, in order."""
-        return (self.cost, self.A_indptr, self.A_indices, self.A_values, self.row_lower, self.row_upper,
-                self.col_lower, self.col_upper)  # fmt: skip
+        return (
+            self.cost,
+            self.A_indptr,
+            self.A_indices,
+            self.A_values,
+            self.row_lower,
+            self.row_upper,
+            self.col_lower,
+            self.col_upper,
+        )
 
     def solve(self, solver: LpSolver) -> LpResult:
         return solver.solve(*self.arrays())
@@ -136,8 +144,18 @@ class LpTemplate:
     def instantiate(self, c_h: float, c_v: float) -> CellLp:
         """The LP with the constants ``c_h`` and ``c_v``."""
         lower, upper = self.row_bounds(c_h, c_v)
-        return CellLp(self.cost, self.A_indptr, self.A_indices, self.A_values, lower, upper, self.col_lower,
-                      self.col_upper, self.n_theta, self.n_h)  # fmt: skip
+        return CellLp(
+            self.cost,
+            self.A_indptr,
+            self.A_indices,
+            self.A_values,
+            lower,
+            upper,
+            self.col_lower,
+            self.col_upper,
+            self.n_theta,
+            self.n_h,
+        )
 
 
 def filled(n: int, value: float) -> np.ndarray:
@@ -147,8 +165,9 @@ def filled(n: int, value: float) -> np.ndarray:
     return out
 
 
-def assemble(dense, lower, equality, rhs_h, rhs_v, rhs_const, n_theta, n_h, n_extra, w_h, w_v, least_violation,
-             vertex_rows=None) -> LpTemplate:  # fmt: skip
+def assemble(
+    dense, lower, equality, rhs_h, rhs_v, rhs_const, n_theta, n_h, n_extra, w_h, w_v, least_violation, vertex_rows=None
+) -> LpTemplate:
     """Add column bounds, the objective and (for least violation) the ``t`` variables; compress the matrix.
 
     Parameters
@@ -204,5 +223,19 @@ def assemble(dense, lower, equality, rhs_h, rhs_v, rhs_const, n_theta, n_h, n_ex
     cost[first : first + n_h] = w_h
     cost[first + n_h] = w_v
     indptr, indices, values = dense_to_csr(dense)
-    return LpTemplate(cost, indptr, indices, values, col_lower, col_upper, lower, equality, rhs_h, rhs_v, rhs_const,
-                      n_theta, n_h, vertex_rows)  # fmt: skip
+    return LpTemplate(
+        cost,
+        indptr,
+        indices,
+        values,
+        col_lower,
+        col_upper,
+        lower,
+        equality,
+        rhs_h,
+        rhs_v,
+        rhs_const,
+        n_theta,
+        n_h,
+        vertex_rows,
+    )

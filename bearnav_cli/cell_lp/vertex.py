@@ -92,8 +92,14 @@ def _vertex_sparsity(pattern, n_theta: int, n_h: int, p: int, box: int) -> tuple
     return _frozen(indptr, indices, gather)
 
 
-def vertex_template(problem: CellProblem, L: np.ndarray, u_max: float | None, w_h: float = 1.0, w_v: float = 1.0,
-                    least_violation: bool = False) -> LpTemplate:  # fmt: skip
+def vertex_template(
+    problem: CellProblem,
+    L: np.ndarray,
+    u_max: float | None,
+    w_h: float = 1.0,
+    w_v: float = 1.0,
+    least_violation: bool = False,
+) -> LpTemplate:
     """The vertex form of (P) with open constants (see :func:`vertex_lp`).
 
     Groups ``g`` in order: the ``h`` barrier rows (``d = −n_k``), the CLF (``d = z``), then
@@ -152,17 +158,41 @@ def vertex_template(problem: CellProblem, L: np.ndarray, u_max: float | None, w_
     pattern = _FIELD_PATTERN if L is FIELD_MAP else _box_pattern(L)
     indptr, indices, gather = _vertex_sparsity(pattern, n_theta, n_h, p, box)
     col_lower, col_upper, cost = _slack_columns(n_theta, n_h, float(w_h), float(w_v))
-    return LpTemplate(cost, indptr, indices, dense.ravel()[gather], col_lower, col_upper, lower, None, rhs_h, rhs_v,
-                      rhs_const, n_theta, n_h, vertex_rows)  # fmt: skip
+    return LpTemplate(
+        cost,
+        indptr,
+        indices,
+        dense.ravel()[gather],
+        col_lower,
+        col_upper,
+        lower,
+        None,
+        rhs_h,
+        rhs_v,
+        rhs_const,
+        n_theta,
+        n_h,
+        vertex_rows,
+    )
 
 
 def _field_vertex_template(problem: CellProblem, u_max: float | None, w_h: float, w_v: float) -> LpTemplate:
     """:func:`vertex_template` in field space (``L`` = :data:`FIELD_MAP`), the default LP of every cell:
     :func:`field_vertex_templates` of this one cell (one builder for both)."""
     p, n_h = len(problem.vertices), len(problem.cbf_q)
-    built = field_vertex_templates(problem.vertices, np.array([0, p]), np.asarray(problem.cbf_n, float).reshape(-1, 2),
-                                   np.asarray(problem.cbf_q, float), np.array([0, n_h]), problem.z[None, :],
-                                   problem.x_j[None, :], [0], u_max, w_h, w_v)  # fmt: skip
+    built = field_vertex_templates(
+        problem.vertices,
+        np.array([0, p]),
+        np.asarray(problem.cbf_n, float).reshape(-1, 2),
+        np.asarray(problem.cbf_q, float),
+        np.array([0, n_h]),
+        problem.z[None, :],
+        problem.x_j[None, :],
+        [0],
+        u_max,
+        w_h,
+        w_v,
+    )
     return built.templates[0]
 
 
@@ -190,9 +220,19 @@ class FieldTemplates:
     minus_v: np.ndarray
 
 
-def field_vertex_templates(vertices: np.ndarray, vertex_offsets: np.ndarray, cbf_n: np.ndarray, cbf_q: np.ndarray,
-                           cbf_offsets: np.ndarray, z: np.ndarray, x_j: np.ndarray, cells, u_max: float | None,
-                           w_h: float = 1.0, w_v: float = 1.0) -> FieldTemplates:  # fmt: skip
+def field_vertex_templates(
+    vertices: np.ndarray,
+    vertex_offsets: np.ndarray,
+    cbf_n: np.ndarray,
+    cbf_q: np.ndarray,
+    cbf_offsets: np.ndarray,
+    z: np.ndarray,
+    x_j: np.ndarray,
+    cells,
+    u_max: float | None,
+    w_h: float = 1.0,
+    w_v: float = 1.0,
+) -> FieldTemplates:
     """:func:`vertex_template` in field space for many cells at once, from flat arrays (the ``Cells`` layout).
 
     The coefficients ``d_g ⊗ w_q`` of every row of every cell come from one numpy pass (the
@@ -276,14 +316,35 @@ def field_vertex_templates(vertices: np.ndarray, vertex_offsets: np.ndarray, cbf
         lower, rhs_const = _vertex_row_bounds(r1 - r0, box * n, float(u_max) if box else 0.0)
         indptr, indices, _ = _vertex_sparsity(_FIELD_PATTERN, 6, n_h, n, box)
         col_lower, col_upper, cost = _slack_columns(6, n_h, float(w_h), float(w_v))
-        templates[c] = LpTemplate(cost, indptr, indices, values, col_lower, col_upper, lower, None,
-                                  h_values[hv_off[c] : hv_off[c + 1]], minus_v[v0:v1], rhs_const, 6, n_h,
-                                  coef[r0:r1])  # fmt: skip
+        templates[c] = LpTemplate(
+            cost,
+            indptr,
+            indices,
+            values,
+            col_lower,
+            col_upper,
+            lower,
+            None,
+            h_values[hv_off[c] : hv_off[c + 1]],
+            minus_v[v0:v1],
+            rhs_const,
+            6,
+            n_h,
+            coef[r0:r1],
+        )
     return FieldTemplates(templates, h_values, hvo, minus_v)
 
 
-def vertex_lp(problem: CellProblem, L: np.ndarray, c_h: float, c_v: float, u_max: float | None,
-              w_h: float = 1.0, w_v: float = 1.0, least_violation: bool = False) -> CellLp:  # fmt: skip
+def vertex_lp(
+    problem: CellProblem,
+    L: np.ndarray,
+    c_h: float,
+    c_v: float,
+    u_max: float | None,
+    w_h: float = 1.0,
+    w_v: float = 1.0,
+    least_violation: bool = False,
+) -> CellLp:
     """The vertex form of (P) in the variables ``θ`` with ``[M, a] = L θ`` (ALGORITHMS §5.2).
 
     Parameters
@@ -331,8 +392,9 @@ def vertex_lp_field(problem: CellProblem, c_h: float, c_v: float, u_max: float |
     return vertex_lp(problem, FIELD_MAP, c_h, c_v, u_max, **kw)
 
 
-def vertex_lp_gain(problem: CellProblem, c_h: float, c_v: float, u_max: float | None, structure: str = "full",
-                   **kw) -> CellLp:  # fmt: skip
+def vertex_lp_gain(
+    problem: CellProblem, c_h: float, c_v: float, u_max: float | None, structure: str = "full", **kw
+) -> CellLp:
     """Gain-space vertex form for a gain structure (``full``, ``diag`` or ``scalar``).
 
     Parameters

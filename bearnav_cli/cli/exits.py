@@ -113,8 +113,9 @@ def handles_errors(command: Callable) -> Callable:
         except (typer.Exit, typer.Abort, typer.BadParameter):
             raise
         except InternalError as exc:
-            raise fail(f"internal error (a bug in bearnav, not your input): {exc}".replace("[", r"\["),
-                       EXIT_INTERNAL) from None  # fmt: skip
+            raise fail(
+                f"internal error (a bug in bearnav, not your input): {exc}".replace("[", r"\["), EXIT_INTERNAL
+            ) from None
         except BearnavError as exc:
             raise fail(str(exc).replace("[", r"\["), EXIT_INVALID) from None
         except KeyboardInterrupt as exc:

@@ -79,8 +79,14 @@ def _attribute_docs(doc: str) -> dict[str, tuple[str, tuple[str, ...]]]:
     lines = inspect_.cleandoc(doc or "").splitlines()
     found: dict[str, tuple[str, tuple[str, ...]]] = {}
     try:
-        start = next(i for i, line in enumerate(lines[:-1]) if line.strip() == "Attributes"
-                     and set(lines[i + 1].strip()) == {"-"}) + 2  # fmt: skip
+        start = (
+            next(
+                i
+                for i, line in enumerate(lines[:-1])
+                if line.strip() == "Attributes" and set(lines[i + 1].strip()) == {"-"}
+            )
+            + 2
+        )
     except StopIteration:
         return found
     names: list[str] = []
@@ -123,7 +129,16 @@ def params_fields(command: str) -> tuple[ParamField, ...]:
         kinds = [k for k in args if k is not type(None)] or [hints[field.name]]
         declaration = declared(field)
         off = declaration.off or "--no-" + field.name.replace("_", "-")
-        fields.append(ParamField(field.name, kinds[0], type(None) in args, field.default,
-                                 docs.get(field.name, ("", ()))[0], declaration.choices, declaration.option,
-                                 off))  # fmt: skip
+        fields.append(
+            ParamField(
+                field.name,
+                kinds[0],
+                type(None) in args,
+                field.default,
+                docs.get(field.name, ("", ()))[0],
+                declaration.choices,
+                declaration.option,
+                off,
+            )
+        )
     return tuple(fields)

@@ -72,9 +72,14 @@ def _tags_map(plan_npz: Path) -> Optional[Path]:
     return source if isinstance(spec, dict) else None
 
 
-def tags_step(plan_npz: Path, fov: float = 360.0, max_range: Optional[float] = None,
-              plan_words: tuple[str, ...] = (), map_yaml: Optional[Path] = None,
-              tags_words: tuple[str, ...] = ()) -> str:  # fmt: skip
+def tags_step(
+    plan_npz: Path,
+    fov: float = 360.0,
+    max_range: Optional[float] = None,
+    plan_words: tuple[str, ...] = (),
+    map_yaml: Optional[Path] = None,
+    tags_words: tuple[str, ...] = (),
+) -> str:
     """The next step where a camera cannot fix itself: the ``bearnav tags`` command for this plan, the map it
     writes and the ``bearnav plan`` command that re-plans with it (``plan_words``: options to plan it with).
 
@@ -97,8 +102,14 @@ def tags_step(plan_npz: Path, fov: float = 360.0, max_range: Optional[float] = N
         ```bearnav tags PLAN --fov F --map M` writes M_tags.yaml; then `bearnav plan M_tags.yaml```.
     """
     map_yaml = map_yaml or _tags_map(plan_npz)
-    tags = command_text("bearnav", "tags", plan_npz, *camera_words(fov, max_range), *tags_words,
-                        *(["--map", map_yaml] if map_yaml is not None else []))  # fmt: skip
+    tags = command_text(
+        "bearnav",
+        "tags",
+        plan_npz,
+        *camera_words(fov, max_range),
+        *tags_words,
+        *(["--map", map_yaml] if map_yaml is not None else []),
+    )
     written = tags_output(plan_npz, map_yaml)
     return f"`{tags}` writes {written}; then `{command_text('bearnav', 'plan', written, *plan_words)}`"
 
@@ -145,26 +156,37 @@ def simulation_steps(report: "pipeline.StageReport", plan_npz: Path, min_success
         if params.get("estimator") == "set":
             eta = params.get("bearing_error_deg") or params.get("noise_bound_deg")
             words = ("--for", "live", *(["--bearing-error-deg", f"{eta:g}"] if eta else []))
-            steps.append("lost: a look all around left the error bound above what the cell tolerates (the cell is "
-                         "not live at these bounds); add tags until every cell is: "
-                         + tags_step(plan_npz, fov, max_range, tags_words=words))  # fmt: skip
+            steps.append(
+                "lost: a look all around left the error bound above what the cell tolerates (the cell is "
+                "not live at these bounds); add tags until every cell is: "
+                + tags_step(plan_npz, fov, max_range, tags_words=words)
+            )
         else:
             hold = params.get("hold_time", 2.0)
-            steps.append(f"lost: the camera saw fewer than two usable tags for --hold-time {hold:g} s (a {fov:g}° "
-                         "camera); add tags: " + tags_step(plan_npz, fov, max_range))  # fmt: skip
+            steps.append(
+                f"lost: the camera saw fewer than two usable tags for --hold-time {hold:g} s (a {fov:g}° "
+                "camera); add tags: " + tags_step(plan_npz, fov, max_range)
+            )
     if counts.get("collision") and params.get("estimator") != "set":
         retry = command_text("bearnav", "simulate", plan_npz, *simulate_words(params, estimator="set"))
-        steps.append("collision: the position estimate erred beyond the cell's tolerance (noise, slip, a camera or "
-                     f"a unicycle outside the certificate); `{retry}` drives only where its error bound is "
-                     "certified")  # fmt: skip
+        steps.append(
+            "collision: the position estimate erred beyond the cell's tolerance (noise, slip, a camera or "
+            f"a unicycle outside the certificate); `{retry}` drives only where its error bound is "
+            "certified"
+        )
     elif counts.get("collision"):
-        steps.append("collision: the error bounds assumed are below the errors simulated (--bearing-error-deg, "
-                     "--slip); `bearnav verify " + str(plan_npz) + "` checks the certificate")  # fmt: skip
+        steps.append(
+            "collision: the error bounds assumed are below the errors simulated (--bearing-error-deg, "
+            "--slip); `bearnav verify " + str(plan_npz) + "` checks the certificate"
+        )
     if counts.get("stall") or counts.get("timeout"):
         steps.append("stall or timeout: the field vanished or the run made no progress (outside every cell?)")
     shown = command_text("bearnav", "plot", report.path)
-    return (f"{report.summary}, fewer than --min-success {min_success:g}: " + "; ".join(steps)
-            + f"; `{shown}` draws the runs by outcome, into {figure_default(report.path)}")  # fmt: skip
+    return (
+        f"{report.summary}, fewer than --min-success {min_success:g}: "
+        + "; ".join(steps)
+        + f"; `{shown}` draws the runs by outcome, into {figure_default(report.path)}"
+    )
 
 
 def verify_steps(report: Any, plan_npz: Path, world: Optional[Path]) -> str:
@@ -199,22 +221,33 @@ def verify_steps(report: Any, plan_npz: Path, world: Optional[Path]) -> str:
     broken = bool(report.false_certificates) or composition_fails or bool(report.lookahead_problems) or breached
     if broken:  # the checks a plan bearnav wrote passes: an edited file, another version's, or a bug
         origin = artifacts.map_source_of(plan_npz)
-        again = (f"`{command_text('bearnav', 'plan', origin, '--force')}`" if origin
-                 else "`bearnav plan` of the map it was made from, with --force,")  # fmt: skip
-        steps.append(f"if the plan was edited or made by another version, {again} makes it again; else please "
-                     "report it with the plan")  # fmt: skip
+        again = (
+            f"`{command_text('bearnav', 'plan', origin, '--force')}`"
+            if origin
+            else "`bearnav plan` of the map it was made from, with --force,"
+        )
+        steps.append(
+            f"if the plan was edited or made by another version, {again} makes it again; else please "
+            "report it with the plan"
+        )
     runs = report.rollouts
     if runs is not None and len(runs) and bool(np.any(np.asarray(runs.outcome) != Outcome.SUCCESS)):
         again = command_text("bearnav", "simulate", plan_npz, "--measurement", "displacement", "--odometry-noise", "0")
-        steps.append(f"`{again}` drives runs of the same loop and writes them; `bearnav plot` of its sim.npz draws "
-                     "them by outcome")  # fmt: skip
+        steps.append(
+            f"`{again}` drives runs of the same loop and writes them; `bearnav plot` of its sim.npz draws "
+            "them by outcome"
+        )
     text = f"{plan_npz} fails verification ({plural(len(report.reasons), 'problem')} above)"
     return text + (": " + "; ".join(steps) if steps else "")
 
 
-def outcome_failure(stage: str, artifact: Any, path: Optional[Path] = None,
-                    camera: tuple[float, Optional[float]] = (360.0, None),
-                    plan_words: tuple[str, ...] = ()) -> str | None:  # fmt: skip
+def outcome_failure(
+    stage: str,
+    artifact: Any,
+    path: Optional[Path] = None,
+    camera: tuple[float, Optional[float]] = (360.0, None),
+    plan_words: tuple[str, ...] = (),
+) -> str | None:
     """Why a finished run's result is not usable (exit 1) and what to do next, or None.
 
     The verdict is the stage's (its first ``problems(result)``, :mod:`bearnav_cli.verdicts`); the next step
@@ -239,7 +272,8 @@ def outcome_failure(stage: str, artifact: Any, path: Optional[Path] = None,
         else:  # cells.npz: synthesize it first
             plan_npz = path.with_name("plan.npz")
             step = f"`{command_text('bearnav', 'synthesize', path, '-o', plan_npz)}`, then " + tags_step(
-                plan_npz, *camera, plan_words=plan_words)  # fmt: skip
+                plan_npz, *camera, plan_words=plan_words
+            )
         return f"{problem.text}: add landmarks there; {step}"
     if problem.kind == verdicts.NOT_CERTIFIED:
         return f"{problem.text}; `bearnav inspect {path} --cell {problem.cells[0]}` shows the first"
@@ -284,16 +318,21 @@ def plan_guarantee(plan: Any, path: Path, fov: Optional[float] = None) -> str:
     from bearnav_cli.datatypes import percent
 
     check = f"`{command_text('bearnav', 'verify', path)}` proves it from the file alone"
-    camera = (f"a {fov:g}° camera sees a usable pair of tags along the field everywhere in that area (measured on a "
-              "grid)" if fov is not None else "the camera is not checked (add --fov)")  # fmt: skip
+    camera = (
+        f"a {fov:g}° camera sees a usable pair of tags along the field everywhere in that area (measured on a grid)"
+        if fov is not None
+        else "the camera is not checked (add --fov)"
+    )
     if not plan.cells.is_funnel:
         return f"guarantee: {composition.PAPER_CLAIM}; {camera}"
     by_area = composition.tolerance_by_area(plan.cells, plan.usable_tolerance)
     robot = composition.robot_words(plan.map)
     where = f"the certified area ({percent(plan.cells.free_coverage)} of the free space)"
     known = f"{plan.plan_tolerance:.3g} map units (median {by_area['median']:.3g} by area)"
-    return (f"guarantee (by construction): {robot} that starts in {where} and knows its position to within "
-            f"{known} reaches the goal without touching an obstacle or a wall; {check}; {camera}")  # fmt: skip
+    return (
+        f"guarantee (by construction): {robot} that starts in {where} and knows its position to within "
+        f"{known} reaches the goal without touching an obstacle or a wall; {check}; {camera}"
+    )
 
 
 def figure_default(artifact: Path) -> Path:

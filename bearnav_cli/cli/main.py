@@ -141,10 +141,17 @@ def main(
 
 # the one command table: --help lists the commands in the order they are registered
 for _name, _command in (
-    ("map", map_.map_command), ("rrtstar", stage.rrtstar_command), ("simplify", stage.simplify_command),
-    ("decompose", stage.decompose_command), ("synthesize", stage.synthesize_command),
-    ("verify", verify.verify_command), ("simulate", simulate.simulate_command), ("plan", plan.plan_command),
-    ("inspect", inspect_.inspect_command), ("tags", tags.tags_command), ("plot", plot.plot_command),
+    ("map", map_.map_command),
+    ("rrtstar", stage.rrtstar_command),
+    ("simplify", stage.simplify_command),
+    ("decompose", stage.decompose_command),
+    ("synthesize", stage.synthesize_command),
+    ("verify", verify.verify_command),
+    ("simulate", simulate.simulate_command),
+    ("plan", plan.plan_command),
+    ("inspect", inspect_.inspect_command),
+    ("tags", tags.tags_command),
+    ("plot", plot.plot_command),
     ("sweep", sweep.sweep_command),
-):  # fmt: skip
+):
     app.command(_name)(_command)

@@ -66,10 +66,16 @@ def map_command(
         seeing = perception.heading_coverage(report.artifact, fov, float("inf") if max_range is None else max_range)
     extra = None
     if seeing is not None:
-        extra = {"perception": {"fov_deg": seeing.fov_deg, "range": max_range, "grid_points": len(seeing.points),
-                                "fraction_some_heading": seeing.fraction_some,
-                                "fraction_every_heading": seeing.fraction_every,
-                                "blind_points": len(seeing.blind)}}  # fmt: skip
+        extra = {
+            "perception": {
+                "fov_deg": seeing.fov_deg,
+                "range": max_range,
+                "grid_points": len(seeing.points),
+                "fraction_some_heading": seeing.fraction_some,
+                "fraction_every_heading": seeing.fraction_every,
+                "blind_points": len(seeing.blind),
+            }
+        }
     if not as_json:
         out.print(report_line(report), highlight=False, soft_wrap=True)
         if seeing is not None:
@@ -79,6 +85,10 @@ def map_command(
             bearnav_map = source if src.grid is None or "occupancy" in src.spec else None  # a bare grid needs options
             step = tags_step(target.parent / "plan.npz", fov, max_range, map_yaml=bearnav_map)
             hint = f"; to place tags where it fails, `{planning}`, then {step}"
-            out.print(f"  perception: {seeing.summary()}{hint if seeing.fraction_some < 1.0 else ''}",
-                      highlight=False, markup=False, soft_wrap=True)  # fmt: skip
+            out.print(
+                f"  perception: {seeing.summary()}{hint if seeing.fraction_some < 1.0 else ''}",
+                highlight=False,
+                markup=False,
+                soft_wrap=True,
+            )
     finish([report], as_json, extra)

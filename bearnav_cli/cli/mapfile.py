@@ -86,17 +86,28 @@ def read_map_source(
     if not isinstance(spec, dict):
         raise InvalidMapError("expected a mapping at the top level", file=str(path))
     if isinstance(spec.get("manifest"), dict) and "schema" in spec["manifest"]:
-        raise InvalidMapError(f"is an artifact ({spec['manifest']['schema']}), not a map YAML; plan from it with "
-                              f"`bearnav plan {path}`", file=str(path))  # fmt: skip
+        raise InvalidMapError(
+            f"is an artifact ({spec['manifest']['schema']}), not a map YAML; plan from it with `bearnav plan {path}`",
+            file=str(path),
+        )
     blobs = [data]
     grid = None
     robot_given = {**(robot or {}), **({"lookahead": lookahead} if lookahead is not None else {})}
     if "image" not in spec:
-        given = [name for name, value in (("--goal", goal), ("--landmark", landmarks), ("--start", starts),
-                                          ("--robot-radius", robot_radius)) if value not in (None, [])]  # fmt: skip
+        given = [
+            name
+            for name, value in (
+                ("--goal", goal),
+                ("--landmark", landmarks),
+                ("--start", starts),
+                ("--robot-radius", robot_radius),
+            )
+            if value not in (None, [])
+        ]
         if given:
-            raise BearnavError(f"{given[0]}: only for a bare map_server YAML; {path} is a bearnav map, "
-                               "set it there (docs/maps.md)")  # fmt: skip
+            raise BearnavError(
+                f"{given[0]}: only for a bare map_server YAML; {path} is a bearnav map, set it there (docs/maps.md)"
+            )
     if "image" in spec:  # a bare map_server YAML: the rest comes from options
         grid, extra = read_grid(path, str(path), "image")
         blobs = extra
@@ -116,8 +127,11 @@ def read_map_source(
         spec.setdefault("name", path.stem)
         if robot_given and isinstance(spec.get("robot") or {}, dict):  # else the map stage names it
             spec["robot"] = {**(spec.get("robot") or {}), **robot_given}
-            blobs.append(json.dumps({"--" + key.replace("_", "-"): value for key, value in robot_given.items()},
-                                    sort_keys=True).encode())  # fmt: skip
+            blobs.append(
+                json.dumps(
+                    {"--" + key.replace("_", "-"): value for key, value in robot_given.items()}, sort_keys=True
+                ).encode()
+            )
         if "occupancy" in spec:
             if not isinstance(spec["occupancy"], str):
                 raise InvalidMapError("expected a file name", file=str(path), field="occupancy")

@@ -40,9 +40,11 @@ FORCE = typer.Option(False, "--force", help="Rerun even if the output is fresh."
 QUIET = typer.Option(False, "--quiet", "-q", help=QUIET_HELP)
 JSON = typer.Option(False, "--json", help="Print machine-readable JSON.")
 LOOKAHEAD = typer.Option(
-    None, metavar="λ", help="Look-ahead λ, map units (any map; overrides the map's robot.lookahead): plan for the "
-    "point λ ahead of a unicycle's axle, obstacles inflated by the radius plus λ (docs/maps.md)."
-)  # fmt: skip
+    None,
+    metavar="λ",
+    help="Look-ahead λ, map units (any map; overrides the map's robot.lookahead): plan for the "
+    "point λ ahead of a unicycle's axle, obstacles inflated by the radius plus λ (docs/maps.md).",
+)
 
 
 #: The range and noise of the camera a ``--fov`` names (map, plan, plot): one declaration each.
@@ -51,8 +53,13 @@ CAMERA_NOISE = typer.Option(
     None, "--noise-deg", help="Bearing noise (1σ, degrees) of that camera's predicted fix error (default 1)."
 )
 #: The option of each field a camera check names (``perception.check_params``, ``bearing.check_camera``).
-CAMERA_OPTIONS = {"fov": "--fov", "fov_deg": "--fov", "noise_deg": "--noise-deg", "range": "--range",
-                  "max_range": "--range"}  # fmt: skip
+CAMERA_OPTIONS = {
+    "fov": "--fov",
+    "fov_deg": "--fov",
+    "noise_deg": "--noise-deg",
+    "range": "--range",
+    "max_range": "--range",
+}
 
 
 def check_camera(fov: float, noise_deg: float = 0.0, max_range: Optional[float] = None) -> None:
@@ -132,8 +139,9 @@ def option_help(command: str, field: ParamField, *, with_default: bool = True, p
     return prefix + text + (f" ({'; '.join(notes)})" if notes else "") + "."
 
 
-def params_options(command: str, *, only: tuple[str, ...] | None = None, defaults: bool = False,
-                   prefix: str = "") -> list[Any]:  # fmt: skip
+def params_options(
+    command: str, *, only: tuple[str, ...] | None = None, defaults: bool = False, prefix: str = ""
+) -> list[Any]:
     """The click options of a command's ``Params`` fields (``typer.core.TyperOption``, as typer makes its own).
 
     The option is the field's declared one (``--field-name``, or a name such as ``--starts``), a
@@ -156,10 +164,16 @@ def params_options(command: str, *, only: tuple[str, ...] | None = None, default
         help_text = option_help(command, field, with_default=not defaults, prefix=prefix)
         # what typer.Option(default, declared, help=...) in a signature makes: a bool is a flag with its
         # off-switch (click's own bool type), any other kind click's type of that Python type
-        options.append(TyperOption(param_decls=[field.name, f"{name}/{field.off}" if flag else name],
-                                   type=None if flag else field.kind, is_flag=flag or None,
-                                   default=field.default if defaults else None, show_default=True,
-                                   help=help_text))  # fmt: skip
+        options.append(
+            TyperOption(
+                param_decls=[field.name, f"{name}/{field.off}" if flag else name],
+                type=None if flag else field.kind,
+                is_flag=flag or None,
+                default=field.default if defaults else None,
+                show_default=True,
+                help=help_text,
+            )
+        )
     return options
 
 
@@ -174,8 +188,11 @@ def with_options(*groups: Callable[[], list[Any]], before: str = "force") -> Cal
 
     def decorate(command: Callable) -> Callable:
         signature = inspect.signature(command, eval_str=True)
-        own = [p.replace(kind=inspect.Parameter.KEYWORD_ONLY) for p in signature.parameters.values()
-               if p.kind is not inspect.Parameter.VAR_KEYWORD]  # fmt: skip
+        own = [
+            p.replace(kind=inspect.Parameter.KEYWORD_ONLY)
+            for p in signature.parameters.values()
+            if p.kind is not inspect.Parameter.VAR_KEYWORD
+        ]
         command.__signature__ = signature.replace(parameters=own)
         command.generated_options = (groups, before)
         return command

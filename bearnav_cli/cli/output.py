@@ -86,8 +86,9 @@ def _warning_handler() -> type:
                 if pipeline.ACTIVITY.file and where:
                     where += f" of {pipeline.ACTIVITY.file}"
                 where = f"{escape(where)}: " if where else ""
-                err.print(f"[yellow]warning:[/yellow] {where}{escape(record.getMessage())}", highlight=False,
-                          soft_wrap=True)  # fmt: skip
+                err.print(
+                    f"[yellow]warning:[/yellow] {where}{escape(record.getMessage())}", highlight=False, soft_wrap=True
+                )
 
     return _WarningHandler
 

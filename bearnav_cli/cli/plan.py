@@ -94,12 +94,25 @@ def plan_command(
     cells = options["cells"]
     if cells is not None and cells not in CELL_KINDS:  # before any stage runs
         raise fail(f"--cells: must be one of {', '.join(CELL_KINDS)}, got {cells!r}", EXIT_INVALID)
-    map_options = {"--goal": goal, "--landmark": landmark, "--start": start, "--robot-radius": robot_radius,
-                   "--lookahead": lookahead,
-                   **{option_name("map", name): options[name] for name in PLAN_OPTIONS["map"]}}  # fmt: skip
+    map_options = {
+        "--goal": goal,
+        "--landmark": landmark,
+        "--start": start,
+        "--robot-radius": robot_radius,
+        "--lookahead": lookahead,
+        **{option_name("map", name): options[name] for name in PLAN_OPTIONS["map"]},
+    }
     overrides = {stage: {name: options[name] for name in names} for stage, names in PLAN_OPTIONS.items()}
-    robot = {key: value for key, value in (("bearing_error_deg", bearing_error_deg), ("compass_error_deg",
-             compass_error_deg), ("slip", slip), ("slip_floor", slip_floor)) if value is not None}  # fmt: skip
+    robot = {
+        key: value
+        for key, value in (
+            ("bearing_error_deg", bearing_error_deg),
+            ("compass_error_deg", compass_error_deg),
+            ("slip", slip),
+            ("slip_floor", slip_floor),
+        )
+        if value is not None
+    }
     map_options.update({"--" + key.replace("_", "-"): value for key, value in robot.items()})
     if fov is None and (max_range is not None or noise_deg is not None):
         given = "--range" if max_range is not None else "--noise-deg"
@@ -113,8 +126,10 @@ def plan_command(
     if _is_map_artifact(source):
         given = [name for name, value in map_options.items() if value not in (None, [])]
         if given:
-            raise fail(f"{given[0]}: {source} is a map.json, built already; give the map YAML to change "
-                       "its map options", EXIT_INVALID)  # fmt: skip
+            raise fail(
+                f"{given[0]}: {source} is a map.json, built already; give the map YAML to change its map options",
+                EXIT_INVALID,
+            )
         src: Any = source
         target = out_dir or source.parent
     else:
@@ -141,8 +156,9 @@ def plan_command(
     if fov is not None and outcome_failure(reports[-1].stage, plan) is None:  # the camera's, on a plan passing the rest
         from bearnav_cli import perception
 
-        seeing = perception.perception_coverage(plan, fov, 1.0 if noise_deg is None else noise_deg,
-                                                float("inf") if max_range is None else max_range)  # fmt: skip
+        seeing = perception.perception_coverage(
+            plan, fov, 1.0 if noise_deg is None else noise_deg, float("inf") if max_range is None else max_range
+        )
         extra = {
             "perception": {
                 "fov_deg": fov,
@@ -160,9 +176,12 @@ def plan_command(
     if seeing is not None and seeing.fraction_domain < 1.0:
         from bearnav_cli.datatypes import percent
 
-        raise fail(f"a {fov:g}° camera looking along the field sees no usable pair of tags from "
-                   f"{percent(1.0 - seeing.fraction_domain)} of the certified area: add tags there; "
-                   + tags_step(reports[-1].path, fov, max_range, plan_words), EXIT_OUTCOME)  # fmt: skip
+        raise fail(
+            f"a {fov:g}° camera looking along the field sees no usable pair of tags from "
+            f"{percent(1.0 - seeing.fraction_domain)} of the certified area: add tags there; "
+            + tags_step(reports[-1].path, fov, max_range, plan_words),
+            EXIT_OUTCOME,
+        )
 
 
 #: ``decompose --cells`` (and ``plan --cells``) choices.

@@ -46,7 +46,7 @@ def plot_command(
         "--bearing-error-deg",
         help="With --color-by live: the bearing error bound η, degrees, (0, 45) "
         "(default: the map's robot.bearing_error_deg plus compass_error_deg).",
-    ),  # fmt: skip
+    ),
     quiet: bool = QUIET,
 ) -> None:
     """Draw an artifact: map, tree, collision samples, cells, the plan's field, simulated runs.
@@ -81,8 +81,11 @@ def plot_command(
         if fov is not None:
             if not isinstance(shown, Plan):
                 schema = loaded.manifest.get("schema", "not a plan")
-                raise fail(f"--fov: {artifact} is {schema}, not a plan (bearnav.plan/2): the camera looks along "
-                           "the plan's field", EXIT_INVALID)  # fmt: skip
+                raise fail(
+                    f"--fov: {artifact} is {schema}, not a plan (bearnav.plan/2): the camera looks along "
+                    "the plan's field",
+                    EXIT_INVALID,
+                )
             from bearnav_cli import perception
 
             max_range_or_inf = float("inf") if max_range is None else max_range
@@ -94,8 +97,11 @@ def plot_command(
                 raise fail(f"{given}: only with --color-by live (the liveness it measures)", EXIT_INVALID)
             if not isinstance(shown, Plan) or not shown.cells.is_funnel:
                 schema = loaded.manifest.get("schema", "not a plan")
-                raise fail(f"--color-by live: {artifact} is {schema}, not a funnel plan: liveness needs its usable "
-                           "tolerances τ_c", EXIT_INVALID)  # fmt: skip
+                raise fail(
+                    f"--color-by live: {artifact} is {schema}, not a funnel plan: liveness needs its usable "
+                    "tolerances τ_c",
+                    EXIT_INVALID,
+                )
             from bearnav_cli import liveness
 
             names = {"eta_deg": "--bearing-error-deg", "fov_deg": "--live-fov"}
@@ -106,9 +112,19 @@ def plot_command(
         cells = shown.cells if isinstance(shown, Plan) else shown if isinstance(shown, Cells) else None
         # plan/3 covers F (ALGORITHMS §12.7): hatch what of F no cell covers
         coverage = composition.coverage_regions(cells, margin=0.0) if cells is not None and cells.is_funnel else None
-        fig = plot.figure_for(shown, background=background, title=title, color_by=color_by, barriers=barriers,
-                              labels=labels, cell_numbers=cell_numbers, coverage=coverage, perception=seeing,
-                              liveness=live, params=loaded.manifest.get("params"))  # fmt: skip
+        fig = plot.figure_for(
+            shown,
+            background=background,
+            title=title,
+            color_by=color_by,
+            barriers=barriers,
+            labels=labels,
+            cell_numbers=cell_numbers,
+            coverage=coverage,
+            perception=seeing,
+            liveness=live,
+            params=loaded.manifest.get("params"),
+        )
         with artifacts.atomic_output(out_path) as tmp:
             plot.save_figure(fig, str(tmp))
     if seeing is not None:

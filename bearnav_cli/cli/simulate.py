@@ -55,8 +55,9 @@ def simulate_command(
 
         ros_bag.check_path(bag, "--bag", force=force)
     with progress_bar() as progress:
-        report = pipeline.run_stage("simulate", plan_npz, out_path, overrides, force,
-                                    progress_factory(progress)("simulate"))  # fmt: skip
+        report = pipeline.run_stage(
+            "simulate", plan_npz, out_path, overrides, force, progress_factory(progress)("simulate")
+        )
     sim = report.artifact
     metrics = sim.stats
     if bag is not None:  # an interrupt names the bag, and what is written already; a warning the plan too

@@ -112,8 +112,12 @@ def sweep_command(
         except KeyboardInterrupt as exc:
             done = len([r for r in sweep.records(store, job_list).values() if r.get("status") == "done"])
             word = "terminated" if isinstance(exc, Terminated) else "interrupted"
-            err.print(f"{word}; {done} of {len(job_list)} jobs are in {store}, the next `bearnav sweep` runs the "
-                      "others", highlight=False, soft_wrap=True, markup=False)  # fmt: skip
+            err.print(
+                f"{word}; {done} of {len(job_list)} jobs are in {store}, the next `bearnav sweep` runs the others",
+                highlight=False,
+                soft_wrap=True,
+                markup=False,
+            )
             raise typer.Exit(EXIT_TERMINATED if isinstance(exc, Terminated) else EXIT_INTERRUPTED) from None
         finally:
             if close is not None:
@@ -132,27 +136,50 @@ def sweep_command(
     with artifacts.atomic_output(figure) as tmp:
         plot.save_figure(plot.sweep_plot(panels, title), str(tmp))
     failed = [r for r in rows if r["status"] != "done"]
-    summary = {"store": str(store), "jobs": len(job_list), "in_store": len(rows), "failed": len(failed),
-               "left_out": left_out, "files": [str(p) for p in (*written, markdown, figure)]}  # fmt: skip
+    summary = {
+        "store": str(store),
+        "jobs": len(job_list),
+        "in_store": len(rows),
+        "failed": len(failed),
+        "left_out": left_out,
+        "files": [str(p) for p in (*written, markdown, figure)],
+    }
     if outcome is not None:
-        summary.update(ran=outcome.ran, from_store=outcome.stored, plans_made=outcome.plans_made,
-                       elapsed_s=round(outcome.elapsed_s, 3))  # fmt: skip
+        summary.update(
+            ran=outcome.ran,
+            from_store=outcome.stored,
+            plans_made=outcome.plans_made,
+            elapsed_s=round(outcome.elapsed_s, 3),
+        )
     if as_json:
         out.print_json(json.dumps(summary))
     else:
         if outcome is not None:
-            out.print(f"sweep      {store}: {len(job_list)} jobs, {outcome.ran} ran, {outcome.stored} from the store, "
-                      f"{len(failed)} failed ({outcome.plans_made} plans made, {outcome.elapsed_s:.1f} s)",
-                      highlight=False, soft_wrap=True)  # fmt: skip
+            out.print(
+                f"sweep      {store}: {len(job_list)} jobs, {outcome.ran} ran, {outcome.stored} from the store, "
+                f"{len(failed)} failed ({outcome.plans_made} plans made, {outcome.elapsed_s:.1f} s)",
+                highlight=False,
+                soft_wrap=True,
+            )
         else:
-            out.print(f"report     {store}: {len(rows)} of {len(job_list)} jobs in the store, {len(failed)} failed",
-                      highlight=False, soft_wrap=True)  # fmt: skip
+            out.print(
+                f"report     {store}: {len(rows)} of {len(job_list)} jobs in the store, {len(failed)} failed",
+                highlight=False,
+                soft_wrap=True,
+            )
         if left_out:
-            out.print(f"left out {left_out} cells with both noise_deg and noise_bound_deg (simulate takes one)",
-                      highlight=False, soft_wrap=True)  # fmt: skip
+            out.print(
+                f"left out {left_out} cells with both noise_deg and noise_bound_deg (simulate takes one)",
+                highlight=False,
+                soft_wrap=True,
+            )
         for row in failed[:5]:
-            out.print(f"failed     {row['map']} fov {row['fov']:g} noise {row['noise_deg']:g}: {row['error']}",
-                      highlight=False, markup=False, soft_wrap=True)  # fmt: skip
+            out.print(
+                f"failed     {row['map']} fov {row['fov']:g} noise {row['noise_deg']:g}: {row['error']}",
+                highlight=False,
+                markup=False,
+                soft_wrap=True,
+            )
         out.print("wrote " + ", ".join(summary["files"]), highlight=False, soft_wrap=True)
     if failed:
         raise typer.Exit(EXIT_OUTCOME)

@@ -91,20 +91,36 @@ def tags_command(
     Quiet.enabled |= quiet
     if out_path is None:  # a new file: the map given stays as it is
         out_path = tags_output(plan_npz, map_yaml)
-    artifacts.check_output_file(out_path, (".yaml", ".yml"), "-o/--out", inputs=tuple(p for p in (plan_npz, map_yaml)
-                                                                                        if p is not None))  # fmt: skip
+    artifacts.check_output_file(
+        out_path, (".yaml", ".yml"), "-o/--out", inputs=tuple(p for p in (plan_npz, map_yaml) if p is not None)
+    )
     artifacts.check_overwrite(out_path, "tags", force=force)
     figure = figure or out_path.with_suffix(".png")
     artifacts.check_output_file(figure, FIGURE_SUFFIXES, "--figure")
     artifacts.check_distinct({"-o/--out": out_path, "--figure": figure})
-    options = {**CAMERA_OPTIONS, "error_target": "--error-target", "max_tags": "--max-tags", "target": "--for",
-               "eta_deg": "--bearing-error-deg", "kappa": "--slip", "resolution": "--live-resolution"}  # fmt: skip
+    options = {
+        **CAMERA_OPTIONS,
+        "error_target": "--error-target",
+        "max_tags": "--max-tags",
+        "target": "--for",
+        "eta_deg": "--bearing-error-deg",
+        "kappa": "--slip",
+        "resolution": "--live-resolution",
+    }
     if target != "live" and (bearing_error_deg is not None or slip is not None or live_resolution is not None):
         raise fail("--bearing-error-deg, --slip and --live-resolution are for --for live", EXIT_INVALID)
     try:
-        params = tags.Params(fov_deg=fov, max_range=float("inf") if max_range is None else max_range,
-                             noise_deg=noise_deg, error_target=error_target, max_tags=max_tags, target=target,
-                             bearing_error_deg=bearing_error_deg, slip=slip, resolution=live_resolution)  # fmt: skip
+        params = tags.Params(
+            fov_deg=fov,
+            max_range=float("inf") if max_range is None else max_range,
+            noise_deg=noise_deg,
+            error_target=error_target,
+            max_tags=max_tags,
+            target=target,
+            bearing_error_deg=bearing_error_deg,
+            slip=slip,
+            resolution=live_resolution,
+        )
     except InvalidParamsError as exc:  # name the option the user typed
         raise fail(f"{options.get(exc.field, exc.field)}: {exc.reason}", EXIT_INVALID) from None
     with pipeline.activity("tags"):  # what an interrupt, an error or a warning names
@@ -119,8 +135,7 @@ def tags_command(
 
             grid, _ = read_grid(map_yaml, str(map_yaml), "--map")
             wrapped = {key: value for key, value in spec.items() if key not in ("name", "bounds", "obstacles")}
-            spec = {"name": spec["name"], "occupancy": os.path.relpath(map_yaml, out_path.resolve().parent),
-                    **wrapped}  # fmt: skip
+            spec = {"name": spec["name"], "occupancy": os.path.relpath(map_yaml, out_path.resolve().parent), **wrapped}
             wrapper = map_.MapSource(spec=spec, file=str(out_path), sha256="", grid=grid)
             problem = composition.map_frame_problem(plan.map, map_.run(wrapper))
             if problem:
@@ -146,8 +161,10 @@ def tags_command(
         new_spec = tags.map_spec_with_tags(spec, proposal)
         new_spec = {"name": name, **{key: value for key, value in new_spec.items() if key != "name"}}
         map_.run(map_.MapSource(spec=new_spec, file=str(out_path), sha256="", grid=grid))  # the map stage accepts it
-        header = (f"{artifacts.TAGS_MARKER} {proposal.count} new tags for a {fov:g}° camera, from {plan_npz} "
-                  f"(and {map_yaml or 'its map'}); plan it with `bearnav plan {out_path}`")  # fmt: skip
+        header = (
+            f"{artifacts.TAGS_MARKER} {proposal.count} new tags for a {fov:g}° camera, from {plan_npz} "
+            f"(and {map_yaml or 'its map'}); plan it with `bearnav plan {out_path}`"
+        )
         text = tags.map_text_with_tags(original, proposal, name, header) if original is not None else None
         if text is not None:
             try:
@@ -159,9 +176,12 @@ def tags_command(
                 text = None  # a layout the text edit got wrong: the map is written afresh (its comments are lost)
         if text is None:
             if original is not None and not Quiet.enabled:
-                err.print(f"[yellow]warning:[/yellow] {out_path}: bearnav cannot extend the landmarks of {map_yaml} "
-                          "where they are; the map is written afresh, without its comments", highlight=False,
-                          soft_wrap=True)  # fmt: skip
+                err.print(
+                    f"[yellow]warning:[/yellow] {out_path}: bearnav cannot extend the landmarks of {map_yaml} "
+                    "where they are; the map is written afresh, without its comments",
+                    highlight=False,
+                    soft_wrap=True,
+                )
             text = header + "\n" + yaml.safe_dump(new_spec, sort_keys=False, default_flow_style=None)
         artifacts.atomic_write(out_path, lambda f: f.write(text.encode()))
         plot = plotting()  # matplotlib is slow to import: only here
@@ -170,48 +190,83 @@ def tags_command(
         with artifacts.atomic_output(figure) as tmp:
             plot.save_figure(fig, str(tmp))
     if as_json:
-        print_json({
-            "map": str(out_path), "figure": str(figure), "new_tags": proposal.count,
-            "lower_bound": proposal.lower_bound, "ids": list(proposal.ids),
-            "positions": [[float(v) for v in p] for p in proposal.positions],
-            "target_reached": proposal.target_reached,
-            "domain_before": proposal.before.fraction_domain, "domain_after": proposal.after.fraction_domain,
-            "free_before": proposal.before.fraction_free, "free_after": proposal.after.fraction_free,
-            "for": target,
-            **({"live_before": proposal.live_before.live_fraction, "live_after": proposal.live_after.live_fraction,
-                "eta_deg": math.degrees(proposal.live_after.grid.eta),
-                "eta_star_deg_before": math.degrees(proposal.live_before.eta_star),
-                "eta_star_deg_after": math.degrees(proposal.live_after.eta_star)}
-               if proposal.live_after is not None else {}),
-        })  # fmt: skip
+        print_json(
+            {
+                "map": str(out_path),
+                "figure": str(figure),
+                "new_tags": proposal.count,
+                "lower_bound": proposal.lower_bound,
+                "ids": list(proposal.ids),
+                "positions": [[float(v) for v in p] for p in proposal.positions],
+                "target_reached": proposal.target_reached,
+                "domain_before": proposal.before.fraction_domain,
+                "domain_after": proposal.after.fraction_domain,
+                "free_before": proposal.before.fraction_free,
+                "free_after": proposal.after.fraction_free,
+                "for": target,
+                **(
+                    {
+                        "live_before": proposal.live_before.live_fraction,
+                        "live_after": proposal.live_after.live_fraction,
+                        "eta_deg": math.degrees(proposal.live_after.grid.eta),
+                        "eta_star_deg_before": math.degrees(proposal.live_before.eta_star),
+                        "eta_star_deg_after": math.degrees(proposal.live_after.eta_star),
+                    }
+                    if proposal.live_after is not None
+                    else {}
+                ),
+            }
+        )
     else:
         out.print(f"tags      {out_path}  {proposal.summary()}", highlight=False, soft_wrap=True)
         if not Quiet.enabled:
-            out.print(f"wrote {out_path} and {figure}; re-plan with `{command_text('bearnav', 'plan', out_path)}`",
-                      highlight=False, soft_wrap=True)  # fmt: skip
+            out.print(
+                f"wrote {out_path} and {figure}; re-plan with `{command_text('bearnav', 'plan', out_path)}`",
+                highlight=False,
+                soft_wrap=True,
+            )
     if not proposal.target_reached and proposal.live_after is not None:
         from bearnav_cli.datatypes import percent
 
         live = proposal.live_after
-        why = (f"--max-tags {max_tags} allowed too few" if max_tags is not None and proposal.count >= max_tags else
-               "no tag makes the grey points live: their cells tolerate less than any look gives (a smaller "
-               "--bearing-error-deg, the heading from the bearings, or a plan with larger tolerances)")  # fmt: skip
-        raise fail(f"{len(live.live) - live.n_live} cells are still not live ({percent(1.0 - live.live_fraction)} of "
-                   f"the certified area): {why}; {out_path} has the tags placed", EXIT_OUTCOME)  # fmt: skip
+        why = (
+            f"--max-tags {max_tags} allowed too few"
+            if max_tags is not None and proposal.count >= max_tags
+            else "no tag makes the grey points live: their cells tolerate less than any look gives (a smaller "
+            "--bearing-error-deg, the heading from the bearings, or a plan with larger tolerances)"
+        )
+        raise fail(
+            f"{len(live.live) - live.n_live} cells are still not live ({percent(1.0 - live.live_fraction)} of "
+            f"the certified area): {why}; {out_path} has the tags placed",
+            EXIT_OUTCOME,
+        )
     if not proposal.target_reached:
         from bearnav_cli.datatypes import percent
 
         short = 1.0 - proposal.after.fraction_domain
         if max_tags is not None and proposal.count >= max_tags:
-            again = command_text("bearnav", "tags", plan_npz, *camera_words(fov, max_range),
-                                 *(["--noise-deg", f"{noise_deg:g}"] if noise_deg != 1.0 else []),
-                                 *(["--error-target", f"{error_target:g}"] if error_target is not None else []),
-                                 *(["--map", map_yaml] if map_yaml is not None else []), "-o", out_path)  # fmt: skip
-            fix = (f"--max-tags {max_tags} allowed too few (at least {proposal.lower_bound} are needed); "
-                   f"`{again}` places as many as the rule needs")  # fmt: skip
+            again = command_text(
+                "bearnav",
+                "tags",
+                plan_npz,
+                *camera_words(fov, max_range),
+                *(["--noise-deg", f"{noise_deg:g}"] if noise_deg != 1.0 else []),
+                *(["--error-target", f"{error_target:g}"] if error_target is not None else []),
+                *(["--map", map_yaml] if map_yaml is not None else []),
+                "-o",
+                out_path,
+            )
+            fix = (
+                f"--max-tags {max_tags} allowed too few (at least {proposal.lower_bound} are needed); "
+                f"`{again}` places as many as the rule needs"
+            )
         else:
-            fix = ("the rest sees no wall or obstacle a tag could go on in view: a wider --fov, a longer "
-                   "--range or a lower --error-target")  # fmt: skip
-        raise fail(f"two usable tags are still not in view on {percent(short)} of the certified area: {fix}; "
-                   f"{out_path} has the tags placed",
-                   EXIT_OUTCOME)  # fmt: skip
+            fix = (
+                "the rest sees no wall or obstacle a tag could go on in view: a wider --fov, a longer "
+                "--range or a lower --error-target"
+            )
+        raise fail(
+            f"two usable tags are still not in view on {percent(short)} of the certified area: {fix}; "
+            f"{out_path} has the tags placed",
+            EXIT_OUTCOME,
+        )

@@ -54,9 +54,16 @@ def verify_command(
         speed = verify.loop_speed(plan, params)  # the speed verify.run drives at (the map's, else simulate's)
         limits.check_value("verify", "speed", speed, where_speed, plan.map.diagonal)
         if starts:  # the closed loop's estimates (simulate's), then the shortest routes' (verify's)
-            loop = pipeline.resolve_params("simulate", {}, {"speed": speed, "measurement": "displacement",
-                                                           "record_trajectories": False,
-                                                           "starts": f"random:{starts}"})  # fmt: skip
+            loop = pipeline.resolve_params(
+                "simulate",
+                {},
+                {
+                    "speed": speed,
+                    "measurement": "displacement",
+                    "record_trajectories": False,
+                    "starts": f"random:{starts}",
+                },
+            )
             origins = pipeline.Origins({"starts": "--starts", "speed": where_speed})
             pipeline.SIMULATE.check_resources(plan, loop, origins)
             limits.check_verify_starts(plan, starts)
@@ -79,10 +86,14 @@ def verify_command(
     if as_json:
         data = report.to_json()
         if seeing is not None:
-            data["perception"] = {"fov_deg": fov, "noise_deg": noise_deg, "fraction_domain": seeing.fraction_domain,
-                                  "fraction_free": seeing.fraction_free,
-                                  "median_predicted_error": seeing.median_error_domain,
-                                  "fraction_within_tolerance": seeing.fraction_within_tolerance}  # fmt: skip
+            data["perception"] = {
+                "fov_deg": fov,
+                "noise_deg": noise_deg,
+                "fraction_domain": seeing.fraction_domain,
+                "fraction_free": seeing.fraction_free,
+                "median_predicted_error": seeing.median_error_domain,
+                "fraction_within_tolerance": seeing.fraction_within_tolerance,
+            }
         print_json(data)
     else:
         out.print(f"verify    {plan_npz}  {report.summary()}", highlight=False, soft_wrap=True)
@@ -91,14 +102,21 @@ def verify_command(
         for note in [] if Quiet.enabled else getattr(report, "notes", []):
             out.print(f"  note: {note}", highlight=False, soft_wrap=True)
         if seeing is not None:
-            out.print(f"  perception: {seeing.summary()} (the rule: `bearnav tags` places tags where it fails)",
-                      highlight=False, soft_wrap=True)  # fmt: skip
+            out.print(
+                f"  perception: {seeing.summary()} (the rule: `bearnav tags` places tags where it fails)",
+                highlight=False,
+                soft_wrap=True,
+            )
         if not Quiet.enabled:  # what the certificate says, in words, whatever else was printed
             out.print(f"  {verify.guarantee(plan, report)}", highlight=False, markup=False, soft_wrap=True)
         if starts and not Quiet.enabled:
-            out.print(f"  the {starts} runs drive with displacements (exact positions) and a full view, at speed "
-                      f"{speed:g} map units/s: `bearnav simulate` adds bearings, a camera and noise; {WORDS_NOTE}",
-                      highlight=False, markup=False, soft_wrap=True)  # fmt: skip
+            out.print(
+                f"  the {starts} runs drive with displacements (exact positions) and a full view, at speed "
+                f"{speed:g} map units/s: `bearnav simulate` adds bearings, a camera and noise; {WORDS_NOTE}",
+                highlight=False,
+                markup=False,
+                soft_wrap=True,
+            )
     if report.failed:
         raise fail(verify_steps(report, plan_npz, world), EXIT_OUTCOME)
 

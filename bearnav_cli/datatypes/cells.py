@@ -264,8 +264,12 @@ def _check_cell_arrays(obj: Any) -> None:
     n = len(obj.nodes)
     c = len(np.asarray(obj.cell_node))
     dims = {"N": n, "C": c, "L": len(obj.map.landmarks)}
-    freeze_fields(obj, "cells", ("parent", "collision_samples", "cell_node", "exit_point", "exit_dir", "fixed_landmark",
-                           "s_min", "s_max"), dims)  # fmt: skip
+    freeze_fields(
+        obj,
+        "cells",
+        ("parent", "collision_samples", "cell_node", "exit_point", "exit_dir", "fixed_landmark", "s_min", "s_max"),
+        dims,
+    )
     for coords, values, offsets in (
         ("cell_A", "cell_b", "cell_row_offsets"),
         ("cbf_A", "cbf_b", "cbf_offsets"),

@@ -56,9 +56,12 @@ def freeze(value: Any) -> Any:
         The same value, its dicts read-only (lists stay lists: they compare equal to JSON arrays).
     """
     if isinstance(value, dict):
-        return value if type(value) is FrozenDict and all(not isinstance(v, dict) or type(v) is FrozenDict
-                                                          for v in value.values()) else \
-            FrozenDict({k: freeze(v) for k, v in value.items()})  # fmt: skip
+        return (
+            value
+            if type(value) is FrozenDict
+            and all(not isinstance(v, dict) or type(v) is FrozenDict for v in value.values())
+            else FrozenDict({k: freeze(v) for k, v in value.items()})
+        )
     if isinstance(value, list):
         return [freeze(v) for v in value]
     return value

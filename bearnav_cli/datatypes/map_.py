@@ -134,8 +134,7 @@ class Map:
         given = dict(self.robot or {})
         unknown = sorted(set(given) - set(ROBOT_KEYS) - {"radius"})
         if unknown:
-            raise ArtifactError(f"unknown key {unknown[0]!r} (expected one of: {', '.join(ROBOT_KEYS)})",
-                                field="robot")  # fmt: skip
+            raise ArtifactError(f"unknown key {unknown[0]!r} (expected one of: {', '.join(ROBOT_KEYS)})", field="robot")
         object.__setattr__(self, "robot", freeze(robot_parameters(given)))
         object.__setattr__(self, "bounds", frozen_array(self.bounds, float, (4,), "bounds"))
         object.__setattr__(self, "goal", frozen_array(self.goal, float, (2,), "goal"))
@@ -287,8 +286,9 @@ def _map_params_problem(map_: Map) -> str | None:
 def _map_points_problem(map_: Map, points: np.ndarray, strict: bool) -> str | None:
     """The first point outside ``B_r`` (strictly inside, when ``strict``) or in an obstacle."""
     lo, hi = map_.free_bounds[:2], map_.free_bounds[2:]
-    inside = np.all((points > lo) & (points < hi), axis=1) if strict else np.all((points >= lo) & (points <= hi),
-                                                                                   axis=1)  # fmt: skip
+    inside = (
+        np.all((points > lo) & (points < hi), axis=1) if strict else np.all((points >= lo) & (points <= hi), axis=1)
+    )
     k = _first(~inside)
     if k is not None:
         return f"{points[k].tolist()} is outside B_r (the bounds less the robot radius)"

@@ -8,8 +8,9 @@ import shapely
 __all__ = ["coverage_domain", "reached_parts"]
 
 
-def coverage_domain(free_region: shapely.Geometry, free_bounds: np.ndarray, obstacles: shapely.Geometry,
-                    margin: float) -> shapely.Geometry:  # fmt: skip
+def coverage_domain(
+    free_region: shapely.Geometry, free_bounds: np.ndarray, obstacles: shapely.Geometry, margin: float
+) -> shapely.Geometry:
     """``F_m``: the free points at distance at least ``m`` from ``O`` and from the walls of ``B_r`` (§11.1).
 
     Parameters

@@ -19,9 +19,20 @@ from bearnav_cli.funnel.coverage import reached_parts
 from bearnav_cli.geometry import FreeSpace
 
 __all__ = [
-    "BAND_CORNER_TURN", "BAND_NODE_TRIES", "DENSIFY_BATCH", "DENSIFY_GRID", "DENSIFY_NEAREST", "WALL_LEAF_DEPTH",
-    "band_candidates", "cells_union", "densify", "densify_leaf", "join_leaf", "pocket_mouth", "reached_coverage",
-]  # fmt: skip
+    "BAND_CORNER_TURN",
+    "BAND_NODE_TRIES",
+    "DENSIFY_BATCH",
+    "DENSIFY_GRID",
+    "DENSIFY_NEAREST",
+    "WALL_LEAF_DEPTH",
+    "band_candidates",
+    "cells_union",
+    "densify",
+    "densify_leaf",
+    "join_leaf",
+    "pocket_mouth",
+    "reached_coverage",
+]
 
 #: Densification tries a pocket's pole, a point on it, then up to ``DENSIFY_GRID²`` grid points in it.
 DENSIFY_GRID = 16
@@ -86,8 +97,9 @@ def densify(pockets: list, allowed: float, budget: int, find_leaf: Callable, add
             hit = shapely.intersects(np.array([q[0] for q in pockets], dtype=object), cell)
             kept = [q for q, h in zip(pockets, hit, strict=True) if not h]
             for q in (q for q, h in zip(pockets, hit, strict=True) if h):
-                kept += [[g, float(g.area), q[2]] for g in shapely.get_parts(shapely.difference(q[0], cell))
-                         if g.area > 0]  # fmt: skip
+                kept += [
+                    [g, float(g.area), q[2]] for g in shapely.get_parts(shapely.difference(q[0], cell)) if g.area > 0
+                ]
             pockets = kept
             grown_count += 1
             grown = True
@@ -110,8 +122,14 @@ def _seen(points: np.ndarray, cand: np.ndarray, nodes: np.ndarray, reach: FreeSp
     return free & (np.hypot(*(nodes[cand] - points[:, None, :]).transpose(2, 0, 1)) > 1e3 * tol)
 
 
-def densify_leaf(pocket: shapely.Geometry, nodes: np.ndarray, cost: np.ndarray, reach: FreeSpace, tol: float,
-                  domain_edge: shapely.Geometry | None = None) -> tuple[np.ndarray, int] | None:  # fmt: skip
+def densify_leaf(
+    pocket: shapely.Geometry,
+    nodes: np.ndarray,
+    cost: np.ndarray,
+    reach: FreeSpace,
+    tol: float,
+    domain_edge: shapely.Geometry | None = None,
+) -> tuple[np.ndarray, int] | None:
     """A leaf for an uncovered pocket: its point of largest clearance (the pole of inaccessibility, then
     a point on its surface) and the node with the least ``‖p − x_n‖ + cost(n)`` over the nodes it sees
     along a segment free with clearance; ``None`` when no node is reachable.
@@ -152,8 +170,15 @@ def densify_leaf(pocket: shapely.Geometry, nodes: np.ndarray, cost: np.ndarray, 
     return join_leaf(candidates, nodes, cost, reach, tol)
 
 
-def join_leaf(candidates: np.ndarray, nodes: np.ndarray, cost: np.ndarray, reach: FreeSpace, tol: float,
-               eligible: np.ndarray | None = None, nearest: bool = False) -> tuple[np.ndarray, int] | None:  # fmt: skip
+def join_leaf(
+    candidates: np.ndarray,
+    nodes: np.ndarray,
+    cost: np.ndarray,
+    reach: FreeSpace,
+    tol: float,
+    eligible: np.ndarray | None = None,
+    nearest: bool = False,
+) -> tuple[np.ndarray, int] | None:
     """The first of ``candidates`` (in order) free in ``reach`` that sees a node along a segment free in
     ``reach``, and the node with the least ``‖p − x_n‖ + cost(n)`` among those it sees; None if none does.
 

@@ -108,8 +108,9 @@ class NeckChoice:
         return 0.5 * min(self.sink_depth, self.inset)
 
 
-def neck_choice(region: Region, x_i: np.ndarray, x_j: np.ndarray, parent: Region, inset: float,
-                tol: float) -> NeckChoice:  # fmt: skip
+def neck_choice(
+    region: Region, x_i: np.ndarray, x_j: np.ndarray, parent: Region, inset: float, tol: float
+) -> NeckChoice:
     """``region`` necked for ``inset`` (:func:`necked`), with its actual inset and sink depth.
 
     Parameters
@@ -140,8 +141,9 @@ def _scored(cell: Region, face: np.ndarray, parent: Region) -> NeckChoice:
     return NeckChoice(cell, depth(parent.A, parent.b, face), exit_sink(face, -cell.A[keep], cell.b[keep])[1])
 
 
-def best_neck(region: Region, x_i: np.ndarray, x_j: np.ndarray, parent: Region, tol: float,
-              samples: int = INSET_SAMPLES) -> NeckChoice:  # fmt: skip
+def best_neck(
+    region: Region, x_i: np.ndarray, x_j: np.ndarray, parent: Region, tol: float, samples: int = INSET_SAMPLES
+) -> NeckChoice:
     """The exit inset of one edge cell that maximises ``τ_c = min(h*/2, δ_e,c/2)`` (ALGORITHMS §12.4).
 
     A larger inset narrows the exit face (its neck) and so lowers ``h*``, while the face's slack

@@ -77,8 +77,9 @@ class ObstaclePieces:
         own = np.column_stack([d[:, 1], -d[:, 0]]) / np.hypot(d[:, 0], d[:, 1])[:, None]
         return own, np.einsum("ek,ek->e", own, self.edges[:, 0])
 
-    def separating_rows(self, ends: np.ndarray, which: np.ndarray, margin: float,
-                        apart: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    def separating_rows(
+        self, ends: np.ndarray, which: np.ndarray, margin: float, apart: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
         """One row ``A x ≤ b`` (unit ``A``) per piece in ``which`` that keeps the segment ``ends`` off it.
 
         For a piece with nearest points ``p`` (on the piece) and ``s`` (on the segment),
@@ -192,8 +193,9 @@ def _clip_rows(polygon: np.ndarray, A: np.ndarray, b: np.ndarray, inside: np.nda
 PIECE_BATCH = 24
 
 
-def _keep_off_pieces(pieces: ObstaclePieces, polygon: np.ndarray, ends: np.ndarray, margin: float,
-                     tol: float) -> np.ndarray:  # fmt: skip
+def _keep_off_pieces(
+    pieces: ObstaclePieces, polygon: np.ndarray, ends: np.ndarray, margin: float, tol: float
+) -> np.ndarray:
     """Clip ``polygon`` by the separating rows of the pieces that meet it, nearest the segment first.
 
     A piece gets its row only while it still meets the shrinking polygon: one hidden behind a

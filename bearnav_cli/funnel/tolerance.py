@@ -101,8 +101,9 @@ def exit_face(vertices: np.ndarray, z: np.ndarray, x_j: np.ndarray) -> np.ndarra
     return V[ends]
 
 
-def cell_tolerance(M: np.ndarray, normals: np.ndarray, sigma_h: np.ndarray, z: np.ndarray | None,
-                   sigma_v: float | None) -> float:  # fmt: skip
+def cell_tolerance(
+    M: np.ndarray, normals: np.ndarray, sigma_h: np.ndarray, z: np.ndarray | None, sigma_v: float | None
+) -> float:
     """``δ_c = min(min_k σ_h,k / ‖Mᵀn_k‖, σ_v / ‖Mᵀz‖)`` of ALGORITHMS §11.4 (map units).
 
     A robot acting on ``x̂`` with ``‖x̂ − x‖ ≤ δ`` applies ``u(x) − M(x̂ − x)``, which changes

@@ -2,7 +2,7 @@
 
 A robot at ``x`` whose camera looks along the heading ``θ`` sees the landmarks ``S_fov(x, θ)`` (in
 the field of view, in range, in line of sight: ``runtime.looking.views``). A look's set then errs by
-at most ``ε(x, S)`` (``runtime.bounded.one_look_bound``: §12.2's static bound, tightened, see its
+at most ``ε(x, S)`` (``runtime.look_bound.one_look_bound``: §12.2's static bound, tightened, see its
 docstring). A look (§12.5, ``runtime.step.look_around``) turns to the best heading and, when that
 view is not enough, turns all around; turning in place does not grow the set, so it ends inside the
 cones of every landmark in sight, ``S_all(x)``. Per cell ``c``:

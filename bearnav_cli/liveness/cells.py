@@ -93,11 +93,13 @@ class Liveness:
         camera = "360° camera" if g.fov >= 2.0 * math.pi - 1e-12 else f"{math.degrees(g.fov):g}° camera"
         reach = "" if math.isinf(g.max_range) else f" of range {g.max_range:g}"
         heads = "1 heading (all around)" if g.headings == 1 else f"{g.headings} headings"
-        return (f"liveness at a bearing error of {math.degrees(g.eta):.3g}°, {camera}{reach}, wheel slip {g.kappa:g}: "
-                f"{percent(self.live_fraction)} of the certified area live ({self.n_live}/{len(self.live)} cells; "
-                f"{percent(self.view_fraction)} after one view, without turning all around); the largest bearing error "
-                f"every cell is live at: {math.degrees(self.eta_star):.3g}°; measured on a {g.resolution:.3g}-map-unit "
-                f"grid with {heads}, a measurement, not a proof")  # fmt: skip
+        return (
+            f"liveness at a bearing error of {math.degrees(g.eta):.3g}°, {camera}{reach}, wheel slip {g.kappa:g}: "
+            f"{percent(self.live_fraction)} of the certified area live ({self.n_live}/{len(self.live)} cells; "
+            f"{percent(self.view_fraction)} after one view, without turning all around); the largest bearing error "
+            f"every cell is live at: {math.degrees(self.eta_star):.3g}°; measured on a {g.resolution:.3g}-map-unit "
+            f"grid with {heads}, a measurement, not a proof"
+        )
 
     def to_json(self) -> dict[str, Any]:
         """A JSON-ready dict: degrees for angles, map units for lengths, ``null`` for non-finite numbers."""
@@ -148,10 +150,18 @@ def _point_min(values: np.ndarray, row_point: np.ndarray, n_points: int) -> np.n
     return out
 
 
-def measure(plan: Plan, eta_deg: float | None = None, fov_deg: float = 60.0, kappa: float | None = None,
-            nu: float | None = None, speed: float | None = None, resolution: float | None = None,
-            headings: int | None = None, max_range: float = math.inf,
-            landmarks: np.ndarray | None = None) -> Liveness:  # fmt: skip
+def measure(
+    plan: Plan,
+    eta_deg: float | None = None,
+    fov_deg: float = 60.0,
+    kappa: float | None = None,
+    nu: float | None = None,
+    speed: float | None = None,
+    resolution: float | None = None,
+    headings: int | None = None,
+    max_range: float = math.inf,
+    landmarks: np.ndarray | None = None,
+) -> Liveness:
     """Measure the liveness of a funnel plan's cells on a grid (ALGORITHMS §12.5; see :mod:`bearnav_cli.liveness`).
 
     Parameters
@@ -174,8 +184,9 @@ def measure(plan: Plan, eta_deg: float | None = None, fov_deg: float = 60.0, kap
     return evaluate(grid(plan, eta_deg, fov_deg, kappa, nu, speed, resolution, headings, max_range), landmarks)
 
 
-def evaluate(g: LiveGrid, landmarks: np.ndarray | None = None,
-             look: tuple[np.ndarray, np.ndarray] | None = None) -> Liveness:  # fmt: skip
+def evaluate(
+    g: LiveGrid, landmarks: np.ndarray | None = None, look: tuple[np.ndarray, np.ndarray] | None = None
+) -> Liveness:
     """The liveness of the cells on a grid with a set of landmarks.
 
     Parameters
@@ -210,18 +221,32 @@ def evaluate(g: LiveGrid, landmarks: np.ndarray | None = None,
     cover = float(shapely.union_all([polygons[c] for c in np.flatnonzero(live)]).area) if live.any() else 0.0
     points_per_cell = np.bincount(pair_cell, minlength=n_cells)
     return Liveness(
-        eps_look=eps_look, eps_view=eps_view, live=live, view_live=view_live, cell_eta_star=cell_eta,
-        points=points_per_cell, eta_star=float(np.min(cell_eta)) if n_cells else 0.0,
+        eps_look=eps_look,
+        eps_view=eps_view,
+        live=live,
+        view_live=view_live,
+        cell_eta_star=cell_eta,
+        points=points_per_cell,
+        eta_star=float(np.min(cell_eta)) if n_cells else 0.0,
         live_fraction=min(1.0, live_area / area) if area > 0 else 0.0,
         view_fraction=min(1.0, view_area / area) if area > 0 else 0.0,
         cover_fraction=min(1.0, cover / area) if area > 0 else 0.0,
         grid=g,
-    )  # fmt: skip
+    )
 
 
-def _eta_star(arrays: PlanArrays, landmarks: np.ndarray, points: np.ndarray, pair_cell: np.ndarray,
-              pair_point: np.ndarray, visible: np.ndarray, eps_look: np.ndarray, margin: np.ndarray, eta: float,
-              live: np.ndarray) -> np.ndarray:  # fmt: skip
+def _eta_star(
+    arrays: PlanArrays,
+    landmarks: np.ndarray,
+    points: np.ndarray,
+    pair_cell: np.ndarray,
+    pair_point: np.ndarray,
+    visible: np.ndarray,
+    eps_look: np.ndarray,
+    margin: np.ndarray,
+    eta: float,
+    live: np.ndarray,
+) -> np.ndarray:
     """``η*_c`` per cell (rad): the linear estimate, re-evaluated on the grid and shrunk until live.
 
     Every point looks at the landmarks ``visible`` (P, L) (its look all around).

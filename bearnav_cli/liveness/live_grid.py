@@ -1,5 +1,5 @@
 """Where and against what liveness is measured (:func:`grid`): the points of every cell, each cell's margin,
-and the bound ``ε(x, S)`` of a look at each point (``runtime.bounded.one_look_bound``)."""
+and the bound ``ε(x, S)`` of a look at each point (``runtime.look_bound.one_look_bound``)."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ import shapely
 
 from bearnav_cli.datatypes import Plan, active_regions
 from bearnav_cli.errors import InvalidParamsError
-from bearnav_cli.runtime import PlanArrays, bounded, estimate, looking, robot, settings
+from bearnav_cli.runtime import PlanArrays, estimate, look_bound, looking, robot, settings
 
 __all__ = [
     "bounds_of",
@@ -125,8 +125,13 @@ class LiveGrid:
         ``points`` (P, 2); ``visible`` (P, L) which of ``landmarks`` (L, 2) each sees.
         """
         x = np.asarray(points, float).reshape(-1, 2)
-        return bounds_of(self.arrays, x, np.asarray(visible, bool), np.full(len(x), self.eta),
-                         np.asarray(landmarks, float).reshape(-1, 2))  # fmt: skip
+        return bounds_of(
+            self.arrays,
+            x,
+            np.asarray(visible, bool),
+            np.full(len(x), self.eta),
+            np.asarray(landmarks, float).reshape(-1, 2),
+        )
 
     def look(self, landmarks: np.ndarray, points: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """What a look all around sees, (P, L) bool, and its bound ``ε(x, S_all(x))``, (P,) map units (§12.5)."""
@@ -136,8 +141,9 @@ class LiveGrid:
         return visible, self.bounds(x, visible, lm)
 
 
-def _number(value: Any, name: str, *, low: float = 0.0, low_open: bool = False, high: float = math.inf,
-            high_open: bool = False) -> float:  # fmt: skip
+def _number(
+    value: Any, name: str, *, low: float = 0.0, low_open: bool = False, high: float = math.inf, high_open: bool = False
+) -> float:
     """``value`` as a float in its interval (``inf`` only where ``high`` is ``inf`` and closed), else an error."""
     if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):
         raise InvalidParamsError(f"expected a number, got {value!r}", field=name)
@@ -175,8 +181,9 @@ def _polygons(arrays: PlanArrays) -> list[shapely.Polygon]:
     return [shapely.Polygon(verts[offsets[c] : offsets[c + 1]]) for c in range(len(offsets) - 1)]
 
 
-def _samples(polygons: list[shapely.Polygon], grow: float, spacing: float,
-             origin: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
+def _samples(
+    polygons: list[shapely.Polygon], grow: float, spacing: float, origin: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The points of every cell: shared grid points (deduplicated) and each cell's own extras.
 
     Returns the points (P, 2), and the pairs ``(cell, point)`` as two index arrays sorted by cell.
@@ -206,8 +213,9 @@ def _samples(polygons: list[shapely.Polygon], grow: float, spacing: float,
     return points, cell[order], point[order]
 
 
-def distinct_views(arrays: PlanArrays, points: np.ndarray, fov: float, max_range: float, headings: int,
-                   landmarks: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+def distinct_views(
+    arrays: PlanArrays, points: np.ndarray, fov: float, max_range: float, headings: int, landmarks: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """The views worth evaluating: per point, its distinct maximal visible sets over the headings.
 
     Returns ``(row_point (M,), row_visible (M, L))``: a view that is a subset of another view of the
@@ -253,9 +261,10 @@ def distinct_views(arrays: PlanArrays, points: np.ndarray, fov: float, max_range
     return np.concatenate(out_point), np.concatenate(out_vis)
 
 
-def bounds_of(arrays: PlanArrays, x: np.ndarray, visible: np.ndarray, eta: np.ndarray,
-              landmarks: np.ndarray | None = None) -> np.ndarray:  # fmt: skip
-    """``ε(x, S)`` of every row (M,) map units, each row at its own ``η`` (rad): ``runtime.bounded.one_look_bound``
+def bounds_of(
+    arrays: PlanArrays, x: np.ndarray, visible: np.ndarray, eta: np.ndarray, landmarks: np.ndarray | None = None
+) -> np.ndarray:
+    """``ε(x, S)`` of every row (M,) map units, each row at its own ``η`` (rad): ``runtime.look_bound.one_look_bound``
     in batches of :data:`_ROWS` rows.
 
     Parameters
@@ -276,13 +285,21 @@ def bounds_of(arrays: PlanArrays, x: np.ndarray, visible: np.ndarray, eta: np.nd
     lm = arrays.landmarks if landmarks is None else landmarks
     for start in range(0, len(x), _ROWS):
         sl = slice(start, start + _ROWS)
-        out[sl] = bounded.one_look_bound(x[sl], lm, visible[sl], eta[sl], box, arrays.tol)
+        out[sl] = look_bound.one_look_bound(x[sl], lm, visible[sl], eta[sl], box, arrays.tol)
     return out
 
 
-def grid(plan: Plan, eta_deg: float | None = None, fov_deg: float = 60.0, kappa: float | None = None,
-         nu: float | None = None, speed: float | None = None, resolution: float | None = None,
-         headings: int | None = None, max_range: float = math.inf) -> LiveGrid:  # fmt: skip
+def grid(
+    plan: Plan,
+    eta_deg: float | None = None,
+    fov_deg: float = 60.0,
+    kappa: float | None = None,
+    nu: float | None = None,
+    speed: float | None = None,
+    resolution: float | None = None,
+    headings: int | None = None,
+    max_range: float = math.inf,
+) -> LiveGrid:
     """Where and against what :func:`measure` measures: the grid of every cell and each cell's margin.
 
     Parameters
@@ -345,8 +362,9 @@ def grid(plan: Plan, eta_deg: float | None = None, fov_deg: float = 60.0, kappa:
 
     arrays = PlanArrays.from_plan(plan)
     if not arrays.funnel:
-        raise InvalidParamsError("liveness needs a funnel plan (the papers' cells state no position error they "
-                                 "tolerate)", field="plan")  # fmt: skip
+        raise InvalidParamsError(
+            "liveness needs a funnel plan (the papers' cells state no position error they tolerate)", field="plan"
+        )
     if resolution is None:
         resolution = default_resolution(arrays, diagonal)
     resolution = _number(resolution, "resolution", low=1e-6 * diagonal, high=diagonal)
@@ -355,9 +373,11 @@ def grid(plan: Plan, eta_deg: float | None = None, fov_deg: float = 60.0, kappa:
     cover = sum(float(p.area) + float(p.length) * lam + math.pi * lam**2 for p in polygons)
     if cover / resolution**2 > MAX_GRID_POINTS:
         finest = math.sqrt(cover / MAX_GRID_POINTS)
-        raise InvalidParamsError(f"a grid of {resolution:g} map units would take about {cover / resolution**2:.3g} "
-                                 f"points (at most {MAX_GRID_POINTS:,}): give {finest:.3g} or more",
-                                 field="resolution")  # fmt: skip
+        raise InvalidParamsError(
+            f"a grid of {resolution:g} map units would take about {cover / resolution**2:.3g} "
+            f"points (at most {MAX_GRID_POINTS:,}): give {finest:.3g} or more",
+            field="resolution",
+        )
 
     eta = math.radians(eta_deg)
     fov = math.radians(fov_deg)
@@ -369,7 +389,21 @@ def grid(plan: Plan, eta_deg: float | None = None, fov_deg: float = 60.0, kappa:
 
     origin = np.asarray(arrays.bounds, float)[:2]
     points, pair_cell, pair_point = _samples(polygons, lam, resolution, origin)
-    return LiveGrid(arrays=arrays, polygons=tuple(polygons), points=points, pair_cell=pair_cell,
-                    pair_point=pair_point, tolerance=tau, margin=margin, eta=eta, fov=fov, kappa=kappa,
-                    nu=float(nu), step=step_len, swing=swing, resolution=float(resolution), headings=headings,
-                    max_range=max_range)  # fmt: skip
+    return LiveGrid(
+        arrays=arrays,
+        polygons=tuple(polygons),
+        points=points,
+        pair_cell=pair_cell,
+        pair_point=pair_point,
+        tolerance=tau,
+        margin=margin,
+        eta=eta,
+        fov=fov,
+        kappa=kappa,
+        nu=float(nu),
+        step=step_len,
+        swing=swing,
+        resolution=float(resolution),
+        headings=headings,
+        max_range=max_range,
+    )

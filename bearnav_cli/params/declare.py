@@ -142,8 +142,16 @@ class Declared:
     capped: bool = False
 
 
-def param(default: Any, *, range: Range | None = None, choices: tuple[str, ...] = (), unit: str = "",
-          option: str | None = AUTO, off: str | None = None, capped: bool = False) -> Any:  # fmt: skip
+def param(
+    default: Any,
+    *,
+    range: Range | None = None,
+    choices: tuple[str, ...] = (),
+    unit: str = "",
+    option: str | None = AUTO,
+    off: str | None = None,
+    capped: bool = False,
+) -> Any:
     """A dataclass field with ``default`` and its declaration (:class:`Declared`) in its metadata.
 
     Parameters
@@ -201,8 +209,9 @@ def check(params: Any) -> None:
         declaration = declared(field)
         value = getattr(params, field.name)
         if declaration.choices and value not in declaration.choices:
-            raise InvalidParamsError(f"must be one of {', '.join(declaration.choices)}, got {value!r}",
-                                     field=field.name)  # fmt: skip
+            raise InvalidParamsError(
+                f"must be one of {', '.join(declaration.choices)}, got {value!r}", field=field.name
+            )
         if declaration.range is not None and value is not None:
             problem = declaration.range.problem(value, high=declaration.capped)
             if problem is not None:

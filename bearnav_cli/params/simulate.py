@@ -202,11 +202,14 @@ class Params:
     def __post_init__(self) -> None:
         check(self)
         if self.noise_bound_deg is not None and self.noise_deg:
-            raise InvalidParamsError("give either a bound (noise_bound_deg) or a Gaussian noise_deg, not both",
-                                     field="noise_bound_deg")  # fmt: skip
+            raise InvalidParamsError(
+                "give either a bound (noise_bound_deg) or a Gaussian noise_deg, not both", field="noise_bound_deg"
+            )
         if self.noise_worst and self.noise_deg:
-            raise InvalidParamsError("the worst case is of bounded errors, not of a Gaussian noise_deg",
-                                     field="noise_worst")  # fmt: skip
+            raise InvalidParamsError(
+                "the worst case is of bounded errors, not of a Gaussian noise_deg", field="noise_worst"
+            )
         if (self.bearing_error_deg or 0.0) + (self.compass_error_deg or 0.0) >= 45.0:
-            raise InvalidParamsError("the bearing error bound (camera plus compass) must be below 45 degrees",
-                                     field="bearing_error_deg")  # fmt: skip
+            raise InvalidParamsError(
+                "the bearing error bound (camera plus compass) must be below 45 degrees", field="bearing_error_deg"
+            )

@@ -36,8 +36,14 @@ GRID_CELLS = 100
 MAX_GRID_POINTS = 2_000_000
 
 
-def check_params(fov_deg: float, noise_deg: float, max_range: float = math.inf, error_target: float | None = None,
-                 min_spread_deg: float = 2.0, spacing: float | None = None) -> None:  # fmt: skip
+def check_params(
+    fov_deg: float,
+    noise_deg: float,
+    max_range: float = math.inf,
+    error_target: float | None = None,
+    min_spread_deg: float = 2.0,
+    spacing: float | None = None,
+) -> None:
     """Raise :class:`InvalidParamsError` (naming the field) for a parameter outside its range.
 
     Parameters
@@ -59,8 +65,9 @@ def check_params(fov_deg: float, noise_deg: float, max_range: float = math.inf, 
     check_camera(fov_deg, noise_deg, min_spread_deg)
     if not is_number(max_range) or not max_range > 0:
         raise InvalidParamsError(f"must be positive, got {max_range!r}", field="range")
-    if error_target is not None and (not is_number(error_target) or not (error_target > 0 and
-                                                                       math.isfinite(error_target))):  # fmt: skip
+    if error_target is not None and (
+        not is_number(error_target) or not (error_target > 0 and math.isfinite(error_target))
+    ):
         raise InvalidParamsError(f"must be positive, got {error_target!r}", field="error_target")
     _check_spacing(spacing)
 
@@ -165,8 +172,9 @@ def bounds_grid(map_: Any, spacing: float | None) -> tuple[np.ndarray, float]:
     step = map_.diagonal / GRID_CELLS if spacing is None else float(spacing)
     nx, ny = math.ceil((xmax - xmin) / step - 0.5), math.ceil((ymax - ymin) / step - 0.5)
     if max(nx, 1) * max(ny, 1) > MAX_GRID_POINTS:
-        raise InvalidParamsError(f"{step:g} gives more than {MAX_GRID_POINTS} grid points; use a larger one",
-                                 field="spacing")  # fmt: skip
+        raise InvalidParamsError(
+            f"{step:g} gives more than {MAX_GRID_POINTS} grid points; use a larger one", field="spacing"
+        )
     xs = np.arange(xmin + step / 2, xmax, step)
     ys = np.arange(ymin + step / 2, ymax, step)
     return np.stack(np.meshgrid(xs, ys), axis=-1).reshape(-1, 2), step
@@ -205,6 +213,14 @@ def evaluation_grid(plan: Any, spacing: float | None = None) -> EvaluationGrid:
     keep = in_free | in_domain
     points = grid[keep]
     arrays = PlanArrays.from_plan(plan)
-    return EvaluationGrid(points=points, in_domain=in_domain[keep], in_free=in_free[keep],
-                          heading=camera_headings(arrays, points), spacing=step, arrays=arrays, space=space,
-                          plan_tolerance=float(plan.plan_tolerance), tol=map_.tol)  # fmt: skip
+    return EvaluationGrid(
+        points=points,
+        in_domain=in_domain[keep],
+        in_free=in_free[keep],
+        heading=camera_headings(arrays, points),
+        spacing=step,
+        arrays=arrays,
+        space=space,
+        plan_tolerance=float(plan.plan_tolerance),
+        tol=map_.tol,
+    )

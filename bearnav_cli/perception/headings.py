@@ -75,13 +75,16 @@ class HeadingCoverage:
     def summary(self) -> str:
         """One line: the camera and the fractions of ``F`` where some heading and where every heading sees a pair."""
         rng = "" if not math.isfinite(self.max_range) else f", range {self.max_range:g}"
-        return (f"{plural(len(self.landmarks), 'tag')}, {self.fov_deg:g}° camera{rng}: two usable tags in view from "
-                f"{percent(self.fraction_some)} of the free space with some heading and {percent(self.fraction_every)} "
-                f"of it with every heading; {len(self.blind)} of {len(self.points)} grid points blind")  # fmt: skip
+        return (
+            f"{plural(len(self.landmarks), 'tag')}, {self.fov_deg:g}° camera{rng}: two usable tags in view from "
+            f"{percent(self.fraction_some)} of the free space with some heading and {percent(self.fraction_every)} "
+            f"of it with every heading; {len(self.blind)} of {len(self.points)} grid points blind"
+        )
 
 
-def _critical_headings(points: np.ndarray, reach: np.ndarray, landmarks: np.ndarray,
-                       fov_deg: float) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+def _critical_headings(
+    points: np.ndarray, reach: np.ndarray, landmarks: np.ndarray, fov_deg: float
+) -> tuple[np.ndarray, np.ndarray]:
     """Headings that give each point its largest and its smallest views, shapes (n, R) and (n, 2R) (radians).
 
     The view of heading ``φ`` is the reachable landmarks ``k`` with ``|wrap(θ_k − φ)| ≤ fov/2``
@@ -107,8 +110,9 @@ def _critical_headings(points: np.ndarray, reach: np.ndarray, landmarks: np.ndar
     return largest, np.where(np.isnan(smallest), smallest[:, :1], smallest)
 
 
-def _views(points: np.ndarray, reach: np.ndarray, landmarks: np.ndarray, headings: np.ndarray, fov_deg: float,
-           tol: float) -> np.ndarray:  # fmt: skip
+def _views(
+    points: np.ndarray, reach: np.ndarray, landmarks: np.ndarray, headings: np.ndarray, fov_deg: float, tol: float
+) -> np.ndarray:
     """What the camera sees from each point at each heading, shape (n, H, L) bool (``headings`` (n, H)).
 
     :func:`visible_landmarks` at that heading, computed as its field-of-view test on the landmarks
@@ -120,8 +124,15 @@ def _views(points: np.ndarray, reach: np.ndarray, landmarks: np.ndarray, heading
     return (seen & np.repeat(reach, h, axis=0)).reshape(n, h, len(landmarks))
 
 
-def _usable(points: np.ndarray, views: np.ndarray, i: np.ndarray, j: np.ndarray, landmarks: np.ndarray,
-            min_spread_deg: float, tol: float) -> np.ndarray:  # fmt: skip
+def _usable(
+    points: np.ndarray,
+    views: np.ndarray,
+    i: np.ndarray,
+    j: np.ndarray,
+    landmarks: np.ndarray,
+    min_spread_deg: float,
+    tol: float,
+) -> np.ndarray:
     """:func:`fix_quality`'s ``usable`` of view ``j[m]`` from point ``i[m]``, shape (M,) bool (< 2 tags: False)."""
     ok = np.zeros(len(i), bool)
     two = views[i, j].sum(axis=1) >= 2
@@ -130,8 +141,9 @@ def _usable(points: np.ndarray, views: np.ndarray, i: np.ndarray, j: np.ndarray,
     return ok
 
 
-def _any_all_usable(points: np.ndarray, reach: np.ndarray, landmarks: np.ndarray, fov_deg: float,
-                    min_spread_deg: float, tol: float) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+def _any_all_usable(
+    points: np.ndarray, reach: np.ndarray, landmarks: np.ndarray, fov_deg: float, min_spread_deg: float, tol: float
+) -> tuple[np.ndarray, np.ndarray]:
     """Whether some heading, and whether every heading, gives each point a usable fix, shapes (n,) and (n,).
 
     Each point's largest view is tried first, the other largest views only where it fails; every
@@ -153,8 +165,9 @@ def _any_all_usable(points: np.ndarray, reach: np.ndarray, landmarks: np.ndarray
     return some, every
 
 
-def heading_coverage(map_: Any, fov_deg: float, max_range: float = math.inf, spacing: float | None = None,
-                     *, min_spread_deg: float = 2.0) -> HeadingCoverage:  # fmt: skip
+def heading_coverage(
+    map_: Any, fov_deg: float, max_range: float = math.inf, spacing: float | None = None, *, min_spread_deg: float = 2.0
+) -> HeadingCoverage:
     """Where some heading, and every heading, of a camera sees a usable pair of tags: a map before its plan.
 
     Before a plan there is no field, so the heading of the perception rule (module docstring) is
@@ -212,7 +225,16 @@ def heading_coverage(map_: Any, fov_deg: float, max_range: float = math.inf, spa
             p, r, sub = points[chunk], reach[chunk][:, cols], lm[cols]
             some[chunk], every[chunk] = _any_all_usable(p, r, sub, fov_deg, min_spread_deg, tol)
     everywhere = np.ones(len(points), bool)
-    return HeadingCoverage(points=points, reachable_count=count, some=some, every=every,
-                           fraction_some=share(some, everywhere), fraction_every=share(every, everywhere),
-                           landmarks=lm, fov_deg=float(fov_deg), max_range=float(max_range),
-                           min_spread_deg=float(min_spread_deg), spacing=step)  # fmt: skip
+    return HeadingCoverage(
+        points=points,
+        reachable_count=count,
+        some=some,
+        every=every,
+        fraction_some=share(some, everywhere),
+        fraction_every=share(every, everywhere),
+        landmarks=lm,
+        fov_deg=float(fov_deg),
+        max_range=float(max_range),
+        min_spread_deg=float(min_spread_deg),
+        spacing=step,
+    )

@@ -18,8 +18,9 @@ from bearnav_cli.runtime import bearing
 __all__ = ["evaluate", "fix_quality", "perception_coverage", "PerceptionCoverage", "share", "visible_landmarks"]
 
 
-def visible_landmarks(points: Any, heading: Any, landmarks: Any, fov_deg: float, max_range: float,
-                      sight: list, tol: float) -> np.ndarray:  # fmt: skip
+def visible_landmarks(
+    points: Any, heading: Any, landmarks: Any, fov_deg: float, max_range: float, sight: list, tol: float
+) -> np.ndarray:
     """Step 2 of the rule: which landmarks the camera sees from each point (ALGORITHMS §6.1).
 
     Parameters
@@ -56,8 +57,9 @@ def visible_landmarks(points: Any, heading: Any, landmarks: Any, fov_deg: float,
     return seen
 
 
-def fix_quality(points: Any, visible: Any, landmarks: Any, noise_deg: float, min_spread_deg: float,
-                tol: float) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+def fix_quality(
+    points: Any, visible: Any, landmarks: Any, noise_deg: float, min_spread_deg: float, tol: float
+) -> tuple[np.ndarray, np.ndarray]:
     """Step 3 of the rule: is the runtime's ``lsq`` fix of exact bearings usable, and its predicted error.
 
     Parameters
@@ -187,14 +189,16 @@ class PerceptionCoverage:
         """One line: the camera, the fractions of ``D`` and ``F`` where the rule holds, and one fix against ``τ_c``."""
         target = "" if self.error_target is None else f", error ≤ {self.error_target:g}"
         rng = "" if not math.isfinite(self.max_range) else f", range {self.max_range:g}"
-        return (f"{plural(len(self.landmarks), 'tag')}, {self.fov_deg:g}° camera{rng}, {self.noise_deg:g}° noise"
-                f"{target}: two usable tags in view from {percent(self.fraction_domain)} of the certified area and "
-                f"{percent(self.fraction_free)} of the free space; "
-                f"one fix's median predicted error {self.median_error_domain:.3g} in the certified area, below the "
-                f"plan's least position tolerance {self.plan_tolerance:.3g} on "
-                f"{percent(self.fraction_within_tolerance)} of it "
-                "(a run does not rest on one fix: it fuses fixes with odometry, which `bearnav simulate` measures "
-                "and nothing here proves)")  # fmt: skip
+        return (
+            f"{plural(len(self.landmarks), 'tag')}, {self.fov_deg:g}° camera{rng}, {self.noise_deg:g}° noise"
+            f"{target}: two usable tags in view from {percent(self.fraction_domain)} of the certified area and "
+            f"{percent(self.fraction_free)} of the free space; "
+            f"one fix's median predicted error {self.median_error_domain:.3g} in the certified area, below the "
+            f"plan's least position tolerance {self.plan_tolerance:.3g} on "
+            f"{percent(self.fraction_within_tolerance)} of it "
+            "(a run does not rest on one fix: it fuses fixes with odometry, which `bearnav simulate` measures "
+            "and nothing here proves)"
+        )
 
 
 def share(mask: np.ndarray, where: np.ndarray) -> float:
@@ -203,9 +207,18 @@ def share(mask: np.ndarray, where: np.ndarray) -> float:
     return float(np.sum(mask & where)) / n if n else math.nan
 
 
-def evaluate(grid: EvaluationGrid, landmarks: Any, landmark_ids: Any = None, *, fov_deg: float, noise_deg: float,
-             max_range: float = math.inf, error_target: float | None = None, min_spread_deg: float = 2.0,
-             sight: list | None = None) -> PerceptionCoverage:  # fmt: skip
+def evaluate(
+    grid: EvaluationGrid,
+    landmarks: Any,
+    landmark_ids: Any = None,
+    *,
+    fov_deg: float,
+    noise_deg: float,
+    max_range: float = math.inf,
+    error_target: float | None = None,
+    min_spread_deg: float = 2.0,
+    sight: list | None = None,
+) -> PerceptionCoverage:
     """The rule on a prepared :class:`EvaluationGrid` for one set of landmarks.
 
     Parameters
@@ -238,19 +251,42 @@ def evaluate(grid: EvaluationGrid, landmarks: Any, landmark_ids: Any = None, *, 
     delta = grid.plan_tolerance
     within = usable & (error <= delta) if math.isfinite(delta) else np.zeros(len(usable), bool)
     return PerceptionCoverage(
-        points=grid.points, heading=grid.heading, in_domain=grid.in_domain, in_free=grid.in_free, visible=visible,
-        visible_count=visible.sum(axis=1).astype(np.int64), usable=usable, predicted_error=error, holds=holds,
-        fraction_domain=share(holds, grid.in_domain), fraction_free=share(holds, grid.in_free),
-        plan_tolerance=delta, fraction_within_tolerance=share(within, grid.in_domain), landmarks=lm,
-        landmark_ids=ids, fov_deg=float(fov_deg), noise_deg=float(noise_deg), max_range=float(max_range),
-        min_spread_deg=float(min_spread_deg), error_target=None if error_target is None else float(error_target),
+        points=grid.points,
+        heading=grid.heading,
+        in_domain=grid.in_domain,
+        in_free=grid.in_free,
+        visible=visible,
+        visible_count=visible.sum(axis=1).astype(np.int64),
+        usable=usable,
+        predicted_error=error,
+        holds=holds,
+        fraction_domain=share(holds, grid.in_domain),
+        fraction_free=share(holds, grid.in_free),
+        plan_tolerance=delta,
+        fraction_within_tolerance=share(within, grid.in_domain),
+        landmarks=lm,
+        landmark_ids=ids,
+        fov_deg=float(fov_deg),
+        noise_deg=float(noise_deg),
+        max_range=float(max_range),
+        min_spread_deg=float(min_spread_deg),
+        error_target=None if error_target is None else float(error_target),
         spacing=grid.spacing,
-    )  # fmt: skip
+    )
 
 
-def perception_coverage(plan: Any, fov_deg: float, noise_deg: float, max_range: float = math.inf,
-                        error_target: float | None = None, spacing: float | None = None, landmarks: Any = None,
-                        *, landmark_ids: Any = None, min_spread_deg: float = 2.0) -> PerceptionCoverage:  # fmt: skip
+def perception_coverage(
+    plan: Any,
+    fov_deg: float,
+    noise_deg: float,
+    max_range: float = math.inf,
+    error_target: float | None = None,
+    spacing: float | None = None,
+    landmarks: Any = None,
+    *,
+    landmark_ids: Any = None,
+    min_spread_deg: float = 2.0,
+) -> PerceptionCoverage:
     """Where the perception rule holds on a plan: the fractions of ``D`` and of ``F`` (issue 11).
 
     The rule at ``x`` (module docstring): the camera looks along the runtime's motion at ``x``, and
@@ -294,5 +330,13 @@ def perception_coverage(plan: Any, fov_deg: float, noise_deg: float, max_range: 
     if landmarks is None:
         landmarks = plan.map.landmarks
         landmark_ids = plan.map.landmark_ids if landmark_ids is None else landmark_ids
-    return evaluate(grid, landmarks, landmark_ids, fov_deg=fov_deg, noise_deg=noise_deg, max_range=max_range,
-                    error_target=error_target, min_spread_deg=min_spread_deg)  # fmt: skip
+    return evaluate(
+        grid,
+        landmarks,
+        landmark_ids,
+        fov_deg=fov_deg,
+        noise_deg=noise_deg,
+        max_range=max_range,
+        error_target=error_target,
+        min_spread_deg=min_spread_deg,
+    )

@@ -40,8 +40,9 @@ def execute(stage: Stage, payload: Any, params: Any, progress: Progress | None, 
     return result
 
 
-def stage_manifest(stage: Stage, result: Any, payload: Any, params: Any, input_hash: str,
-                   input_path: str | None, elapsed_s: float) -> dict:  # fmt: skip
+def stage_manifest(
+    stage: Stage, result: Any, payload: Any, params: Any, input_hash: str, input_path: str | None, elapsed_s: float
+) -> dict:
     """The manifest of ``result``, the output of ``stage`` run on ``payload`` with ``params`` (DESIGN §3.1).
 
     The one builder of a stage's manifest: ``plan`` writes it, :func:`compute_saved` returns it.
@@ -63,10 +64,18 @@ def stage_manifest(stage: Stage, result: Any, payload: Any, params: Any, input_h
     elapsed_s : float
         The stage's wall time (s).
     """
-    return artifacts.make_manifest(stage.output_kind, result, stage=stage.name, stage_version=stage.module.VERSION,
-                                   params=artifacts.params_dict(params), input_path=input_path,
-                                   input_hash=input_hash, summary=stage.summary(result, payload), elapsed_s=elapsed_s,
-                                   stats=getattr(result, "stats", None))  # fmt: skip
+    return artifacts.make_manifest(
+        stage.output_kind,
+        result,
+        stage=stage.name,
+        stage_version=stage.module.VERSION,
+        params=artifacts.params_dict(params),
+        input_path=input_path,
+        input_hash=input_hash,
+        summary=stage.summary(result, payload),
+        elapsed_s=elapsed_s,
+        stats=getattr(result, "stats", None),
+    )
 
 
 def compute(
@@ -143,8 +152,14 @@ def compute_saved(
     return _chain(source, after, through, overrides, None, manifests=True)
 
 
-def _chain(source: Any, after: str | None, through: str, overrides: dict[str, dict] | None,
-           progress: Callable[[str], Progress | None] | None, manifests: bool) -> dict[str, tuple]:  # fmt: skip
+def _chain(
+    source: Any,
+    after: str | None,
+    through: str,
+    overrides: dict[str, dict] | None,
+    progress: Callable[[str], Progress | None] | None,
+    manifests: bool,
+) -> dict[str, tuple]:
     """The stages after ``after`` (None: from the map) through ``through``, each artifact with its manifest
     (None unless ``manifests``: hashing every input is work :func:`compute` does not need)."""
     names = [stage.name for stage in CHAIN]
@@ -161,19 +176,20 @@ def _chain(source: Any, after: str | None, through: str, overrides: dict[str, di
         made[CHAIN[0].output_kind] = (artifact, None)
     else:
         params = map_stage_params(source, overrides.get("map"))
-        artifact = _timed_stage(CHAIN[0], source, params, None, source.file, source.sha256 if manifests else None,
-                                made)  # fmt: skip
+        artifact = _timed_stage(CHAIN[0], source, params, None, source.file, source.sha256 if manifests else None, made)
         first = 1
     for stage in CHAIN[first : names.index(through) + 1]:
         params = stage_params(stage.name, artifact, overrides.get(stage.name))
         input_hash = artifacts.content_hash(artifacts.entries_of(artifact)) if manifests else None
-        artifact = _timed_stage(stage, artifact, params, progress(stage.name) if progress else None, stage.name,
-                                input_hash, made)  # fmt: skip
+        artifact = _timed_stage(
+            stage, artifact, params, progress(stage.name) if progress else None, stage.name, input_hash, made
+        )
     return made
 
 
-def _timed_stage(stage: Stage, payload: Any, params: Any, progress: Progress | None, file: str,
-                 input_hash: str | None, made: dict) -> Any:  # fmt: skip
+def _timed_stage(
+    stage: Stage, payload: Any, params: Any, progress: Progress | None, file: str, input_hash: str | None, made: dict
+) -> Any:
     """Run one stage of :func:`_chain` and file its artifact in ``made``, with its manifest when ``input_hash``
     is given (timed: the manifest records the stage's wall time)."""
     started = time.perf_counter()

@@ -143,8 +143,7 @@ def _run_and_save(
     started = time.perf_counter()
     result = execute(stage, payload, params, progress, input_path or str(out))
     elapsed = time.perf_counter() - started
-    manifest = stage_manifest(stage, result, payload, params, input_hash, _relative_to_output(input_path, out),
-                              elapsed)  # fmt: skip
+    manifest = stage_manifest(stage, result, payload, params, input_hash, _relative_to_output(input_path, out), elapsed)
     summary = manifest["summary"]
     try:
         artifacts.save(out, result, manifest, on_commit=committed)
@@ -152,8 +151,9 @@ def _run_and_save(
         if exc.file is not None:
             raise
         # the stage's own output breaks its type's invariants: a bug, not the user's input
-        raise InternalError(f"{stage.name} made an artifact that fails its own checks, nothing written "
-                            f"({exc})", file=str(out)) from None  # fmt: skip
+        raise InternalError(
+            f"{stage.name} made an artifact that fails its own checks, nothing written ({exc})", file=str(out)
+        ) from None
     return StageReport(stage.name, out, True, elapsed, summary, result, manifest)
 
 
@@ -178,8 +178,9 @@ def _check_outputs(stage: Stage, out: Path, inputs: tuple[str | Path, ...] = (),
     """Every file the stage writes at ``out``: a fitting path, not an input, and nothing bearnav's stage did not
     write (unless ``force``)."""
     for path in artifacts.output_files(stage.output_kind, out):
-        artifacts.check_output_file(path, (path.suffix if path != out else artifacts.KINDS[stage.output_kind].suffix,),
-                                    inputs=inputs)  # fmt: skip
+        artifacts.check_output_file(
+            path, (path.suffix if path != out else artifacts.KINDS[stage.output_kind].suffix,), inputs=inputs
+        )
         artifacts.check_overwrite(path, stage.name, force=force)
 
 
@@ -286,8 +287,10 @@ def _check_chain(reports: list[StageReport]) -> None:
         if before.manifest is None or after.manifest is None:
             continue
         if after.manifest["input"]["content_sha256"] != before.manifest["content_sha256"]:
-            raise ArtifactError(f"was made from another {before.path.name} than the one next to it; rerun with --force",
-                                file=str(after.path))  # fmt: skip
+            raise ArtifactError(
+                f"was made from another {before.path.name} than the one next to it; rerun with --force",
+                file=str(after.path),
+            )
 
 
 def _adopt_map(loaded: artifacts.Loaded, map_json: Path, target: Path) -> StageReport:

@@ -48,8 +48,9 @@ def _coerce(stage: str, name: str, default: Any, value: Any, where: str) -> Any:
     raise InvalidParamsError(f"expected {kind.__name__}, got {value!r}", field=where)
 
 
-def resolve(stage: str, map_params: dict | None, overrides: dict | None,
-            diagonal: float | None = None) -> tuple[Any, Origins]:  # fmt: skip
+def resolve(
+    stage: str, map_params: dict | None, overrides: dict | None, diagonal: float | None = None
+) -> tuple[Any, Origins]:
     """:func:`resolve_params`, and where each value came from.
 
     Parameters
@@ -98,8 +99,9 @@ def resolve(stage: str, map_params: dict | None, overrides: dict | None,
     return params, origins
 
 
-def resolve_params(stage: str, map_params: dict | None, overrides: dict | None = None,
-                   diagonal: float | None = None) -> Any:  # fmt: skip
+def resolve_params(
+    stage: str, map_params: dict | None, overrides: dict | None = None, diagonal: float | None = None
+) -> Any:
     """Build the stage's frozen ``Params``: defaults, then the map's, then ``overrides``.
 
     Parameters

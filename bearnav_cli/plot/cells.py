@@ -60,8 +60,9 @@ def cell_regions(cells: Cells) -> list[shapely.Geometry]:
     return active_regions(cell_polygons(cells), cells.cell_rank)
 
 
-def _cell_colors(cells: Cells, color_by: str, status: np.ndarray | None, tolerance: np.ndarray | None,
-                 live: np.ndarray | None = None):  # fmt: skip
+def _cell_colors(
+    cells: Cells, color_by: str, status: np.ndarray | None, tolerance: np.ndarray | None, live: np.ndarray | None = None
+):
     """``(face colours (C, 4), mappable or None, colour-bar label)`` of the cells."""
     if color_by == "live":
         if live is None or len(live) != cells.n_cells:
@@ -104,10 +105,20 @@ NEVER_ACTIVE_LABEL = "index of a cell never active (lower-rank cells cover it)"
 _NEVER_ACTIVE_STYLE = {"color": PALETTE["dark grey"], "fontstyle": "italic"}
 
 
-def plot_cells(ax: plt.Axes, cells: Cells, status: np.ndarray | None = None, *, color_by: str | None = None,
-               tolerance: np.ndarray | None = None, fill: float = 0.45, exit_faces: bool = True,
-               numbers: bool = False, colorbar: bool = True, legend: bool = True,
-               live: np.ndarray | None = None) -> plt.Axes:  # fmt: skip
+def plot_cells(
+    ax: plt.Axes,
+    cells: Cells,
+    status: np.ndarray | None = None,
+    *,
+    color_by: str | None = None,
+    tolerance: np.ndarray | None = None,
+    fill: float = 0.45,
+    exit_faces: bool = True,
+    numbers: bool = False,
+    colorbar: bool = True,
+    legend: bool = True,
+    live: np.ndarray | None = None,
+) -> plt.Axes:
     """Cells: thin outlines, exit faces, a fill by ``color_by`` and uncertified cells hatched vermillion.
 
     Parameters
@@ -164,17 +175,38 @@ def plot_cells(ax: plt.Axes, cells: Cells, status: np.ndarray | None = None, *, 
 
         if regions is not None or color_by != "status":
             for c, region in enumerate(regions if regions is not None else cell_regions(cells)):
-                add_geometry(ax, region, facecolor=faces[c], alpha=fill, edgecolor=PALETTE["white"], lw=0.5,
-                             zorder=0.5, gid="cell-fill", label=key(name(c)))  # fmt: skip
+                add_geometry(
+                    ax,
+                    region,
+                    facecolor=faces[c],
+                    alpha=fill,
+                    edgecolor=PALETTE["white"],
+                    lw=0.5,
+                    zorder=0.5,
+                    gid="cell-fill",
+                    label=key(name(c)),
+                )
         else:  # paper cells by status: each status's union once, the worst on top
             polys = cell_polygons(cells)
-            for value in (CellStatus.CERTIFIED, CellStatus.GOAL, CellStatus.RELAXED, CellStatus.NOT_CERTIFIED,
-                          CellStatus.SOLVER_FAILURE):  # fmt: skip
+            for value in (
+                CellStatus.CERTIFIED,
+                CellStatus.GOAL,
+                CellStatus.RELAXED,
+                CellStatus.NOT_CERTIFIED,
+                CellStatus.SOLVER_FAILURE,
+            ):
                 chosen = [polys[c] for c in np.flatnonzero(np.asarray(status) == value)]
                 if chosen:
-                    add_geometry(ax, shapely.union_all(chosen), facecolor=STATUS_COLORS[value], alpha=fill,
-                                 edgecolor="none", zorder=0.5, gid="cell-fill",
-                                 label=key(status_name(value)))  # fmt: skip
+                    add_geometry(
+                        ax,
+                        shapely.union_all(chosen),
+                        facecolor=STATUS_COLORS[value],
+                        alpha=fill,
+                        edgecolor="none",
+                        zorder=0.5,
+                        gid="cell-fill",
+                        label=key(status_name(value)),
+                    )
         if mappable is not None and colorbar:
             bar = ax.figure.colorbar(mappable, ax=ax, fraction=0.04, pad=0.015, shrink=0.9)
             bar.set_label(label, fontsize=8)
@@ -182,23 +214,44 @@ def plot_cells(ax: plt.Axes, cells: Cells, status: np.ndarray | None = None, *, 
             bar.solids.set_alpha(fill)
     rings = [np.vstack([cells.vertices(c), cells.vertices(c)[:1]]) for c in range(cells.n_cells)]
     # faint: the cells overlap, and the fill's white edges already part the regions where each is used
-    ax.add_collection(LineCollection(rings, colors=OUTLINE_COLOR, linewidths=0.3, alpha=0.3, zorder=0.8,
-                                     label=key("cell outlines"), gid="cell-outlines"))  # fmt: skip
+    ax.add_collection(
+        LineCollection(
+            rings,
+            colors=OUTLINE_COLOR,
+            linewidths=0.3,
+            alpha=0.3,
+            zorder=0.8,
+            label=key("cell outlines"),
+            gid="cell-outlines",
+        )
+    )
     if exit_faces:
         faces_xy = []
         for c in np.flatnonzero(cells.cell_exit_row >= 0):
             v, k = cells.vertices(c), int(cells.cell_exit_row[c])
             faces_xy.append(np.stack([v[k], v[(k + 1) % len(v)]]))
         if faces_xy:
-            ax.add_collection(LineCollection(faces_xy, colors=EXIT_COLOR, linewidths=0.9, zorder=0.9,
-                                             label=key("exit faces"), gid="exit-faces"))  # fmt: skip
+            ax.add_collection(
+                LineCollection(
+                    faces_xy, colors=EXIT_COLOR, linewidths=0.9, zorder=0.9, label=key("exit faces"), gid="exit-faces"
+                )
+            )
     if status is not None:
         bad = np.flatnonzero(np.isin(status, [CellStatus.NOT_CERTIFIED, CellStatus.SOLVER_FAILURE]))
         for c in bad:
             ring = np.vstack([cells.vertices(c), cells.vertices(c)[:1]])
-            ax.add_patch(PathPatch(MplPath(ring, closed=True), facecolor="none", edgecolor=UNCERTIFIED_COLOR,
-                                   hatch="xxx", lw=1.6, zorder=3.3, gid=f"uncertified-cell-{c}",
-                                   label=key("uncertified cell (status 2/3)")))  # fmt: skip
+            ax.add_patch(
+                PathPatch(
+                    MplPath(ring, closed=True),
+                    facecolor="none",
+                    edgecolor=UNCERTIFIED_COLOR,
+                    hatch="xxx",
+                    lw=1.6,
+                    zorder=3.3,
+                    gid=f"uncertified-cell-{c}",
+                    label=key("uncertified cell (status 2/3)"),
+                )
+            )
     if numbers:
         label_cells(ax, cells, regions=regions, legend=legend)
     return ax
@@ -222,8 +275,14 @@ def cell_anchors(cells: Cells, regions: Sequence[shapely.Geometry] | None) -> tu
     return points, active
 
 
-def label_cells(ax: plt.Axes, cells: Cells, *, regions: Sequence[shapely.Geometry] | None = None,
-                legend: bool = True, avoid: Any = None) -> list:  # fmt: skip
+def label_cells(
+    ax: plt.Axes,
+    cells: Cells,
+    *,
+    regions: Sequence[shapely.Geometry] | None = None,
+    legend: bool = True,
+    avoid: Any = None,
+) -> list:
     """Write each cell's index where it fits (:func:`place_labels`, after the labels already written).
 
     The cells used somewhere come first (black, inside their active region), then those never active
@@ -257,11 +316,22 @@ def label_cells(ax: plt.Axes, cells: Cells, *, regions: Sequence[shapely.Geometr
         t.remove()
     order = [np.flatnonzero(active), np.flatnonzero(~active)]
     texts = []
-    for chosen, label, style in zip(order, (CELL_NUMBER_LABEL, NEVER_ACTIVE_LABEL), ({}, _NEVER_ACTIVE_STYLE),
-                                    strict=True):  # fmt: skip
-        texts += place_labels(ax, [str(c) for c in chosen], points[chosen], gid="cell-number", label=label,
-                              avoid=avoid, offsets=CENTRED, replace=False, fontsize=5.5, zorder=8.5,
-                              **style)  # fmt: skip
+    for chosen, label, style in zip(
+        order, (CELL_NUMBER_LABEL, NEVER_ACTIVE_LABEL), ({}, _NEVER_ACTIVE_STYLE), strict=True
+    ):
+        texts += place_labels(
+            ax,
+            [str(c) for c in chosen],
+            points[chosen],
+            gid="cell-number",
+            label=label,
+            avoid=avoid,
+            offsets=CENTRED,
+            replace=False,
+            fontsize=5.5,
+            zorder=8.5,
+            **style,
+        )
     return texts
 
 
@@ -284,8 +354,9 @@ def cell_number_keys(ax: plt.Axes, cells: Cells, active: np.ndarray | None = Non
         label_key(ax, "12", NEVER_ACTIVE_LABEL, **_NEVER_ACTIVE_STYLE)
 
 
-def plot_uncovered(ax: plt.Axes, cells: Cells, uncovered: shapely.Geometry,
-                   unreached: shapely.Geometry | None = None) -> plt.Axes:  # fmt: skip
+def plot_uncovered(
+    ax: plt.Axes, cells: Cells, uncovered: shapely.Geometry, unreached: shapely.Geometry | None = None
+) -> plt.Axes:
     """Hatch the free space no certificate covers, as :func:`bearnav_cli.composition.coverage_regions` splits it.
 
     Parameters
@@ -299,11 +370,29 @@ def plot_uncovered(ax: plt.Axes, cells: Cells, uncovered: shapely.Geometry,
     unreached : shapely geometry, optional
         The parts of ``F`` no cell reaches (drawn in grey).
     """
-    add_geometry(ax, uncovered, facecolor="none", edgecolor=UNCOVERED_COLOR, hatch="///", lw=0.6,
-                 zorder=2.7, gid="uncovered", label="free space no cell covers (part of F)")  # fmt: skip
+    add_geometry(
+        ax,
+        uncovered,
+        facecolor="none",
+        edgecolor=UNCOVERED_COLOR,
+        hatch="///",
+        lw=0.6,
+        zorder=2.7,
+        gid="uncovered",
+        label="free space no cell covers (part of F)",
+    )
     if unreached is not None and not unreached.is_empty:
-        add_geometry(ax, unreached, facecolor="none", edgecolor=UNREACHED_COLOR, hatch="\\\\", lw=0.6,
-                     zorder=2.7, gid="unreached", label="free space no cell reaches")  # fmt: skip
+        add_geometry(
+            ax,
+            unreached,
+            facecolor="none",
+            edgecolor=UNREACHED_COLOR,
+            hatch="\\\\",
+            lw=0.6,
+            zorder=2.7,
+            gid="unreached",
+            label="free space no cell reaches",
+        )
     return ax
 
 
@@ -353,6 +442,16 @@ def plot_barriers(ax: plt.Axes, cells: Cells, *, color: str = ROLE_COLORS["barri
             if seg is not None:
                 segments.append(seg)
     if segments:
-        ax.add_collection(LineCollection(segments, colors=color, linewidths=0.5, linestyles="--", alpha=0.7,
-                                         zorder=3.5, label="barrier lines", gid="barrier-lines"))  # fmt: skip
+        ax.add_collection(
+            LineCollection(
+                segments,
+                colors=color,
+                linewidths=0.5,
+                linestyles="--",
+                alpha=0.7,
+                zorder=3.5,
+                label="barrier lines",
+                gid="barrier-lines",
+            )
+        )
     return ax

@@ -38,8 +38,9 @@ def _simulation_title(sim: Simulation, params: Mapping[str, Any] | None) -> str:
     return figure_title(sim.map.name, "simulate", summary, simulation_config(params, sim.stats))
 
 
-def save_animation(sim: Simulation, path: str, *, frames: int = 80, limit: int = 60,
-                   params: Mapping[str, Any] | None = None) -> None:  # fmt: skip
+def save_animation(
+    sim: Simulation, path: str, *, frames: int = 80, limit: int = 60, params: Mapping[str, Any] | None = None
+) -> None:
     """Write a GIF of the runs (at most ``limit``) advancing together, ``frames`` frames.
 
     Each frame shows every run's path so far and its current position (and heading, when every
@@ -64,8 +65,17 @@ def save_animation(sim: Simulation, path: str, *, frames: int = 80, limit: int =
     plot_sim_background(ax, sim)
     runs = [r for r in range(min(len(sim.outcome), limit)) if len(sim.trajectory(r))]
     seen: set = set()
-    lines = [ax.plot([], [], color=OUTCOME_COLORS[int(sim.outcome[r])], lw=0.9, zorder=4,
-                     label=shared_label(OUTCOME_NAMES[int(sim.outcome[r])], seen))[0] for r in runs]  # fmt: skip
+    lines = [
+        ax.plot(
+            [],
+            [],
+            color=OUTCOME_COLORS[int(sim.outcome[r])],
+            lw=0.9,
+            zorder=4,
+            label=shared_label(OUTCOME_NAMES[int(sim.outcome[r])], seen),
+        )[0]
+        for r in runs
+    ]
     colors = [OUTCOME_COLORS[int(sim.outcome[r])] for r in runs]
     heads = ax.scatter(np.zeros(len(runs)), np.zeros(len(runs)), s=12, zorder=5, c=colors)
     offsets = sim.trajectory_offsets
@@ -73,9 +83,22 @@ def save_animation(sim: Simulation, path: str, *, frames: int = 80, limit: int =
     has_heading = all(len(h) == len(sim.trajectory(r)) for h, r in zip(headings, runs, strict=True)) and runs
     xmin, ymin, xmax, ymax = sim.map.bounds
     size = 0.03 * max(xmax - xmin, ymax - ymin)  # each robot's heading, an arrow this long
-    arrows = ax.quiver(np.zeros(len(runs)), np.zeros(len(runs)), np.ones(len(runs)), np.zeros(len(runs)),
-                       color=colors, angles="xy", scale_units="xy", scale=1.0 / size, width=0.004,
-                       zorder=5.5) if has_heading else None  # fmt: skip
+    arrows = (
+        ax.quiver(
+            np.zeros(len(runs)),
+            np.zeros(len(runs)),
+            np.ones(len(runs)),
+            np.zeros(len(runs)),
+            color=colors,
+            angles="xy",
+            scale_units="xy",
+            scale=1.0 / size,
+            width=0.004,
+            zorder=5.5,
+        )
+        if has_heading
+        else None
+    )
     longest = max((len(sim.trajectory(r)) for r in runs), default=1)
     finish(fig, ax)
     label_landmarks(ax, sim.map)
@@ -132,23 +155,37 @@ def _tree_title(tree: Tree, background: Sequence[Any]) -> str:
 
 
 def _map_title(map_: Map) -> str:
-    summary = (f"{len(map_.raw_obstacles)} obstacles, {len(map_.landmarks)} landmarks, {len(map_.starts)} starts, "
-               f"robot radius {map_.robot_radius:g}")  # fmt: skip
+    summary = (
+        f"{len(map_.raw_obstacles)} obstacles, {len(map_.landmarks)} landmarks, {len(map_.starts)} starts, "
+        f"robot radius {map_.robot_radius:g}"
+    )
     return figure_title(map_.name, "map", summary)
 
 
 def _perception_config(coverage: Any) -> str:
     target = coverage.error_target
     rule = "2 usable tags in view" if target is None else f"a fix within {target:g} in view"
-    return (f"perception: {coverage.fov_deg:g}° camera, {coverage.noise_deg:g}° noise: {rule} on "
-            f"{coverage.fraction_domain:.1%} of D")  # fmt: skip
+    return (
+        f"perception: {coverage.fov_deg:g}° camera, {coverage.noise_deg:g}° noise: {rule} on "
+        f"{coverage.fraction_domain:.1%} of D"
+    )
 
 
-def figure_for(artifact: Any, *, background: Sequence[Any] = (), title: str | None = None,
-               color_by: str | None = None, barriers: bool = False, labels: bool | None = None,
-               cell_numbers: bool = False, arrows: int = 28, coverage: Any = None,
-               perception: Any = None, liveness: Any = None,
-               params: Mapping[str, Any] | None = None) -> plt.Figure:  # fmt: skip
+def figure_for(
+    artifact: Any,
+    *,
+    background: Sequence[Any] = (),
+    title: str | None = None,
+    color_by: str | None = None,
+    barriers: bool = False,
+    labels: bool | None = None,
+    cell_numbers: bool = False,
+    arrows: int = 28,
+    coverage: Any = None,
+    perception: Any = None,
+    liveness: Any = None,
+    params: Mapping[str, Any] | None = None,
+) -> plt.Figure:
     """A figure with the layers that suit ``artifact``, a legend entry for every mark and a title that says what.
 
     The title is :func:`figure_title`'s: map, stage, summary and, for a simulation, the configuration
@@ -218,13 +255,23 @@ def figure_for(artifact: Any, *, background: Sequence[Any] = (), title: str | No
     if isinstance(artifact, Tree):
         plot_samples(ax, artifact)
         simplified = "rounds" in artifact.stats  # simplified.npz (its stats count the rounds), not tree.npz
-        plot_tree(ax, artifact, nodes=len(artifact.nodes) < 400, lw=1.0 if background else 0.7,
-                  label="simplified tree" if simplified else "RRT* tree")  # fmt: skip
+        plot_tree(
+            ax,
+            artifact,
+            nodes=len(artifact.nodes) < 400,
+            lw=1.0 if background else 0.7,
+            label="simplified tree" if simplified else "RRT* tree",
+        )
     regions = None
     if cells is not None:
-        plot_cells(ax, cells, plan.status if plan is not None else None, color_by=color_by,
-                   tolerance=plan.usable_tolerance if plan is not None else None,
-                   live=None if liveness is None else liveness.live)  # fmt: skip
+        plot_cells(
+            ax,
+            cells,
+            plan.status if plan is not None else None,
+            color_by=color_by,
+            tolerance=plan.usable_tolerance if plan is not None else None,
+            live=None if liveness is None else liveness.live,
+        )
         if cell_numbers:  # the legend entries now, the indices once the layout is settled
             regions = cell_regions(cells) if cells.is_funnel else None
             cell_number_keys(ax, cells, cell_anchors(cells, regions)[1])

@@ -72,8 +72,11 @@ def simulation_config(params: Mapping[str, Any] | None, stats: Mapping[str, Any]
         rendered = " (rendered camera)" if p.get("camera") == "render" else ""
         parts.append(f"fov {float(p.get('fov', 360.0)):g}°{rendered}")
         bound = p.get("noise_bound_deg")
-        parts.append(f"bearing noise ±{bound:g}° (bounded)" if bound is not None
-                     else f"bearing noise {float(p.get('noise_deg', 0.0)):g}° (1σ)")  # fmt: skip
+        parts.append(
+            f"bearing noise ±{bound:g}° (bounded)"
+            if bound is not None
+            else f"bearing noise {float(p.get('noise_deg', 0.0)):g}° (1σ)"
+        )
         if p.get("range") is not None:
             parts.append(f"range {p['range']:g}")
     dynamics = p.get("dynamics", "single")
@@ -102,8 +105,15 @@ def legend_below(ax: plt.Axes, ncol: int = 3) -> None:
         labels.append(label)
     if not handles:
         return
-    legend = ax.legend(handles=handles, labels=labels, loc="upper center", bbox_to_anchor=(0.5, -0.08), ncol=ncol,
-                       fontsize=7, frameon=False)  # fmt: skip
+    legend = ax.legend(
+        handles=handles,
+        labels=labels,
+        loc="upper center",
+        bbox_to_anchor=(0.5, -0.08),
+        ncol=ncol,
+        fontsize=7,
+        frameon=False,
+    )
     for key in legend.legend_handles:
         if isinstance(key, Patch) and key.get_alpha() is not None and key.get_alpha() < 0.3:
             key.set_alpha(0.3)

@@ -33,14 +33,23 @@ LANDMARKS_LABEL = "landmarks (ids beside them where they fit)"
 #: The white outline behind every label, so that it reads over fills, arrows and lines.
 HALO = (patheffects.withStroke(linewidth=2, foreground=PALETTE["white"]),)
 #: A label's places around its point: (dx, dy) offset in points, horizontal and vertical alignment.
-CORNERS = ((3.5, 3.5, "left", "bottom"), (-3.5, 3.5, "right", "bottom"), (3.5, -3.5, "left", "top"),
-           (-3.5, -3.5, "right", "top"))  # fmt: skip
+CORNERS = (
+    (3.5, 3.5, "left", "bottom"),
+    (-3.5, 3.5, "right", "bottom"),
+    (3.5, -3.5, "left", "top"),
+    (-3.5, -3.5, "right", "top"),
+)
 #: Half the side of the box a marker of ``avoid`` keeps clear (points): a landmark triangle's, so that a
 #: label at a corner touches its own marker but covers no other.
 MARKER_HALF = 3.0
 #: Centred on its point, else nudged a little up, down, right or left (a cell's index inside its region).
-CENTRED = ((0, 0, "center", "center"), (0, 4, "center", "center"), (0, -4, "center", "center"),
-           (5, 0, "center", "center"), (-5, 0, "center", "center"))  # fmt: skip
+CENTRED = (
+    (0, 0, "center", "center"),
+    (0, 4, "center", "center"),
+    (0, -4, "center", "center"),
+    (5, 0, "center", "center"),
+    (-5, 0, "center", "center"),
+)
 
 
 def _boxes(boxes: Sequence[Any]) -> np.ndarray:
@@ -49,9 +58,19 @@ def _boxes(boxes: Sequence[Any]) -> np.ndarray:
     return np.array(rows, float).reshape(-1, 4)
 
 
-def place_labels(ax: plt.Axes, texts: Sequence[str], points: Any, *, gid: str, label: str | None = None,
-                 avoid: Any = None, offsets: Sequence[tuple] = CORNERS, every: bool = False, replace: bool = True,
-                 **style: Any) -> list:  # fmt: skip
+def place_labels(
+    ax: plt.Axes,
+    texts: Sequence[str],
+    points: Any,
+    *,
+    gid: str,
+    label: str | None = None,
+    avoid: Any = None,
+    offsets: Sequence[tuple] = CORNERS,
+    every: bool = False,
+    replace: bool = True,
+    **style: Any,
+) -> list:
     """Write short texts beside points, leaving out those that would collide: every figure's one label placement.
 
     Each text tries ``offsets`` in turn and takes the first place whose box meets no visible text
@@ -106,15 +125,25 @@ def place_labels(ax: plt.Axes, texts: Sequence[str], points: Any, *, gid: str, l
     page = fig.bbox
     placed = []
     for name, point in zip(texts, np.asarray(points, float).reshape(-1, 2), strict=True):
-        text = ax.annotate(str(name), point, xytext=offsets[0][:2], textcoords="offset points", gid=gid,
-                           label=label or "_label", ha=offsets[0][2], va=offsets[0][3], **style)  # fmt: skip
+        text = ax.annotate(
+            str(name),
+            point,
+            xytext=offsets[0][:2],
+            textcoords="offset points",
+            gid=gid,
+            label=label or "_label",
+            ha=offsets[0][2],
+            va=offsets[0][3],
+            **style,
+        )
         for dx, dy, ha, va in offsets:
             text.xyann = (dx, dy)
             text.set(ha=ha, va=va)
             b = text.get_window_extent(renderer)
             inside = page.x0 <= b.x0 and b.x1 <= page.x1 and page.y0 <= b.y0 and b.y1 <= page.y1
-            if inside and not np.any((b.x0 < boxes[:, 2]) & (boxes[:, 0] < b.x1) & (b.y0 < boxes[:, 3])
-                                     & (boxes[:, 1] < b.y1)):  # fmt: skip
+            if inside and not np.any(
+                (b.x0 < boxes[:, 2]) & (boxes[:, 0] < b.x1) & (b.y0 < boxes[:, 3]) & (boxes[:, 1] < b.y1)
+            ):
                 break
         else:
             if not every:
@@ -148,8 +177,16 @@ def label_key(ax: plt.Axes, sample: str, label: str, **style: Any) -> None:
     if label in [h.get_label() for h in ax.lines]:
         return
     weight = r"\mathit" if style.get("fontstyle") == "italic" else r"\mathrm"
-    ax.plot([], [], ls="none", marker=f"${weight}{{{sample}}}$", markersize=9 if len(sample) < 3 else 12,
-            color=style.get("color", ROLE_COLORS["text"]), label=label, gid="label-key")  # fmt: skip
+    ax.plot(
+        [],
+        [],
+        ls="none",
+        marker=f"${weight}{{{sample}}}$",
+        markersize=9 if len(sample) < 3 else 12,
+        color=style.get("color", ROLE_COLORS["text"]),
+        label=label,
+        gid="label-key",
+    )
 
 
 def label_landmarks(ax: plt.Axes, map_: Map, *, every: bool = False) -> list:
@@ -172,5 +209,13 @@ def label_landmarks(ax: plt.Axes, map_: Map, *, every: bool = False) -> list:
     list of matplotlib.text.Annotation
         The label artists (gid ``landmark-label``, legend label :data:`LANDMARKS_LABEL`).
     """
-    return place_labels(ax, map_.landmark_ids, map_.landmarks, gid="landmark-label", label=LANDMARKS_LABEL,
-                        avoid=map_.landmarks, every=every, color=LANDMARK_COLOR)  # fmt: skip
+    return place_labels(
+        ax,
+        map_.landmark_ids,
+        map_.landmarks,
+        gid="landmark-label",
+        label=LANDMARKS_LABEL,
+        avoid=map_.landmarks,
+        every=every,
+        color=LANDMARK_COLOR,
+    )

@@ -32,8 +32,15 @@ from bearnav_cli.plot.style import (
 __all__ = ["field_samples", "map_handles", "plot_field", "plot_map", "plot_samples", "plot_tree"]
 
 
-def plot_map(ax: plt.Axes, map_: Map, *, landmarks: bool = True, starts: bool = True, labels: bool | None = None,
-             walls: bool = True) -> plt.Axes:  # fmt: skip
+def plot_map(
+    ax: plt.Axes,
+    map_: Map,
+    *,
+    landmarks: bool = True,
+    starts: bool = True,
+    labels: bool | None = None,
+    walls: bool = True,
+) -> plt.Axes:
     """Bounds, inflated and raw obstacles, landmarks, goal and starts.
 
     Also sets the limits (the bounds with a 2 % pad of the diagonal) and an equal aspect. Every
@@ -62,29 +69,85 @@ def plot_map(ax: plt.Axes, map_: Map, *, landmarks: bool = True, starts: bool = 
         ``ax``.
     """
     xmin, ymin, xmax, ymax = map_.bounds
-    ax.plot([xmin, xmax, xmax, xmin, xmin], [ymin, ymin, ymax, ymax, ymin], color=ROLE_COLORS["bounds"], lw=1.2,
-            gid="bounds", label="_bounds")  # the frame of the map: no legend entry  # fmt: skip
+    ax.plot(
+        [xmin, xmax, xmax, xmin, xmin],
+        [ymin, ymin, ymax, ymax, ymin],
+        color=ROLE_COLORS["bounds"],
+        lw=1.2,
+        gid="bounds",
+        label="_bounds",
+    )  # the frame of the map: no legend entry
     inflated = _inflated_label(map_)
     seen: set = set()
     # the raw obstacles' entry first: it is the one a reader looks for
     for poly in map_.raw_obstacles:
-        ax.add_patch(polygon_patch(poly, facecolor=RAW_COLOR, edgecolor="none", zorder=2, gid="obstacles",
-                                   label=shared_label("obstacles", seen)))  # fmt: skip
+        ax.add_patch(
+            polygon_patch(
+                poly,
+                facecolor=RAW_COLOR,
+                edgecolor="none",
+                zorder=2,
+                gid="obstacles",
+                label=shared_label("obstacles", seen),
+            )
+        )
     if walls and map_.planning_radius > 0:
         band = shapely.difference(shapely.box(*map_.bounds), shapely.box(*map_.free_bounds))
-        add_geometry(ax, band, facecolor=INFLATED_COLOR, edgecolor="none", zorder=1, gid="inflated",
-                     label=shared_label(inflated, seen))  # fmt: skip
+        add_geometry(
+            ax,
+            band,
+            facecolor=INFLATED_COLOR,
+            edgecolor="none",
+            zorder=1,
+            gid="inflated",
+            label=shared_label(inflated, seen),
+        )
     for poly in map_.obstacles:
-        ax.add_patch(polygon_patch(poly, facecolor=INFLATED_COLOR, edgecolor="none", zorder=1, gid="inflated",
-                                   label=shared_label(inflated, seen)))  # fmt: skip
+        ax.add_patch(
+            polygon_patch(
+                poly,
+                facecolor=INFLATED_COLOR,
+                edgecolor="none",
+                zorder=1,
+                gid="inflated",
+                label=shared_label(inflated, seen),
+            )
+        )
     if landmarks and len(map_.landmarks):
-        ax.scatter(*map_.landmarks.T, marker="^", s=40, color=LANDMARK_COLOR, edgecolor=ROLE_COLORS["edge"],
-                   linewidths=0.5, zorder=6, gid="landmarks", label=LANDMARKS_LABEL)  # fmt: skip
+        ax.scatter(
+            *map_.landmarks.T,
+            marker="^",
+            s=40,
+            color=LANDMARK_COLOR,
+            edgecolor=ROLE_COLORS["edge"],
+            linewidths=0.5,
+            zorder=6,
+            gid="landmarks",
+            label=LANDMARKS_LABEL,
+        )
     if starts and len(map_.starts):
-        ax.scatter(*map_.starts.T, marker="o", s=36, facecolor=ROLE_COLORS["edge"], edgecolor=ROLE_COLORS["start"],
-                   linewidths=1.0, zorder=6, gid="map-starts", label="map starts")  # fmt: skip
-    ax.scatter(*map_.goal, marker="*", s=200, color=GOAL_COLOR, edgecolor=PALETTE["black"], linewidths=0.6, zorder=7,
-               gid="goal", label="goal")  # fmt: skip
+        ax.scatter(
+            *map_.starts.T,
+            marker="o",
+            s=36,
+            facecolor=ROLE_COLORS["edge"],
+            edgecolor=ROLE_COLORS["start"],
+            linewidths=1.0,
+            zorder=6,
+            gid="map-starts",
+            label="map starts",
+        )
+    ax.scatter(
+        *map_.goal,
+        marker="*",
+        s=200,
+        color=GOAL_COLOR,
+        edgecolor=PALETTE["black"],
+        linewidths=0.6,
+        zorder=7,
+        gid="goal",
+        label="goal",
+    )
     pad = 0.02 * map_.diagonal
     ax.set_xlim(xmin - pad, xmax + pad)
     ax.set_ylim(ymin - pad, ymax + pad)
@@ -162,9 +225,22 @@ def plot_field(ax: plt.Axes, plan: Plan, *, arrows: int = 28) -> plt.Axes:
     if len(points):
         fb = plan.map.free_bounds
         step = max(fb[2] - fb[0], fb[3] - fb[1]) / arrows
-        ax.quiver(*points.T, *directions.T, angles="xy", scale_units="xy", scale=1.0 / (0.6 * step), pivot="tail",
-                  width=0.002, headwidth=4, headlength=4.5, color=ROLE_COLORS["field"], alpha=0.6, zorder=3.8,
-                  label="field direction (runtime policy)", gid="field")  # fmt: skip
+        ax.quiver(
+            *points.T,
+            *directions.T,
+            angles="xy",
+            scale_units="xy",
+            scale=1.0 / (0.6 * step),
+            pivot="tail",
+            width=0.002,
+            headwidth=4,
+            headlength=4.5,
+            color=ROLE_COLORS["field"],
+            alpha=0.6,
+            zorder=3.8,
+            label="field direction (runtime policy)",
+            gid="field",
+        )
     return ax
 
 
@@ -206,17 +282,34 @@ def plot_tree(
     key = label if label else "_tree"
     if len(tree.nodes) > 1:
         segments = _edges(tree.nodes, tree.parent)
-        ax.add_collection(LineCollection(segments, colors=color, linewidths=lw, alpha=alpha, zorder=4, label=key,
-                                         gid="tree"))  # fmt: skip
+        ax.add_collection(
+            LineCollection(segments, colors=color, linewidths=lw, alpha=alpha, zorder=4, label=key, gid="tree")
+        )
     if nodes:
         added = np.asarray(getattr(tree, "node_added", np.zeros(len(tree.nodes), bool)), bool)
         # the nodes share the edges' legend entry
-        ax.scatter(*tree.nodes[~added].T, s=5, color=color, alpha=alpha, zorder=5, label="_" + key.lstrip("_"),
-                   gid="tree-nodes")  # fmt: skip
+        ax.scatter(
+            *tree.nodes[~added].T,
+            s=5,
+            color=color,
+            alpha=alpha,
+            zorder=5,
+            label="_" + key.lstrip("_"),
+            gid="tree-nodes",
+        )
         if added.any():
-            ax.scatter(*tree.nodes[added].T, s=14, marker="D", color=ADDED_COLOR, edgecolor=ROLE_COLORS["edge"],
-                       linewidths=0.4, alpha=alpha, zorder=5, gid="added-nodes",
-                       label=f"added nodes ({int(added.sum())}, densification)")  # fmt: skip
+            ax.scatter(
+                *tree.nodes[added].T,
+                s=14,
+                marker="D",
+                color=ADDED_COLOR,
+                edgecolor=ROLE_COLORS["edge"],
+                linewidths=0.4,
+                alpha=alpha,
+                zorder=5,
+                gid="added-nodes",
+                label=f"added nodes ({int(added.sum())}, densification)",
+            )
     return ax
 
 
@@ -238,6 +331,14 @@ def plot_samples(ax: plt.Axes, tree: Tree | Cells, *, color: str = ROLE_COLORS["
         ``ax``.
     """
     if len(tree.collision_samples):
-        ax.scatter(*tree.collision_samples.T, s=3, marker="x", linewidths=0.6, color=color, zorder=3,
-                   gid="collision-samples", label="collision samples")  # fmt: skip
+        ax.scatter(
+            *tree.collision_samples.T,
+            s=3,
+            marker="x",
+            linewidths=0.6,
+            color=color,
+            zorder=3,
+            gid="collision-samples",
+            label="collision samples",
+        )
     return ax

@@ -53,22 +53,39 @@ def plot_estimate_trace(ax: plt.Axes, trace: Any, *, cmap: str = "viridis", scal
         if len(ring) >= 3:
             ring = trace.x_hat[k] + scale * (ring - trace.x_hat[k])
             colour = colours(norm(trace.error[k]))
-            patch = add_geometry(ax, shapely.Polygon(ring), facecolor=colour, alpha=0.55, edgecolor=colour, lw=0.4,
-                                 zorder=5)  # fmt: skip
+            patch = add_geometry(
+                ax, shapely.Polygon(ring), facecolor=colour, alpha=0.55, edgecolor=colour, lw=0.4, zorder=5
+            )
             if patch is not None:
                 patch.set_label(shared_label(label, seen))
     looked = trace.looking
     if looked.any():
-        ax.plot(*trace.truth[looked].T, "o", ms=2.5, mfc="none", mec=ROLE_COLORS["looked"], zorder=6,
-                label="stopped to look")  # fmt: skip
+        ax.plot(
+            *trace.truth[looked].T,
+            "o",
+            ms=2.5,
+            mfc="none",
+            mec=ROLE_COLORS["looked"],
+            zorder=6,
+            label="stopped to look",
+        )
     bar = plt.colorbar(ScalarMappable(norm=norm, cmap=colours), ax=ax, fraction=0.04, pad=0.02)
     bar.set_label(f"error radius e ({AXIS_UNITS})")
     return ax
 
 
-def _draw_cells(ax: plt.Axes, vertices: np.ndarray, offsets: np.ndarray, status: np.ndarray | None, *,
-                fill: float = 0.25, line: float = 0.6, lw: float = 0.4, legend: bool = True,
-                skip: Sequence[int] = ()) -> plt.Axes:  # fmt: skip
+def _draw_cells(
+    ax: plt.Axes,
+    vertices: np.ndarray,
+    offsets: np.ndarray,
+    status: np.ndarray | None,
+    *,
+    fill: float = 0.25,
+    line: float = 0.6,
+    lw: float = 0.4,
+    legend: bool = True,
+    skip: Sequence[int] = (),
+) -> plt.Axes:
     """Cells given as coords + offsets: outlines, and fills by status when given (labelled ``cells: <status>``;
     none for the statuses in ``skip``)."""
     seen: set = set()
@@ -76,12 +93,27 @@ def _draw_cells(ax: plt.Axes, vertices: np.ndarray, offsets: np.ndarray, status:
         v = vertices[offsets[c] : offsets[c + 1]]
         if status is not None and int(status[c]) not in skip:
             name = status_name(status[c])
-            ax.fill(*v.T, color=STATUS_COLORS[CellStatus(int(status[c]))], alpha=fill, lw=0, zorder=0.5,
-                    gid="cell-fill", label=shared_label(name, seen) if legend else "_" + name)  # fmt: skip
+            ax.fill(
+                *v.T,
+                color=STATUS_COLORS[CellStatus(int(status[c]))],
+                alpha=fill,
+                lw=0,
+                zorder=0.5,
+                gid="cell-fill",
+                label=shared_label(name, seen) if legend else "_" + name,
+            )
     rings = [np.vstack([vertices[a:b], vertices[a : a + 1]]) for a, b in zip(offsets[:-1], offsets[1:], strict=True)]
-    ax.add_collection(LineCollection(rings, colors=OUTLINE_COLOR, linewidths=lw, alpha=line, zorder=0.6,
-                                     gid="cell-outlines",
-                                     label="cell outlines" if legend else "_cell outlines"))  # fmt: skip
+    ax.add_collection(
+        LineCollection(
+            rings,
+            colors=OUTLINE_COLOR,
+            linewidths=lw,
+            alpha=line,
+            zorder=0.6,
+            gid="cell-outlines",
+            label="cell outlines" if legend else "_cell outlines",
+        )
+    )
     return ax
 
 
@@ -93,8 +125,16 @@ def plot_sim_background(ax: plt.Axes, sim: Simulation) -> plt.Axes:
     filled. The tree is dark grey, apart from every outcome's colour.
     """
     status = np.asarray(sim.cell_status)
-    _draw_cells(ax, sim.cell_vertices, sim.cell_vertex_offsets, status, fill=0.25, line=0.35, lw=0.3,
-                skip=(CellStatus.CERTIFIED,))  # fmt: skip
+    _draw_cells(
+        ax,
+        sim.cell_vertices,
+        sim.cell_vertex_offsets,
+        status,
+        fill=0.25,
+        line=0.35,
+        lw=0.3,
+        skip=(CellStatus.CERTIFIED,),
+    )
     return plot_tree(ax, sim, color=ROLE_COLORS["background tree"], lw=0.6, alpha=0.5, label="simplified tree")
 
 
@@ -122,11 +162,34 @@ def plot_trajectories(ax: plt.Axes, sim: Simulation, *, limit: int = 400) -> plt
             continue
         outcome = int(sim.outcome[r])
         color = OUTCOME_COLORS[outcome]
-        ax.plot(*path.T, color=color, lw=0.9, alpha=0.85, zorder=4, label=shared_label(OUTCOME_NAMES[outcome], seen),
-                gid="run")  # fmt: skip
-        ax.plot(*path[0], "o", ms=3, color=color, mfc=ROLE_COLORS["edge"], mec=color, zorder=5,
-                label=shared_label("run starts", seen), gid="run-start")  # fmt: skip
+        ax.plot(
+            *path.T,
+            color=color,
+            lw=0.9,
+            alpha=0.85,
+            zorder=4,
+            label=shared_label(OUTCOME_NAMES[outcome], seen),
+            gid="run",
+        )
+        ax.plot(
+            *path[0],
+            "o",
+            ms=3,
+            color=color,
+            mfc=ROLE_COLORS["edge"],
+            mec=color,
+            zorder=5,
+            label=shared_label("run starts", seen),
+            gid="run-start",
+        )
         if outcome != 0:
-            ax.plot(*path[-1], "x", ms=5, color=color, zorder=5, label=shared_label("where a failed run ended", seen),
-                    gid="run-end")  # fmt: skip
+            ax.plot(
+                *path[-1],
+                "x",
+                ms=5,
+                color=color,
+                zorder=5,
+                label=shared_label("where a failed run ended", seen),
+                gid="run-end",
+            )
     return ax

@@ -14,8 +14,10 @@ __all__ = ["sweep_plot"]
 
 #: Colours and markers of the success figure's fields of view, in the order they first appear.
 #: One colour per field of view, the palette's Okabe–Ito colours in a fixed order.
-_SWEEP_COLORS = tuple(PALETTE[name] for name in ("blue", "orange", "bluish green", "vermillion", "reddish purple",
-                                                 "sky blue", "yellow", "black"))  # fmt: skip
+_SWEEP_COLORS = tuple(
+    PALETTE[name]
+    for name in ("blue", "orange", "bluish green", "vermillion", "reddish purple", "sky blue", "yellow", "black")
+)
 _SWEEP_MARKERS = "osD^vP*X"
 _SWEEP_STYLES = ("-", "--", ":", "-.")
 
@@ -48,8 +50,14 @@ def sweep_plot(panels: Sequence[Any], title: str | None = None) -> plt.Figure:
     n_handles = len(fovs) + len({line["variant_index"] for p in panels for line in p.lines if line["variant"]})
     legend_rows = -(-n_handles // ncol)
     height = 3.1 * len(maps) + 0.6 + 0.22 * legend_rows
-    fig, axes = plt.subplots(len(maps), len(dynamics), figsize=(max(6.4, 5.2 * len(dynamics)), height),
-                             sharex=True, sharey=True, squeeze=False)  # fmt: skip
+    fig, axes = plt.subplots(
+        len(maps),
+        len(dynamics),
+        figsize=(max(6.4, 5.2 * len(dynamics)), height),
+        sharex=True,
+        sharey=True,
+        squeeze=False,
+    )
     variants: dict[int, str] = {}
     noises: set[float] = set()
     for panel in panels:
@@ -58,9 +66,16 @@ def sweep_plot(panels: Sequence[Any], title: str | None = None) -> plt.Figure:
             k = line["variant_index"]
             variants.setdefault(k, line["variant"])
             noises.update(line["noise"])
-            ax.plot(line["noise"], [100 * v for v in line["success"]], ls=_SWEEP_STYLES[k % len(_SWEEP_STYLES)],
-                    marker=marker[line["fov"]], ms=4, lw=1.3, color=color[line["fov"]],
-                    mfc=color[line["fov"]] if k == 0 else "white")  # fmt: skip
+            ax.plot(
+                line["noise"],
+                [100 * v for v in line["success"]],
+                ls=_SWEEP_STYLES[k % len(_SWEEP_STYLES)],
+                marker=marker[line["fov"]],
+                ms=4,
+                lw=1.3,
+                color=color[line["fov"]],
+                mfc=color[line["fov"]] if k == 0 else "white",
+            )
         caption = f"{panel.map}, {panel.dynamics}" + (f": {panel.tags}" if panel.tags else "")
         ax.set_title(caption, fontsize=9)
     for ax in axes.flat:
@@ -74,9 +89,20 @@ def sweep_plot(panels: Sequence[Any], title: str | None = None) -> plt.Figure:
     for ax in axes[-1]:
         ax.set_xlabel("bearing noise (°; σ, or the bound of a bounded noise)", fontsize=8)
     handles = [Line2D([], [], color=color[f], marker=marker[f], ms=4, label=f"{f:g}° field of view") for f in fovs]
-    handles += [Line2D([], [], color="black", ls=_SWEEP_STYLES[k % len(_SWEEP_STYLES)], marker="o", ms=4,
-                       mfc="black" if k == 0 else "white", label=label)
-                for k, label in sorted(variants.items()) if label]  # fmt: skip
+    handles += [
+        Line2D(
+            [],
+            [],
+            color="black",
+            ls=_SWEEP_STYLES[k % len(_SWEEP_STYLES)],
+            marker="o",
+            ms=4,
+            mfc="black" if k == 0 else "white",
+            label=label,
+        )
+        for k, label in sorted(variants.items())
+        if label
+    ]
     if handles:
         fig.legend(handles=handles, loc="lower center", ncol=min(ncol, len(handles)), fontsize=8, frameon=False)
     if title:

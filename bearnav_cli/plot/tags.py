@@ -42,12 +42,23 @@ PROPOSED_TAG_COLOR = ROLE_COLORS["proposed tag"]
 def _existing_tags(ax: plt.Axes, landmarks: Any, gid: str, label: str) -> None:
     """The tags a map already has, as vermillion triangles labelled ``label``."""
     lm = np.asarray(landmarks, float).reshape(-1, 2)
-    ax.scatter(lm[:, 0], lm[:, 1], marker="^", s=40, color=EXISTING_TAG_COLOR, edgecolor=ROLE_COLORS["edge"],
-               linewidths=0.5, zorder=6, gid=gid, label=label)  # fmt: skip
+    ax.scatter(
+        lm[:, 0],
+        lm[:, 1],
+        marker="^",
+        s=40,
+        color=EXISTING_TAG_COLOR,
+        edgecolor=ROLE_COLORS["edge"],
+        linewidths=0.5,
+        zorder=6,
+        gid=gid,
+        label=label,
+    )
 
 
-def plot_perception(ax: plt.Axes, coverage: Any, *, free: bool = True, landmarks: bool = True,
-                    legend: bool = True) -> plt.Axes:  # fmt: skip
+def plot_perception(
+    ax: plt.Axes, coverage: Any, *, free: bool = True, landmarks: bool = True, legend: bool = True
+) -> plt.Axes:
     """Where the perception rule fails: small marks over the plan (issue 11; compute with ``perception``).
 
     Draw it over :func:`figure_for` of the plan (or :func:`plot_map` with ``landmarks=False``).
@@ -77,12 +88,30 @@ def plot_perception(ax: plt.Axes, coverage: Any, *, free: bool = True, landmarks
     target = coverage.error_target
     what = "fewer than 2 usable tags in view" if target is None else f"no fix within {target:g} in view"
     label = f"{what}, in D ({share:.1%} of D; {coverage.fov_deg:g}° camera)"
-    ax.scatter(bad[:, 0], bad[:, 1], marker="x", s=8, lw=0.7, color=PERCEPTION_FAIL_COLOR, zorder=5.5,
-               gid="perception-fail-domain", label=label)  # fmt: skip
+    ax.scatter(
+        bad[:, 0],
+        bad[:, 1],
+        marker="x",
+        s=8,
+        lw=0.7,
+        color=PERCEPTION_FAIL_COLOR,
+        zorder=5.5,
+        gid="perception-fail-domain",
+        label=label,
+    )
     if free:
         out = coverage.failing_free
-        ax.scatter(out[:, 0], out[:, 1], marker=".", s=5, lw=0, color=PERCEPTION_FAIL_FREE_COLOR, zorder=5.4,
-                   gid="perception-fail-free", label="the same, in F outside D")  # fmt: skip
+        ax.scatter(
+            out[:, 0],
+            out[:, 1],
+            marker=".",
+            s=5,
+            lw=0,
+            color=PERCEPTION_FAIL_FREE_COLOR,
+            zorder=5.4,
+            gid="perception-fail-free",
+            label="the same, in F outside D",
+        )
     if landmarks:
         _existing_tags(ax, coverage.landmarks, "perception-tags", f"tags ({len(coverage.landmarks)})")
     if legend:
@@ -96,8 +125,15 @@ PROPOSED_TAGS_LABEL = "proposed tags ({}): glue one at each, ids beside them"
 EXISTING_TAGS_LABEL = "existing tags ({}), ids beside them where they fit"
 
 
-def plot_tags(ax: plt.Axes, proposal: Any, *, failures: bool = True, labels: bool = True,
-              uncoverable: bool = True, legend: bool = True) -> plt.Axes:  # fmt: skip
+def plot_tags(
+    ax: plt.Axes,
+    proposal: Any,
+    *,
+    failures: bool = True,
+    labels: bool = True,
+    uncoverable: bool = True,
+    legend: bool = True,
+) -> plt.Axes:
     """Where to glue the proposed tags: existing tags, new ones with the side they face, what still fails.
 
     Draw it over :func:`figure_for` of the plan (or :func:`plot_map` with ``landmarks=False``).
@@ -132,20 +168,45 @@ def plot_tags(ax: plt.Axes, proposal: Any, *, failures: bool = True, labels: boo
     _existing_tags(ax, before.landmarks, "existing-tags", EXISTING_TAGS_LABEL.format(len(before.landmarks)))
     new = np.asarray(proposal.positions, float).reshape(-1, 2)
     normals = np.asarray(proposal.normals, float).reshape(-1, 2)
-    ax.scatter(new[:, 0], new[:, 1], marker="D", s=34, color=PROPOSED_TAG_COLOR, edgecolor=ROLE_COLORS["edge"],
-               linewidths=0.6, zorder=6.5, gid="proposed-tags",
-               label=PROPOSED_TAGS_LABEL.format(len(new)))  # fmt: skip
+    ax.scatter(
+        new[:, 0],
+        new[:, 1],
+        marker="D",
+        s=34,
+        color=PROPOSED_TAG_COLOR,
+        edgecolor=ROLE_COLORS["edge"],
+        linewidths=0.6,
+        zorder=6.5,
+        gid="proposed-tags",
+        label=PROPOSED_TAGS_LABEL.format(len(new)),
+    )
     if len(new):
         xmin, xmax = ax.get_xlim()
         scale = 0.02 * abs(xmax - xmin) if xmax != xmin else 0.1
         tips = new + scale * normals
-        ax.add_collection(LineCollection(np.stack([new, tips], axis=1), colors=PROPOSED_TAG_COLOR, linewidths=1.0,
-                                         zorder=6.4, gid="proposed-tag-facing",
-                                         label="the free side a proposed tag faces"))  # fmt: skip
+        ax.add_collection(
+            LineCollection(
+                np.stack([new, tips], axis=1),
+                colors=PROPOSED_TAG_COLOR,
+                linewidths=1.0,
+                zorder=6.4,
+                gid="proposed-tag-facing",
+                label="the free side a proposed tag faces",
+            )
+        )
     stuck = np.asarray(proposal.uncoverable, float).reshape(-1, 2)
     if uncoverable and len(stuck):
-        ax.scatter(stuck[:, 0], stuck[:, 1], marker="s", s=5, lw=0, color=ROLE_COLORS["uncoverable"], zorder=5.6,
-                   gid="uncoverable", label=f"no placement covers ({len(stuck)} points)")  # fmt: skip
+        ax.scatter(
+            stuck[:, 0],
+            stuck[:, 1],
+            marker="s",
+            s=5,
+            lw=0,
+            color=ROLE_COLORS["uncoverable"],
+            zorder=5.6,
+            gid="uncoverable",
+            label=f"no placement covers ({len(stuck)} points)",
+        )
     if legend:
         axis_labels(ax)
         legend_below(ax)
@@ -185,10 +246,27 @@ def label_tags(ax: plt.Axes, proposal: Any) -> list:
     for name, point, n in zip(proposal.ids, new, normals, strict=True):
         # the corner toward the free side first: there the label covers no wall
         facing = sorted(CORNERS, key=lambda o: -(np.sign(o[0]) * n[0] + np.sign(o[1]) * n[1]))
-        texts += place_labels(ax, [str(name)], point[None], gid="proposed-tag-label", label=label, avoid=marks,
-                              offsets=facing, every=True, replace=False, color=PROPOSED_TAG_COLOR)  # fmt: skip
-    texts += place_labels(ax, proposal.before.landmark_ids, old, gid="existing-tag-label", avoid=marks,
-                          label=EXISTING_TAGS_LABEL.format(len(old)), color=EXISTING_TAG_COLOR)  # fmt: skip
+        texts += place_labels(
+            ax,
+            [str(name)],
+            point[None],
+            gid="proposed-tag-label",
+            label=label,
+            avoid=marks,
+            offsets=facing,
+            every=True,
+            replace=False,
+            color=PROPOSED_TAG_COLOR,
+        )
+    texts += place_labels(
+        ax,
+        proposal.before.landmark_ids,
+        old,
+        gid="existing-tag-label",
+        avoid=marks,
+        label=EXISTING_TAGS_LABEL.format(len(old)),
+        color=EXISTING_TAG_COLOR,
+    )
     return texts
 
 
@@ -196,13 +274,17 @@ def _tags_title(proposal: Any, map_: Map) -> str:
     before, after = proposal.before, proposal.after
     live = getattr(proposal, "live_after", None)
     if live is not None:
-        config = (f"every cell live at η = {math.degrees(live.grid.eta):.3g}°: "
-                  f"{proposal.live_before.live_fraction:.1%} → {live.live_fraction:.1%} of D")  # fmt: skip
+        config = (
+            f"every cell live at η = {math.degrees(live.grid.eta):.3g}°: "
+            f"{proposal.live_before.live_fraction:.1%} → {live.live_fraction:.1%} of D"
+        )
         return figure_title(map_.name, "tags", f"where to glue {len(proposal.ids)} new tags", config)
     target = before.error_target
     rule = "2 usable tags in view" if target is None else f"a fix within {target:g} in view"
-    config = (f"{before.fov_deg:g}° camera, {before.noise_deg:g}° noise: {rule} on {before.fraction_domain:.1%} "
-              f"→ {after.fraction_domain:.1%} of D")  # fmt: skip
+    config = (
+        f"{before.fov_deg:g}° camera, {before.noise_deg:g}° noise: {rule} on {before.fraction_domain:.1%} "
+        f"→ {after.fraction_domain:.1%} of D"
+    )
     return figure_title(map_.name, "tags", f"where to glue {len(proposal.ids)} new tags", config)
 
 

@@ -6,6 +6,7 @@
 - :mod:`~bearnav_cli.runtime.bearing` — measurements, field of view, bearing reconstruction (§6);
 - :mod:`~bearnav_cli.runtime.cell_policy` — which cell's controller a robot uses (§7.3, §11.3);
 - :mod:`~bearnav_cli.runtime.bounded` — convex sets that hold the robot (ALGORITHMS §12.2);
+- :mod:`~bearnav_cli.runtime.look_bound` — the static bound ``ε(x, S)`` of one look (§12.2, §12.5);
 - :mod:`~bearnav_cli.runtime.estimate` — the fix and its fusion with odometry, and the estimate sets;
 - :mod:`~bearnav_cli.runtime.robot` — the robot's parameters (the map's ``robot:`` section) and the
   look-ahead point of a unicycle (ALGORITHMS §12.6, Lemma 7);

@@ -13,8 +13,8 @@ robots at once:
 - :func:`intersect_cones` — clip by the cones of every visible bearing;
 - :func:`centre` — the estimate ``x̂`` (a point of the set) and its exact error radius
   ``e = max_v ‖v − x̂‖``;
-- :func:`diameter` and :func:`one_look_bound` — the static bound ``ε(x, S)`` of §12.2 on the error
-  radius after one look, which looking (§12.5) and ``bearnav verify``'s liveness use;
+- :func:`diameter` — the largest distance between two points of a set (the static bound ``ε(x, S)``
+  of §12.2 built on these operations is :mod:`~bearnav_cli.runtime.look_bound`'s);
 - :func:`contains` — whether points lie in their sets (the simulator's containment count).
 
 Every clip keeps a slack of ``tol`` (``1e-9·D``) on the outside, so round-off never empties a set
@@ -24,15 +24,27 @@ that holds the truth: the sets are outer approximations, as Lemma 5 needs.
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
 
 import numpy as np
 
 from bearnav_cli.runtime.sight import crossing_parity
 
-__all__ = ["CENTRE_STEPS", "MAX_VERTICES", "RADIUS_PER_WIDTH", "LookBound", "bound_with", "box", "centre", "clip",
-           "cone_rows", "contains", "diameter", "grow", "intersect_cones", "look_bound", "one_look_bound",
-           "translate"]  # fmt: skip
+__all__ = [
+    "CENTRE_STEPS",
+    "MAX_VERTICES",
+    "RADIUS_PER_WIDTH",
+    "box",
+    "clip_pairs",
+    "centre",
+    "clip",
+    "cone_rows",
+    "contains",
+    "diameter",
+    "grow",
+    "intersect_cones",
+    "translate",
+    "valid_vertices",
+]
 
 #: Widest vertex array kept: a set with more vertices is merged down (outward) to this many. A set
 #: rarely has more than 12 (the kitchen's 28 tags all around: at most 10 in 1,000 runs).
@@ -41,7 +53,7 @@ MAX_VERTICES = 24
 #: around the vertices (the error radius is exact for whatever point results).
 CENTRE_STEPS = 12
 #: ``e ≤ RADIUS_PER_WIDTH · diam X`` for the ``x̂`` :func:`centre` returns: Jung's ``R ≤ diam/√3`` and
-#: Bădoiu–Clarkson's ``e ≤ (1 + 1/√(CENTRE_STEPS + 1)) R`` (:func:`one_look_bound`).
+#: Bădoiu–Clarkson's ``e ≤ (1 + 1/√(CENTRE_STEPS + 1)) R`` (:func:`~bearnav_cli.runtime.look_bound.one_look_bound`).
 RADIUS_PER_WIDTH = min(1.0, (1.0 + 1.0 / math.sqrt(CENTRE_STEPS + 1)) / math.sqrt(3.0))
 
 
@@ -57,7 +69,8 @@ def translate(vertices: np.ndarray, d: np.ndarray) -> np.ndarray:
     return vertices + np.asarray(d, float)[:, None, :]
 
 
-def _valid(vertices: np.ndarray, count: np.ndarray) -> np.ndarray:
+def valid_vertices(vertices: np.ndarray, count: np.ndarray) -> np.ndarray:
+    """Which rows of the padded vertex array (R, W, 2) are vertices: shape (R, W) bool, the first ``count`` of each."""
     return np.arange(vertices.shape[1])[None, :] < count[:, None]
 
 
@@ -74,8 +87,9 @@ def _compact(candidates: np.ndarray, keep: np.ndarray) -> tuple[np.ndarray, np.n
     return np.take_along_axis(candidates, order[..., None], axis=1), count
 
 
-def clip(vertices: np.ndarray, count: np.ndarray, a: np.ndarray, b: np.ndarray,
-         tol: float = 0.0) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+def clip(
+    vertices: np.ndarray, count: np.ndarray, a: np.ndarray, b: np.ndarray, tol: float = 0.0
+) -> tuple[np.ndarray, np.ndarray]:
     """Each polygon intersected with its half-plane ``{y : a·y ≤ b + tol}`` (Sutherland–Hodgman).
 
     Parameters
@@ -97,7 +111,7 @@ def clip(vertices: np.ndarray, count: np.ndarray, a: np.ndarray, b: np.ndarray,
     count : ndarray of int64, shape (R,)
         At most one more vertex than before; 0 where the polygon lies wholly outside.
     """
-    valid = _valid(vertices, count)
+    valid = valid_vertices(vertices, count)
     s = vertices[..., 0] * a[:, 0, None] + vertices[..., 1] * a[:, 1, None] - (np.asarray(b, float) + tol)[:, None]
     s = np.where(valid, s, 0.0)
     cut = np.flatnonzero(np.any(s > 0.0, axis=1))
@@ -112,8 +126,9 @@ def clip(vertices: np.ndarray, count: np.ndarray, a: np.ndarray, b: np.ndarray,
     return _clip_rows(vertices, count, s, valid)
 
 
-def _clip_rows(vertices: np.ndarray, count: np.ndarray, s: np.ndarray,
-               valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+def _clip_rows(
+    vertices: np.ndarray, count: np.ndarray, s: np.ndarray, valid: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """:func:`clip` of rows whose signed row values ``s`` (R, W) are known (positive: outside)."""
     nxt = _next_index(vertices, count)
     rows = np.arange(len(vertices))[:, None]
@@ -133,7 +148,7 @@ def _dedupe(vertices: np.ndarray, count: np.ndarray, tol: float) -> tuple[np.nda
     """Drop every vertex within ``tol`` of the next one (a move of at most ``tol``)."""
     if not len(vertices):
         return vertices, count
-    valid = _valid(vertices, count)
+    valid = valid_vertices(vertices, count)
     nxt = _next_index(vertices, count)
     gap = vertices - np.take_along_axis(vertices, nxt[..., None], axis=1)
     close = np.hypot(gap[..., 0], gap[..., 1]) <= tol
@@ -155,11 +170,12 @@ def _normals(vertices: np.ndarray, count: np.ndarray) -> np.ndarray:
 def _area(vertices: np.ndarray, count: np.ndarray) -> np.ndarray:
     nxt = np.take_along_axis(vertices, _next_index(vertices, count)[..., None], axis=1)
     cross = vertices[..., 0] * nxt[..., 1] - vertices[..., 1] * nxt[..., 0]
-    return 0.5 * np.sum(np.where(_valid(vertices, count), cross, 0.0), axis=1)
+    return 0.5 * np.sum(np.where(valid_vertices(vertices, count), cross, 0.0), axis=1)
 
 
-def grow(vertices: np.ndarray, count: np.ndarray, radius: np.ndarray,
-         tol: float = 0.0) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+def grow(
+    vertices: np.ndarray, count: np.ndarray, radius: np.ndarray, tol: float = 0.0
+) -> tuple[np.ndarray, np.ndarray]:
     """Each polygon with every row moved outward by its ``radius``: it contains ``X ⊕ B(radius)``.
 
     At a corner whose edge normals turn by ``φ`` the offset rows meet ``r/cos(φ/2)`` from the
@@ -181,7 +197,7 @@ def grow(vertices: np.ndarray, count: np.ndarray, radius: np.ndarray,
     """
     radius = np.asarray(radius, float).reshape(len(vertices))
     vertices, count = _dedupe(vertices, count, tol)
-    valid = _valid(vertices, count)
+    valid = valid_vertices(vertices, count)
     flat = (count < 3) | (np.abs(_area(vertices, count)) <= max(tol, 1e-300) ** 2)
     n = _normals(vertices, count)
     j = np.arange(vertices.shape[1])[None, :]
@@ -208,8 +224,9 @@ def grow(vertices: np.ndarray, count: np.ndarray, radius: np.ndarray,
         if len(idx):
             v = np.where(valid[idx, :, None], vertices[idx], np.nan)
             lo, hi = np.nanmin(v, axis=1) - radius[idx, None], np.nanmax(v, axis=1) + radius[idx, None]
-            rect = np.stack([lo, np.column_stack([hi[:, 0], lo[:, 1]]), hi, np.column_stack([lo[:, 0], hi[:, 1]])],
-                            axis=1)  # fmt: skip
+            rect = np.stack(
+                [lo, np.column_stack([hi[:, 0], lo[:, 1]]), hi, np.column_stack([lo[:, 0], hi[:, 1]])], axis=1
+            )
             if out.shape[1] < 4:
                 out = np.concatenate([out, np.repeat(out[:, :1], 4 - out.shape[1], axis=1)], axis=1)
             out[idx, :4], out_count[idx] = rect, 4
@@ -293,15 +310,20 @@ def cone_rows(landmarks: np.ndarray, angle: np.ndarray, eta: float | np.ndarray)
         Their offsets ``a·l`` (map units).
     """
     lo, hi = angle - eta, angle + eta
-    a = np.stack([np.stack([-np.sin(lo), np.cos(lo)], axis=-1), np.stack([np.sin(hi), -np.cos(hi)], axis=-1)],
-                 axis=-2)  # fmt: skip
+    a = np.stack([np.stack([-np.sin(lo), np.cos(lo)], axis=-1), np.stack([np.sin(hi), -np.cos(hi)], axis=-1)], axis=-2)
     b = np.einsum("...qk,...k->...q", a, np.asarray(landmarks, float))
     return a, b
 
 
-def intersect_cones(vertices: np.ndarray, count: np.ndarray, landmarks: np.ndarray, angle: np.ndarray,
-                    visible: np.ndarray, eta: float | np.ndarray,
-                    tol: float = 0.0) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+def intersect_cones(
+    vertices: np.ndarray,
+    count: np.ndarray,
+    landmarks: np.ndarray,
+    angle: np.ndarray,
+    visible: np.ndarray,
+    eta: float | np.ndarray,
+    tol: float = 0.0,
+) -> tuple[np.ndarray, np.ndarray]:
     """Every set clipped by the bearing cones of the landmarks its robot sees (§12.2's update).
 
     The robots are clipped together, one visible bearing of each per round (a robot with fewer
@@ -330,22 +352,37 @@ def intersect_cones(vertices: np.ndarray, count: np.ndarray, landmarks: np.ndarr
     rob, lm = np.nonzero(visible)  # the (robot, landmark) pairs, robot by robot
     eta_pairs = np.broadcast_to(np.asarray(eta, float), (len(visible),))[rob]
     a, b = cone_rows(np.asarray(landmarks, float)[lm], np.asarray(angle, float)[rob, lm], eta_pairs)  # (P, 2, 2)
-    return _clip_pairs(vertices, count, rob, a, b, tol)
+    return clip_pairs(vertices, count, rob, a, b, tol)
 
 
-def _clip_pairs(vertices: np.ndarray, count: np.ndarray, rob: np.ndarray, a: np.ndarray, b: np.ndarray,
-                tol: float) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+def clip_pairs(
+    vertices: np.ndarray, count: np.ndarray, rob: np.ndarray, a: np.ndarray, b: np.ndarray, tol: float
+) -> tuple[np.ndarray, np.ndarray]:
     """Each set clipped by the rows of its pairs: pair ``p`` clips set ``rob[p]`` by ``a[p, q]·y ≤ b[p, q]``.
 
-    ``rob`` (P,) is sorted; ``a`` (P, Q, 2), ``b`` (P, Q). The sets are clipped together, one pair
-    of each per round (a set with fewer pairs sits out the later rounds). The caller's arrays stay
-    as they were.
+    The sets are clipped together, one pair of each per round (a set with fewer pairs sits out the
+    later rounds). The caller's arrays stay as they were.
+
+    Parameters
+    ----------
+    vertices, count : ndarray, shapes (R, W, 2), (R,)
+        The padded sets (map units).
+    rob : ndarray of int, shape (P,)
+        The set each pair clips, sorted.
+    a, b : ndarray, shapes (P, Q, 2), (P, Q)
+        Each pair's ``Q`` rows ``a·y ≤ b`` (map units).
+    tol : float
+        The slack every clip keeps outside (map units).
+
+    Returns
+    -------
+    vertices, count : ndarray, shapes (R, W', 2), (R,)
     """
     vertices, count = vertices[:, : max(int(count.max(initial=0)), 1)].copy(), count.copy()
     # a pair whose rows hold every vertex now hold the set after every other clip too (clips only
     # shrink it): only the pairs that cut it are applied
     s = np.einsum("pqk,pwk->pqw", a, vertices[rob]) - (b + tol)[..., None]
-    cuts = np.any((s > 0.0) & _valid(vertices, count)[rob][:, None, :], axis=(1, 2))
+    cuts = np.any((s > 0.0) & valid_vertices(vertices, count)[rob][:, None, :], axis=(1, 2))
     rob, a, b = rob[cuts], a[cuts], b[cuts]
     if not len(rob):
         return _reduce(*_dedupe(vertices, count, tol))
@@ -382,7 +419,7 @@ def centre(vertices: np.ndarray, count: np.ndarray) -> tuple[np.ndarray, np.ndar
     vertices = vertices[:, : max(int(count.max(initial=0)), 1)]  # the padding past the widest set
     r = len(vertices)
     rows = np.arange(r)
-    valid = _valid(vertices, count)
+    valid = valid_vertices(vertices, count)
     empty = count <= 0
     weight = valid / np.maximum(count, 1)[:, None]
     c = np.einsum("rw,rwk->rk", weight, vertices)
@@ -410,159 +447,11 @@ def centre(vertices: np.ndarray, count: np.ndarray) -> tuple[np.ndarray, np.ndar
 
 def diameter(vertices: np.ndarray, count: np.ndarray) -> np.ndarray:
     """The largest distance between two vertices of each set (R,) map units; ``inf`` for empty sets."""
-    valid = _valid(vertices, count)
+    valid = valid_vertices(vertices, count)
     d = vertices[:, :, None] - vertices[:, None]
     dist2 = np.where(valid[:, :, None] & valid[:, None, :], np.einsum("rwvk,rwvk->rwv", d, d), 0.0)
     out = np.sqrt(np.max(dist2.reshape(len(vertices), -1), axis=1, initial=0.0))
     return np.where(count > 0, out, np.inf)
-
-
-class LookBound(NamedTuple):
-    """One look's bound ``ε(x, S)`` and the sets it is made of (:func:`look_bound`), for ``R`` looks.
-
-    Attributes
-    ----------
-    bound : ndarray, shape (R,)
-        ``ε`` (map units; ``inf`` where ``K`` is empty).
-    width, rho : ndarray, shape (R,)
-        ``diam K`` (0 where ``K`` is empty) and ``ρ = max_{v∈K} ‖v − x‖`` (map units).
-    half : ndarray, shape (R,)
-        The cones' half-angle ``2η`` (rad).
-    diff_vertices, diff_count : ndarray, shapes (R, W, 2), (R,)
-        The difference-body polygon ``{d : |n_k·d| ≤ h_k} ∩ [−diam K, diam K]²`` (map units).
-    """
-
-    bound: np.ndarray
-    width: np.ndarray
-    rho: np.ndarray
-    half: np.ndarray
-    diff_vertices: np.ndarray
-    diff_count: np.ndarray
-
-    def take(self, rows: np.ndarray) -> LookBound:
-        """The looks ``rows``."""
-        return LookBound(*(field[rows] for field in self))
-
-
-def _strip_rows(x: np.ndarray, landmark: np.ndarray, width: np.ndarray, rho: np.ndarray,
-                half: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
-    """The strip ``|n·d| ≤ h`` of one landmark per look (fact 1 of :func:`one_look_bound`): ``a`` (P, 2, 2), ``b``
-    (P, 2), and which pairs have one (a landmark on the point has none)."""
-    d = landmark - x
-    reach = np.hypot(d[:, 0], d[:, 1])
-    ok = reach > 0.0
-    n = np.stack([-d[:, 1], d[:, 0]], axis=-1) / np.where(ok, reach, 1.0)[:, None]
-    h = (reach + rho) * np.sin(half) + 2.0 * np.sin(0.5 * half) * width
-    return np.stack([n, -n], axis=1), np.stack([h, h], axis=1), ok
-
-
-def _spread(vertices: np.ndarray, count: np.ndarray) -> np.ndarray:
-    """The largest norm of a vertex of each polygon (R,) map units."""
-    norm2 = np.einsum("rwk,rwk->rw", vertices, vertices)
-    return np.sqrt(np.max(np.where(_valid(vertices, count), norm2, 0.0), axis=1, initial=0.0))
-
-
-def look_bound(x: np.ndarray, landmarks: np.ndarray, visible: np.ndarray, eta: float | np.ndarray,
-               bounds: np.ndarray, tol: float = 0.0) -> LookBound:  # fmt: skip
-    """The static bound ``ε(x, S)`` of one look: no set a look at ``S`` from ``x`` gives errs by more, shape (R,).
-
-    A robot at ``x`` that sees ``S`` with bearing errors within ``η`` gets a set ``X`` (§12.2) whose
-    error radius :func:`centre` returns as ``e``. ALGORITHMS §12.2 bounds ``e`` by ``diam K``,
-    ``K = B_r ∩ ∩_{k∈S} cone(l_k, φ_k(x), 2η)``; that is about 2.7 times too large, and this bound
-    is the product of three facts (docs/algorithms.md, "the one-look bound"):
-
-    1. **X is half as wide as K.** Two points ``y, z ∈ X`` lie in one cone of half-angle ``η`` at
-       ``l_k``, so ``z`` is within ``‖z − l_k‖ sin 2η`` of the line ``l_k y``; that line's normal is
-       within ``2η`` of ``n_k``, the normal of the line ``l_k x`` (``y ∈ K``). Hence
-       ``|n_k·(z − y)| ≤ h_k = (r_k + ρ) sin 2η + 2 sin η · diam K`` (``r_k = ‖l_k − x‖``,
-       ``ρ = max_{v∈K} ‖v − x‖``), and ``diam X ≤ max ‖d‖`` over the polygon
-       ``{d : |n_k·d| ≤ h_k ∀k} ∩ [−diam K, diam K]²``, which is about ``diam K / 2``.
-    2. **Jung's theorem** in the plane: the smallest circle around ``X`` has radius
-       ``R ≤ diam X / √3``.
-    3. **Bădoiu–Clarkson**: :func:`centre` starts in the set's hull and takes
-       :data:`CENTRE_STEPS` steps, so ``‖x̂ − c*‖ ≤ R/√(CENTRE_STEPS + 1)`` and
-       ``e ≤ (1 + 1/√(CENTRE_STEPS + 1)) R``; also ``e ≤ diam X`` (``x̂ ∈ X``).
-
-    So ``e ≤ ε = min(1, (1 + 1/√(CENTRE_STEPS + 1))/√3) · min(diam K, max ‖d‖)`` (:data:`RADIUS_PER_WIDTH`
-    is the factor). With fewer than two well-spread bearings ``K`` reaches the bounds and ``ε`` is large.
-
-    Parameters
-    ----------
-    x : ndarray, shape (R, 2)
-        Where the robot is (map units).
-    landmarks : ndarray, shape (L, 2)
-        Landmark positions (map units).
-    visible : ndarray of bool, shape (R, L)
-        ``S``: which landmarks it sees from ``x``.
-    eta : float or ndarray, shape (R,)
-        The bearing error bound (rad), one or one per point.
-    bounds : ndarray, shape (4,)
-        ``B_r`` (map units).
-    tol : float
-        Outside slack of the clips (map units).
-    """
-    p = np.asarray(x, float).reshape(-1, 2)
-    lm = np.asarray(landmarks, float)
-    visible = np.asarray(visible, bool).reshape(len(p), len(lm))
-    d = lm[None] - p[:, None, :]
-    angle = np.arctan2(d[..., 1], d[..., 0])
-    half = np.minimum(2.0 * np.broadcast_to(np.asarray(eta, float), (len(p),)), 0.5 * math.pi - 1e-9)
-    vertices, count = intersect_cones(*box(bounds, len(p)), lm, angle, visible, half, tol)  # K: the 2η cones
-    width = diameter(vertices, count)
-    valid = _valid(vertices, count)
-    off = vertices - p[:, None, :]
-    rho = np.sqrt(np.max(np.where(valid, off[..., 0] ** 2 + off[..., 1] ** 2, 0.0), axis=1, initial=0.0))
-    bounded_k = np.isfinite(width)
-    # the difference body of X: strips |n_k·d| ≤ h_k around 0, in the box of side 2·diam K
-    span = np.where(bounded_k, width, 0.0)
-    square = np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])
-    diff_v, diff_n = square[None] * span[:, None, None], np.full(len(p), 4, np.int64)
-    rob, k = np.nonzero(visible & bounded_k[:, None])
-    if len(rob):
-        a, b, ok = _strip_rows(p[rob], lm[k], span[rob], rho[rob], half[rob])
-        diff_v, diff_n = _clip_pairs(diff_v, diff_n, rob[ok], a[ok], b[ok], tol)
-    bound = np.where(bounded_k, RADIUS_PER_WIDTH * np.minimum(width, _spread(diff_v, diff_n)), np.inf)
-    return LookBound(bound, span, rho, half, diff_v, diff_n)
-
-
-def one_look_bound(x: np.ndarray, landmarks: np.ndarray, visible: np.ndarray, eta: float | np.ndarray,
-                   bounds: np.ndarray, tol: float = 0.0) -> np.ndarray:  # fmt: skip
-    """:func:`look_bound`'s ``ε(x, S)`` alone, shape (R,) map units.
-
-    Parameters
-    ----------
-    x, landmarks, visible, eta, bounds, tol
-        As :func:`look_bound`.
-    """
-    return look_bound(x, landmarks, visible, eta, bounds, tol).bound
-
-
-def bound_with(look: LookBound, x: np.ndarray, landmark: np.ndarray, tol: float = 0.0) -> np.ndarray:
-    """An upper bound on ``ε`` when each look also sees one more landmark, shape (R,) map units.
-
-    The new landmark's strip clips the difference body; ``diam K`` and ``ρ`` are kept (with the
-    landmark they only shrink, and so do the strips they widen), so this is at least the bound
-    :func:`look_bound` computes with it: a cheap score for placing tags.
-
-    Parameters
-    ----------
-    look : LookBound
-        The looks without it.
-    x : ndarray, shape (R, 2)
-        Where they are taken (map units).
-    landmark : ndarray, shape (R, 2)
-        The landmark each one also sees (map units).
-    tol : float
-        Outside slack of the clips (map units).
-    """
-    p = np.asarray(x, float).reshape(-1, 2)
-    a, b, ok = _strip_rows(p, np.asarray(landmark, float).reshape(-1, 2), look.width, look.rho, look.half)
-    rows = np.flatnonzero(ok & np.isfinite(look.bound))
-    vertices, count = look.diff_vertices, look.diff_count
-    if len(rows):
-        vertices, count = _clip_pairs(vertices, count, rows, a[rows], b[rows], tol)
-    tighter = np.minimum(look.bound, RADIUS_PER_WIDTH * np.minimum(look.width, _spread(vertices, count)))
-    return np.where(np.isfinite(look.bound), tighter, np.inf)
 
 
 def contains(vertices: np.ndarray, count: np.ndarray, x: np.ndarray, tol: float = 0.0) -> np.ndarray:
@@ -584,7 +473,7 @@ def contains(vertices: np.ndarray, count: np.ndarray, x: np.ndarray, tol: float 
         Slack (map units).
     """
     p = np.asarray(x, float).reshape(-1, 2)
-    valid = _valid(vertices, count)
+    valid = valid_vertices(vertices, count)
     a = vertices
     b = vertices[np.arange(len(vertices))[:, None], _next_index(vertices, count)]
     inside = crossing_parity(a, b, p, valid)

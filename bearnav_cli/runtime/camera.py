@@ -35,10 +35,20 @@ from bearnav_cli.runtime.bearing import wrap
 from bearnav_cli.runtime.camera_model import Intrinsics, Mount, finite, rotation_z
 
 __all__ = [
-    "BEHIND_MARGIN", "CORNER_SLACK", "ROTATION_TOL", "Detection", "Observation", "TagMap",
-    "heading_from_tag", "observe", "project_world", "tag_corners_world", "tag_number", "tag_pose_from_opencv",
+    "BEHIND_MARGIN",
+    "CORNER_SLACK",
+    "ROTATION_TOL",
+    "Detection",
+    "Observation",
+    "TagMap",
+    "heading_from_tag",
+    "observe",
+    "project_world",
+    "tag_corners_world",
+    "tag_number",
+    "tag_pose_from_opencv",
     "tag_rotation_world",
-]  # fmt: skip
+]
 
 #: A detection is rejected as seen from behind when its world bearing points past the tag's plane,
 #: along the tag's facing, by more than this (rad): ``bearing · facing > sin(BEHIND_MARGIN)``. A
@@ -93,16 +103,18 @@ class TagMap:
         facing = np.array(self.facing, float).reshape(-1)
         n = len(numbers)
         if len(positions) != n or len(facing) != n:
-            raise InvalidParamsError(f"{n} numbers, {len(positions)} positions and {len(facing)} facings",
-                                     field="landmarks")  # fmt: skip
+            raise InvalidParamsError(
+                f"{n} numbers, {len(positions)} positions and {len(facing)} facings", field="landmarks"
+            )
         ids = tuple(str(i) for i in self.ids) if self.ids else tuple(str(v) for v in numbers)
         used = numbers[numbers >= 0]
         values, counts = np.unique(used, return_counts=True)
         if (counts > 1).any():
             twice = int(values[counts > 1][0])
             names = [ids[k] for k in np.flatnonzero(numbers == twice)]
-            raise InvalidParamsError(f"landmarks {', '.join(names)} have the same detector id {twice}",
-                                     field="landmarks")  # fmt: skip
+            raise InvalidParamsError(
+                f"landmarks {', '.join(names)} have the same detector id {twice}", field="landmarks"
+            )
         for a in (numbers, positions, facing):
             a.flags.writeable = False
         object.__setattr__(self, "numbers", numbers)
@@ -248,8 +260,9 @@ def heading_from_tag(camera_R_tag: Any, tag_facing: float, mount: Mount) -> floa
     if r.shape != (3, 3) or not np.all(np.isfinite(r)):
         raise InvalidParamsError("expected a finite 3 × 3 rotation", field="camera_R_tag")
     if not math.isfinite(tag_facing):
-        raise InvalidParamsError("a free-standing tag (facing NaN) has no known orientation to take a heading "
-                                 "from", field="tag_facing")  # fmt: skip
+        raise InvalidParamsError(
+            "a free-standing tag (facing NaN) has no known orientation to take a heading from", field="tag_facing"
+        )
     w_r_j = tag_rotation_world(tag_facing) @ (mount.rotation @ r).T
     return math.atan2(w_r_j[1, 0], w_r_j[0, 0])
 
@@ -283,8 +296,11 @@ class Detection:
         corners.flags.writeable = False
         object.__setattr__(self, "corners", corners)
         tag_id = self.tag_id
-        if isinstance(tag_id, (bool, np.bool_)) or not isinstance(tag_id, (int, np.integer, float, np.floating)) \
-                or not (math.isfinite(tag_id) and float(tag_id).is_integer() and tag_id >= 0):  # fmt: skip
+        if (
+            isinstance(tag_id, (bool, np.bool_))
+            or not isinstance(tag_id, (int, np.integer, float, np.floating))
+            or not (math.isfinite(tag_id) and float(tag_id).is_integer() and tag_id >= 0)
+        ):
             raise InvalidParamsError(f"expected a whole number 0 or more, got {tag_id!r}", field="tag_id")
         object.__setattr__(self, "tag_id", int(tag_id))
         if self.pose is not None:
@@ -358,8 +374,15 @@ def _mean_heading(headings: list[float]) -> float | None:
     return float(np.angle(np.exp(1j * group).mean()))
 
 
-def observe(detections: Any, intrinsics: Intrinsics, mount: Mount, tags: TagMap, heading: float | None = None, *,
-            behind_margin: float = BEHIND_MARGIN) -> Observation:  # fmt: skip
+def observe(
+    detections: Any,
+    intrinsics: Intrinsics,
+    mount: Mount,
+    tags: TagMap,
+    heading: float | None = None,
+    *,
+    behind_margin: float = BEHIND_MARGIN,
+) -> Observation:
     """World-frame bearings (and the heading) from the AprilTag detections in one image.
 
     Parameters
@@ -420,15 +443,20 @@ def observe(detections: Any, intrinsics: Intrinsics, mount: Mount, tags: TagMap,
             continue
         seen.add(k)
         accepted.append((k, det))
-    pose_headings = [heading_from_tag(det.pose[0], float(tags.facing[k]), mount) for k, det in accepted
-                     if det.pose is not None and math.isfinite(tags.facing[k])]  # fmt: skip
+    pose_headings = [
+        heading_from_tag(det.pose[0], float(tags.facing[k]), mount)
+        for k, det in accepted
+        if det.pose is not None and math.isfinite(tags.facing[k])
+    ]
     pose_heading = _mean_heading(pose_headings)
     if heading is not None:
         heading = finite(heading, "heading")
     elif accepted:
         if pose_heading is None:
-            raise InvalidParamsError("no heading: pass the compass yaw, or detections with tag poses (of tags "
-                                     "with a known facing)", field="heading")  # fmt: skip
+            raise InvalidParamsError(
+                "no heading: pass the compass yaw, or detections with tag poses (of tags with a known facing)",
+                field="heading",
+            )
         heading = pose_heading
     if accepted:
         corners = np.stack([det.corners for _, det in accepted])  # (m, 4, 2)
@@ -452,8 +480,16 @@ def observe(detections: Any, intrinsics: Intrinsics, mount: Mount, tags: TagMap,
                 behind += 1
                 continue
             bearings[k], visible[k] = b, True
-    return Observation(bearings, visible, heading, unknown=unknown, from_behind=behind, outside_image=outside,
-                       duplicates=duplicates, pose_heading=pose_heading)  # fmt: skip
+    return Observation(
+        bearings,
+        visible,
+        heading,
+        unknown=unknown,
+        from_behind=behind,
+        outside_image=outside,
+        duplicates=duplicates,
+        pose_heading=pose_heading,
+    )
 
 
 def _diagonals(xy: np.ndarray) -> np.ndarray:

@@ -75,13 +75,16 @@ class Intrinsics:
             object.__setattr__(self, name, int(value))
         d = tuple(finite(v, "distortion") for v in self.distortion)
         if len(d) not in (0, 4, 5, 8):
-            raise InvalidParamsError(f"expected 0, 4, 5 (plumb_bob) or 8 (rational_polynomial) coefficients, got "
-                                     f"{len(d)}", field="distortion")  # fmt: skip
+            raise InvalidParamsError(
+                f"expected 0, 4, 5 (plumb_bob) or 8 (rational_polynomial) coefficients, got {len(d)}",
+                field="distortion",
+            )
         object.__setattr__(self, "distortion", d)
 
     @classmethod
-    def from_camera_info(cls, k: Any, d: Any, width: int, height: int,
-                         distortion_model: str = "plumb_bob") -> Intrinsics:  # fmt: skip
+    def from_camera_info(
+        cls, k: Any, d: Any, width: int, height: int, distortion_model: str = "plumb_bob"
+    ) -> Intrinsics:
         """From the fields of a ``sensor_msgs/CameraInfo``.
 
         Parameters
@@ -99,12 +102,17 @@ class Intrinsics:
             raise InvalidParamsError(f"expected the 9 numbers of CameraInfo.k, got {k.size}", field="k")
         d = tuple(float(v) for v in np.asarray(d, float).reshape(-1))
         if distortion_model not in DISTORTION_MODELS and any(d):
-            raise InvalidParamsError(f"unsupported distortion model {distortion_model!r} (expected one of: "
-                                     f"{', '.join(DISTORTION_MODELS)})", field="distortion_model")  # fmt: skip
+            raise InvalidParamsError(
+                f"unsupported distortion model {distortion_model!r} (expected one of: {', '.join(DISTORTION_MODELS)})",
+                field="distortion_model",
+            )
         for name, value in (("fx", k[0]), ("fy", k[4])):
             if not (math.isfinite(value) and value > 0):
-                raise InvalidParamsError(f"the focal length must be positive (px), got {value:g} (an uncalibrated "
-                                         "camera publishes K = 0: calibrate it)", field=name)  # fmt: skip
+                raise InvalidParamsError(
+                    f"the focal length must be positive (px), got {value:g} (an uncalibrated "
+                    "camera publishes K = 0: calibrate it)",
+                    field=name,
+                )
         if not np.all(np.isfinite(k)):
             raise InvalidParamsError("CameraInfo.k contains NaN or infinity", field="k")
         if abs(k[1]) > 1e-9 * max(abs(k[0]), 1.0) or abs(k[3]) > 0 or np.any(k[6:] != (0.0, 0.0, 1.0)):
@@ -126,8 +134,9 @@ class Intrinsics:
         """
         hfov = finite(hfov, "hfov")
         if not 0 < hfov < math.pi:
-            raise InvalidParamsError(f"a pinhole camera's field of view lies in (0°, 180°), got "
-                                     f"{math.degrees(hfov):g}°", field="hfov")  # fmt: skip
+            raise InvalidParamsError(
+                f"a pinhole camera's field of view lies in (0°, 180°), got {math.degrees(hfov):g}°", field="hfov"
+            )
         f = 0.5 * width / math.tan(0.5 * hfov)
         return cls(fx=f, fy=f, cx=0.5 * (width - 1), cy=0.5 * (height - 1), width=width, height=height)
 
@@ -226,8 +235,9 @@ class Mount:
         if r.shape != (3, 3) or not np.all(np.isfinite(r)):
             raise InvalidParamsError("expected a finite 3 × 3 matrix", field="rotation")
         if not np.allclose(r.T @ r, np.eye(3), atol=1e-6) or np.linalg.det(r) < 0:
-            raise InvalidParamsError("robot_R_camera must be a rotation (orthonormal, determinant +1)",
-                                     field="rotation")  # fmt: skip
+            raise InvalidParamsError(
+                "robot_R_camera must be a rotation (orthonormal, determinant +1)", field="rotation"
+            )
         if t.shape != (3,) or not np.all(np.isfinite(t)):
             raise InvalidParamsError("expected 3 finite numbers (m)", field="translation")
         r.flags.writeable = t.flags.writeable = False

@@ -202,8 +202,9 @@ def locate(arrays: PlanArrays, x: np.ndarray, tol: float | None = None, eps_sw: 
     return chosen
 
 
-def least_rank_cell(arrays: PlanArrays, x: np.ndarray, erosion: np.ndarray | float = 0.0,
-                    below: np.ndarray | None = None) -> np.ndarray:  # fmt: skip
+def least_rank_cell(
+    arrays: PlanArrays, x: np.ndarray, erosion: np.ndarray | float = 0.0, below: np.ndarray | None = None
+) -> np.ndarray:
     """The containing cell of least rank (ties: lower index), ALGORITHMS §11.3, shape (R,); ``-1`` outside ``D``.
 
     Membership is tested on the cells eroded by ``erosion`` (``x ∈ P_c ⊖ δ``: every row with
@@ -240,9 +241,15 @@ def least_rank_cell(arrays: PlanArrays, x: np.ndarray, erosion: np.ndarray | flo
     return out
 
 
-def funnel_update(arrays: PlanArrays, cell: np.ndarray, target: np.ndarray, x: np.ndarray, eps_sw: float,
-                  erosion: np.ndarray | float = 0.0,
-                  keep: np.ndarray | float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
+def funnel_update(
+    arrays: PlanArrays,
+    cell: np.ndarray,
+    target: np.ndarray,
+    x: np.ndarray,
+    eps_sw: float,
+    erosion: np.ndarray | float = 0.0,
+    keep: np.ndarray | float | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The composition policy of ALGORITHMS §11.3 for every robot (funnel plans).
 
     The active cell is kept while the robot is in it; whenever it lies in a cell of smaller rank

@@ -47,8 +47,16 @@ class Controller:
         self.heading = float(heading)  # the last heading given (rad): where the look-ahead point is
 
     @classmethod
-    def from_plan(cls, path: str, *, speed: float = SPEED, dt: float | None = None, dynamics: str = "single",
-                  heading: float = 0.0, **options: Any) -> Controller:  # fmt: skip
+    def from_plan(
+        cls,
+        path: str,
+        *,
+        speed: float = SPEED,
+        dt: float | None = None,
+        dynamics: str = "single",
+        heading: float = 0.0,
+        **options: Any,
+    ) -> Controller:
         """Load ``plan.npz``; ``options`` are further :class:`ControlSettings` fields.
 
         The settings come from :meth:`ControlSettings.for_plan`, the builder ``bearnav simulate``
@@ -106,8 +114,14 @@ class Controller:
         """
         if heading is None and self.settings.dynamics == "unicycle":
             raise ValueError("the unicycle needs its heading (rad) on every frame")
-        out = control(self.arrays, self.settings, self.state, np.asarray(bearings, float)[None],
-                      np.asarray(visible, bool)[None], np.array([0.0 if heading is None else heading]))  # fmt: skip
+        out = control(
+            self.arrays,
+            self.settings,
+            self.state,
+            np.asarray(bearings, float)[None],
+            np.asarray(visible, bool)[None],
+            np.array([0.0 if heading is None else heading]),
+        )
         self.state, self.last = out.state, out
         self.heading = 0.0 if heading is None else float(heading)
         if out.lost[0]:
@@ -158,8 +172,11 @@ def error_model(robot: dict) -> dict:
     """The set estimator's bounds (ALGORITHMS §12.1) from robot parameters, as :class:`ControlSettings` fields:
     ``bearing_bound = η_cam + ψ`` and ``heading_bound = ψ`` (rad), ``slip`` κ, and ``slip_floor`` ν where given."""
     compass = robot.get("compass_error_deg") or 0.0
-    fields = {"bearing_bound": math.radians(robot["bearing_error_deg"] + compass),
-              "heading_bound": math.radians(compass), "slip": robot["slip"]}  # fmt: skip
+    fields = {
+        "bearing_bound": math.radians(robot["bearing_error_deg"] + compass),
+        "heading_bound": math.radians(compass),
+        "slip": robot["slip"],
+    }
     if robot.get("slip_floor") is not None:
         fields["slip_floor"] = robot["slip_floor"]
     return fields

@@ -39,9 +39,15 @@ class Fix:
     variance: np.ndarray
 
 
-def measure(arrays: PlanArrays, s: ControlSettings, bearings: np.ndarray, visible: np.ndarray,
-            x_true: np.ndarray | None = None, displacements: np.ndarray | None = None,
-            prior: np.ndarray | None = None) -> Fix:  # fmt: skip
+def measure(
+    arrays: PlanArrays,
+    s: ControlSettings,
+    bearings: np.ndarray,
+    visible: np.ndarray,
+    x_true: np.ndarray | None = None,
+    displacements: np.ndarray | None = None,
+    prior: np.ndarray | None = None,
+) -> Fix:
     """The position fix of one frame, for ``R`` robots (ALGORITHMS §6.2, §7.2).
 
     Bearing mode: the ``lsq`` intersection of the visible bearing lines
@@ -98,8 +104,9 @@ def measure(arrays: PlanArrays, s: ControlSettings, bearings: np.ndarray, visibl
             measured = np.array(x_true, float).reshape(-1, 2)
         fix = np.ones(r, bool)
     else:
-        estimate = bearing.reconstruct(bearings, visible, arrays.landmarks, 0, method="lsq",
-                                       min_spread=s.min_spread, tol=s.tol)  # fmt: skip
+        estimate = bearing.reconstruct(
+            bearings, visible, arrays.landmarks, 0, method="lsq", min_spread=s.min_spread, tol=s.tol
+        )
         measured, fix = estimate.x_hat, estimate.usable.copy()
     at = measured  # where a fix's variance takes its distances
     if s.measurement != "displacement" and s.bearing_sigma > 0 and fix.any():
@@ -111,14 +118,16 @@ def measure(arrays: PlanArrays, s: ControlSettings, bearings: np.ndarray, visibl
         refined = measured.copy()
         for rows, passes in ((fix & known, 1), (fix & ~known, 2)):
             if rows.any():
-                refined[rows] = bearing.refine_fix(bearings[rows], visible[rows], arrays.landmarks, start[rows], s.tol,
-                                                   iterations=passes)  # fmt: skip
+                refined[rows] = bearing.refine_fix(
+                    bearings[rows], visible[rows], arrays.landmarks, start[rows], s.tol, iterations=passes
+                )
         at = np.where(known[:, None], start, refined)  # no prediction: the variance at the refined fix
         measured = refined
     sigma_fix2 = np.zeros(r)
     if s.bearing_sigma > 0 and fix.any():
-        sigma_fix2[fix] = bearing.fix_variance(bearings[fix], visible[fix], arrays.landmarks, at[fix],
-                                               s.bearing_sigma, arrays.tol)  # fmt: skip
+        sigma_fix2[fix] = bearing.fix_variance(
+            bearings[fix], visible[fix], arrays.landmarks, at[fix], s.bearing_sigma, arrays.tol
+        )
         fix &= sigma_fix2 <= (s.max_fix_error / 3.0) ** 2
     return Fix(measured, fix, sigma_fix2)
 
@@ -254,8 +263,14 @@ class SetEstimate:
     seen: np.ndarray
 
 
-def bounded_update(arrays: PlanArrays, s: ControlSettings, state: ControlState, bearings: np.ndarray,
-                   visible: np.ndarray, x_true: np.ndarray | None = None) -> SetEstimate:  # fmt: skip
+def bounded_update(
+    arrays: PlanArrays,
+    s: ControlSettings,
+    state: ControlState,
+    bearings: np.ndarray,
+    visible: np.ndarray,
+    x_true: np.ndarray | None = None,
+) -> SetEstimate:
     """One step of the bounded-error estimator for ``R`` robots (ALGORITHMS §12.2).
 
     Predict: ``X_t⁻ = (X_{t−1} + d̂_t) ⊕ B(κ‖d̂_t‖ + ν)`` with ``d̂_t = dt·motion`` the last command's
@@ -313,8 +328,9 @@ def bounded_update(arrays: PlanArrays, s: ControlSettings, state: ControlState, 
     if inconsistent.any():
         # the bearing sets alone, or the prediction where they are empty too
         idx = np.flatnonzero(inconsistent)
-        fresh_v, fresh_n = bounded.intersect_cones(start_v[idx], start_n[idx], arrays.landmarks, angle[idx],
-                                                   visible[idx], eta, tol)  # fmt: skip
+        fresh_v, fresh_n = bounded.intersect_cones(
+            start_v[idx], start_n[idx], arrays.landmarks, angle[idx], visible[idx], eta, tol
+        )
         fresh_v = bounded.fit(fresh_v, width).copy()
         empty = fresh_n == 0
         fresh_v[empty], fresh_n[empty] = vertices[idx[empty]], count[idx[empty]]

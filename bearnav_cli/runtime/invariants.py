@@ -325,8 +325,11 @@ def check_cells_form(cells: Any) -> None:
     ArtifactError
         Naming the field and what is wrong.
     """
-    for coords, offsets in (("cell_A", "cell_row_offsets"), ("cbf_A", "cbf_offsets"),
-                            ("cell_vertices", "cell_vertex_offsets")):  # fmt: skip
+    for coords, offsets in (
+        ("cell_A", "cell_row_offsets"),
+        ("cbf_A", "cbf_offsets"),
+        ("cell_vertices", "cell_vertex_offsets"),
+    ):
         _fail(ragged_problem(getattr(cells, coords), getattr(cells, offsets)), f"{coords} offsets")
     n, n_lm, parent = len(cells.nodes), len(cells.map.landmarks), cells.parent
     if n == 0 or parent[0] != -1 or np.count_nonzero(parent == -1) != 1:
@@ -337,13 +340,23 @@ def check_cells_form(cells: Any) -> None:
         raise ArtifactError("landmark index out of range", field="fixed_landmark")
     if not np.array_equal(np.diff(cells.cell_row_offsets), np.diff(cells.cell_vertex_offsets)):
         raise ArtifactError("one row per polygon edge expected", field="cell_row_offsets")
-    for name in ("nodes", "collision_samples", "cell_A", "cell_b", "cell_vertices", "exit_point", "exit_dir",
-                 "cbf_A", "cbf_b", "s_min", "s_max"):  # fmt: skip
+    for name in (
+        "nodes",
+        "collision_samples",
+        "cell_A",
+        "cell_b",
+        "cell_vertices",
+        "exit_point",
+        "exit_dir",
+        "cbf_A",
+        "cbf_b",
+        "s_min",
+        "s_max",
+    ):
         if not np.all(np.isfinite(getattr(cells, name))):
             raise ArtifactError("contains NaN or infinity", field=name)
     if cells.certificate not in CERTIFICATES:
-        raise ArtifactError(f"must be one of {', '.join(CERTIFICATES)}, got {cells.certificate!r}",
-                            field="certificate")  # fmt: skip
+        raise ArtifactError(f"must be one of {', '.join(CERTIFICATES)}, got {cells.certificate!r}", field="certificate")
     counts = np.diff(cells.cell_row_offsets)
     goal = parent[cells.cell_node] == -1
     exit_row = cells.cell_exit_row
@@ -353,8 +366,9 @@ def check_cells_form(cells: Any) -> None:
         raise ArtifactError("contains NaN or infinity", field="cell_rank")
     inset = cells.exit_inset
     if not (np.all(np.isnan(inset[goal])) and np.all(np.isfinite(inset[~goal]) & (inset[~goal] >= 0))):
-        raise ArtifactError("must be finite and zero or positive in every edge cell and NaN in the goal cell",
-                            field="exit_inset")  # fmt: skip
+        raise ArtifactError(
+            "must be finite and zero or positive in every edge cell and NaN in the goal cell", field="exit_inset"
+        )
     lookahead = float(cells.lookahead)
     if not (math.isfinite(lookahead) and lookahead >= 0):
         raise ArtifactError(f"must be finite and zero or positive, got {lookahead:g}", field="lookahead")

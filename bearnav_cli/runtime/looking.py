@@ -13,8 +13,8 @@ import math
 import numpy as np
 
 from bearnav_cli.runtime import bearing
-from bearnav_cli.runtime.bounded import one_look_bound
 from bearnav_cli.runtime.estimate import Estimate, axle_bounds
+from bearnav_cli.runtime.look_bound import one_look_bound
 from bearnav_cli.runtime.plan_arrays import PlanArrays
 from bearnav_cli.runtime.settings import ControlSettings, ControlState
 from bearnav_cli.runtime.sight import in_sight
@@ -25,8 +25,14 @@ __all__ = ["LOOK_HEADINGS", "best_bound_heading", "best_view_heading", "look_aro
 LOOK_HEADINGS = 36
 
 
-def look_around(s: ControlSettings, state: ControlState, est: Estimate, last_dir: np.ndarray,
-                heading: np.ndarray, arrays: PlanArrays | None = None) -> tuple[np.ndarray, ...]:  # fmt: skip
+def look_around(
+    s: ControlSettings,
+    state: ControlState,
+    est: Estimate,
+    last_dir: np.ndarray,
+    heading: np.ndarray,
+    arrays: PlanArrays | None = None,
+) -> tuple[np.ndarray, ...]:
     """Who looks around in place, who is lost, and how they turn (ALGORITHMS §7.5 with docs/choices.md).
 
     With odometry, a robot without an estimate never moves blind: it looks around at once, for
@@ -102,8 +108,9 @@ def look_around(s: ControlSettings, state: ControlState, est: Estimate, last_dir
     return scanning, lost, spin, turn, look
 
 
-def best_view_heading(arrays: PlanArrays, s: ControlSettings, x: np.ndarray, phi: np.ndarray,
-                      headings: int = 72) -> np.ndarray:  # fmt: skip
+def best_view_heading(
+    arrays: PlanArrays, s: ControlSettings, x: np.ndarray, phi: np.ndarray, headings: int = 72
+) -> np.ndarray:
     """The camera heading at ``x`` from which the map promises the best fix, shape (R,) rad; NaN if none.
 
     Among ``headings`` evenly spaced headings, those where at least two landmarks are in the field
@@ -157,13 +164,14 @@ def best_view_heading(arrays: PlanArrays, s: ControlSettings, x: np.ndarray, phi
     return out
 
 
-def best_bound_heading(arrays: PlanArrays, s: ControlSettings, x: np.ndarray, phi: np.ndarray,
-                       headings: int = LOOK_HEADINGS) -> np.ndarray:  # fmt: skip
+def best_bound_heading(
+    arrays: PlanArrays, s: ControlSettings, x: np.ndarray, phi: np.ndarray, headings: int = LOOK_HEADINGS
+) -> np.ndarray:
     """The camera heading at ``x`` whose view promises the smallest one-look bound ``ε``, shape (R,) rad.
 
     Among ``headings`` evenly spaced headings, the landmarks in the field of view, in range and in
     line of sight from ``x`` (``sight.in_sight``) give
-    :func:`~bearnav_cli.runtime.bounded.one_look_bound` at ``η = s.bearing_bound``; the least ``ε``
+    :func:`~bearnav_cli.runtime.look_bound.one_look_bound` at ``η = s.bearing_bound``; the least ``ε``
     wins, ties to the smallest turn from ``phi`` (ALGORITHMS §12.5). NaN where no heading sees a
     landmark.
 
@@ -193,8 +201,9 @@ def best_bound_heading(arrays: PlanArrays, s: ControlSettings, x: np.ndarray, ph
     rr, hh = np.nonzero(todo)
     eps = np.full((r, h), np.inf)
     if len(rr):
-        eps[rr, hh] = one_look_bound(p[rr], arrays.landmarks, visible[rr, hh], s.bearing_bound, axle_bounds(arrays),
-                                     arrays.tol)  # fmt: skip
+        eps[rr, hh] = one_look_bound(
+            p[rr], arrays.landmarks, visible[rr, hh], s.bearing_bound, axle_bounds(arrays), arrays.tol
+        )
     theta = np.linspace(-math.pi, math.pi, h, endpoint=False)
     turn = np.abs(bearing.wrap(theta[None, :] - phi[:, None]))
     best = np.lexsort((turn, eps), axis=1)[:, 0] if eps.size else np.zeros(len(p), np.int64)
@@ -203,8 +212,9 @@ def best_bound_heading(arrays: PlanArrays, s: ControlSettings, x: np.ndarray, ph
     return out
 
 
-def views(arrays: PlanArrays, x: np.ndarray, fov: float, max_range: float, headings: int,
-          landmarks: np.ndarray | None = None) -> np.ndarray:  # fmt: skip
+def views(
+    arrays: PlanArrays, x: np.ndarray, fov: float, max_range: float, headings: int, landmarks: np.ndarray | None = None
+) -> np.ndarray:
     """Which landmarks a camera at ``x`` sees at each of ``headings`` evenly spaced headings, (R, H, L).
 
     In the field of view ``fov`` (rad) around the heading, within ``max_range`` (map units; ``inf``:

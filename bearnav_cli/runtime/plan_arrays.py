@@ -39,12 +39,33 @@ RUNTIME_KEYS = schema.RUNTIME_KEYS
 #: The declaration of ``plan.npz``: dtypes and symbolic shapes.
 _PLAN = schema.ENTRIES["plan"]
 #: Arrays of the view that ``plan.npz`` does not hold: derived from the embedded map on loading.
-_MAP_ARRAYS = {"bounds": (np.dtype(float), (4,)), "obstacle_edges": (np.dtype(float), None),
-               "sight_edges": (np.dtype(float), None)}  # fmt: skip
+_MAP_ARRAYS = {
+    "bounds": (np.dtype(float), (4,)),
+    "obstacle_edges": (np.dtype(float), None),
+    "sight_edges": (np.dtype(float), None),
+}
 #: Entries whose shape :meth:`PlanArrays._check_shapes` checks (the rest are checked where they are used).
-_CHECKED_SHAPES = ("landmarks", "nodes", "parent", "cell_node", "cell_A", "cell_b", "cell_row_offsets", "exit_point",
-                   "exit_dir", "gain", "u_max", "bounds", "cell_landmarks", "fixed_landmark", "status", "c_h",
-                   "c_v", "exit_inset", "usable_tolerance")  # fmt: skip
+_CHECKED_SHAPES = (
+    "landmarks",
+    "nodes",
+    "parent",
+    "cell_node",
+    "cell_A",
+    "cell_b",
+    "cell_row_offsets",
+    "exit_point",
+    "exit_dir",
+    "gain",
+    "u_max",
+    "bounds",
+    "cell_landmarks",
+    "fixed_landmark",
+    "status",
+    "c_h",
+    "c_v",
+    "exit_inset",
+    "usable_tolerance",
+)
 
 #: The cell index of :class:`PlanArrays`: at most this many bins along each side of the bounds.
 INDEX_BINS = 32
@@ -407,9 +428,13 @@ class PlanArrays:
             if _PLAN[key].ndim == 0:  # 0-d arrays in the file: a number, or the certificate's text
                 entries[key] = str(entries[key]) if _PLAN[key].dtype == "str" else float(entries[key])
         try:
-            return cls(bounds=map_.bounds, obstacle_edges=ring_edges(map_.obstacles),
-                       sight_edges=ring_edges(map_.raw_obstacles), robot_radius=map_.robot_radius,
-                       **entries)  # fmt: skip
+            return cls(
+                bounds=map_.bounds,
+                obstacle_edges=ring_edges(map_.obstacles),
+                sight_edges=ring_edges(map_.raw_obstacles),
+                robot_radius=map_.robot_radius,
+                **entries,
+            )
         except ArtifactError as exc:
             raise exc.located(file) if file else exc from None
 

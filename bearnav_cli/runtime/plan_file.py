@@ -134,8 +134,12 @@ def human_bytes(count: float) -> str:
     return f"{count:.3g} EB"  # pragma: no cover
 
 
-def read_input(path: str | os.PathLike, error: Callable[..., Exception] = ArtifactError, what: str = "file",
-               field: str | None = None) -> bytes:  # fmt: skip
+def read_input(
+    path: str | os.PathLike,
+    error: Callable[..., Exception] = ArtifactError,
+    what: str = "file",
+    field: str | None = None,
+) -> bytes:
     """The bytes of an input file: a regular file no larger than :func:`memory_budget`, or one clear error.
 
     A device (``/dev/zero``), a FIFO or a socket is refused from its ``stat`` without opening it
@@ -215,8 +219,9 @@ def parse_npz(data: bytes, file: str, budget: int | None = None) -> tuple[dict, 
         raise ArtifactError(f"damaged zip archive ({exc})", file=file) from None
     declared = sum(info.file_size for info in infos)
     if declared > budget:
-        raise ArtifactError(f"declares {human_bytes(declared)} of data, more than the {human_bytes(budget)} "
-                            "a load may use", file=file)  # fmt: skip
+        raise ArtifactError(
+            f"declares {human_bytes(declared)} of data, more than the {human_bytes(budget)} a load may use", file=file
+        )
     for info in infos:
         if not info.filename.endswith(".npy"):
             raise ArtifactError(f"unexpected member {info.filename!r} (an npz holds .npy arrays)", file=file)
@@ -235,8 +240,9 @@ def parse_npz(data: bytes, file: str, budget: int | None = None) -> tuple[dict, 
     if raw is None:
         raise ArtifactError("no manifest entry (not a bearnav artifact)", file=file)
     if raw.dtype.kind != "U" or raw.ndim != 0:
-        raise ArtifactError(f"expected a 0-d JSON text, got a {raw.ndim}-d {raw.dtype} array", file=file,
-                            field="manifest")  # fmt: skip
+        raise ArtifactError(
+            f"expected a 0-d JSON text, got a {raw.ndim}-d {raw.dtype} array", file=file, field="manifest"
+        )
     try:
         manifest = json.loads(str(raw))
     except json.JSONDecodeError as exc:
@@ -274,8 +280,11 @@ def check_manifest_fields(manifest: dict, file: str, stage: str) -> None:
             wanted = " or ".join("an object" if t is dict else t.__name__ for t in types)
             raise ArtifactError(f"expected {wanted}, got {type(value).__name__}", file=file, field=f"manifest.{name}")
     if manifest["stage"] != stage:
-        raise ArtifactError(f"is {manifest['stage']!r}, but {manifest['schema']} is written by {stage!r}", file=file,
-                            field="manifest.stage")  # fmt: skip
+        raise ArtifactError(
+            f"is {manifest['stage']!r}, but {manifest['schema']} is written by {stage!r}",
+            file=file,
+            field="manifest.stage",
+        )
     if not isinstance(manifest["input"].get("content_sha256"), str):
         raise ArtifactError("expected a hash text", file=file, field="manifest.input.content_sha256")
     if not isinstance(manifest["input"].get("path"), (str, type(None))):
@@ -334,8 +343,9 @@ def check_entries(kind: str, entries: dict[str, Any], file: str) -> None:
         elif isinstance(value, str):
             raise ArtifactError(f"expected a {ndim}-d {dtype_kind} array, got a text", file=file, field=key)
         elif value.dtype.kind != dtype_kind or value.ndim != ndim:
-            raise ArtifactError(f"expected a {ndim}-d {dtype_kind} array, got a {value.ndim}-d {value.dtype} one",
-                                file=file, field=key)  # fmt: skip
+            raise ArtifactError(
+                f"expected a {ndim}-d {dtype_kind} array, got a {value.ndim}-d {value.dtype} one", file=file, field=key
+            )
     extra = sorted(set(entries) - set(declared))
     if extra:
         raise ArtifactError(f"unexpected entry (not part of {schema.SCHEMAS[kind]})", file=file, field=extra[0])
@@ -401,9 +411,16 @@ def embedded_map(document: Any, file: str | None = None) -> EmbeddedMap:
         goal = np.asarray(document["goal"], float).reshape(2)
         landmarks = np.asarray([lm["position"] for lm in document["landmarks"]], float).reshape(-1, 2)
         radius = float(document.get("robot_radius", 0.0))
-        rings = [[(np.asarray(o["exterior"], float).reshape(-1, 2),
-                   *(np.asarray(h, float).reshape(-1, 2) for h in o.get("holes", ()))) for o in document[key]]
-                 for key in ("obstacles", "raw_obstacles")]  # fmt: skip
+        rings = [
+            [
+                (
+                    np.asarray(o["exterior"], float).reshape(-1, 2),
+                    *(np.asarray(h, float).reshape(-1, 2) for h in o.get("holes", ())),
+                )
+                for o in document[key]
+            ]
+            for key in ("obstacles", "raw_obstacles")
+        ]
     except (KeyError, TypeError, ValueError, AttributeError) as exc:
         raise ArtifactError(f"malformed embedded map ({type(exc).__name__}: {exc})", file=file, field="map") from None
     if not (np.all(np.isfinite(bounds)) and bounds[0] < bounds[2] and bounds[1] < bounds[3]):
@@ -416,8 +433,11 @@ def embedded_map(document: Any, file: str | None = None) -> EmbeddedMap:
     if robot is not None:
         raise ArtifactError(robot[1], file=file, field=f"map.robot.{robot[0]}".rstrip("."))
     if not (np.all(np.isfinite(goal)) and np.all(np.isfinite(landmarks))):
-        raise ArtifactError("contains NaN or infinity", file=file, field="map.goal" if not np.all(np.isfinite(goal))
-                            else "map.landmarks")  # fmt: skip
+        raise ArtifactError(
+            "contains NaN or infinity",
+            file=file,
+            field="map.goal" if not np.all(np.isfinite(goal)) else "map.landmarks",
+        )
     return EmbeddedMap(document, bounds, goal, landmarks, radius, rings[0], rings[1])
 
 
@@ -497,9 +517,12 @@ def load_plan(path: str | os.PathLike) -> LoadedPlan:
     manifest, entries = parse_npz(read_input(path), file)
     found, current = manifest.get("schema"), schema.SCHEMAS["plan"]
     if found in schema.RETIRED_PLAN_SCHEMAS:
-        raise ArtifactError(f"is a {found} plan, which this version no longer reads; re-run "
-                            f"`bearnav plan MAP.yaml --force` to get {current}", file=file,
-                            field="manifest.schema")  # fmt: skip
+        raise ArtifactError(
+            f"is a {found} plan, which this version no longer reads; re-run "
+            f"`bearnav plan MAP.yaml --force` to get {current}",
+            file=file,
+            field="manifest.schema",
+        )
     if found != current:
         what = f"is a {found} artifact" if found in schema.SCHEMAS.values() else f"unknown schema {found!r}"
         raise ArtifactError(f"{what}, expected {current}", file=file, field="manifest.schema")

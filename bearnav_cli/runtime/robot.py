@@ -115,8 +115,9 @@ def lookahead_point(x: np.ndarray, heading: np.ndarray, lookahead: float) -> np.
     return x + float(lookahead) * np.column_stack([np.cos(theta), np.sin(theta)])
 
 
-def lookahead_command(w: np.ndarray, heading: np.ndarray, lookahead: float,
-                      clamp_reverse: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
+def lookahead_command(
+    w: np.ndarray, heading: np.ndarray, lookahead: float, clamp_reverse: bool = False
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The unicycle command that moves the look-ahead point by ``w`` (Lemma 7), for ``R`` robots.
 
     ``v = w·h(θ)``, ``ω = w·h^⊥(θ)/λ``: then ``ṗ = v h + λ ω h^⊥ = w`` exactly. With

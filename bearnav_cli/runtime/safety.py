@@ -23,8 +23,15 @@ from bearnav_cli.runtime.sight import obstacle_clearance
 __all__ = ["bend_inward", "carry_inside", "certified_pace", "error_ball_pace", "steer_clear"]
 
 
-def certified_pace(arrays: PlanArrays, cell: np.ndarray, x_hat: np.ndarray, error: np.ndarray,
-                   direction: np.ndarray, step: float, disturbance: float) -> np.ndarray:  # fmt: skip
+def certified_pace(
+    arrays: PlanArrays,
+    cell: np.ndarray,
+    x_hat: np.ndarray,
+    error: np.ndarray,
+    direction: np.ndarray,
+    step: float,
+    disturbance: float,
+) -> np.ndarray:
     """The largest fraction of a step that keeps the truth in its cell's barrier set, shape (R,) in [0, 1].
 
     The discrete-time part of Theorem 2 (ALGORITHMS §12.3), done exactly: the true position ``x``
@@ -68,8 +75,15 @@ def certified_pace(arrays: PlanArrays, cell: np.ndarray, x_hat: np.ndarray, erro
     return np.min(bound, axis=1, initial=1.0)
 
 
-def bend_inward(arrays: PlanArrays, cell: np.ndarray, x_hat: np.ndarray, error: np.ndarray, direction: np.ndarray,
-                step: float, disturbance: float) -> np.ndarray:  # fmt: skip
+def bend_inward(
+    arrays: PlanArrays,
+    cell: np.ndarray,
+    x_hat: np.ndarray,
+    error: np.ndarray,
+    direction: np.ndarray,
+    step: float,
+    disturbance: float,
+) -> np.ndarray:
     """The unit step directions turned toward the inside of the faces that :func:`certified_pace` finds near, (R, 2).
 
     For every barrier row ``k`` within reach (``h_k(x̂) − e < ℓ + w``) that the step does not leave
@@ -109,8 +123,9 @@ def bend_inward(arrays: PlanArrays, cell: np.ndarray, x_hat: np.ndarray, error: 
     return out
 
 
-def error_ball_pace(arrays: PlanArrays, s: ControlSettings, cell: np.ndarray, x_hat: np.ndarray,
-                    error_bound: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+def error_ball_pace(
+    arrays: PlanArrays, s: ControlSettings, cell: np.ndarray, x_hat: np.ndarray, error_bound: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """How fast each robot may drive without its error ball reaching an obstacle, and which way is away.
 
     The true position lies within ``e`` (the estimate's error bound, 3σ) of ``x̂``, and a step at

@@ -21,10 +21,20 @@ from bearnav_cli.runtime.defaults import ALPHA, BEARING_SIGMA, LOOP_DEFAULTS, OD
 from bearnav_cli.runtime.robot import ROBOT_DEFAULTS
 
 __all__ = [
-    "BLIND_ERROR_PER_DIAGONAL", "DT_MAX", "DT_PER_DIAGONAL", "SLIP_FLOOR_PER_DIAGONAL",
-    "ControlOutput", "ControlSettings", "ControlState", "ErrorBounds", "FixSettings", "LookSettings", "LoopSettings",
-    "UnicycleSettings", "timing",
-]  # fmt: skip
+    "BLIND_ERROR_PER_DIAGONAL",
+    "DT_MAX",
+    "DT_PER_DIAGONAL",
+    "SLIP_FLOOR_PER_DIAGONAL",
+    "ControlOutput",
+    "ControlSettings",
+    "ControlState",
+    "ErrorBounds",
+    "FixSettings",
+    "LookSettings",
+    "LoopSettings",
+    "UnicycleSettings",
+    "timing",
+]
 
 #: ``ν = SLIP_FLOOR_PER_DIAGONAL · D``, the odometry bound's floor per step (ALGORITHMS §12.1).
 SLIP_FLOOR_PER_DIAGONAL = 1e-4
@@ -227,9 +237,18 @@ class ControlSettings(ErrorBounds, LookSettings, FixSettings, UnicycleSettings, 
         return self.alpha if self.dynamics == "unicycle" else self.speed
 
     @classmethod
-    def for_plan(cls, diagonal: float, tol: float, *, dynamics: str = "single", speed: float = SPEED,
-                 alpha: float = ALPHA, dt: float | None = None, bearing_sigma: float = BEARING_SIGMA,
-                 **fields: object) -> ControlSettings:  # fmt: skip
+    def for_plan(
+        cls,
+        diagonal: float,
+        tol: float,
+        *,
+        dynamics: str = "single",
+        speed: float = SPEED,
+        alpha: float = ALPHA,
+        dt: float | None = None,
+        bearing_sigma: float = BEARING_SIGMA,
+        **fields: object,
+    ) -> ControlSettings:
         """The settings of a plan's loop: the one builder of ``bearnav simulate`` and :class:`Controller`.
 
         ``dt`` defaults to ``min(0.0025·D/v, 0.2)``, ``eps_sw`` to ``2·v·dt`` and ``blind_error``
@@ -251,8 +270,7 @@ class ControlSettings(ErrorBounds, LookSettings, FixSettings, UnicycleSettings, 
         fields.setdefault("eps_sw", eps_sw)
         fields.setdefault("blind_error", blind_error)
         fields.setdefault("slip_floor", SLIP_FLOOR_PER_DIAGONAL * diagonal)
-        return cls(speed=speed, dt=dt, tol=tol, dynamics=dynamics, alpha=alpha, bearing_sigma=bearing_sigma,
-                   **fields)  # type: ignore[arg-type]  # fmt: skip
+        return cls(speed=speed, dt=dt, tol=tol, dynamics=dynamics, alpha=alpha, bearing_sigma=bearing_sigma, **fields)  # type: ignore[arg-type]
 
 
 @dataclass(eq=False)
@@ -318,10 +336,23 @@ class ControlState:
         """Robots that have not had a fix yet, facing ``heading`` (rad, shape (R,))."""
         h = np.asarray(heading, float).reshape(-1)
         r = len(h)
-        return cls(np.full(r, -1, np.int64), np.full(r, -1, np.int64), np.column_stack([np.cos(h), np.sin(h)]),
-                   np.zeros(r), np.zeros((r, 2)), np.zeros((r, 2)), np.zeros(r, bool), np.full(r, np.inf),
-                   np.zeros(r, bool), np.ones(r), np.full(r, np.nan), np.zeros(r),
-                   np.zeros((r, MAX_VERTICES, 2)), np.zeros(r, np.int64), np.full(r, np.nan))  # fmt: skip
+        return cls(
+            np.full(r, -1, np.int64),
+            np.full(r, -1, np.int64),
+            np.column_stack([np.cos(h), np.sin(h)]),
+            np.zeros(r),
+            np.zeros((r, 2)),
+            np.zeros((r, 2)),
+            np.zeros(r, bool),
+            np.full(r, np.inf),
+            np.zeros(r, bool),
+            np.ones(r),
+            np.full(r, np.nan),
+            np.zeros(r),
+            np.zeros((r, MAX_VERTICES, 2)),
+            np.zeros(r, np.int64),
+            np.full(r, np.nan),
+        )
 
     def take(self, idx: np.ndarray) -> ControlState:
         """The state of the robots ``idx``."""

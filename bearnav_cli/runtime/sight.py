@@ -79,9 +79,11 @@ def edges_clear(edges: np.ndarray, a: np.ndarray, b: np.ndarray, ok: np.ndarray 
         # touching counts as a collision: an endpoint of one segment on the other (orientation 0
         # and inside the other's bounding box)
         touch = (
-            _on_segment(o1, p[None], A, Bp) | _on_segment(o2, q[None], A, Bp)
-            | _on_segment(o3, A, p[None], q[None]) | _on_segment(o4, Bp, p[None], q[None])
-        )  # fmt: skip
+            _on_segment(o1, p[None], A, Bp)
+            | _on_segment(o2, q[None], A, Bp)
+            | _on_segment(o3, A, p[None], q[None])
+            | _on_segment(o4, Bp, p[None], q[None])
+        )
         ok[s : s + step] &= ~np.any(proper | touch, axis=1)
     return ok
 

@@ -108,8 +108,9 @@ def control(
         if s.reconstruction != "lsq":  # the bearings are taken at x, not at p: the output comes from p̂
             policy = dataclasses.replace(s, reconstruction="lsq")
     est = carry_inside(arrays, s, state, reference)
-    cell, target, last_dir, u, stalled, relocated = follow_fields(arrays, policy, state, est, bearings, visible,
-                                                                  displacements)  # fmt: skip
+    cell, target, last_dir, u, stalled, relocated = follow_fields(
+        arrays, policy, state, est, bearings, visible, displacements
+    )
     if s.keep_clear:
         pace, away = error_ball_pace(arrays, s, cell, est.x_hat, est.error_bound)
         u = steer_clear(u, pace, away)
@@ -151,24 +152,57 @@ def control(
         forward, motion = forward * slow, motion * slow[:, None]
     # the estimate always moves on with the robot's own motion, steering with it or not; it is the axle's
     x_hat = axle.x_hat if ahead else est.x_hat
-    new = ControlState(cell, target, last_dir, est.hold, np.where(est.known[:, None], x_hat, state.x_hat), motion,
-                       est.known, est.var, scanning, spin, look,
-                       np.where(scanning & ~state.scanning, est.hold - s.dt, state.scan_from),
-                       state.set_vertices, state.set_count, state.resume)  # fmt: skip
+    new = ControlState(
+        cell,
+        target,
+        last_dir,
+        est.hold,
+        np.where(est.known[:, None], x_hat, state.x_hat),
+        motion,
+        est.known,
+        est.var,
+        scanning,
+        spin,
+        look,
+        np.where(scanning & ~state.scanning, est.hold - s.dt, state.scan_from),
+        state.set_vertices,
+        state.set_count,
+        state.resume,
+    )
     # certified (§11.4): a funnel plan, driven by a certified cell's field (not a straight approach),
     # on an estimate whose error bound is within the cell's τ_c; a unicycle only as the
     # look-ahead point of §12.6 (λ > 0), and not on a step the reverse clamp changed
     certified = arrays.funnel & est.steer & (target < 0) & (cell >= 0) & within & ~clamped
     if s.dynamics == "unicycle" and not ahead:
         certified = np.zeros(len(cell), bool)  # λ = 0: the heading rules keep it safe in practice, unproven
-    return ControlOutput(velocity, forward, turn, scanning, new, est.fix, lost, stalled, relocated,
-                         np.where(est.steer[:, None], x_hat, 0.0), certified, waiting, scanning | waiting,
-                         est.error_bound, np.zeros(len(cell), bool))  # fmt: skip
+    return ControlOutput(
+        velocity,
+        forward,
+        turn,
+        scanning,
+        new,
+        est.fix,
+        lost,
+        stalled,
+        relocated,
+        np.where(est.steer[:, None], x_hat, 0.0),
+        certified,
+        waiting,
+        scanning | waiting,
+        est.error_bound,
+        np.zeros(len(cell), bool),
+    )
 
 
-def bounded_control(arrays: PlanArrays, s: ControlSettings, state: ControlState, bearings: np.ndarray,
-                    visible: np.ndarray, heading: np.ndarray,
-                    x_true: np.ndarray | None = None) -> ControlOutput:  # fmt: skip
+def bounded_control(
+    arrays: PlanArrays,
+    s: ControlSettings,
+    state: ControlState,
+    bearings: np.ndarray,
+    visible: np.ndarray,
+    heading: np.ndarray,
+    x_true: np.ndarray | None = None,
+) -> ControlOutput:
     """One step of the certified policy of ALGORITHMS §12.3 on the estimate sets of §12.2, for ``R`` robots.
 
     The set ``X_t`` and its estimate ``x̂`` with error ``e`` come from
@@ -223,14 +257,14 @@ def bounded_control(arrays: PlanArrays, s: ControlSettings, state: ControlState,
     # verify's loop with the exact motion of §7.1): no odometry enters the estimate
     step_len = s.top_speed * s.dt  # ℓ
     margin = 0.0 if s.measurement == "displacement" else s.slip * step_len + s.slip_floor
-    est = Estimate(reference, error**2 / 9.0, sets.seen, known & np.isfinite(error), known,
-                   np.where(known, state.hold, 0.0), error)  # fmt: skip
+    est = Estimate(
+        reference, error**2 / 9.0, sets.seen, known & np.isfinite(error), known, np.where(known, state.hold, 0.0), error
+    )
     # the truth is in the active cell (Theorem 2), so its estimate may lie up to e outside it; not after a
     # look-ahead unicycle's look swung p around the axle: then p̂ must lie in a cell eroded by e
     swung = np.isfinite(state.resume) if ahead else np.zeros(r, bool)
     keep = np.where(swung, -error, error)
-    cell, target, last_dir, u, stalled, relocated = follow_fields(arrays, s, state, est, bearings, visible,
-                                                                  keep=keep)  # fmt: skip
+    cell, target, last_dir, u, stalled, relocated = follow_fields(arrays, s, state, est, bearings, visible, keep=keep)
     in_cell = (cell >= 0) & (target < 0) & known
     tau = arrays.tolerance_in(cell)
     move = in_cell & (error + margin <= tau + s.tol)
@@ -289,8 +323,12 @@ def bounded_control(arrays: PlanArrays, s: ControlSettings, state: ControlState,
         # the look's swing may have undone the field's progress, and driving from there repeats it look after look
         # (a loop seen under worst-case bearings): turn back first, as ALGORITHMS §12.6 says
         had = state.cell >= 0
-        worse = pending & had & (cell >= 0) & (arrays.cell_rank[np.maximum(cell, 0)] >=
-                                               arrays.cell_rank[np.maximum(state.cell, 0)])  # fmt: skip
+        worse = (
+            pending
+            & had
+            & (cell >= 0)
+            & (arrays.cell_rank[np.maximum(cell, 0)] >= arrays.cell_rank[np.maximum(state.cell, 0)])
+        )
         move &= ~worse
     drive = (move | (outside & (pace > 0.0) & ~pending)) & np.any(u != 0.0, axis=1)
     back = np.zeros(r, bool)
@@ -352,22 +390,56 @@ def bounded_control(arrays: PlanArrays, s: ControlSettings, state: ControlState,
         # a robot that may not move only turns (to look, or toward its field)
         forward, motion = forward * pace, motion * pace[:, None]
         turn = np.where(scanning, turn, turn_cmd)
-    new = ControlState(cell, target, last_dir, hold, np.where(known[:, None], sets.x_hat, state.x_hat), motion,
-                       known, est.var, scanning, spin, look,
-                       np.where(scanning & ~state.scanning, hold - s.dt, state.scan_from),
-                       sets.vertices, sets.count, resume)  # fmt: skip
+    new = ControlState(
+        cell,
+        target,
+        last_dir,
+        hold,
+        np.where(known[:, None], sets.x_hat, state.x_hat),
+        motion,
+        known,
+        est.var,
+        scanning,
+        spin,
+        look,
+        np.where(scanning & ~state.scanning, hold - s.dt, state.scan_from),
+        sets.vertices,
+        sets.count,
+        resume,
+    )
     certified = arrays.funnel & move & drive & ~clamped
     if s.dynamics == "unicycle" and not ahead:
         certified = np.zeros(r, bool)  # λ = 0: the unicycle is not the single integrator of the certificate
     looking = known & ~drive
-    return ControlOutput(velocity, forward, turn, scanning, new, sets.seen, lost & ~drive, stalled & drive,
-                         relocated, np.where(known[:, None], reference, 0.0), certified, looking & ~scanning & ~back,
-                         looking | ~known, error, sets.inconsistent)  # fmt: skip
+    return ControlOutput(
+        velocity,
+        forward,
+        turn,
+        scanning,
+        new,
+        sets.seen,
+        lost & ~drive,
+        stalled & drive,
+        relocated,
+        np.where(known[:, None], reference, 0.0),
+        certified,
+        looking & ~scanning & ~back,
+        looking | ~known,
+        error,
+        sets.inconsistent,
+    )
 
 
-def follow_fields(arrays: PlanArrays, s: ControlSettings, state: ControlState, est: Estimate, bearings: np.ndarray,
-                  visible: np.ndarray, displacements: np.ndarray | None = None,
-                  keep: np.ndarray | None = None) -> tuple[np.ndarray, ...]:  # fmt: skip
+def follow_fields(
+    arrays: PlanArrays,
+    s: ControlSettings,
+    state: ControlState,
+    est: Estimate,
+    bearings: np.ndarray,
+    visible: np.ndarray,
+    displacements: np.ndarray | None = None,
+    keep: np.ndarray | None = None,
+) -> tuple[np.ndarray, ...]:
     """The cell policy and the unit command of every robot that has an estimate (ALGORITHMS §7.2, §11.3).
 
     The policy is :func:`~bearnav_cli.runtime.cell_policy.update` (funnel cells eroded by the
@@ -417,8 +489,9 @@ def follow_fields(arrays: PlanArrays, s: ControlSettings, state: ControlState, e
     # the filter's 3σ is capped at δ* (beyond it nothing is certified anyway); a set's e_t is a bound
     erosion = None
     if arrays.funnel:
-        erosion = est.error_bound[idx] if s.estimator == "set" else np.minimum(est.error_bound[idx],
-                                                                                arrays.plan_tolerance)  # fmt: skip
+        erosion = (
+            est.error_bound[idx] if s.estimator == "set" else np.minimum(est.error_bound[idx], arrays.plan_tolerance)
+        )
     # a bounded estimate of a robot its cell's certificate keeps inside may stray up to e outside it
     if keep is not None:
         keep = np.asarray(keep, float)[idx]
@@ -432,8 +505,15 @@ def follow_fields(arrays: PlanArrays, s: ControlSettings, state: ControlState, e
     elif s.reconstruction == "lsq" or not fix[idx].all():
         y = bearing.scaled_output(x_hat[idx], arrays.landmarks, f, s.tol)
     else:
-        rec = bearing.reconstruct(bearings[idx], visible[idx], arrays.landmarks, f, method=s.reconstruction,
-                                  min_spread=s.min_spread, tol=s.tol)  # fmt: skip
+        rec = bearing.reconstruct(
+            bearings[idx],
+            visible[idx],
+            arrays.landmarks,
+            f,
+            method=s.reconstruction,
+            min_spread=s.min_spread,
+            tol=s.tol,
+        )
         y = np.where(rec.usable[:, None], rec.y, bearing.scaled_output(x_hat[idx], arrays.landmarks, f, s.tol))
     ui = apply_gain(arrays, c, y)
     stalled[idx] = np.hypot(*affine_field(arrays, c, x_hat[idx]).T) < STALL_FIELD * arrays.u_max[c]

@@ -23,9 +23,16 @@ __all__ = ["APPROACH_ALIGNMENT", "heading_allowance", "unicycle_command"]
 APPROACH_ALIGNMENT = math.radians(10.0)
 
 
-def unicycle_command(s: UnicycleSettings, direction: np.ndarray, heading: np.ndarray, holding: np.ndarray,
-                     scanning: np.ndarray, target: np.ndarray, turn: np.ndarray,
-                     allowed: np.ndarray | None = None) -> tuple[np.ndarray, ...]:  # fmt: skip
+def unicycle_command(
+    s: UnicycleSettings,
+    direction: np.ndarray,
+    heading: np.ndarray,
+    holding: np.ndarray,
+    scanning: np.ndarray,
+    target: np.ndarray,
+    turn: np.ndarray,
+    allowed: np.ndarray | None = None,
+) -> tuple[np.ndarray, ...]:
     """``(v, ω)`` of the unicycle toward the unit command ``direction`` (ALGORITHMS §7.1).
 
     §7.1's ``v = α cos e``; ``turn_first`` uses ``α cos³ e``: a unicycle far off its field slows

@@ -150,8 +150,11 @@ def _funnel_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) 
     children = np.flatnonzero(parent >= 0)
     blocked = children[~space.segments_free(nodes[children], nodes[parent[children]])]
     if len(blocked):  # (C1) rests on free edges: a corridor cannot be cut around an edge through an obstacle
-        raise ArtifactError(f"tree edges are not free (child nodes {cell_list(blocked)}): funnel cells need "
-                            "collision-free edges; re-run rrtstar and simplify", field="nodes")  # fmt: skip
+        raise ArtifactError(
+            f"tree edges are not free (child nodes {cell_list(blocked)}): funnel cells need "
+            "collision-free edges; re-run rrtstar and simplify",
+            field="nodes",
+        )
 
     def region_of(i: int, j: int, all_nodes: np.ndarray) -> Region:
         start = edge_cell(all_nodes, i, j, free_bounds, tol) if local else None
@@ -237,8 +240,11 @@ def _funnel_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) 
                     trial["leaf"] = (p, n, choice)
                     return p, n
                 others = np.setdiff1d(joinable, tried, assume_unique=True)
-                other = join_leaf(p[None], nodes, cost, near_wall, tol, others, nearest=True) \
-                    if len(tried) < BAND_NODE_TRIES and len(others) else None  # fmt: skip
+                other = (
+                    join_leaf(p[None], nodes, cost, near_wall, tol, others, nearest=True)
+                    if len(tried) < BAND_NODE_TRIES and len(others)
+                    else None
+                )
                 if other is None:
                     break
                 n = other[1]
@@ -248,8 +254,13 @@ def _funnel_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) 
         return None
 
     allowed = (1.0 - params.coverage_target) * domain_area
-    pockets = densify(pockets, allowed, params.max_added_nodes,
-                       lambda g: densify_leaf(g, nodes, cost, reach, tol, domain_edge), add_leaf)  # fmt: skip
+    pockets = densify(
+        pockets,
+        allowed,
+        params.max_added_nodes,
+        lambda g: densify_leaf(g, nodes, cost, reach, tol, domain_edge),
+        add_leaf,
+    )
     uncovered_area = sum(p[1] for p in pockets)
     unreachable = [p for p in pockets if p[2]]
     if added:  # an added cell may reach into a part of F_m that no tree cell met: count that part too
@@ -260,11 +271,15 @@ def _funnel_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) 
             uncovered_area = float(shapely.difference(domain, covered).area)
     unreached_area = max(float(full_domain.area) - domain_area, 0.0)
     if unreached_area > NEGLIGIBLE_SHARE * max(float(full_domain.area), 1e-300):
-        log.warning("%.1f%% of the free space away from the walls (F_m, %.3g map units²) is cut off from every "
-                    "cell by passages narrower than %.3g, twice the wall margin (a robot keeping that margin cannot "
-                    "get there): coverage is of the rest; a smaller decompose.barrier_margin or a wider passage "
-                    "would join it",
-                    100 * unreached_area / full_domain.area, unreached_area, 2 * margin)  # fmt: skip
+        log.warning(
+            "%.1f%% of the free space away from the walls (F_m, %.3g map units²) is cut off from every "
+            "cell by passages narrower than %.3g, twice the wall margin (a robot keeping that margin cannot "
+            "get there): coverage is of the rest; a smaller decompose.barrier_margin or a wider passage "
+            "would join it",
+            100 * unreached_area / full_domain.area,
+            unreached_area,
+            2 * margin,
+        )
     after = 1.0 - uncovered_area / domain_area if domain_area > 0 else 1.0
     # F_m's densification is done: its shortfall is warned of here (the band's cells can reach into parts
     # of F_m past passages narrower than 2m without covering them, which the F warning below explains)
@@ -285,8 +300,9 @@ def _funnel_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) 
     whole_free = coverage_domain(free, free_bounds, space.obstacles, 0.0)
     reached_free, _ = reached_parts(whole_free, covered)
     free_area = float(reached_free.area)
-    band = [[g, float(g.area), False] for g in shapely.get_parts(shapely.difference(reached_free, covered))
-            if g.area > 0]  # fmt: skip
+    band = [
+        [g, float(g.area), False] for g in shapely.get_parts(shapely.difference(reached_free, covered)) if g.area > 0
+    ]
     free_before = 1.0 - sum(p[1] for p in band) / free_area if free_area > 0 else 1.0
     depth_q = WALL_LEAF_DEPTH * margin
     refused = []  # band leaves whose cells would have lowered the plan's least τ_c
@@ -301,8 +317,9 @@ def _funnel_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) 
         offset = shapely.boundary(coverage_domain(free, free_bounds, space.obstacles, depth_q))
         shapely.prepare(offset)
         near_wall = space.with_clearance(0.5 * depth_q)
-        band = densify(band, (1.0 - params.coverage_target) * free_area, params.max_added_nodes - len(added),
-                        band_leaf, add_leaf)  # fmt: skip
+        band = densify(
+            band, (1.0 - params.coverage_target) * free_area, params.max_added_nodes - len(added), band_leaf, add_leaf
+        )
     band_unreachable = sum(1 for p in band if p[2])
     free_after = 1.0 - sum(p[1] for p in band) / free_area if free_area > 0 else 1.0
     if len(added) > in_fm:  # the added cells may meet parts of F no cell met before: measure again
@@ -313,18 +330,41 @@ def _funnel_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) 
     if free_after < params.coverage_target and params.cover == "F":
         # the part of F_m past passages narrower than 2m (warned above) is not a band the leaves can fill
         cut_off = unreached_area > NEGLIGIBLE_SHARE * max(free_area, 1e-300)
-        why = (f"{100 * unreached_area / free_area:.1f}% of the free space lies past passages narrower than "
-               f"{2 * margin:.3g} (twice the wall margin) that no tree edge crosses (a smaller "
-               "decompose.barrier_margin would join it); the rest" if cut_off else "the rest")  # fmt: skip
-        log.warning("the cells cover %.1f%% of the free space (of F; target %.1f%%): %s lies within the wall margin "
-                    "%.3g of an obstacle or a wall%s", 100 * free_after, 100 * params.coverage_target, why, margin,
-                    (f", in {band_unreachable} pockets no node reaches with clearance {0.5 * depth_q:.3g}"
-                     + (f" by a cell that tolerates the plan's least position error {floor:.3g} ({len(refused)} such "
-                        "cells were left out)" if refused else ""))
-                    if band_unreachable else " (the max_added_nodes limit was reached)")  # fmt: skip
+        why = (
+            f"{100 * unreached_area / free_area:.1f}% of the free space lies past passages narrower than "
+            f"{2 * margin:.3g} (twice the wall margin) that no tree edge crosses (a smaller "
+            "decompose.barrier_margin would join it); the rest"
+            if cut_off
+            else "the rest"
+        )
+        log.warning(
+            "the cells cover %.1f%% of the free space (of F; target %.1f%%): %s lies within the wall margin "
+            "%.3g of an obstacle or a wall%s",
+            100 * free_after,
+            100 * params.coverage_target,
+            why,
+            margin,
+            (
+                f", in {band_unreachable} pockets no node reaches with clearance {0.5 * depth_q:.3g}"
+                + (
+                    f" by a cell that tolerates the plan's least position error {floor:.3g} ({len(refused)} such "
+                    "cells were left out)"
+                    if refused
+                    else ""
+                )
+            )
+            if band_unreachable
+            else " (the max_added_nodes limit was reached)",
+        )
     if capped:
-        log.warning("exit_inset %.4g capped in %d cells at %.0f%% of their exit point's depth in the parent cell "
-                    "(first: node %d)", params.exit_inset, len(capped), 100 * INSET_LIMIT, capped[0])  # fmt: skip
+        log.warning(
+            "exit_inset %.4g capped in %d cells at %.0f%% of their exit point's depth in the parent cell "
+            "(first: node %d)",
+            params.exit_inset,
+            len(capped),
+            100 * INSET_LIMIT,
+            capped[0],
+        )
     exit_inset = np.array([math.nan] + [insets[i] for i in range(1, len(nodes))])
     cbf = []
     for r in regions:
@@ -353,8 +393,18 @@ def _funnel_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) 
         "unreached_area": unreached_area,
         "obstacle_pieces": len(pieces),
     }
-    return _Layout(nodes, parent, cost, [(r.polygon, r.A, r.b, r.exit_row) for r in regions], cbf,
-                   np.zeros(len(nodes), np.int64), node_added, exit_inset, free_after, stats)  # fmt: skip
+    return _Layout(
+        nodes,
+        parent,
+        cost,
+        [(r.polygon, r.A, r.b, r.exit_row) for r in regions],
+        cbf,
+        np.zeros(len(nodes), np.int64),
+        node_added,
+        exit_inset,
+        free_after,
+        stats,
+    )
 
 
 # --------------------------------------------------------------------------- paper cells (ALGORITHMS §4)
@@ -402,8 +452,7 @@ def _paper_layout(tree: Tree, params: Params, space: FreeSpace, margin: float) -
             exit_row = exit_row_index(A, b, z, nodes[j], tol)  # edge_cell keeps the face: a ValueError is a bug
         regions.append((polygon, A, b, exit_row))
         cbf.append((normals, offsets))
-    return _Layout(nodes, parent, np.array(tree.cost, float), regions, cbf, flags, np.zeros(n, bool),
-                   stats={})  # fmt: skip
+    return _Layout(nodes, parent, np.array(tree.cost, float), regions, cbf, flags, np.zeros(n, bool), stats={})
 
 
 # --------------------------------------------------------------------------- the stage

@@ -33,8 +33,17 @@ from bearnav_cli.params.map_ import Params
 from bearnav_cli.runtime.plan_arrays import ring_edges
 from bearnav_cli.runtime.robot import ROBOT_DEFAULTS, ROBOT_KEYS
 
-__all__ = ["GridSource", "MAP_KEYS", "MapSource", "VERSION", "infer_facing", "listed_obstacles", "run",
-           "spec_of", "summary"]  # fmt: skip
+__all__ = [
+    "GridSource",
+    "MAP_KEYS",
+    "MapSource",
+    "VERSION",
+    "infer_facing",
+    "listed_obstacles",
+    "run",
+    "spec_of",
+    "summary",
+]
 
 VERSION = 2  # 2: landmarks have a facing
 log = logging.getLogger(__name__)
@@ -275,17 +284,23 @@ def infer_facing(points: np.ndarray, bounds: np.ndarray, raw: shapely.Geometry, 
     return out
 
 
-def _facing(reader: _Reader, given: np.ndarray, landmarks: np.ndarray, bounds: np.ndarray,
-            raw: shapely.Geometry, tol: float) -> np.ndarray:  # fmt: skip
+def _facing(
+    reader: _Reader, given: np.ndarray, landmarks: np.ndarray, bounds: np.ndarray, raw: shapely.Geometry, tol: float
+) -> np.ndarray:
     """Each landmark's facing: the one given, else the one its wall implies (:func:`infer_facing`)."""
     inferred = infer_facing(landmarks, bounds, raw, tol)
     facing = np.array([inferred[k] if f is None else f for k, f in enumerate(given)], float)
     for k in np.flatnonzero([f is not None for f in given]):
         f = facing[k]
         if math.isfinite(f) and math.isfinite(inferred[k]) and math.cos(f - inferred[k]) < 0:
-            log.warning("%s: landmarks[%d].facing %.4g° points into the wall it is on (its free side faces "
-                        "%.4g°): the tag cannot be seen", reader.file, k, math.degrees(f) % 360,
-                        math.degrees(inferred[k]))  # fmt: skip
+            log.warning(
+                "%s: landmarks[%d].facing %.4g° points into the wall it is on (its free side faces "
+                "%.4g°): the tag cannot be seen",
+                reader.file,
+                k,
+                math.degrees(f) % 360,
+                math.degrees(inferred[k]),
+            )
     return facing
 
 
@@ -455,8 +470,10 @@ def _validate(reader: _Reader, map_: Map, params: Params, culprit: str | None = 
     if space.free_area <= 0:
         raise fail("obstacles", "the free space is empty")
     # the free space a message names is the planned point's: say what it is less than the map's
-    free = (f"the free space (the bounds less the walls and obstacles grown by the {map_.inflation_text}, where the "
-            "robot's centre may go)")  # fmt: skip
+    free = (
+        f"the free space (the bounds less the walls and obstacles grown by the {map_.inflation_text}, where the "
+        "robot's centre may go)"
+    )
     if not space.points_strictly_free(map_.goal)[0]:
         what = "the goal " if culprit else ""
         raise fail("goal", f"{what}{map_.goal.tolist()} is not strictly inside {free}")

@@ -234,8 +234,9 @@ def _brute_nearest(points: np.ndarray, nodes: np.ndarray, k: int) -> tuple[np.nd
         d = points[s : s + step, None, :] - nodes[None, :, :]
         d = np.sqrt(d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1])
         # the k smallest by partition, then those k in order (ties: the lower index)
-        part = np.argpartition(d, k - 1, axis=1)[:, :k] if k < d.shape[1] else np.tile(np.arange(d.shape[1]),
-                                                                                        (len(d), 1))  # fmt: skip
+        part = (
+            np.argpartition(d, k - 1, axis=1)[:, :k] if k < d.shape[1] else np.tile(np.arange(d.shape[1]), (len(d), 1))
+        )
         part.sort(axis=1)
         near = np.take_along_axis(d, part, axis=1)
         order = np.take_along_axis(part, np.argsort(near, axis=1, kind="stable"), axis=1)

@@ -35,9 +35,27 @@ from bearnav_cli.world.loop import EstimateTrace, Loop, trace_estimates
 from bearnav_cli.world.motion import Base, Contact, body_space, initial_headings
 from bearnav_cli.world.starts import parse_starts
 
-__all__ = ["PROGRESS_EVERY", "PROGRESS_WINDOW", "Params", "Settings", "VERSION", "check_resources", "estimate_trace",
-           "in_domain", "make_camera", "metrics", "resolve_starts", "rollout", "run", "settings", "start_loop",
-           "step_limit", "step_limits", "summary", "tree_routes"]  # fmt: skip
+__all__ = [
+    "PROGRESS_EVERY",
+    "PROGRESS_WINDOW",
+    "Params",
+    "Settings",
+    "VERSION",
+    "check_resources",
+    "estimate_trace",
+    "in_domain",
+    "make_camera",
+    "metrics",
+    "resolve_starts",
+    "rollout",
+    "run",
+    "settings",
+    "start_loop",
+    "step_limit",
+    "step_limits",
+    "summary",
+    "tree_routes",
+]
 
 VERSION = 3
 log = logging.getLogger(__name__)
@@ -111,18 +129,30 @@ def settings(plan, params: Params) -> Settings:
         # does (a filter sure of its fixes rejects the slightly-off ones and gets lost: kitchen, 2 of 4)
         sigma = max(sigma, BEARING_SIGMA)
     control = ControlSettings.for_plan(
-        plan.map.diagonal, plan.map.tol, dynamics=params.dynamics, speed=params.speed, alpha=params.alpha,
-        dt=params.dt, bearing_sigma=sigma, beta=params.beta,
-        clamp_reverse=params.clamp_reverse or not plan.map.robot["reverse"], turn_first=params.turn_first,
+        plan.map.diagonal,
+        plan.map.tol,
+        dynamics=params.dynamics,
+        speed=params.speed,
+        alpha=params.alpha,
+        dt=params.dt,
+        bearing_sigma=sigma,
+        beta=params.beta,
+        clamp_reverse=params.clamp_reverse or not plan.map.robot["reverse"],
+        turn_first=params.turn_first,
         certified_heading=params.certified_heading,
-        measurement=params.measurement, reconstruction=params.reconstruction,
-        min_spread=math.radians(params.min_spread_deg), hold_time=params.hold_time, odometry=params.odometry,
+        measurement=params.measurement,
+        reconstruction=params.reconstruction,
+        min_spread=math.radians(params.min_spread_deg),
+        hold_time=params.hold_time,
+        odometry=params.odometry,
         odometry_drift=params.odometry_drift,
         max_fix_error=math.inf if params.max_fix_error is None else params.max_fix_error,
-        fov=math.radians(params.fov), max_range=math.inf if params.range is None else float(params.range),
-        look_on_purpose=params.look_on_purpose, keep_clear=params.keep_clear,
+        fov=math.radians(params.fov),
+        max_range=math.inf if params.range is None else float(params.range),
+        look_on_purpose=params.look_on_purpose,
+        keep_clear=params.keep_clear,
         **error_model(plan.map, params),
-    )  # fmt: skip
+    )
     return Settings(goal_tolerance, control)
 
 
@@ -145,8 +175,9 @@ def error_model(map_, params: Params) -> dict:
     return {"estimator": params.estimator, **runtime_controller.error_model(robot)}
 
 
-def step_limits(arrays: PlanArrays, starts: np.ndarray, s: Settings, params: Params,
-                routes: np.ndarray | None = None) -> np.ndarray:  # fmt: skip
+def step_limits(
+    arrays: PlanArrays, starts: np.ndarray, s: Settings, params: Params, routes: np.ndarray | None = None
+) -> np.ndarray:
     """``max_steps`` of each run (ALGORITHMS §7.2), shape (R,).
 
     ``params.max_steps`` for every run if given, else ``ceil(5·L_route/(v·dt)) + 1000``.
@@ -191,8 +222,14 @@ def tree_routes(arrays: PlanArrays, starts: np.ndarray) -> np.ndarray:
     return np.hypot(*(starts - arrays.nodes[near]).T) + arrays.node_cost[near]
 
 
-def make_camera(plan, world, space: FreeSpace, params: Params, bound: float | None = None,
-                toward: Callable[[np.ndarray], np.ndarray] | None = None) -> Camera | None:  # fmt: skip
+def make_camera(
+    plan,
+    world,
+    space: FreeSpace,
+    params: Params,
+    bound: float | None = None,
+    toward: Callable[[np.ndarray], np.ndarray] | None = None,
+) -> Camera | None:
     """The camera of :attr:`Params.camera` for robots in ``world`` (whose free space is ``space``),
     drawing from the stream ``[seed, 2]``; ``None`` for ``measurement="displacement"``.
 
@@ -224,15 +261,24 @@ def make_camera(plan, world, space: FreeSpace, params: Params, bound: float | No
     rng = np.random.default_rng([params.seed, 2])
     if params.camera == "render":
         if world is not plan.map:
-            raise InvalidParamsError("the rendered camera draws the plan's own map; use camera ideal for another world",
-                                     field="camera")  # fmt: skip
+            raise InvalidParamsError(
+                "the rendered camera draws the plan's own map; use camera ideal for another world", field="camera"
+            )
         from bearnav_cli.world.render import RenderedCamera  # OpenCV, only when asked for
 
         return RenderedCamera.for_plan(plan, fov=math.radians(params.fov), rng=rng, space=space)
-    return IdealCamera(space, world.landmarks, fov=math.radians(params.fov), noise=math.radians(params.noise_deg),
-                       max_range=math.inf if params.range is None else float(params.range),
-                       occlusion=params.occlusion, tol=plan.map.tol, rng=rng, bound=bound,
-                       toward=toward if params.noise_worst else None)  # fmt: skip
+    return IdealCamera(
+        space,
+        world.landmarks,
+        fov=math.radians(params.fov),
+        noise=math.radians(params.noise_deg),
+        max_range=math.inf if params.range is None else float(params.range),
+        occlusion=params.occlusion,
+        tol=plan.map.tol,
+        rng=rng,
+        bound=bound,
+        toward=toward if params.noise_worst else None,
+    )
 
 
 def world_bound(params: Params, s: Settings) -> float | None:
@@ -253,8 +299,15 @@ def nearest_obstacle(arrays: PlanArrays) -> Callable[[np.ndarray], np.ndarray]:
     return toward
 
 
-def start_loop(plan, starts: np.ndarray, params: Params = Params(), world=None, *, arrays: PlanArrays | None = None,
-               space: FreeSpace | None = None) -> tuple[Loop, np.ndarray, dict]:  # fmt: skip
+def start_loop(
+    plan,
+    starts: np.ndarray,
+    params: Params = Params(),
+    world=None,
+    *,
+    arrays: PlanArrays | None = None,
+    space: FreeSpace | None = None,
+) -> tuple[Loop, np.ndarray, dict]:
     """The loop of :func:`rollout` before its first step: the loop, the runs to step and what it was built from.
 
     Starts that are not free are already finished as collisions. The dict holds the ``arrays``,
@@ -299,15 +352,34 @@ def start_loop(plan, starts: np.ndarray, params: Params = Params(), world=None, 
     camera = make_camera(plan, world, space, params, bound, toward)
     # bounded noise: the odometry errs within the bound the robot assumes, κ‖d̂‖ + ν (ALGORITHMS §12.8)
     slip_bound = None if bound is None else (s.control.slip, s.control.slip_floor)
-    base = Base(params.dynamics, s.dt, params.odometry_noise, len(x0), np.random.default_rng([params.seed, 3]),
-                slip_bound, toward)  # fmt: skip
+    base = Base(
+        params.dynamics,
+        s.dt,
+        params.odometry_noise,
+        len(x0),
+        np.random.default_rng([params.seed, 3]),
+        slip_bound,
+        toward,
+    )
     # a unicycle on a look-ahead plan: the starts are the look-ahead point's, and the body (radius ρ
     # around the axle) is what hits things (ALGORITHMS §12.6)
     lookahead = arrays.lookahead if params.dynamics == "unicycle" else 0.0
     axle = runtime_robot.lookahead_point(x0, heading, -lookahead)
     contact = Contact(body_space(world, space), axle) if lookahead > 0 else Contact(space, x0)
-    loop = Loop(arrays, camera, base, contact, x0, heading, s, params, limits, world.landmarks, lookahead,
-                window=PROGRESS_WINDOW)  # fmt: skip
+    loop = Loop(
+        arrays,
+        camera,
+        base,
+        contact,
+        x0,
+        heading,
+        s,
+        params,
+        limits,
+        world.landmarks,
+        lookahead,
+        window=PROGRESS_WINDOW,
+    )
     if blocked.any():
         log.warning("%d starts are not free: counted as collisions", int(np.count_nonzero(blocked)))
         loop.finish(np.flatnonzero(blocked), Outcome.COLLISION)

@@ -62,9 +62,18 @@ from bearnav_cli.params.synthesize import Params
 from bearnav_cli.runtime.certificate import barrier_fault
 
 __all__ = [
-    "PreparedCell", "SolveOutcome", "VERSION", "finish_cell", "judged", "prepare_cell", "problems", "run",
-    "solve_cell", "solve_prepared", "summary",
-]  # fmt: skip
+    "PreparedCell",
+    "SolveOutcome",
+    "VERSION",
+    "finish_cell",
+    "judged",
+    "prepare_cell",
+    "problems",
+    "run",
+    "solve_cell",
+    "solve_prepared",
+    "summary",
+]
 
 VERSION = 3
 log = logging.getLogger(__name__)
@@ -158,8 +167,16 @@ def prepare_cell(problem: CellProblem, params: Params) -> PreparedCell:
     return _prepared(problem, params, space, L, checker, h_scale, v_scale)
 
 
-def _prepared(problem: CellProblem, params: Params, space: str, L: np.ndarray, checker: LpTemplate, h_scale: float,
-              v_scale: float, lemma4_terms: tuple[float, float] | None = None) -> PreparedCell:  # fmt: skip
+def _prepared(
+    problem: CellProblem,
+    params: Params,
+    space: str,
+    L: np.ndarray,
+    checker: LpTemplate,
+    h_scale: float,
+    v_scale: float,
+    lemma4_terms: tuple[float, float] | None = None,
+) -> PreparedCell:
     """The :class:`PreparedCell` of a built checker: the solved template is the checker or the dual form."""
     if params.lp_form == "vertex":
         template = checker
@@ -176,8 +193,9 @@ def _kappa_lp(prepared: PreparedCell, params: Params, attempt: int, columns: tup
     return (kappa, c_h, c_v, prepared.template.row_bounds(c_h, c_v) + tuple(columns))
 
 
-def _kappa_sweep(prepared: PreparedCell, params: Params, solver: LpSolver, fixed: tuple, columns: tuple,
-                 first: tuple | None = None) -> tuple:  # fmt: skip
+def _kappa_sweep(
+    prepared: PreparedCell, params: Params, solver: LpSolver, fixed: tuple, columns: tuple, first: tuple | None = None
+) -> tuple:
     """Solve with ``κ, κ/2, …`` (``halvings`` times) until the LP is not infeasible.
 
     ``first`` is ``(attempt 0 of _kappa_lp, its result)`` when that LP is solved already. Returns the
@@ -221,8 +239,9 @@ def _funnel_lp(prepared: PreparedCell, params: Params, halving: int, terms: tupl
     return kappa, c_h, c_v, template.row_bounds(c_h, c_v) + (template.col_lower, columns)
 
 
-def _funnel_sweep(prepared: PreparedCell, params: Params, solver: LpSolver, fixed: tuple,
-                  first: tuple | None = None) -> SolveOutcome:  # fmt: skip
+def _funnel_sweep(
+    prepared: PreparedCell, params: Params, solver: LpSolver, fixed: tuple, first: tuple | None = None
+) -> SolveOutcome:
     """ALGORITHMS §11.2 for a funnel cell: ``c_h ≥ c_v`` enforced and ``κ`` halved until Lemma 4 holds.
 
     The LP is then feasible with strict margins ``S_h,k ≤ −ε/4`` (every barrier row) and
@@ -253,8 +272,10 @@ def _funnel_sweep(prepared: PreparedCell, params: Params, solver: LpSolver, fixe
         return SolveOutcome(status, result, upper, c_h, c_v, kappa, attempts, (h_min, diam))
     # Lemma 4 rules this out for a cell that meets (C2): a bug, or a cell whose exit point is not
     # strictly inside its rows. Store the least violation so verify can name the cell.
-    log.error("funnel cell not certifiable (Lemma 4 says this cannot happen): %s", "no κ gives ε > 0"
-              if result is None else f"LP {result.status.name.lower()}")  # fmt: skip
+    log.error(
+        "funnel cell not certifiable (Lemma 4 says this cannot happen): %s",
+        "no κ gives ε > 0" if result is None else f"LP {result.status.name.lower()}",
+    )
     build = vertex_template if params.lp_form == "vertex" else dual_template
     lv = build(prepared.problem, prepared.L, u_max, params.w_h, params.w_v, least_violation=True)
     result = lv.instantiate(c_h, c_v).solve(solver)
@@ -283,8 +304,9 @@ def _first_attempt(prepared: PreparedCell, params: Params, funnel: bool) -> tupl
     return _kappa_lp(prepared, params, 0, (prepared.template.col_lower, _strict_columns(prepared, params)))
 
 
-def solve_prepared(prepared: PreparedCell, params: Params, solver: LpSolver, funnel: bool = False,
-                   first: tuple | None = None) -> SolveOutcome:  # fmt: skip
+def solve_prepared(
+    prepared: PreparedCell, params: Params, solver: LpSolver, funnel: bool = False, first: tuple | None = None
+) -> SolveOutcome:
     """SOLVE_CELL's loop (§5.3): halve ``κ`` while infeasible, then the least-violation LP.
 
     Without ``funnel``, the CLF slack is first bounded by ``S_V ≤ −clf_margin·u_max`` and, when
@@ -343,8 +365,9 @@ def solve_prepared(prepared: PreparedCell, params: Params, solver: LpSolver, fun
     return SolveOutcome(status, result, upper, c_h, c_v, kappa, attempts)
 
 
-def finish_cell(prepared: PreparedCell, outcome: SolveOutcome, recheck: bool = True,
-                K: np.ndarray | None = None) -> CellSolution:  # fmt: skip
+def finish_cell(
+    prepared: PreparedCell, outcome: SolveOutcome, recheck: bool = True, K: np.ndarray | None = None
+) -> CellSolution:
     """The gain of the solved LP (Lemma 3 in field space; zero after a failure) and its re-checked margins.
 
     Parameters
@@ -376,10 +399,12 @@ def finish_cell(prepared: PreparedCell, outcome: SolveOutcome, recheck: bool = T
         status, K = CellStatus.SOLVER_FAILURE, np.zeros((2, 2 * len(problem.landmarks)))
     margin_h = margin_v = math.nan
     if recheck or status not in (CellStatus.CERTIFIED, CellStatus.RELAXED):
-        margin_h, margin_v = _template_margins(prepared.checker, outcome.row_upper, prepared.space, K,
-                                               problem.landmarks, len(problem.vertices))  # fmt: skip
-    return CellSolution(status, K, outcome.c_h, outcome.c_v, margin_h, margin_v, outcome.attempts, outcome.kappa,
-                        result.objective)  # fmt: skip
+        margin_h, margin_v = _template_margins(
+            prepared.checker, outcome.row_upper, prepared.space, K, problem.landmarks, len(problem.vertices)
+        )
+    return CellSolution(
+        status, K, outcome.c_h, outcome.c_v, margin_h, margin_v, outcome.attempts, outcome.kappa, result.objective
+    )
 
 
 def solve_cell(problem: CellProblem, params: Params, solver: LpSolver, funnel: bool = False) -> CellSolution:
@@ -417,8 +442,9 @@ def solve_cell(problem: CellProblem, params: Params, solver: LpSolver, funnel: b
     return solution
 
 
-def judged(solution: CellSolution, cbf_n: np.ndarray, cbf_q: np.ndarray,
-           x_j: np.ndarray | None) -> tuple[CellSolution, str | None]:  # fmt: skip
+def judged(
+    solution: CellSolution, cbf_n: np.ndarray, cbf_q: np.ndarray, x_j: np.ndarray | None
+) -> tuple[CellSolution, str | None]:
     """``solution``, not certified (status 2, the gain kept) when its cell's barrier rows cannot carry a
     certificate, and why: ``verify``'s judgement of the rows, :func:`~bearnav_cli.runtime.certificate.barrier_fault`.
 
@@ -520,29 +546,50 @@ def run(cells: Cells, params: Params = Params(), progress: Callable[[int, int], 
     built = None
     if params.gain_structure == "full":  # field space: every cell's vertex rows in one numpy pass
         edge = np.flatnonzero(~goal_mask).tolist()
-        built = field_vertex_templates(cells.cell_vertices, cells.cell_vertex_offsets, cells.cbf_A, cells.cbf_b,
-                                       cells.cbf_offsets, cells.exit_dir, cells.exit_point, edge, params.u_max,
-                                       params.w_h, params.w_v)  # fmt: skip
+        built = field_vertex_templates(
+            cells.cell_vertices,
+            cells.cell_vertex_offsets,
+            cells.cbf_A,
+            cells.cbf_b,
+            cells.cbf_offsets,
+            cells.exit_dir,
+            cells.exit_point,
+            edge,
+            params.u_max,
+            params.w_h,
+            params.w_v,
+        )
         scales = batched_scales(cells, built, edge)
     for c in range(C):
         if lo[c + 1] - lo[c] < 2:
-            raise ArtifactError(f"cell {c} uses {lo[c + 1] - lo[c]} landmark(s); at least 2 needed",
-                                field="cell_landmarks")  # fmt: skip
+            raise ArtifactError(
+                f"cell {c} uses {lo[c + 1] - lo[c]} landmark(s); at least 2 needed", field="cell_landmarks"
+            )
         vertices, used = cells.cell_vertices[vo[c] : vo[c + 1]], cell_landmarks[lo[c] : lo[c + 1]]
         cbf_n, cbf_q = cells.cbf_A[ho[c] : ho[c + 1]], cells.cbf_b[ho[c] : ho[c + 1]]
         if is_goal[c]:
-            solutions[c] = goal_cell_solution(vertices, cells.nodes[cells.cell_node[c]], used, cbf_n, cbf_q,
-                                              params.u_max)  # fmt: skip
+            solutions[c] = goal_cell_solution(
+                vertices, cells.nodes[cells.cell_node[c]], used, cbf_n, cbf_q, params.u_max
+            )
             continue
-        problem = CellProblem(vertices, cells.cell_A[ro[c] : ro[c + 1]], cells.cell_b[ro[c] : ro[c + 1]],
-                              cells.exit_dir[c], cells.exit_point[c], cbf_n, cbf_q, used)  # fmt: skip
+        problem = CellProblem(
+            vertices,
+            cells.cell_A[ro[c] : ro[c + 1]],
+            cells.cell_b[ro[c] : ro[c + 1]],
+            cells.exit_dir[c],
+            cells.exit_point[c],
+            cbf_n,
+            cbf_q,
+            used,
+        )
         try:
             if built is None:
                 prepared[c] = prepare_cell(problem, params)
             else:
                 h_scale, v_max, terms = scales[c]
-                prepared[c] = _prepared(problem, params, "field", FIELD_MAP, built.templates[c], h_scale,
-                                        checked_v_max(v_max), terms)  # fmt: skip
+                prepared[c] = _prepared(
+                    problem, params, "field", FIELD_MAP, built.templates[c], h_scale, checked_v_max(v_max), terms
+                )
         except ArtifactError as exc:
             raise ArtifactError(f"cell {c}: {exc}", field=exc.field) from exc
     outcomes = _solve_all(prepared, params, solver, cells.is_funnel, progress, C)
@@ -554,8 +601,9 @@ def run(cells: Cells, params: Params = Params(), progress: Callable[[int, int], 
         theta = np.array([outcomes[c].result.x[:n_theta] for c in optimal]).reshape(-1, rows, width)
         fields = np.zeros((C, rows, width))
         fields[optimal] = theta
-        gains = grouped_gains(fields[:, :, :2], fields[:, :, 2], [cell_landmarks[lo[c] : lo[c + 1]] for c in range(C)],
-                               optimal)  # fmt: skip
+        gains = grouped_gains(
+            fields[:, :, :2], fields[:, :, 2], [cell_landmarks[lo[c] : lo[c + 1]] for c in range(C)], optimal
+        )
     for c, outcome in outcomes.items():
         solutions[c] = sol = finish_cell(prepared[c], outcome, recheck=not tolerant, K=gains.get(c))
         if sol.status == CellStatus.NOT_CERTIFIED:
@@ -565,26 +613,40 @@ def run(cells: Cells, params: Params = Params(), progress: Callable[[int, int], 
     faults = {}  # verify's judgement of the barrier rows, before any cell counts as certified
     for c in range(C):
         j = cells.parent[cells.cell_node[c]]
-        solutions[c], fault = judged(solutions[c], cells.cbf_A[ho[c] : ho[c + 1]], cells.cbf_b[ho[c] : ho[c + 1]],
-                                     cells.nodes[j] if j >= 0 else None)  # fmt: skip
+        solutions[c], fault = judged(
+            solutions[c],
+            cells.cbf_A[ho[c] : ho[c + 1]],
+            cells.cbf_b[ho[c] : ho[c + 1]],
+            cells.nodes[j] if j >= 0 else None,
+        )
         if fault is not None:
             faults[c] = fault
     if faults:
         first = min(faults)
-        log.warning("%s not certified, their barrier rows unfit for a certificate (cell %d: %s): %s",
-                    plural(len(faults), "cell"), first, faults[first], cell_list(sorted(faults)))  # fmt: skip
+        log.warning(
+            "%s not certified, their barrier rows unfit for a certificate (cell %d: %s): %s",
+            plural(len(faults), "cell"),
+            first,
+            faults[first],
+            cell_list(sorted(faults)),
+        )
     if tolerant:
         chosen = [c for c in outcomes if solutions[c].status in (CellStatus.CERTIFIED, CellStatus.RELAXED)]
-        picked = more_tolerant_all([solutions[c] for c in chosen], [prepared[c].problem for c in chosen],
-                                   params.u_max, [outcomes[c].lemma4_terms for c in chosen])  # fmt: skip
+        picked = more_tolerant_all(
+            [solutions[c] for c in chosen],
+            [prepared[c].problem for c in chosen],
+            params.u_max,
+            [outcomes[c].lemma4_terms for c in chosen],
+        )
         for c, sol in zip(chosen, picked, strict=True):
             solutions[c] = sol
     gain = np.zeros((C, 2, 2 * n_lm))
     if C:  # K_k of landmark k in columns 2k, 2k + 1: every cell's blocks in one scatter
         blocks = np.concatenate([sol.K.reshape(2, -1, 2) for sol in solutions], axis=1)  # (2, Σ n_c, 2)
         gain.reshape(C, 2, n_lm, 2)[lm_cell, :, lm_index, :] = blocks.transpose(1, 0, 2)
-    c_h, c_v, margin_h, margin_v = (np.array([getattr(sol, name) for sol in solutions], float)
-                                    for name in ("c_h", "c_v", "margin_h", "margin_v"))  # fmt: skip
+    c_h, c_v, margin_h, margin_v = (
+        np.array([getattr(sol, name) for sol in solutions], float) for name in ("c_h", "c_v", "margin_h", "margin_v")
+    )
     status = np.array([int(sol.status) for sol in solutions], np.int8)
     attempts = np.array([sol.attempts for sol in solutions], np.int64)
     if progress is not None and not prepared:
@@ -607,13 +669,26 @@ def run(cells: Cells, params: Params = Params(), progress: Callable[[int, int], 
         stats["constant_field_cells"] = np.flatnonzero(delta == np.inf).tolist()
     else:
         usable = np.full(C, np.nan)
-    return Plan(cells=cells, gain=gain, c_h=c_h, c_v=c_v, u_max=np.full(C, params.u_max), margin_h=margin_h,
-                margin_v=margin_v, status=status, goal_tolerance=goal_tolerance, tolerance=delta,
-                usable_tolerance=usable, plan_tolerance=plan_tolerance, stats=stats)  # fmt: skip
+    return Plan(
+        cells=cells,
+        gain=gain,
+        c_h=c_h,
+        c_v=c_v,
+        u_max=np.full(C, params.u_max),
+        margin_h=margin_h,
+        margin_v=margin_v,
+        status=status,
+        goal_tolerance=goal_tolerance,
+        tolerance=delta,
+        usable_tolerance=usable,
+        plan_tolerance=plan_tolerance,
+        stats=stats,
+    )
 
 
-def _solve_all(prepared: dict, params: Params, solver: LpSolver, funnel: bool,
-               progress: Callable[[int, int], None] | None, C: int) -> dict:  # fmt: skip
+def _solve_all(
+    prepared: dict, params: Params, solver: LpSolver, funnel: bool, progress: Callable[[int, int], None] | None, C: int
+) -> dict:
     """:func:`solve_prepared` of every prepared cell in order (``{cell: SolveOutcome}``); ``progress(done, C)``
     about a hundred times, goal cells counted as done.
 
@@ -678,15 +753,21 @@ def _stats(cells: Cells, status, attempts, c_h, c_v, margin_v) -> dict:
 def summary(plan: Plan) -> str:
     """One line: cells per status, the certified tolerance and flagged cells (deterministic: no timings)."""
     counts = {s: int(np.count_nonzero(plan.status == s)) for s in CellStatus}
-    words = {CellStatus.CERTIFIED: "certified", CellStatus.RELAXED: "certified after relaxing",
-             CellStatus.NOT_CERTIFIED: "not certified", CellStatus.SOLVER_FAILURE: "solver failures",
-             CellStatus.GOAL: "goal"}  # fmt: skip
+    words = {
+        CellStatus.CERTIFIED: "certified",
+        CellStatus.RELAXED: "certified after relaxing",
+        CellStatus.NOT_CERTIFIED: "not certified",
+        CellStatus.SOLVER_FAILURE: "solver failures",
+        CellStatus.GOAL: "goal",
+    }
     text = f"{len(plan.status)} cells: " + ", ".join(f"{counts[s]} {words[s]}" for s in CellStatus)
     if plan.cells.is_funnel:
         by_area = tolerance_by_area(plan.cells, plan.usable_tolerance)
-        text += (f"; funnel certificate: a position error of {plan.plan_tolerance:.3g} tolerated everywhere "
-                 f"({by_area['median']:.3g} at the median point, under {by_area['p10']:.3g} on 10% of the area), "
-                 f"{100 * plan.cells.free_coverage:.1f}% of the free space covered")  # fmt: skip
+        text += (
+            f"; funnel certificate: a position error of {plan.plan_tolerance:.3g} tolerated everywhere "
+            f"({by_area['median']:.3g} at the median point, under {by_area['p10']:.3g} on 10% of the area), "
+            f"{100 * plan.cells.free_coverage:.1f}% of the free space covered"
+        )
     flags = plan.cells.cell_flags
     if plan.cells.is_funnel:  # harmless for the funnel certificate (docs/cli.md "Words"): no alarm to print
         flags = flags & ~CellFlag.DEGENERATE_RISK

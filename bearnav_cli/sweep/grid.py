@@ -135,8 +135,9 @@ def read_sweep(spec: Any, file: str) -> Sweep:
         raise InvalidSweepError("expected a mapping of keys to lists", file=file)
     for key in spec:
         if key not in AXES and key not in OTHER_KEYS:
-            raise InvalidSweepError(f"unknown key (known: {', '.join((*OTHER_KEYS, *AXES))})", file=file,
-                                    field=str(key))  # fmt: skip
+            raise InvalidSweepError(
+                f"unknown key (known: {', '.join((*OTHER_KEYS, *AXES))})", file=file, field=str(key)
+            )
     name = spec.get("name", Path(file).stem)
     if not isinstance(name, str) or not name or "/" in name or name.startswith("."):
         raise InvalidSweepError(f"expected a plain folder name, got {name!r}", file=file, field="name")
@@ -146,8 +147,9 @@ def read_sweep(spec: Any, file: str) -> Sweep:
     for key, param in AXES.items():
         values = _as_list(spec[key]) if key in spec else [None]
         if not values:
-            raise InvalidSweepError("empty list: give at least one value (leave the key out for the default)",
-                                    file=file, field=key)  # fmt: skip
+            raise InvalidSweepError(
+                "empty list: give at least one value (leave the key out for the default)", file=file, field=key
+            )
         checked = []
         for value in values:
             try:
@@ -285,8 +287,9 @@ def expand(sweep: Sweep, sources: Sequence[Any]) -> tuple[list[Job], int]:
         map_name = str(source.spec.get("name", Path(source.file).stem))
         for seed in sweep.axes["seeds"]:
             rrt_seed = pipeline.resolve_params("rrtstar", spec_params, {"seed": seed}).seed
-            base_key = _key({"map": source.sha256, "seed": seed, "versions": versions,
-                             "format": artifacts.ARTIFACT_FORMAT})  # fmt: skip
+            base_key = _key(
+                {"map": source.sha256, "seed": seed, "versions": versions, "format": artifacts.ARTIFACT_FORMAT}
+            )
             for tags_choice in sweep.axes["tags"]:
                 for values in itertools.product(*(sweep.axes[k] for k in other)):
                     overrides = {AXES[k]: v for k, v in zip(other, values, strict=True) if v is not None}
@@ -297,19 +300,30 @@ def expand(sweep: Sweep, sources: Sequence[Any]) -> tuple[list[Job], int]:
                     try:
                         params = pipeline.resolve_params("simulate", spec_params, overrides)
                     except InvalidParamsError as exc:
-                        raise InvalidSweepError(f"{exc.reason} (with {overrides})", file=sweep.file,
-                                                field=f"{source.file}: {exc.field}") from None  # fmt: skip
+                        raise InvalidSweepError(
+                            f"{exc.reason} (with {overrides})", file=sweep.file, field=f"{source.file}: {exc.field}"
+                        ) from None
                     tags_params = (tags_choice or TagsChoice("own")).params(params)
-                    plan_key = base_key if tags_params is None else _key(
-                        {"base": base_key, "tags": artifacts.params_dict(tags_params)})  # fmt: skip
-                    key = _key({"plan": plan_key, "simulate": artifacts.params_dict(params),
-                                "version": simulate.VERSION})  # fmt: skip
+                    plan_key = (
+                        base_key
+                        if tags_params is None
+                        else _key({"base": base_key, "tags": artifacts.params_dict(tags_params)})
+                    )
+                    key = _key(
+                        {"plan": plan_key, "simulate": artifacts.params_dict(params), "version": simulate.VERSION}
+                    )
                     grid = {
-                        "map": map_name, "map_file": source.file, "seed": rrt_seed,
-                        "tags": (tags_choice or TagsChoice("own")).text, "fov": params.fov,
-                        "noise_deg": params.noise_deg, "noise_bound_deg": params.noise_bound_deg,
-                        "dynamics": params.dynamics, "estimator": params.estimator, "starts": params.starts,
+                        "map": map_name,
+                        "map_file": source.file,
+                        "seed": rrt_seed,
+                        "tags": (tags_choice or TagsChoice("own")).text,
+                        "fov": params.fov,
+                        "noise_deg": params.noise_deg,
+                        "noise_bound_deg": params.noise_bound_deg,
+                        "dynamics": params.dynamics,
+                        "estimator": params.estimator,
+                        "starts": params.starts,
                         "sim_seed": params.seed,
-                    }  # fmt: skip
+                    }
                     jobs.append(Job(key, plan_key, base_key, grid, source, seed, tags_params, params))
     return jobs, skipped

@@ -11,8 +11,16 @@ from bearnav_cli import artifacts
 from bearnav_cli.datatypes import Outcome
 from bearnav_cli.sweep.grid import Job
 
-__all__ = ["COLUMNS", "DETERMINISTIC_COLUMNS", "markdown", "OUTCOMES", "Panel", "success_curves", "table",
-           "write_results"]  # fmt: skip
+__all__ = [
+    "COLUMNS",
+    "DETERMINISTIC_COLUMNS",
+    "markdown",
+    "OUTCOMES",
+    "Panel",
+    "success_curves",
+    "table",
+    "write_results",
+]
 
 
 #: Outcome names, in the enum's order (the table's count columns).
@@ -40,12 +48,26 @@ def table(jobs: Sequence[Job], found: dict[str, dict]) -> list[dict]:
         result = record.get("result") or {}
         plan = record.get("plan") or {}
         times = record.get("times") or {}
-        row = {**record["grid"], "status": record["status"], "error": record.get("error"),
-               "n_tags": plan.get("n_tags"), "plan_tolerance": plan.get("tolerance"), "plan_cells": plan.get("cells"),
-               "plan_key": job.plan_key[:24], "job_key": job.key[:24], "plan_s": times.get("plan_s"),
-               "sim_s": times.get("sim_s")}  # fmt: skip
-        for name in ("runs", *OUTCOMES, "success_rate", "certified_step_fraction", "in_domain_fraction",
-                     "success_rate_in_domain"):  # fmt: skip
+        row = {
+            **record["grid"],
+            "status": record["status"],
+            "error": record.get("error"),
+            "n_tags": plan.get("n_tags"),
+            "plan_tolerance": plan.get("tolerance"),
+            "plan_cells": plan.get("cells"),
+            "plan_key": job.plan_key[:24],
+            "job_key": job.key[:24],
+            "plan_s": times.get("plan_s"),
+            "sim_s": times.get("sim_s"),
+        }
+        for name in (
+            "runs",
+            *OUTCOMES,
+            "success_rate",
+            "certified_step_fraction",
+            "in_domain_fraction",
+            "success_rate_in_domain",
+        ):
             row[name] = result.get(name)
         rows.append({column: row.get(column) for column in COLUMNS})
     return rows
@@ -94,8 +116,11 @@ def success_curves(rows: Sequence[dict]) -> list[Panel]:
     rows : sequence of dict
         Rows of :func:`table`; failed jobs are left out.
     """
-    done = [dict(r, noise_kind="bounded" if r["noise_bound_deg"] is not None else "gaussian") for r in rows
-            if r["status"] == "done" and r["success_rate"] is not None]  # fmt: skip
+    done = [
+        dict(r, noise_kind="bounded" if r["noise_bound_deg"] is not None else "gaussian")
+        for r in rows
+        if r["status"] == "done" and r["success_rate"] is not None
+    ]
     varying = [axis for axis in _VARIANT_AXES if len({r[axis] for r in done}) > 1]
     variants: list[tuple] = []
     panels = []
@@ -103,13 +128,23 @@ def success_curves(rows: Sequence[dict]) -> list[Panel]:
         here = [r for r in done if (r["map"], r["dynamics"]) == (map_name, dynamics)]
         lines = []
         for fov, variant in dict.fromkeys((r["fov"], tuple(r[a] for a in varying)) for r in here):
-            points = sorted((_noise(r), r["success_rate"]) for r in here
-                            if r["fov"] == fov and tuple(r[a] for a in varying) == variant)  # fmt: skip
+            points = sorted(
+                (_noise(r), r["success_rate"])
+                for r in here
+                if r["fov"] == fov and tuple(r[a] for a in varying) == variant
+            )
             if variant not in variants:
                 variants.append(variant)
             label = ", ".join(f"{axis}={value}" for axis, value in zip(varying, variant, strict=True))
-            lines.append({"fov": fov, "variant": label, "variant_index": variants.index(variant),
-                          "noise": [p[0] for p in points], "success": [p[1] for p in points]})  # fmt: skip
+            lines.append(
+                {
+                    "fov": fov,
+                    "variant": label,
+                    "variant_index": variants.index(variant),
+                    "noise": [p[0] for p in points],
+                    "success": [p[1] for p in points],
+                }
+            )
         counts = sorted({r["n_tags"] for r in here if r["n_tags"] is not None})
         panels.append(Panel(map_name, dynamics, tuple(lines), " → ".join(map(str, counts)) + " tags" if counts else ""))
     return panels
@@ -129,8 +164,10 @@ def markdown(panels: Sequence[Panel], title: str) -> str:
         heading = f"## {panel.map}, {panel.dynamics}" + (f" ({panel.tags})" if panel.tags else "")
         note = " → ".join(variants) if variants != [""] else ""
         lines += [heading, ""] + ([f"Each cell: {note}.", ""] if note else [])
-        lines += ["| noise | " + " | ".join(f"{f:g}° view" for f in fovs) + " |",
-                  "| ---: | " + " | ".join("---:" for _ in fovs) + " |"]  # fmt: skip
+        lines += [
+            "| noise | " + " | ".join(f"{f:g}° view" for f in fovs) + " |",
+            "| ---: | " + " | ".join("---:" for _ in fovs) + " |",
+        ]
         for noise in noises:
             cells = []
             for fov in fovs:

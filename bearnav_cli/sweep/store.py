@@ -91,8 +91,15 @@ def _save_plan(store: Path, key: str, plan: Any, manifest: dict | None, info: di
     else:
         artifacts.save(folder / "plan.npz", plan, manifest)
     tags = "own" if own else artifacts.params_dict(job.tags)
-    document = {"schema": "bearnav.sweep-plan/1", "key": key, "map": job.grid["map"],
-                "map_file": job.grid["map_file"], "seed": job.grid["seed"], "tags": tags, **info}  # fmt: skip
+    document = {
+        "schema": "bearnav.sweep-plan/1",
+        "key": key,
+        "map": job.grid["map"],
+        "map_file": job.grid["map_file"],
+        "seed": job.grid["seed"],
+        "tags": tags,
+        **info,
+    }
     artifacts.write_record(folder / "plan.json", document)
 
 
@@ -228,8 +235,12 @@ def _record(job: Job, outcome: dict, plan_data: dict) -> dict:
     info = plan_data.get("info") or {}
     figures = None
     if plan is not None:
-        figures = {"tolerance": _finite(getattr(plan, "plan_tolerance", None)), "cells": int(len(plan.cells.cell_node)),
-                   "n_tags": int(len(plan.map.landmarks)), "new_tags": info.get("new_tags")}  # fmt: skip
+        figures = {
+            "tolerance": _finite(getattr(plan, "plan_tolerance", None)),
+            "cells": int(len(plan.cells.cell_node)),
+            "n_tags": int(len(plan.map.landmarks)),
+            "new_tags": info.get("new_tags"),
+        }
     return {
         "schema": JOB_SCHEMA,
         "key": job.key,

@@ -66,8 +66,9 @@ def _tagged_plan(task: PlanTask, simplified: Any, plan: Any, tags_params: Any) -
         return plan, None, info
     source = task.source
     spec = tags.map_spec_with_tags(source.spec, proposal)
-    with_tags = map_stage.MapSource(spec=spec, file=source.file, sha256=f"{source.sha256}+{proposal.count} tags",
-                                    grid=source.grid)  # fmt: skip
+    with_tags = map_stage.MapSource(
+        spec=spec, file=source.file, sha256=f"{source.sha256}+{proposal.count} tags", grid=source.grid
+    )
     new_map = pipeline.compute(with_tags, through="map")["map"]
     made, manifest = pipeline.compute_saved(replace(simplified, map=new_map), after="simplify")["plan"]
     return made, manifest, info
@@ -93,8 +94,11 @@ def make_plans(task: PlanTask) -> dict:
             made = pipeline.compute_saved(task.source, through="synthesize", overrides=overrides)
             (simplified, _), (plan, manifest) = made["simplified"], made["plan"]
             out["simplified"] = made["simplified"]
-            out["plans"][task.base_key] = {"plan": plan, "manifest": manifest,
-                                           "info": {"elapsed_s": time.perf_counter() - began}}  # fmt: skip
+            out["plans"][task.base_key] = {
+                "plan": plan,
+                "manifest": manifest,
+                "info": {"elapsed_s": time.perf_counter() - began},
+            }
     except Exception as exc:  # noqa: BLE001 - recorded with the jobs that needed the plan
         error = one_line(exc)
         return {"simplified": None, "plans": {key: {"error": error} for key in (task.base_key, *dict(task.tagged))}}
@@ -102,8 +106,11 @@ def make_plans(task: PlanTask) -> dict:
         began = time.perf_counter()
         try:
             tagged, manifest, info = _tagged_plan(task, simplified, plan, tags_params)
-            out["plans"][key] = {"plan": tagged, "manifest": manifest,
-                                 "info": {**info, "elapsed_s": time.perf_counter() - began}}  # fmt: skip
+            out["plans"][key] = {
+                "plan": tagged,
+                "manifest": manifest,
+                "info": {**info, "elapsed_s": time.perf_counter() - began},
+            }
         except Exception as exc:  # noqa: BLE001 - recorded with the jobs that needed the plan
             out["plans"][key] = {"error": one_line(exc)}
     return out

@@ -85,8 +85,16 @@ def _lower_bound(visible: np.ndarray, deficit: np.ndarray) -> tuple[int, float]:
     n_c = v.shape[1]
     indptr = np.concatenate([[0], np.cumsum(v.sum(axis=1))]).astype(np.int32)
     indices = np.nonzero(v)[1].astype(np.int32)
-    result = LpSolver().solve(np.ones(n_c), indptr, indices, np.ones(len(indices)), r.astype(float),
-                              np.full(len(r), INF), np.zeros(n_c), np.ones(n_c))  # fmt: skip
+    result = LpSolver().solve(
+        np.ones(n_c),
+        indptr,
+        indices,
+        np.ones(len(indices)),
+        r.astype(float),
+        np.full(len(r), INF),
+        np.zeros(n_c),
+        np.ones(n_c),
+    )
     if result.status is not LpStatus.OPTIMAL:
         return 0, math.nan
     return int(math.ceil(result.objective - LP_SLACK)), float(result.objective)
@@ -126,8 +134,7 @@ def _per_point(point: np.ndarray, values: np.ndarray, n: int) -> np.ndarray:
     return np.stack([np.bincount(point, values[:, k], n) for k in range(values.shape[1])], axis=1)
 
 
-def _greedy(pairs: _Pairs, sums: _Sums, coverable: np.ndarray, rule: _Rule, n_cand: int,
-            limit: float) -> list[int]:  # fmt: skip
+def _greedy(pairs: _Pairs, sums: _Sums, coverable: np.ndarray, rule: _Rule, n_cand: int, limit: float) -> list[int]:
     """Step 2 of the module docstring; updates ``sums`` in place and returns the chosen candidates in order."""
     covered, psi = rule.holds_and_progress(sums.n, sums.s, sums.w)
     available = np.ones(n_cand, bool)
@@ -146,8 +153,9 @@ def _greedy(pairs: _Pairs, sums: _Sums, coverable: np.ndarray, rule: _Rule, n_ca
         if primary[best] <= 0 and not progress[best] > 0:
             break  # nothing left helps (only possible with an error target)
         seen_from = pairs.add(sums, best)
-        covered[seen_from], psi[seen_from] = rule.holds_and_progress(sums.n[seen_from], sums.s[seen_from],
-                                                                     sums.w[seen_from])  # fmt: skip
+        covered[seen_from], psi[seen_from] = rule.holds_and_progress(
+            sums.n[seen_from], sums.s[seen_from], sums.w[seen_from]
+        )
         available[best] = False
         chosen.append(best)
     return chosen
@@ -209,8 +217,9 @@ def propose_tags(plan: Any, params: Params = Params()) -> TagProposal:
 
     cand = candidates(map_, width, grid.space)
     sight = grid.space.visibility_regions(cand.positions)
-    seen_all = perception.visible_landmarks(grid.points, grid.heading, cand.positions, params.fov_deg,
-                                            params.max_range, sight, grid.tol)  # fmt: skip
+    seen_all = perception.visible_landmarks(
+        grid.points, grid.heading, cand.positions, params.fov_deg, params.max_range, sight, grid.tol
+    )
     useful = np.flatnonzero(seen_all.any(axis=0))  # seen from some evaluation point
     cand = Candidates(cand.positions[useful], cand.normals[useful], cand.on_wall[useful])
     sight = [sight[k] for k in useful]
@@ -218,19 +227,25 @@ def propose_tags(plan: Any, params: Params = Params()) -> TagProposal:
     xd = grid.points[dom]
     pairs = _Pairs.build(seen_all[np.ix_(dom, useful)], xd, cand.positions, grid.tol)
 
-    rule = _Rule(1.0 - math.cos(math.radians(params.min_spread_deg)), math.radians(params.noise_deg),
-                 params.error_target)  # fmt: skip
+    rule = _Rule(
+        1.0 - math.cos(math.radians(params.min_spread_deg)), math.radians(params.noise_deg), params.error_target
+    )
     # running sums of the existing tags at every point of D
     v0 = before.visible[dom].astype(float)
     proj0, wproj0 = _projectors(xd, map_.landmarks, grid.tol)
-    start = _Sums(v0.sum(axis=1).astype(np.int64), np.einsum("pl,plk->pk", v0, proj0),
-                  np.einsum("pl,plk->pk", v0, wproj0))  # fmt: skip
+    start = _Sums(
+        v0.sum(axis=1).astype(np.int64), np.einsum("pl,plk->pk", v0, proj0), np.einsum("pl,plk->pk", v0, wproj0)
+    )
     # coverable: the rule holds with every candidate added
     n_d = len(dom)
-    full = _Sums(start.n + np.bincount(pairs.point, minlength=n_d), start.s + _per_point(pairs.point, pairs.proj, n_d),
-                 start.w + _per_point(pairs.point, pairs.wproj, n_d))  # fmt: skip
-    coverable = rule.holds_and_progress(full.n, full.s, full.w)[0] | rule.holds_and_progress(start.n, start.s,
-                                                                                             start.w)[0]  # fmt: skip
+    full = _Sums(
+        start.n + np.bincount(pairs.point, minlength=n_d),
+        start.s + _per_point(pairs.point, pairs.proj, n_d),
+        start.w + _per_point(pairs.point, pairs.wproj, n_d),
+    )
+    coverable = (
+        rule.holds_and_progress(full.n, full.s, full.w)[0] | rule.holds_and_progress(start.n, start.s, start.w)[0]
+    )
     deficit = np.where(coverable, np.maximum(0, 2 - start.n), 0)
     seen_d = np.zeros((n_d, len(cand.positions)), bool)
     seen_d[pairs.point, pairs.cand] = True
@@ -249,10 +264,24 @@ def propose_tags(plan: Any, params: Params = Params()) -> TagProposal:
     positions = cand.positions[idx].reshape(-1, 2)
     after = coverage_with(grid, map_, params, existing_sight, positions, ids, [sight[k] for k in idx])
     return TagProposal(
-        ids=ids, positions=positions, normals=cand.normals[idx].reshape(-1, 2), gains=gains, before=before,
-        after=after, lower_bound=lower_bound, lp_objective=lp_objective, uncoverable=xd[~coverable],
+        ids=ids,
+        positions=positions,
+        normals=cand.normals[idx].reshape(-1, 2),
+        gains=gains,
+        before=before,
+        after=after,
+        lower_bound=lower_bound,
+        lp_objective=lp_objective,
+        uncoverable=xd[~coverable],
         coverable_fraction=float(coverable.mean()) if n_d else math.nan,
-        target_reached=bool(np.all(after.holds[dom][coverable])), candidates=cand, params=params, tag_width=width,
-        stats={"candidates": len(cand.positions), "domain_points": n_d, "pairs": len(pairs.point),
-               "greedy": greedy_count},
-    )  # fmt: skip
+        target_reached=bool(np.all(after.holds[dom][coverable])),
+        candidates=cand,
+        params=params,
+        tag_width=width,
+        stats={
+            "candidates": len(cand.positions),
+            "domain_points": n_d,
+            "pairs": len(pairs.point),
+            "greedy": greedy_count,
+        },
+    )

@@ -10,7 +10,7 @@ import numpy as np
 
 from bearnav_cli import perception
 from bearnav_cli.perception import EvaluationGrid
-from bearnav_cli.runtime import bounded, estimate, looking
+from bearnav_cli.runtime import bounded, estimate, look_bound, looking
 from bearnav_cli.tags.candidates import Candidates, candidates
 from bearnav_cli.tags.proposal import Params, TagProposal, coverage_with, new_tag_ids
 
@@ -24,21 +24,35 @@ LIVE_RESCORE = 32
 class _LiveScores:
     """The live greedy's state: the points of the liveness grid some cell needs a smaller bound at (F of them).
 
-    Each point keeps its look (``runtime.bounded.LookBound``) with the tags so far; a candidate is
-    scored by ``bounded.bound_with`` (an upper bound on the point's bound with it, cheap), a chosen
+    Each point keeps its look (``runtime.look_bound.LookBound``) with the tags so far; a candidate is
+    scored by ``look_bound.bound_with`` (an upper bound on the point's bound with it, cheap), a chosen
     one is added exactly.
     """
 
-    def __init__(self, g: Any, x: np.ndarray, need: np.ndarray, visible: np.ndarray, landmarks: np.ndarray,
-                 seen: np.ndarray, positions: np.ndarray) -> None:  # fmt: skip
+    def __init__(
+        self,
+        g: Any,
+        x: np.ndarray,
+        need: np.ndarray,
+        visible: np.ndarray,
+        landmarks: np.ndarray,
+        seen: np.ndarray,
+        positions: np.ndarray,
+    ) -> None:
         self.g, self.x, self.need = g, x, need
         self.visible, self.landmarks = visible, landmarks  # (F, L) and (L, 2): the tags so far
         self.seen, self.positions = seen, positions  # (F, C) and (C, 2): the candidates
         self.look = self._look(np.arange(len(x)))
 
-    def _look(self, rows: np.ndarray) -> bounded.LookBound:
-        return bounded.look_bound(self.x[rows], self.landmarks, self.visible[rows], self.g.eta,
-                                  estimate.axle_bounds(self.g.arrays), self.g.arrays.tol)  # fmt: skip
+    def _look(self, rows: np.ndarray) -> look_bound.LookBound:
+        return look_bound.look_bound(
+            self.x[rows],
+            self.landmarks,
+            self.visible[rows],
+            self.g.eta,
+            estimate.axle_bounds(self.g.arrays),
+            self.g.arrays.tol,
+        )
 
     @property
     def eps(self) -> np.ndarray:
@@ -51,7 +65,7 @@ class _LiveScores:
     def score(self, rows: np.ndarray, cand: np.ndarray) -> np.ndarray:
         """For pairs (point ``rows[i]``, candidate ``cand[i]``): the share of the point's missing reduction the
         candidate makes (1: live there), by the cheap bound."""
-        new = bounded.bound_with(self.look.take(rows), self.x[rows], self.positions[cand], self.g.arrays.tol)
+        new = look_bound.bound_with(self.look.take(rows), self.x[rows], self.positions[cand], self.g.arrays.tol)
         eps = self.eps[rows]
         gap = eps - self.need[rows]
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -71,7 +85,7 @@ class _LiveScores:
             fields = [np.array(f, copy=True) for f in old]
             for f, value in zip(fields, new._replace(diff_vertices=bounded.fit(new.diff_vertices, width)), strict=True):
                 f[rows] = value
-            self.look = bounded.LookBound(*fields)
+            self.look = look_bound.LookBound(*fields)
         return int(np.count_nonzero(before & ~self.failing[rows]))
 
 
@@ -126,7 +140,7 @@ def propose_live_tags(plan: Any, params: Params = Params(target="live")) -> TagP
     ``ε(x, S_all(x))`` below the least margin of the cells holding it. Candidates are those of
     :func:`candidates`; a lazy greedy adds the candidate whose tag brings the failing points the
     most of their missing reduction (a point made live counts 1; scored by the cheap upper bound
-    ``runtime.bounded.bound_with``, the chosen tag's effect computed exactly), until every point
+    ``runtime.look_bound.bound_with``, the chosen tag's effect computed exactly), until every point
     some placement can make live is live, or ``max_tags`` are placed. A point no candidate makes live
     (with all of them added) is ``uncoverable``: a cell whose margin is too small for any look.
 
@@ -152,8 +166,14 @@ def propose_live_tags(plan: Any, params: Params = Params(target="live")) -> TagP
 
     map_ = plan.map
     width = params.width(map_.diagonal)
-    g = liveness.grid(plan, params.bearing_error_deg, params.fov_deg, kappa=params.slip,
-                      resolution=params.resolution, max_range=params.max_range)  # fmt: skip
+    g = liveness.grid(
+        plan,
+        params.bearing_error_deg,
+        params.fov_deg,
+        kappa=params.slip,
+        resolution=params.resolution,
+        max_range=params.max_range,
+    )
     existing = np.asarray(map_.landmarks, float).reshape(-1, 2)
     need = g.point_margin()
     visible0, eps0 = g.look(existing)
@@ -188,11 +208,26 @@ def propose_live_tags(plan: Any, params: Params = Params(target="live")) -> TagP
     after = coverage_with(pe_grid, map_, params, existing_sight, positions, ids, new_sight)
     stuck = np.concatenate([unfixable, failing[~coverable]])
     return TagProposal(
-        ids=ids, positions=positions, normals=cand.normals[idx].reshape(-1, 2), gains=np.array(gains, np.int64),
-        before=before, after=after, lower_bound=0, lp_objective=math.nan, uncoverable=g.points[stuck],
+        ids=ids,
+        positions=positions,
+        normals=cand.normals[idx].reshape(-1, 2),
+        gains=np.array(gains, np.int64),
+        before=before,
+        after=after,
+        lower_bound=0,
+        lp_objective=math.nan,
+        uncoverable=g.points[stuck],
         coverable_fraction=1.0 - len(stuck) / max(len(g.points), 1),
-        target_reached=bool(np.all(live_after.live)), candidates=cand, params=params, tag_width=width,
-        stats={"candidates": len(cand.positions), "domain_points": len(g.points), "pairs": pairs,
-               "greedy": len(chosen)},
-        live_before=live_before, live_after=live_after,
-    )  # fmt: skip
+        target_reached=bool(np.all(live_after.live)),
+        candidates=cand,
+        params=params,
+        tag_width=width,
+        stats={
+            "candidates": len(cand.positions),
+            "domain_points": len(g.points),
+            "pairs": pairs,
+            "greedy": len(chosen),
+        },
+        live_before=live_before,
+        live_after=live_after,
+    )

@@ -44,8 +44,10 @@ def map_spec_with_tags(spec: dict, proposal: TagProposal) -> dict:
         ids.add(str(item.get("id", k)) if isinstance(item, dict) else str(k))
     clash = sorted(ids & set(proposal.ids))
     if clash:
-        raise InvalidParamsError(f"proposed id {clash[0]!r} is already a landmark of this map description "
-                                 "(was the plan made from it?)", field="landmarks")  # fmt: skip
+        raise InvalidParamsError(
+            f"proposed id {clash[0]!r} is already a landmark of this map description (was the plan made from it?)",
+            field="landmarks",
+        )
     for name, p in zip(proposal.ids, proposal.positions, strict=True):
         out["landmarks"].append({"id": name, "position": [float(p[0]), float(p[1])]})
     return out

@@ -77,8 +77,9 @@ class Params:
     resolution: float | None = None
 
     def __post_init__(self) -> None:
-        perception.check_params(self.fov_deg, self.noise_deg, self.max_range, self.error_target, self.min_spread_deg,
-                                self.spacing)  # fmt: skip
+        perception.check_params(
+            self.fov_deg, self.noise_deg, self.max_range, self.error_target, self.min_spread_deg, self.spacing
+        )
         if self.target not in TARGETS:
             raise InvalidParamsError(f"must be one of {', '.join(TARGETS)}, got {self.target!r}", field="target")
         m = self.max_tags
@@ -185,12 +186,13 @@ class TagProposal:
                 f"error η* {math.degrees(b.eta_star):.3g}° → {math.degrees(a.eta_star):.3g}°"
                 + (f"; {percent(uncovered)} of the grid cannot be made live by any tag" if uncovered > 0 else "")
             )
-        return (f"{plural(self.count, 'new tag')} (lower bound {self.lower_bound}) to the "
-                f"{len(self.before.landmarks)} of the map, {reached}: two usable tags in view on "
-                f"{percent(self.before.fraction_domain)} → {percent(self.after.fraction_domain)} of the certified area "
-                f"and {percent(self.before.fraction_free)} → {percent(self.after.fraction_free)} of the free space"
-                + (f"; {percent(uncovered)} of the certified area cannot be covered" if uncovered > 0
-                   else ""))  # fmt: skip
+        return (
+            f"{plural(self.count, 'new tag')} (lower bound {self.lower_bound}) to the "
+            f"{len(self.before.landmarks)} of the map, {reached}: two usable tags in view on "
+            f"{percent(self.before.fraction_domain)} → {percent(self.after.fraction_domain)} of the certified area "
+            f"and {percent(self.before.fraction_free)} → {percent(self.after.fraction_free)} of the free space"
+            + (f"; {percent(uncovered)} of the certified area cannot be covered" if uncovered > 0 else "")
+        )
 
 
 def new_tag_ids(existing: Any, count: int) -> tuple[str, ...]:
@@ -243,8 +245,13 @@ def coverage_with(
     new_sight : list of shapely geometry, optional
         Their visibility regions (with ``positions``).
     """
-    camera = dict(fov_deg=params.fov_deg, noise_deg=params.noise_deg, max_range=params.max_range,
-                  error_target=params.error_target, min_spread_deg=params.min_spread_deg)  # fmt: skip
+    camera = dict(
+        fov_deg=params.fov_deg,
+        noise_deg=params.noise_deg,
+        max_range=params.max_range,
+        error_target=params.error_target,
+        min_spread_deg=params.min_spread_deg,
+    )
     if positions is None or not len(positions):
         landmarks, landmark_ids, seen = map_.landmarks, map_.landmark_ids, sight
     else:

@@ -76,9 +76,20 @@ class IdealCamera:
         line (and so the estimate) away from it.
     """
 
-    def __init__(self, space: FreeSpace, landmarks: np.ndarray, *, fov: float, noise: float, max_range: float,
-                 occlusion: bool, tol: float, rng: np.random.Generator, bound: float | None = None,
-                 toward: Callable[[np.ndarray], np.ndarray] | None = None) -> None:  # fmt: skip
+    def __init__(
+        self,
+        space: FreeSpace,
+        landmarks: np.ndarray,
+        *,
+        fov: float,
+        noise: float,
+        max_range: float,
+        occlusion: bool,
+        tol: float,
+        rng: np.random.Generator,
+        bound: float | None = None,
+        toward: Callable[[np.ndarray], np.ndarray] | None = None,
+    ) -> None:
         self.landmarks = np.asarray(landmarks, float).reshape(-1, 2)
         self.fov, self.noise, self.max_range, self.tol, self.rng = fov, noise, max_range, tol, rng
         self.bound, self.toward = bound, toward

@@ -26,11 +26,13 @@ def _cv2() -> Any:
     try:
         import cv2
     except ImportError as exc:
-        raise InvalidParamsError("--camera render needs OpenCV: pip install 'bearnav[camera]'",
-                                 field="camera") from exc  # fmt: skip
+        raise InvalidParamsError("--camera render needs OpenCV: pip install 'bearnav[camera]'", field="camera") from exc
     if not hasattr(cv2, "aruco") or not hasattr(cv2.aruco, "ArucoDetector"):
-        raise InvalidParamsError(f"OpenCV {cv2.__version__} has no aruco.ArucoDetector: pip install "
-                                 "'bearnav[camera]' (opencv-python-headless >= 4.8)", field="camera")  # fmt: skip
+        raise InvalidParamsError(
+            f"OpenCV {cv2.__version__} has no aruco.ArucoDetector: pip install "
+            "'bearnav[camera]' (opencv-python-headless >= 4.8)",
+            field="camera",
+        )
     return cv2
 
 

@@ -67,9 +67,22 @@ class Loop:
         The no-progress window (steps with a fix).
     """
 
-    def __init__(self, arrays: PlanArrays, camera: Camera | None, base: Base, contact: Contact, starts: np.ndarray,
-                 heading: np.ndarray, s: Any, params: Any, limits: np.ndarray,
-                 world_landmarks: np.ndarray | None = None, lookahead: float = 0.0, *, window: int):  # fmt: skip
+    def __init__(
+        self,
+        arrays: PlanArrays,
+        camera: Camera | None,
+        base: Base,
+        contact: Contact,
+        starts: np.ndarray,
+        heading: np.ndarray,
+        s: Any,
+        params: Any,
+        limits: np.ndarray,
+        world_landmarks: np.ndarray | None = None,
+        lookahead: float = 0.0,
+        *,
+        window: int,
+    ):
         r = len(starts)
         self.arrays, self.camera, self.base, self.contact = arrays, camera, base, contact
         self.s, self.params, self.limits = s, params, limits
@@ -139,8 +152,16 @@ class Loop:
                 return active
         bearings, seen = self.measure(active, p)
         measured = (self.world[None] - p[:, None, :]) if self.moved_world else None
-        out = runtime.control(arrays, s.control, self.state.take(active), bearings, seen, self.phi[active], x_true=p,
-                              displacements=measured)  # fmt: skip
+        out = runtime.control(
+            arrays,
+            s.control,
+            self.state.take(active),
+            bearings,
+            seen,
+            self.phi[active],
+            x_true=p,
+            displacements=measured,
+        )
         heading = self.phi[active]
         self.state.put(active, out.state)
         self.left[active] += out.relocated
@@ -165,8 +186,9 @@ class Loop:
             if not active.size:
                 return active
         velocity, forward, turn, scanning, fix = command
-        q, self.phi[active] = self.base.step(active, p, self.phi[active], velocity, forward, turn, scanning,
-                                             self.state.last_dir[active])  # fmt: skip
+        q, self.phi[active] = self.base.step(
+            active, p, self.phi[active], velocity, forward, turn, scanning, self.state.last_dir[active]
+        )
         free = self.contact.free(p, q)
         if params.record_trajectories:
             self.trace.append((active, ref, self.state.cell[active].copy(), heading))
@@ -209,8 +231,7 @@ class Loop:
         self.inconsistencies[active] += out.inconsistent
         known = out.state.known
         if self.s.control.estimator == "set":
-            inside = runtime_bounded.contains(out.state.set_vertices, out.state.set_count, axle,
-                                              10.0 * self.arrays.tol)  # fmt: skip
+            inside = runtime_bounded.contains(out.state.set_vertices, out.state.set_count, axle, 10.0 * self.arrays.tol)
         else:
             with np.errstate(invalid="ignore"):
                 inside = np.hypot(*(ref - out.x_hat).T) <= out.error_bound + 10.0 * self.arrays.tol
@@ -226,12 +247,16 @@ class Loop:
     def estimate_counts(self) -> dict:
         """The totals of :meth:`count_estimates` over every run, for the metrics."""
         steps, bound, true = self.claims
-        return {"moved_steps": int(self.moved.sum()), "looks": int(self.looks.sum()),
-                "look_steps": int(self.look_steps.sum()), "inconsistencies": int(self.inconsistencies.sum()),
-                "containment_violations": int(self.violations.sum()),
-                "error_bound_mean": bound / steps if steps else None,
-                "true_error_mean": true / steps if steps else None,
-                "error_used_max": self.claim_used if steps else None}  # fmt: skip
+        return {
+            "moved_steps": int(self.moved.sum()),
+            "looks": int(self.looks.sum()),
+            "look_steps": int(self.look_steps.sum()),
+            "inconsistencies": int(self.inconsistencies.sum()),
+            "containment_violations": int(self.violations.sum()),
+            "error_bound_mean": bound / steps if steps else None,
+            "true_error_mean": true / steps if steps else None,
+            "error_used_max": self.claim_used if steps else None,
+        }
 
     def trajectories(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Coords, cells, headings and offsets of every run (departure points, then the final point)."""
@@ -314,6 +339,12 @@ def trace_estimates(loop: Loop, active: np.ndarray, every: int) -> EstimateTrace
     x_hat = [c[0][0] for c in centres]
     error = [c[1][0] for c in centres]
     offsets = np.concatenate([[0], np.cumsum([len(v) for v in sets])]).astype(np.int64)
-    return EstimateTrace(np.array(truth).reshape(-1, 2), np.array(x_hat).reshape(-1, 2), np.array(error),
-                         np.concatenate(sets) if sets else np.zeros((0, 2)), offsets, np.array(looking, bool),
-                         int(loop.outcome[0]))  # fmt: skip
+    return EstimateTrace(
+        np.array(truth).reshape(-1, 2),
+        np.array(x_hat).reshape(-1, 2),
+        np.array(error),
+        np.concatenate(sets) if sets else np.zeros((0, 2)),
+        offsets,
+        np.array(looking, bool),
+        int(loop.outcome[0]),
+    )

@@ -108,9 +108,16 @@ class Base:
         nearest obstacle, and every error at the bound along it.
     """
 
-    def __init__(self, dynamics: str, dt: float, slip: float, runs: int, rng: np.random.Generator,
-                 bound: tuple[float, float] | None = None,
-                 toward: Callable[[np.ndarray], np.ndarray] | None = None) -> None:  # fmt: skip
+    def __init__(
+        self,
+        dynamics: str,
+        dt: float,
+        slip: float,
+        runs: int,
+        rng: np.random.Generator,
+        bound: tuple[float, float] | None = None,
+        toward: Callable[[np.ndarray], np.ndarray] | None = None,
+    ) -> None:
         self.dynamics, self.dt, self.slip, self.rng = dynamics, float(dt), float(slip), rng
         self.bound, self.toward = bound, toward
         if bound is not None:
@@ -124,9 +131,16 @@ class Base:
         else:
             self.scale_error = self.heading_bias = np.zeros(runs)
 
-    def commanded(self, x: np.ndarray, heading: np.ndarray, velocity: np.ndarray, forward: np.ndarray,
-                  turn: np.ndarray, scanning: np.ndarray,
-                  last_dir: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    def commanded(
+        self,
+        x: np.ndarray,
+        heading: np.ndarray,
+        velocity: np.ndarray,
+        forward: np.ndarray,
+        turn: np.ndarray,
+        scanning: np.ndarray,
+        last_dir: np.ndarray,
+    ) -> tuple[np.ndarray, np.ndarray]:
         """The exact displacement of one step (R, 2) and the new camera headings (R,), ALGORITHMS §7.1.
 
         Parameters
@@ -163,9 +177,17 @@ class Base:
         c, s = np.cos(turn), np.sin(turn)
         return scale[:, None] * np.column_stack([c * move[:, 0] - s * move[:, 1], s * move[:, 0] + c * move[:, 1]])
 
-    def step(self, runs: np.ndarray, x: np.ndarray, heading: np.ndarray, velocity: np.ndarray, forward: np.ndarray,
-             turn: np.ndarray, scanning: np.ndarray,
-             last_dir: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    def step(
+        self,
+        runs: np.ndarray,
+        x: np.ndarray,
+        heading: np.ndarray,
+        velocity: np.ndarray,
+        forward: np.ndarray,
+        turn: np.ndarray,
+        scanning: np.ndarray,
+        last_dir: np.ndarray,
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Where the robots ``runs`` (shape (R,)) are after one step, and their new camera headings.
 
         See :meth:`commanded` for the arguments; the displacement is then :meth:`slipped`.

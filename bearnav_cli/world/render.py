@@ -99,11 +99,13 @@ class RenderSettings:
         for name in ("width", "height", "supersample"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < (1 if name == "supersample" else 16):
-                raise InvalidParamsError(f"must be an integer of at least {1 if name == 'supersample' else 16}, "
-                                         f"got {value!r}", field=name)  # fmt: skip
+                raise InvalidParamsError(
+                    f"must be an integer of at least {1 if name == 'supersample' else 16}, got {value!r}", field=name
+                )
         if not (0 < self.hfov < MAX_FOV):
-            raise InvalidParamsError(f"a pinhole camera's field of view lies below 175°, got "
-                                     f"{math.degrees(self.hfov):g}°", field="hfov")  # fmt: skip
+            raise InvalidParamsError(
+                f"a pinhole camera's field of view lies below 175°, got {math.degrees(self.hfov):g}°", field="hfov"
+            )
         for name in ("tag_size", "wall_height"):
             if not (getattr(self, name) > 0 and math.isfinite(getattr(self, name))):
                 raise InvalidParamsError(f"must be positive, got {getattr(self, name)}", field=name)
@@ -133,20 +135,32 @@ class RenderedCamera:
         The free space of ``map_`` when the caller has it (its raw obstacles hide tags); built otherwise.
     """
 
-    def __init__(self, map_: Any, *, rng: np.random.Generator, settings: RenderSettings | None = None,
-                 space: FreeSpace | None = None) -> None:  # fmt: skip
+    def __init__(
+        self,
+        map_: Any,
+        *,
+        rng: np.random.Generator,
+        settings: RenderSettings | None = None,
+        space: FreeSpace | None = None,
+    ) -> None:
         self.settings = s = settings or RenderSettings()
         self.map = map_
         self.rng = rng
         self.intrinsics = s.intrinsics
         self.mount = Mount.forward(height=s.camera_height)
-        self.tags = TagMap(np.array([tag_number(i) for i in map_.landmark_ids], np.int64), map_.landmarks,
-                           map_.landmark_facing, map_.landmark_ids)  # fmt: skip
+        self.tags = TagMap(
+            np.array([tag_number(i) for i in map_.landmark_ids], np.int64),
+            map_.landmarks,
+            map_.landmark_facing,
+            map_.landmark_ids,
+        )
         self.drawable = self.tags.numbers >= 0
         unknown = [i for i, n in zip(map_.landmark_ids, self.tags.numbers, strict=True) if n >= detect.TAG36H11_IDS]
         if unknown:
-            raise InvalidParamsError(f"landmark {unknown[0]!r} has no tag36h11 pattern (ids 0 to "
-                                     f"{detect.TAG36H11_IDS - 1})", field="landmarks")  # fmt: skip
+            raise InvalidParamsError(
+                f"landmark {unknown[0]!r} has no tag36h11 pattern (ids 0 to {detect.TAG36H11_IDS - 1})",
+                field="landmarks",
+            )
         levels = np.array([s.black, s.white])
         textures = np.full((len(self.tags.numbers), _CELLS, _CELLS), s.white)
         for k in np.flatnonzero(self.drawable):
@@ -166,22 +180,45 @@ class RenderedCamera:
         v = np.arange(s.height, dtype=float)
         self._a = (u - self.intrinsics.cx) / self.intrinsics.fx  # column ray: forward + a·right
         self._b = (v - self.intrinsics.cy) / self.intrinsics.fy  # row: height drops by b per unit forward
-        self._noise = (rng.standard_normal(2 * s.width * s.height + s.width).astype(np.float32) * s.noise
-                       if s.noise > 0 else None)  # fmt: skip
-        self.stats: dict[str, Any] = {key: 0 for key in ("frames", "detections", "matched", "unknown", "from_behind",
-                                                         "outside_image", "duplicates", "expected", "missed",
-                                                         "missed_small")}  # fmt: skip
+        self._noise = (
+            rng.standard_normal(2 * s.width * s.height + s.width).astype(np.float32) * s.noise if s.noise > 0 else None
+        )
+        self.stats: dict[str, Any] = {
+            key: 0
+            for key in (
+                "frames",
+                "detections",
+                "matched",
+                "unknown",
+                "from_behind",
+                "outside_image",
+                "duplicates",
+                "expected",
+                "missed",
+                "missed_small",
+            )
+        }
         self.errors: list[float] = []
         self.heading_errors: list[float] = []
 
     @classmethod
-    def for_plan(cls, plan: Any, *, fov: float, rng: np.random.Generator, settings: RenderSettings | None = None,
-                 space: FreeSpace | None = None) -> RenderedCamera:  # fmt: skip
+    def for_plan(
+        cls,
+        plan: Any,
+        *,
+        fov: float,
+        rng: np.random.Generator,
+        settings: RenderSettings | None = None,
+        space: FreeSpace | None = None,
+    ) -> RenderedCamera:
         """The rendered camera for ``bearnav simulate --camera render``: ``fov`` (rad) is ``--fov``."""
         if not (isinstance(fov, (int, float)) and math.isfinite(fov) and 0 < fov < MAX_FOV):
             given = f"{math.degrees(fov):g}" if isinstance(fov, (int, float)) else repr(fov)
-            raise InvalidParamsError(f"--camera render is a pinhole camera: give --fov below 175 (the D455's colour "
-                                     f"camera: 90), got {given}", field="fov")  # fmt: skip
+            raise InvalidParamsError(
+                f"--camera render is a pinhole camera: give --fov below 175 (the D455's colour "
+                f"camera: 90), got {given}",
+                field="fov",
+            )
         settings = dataclasses.replace(settings or RenderSettings(), hfov=float(fov))
         return cls(plan.map, rng=rng, settings=settings, space=space)
 
@@ -302,8 +339,12 @@ class RenderedCamera:
                 facing = math.atan2(away[1], away[0])
             corners = tag_corners_world(lm, facing, s.tag_size, s.tag_height)
             pix, depth = project_world(intr, self.mount, p, heading, corners)
-            if (depth <= 0).any() or (pix < -0.5).any() or (pix[:, 0] > s.width - 0.5).any() or \
-                    (pix[:, 1] > s.height - 0.5).any():  # fmt: skip
+            if (
+                (depth <= 0).any()
+                or (pix < -0.5).any()
+                or (pix[:, 0] > s.width - 0.5).any()
+                or (pix[:, 1] > s.height - 0.5).any()
+            ):
                 continue
             if not shapely.intersects_xy(self.sight[k], p[0], p[1]):
                 continue
@@ -322,8 +363,9 @@ class RenderedCamera:
             _, found = self.frame(x[r], heading[r])
             found = [detect.estimate_pose(d, self.intrinsics, self.settings.tag_size) for d in found]
             try:
-                obs = observe(found, self.intrinsics, self.mount, self.tags, heading=float(heading[r]) if compass
-                              else None)  # fmt: skip
+                obs = observe(
+                    found, self.intrinsics, self.mount, self.tags, heading=float(heading[r]) if compass else None
+                )
             except InvalidParamsError:  # only free-standing tags in sight: no heading without a compass
                 obs = observe([], self.intrinsics, self.mount, self.tags, heading=float(heading[r]))
             bearings[r], seen[r] = obs.bearings, obs.visible

@@ -79,11 +79,16 @@ def resolve_starts(map_, spec: str, rng: np.random.Generator) -> np.ndarray:
         if not inside[k]:
             if not (lo <= (x, y)).all() or not ((x, y) <= hi).all():
                 raise InvalidParamsError(f"{where} is outside the bounds {_box(map_.bounds)}", field="starts")
-            raise InvalidParamsError(f"{where} is within the {map_.inflation_text} of a wall (the robot's centre "
-                                     f"stays in {_box(map_.free_bounds)})", field="starts")  # fmt: skip
+            raise InvalidParamsError(
+                f"{where} is within the {map_.inflation_text} of a wall (the robot's centre "
+                f"stays in {_box(map_.free_bounds)})",
+                field="starts",
+            )
         if blocked[k]:
-            raise InvalidParamsError(f"{where} is inside an obstacle grown by the {map_.inflation_text} (the robot "
-                                     "would touch it)", field="starts")  # fmt: skip
+            raise InvalidParamsError(
+                f"{where} is inside an obstacle grown by the {map_.inflation_text} (the robot would touch it)",
+                field="starts",
+            )
     return starts
 
 
@@ -132,8 +137,9 @@ def domain_starts(arrays, count: int, rng: np.random.Generator) -> np.ndarray:
         holders = np.zeros(len(p), np.int64)
         for k in range(0, len(p), 128):  # (points, cells, rows) in chunks
             q = p[k : k + 128]
-            holders[k : k + 128] = np.all(np.einsum("cpk,rk->rcp", arrays.row_A, q) <= arrays.row_b[None] + slack,
-                                          axis=2).sum(axis=1)  # fmt: skip
+            holders[k : k + 128] = np.all(
+                np.einsum("cpk,rk->rcp", arrays.row_A, q) <= arrays.row_b[None] + slack, axis=2
+            ).sum(axis=1)
         keep = rng.uniform(size=len(p)) * np.maximum(holders, 1) < 1.0
         found.append(p[keep][:need])
         need -= len(found[-1])

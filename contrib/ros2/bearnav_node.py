@@ -75,9 +75,10 @@ class BearnavNode(Node):
         )  # best effort: matches any publisher
         self.create_timer(settings.period, self.watchdog)
         lookahead = self.logic.controller.arrays.lookahead
-        self.get_logger().info(f"bearnav: {len(self.logic.tags.numbers)} tags, {settings.dynamics}, "
-                               f"heading from {settings.heading_source}"
-                               + (f", look-ahead {lookahead:g} m" if lookahead > 0 else ""))  # fmt: skip
+        self.get_logger().info(
+            f"bearnav: {len(self.logic.tags.numbers)} tags, {settings.dynamics}, "
+            f"heading from {settings.heading_source}" + (f", look-ahead {lookahead:g} m" if lookahead > 0 else "")
+        )
 
     def publish(self, values: tuple) -> None:
         self.pub.publish(fill_twist(Twist(), values))

@@ -28,10 +28,21 @@ from bearnav_cli.runtime import ESTIMATORS, Controller, camera, camera_model
 from bearnav_cli.runtime.defaults import BEARING_SIGMA, LOOP_DEFAULTS
 
 __all__ = [
-    "BearnavLogic", "HEADING_SOURCES", "Settings", "Step", "camera_yaw", "detections_from_msg", "fill_twist",
-    "intrinsics_from_camera_info", "mount_from_transform", "pose_from_transform", "rotation_from_quaternion",
-    "tag_frame", "twist_from_command", "yaw_from_quaternion",
-]  # fmt: skip
+    "BearnavLogic",
+    "HEADING_SOURCES",
+    "Settings",
+    "Step",
+    "camera_yaw",
+    "detections_from_msg",
+    "fill_twist",
+    "intrinsics_from_camera_info",
+    "mount_from_transform",
+    "pose_from_transform",
+    "rotation_from_quaternion",
+    "tag_frame",
+    "twist_from_command",
+    "yaw_from_quaternion",
+]
 
 #: Where the robot's yaw comes from: a compass (``sensor_msgs/Imu`` with an absolute yaw) or the
 #: tag poses (TF from ``apriltag_ros``, tags with a known facing on the map).
@@ -205,19 +216,29 @@ class Settings:
 
     def __post_init__(self) -> None:
         if self.heading_source not in HEADING_SOURCES:
-            raise InvalidParamsError(f"expected one of {', '.join(HEADING_SOURCES)}, got {self.heading_source!r}",
-                                     field="heading_source")  # fmt: skip
+            raise InvalidParamsError(
+                f"expected one of {', '.join(HEADING_SOURCES)}, got {self.heading_source!r}", field="heading_source"
+            )
         if self.estimator not in ESTIMATORS:
-            raise InvalidParamsError(f"expected one of {', '.join(ESTIMATORS)}, got {self.estimator!r}",
-                                     field="estimator")  # fmt: skip
+            raise InvalidParamsError(
+                f"expected one of {', '.join(ESTIMATORS)}, got {self.estimator!r}", field="estimator"
+            )
         if not self.period > 0:
             raise InvalidParamsError(f"the camera period must be positive (s), got {self.period}", field="period")
 
     def controller(self) -> Controller:
-        return Controller.from_plan(self.plan, speed=self.speed, dt=self.period, dynamics=self.dynamics,
-                                    alpha=self.alpha, beta=self.beta, clamp_reverse=self.clamp_reverse,
-                                    hold_time=self.hold_time, bearing_sigma=self.bearing_sigma,
-                                    estimator=self.estimator)  # fmt: skip
+        return Controller.from_plan(
+            self.plan,
+            speed=self.speed,
+            dt=self.period,
+            dynamics=self.dynamics,
+            alpha=self.alpha,
+            beta=self.beta,
+            clamp_reverse=self.clamp_reverse,
+            hold_time=self.hold_time,
+            bearing_sigma=self.bearing_sigma,
+            estimator=self.estimator,
+        )
 
 
 @dataclass
@@ -282,8 +303,11 @@ class BearnavLogic:
     def tag_frames(self, msg: Any, template: str = "{family}:{id}") -> dict[int, str]:
         """``{tag id: TF frame}`` of the plan's tags in a detection message (to look their poses up)."""
         keep = _family(self.settings.family) if self.settings.family else None
-        return {int(d.id): tag_frame(d.family, d.id, template) for d in msg.detections
-                if self.tags.index(int(d.id)) >= 0 and (keep is None or _family(d.family) == keep)}  # fmt: skip
+        return {
+            int(d.id): tag_frame(d.family, d.id, template)
+            for d in msg.detections
+            if self.tags.index(int(d.id)) >= 0 and (keep is None or _family(d.family) == keep)
+        }
 
     def on_detections(self, msg: Any, poses: Mapping[int, tuple] | None = None) -> Step:
         """The twist for one ``AprilTagDetectionArray`` (``poses``: tag id → camera pose, from TF)."""
@@ -305,8 +329,9 @@ class BearnavLogic:
                 obs = camera.observe(detections, self.intrinsics, self.mount, self.tags, self.yaw)
         yaw = float(obs.heading)
         single = self.settings.dynamics != "unicycle"
-        command = self.controller.command(obs.bearings, obs.visible,
-                                          heading=yaw + camera_yaw(self.mount) if single else yaw)  # fmt: skip
+        command = self.controller.command(
+            obs.bearings, obs.visible, heading=yaw + camera_yaw(self.mount) if single else yaw
+        )
         last = self.controller.last
         turn = float(last.turn[0]) if single and last is not None else 0.0
         twist = twist_from_command(command, self.settings.dynamics, yaw, turn)
