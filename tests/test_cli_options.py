@@ -174,22 +174,11 @@ def verify_plan_fixture_free():
 
 def test_simulate_and_the_controller_build_their_settings_alike(tmp_path):
     """One builder, one set of defaults: the Controller's settings are simulate's for the same options."""
-    from bearnav_cli import artifacts
+    from .handmade import write_plan
 
     plan = verify_plan_fixture_free()
     path = tmp_path / "plan.npz"
-    manifest = artifacts.make_manifest(
-        "plan",
-        plan,
-        stage="synthesize",
-        stage_version=1,
-        params={},
-        input_path=None,
-        input_hash="0",
-        summary="",
-        elapsed_s=0.0,
-    )
-    artifacts.save(path, plan, manifest)
+    write_plan(path, plan)
     robot = runtime.Controller.from_plan(str(path)).settings
     sim = simulate.settings(plan, simulate.Params(noise_deg=1.0)).control
     assert robot == sim

@@ -16,10 +16,11 @@ from pathlib import Path
 import numpy as np
 
 import bearnav_cli
-from bearnav_cli import artifacts, pipeline
+from bearnav_cli import pipeline
 from bearnav_cli.stages import map_
 
 from .conftest import REPO, SMALL_MAP
+from .handmade import write_plan
 
 #: Runs in ``python -I -S``: no site-packages, no ``.pth`` (so not the editable install), no current folder;
 #: ``sys.path`` is the stdlib, the installed wheel and a folder holding numpy alone.
@@ -125,18 +126,7 @@ def test_a_robot_runs_a_plan_from_the_wheel_with_numpy_alone(tmp_path):
         map_.MapSource(spec=spec, file="small.yaml", sha256="0"), overrides={"rrtstar": {"iterations": 150}}
     )
     plan = made["plan"]
-    manifest = artifacts.make_manifest(
-        "plan",
-        plan,
-        stage="synthesize",
-        stage_version=1,
-        params={},
-        input_path=None,
-        input_hash="0",
-        summary="",
-        elapsed_s=0.0,
-    )
-    plan_path = artifacts.save(tmp_path / "plan.npz", plan, manifest)
+    plan_path = write_plan(tmp_path / "plan.npz", plan)
     start = SMALL_MAP["starts"][0]
 
     done = subprocess.run(

@@ -24,23 +24,9 @@ from bearnav_cli.funnel import cell_tolerance, exit_face, exit_sink, usable_tole
 from bearnav_cli.geometry import polygon_rows
 from bearnav_cli.runtime.certificate import field_margins
 from tests.conftest import random_plan
+from tests.handmade import write_plan
 
 SEEDS = range(6)
-
-
-def _save(path, plan):
-    manifest = artifacts.make_manifest(
-        "plan",
-        plan,
-        stage="synthesize",
-        stage_version=1,
-        params={},
-        input_path=None,
-        input_hash="0",
-        summary="",
-        elapsed_s=0.0,
-    )
-    return artifacts.save(path, plan, manifest)
 
 
 def random_cell(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -173,12 +159,12 @@ def test_a_plan_stores_an_infinite_tolerance_and_round_trips_it(tmp_path):
     tolerance[c] = math.inf
     constant = dataclasses.replace(plan, tolerance=tolerance)
     path = tmp_path / "plan.npz"
-    _save(path, constant)
+    write_plan(path, constant)
     again = artifacts.load(path).artifact
     assert again.tolerance[c] == math.inf and np.isfinite(again.usable_tolerance).all()
     tolerance[c] = -math.inf
     with pytest.raises(ArtifactError, match="tolerance"):
-        _save(tmp_path / "bad.npz", dataclasses.replace(plan, tolerance=tolerance))
+        write_plan(tmp_path / "bad.npz", dataclasses.replace(plan, tolerance=tolerance))
 
 
 def _tampered(plan, **changes):
@@ -216,7 +202,7 @@ def test_verify_names_the_cell_whose_exit_face_leaves_its_parent_eroded_by_its_o
 def test_a_plan_2_file_names_the_command_that_rebuilds_it(tmp_path):
     plan = random_plan(0)
     path = tmp_path / "plan.npz"
-    _save(path, plan)
+    write_plan(path, plan)
     with np.load(path, allow_pickle=False) as data:
         entries = {k: data[k] for k in data.files}
     import json
