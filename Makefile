@@ -102,8 +102,8 @@ $(FIGURES)/paper_b.png: repro/paper_b.py $(REPRO_LIB) plans/paper_b_circles/plan
 # The robustness figure is a sweep (repro/robustness.yaml, docs/sweeps.md): every example map × both tag sets ×
 # 4 fields of view × 4 noises × 2 dynamics, 200 random starts, one job each, on every CPU (bearnav sweep --jobs N
 # for fewer). The store sweeps/robustness/ keeps every finished job (a job's file is named by the hash of its map,
-# seed, parameters and stage versions), so an interrupted `make reproduce` resumes where it stopped. About 20
-# minutes of CPU on the 2-core development machine (bench/README.md "Sweep").
+# seed, parameters and stage versions), so an interrupted `make reproduce` resumes where it stopped. 30
+# minutes of CPU on the 2-core development machine, 17 on both of its cores (bench/README.md "Sweep").
 ROBUSTNESS_MAPS := kitchen paper_sim_circles paper_b_circles storeroom
 $(FIGURES)/robustness.png: repro/robustness.yaml $(STAMP) $(PLAN_SRC) $(foreach m,$(ROBUSTNESS_MAPS),maps/$(m).yaml)
 	$(BIN)/bearnav sweep $< -o sweeps/robustness --figure $@
