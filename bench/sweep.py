@@ -2,7 +2,7 @@
 
 The sweep file is ``repro/robustness.yaml`` (``make reproduce``'s robustness figure: 4 maps × 2 tag
 sets × 4 fields of view × 4 noises × 2 dynamics, 200 random starts). By default a reduced grid of
-it runs (``--full`` runs all of it: 30 min with ``--jobs 1`` and 17 min on two processes, bench/README.md): the same file with
+it runs (``--full`` runs all of it: 30 min with ``--jobs 1``, 17 min on two processes): the same file with
 ``fov: [360, 60]``, ``noise_deg: [0, 1]``, ``dynamics: [single]`` and ``starts: random:100``, 32 jobs of
 100 starts on every map with both tag sets; the section says which ran.
 
