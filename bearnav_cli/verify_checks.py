@@ -25,7 +25,7 @@ import numpy as np
 import shapely
 
 from bearnav_cli import composition
-from bearnav_cli.datatypes import CellFlag, CellStatus, Plan, cell_polygons
+from bearnav_cli.datatypes import CLAIMS_CERTIFICATE, CellFlag, CellStatus, Plan, cell_polygons
 from bearnav_cli.funnel import coverage_domain, reached_parts
 from bearnav_cli.geometry import FreeSpace, inflate
 from bearnav_cli.routes import sample_starts
@@ -33,7 +33,6 @@ from bearnav_cli.runtime.certificate import UNIT_TOL, barrier_fault, field_margi
 
 __all__ = [
     "CERTIFICATE_TOL",
-    "CERTIFIED",
     "COVERAGE_TOL",
     "GOAL_FIELD_TOL",
     "Certificates",
@@ -55,7 +54,6 @@ CERTIFICATE_TOL = 1e-7
 GOAL_FIELD_TOL = 1e-9
 #: Uncovered area allowed, as a fraction of ``area(B)``.
 COVERAGE_TOL = 1e-9
-CERTIFIED = (CellStatus.CERTIFIED, CellStatus.RELAXED, CellStatus.GOAL)
 
 
 # --------------------------------------------------------------------------- certificates
@@ -143,7 +141,7 @@ def certificate_problems(plan: Plan, cert: Certificates) -> dict[int, str]:
     problems = {}
     for c in range(plan.cells.n_cells):
         status = int(plan.status[c])
-        if status not in CERTIFIED:
+        if status not in CLAIMS_CERTIFICATE:
             continue
         why = []
         if cert.violation[c] > CERTIFICATE_TOL:
@@ -292,7 +290,9 @@ def check_geometry(plan: Plan, space: FreeSpace, tree_samples: np.ndarray | None
         anchors = np.stack([cells.nodes[node], cells.nodes[j]]) if j >= 0 else map_.goal[None, :]
         if np.any(anchors @ A.T > b + tol):
             off_edge.append(c)
-        if int(plan.status[c]) in CERTIFIED and barrier_fault(*cells.barrier(c), cells.nodes[j] if j >= 0 else None):
+        if int(plan.status[c]) in CLAIMS_CERTIFICATE and barrier_fault(
+            *cells.barrier(c), cells.nodes[j] if j >= 0 else None
+        ):
             bad_rows.append(c)
     children = np.flatnonzero(cells.parent >= 0)
     free = space.segments_free(cells.nodes[children], cells.nodes[cells.parent[children]])

@@ -13,10 +13,10 @@ from typing import Any
 import numpy as np
 
 from bearnav_cli.composition import Composition
-from bearnav_cli.datatypes import CellStatus, Outcome, Simulation, cell_list, plural
+from bearnav_cli.datatypes import CLAIMS_CERTIFICATE, CellStatus, Outcome, Simulation, cell_list, plural
 from bearnav_cli.liveness import Liveness
 from bearnav_cli.routes import MAX_ROUTE_VERTICES
-from bearnav_cli.verify_checks import CERTIFIED, Certificates, Geometry, Unreached
+from bearnav_cli.verify_checks import Certificates, Geometry, Unreached
 
 __all__ = ["VerifyReport", "duration_text"]
 
@@ -300,7 +300,7 @@ class VerifyReport:
     def summary(self) -> str:
         """One line for the CLI."""
         n = len(self.status)
-        certified = int(np.count_nonzero(np.isin(self.status, CERTIFIED))) - len(self.false_certificates)
+        certified = int(np.count_nonzero(np.isin(self.status, CLAIMS_CERTIFICATE))) - len(self.false_certificates)
         comp = self.composition
         if comp is not None:
             tau = comp.usable_by_area
@@ -350,7 +350,7 @@ class VerifyReport:
                 "uncertified": self.uncertified,
                 "false_certificates": {str(c): why for c, why in sorted(self.false_certificates.items())},
                 "max_violation_certified": _finite_or_none(
-                    [np.max(cert.violation[np.isin(self.status, CERTIFIED)], initial=0.0)]
+                    [np.max(cert.violation[np.isin(self.status, CLAIMS_CERTIFICATE)], initial=0.0)]
                 )[0],
                 "flagged": self.flagged,
                 "per_cell": {

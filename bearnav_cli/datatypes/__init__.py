@@ -19,6 +19,7 @@ Every name is re-exported here; its modules, each with one job:
 from bearnav_cli.datatypes.cells import (
     AREA_QUANTILES,
     CELL_KEYS,
+    CLAIMS_CERTIFICATE,
     PLAN_KEYS,
     CellFlag,
     Cells,
@@ -38,6 +39,7 @@ from bearnav_cli.datatypes.words import NEGLIGIBLE_SHARE, cell_list, percent, pl
 __all__ = [
     "AREA_QUANTILES",
     "CELL_KEYS",
+    "CLAIMS_CERTIFICATE",
     "active_regions",
     "cell_polygons",
     "cell_list",

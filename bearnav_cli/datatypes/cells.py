@@ -20,6 +20,7 @@ from bearnav_cli.runtime.invariants import cell_areas, check_cells_form, check_p
 from bearnav_cli.runtime.schema import ENTRIES
 
 __all__ = [
+    "CLAIMS_CERTIFICATE",
     "AREA_QUANTILES",
     "CELL_KEYS",
     "CellFlag",
@@ -41,6 +42,10 @@ class CellStatus(enum.IntEnum):
     NOT_CERTIFIED = 2  # least-violation solution stored
     SOLVER_FAILURE = 3
     GOAL = 4
+
+
+#: The statuses that claim a certificate: the ones ``verify`` re-checks and ``synthesize`` judges the barrier rows of.
+CLAIMS_CERTIFICATE = (CellStatus.CERTIFIED, CellStatus.RELAXED, CellStatus.GOAL)
 
 
 class CellFlag(enum.IntFlag):

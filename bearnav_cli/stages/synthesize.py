@@ -54,7 +54,16 @@ from bearnav_cli.cell_lp import (
     theta_from_gain,
     vertex_template,
 )
-from bearnav_cli.datatypes import CellFlag, Cells, CellStatus, Plan, cell_list, plural, tolerance_by_area
+from bearnav_cli.datatypes import (
+    CLAIMS_CERTIFICATE,
+    CellFlag,
+    Cells,
+    CellStatus,
+    Plan,
+    cell_list,
+    plural,
+    tolerance_by_area,
+)
 from bearnav_cli.errors import ArtifactError
 from bearnav_cli.funnel import plan_tolerance_of, usable_tolerances
 from bearnav_cli.lp import LpResult, LpSolver, LpStatus
@@ -77,8 +86,6 @@ __all__ = [
 
 VERSION = 3
 log = logging.getLogger(__name__)
-#: The statuses that claim a certificate (``verify`` re-checks these).
-_CLAIMED = (CellStatus.CERTIFIED, CellStatus.RELAXED, CellStatus.GOAL)
 
 
 # --------------------------------------------------------------------------- one cell
@@ -466,7 +473,7 @@ def judged(
     tuple of CellSolution and (str or None)
         The solution, and the fault that took its certificate away (None: none did).
     """
-    if solution.status not in _CLAIMED:
+    if solution.status not in CLAIMS_CERTIFICATE:
         return solution, None
     fault = barrier_fault(cbf_n, cbf_q, x_j)
     return (solution, None) if fault is None else (replace(solution, status=CellStatus.NOT_CERTIFIED), fault)
