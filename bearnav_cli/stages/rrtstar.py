@@ -429,15 +429,17 @@ def summary(tree: Tree) -> str:
 
 # --------------------------------------------------------------------------- checks and verdict
 
-#: Most cells of RRT*'s neighbour grid (3 per step along each side of the bounds).
+#: Most cells of RRT*'s neighbour grid (3 per step along each side of the bounds). The sorted grid stores
+#: nothing per bucket beyond :data:`DENSE_BUCKETS`, but a nearest-node query widens its block bucket by bucket,
+#: so a grid far finer than the tree is slow, not large.
 MAX_GRID_CELLS = 10_000_000
 #: Most border pseudo-samples of RRT* (they become collision samples every later stage reads).
 MAX_BORDER_SAMPLES = 200_000
 #: Bytes per RRT* iteration (sample, node, parent, cost, child list, bucket slot), measured on the kitchen.
 RRT_BYTES_PER_ITERATION = 400
-#: Bytes per cell of RRT*'s neighbour grid, as budgeted: measured when every bucket was an array of its own
-#: (150); the sorted grid keeps 8 bytes per bucket up to ``DENSE_BUCKETS`` and none beyond, so this over-counts.
-RRT_BYTES_PER_GRID_CELL = 150
+#: Bytes per cell of RRT*'s neighbour grid: where each bucket's run starts (int64), kept only up to
+#: :data:`DENSE_BUCKETS` buckets (:class:`_BucketGrid`).
+RRT_BYTES_PER_GRID_CELL = 8
 
 
 def _count(cells: float) -> float:
@@ -489,7 +491,7 @@ def check_resources(map_: Map, params: Params, given: frozenset[str] = frozenset
             f"{MAX_BORDER_SAMPLES:,}); use a --border-spacing of at least {smallest:.3g} (or 0: none)",
             field="step" if derived else "border_spacing",
         )
-    fixed = grid * RRT_BYTES_PER_GRID_CELL + border * 64
+    fixed = (min(grid, DENSE_BUCKETS) + 1) * RRT_BYTES_PER_GRID_CELL + border * 64
     limits.check_memory(params.iterations, "iterations", RRT_BYTES_PER_ITERATION, "iterations", fixed)
 
 
