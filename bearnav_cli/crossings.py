@@ -17,7 +17,6 @@ import numpy as np
 import shapely
 
 __all__ = [
-    "box_pairs",
     "carry",
     "count_crossings",
     "crossing",
@@ -25,7 +24,6 @@ __all__ = [
     "MEET_SLACK",
     "NearNodes",
     "Neighbours",
-    "remove_crossings",
     "split_crossings",
 ]
 
@@ -129,7 +127,7 @@ def _in_subtree(v: int, parent: list[int], roots: tuple[int, int]) -> bool:
     return False
 
 
-def box_pairs(nodes, parent, tol: float) -> tuple[np.ndarray, np.ndarray]:
+def _box_pairs(nodes, parent, tol: float) -> tuple[np.ndarray, np.ndarray]:
     """Ordered pairs ``(e, f)``, ``e != f``, of edges (named by their child) whose boxes, grown by ``tol``, meet.
 
     Parameters
@@ -260,29 +258,6 @@ class Neighbours:
         if found is None:
             found = self.lists[edge] = self.pairs(np.array([edge]))[1]
         return found
-
-
-def remove_crossings(nodes, parent, cost, tol: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
-    """RC: split properly crossing edges until none is left (ALGORITHMS §3).
-
-    :func:`split_crossings` from scratch, without what it carries to the next pass.
-
-    Parameters
-    ----------
-    nodes : ndarray, shape (N, 2)
-        Node positions (map units); the edges are ``nodes[i] → nodes[parent[i]]``.
-    parent : ndarray of int, shape (N,)
-        Each node's parent, ``-1`` at node 0 only.
-    cost : ndarray, shape (N,)
-        Route length from each node to the root (map units), consistent with the tree.
-    tol : float
-        The map's tolerance (map units).
-
-    Returns
-    -------
-    nodes (M, 2), parent (M,), cost (M,), insertions
-    """
-    return split_crossings(nodes, parent, cost, tol)[:4]
 
 
 def split_crossings(
@@ -483,7 +458,7 @@ def count_crossings(nodes: np.ndarray, parent: np.ndarray, tol: float) -> tuple[
     """
     if len(nodes) < 4:
         return 0, 0
-    qa, qb = box_pairs(nodes, parent, tol)
+    qa, qb = _box_pairs(nodes, parent, tol)
     upper = qa < qb
     ok, k = crossing(nodes, parent, qa[upper], qb[upper], None, tol)
     proper = NearNodes(nodes, tol).clear_of(k[ok]) if ok.any() else np.zeros(0, bool)

@@ -415,12 +415,12 @@ def test_rc_cycle_guard_overrides_a_cheaper_parent_inside_the_subtree():
     forged = np.array([0.0, 0.0, -10.0, 4.0])  # C_i = -10 + 2 < C_j = 0 + 2: naive choice is p_i = 2
     result = []  # in a daemon thread: without the guard the cost update would loop round the cycle
     worker = threading.Thread(
-        target=lambda: result.append(crossings.remove_crossings(nodes, parent, forged, 1e-9)), daemon=True
+        target=lambda: result.append(crossings.split_crossings(nodes, parent, forged, 1e-9)), daemon=True
     )
     worker.start()
     worker.join(timeout=20)
     assert result, "RC did not finish (a cycle?)"
-    nodes2, parent2, cost2, added = result[0]
+    nodes2, parent2, cost2, added, _ = result[0]
     assert added == 1 and nodes2[4].tolist() == [7, 5]
     assert parent2.tolist() == [-1, 4, 3, 4, 0]  # k hangs on p_j = root, not on p_i
     assert cost2[4] == 2.0
@@ -434,7 +434,7 @@ def test_rc_alone_keeps_costs_consistent_and_leaves_no_crossing(clutter):
     nodes, parent = np.array(tree.nodes), np.array(tree.parent)
     simplify._shortcut(nodes, parent, FreeSpace.from_map(clutter), simplify.bfs_levels(parent))
     cost = simplify.tree_costs(nodes, parent, simplify.bfs_levels(parent))
-    nodes, parent, cost, added = crossings.remove_crossings(nodes, parent, cost, clutter.tol)
+    nodes, parent, cost, added, _ = crossings.split_crossings(nodes, parent, cost, clutter.tol)
     assert added > 0 and proper_crossings(nodes, parent, clutter.tol) == []
     fresh = simplify.tree_costs(nodes, parent, simplify.bfs_levels(parent))
     assert np.allclose(cost, fresh, rtol=0, atol=clutter.tol)
