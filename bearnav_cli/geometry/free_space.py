@@ -243,17 +243,17 @@ class FreeSpace:
     def segments_free(self, starts: np.ndarray, ends: np.ndarray, *, known_in_box: bool = False) -> np.ndarray:
         """Exact segment test: each segment lies in ``B`` and does not touch ``O``.
 
-            Parameters
-            ----------
-            starts, ends : ndarray, shape (n, 2)
-                Segment endpoints (either may be a single point, broadcast against the other).
+        Parameters
+        ----------
+        starts, ends : ndarray, shape (n, 2)
+            Segment endpoints (either may be a single point, broadcast against the other).
         known_in_box : bool
             The caller guarantees every endpoint lies in ``B`` (samples drawn in ``B``):
             skip that check.
 
-            Returns
-            -------
-            ndarray of bool, shape (n,)
+        Returns
+        -------
+        ndarray of bool, shape (n,)
         """
         a = np.asarray(starts, float).reshape(-1, 2)
         b = np.asarray(ends, float).reshape(-1, 2)
@@ -261,14 +261,13 @@ class FreeSpace:
         coords[:, 0] = a
         coords[:, 1] = b
         if known_in_box:
-            if self._no_obstacles:
-                return np.ones(len(coords), bool)
-            return ~shapely.intersects(self.obstacles, shapely.linestrings(coords))
-        lo, hi = self._box_limits
-        # B is convex, so both endpoints in B put the whole segment in B
-        flat = coords.reshape(-1, 4)
-        free = ((flat >= lo) & (flat <= hi)).all(axis=1)
-        if self.obstacles.is_empty:
+            free = np.ones(len(coords), bool)
+        else:
+            lo, hi = self._box_limits
+            # B is convex, so both endpoints in B put the whole segment in B
+            flat = coords.reshape(-1, 4)
+            free = ((flat >= lo) & (flat <= hi)).all(axis=1)
+        if self._no_obstacles:
             return free
         if free.all():
             return ~shapely.intersects(self.obstacles, shapely.linestrings(coords))
