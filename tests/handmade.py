@@ -78,6 +78,25 @@ def first_cells(cells: Cells, count: int) -> Cells:
     )
 
 
+def first_plan_cells(plan: Plan, count: int) -> Plan:
+    """The same plan with only its first ``count`` cells and their controllers (:func:`first_cells`)."""
+    keep = slice(None, count)
+    return Plan(
+        first_cells(plan.cells, count),
+        plan.gain[keep],
+        plan.c_h[keep],
+        plan.c_v[keep],
+        plan.u_max[keep],
+        plan.margin_h[keep],
+        plan.margin_v[keep],
+        plan.status[keep],
+        plan.goal_tolerance,
+        plan.tolerance[keep],
+        plan.usable_tolerance[keep],
+        plan.plan_tolerance,
+    )
+
+
 def cell_polygons(nodes: np.ndarray, parent: np.ndarray, bounds: np.ndarray) -> list[np.ndarray]:
     """The cells of ALGORITHMS §4.1 (crossing rule) and §4.3, one CCW polygon per node."""
     xmin, ymin, xmax, ymax = bounds

@@ -16,7 +16,15 @@ from bearnav_cli.runtime import PlanArrays
 from bearnav_cli.stages import simulate
 
 from .conftest import REPO
-from .handmade import CHAIN_NODES, CHAIN_PARENT, cell_polygons, first_cells, hand_map, hand_plan, write_plan
+from .handmade import (
+    CHAIN_NODES,
+    CHAIN_PARENT,
+    cell_polygons,
+    first_plan_cells,
+    hand_map,
+    hand_plan,
+    write_plan,
+)
 from .test_hostile_common import rewrite_npz
 
 #: The exact motion of ALGORITHMS §7.1 (no wheel slip), for tests of exact paths.
@@ -75,24 +83,8 @@ def test_from_npz_names_a_missing_entry(chain, tmp_path):
 
 
 def test_every_node_needs_a_cell(chain):
-    fewer = first_cells(chain.cells, 2)
     with pytest.raises(ArtifactError, match="exactly one cell"):
-        PlanArrays.from_plan(
-            Plan(
-                fewer,
-                chain.gain[:2],
-                chain.c_h[:2],
-                chain.c_v[:2],
-                chain.u_max[:2],
-                chain.margin_h[:2],
-                chain.margin_v[:2],
-                chain.status[:2],
-                chain.goal_tolerance,
-                chain.tolerance[:2],
-                chain.usable_tolerance[:2],
-                chain.plan_tolerance,
-            )
-        )
+        PlanArrays.from_plan(first_plan_cells(chain, 2))
 
 
 def test_field_is_the_gain_applied_to_displacements(chain, arrays):

@@ -17,7 +17,7 @@ from bearnav_cli.geometry import FreeSpace
 from bearnav_cli.stages import simulate
 
 from .conftest import EXAMPLE_MAPS, REPO, example_plan
-from .handmade import cell_polygons, first_cells, hand_map, hand_plan
+from .handmade import cell_polygons, first_plan_cells, hand_map, hand_plan
 
 FAST = verify.Params(n_starts=40, seed=3)
 
@@ -108,21 +108,7 @@ def test_false_margins_uncertified_cells_and_goal_fields_fail(chain):
 
 
 def test_removing_a_cell_makes_coverage_fail(chain):
-    fewer = first_cells(chain.cells, 2)
-    plan = Plan(
-        fewer,
-        chain.gain[:2],
-        chain.c_h[:2],
-        chain.c_v[:2],
-        chain.u_max[:2],
-        chain.margin_h[:2],
-        chain.margin_v[:2],
-        chain.status[:2],
-        chain.goal_tolerance,
-        chain.tolerance[:2],
-        chain.usable_tolerance[:2],
-        chain.plan_tolerance,
-    )
+    plan = first_plan_cells(chain, 2)
     report = verify.run(plan, FAST)
     assert report.failed and not report.geometry.coverage_ok
     assert report.geometry.uncovered_area == pytest.approx(3.0 * 8.0)  # cell 2 alone held 7 ≤ x ≤ 10
