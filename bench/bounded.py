@@ -53,7 +53,10 @@ def plan_of(source: MapSource, spec: dict, lookahead: float):
 
 
 def one(plan, label: str, starts: str, **options) -> tuple[list, float]:
-    params = simulate.Params(starts=starts, fov=60.0, record_trajectories=False, **options)
+    # defaults, then the map's own `params: simulate` (the paper maps drive at 1 unit/s), then these, as `bearnav
+    # simulate` resolves them
+    overrides = {"starts": starts, "fov": 60.0, "record_trajectories": False, **options}
+    params = pipeline.resolve_params("simulate", plan.map.params, overrides)
     seconds, sim = timed(simulate.run, plan, params)
     m = sim.stats
     looks = m.get("looks_per_run")
@@ -106,16 +109,14 @@ def main() -> None:
                 ]
             )
             print(" | ".join(map(str, live_rows[-1])), flush=True)
-            # the map's own closed-loop parameters (the paper maps drive at 1 unit/s), as `bearnav simulate` takes them
-            own = dict((source.spec.get("params") or {}).get("simulate") or {})
-            base = {**own, "dynamics": dynamics, "noise_bound_deg": args.eta}
+            base = {"dynamics": dynamics, "noise_bound_deg": args.eta}
             kalman, t_kalman = one(plan, f"{tag}: kalman", starts, estimator="kalman", **base)
             uniform, t_set = one(plan, f"{tag}: set", starts, estimator="set", **base)
             worst, _ = one(plan, f"{tag}: set, worst", starts, estimator="set", noise_worst=True, **base)
             uniform[-1] += f" ({t_set / t_kalman:.2f}×)"
             rows += [kalman, uniform, worst]
             if dynamics == "single":  # the stress test: Gaussian σ = 1°, beyond any bound the robot assumes
-                stress = {**own, "dynamics": dynamics, "noise_deg": 1.0}
+                stress = {"dynamics": dynamics, "noise_deg": 1.0}
                 rows += [
                     one(plan, f"{tag}: kalman, Gaussian σ=1°", starts, estimator="kalman", **stress)[0],
                     one(plan, f"{tag}: set, Gaussian σ=1°", starts, estimator="set", **stress)[0],
