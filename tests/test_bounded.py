@@ -10,12 +10,14 @@ outside its set, and every certified step ending inside the certified domain.
 from __future__ import annotations
 
 import math
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 import shapely
 
 from bearnav_cli.runtime import PlanArrays, bounded, least_rank_cell, look_bound
+from bearnav_cli.runtime.safety import StepError, certified_pace
 from bearnav_cli.stages import simulate
 from tests.conftest import random_plan
 
@@ -221,6 +223,93 @@ def test_cones_of_inconsistent_bearings_empty_the_set():
     assert count[0] == 0
     x_hat, error = bounded.centre(vertices, count)
     assert np.isnan(x_hat).all() and np.isinf(error).all()
+
+
+def pace_case(seed: int, r: int = 400):
+    """``r`` robots in random cells (barrier rows of random convex polygons, some rows scaled), with random
+    estimates near the faces, error bounds, step directions and step errors."""
+    rng = np.random.default_rng(seed)
+    vertices, count = random_polygons(seed, r, 7)
+    width = vertices.shape[1]
+    A, b = np.zeros((r, width, 2)), np.full((r, width), np.inf)
+    for i in range(r):
+        ring = vertices[i, : count[i]]
+        edge = np.roll(ring, -1, axis=0) - ring
+        n = np.column_stack([edge[:, 1], -edge[:, 0]]) / np.hypot(edge[:, 0], edge[:, 1])[:, None]  # outward
+        scale = rng.choice([1.0, 2.5], len(ring))  # h = A·x + b ≥ 0 inside; rows need not be unit
+        A[i, : len(ring)] = -n * scale[:, None]
+        b[i, : len(ring)] = np.einsum("ij,ij->i", n, ring) * scale
+    inside = np.array([polygon(vertices, count, i).representative_point().coords[0] for i in range(r)])
+    near = vertices[np.arange(r), rng.integers(0, count)]  # toward a vertex: close to two faces
+    x_hat = near + rng.uniform(0.0, 1.0, (r, 1)) ** 3 * (inside - near)
+    angle = rng.uniform(-np.pi, np.pi, r)
+    direction = np.column_stack([np.cos(angle), np.sin(angle)])
+    error = rng.uniform(0.0, 0.2, r) * rng.uniform(0.0, 1.0, r)
+    step = rng.uniform(0.05, 0.5)
+    motion = StepError(step, rng.uniform(0.0, 0.1), rng.uniform(0.0, 0.02), rng.uniform(0.0, 0.3, r) * step**2)
+    arrays = SimpleNamespace(bar_A=A, bar_b=b)
+    return arrays, np.arange(r), x_hat, error, direction, motion
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_the_certified_pace_keeps_every_truth_in_its_cell_and_is_the_largest(seed):
+    """§12.3's step check: whatever the truth within ``e`` of ``x̂`` in the cell, and whatever the step's error
+    within ``w(p)``, a step at the pace returned ends in the cell (checked on sampled truths, pushed by the
+    largest error against each face in turn); and no larger pace passes the rows (checked on a fine grid)."""
+    arrays, cell, x_hat, error, direction, motion = pace_case(seed)
+    pace = certified_pace(arrays, cell, x_hat, error, direction, motion)
+    assert np.all((pace >= 0.0) & (pace <= 1.0))
+    rng = np.random.default_rng(seed + 10)
+    A, b = arrays.bar_A, arrays.bar_b
+    real = np.isfinite(b)
+    norm = np.hypot(A[..., 0], A[..., 1])
+    w = motion.at(pace)
+    moved = 0
+    for i in np.flatnonzero(pace > 0.0):
+        # truths: points of the disc B(x̂, e) that lie in the cell (the induction hypothesis)
+        angle, radius = rng.uniform(-np.pi, np.pi, 300), error[i] * np.sqrt(rng.uniform(0.0, 1.0, 300))
+        x = x_hat[i] + radius[:, None] * np.column_stack([np.cos(angle), np.sin(angle)])
+        x = np.vstack([x, x_hat[i] + error[i] * np.column_stack([np.cos(angle), np.sin(angle)])])
+        h = x @ A[i][real[i]].T + b[i][real[i]]
+        x = x[np.all(h >= 0.0, axis=1)]
+        if not len(x):
+            continue
+        moved += 1
+        rows = A[i][real[i]] / norm[i][real[i], None]
+        for push in rows:  # the step's error, as large as allowed, straight out of each face in turn
+            after = x + pace[i] * motion.step * direction[i] - w[i] * push
+            h_after = after @ A[i][real[i]].T + b[i][real[i]]
+            assert np.all(h_after >= -1e-9 * (1.0 + np.abs(b[i][real[i]]))), (seed, i)
+    assert moved > 50
+    # the largest: every grid pace above the one returned fails some row's exact test
+    grid = np.linspace(0.0, 1.0, 2001)[1:]
+    depth = np.where(real, np.maximum(np.einsum("rqi,ri->rq", A, x_hat) + b - error[:, None] * norm, 0.0), np.inf)
+    inward = np.einsum("rqi,ri->rq", A, direction)
+    for i in range(len(pace)):
+        w_grid = motion.floor + motion.slip * grid * motion.step + grid**2 * motion.curvature[i]
+        f = depth[i][None, :] + grid[:, None] * motion.step * inward[i][None, :] - w_grid[:, None] * norm[i][None, :]
+        ok = np.all(f[:, real[i]] >= 0.0, axis=1)
+        best = grid[np.flatnonzero(ok)].max(initial=0.0)
+        assert best <= pace[i] + 1e-3, (seed, i, best, pace[i])
+
+
+def test_a_step_along_a_near_face_goes_at_full_pace():
+    """The unit square, ``x̂`` 3 cm above its floor with ``e`` = 1 cm, a step of 10 cm along the floor: the truth
+    stays at least 2 cm above it, more than the step's error ``w`` = 4 mm, so the whole step is certified. (The
+    rule before asked a row nearer than ``ℓ + w`` for an inward step of ``w/ℓ`` and allowed 16% of it.) Toward
+    the floor, only the part of the step that the 1.6 cm of room allows."""
+    A = np.array([[[0.0, 1.0], [-1.0, 0.0], [0.0, -1.0], [1.0, 0.0]]])
+    arrays = SimpleNamespace(bar_A=A, bar_b=np.array([[0.0, 1.0, 1.0, 0.0]]))
+    motion = StepError(0.1, 0.03, 0.001, np.zeros(1))
+    along = certified_pace(
+        arrays, np.zeros(1, int), np.array([[0.5, 0.03]]), np.array([0.01]), np.array([[1.0, 0.0]]), motion
+    )
+    assert along[0] == 1.0
+    down = certified_pace(
+        arrays, np.zeros(1, int), np.array([[0.5, 0.03]]), np.array([0.01]), np.array([[0.0, -1.0]]), motion
+    )
+    # 0.02 − p·0.1 − (0.001 + 0.003p) ≥ 0
+    assert down[0] == pytest.approx(0.019 / 0.103, rel=1e-6)
 
 
 LOOP_CASES = [(seed, worst, fov) for seed in (1, 4) for worst in (False, True) for fov in (360.0, 60.0)]

@@ -67,6 +67,39 @@ def test_lemma_7_the_look_ahead_point_is_a_single_integrator():
         robot.lookahead_command(w, theta, 0.0)
 
 
+def test_the_step_error_bounds_the_look_ahead_point_off_its_straight_step():
+    """Over one step at the pace ``p`` the look-ahead point leaves the straight step ``pℓd`` by at most
+    ``p²·curvature`` (``StepError.of``: ``ℓ²|d·h^⊥|/2λ``), whether the base is integrated at the step's start
+    (the simulated one) or turns continuously along its arc (a real one)."""
+    from bearnav_cli.runtime.safety import StepError
+
+    rng = np.random.default_rng(3)
+    n, dt, alpha = 4000, 0.2, 1.0
+    theta = rng.uniform(-math.pi, math.pi, n)
+    angle = rng.uniform(-math.pi, math.pi, n)
+    d = np.column_stack([np.cos(angle), np.sin(angle)])
+    pace = rng.uniform(0.0, 1.0, n)
+    for lam in (0.05, 0.5, 2.0):
+        motion = StepError.of(alpha * dt, 0.0, 0.0, d, theta, lam)
+        v, omega, _ = robot.lookahead_command(alpha * pace[:, None] * d, theta, lam)
+        straight = dt * alpha * pace[:, None] * d
+        turned = theta + omega * dt
+        p0 = robot.lookahead_point(np.zeros((n, 2)), theta, lam)
+        euler = dt * v[:, None] * np.column_stack([np.cos(theta), np.sin(theta)])
+        arc = np.where(
+            np.abs(omega)[:, None] > 1e-12,
+            (v / np.where(omega == 0, 1.0, omega))[:, None]
+            * np.column_stack([np.sin(turned) - np.sin(theta), np.cos(theta) - np.cos(turned)]),
+            euler,
+        )
+        for axle in (euler, arc):
+            moved = robot.lookahead_point(axle, turned, lam) - p0
+            off = np.hypot(*(moved - straight).T)
+            assert np.all(off <= pace**2 * motion.curvature * (1.0 + 1e-9) + 1e-12)
+        # the bound is attained (up to the arc's second order) where the step crosses the heading
+        assert np.max(off / np.maximum(pace**2 * motion.curvature, 1e-300)) > 0.9
+
+
 def test_the_reverse_clamp_never_reverses_and_turns_toward_the_wanted_velocity():
     rng = np.random.default_rng(8)
     theta, w = rng.uniform(-math.pi, math.pi, 2000), rng.normal(size=(2000, 2))

@@ -20,7 +20,63 @@ from bearnav_cli.runtime.plan_arrays import PlanArrays
 from bearnav_cli.runtime.settings import ControlSettings, ControlState
 from bearnav_cli.runtime.sight import obstacle_clearance
 
-__all__ = ["bend_inward", "carry_inside", "certified_pace", "error_ball_pace", "steer_clear"]
+__all__ = ["StepError", "bend_inward", "carry_inside", "certified_pace", "error_ball_pace", "steer_clear"]
+
+
+@dataclasses.dataclass(frozen=True)
+class StepError:
+    """The bound on the motion's own error over one step at the pace ``p`` (ALGORITHMS §12.3, §12.6).
+
+    The true displacement of the point the plan is about lies within
+    ``w(p) = ν + κpℓ + p²·curvature`` of ``pℓ·d``: the odometry bound ``κ‖d̂‖ + ν`` (the floor ``ν``
+    only when the robot translates), and for a look-ahead point the arc it swings through while the
+    axle turns at ``ω = pα (d·h^⊥)/λ``: ``‖Δp − pℓd‖ ≤ λ(ωdt)²/2`` for a step integrated at its start
+    (the simulated base) and ``≤ pℓ·|ω|dt/2`` for one the wheels drive continuously, both at most
+    ``p²ℓ²|d·h^⊥|/(2λ)``.
+
+    Attributes
+    ----------
+    step : float
+        ``ℓ``, a full step's length (map units).
+    slip : float
+        ``κ`` (dimensionless).
+    floor : float
+        ``ν`` (map units).
+    curvature : ndarray, shape (R,)
+        The coefficient of ``p²`` (map units): ``ℓ²|d·h^⊥(θ)|/(2λ)`` for a look-ahead point, 0 for a
+        single integrator.
+    """
+
+    step: float
+    slip: float
+    floor: float
+    curvature: np.ndarray
+
+    @classmethod
+    def of(cls, step: float, slip: float, floor: float, direction: np.ndarray, heading=None, lookahead: float = 0.0):
+        """The bound of steps along the unit ``direction`` (R, 2); a look-ahead point's at ``heading`` (R,) rad."""
+        r = len(direction)
+        if lookahead <= 0.0 or heading is None:
+            return cls(step, slip, floor, np.zeros(r))
+        across = np.abs(-direction[:, 0] * np.sin(heading) + direction[:, 1] * np.cos(heading))
+        return cls(step, slip, floor, step**2 * across / (2.0 * lookahead))
+
+    def at(self, pace: np.ndarray) -> np.ndarray:
+        """``w(p)`` for the paces ``p`` (R,) in [0, 1] (0 where ``p = 0``: a robot that stands does not slip)."""
+        pace = np.asarray(pace, float)
+        return np.where(pace > 0.0, self.floor + self.slip * pace * self.step + pace**2 * self.curvature, 0.0)
+
+
+def _row_terms(arrays: PlanArrays, cell: np.ndarray, x_hat: np.ndarray, error: np.ndarray, direction: np.ndarray):
+    """Per barrier row of each robot's cell: its depth ``H = max(0, h(x̂) − e‖A‖)`` the truth is sure to have,
+    the step's inward rate ``A·d``, the row norm ``‖A‖`` and which rows are real (not padding), all (R, Q)."""
+    c = np.asarray(cell, np.int64)
+    A, b = arrays.bar_A[c], arrays.bar_b[c]
+    real = np.isfinite(b)
+    norm = np.hypot(A[..., 0], A[..., 1])
+    with np.errstate(invalid="ignore"):
+        depth = np.where(real, np.maximum(np.einsum("rqi,ri->rq", A, x_hat) + b - error[:, None] * norm, 0.0), np.inf)
+    return depth, np.einsum("rqi,ri->rq", A, direction), norm, real
 
 
 def certified_pace(
@@ -29,22 +85,20 @@ def certified_pace(
     x_hat: np.ndarray,
     error: np.ndarray,
     direction: np.ndarray,
-    step: float,
-    disturbance: float,
+    motion: StepError,
 ) -> np.ndarray:
     """The largest fraction of a step that keeps the truth in its cell's barrier set, shape (R,) in [0, 1].
 
     The discrete-time part of Theorem 2 (ALGORITHMS §12.3), done exactly: the true position ``x``
     lies within ``e`` of ``x̂`` and, by induction, in the cell (every barrier row ``h_k = A_k·x + b_k
-    ≥ 0``); a step at the fraction ``p`` moves it by ``pℓ·d`` plus an error of at most ``w``
-    (``κpℓ + ν``, and for a look-ahead point the Euler error ``ℓ²/2λ``). Row ``k`` stays satisfied if
+    ≥ 0``), so ``h_k(x) ≥ H_k = max(0, h_k(x̂) − e‖A_k‖)``. A step at the fraction ``p`` moves it by
+    ``pℓ·d`` plus an error of at most ``w(p)`` (:class:`StepError`), so row ``k`` holds after it if
 
-    - the step moves inward fast enough: ``pℓ (A_k·d) ≥ w`` (then ``h_k`` does not decrease), or
-    - the row is far enough whichever way: ``h_k(x̂) − e ≥ pℓ + w``.
+        ``H_k + pℓ (A_k·d) − ‖A_k‖ w(p) ≥ 0``,
 
-    The first holds for every ``p`` once ``A_k·d ≥ w/ℓ`` (with ``w`` at ``p = 1``, an upper bound); the
-    second bounds ``p``. The pace is the least bound over the rows that need it (0: no step is safe).
-    The exit row is not a barrier: crossing it is the progress the cell is for.
+    a concave quadratic in ``p`` whose solutions form an interval. The pace is the largest ``p ≤ 1``
+    in every row's interval (0: no step is safe; standing still is). The exit row is not a barrier:
+    crossing it is the progress the cell is for.
 
     Parameters
     ----------
@@ -58,21 +112,36 @@ def certified_pace(
         Their error bounds ``e`` (map units).
     direction : ndarray, shape (R, 2)
         Unit step directions.
-    step : float
-        ``ℓ``, a full step's length (map units).
-    disturbance : float
-        ``w``: the bound on a step's motion error at full length (map units).
+    motion : StepError
+        The bound ``w(p)`` of the step's own error.
     """
-    c = np.asarray(cell, np.int64)
-    A, b = arrays.bar_A[c], arrays.bar_b[c]
-    with np.errstate(invalid="ignore"):
-        h = np.einsum("rqi,ri->rq", A, x_hat) + b
-    inward = np.einsum("rqi,ri->rq", A, direction)
-    free = ~np.isfinite(b) | (step * inward >= disturbance)
-    with np.errstate(invalid="ignore"):
-        room = (h - error[:, None] - disturbance) / step
-    bound = np.where(free, 1.0, np.clip(room, 0.0, 1.0))
-    return np.min(bound, axis=1, initial=1.0)
+    depth, inward, norm, real = _row_terms(arrays, cell, x_hat, error, direction)
+    curvature = motion.curvature[:, None] * norm
+    # f(p) = c0 + c1·p − c2·p² ≥ 0 on (0, 1]
+    c0 = np.where(real, depth - norm * motion.floor, 1.0)
+    c1 = np.where(real, motion.step * (inward - norm * motion.slip), 0.0)
+    c2 = np.where(real, curvature, 0.0)
+    disc = c1 * c1 + 4.0 * c2 * c0
+    root = np.sqrt(np.maximum(disc, 0.0))
+    # the roots of c2·p² − c1·p − c0 = 0 without cancellation: q/c2 and −c0/q, q = (c1 + sign(c1)·√disc)/2
+    q = 0.5 * (c1 + np.where(c1 >= 0.0, root, -root))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r1 = np.where(c2 > 0.0, q / c2, np.where(q > 0.0, np.inf, -np.inf))
+        r2 = np.where(q != 0.0, -c0 / q, np.where(c0 >= 0.0, -np.inf, np.inf))
+    lo, hi = np.minimum(r1, r2), np.maximum(r1, r2)
+    linear = c2 <= 0.0
+    # without curvature f is affine: one root, and the side that holds depends on the slope's sign
+    lo = np.where(linear, np.where(c1 > 0.0, r2, -np.inf), lo)
+    hi = np.where(linear, np.where(c1 > 0.0, np.inf, np.where(c1 < 0.0, r2, np.where(c0 >= 0.0, np.inf, -np.inf))), hi)
+    empty = (disc < 0.0) & ~linear
+    lo, hi = np.where(empty, np.inf, lo), np.where(empty, -np.inf, hi)
+    top = np.minimum(np.min(hi, axis=1, initial=np.inf), 1.0)
+    bottom = np.max(lo, axis=1, initial=-np.inf)
+    # a hair inside the interval: its ends are roots, where round-off decides the sign
+    pace = np.clip(np.where(top < 1.0, top * (1.0 - 1e-9), top), 0.0, 1.0)
+    # the exact check of every row at the pace chosen (a root found wrong by round-off gives 0, not a step)
+    holds = np.all(c0 + pace[:, None] * (c1 - c2 * pace[:, None]) >= 0.0, axis=1)
+    return np.where((pace > 0.0) & (pace >= bottom) & holds, pace, 0.0)
 
 
 def bend_inward(
@@ -81,16 +150,16 @@ def bend_inward(
     x_hat: np.ndarray,
     error: np.ndarray,
     direction: np.ndarray,
-    step: float,
-    disturbance: float,
+    motion: StepError,
 ) -> np.ndarray:
     """The unit step directions turned toward the inside of the faces that :func:`certified_pace` finds near, (R, 2).
 
-    For every barrier row ``k`` within reach (``h_k(x̂) − e < ℓ + w``) that the step does not leave
-    fast enough (``A_k·d < w/ℓ``), the direction gains ``(w/ℓ − A_k·d + 0.01)·A_k``; the sum is
-    normalised. The exit direction is kept: a bend that would stop the progress (``z·d' ≥ 0`` in a cell
-    with an exit) gives the field's direction back. Safety does not rest on the bend: the step it
-    gives is taken only at :func:`certified_pace`'s pace, which checks every row exactly.
+    For every barrier row ``k`` that a full step along ``d`` would not keep (``H_k + ℓ(A_k·d) <
+    ‖A_k‖w(1)``, :func:`certified_pace`'s test at ``p = 1``), the direction gains ``(‖A_k‖w(1) − H_k)/ℓ −
+    A_k·d + 0.01`` times ``A_k``; the sum is normalised. The exit direction is kept: a bend that would stop
+    the progress (``z·d' ≥ 0`` in a cell with an exit) gives the field's direction back. Safety does not
+    rest on the bend: the step it gives is taken only at :func:`certified_pace`'s pace, which checks
+    every row exactly.
 
     Parameters
     ----------
@@ -104,19 +173,16 @@ def bend_inward(
         Their error bounds (map units).
     direction : ndarray, shape (R, 2)
         The field's unit directions.
-    step, disturbance : float
-        ``ℓ`` and ``w`` as in :func:`certified_pace` (map units).
+    motion : StepError
+        The bound of the step's own error, for ``direction``.
     """
     c = np.asarray(cell, np.int64)
-    A, b = arrays.bar_A[c], arrays.bar_b[c]
-    with np.errstate(invalid="ignore"):
-        h = np.einsum("rqi,ri->rq", A, x_hat) + b
-    inward = np.einsum("rqi,ri->rq", A, direction)
-    need = np.isfinite(b) & (h - error[:, None] < step + disturbance) & (inward < disturbance / step)
-    gain = np.where(need, disturbance / step - inward + 0.01, 0.0)
-    bent = direction + np.einsum("rq,rqi->ri", gain, np.where(np.isfinite(b)[..., None], A, 0.0))
-    norm = np.hypot(bent[:, 0], bent[:, 1])
-    out = np.where(norm[:, None] > 0, bent / np.where(norm > 0, norm, 1.0)[:, None], direction)
+    depth, inward, norm, real = _row_terms(arrays, c, x_hat, error, direction)
+    needed = (norm * motion.at(np.ones(len(c)))[:, None] - depth) / motion.step
+    gain = np.where(real & (inward < needed), needed - inward + 0.01, 0.0)
+    bent = direction + np.einsum("rq,rqi->ri", gain, np.where(real[..., None], arrays.bar_A[c], 0.0))
+    size = np.hypot(bent[:, 0], bent[:, 1])
+    out = np.where(size[:, None] > 0, bent / np.where(size > 0, size, 1.0)[:, None], direction)
     exit_ = arrays.parent_cell[c] >= 0
     stops = exit_ & (np.einsum("ri,ri->r", arrays.exit_dir[c], out) >= 0.0)
     out[stops] = direction[stops]

@@ -24,7 +24,14 @@ from bearnav_cli.runtime.estimate import Estimate, bounded_update, fuse, measure
 from bearnav_cli.runtime.looking import look_around
 from bearnav_cli.runtime.plan_arrays import PlanArrays
 from bearnav_cli.runtime.robot import lookahead_command, lookahead_point
-from bearnav_cli.runtime.safety import bend_inward, carry_inside, certified_pace, error_ball_pace, steer_clear
+from bearnav_cli.runtime.safety import (
+    StepError,
+    bend_inward,
+    carry_inside,
+    certified_pace,
+    error_ball_pace,
+    steer_clear,
+)
 from bearnav_cli.runtime.settings import ControlOutput, ControlSettings, ControlState
 from bearnav_cli.runtime.unicycle import heading_allowance, unicycle_command
 
@@ -32,6 +39,9 @@ __all__ = ["STALL_FIELD", "bounded_control", "control", "follow_fields"]
 
 #: ``‖a − M x̂‖ < STALL_FIELD · u_max`` is a stall: the field has (almost) an equilibrium there.
 STALL_FIELD = 1e-6
+#: How many times a step that slides along a near face is bent inward (:func:`~bearnav_cli.runtime.safety.bend_inward`)
+#: before the best pace found is taken: each bend is sized for the step's error at the last direction.
+BENDS = 3
 
 
 def control(
@@ -285,13 +295,20 @@ def bounded_control(
     pace = np.where(move, 1.0, 0.0)
     if arrays.funnel and move.any():
         idx = np.flatnonzero(move)
-        # the motion's own error, and a look-ahead point's Euler error λ(ωdt)²/2 ≤ ℓ²/2λ (|ω| ≤ α/λ)
-        wobble = margin + (step_len**2 / (2.0 * lam) if ahead else 0.0)
-        pace[idx] = certified_pace(arrays, cell[idx], reference[idx], error[idx], u[idx], step_len, wobble)
+        # the motion's own error: the odometry bound, and a look-ahead point's swing on the arc its turn
+        # rate gives (no odometry enters a measured displacement)
+        slip, floor = (0.0, 0.0) if s.measurement == "displacement" else (s.slip, s.slip_floor)
+
+        def motion(direction: np.ndarray, who: np.ndarray) -> StepError:
+            return StepError.of(step_len, slip, floor, direction, phi[who], lam if ahead else 0.0)
+
+        pace[idx] = certified_pace(arrays, cell[idx], reference[idx], error[idx], u[idx], motion(u[idx], idx))
         slow = idx[pace[idx] < 1.0]
-        if len(slow):  # near a face the field may slide along it: bend it inward just enough, if that helps
-            bent = bend_inward(arrays, cell[slow], reference[slow], error[slow], u[slow], step_len, wobble)
-            better = certified_pace(arrays, cell[slow], reference[slow], error[slow], bent, step_len, wobble)
+        bent = u[slow]
+        for _ in range(BENDS):  # near a face the field may slide along it: bend it inward just enough, if that helps
+            # (a bend turns the look-ahead point's step across the heading, so its own swing grows: bend again)
+            bent = bend_inward(arrays, cell[slow], reference[slow], error[slow], bent, motion(bent, slow))
+            better = certified_pace(arrays, cell[slow], reference[slow], error[slow], bent, motion(bent, slow))
             take = better > pace[slow]
             u[slow[take]], pace[slow[take]] = bent[take], better[take]
         move[idx] = pace[idx] > 0.0
