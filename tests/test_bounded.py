@@ -357,6 +357,42 @@ def test_a_broken_bound_is_counted_not_a_crash():
     assert len(sim) == 6
 
 
+def test_a_broken_bound_is_widened_to_the_least_doubling_that_holds_the_bearings():
+    """Bearings that err by 3η (the truth outside every cone of half-angle η): the set comes out empty, the
+    robot restarts from the bearing sets alone at the least doubling of η for which they meet (4η, which
+    holds the truth), and keeps that bound for the next steps."""
+    from bearnav_cli.runtime import ControlState
+    from bearnav_cli.runtime.estimate import bounded_update
+
+    plan = random_plan(1)
+    arrays = PlanArrays.from_plan(plan)
+    s = simulate.settings(plan, simulate.Params(estimator="set", bearing_error_deg=0.2, noise_bound_deg=0.2)).control
+    eta = s.bearing_bound
+    rng = np.random.default_rng(5)
+    x = arrays.nodes[rng.choice(len(arrays.nodes), 40)]
+    r, lm = len(x), len(arrays.landmarks)
+    visible = np.ones((r, lm), bool)
+    true_angle = np.arctan2(arrays.landmarks[None, :, 1] - x[:, None, 1], arrays.landmarks[None, :, 0] - x[:, None, 0])
+
+    def bearings(angle):
+        return np.stack([np.cos(angle), np.sin(angle)], axis=-1)
+
+    state = ControlState.initial(np.zeros(r))
+    first = bounded_update(arrays, s, state, bearings(true_angle), visible, None)
+    state.set_vertices, state.set_count, state.known = first.vertices, first.count, np.ones(r, bool)
+    assert not first.inconsistent.any() and np.all(first.bound_scale == 1.0)
+    # every bearing off by 3η, alternating in sign: the cones of half-angle η no longer meet
+    off = 3.0 * eta * np.where(np.arange(lm) % 2 == 0, 1.0, -1.0)
+    broken = bounded_update(arrays, s, state, bearings(true_angle + off), visible, None)
+    assert broken.inconsistent.all()
+    assert np.all(broken.bound_scale == 4.0)  # 2η is still broken, 4η holds every bearing
+    assert bounded.contains(broken.vertices, broken.count, x, 1e-9).all()
+    state.set_vertices, state.set_count, state.bound_scale = broken.vertices, broken.count, broken.bound_scale
+    again = bounded_update(arrays, s, state, bearings(true_angle + off), visible, None)
+    assert not again.inconsistent.any() and np.all(again.bound_scale == 4.0)
+    assert bounded.contains(again.vertices, again.count, x, 1e-9).all()
+
+
 @pytest.mark.parametrize("value", [-0.1, math.inf, 45.0, math.nan])
 def test_a_bad_noise_bound_names_the_field(value):
     from bearnav_cli.errors import InvalidParamsError

@@ -41,6 +41,7 @@ __all__ = [
     "contains",
     "diameter",
     "grow",
+    "inside_rows",
     "intersect_cones",
     "translate",
     "valid_vertices",
@@ -452,6 +453,31 @@ def diameter(vertices: np.ndarray, count: np.ndarray) -> np.ndarray:
     dist2 = np.where(valid[:, :, None] & valid[:, None, :], np.einsum("rwvk,rwvk->rwv", d, d), 0.0)
     out = np.sqrt(np.max(dist2.reshape(len(vertices), -1), axis=1, initial=0.0))
     return np.where(count > 0, out, np.inf)
+
+
+def inside_rows(
+    vertices: np.ndarray, count: np.ndarray, A: np.ndarray, b: np.ndarray, margin: np.ndarray | float = 0.0
+) -> np.ndarray:
+    """Whether each set lies in its polygon ``{y : A y ≤ b}`` with ``margin`` to spare, shape (R,).
+
+    A convex set lies in a convex polygon exactly when its vertices do, so the test is exact: every
+    vertex ``v`` of set ``r`` satisfies ``A[r, k]·v ≤ b[r, k] − margin[r]·‖A[r, k]‖`` for every row ``k``
+    (padding rows ``0·y ≤ 0`` always hold). Empty sets are in nothing.
+
+    Parameters
+    ----------
+    vertices, count : ndarray, shapes (R, W, 2), (R,)
+        The padded sets (map units).
+    A, b : ndarray, shapes (R, P, 2), (R, P)
+        Each set's polygon as half-plane rows (map units).
+    margin : float or ndarray, shape (R,)
+        Room every vertex must keep inside each row (map units).
+    """
+    norm = np.hypot(A[..., 0], A[..., 1])
+    room = b - np.broadcast_to(np.asarray(margin, float), (len(A),))[:, None] * norm
+    lhs = np.einsum("rpk,rwk->rwp", A, vertices) - room[:, None, :]
+    ok = np.all(lhs <= 0.0, axis=2) | ~valid_vertices(vertices, count)
+    return np.all(ok, axis=1) & (count > 0)
 
 
 def contains(vertices: np.ndarray, count: np.ndarray, x: np.ndarray, tol: float = 0.0) -> np.ndarray:

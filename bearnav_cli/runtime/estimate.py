@@ -9,6 +9,7 @@ by and what a certified step is measured against (§11.4).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -17,7 +18,23 @@ from bearnav_cli.runtime import bearing
 from bearnav_cli.runtime.plan_arrays import PlanArrays
 from bearnav_cli.runtime.settings import ControlSettings, ControlState
 
-__all__ = ["Estimate", "Fix", "SetEstimate", "axle_bounds", "bounded_update", "fuse", "measure"]
+__all__ = [
+    "BOUND_DOUBLINGS",
+    "MAX_BOUND",
+    "Estimate",
+    "Fix",
+    "SetEstimate",
+    "axle_bounds",
+    "bounded_update",
+    "fuse",
+    "measure",
+]
+
+#: The widest bearing bound a robot widens its ``η`` to when its set comes out empty (rad): the cones
+#: stay well inside a half-plane.
+MAX_BOUND = math.radians(30.0)
+#: At most this many doublings of ``η`` per empty set (0.2° reaches :data:`MAX_BOUND` in 8).
+BOUND_DOUBLINGS = 12
 
 
 @dataclass(frozen=True)
@@ -253,6 +270,8 @@ class SetEstimate:
         sets alone (``B_r ∩ ∩_k W_k``), or stayed ``X_t⁻`` where those were empty too.
     seen : ndarray of bool, shape (R,)
         Some bearing entered the set this step.
+    bound_scale : ndarray, shape (R,)
+        The factor on ``η`` each robot assumes from now on (widened where the set came out empty).
     """
 
     vertices: np.ndarray
@@ -261,6 +280,7 @@ class SetEstimate:
     error: np.ndarray
     inconsistent: np.ndarray
     seen: np.ndarray
+    bound_scale: np.ndarray
 
 
 def bounded_update(
@@ -307,7 +327,8 @@ def bounded_update(
             raise ValueError("displacement measurement needs the true positions")
         x = np.asarray(x_true, float).reshape(-1, 2)
         vertices = np.repeat(x[:, None, :], bounded.MAX_VERTICES, axis=1)
-        return SetEstimate(vertices, np.ones(r, np.int64), x.copy(), np.zeros(r), np.zeros(r, bool), np.ones(r, bool))
+        exact = np.ones(r, bool)
+        return SetEstimate(vertices, exact.astype(np.int64), x.copy(), np.zeros(r), ~exact, exact, state.bound_scale)
     width = bounded.MAX_VERTICES  # every stored set has this width (operations cap their counts at it)
     d = s.dt * state.motion
     travelled = np.hypot(d[:, 0], d[:, 1])
@@ -321,22 +342,33 @@ def bounded_update(
         grown_v, count[moving] = bounded.grow(vertices[moving], count[moving], radius[moving], tol)
         vertices[moving] = bounded.fit(grown_v, width)
     angle = np.arctan2(bearings[..., 1], bearings[..., 0])
-    eta = s.bearing_bound
+    scale = state.bound_scale.copy()
+    eta = s.bearing_bound * scale
     updated_v, updated_n = bounded.intersect_cones(vertices, count, arrays.landmarks, angle, visible, eta, tol)
     updated_v, updated_n = bounded.fit(updated_v, width).copy(), updated_n.copy()
     inconsistent = (updated_n == 0) & (count > 0)
     if inconsistent.any():
-        # the bearing sets alone, or the prediction where they are empty too
+        # a bound was broken: the bearing sets alone, at the least doubling of this robot's η for which they
+        # meet (kept from now on: a robot that has seen its bound broken no longer trusts it), or the
+        # prediction where no doubling up to MAX_BOUND does
         idx = np.flatnonzero(inconsistent)
-        fresh_v, fresh_n = bounded.intersect_cones(
-            start_v[idx], start_n[idx], arrays.landmarks, angle[idx], visible[idx], eta, tol
-        )
-        fresh_v = bounded.fit(fresh_v, width).copy()
+        fresh_v, fresh_n = bounded.fit(start_v[idx], width).copy(), np.zeros(len(idx), np.int64)
+        for _ in range(BOUND_DOUBLINGS):
+            todo = np.flatnonzero((fresh_n == 0) & (2.0 * eta[idx] <= MAX_BOUND))
+            if not len(todo):
+                break
+            who = idx[todo]
+            scale[who] *= 2.0
+            eta[who] *= 2.0
+            got_v, got_n = bounded.intersect_cones(
+                start_v[who], start_n[who], arrays.landmarks, angle[who], visible[who], eta[who], tol
+            )
+            fresh_v[todo], fresh_n[todo] = bounded.fit(got_v, width), got_n
         empty = fresh_n == 0
         fresh_v[empty], fresh_n[empty] = vertices[idx[empty]], count[idx[empty]]
         updated_v[idx], updated_n[idx] = fresh_v, fresh_n
     x_hat, error = bounded.centre(updated_v, updated_n)
-    return SetEstimate(updated_v, updated_n, x_hat, error, inconsistent, visible.any(axis=1))
+    return SetEstimate(updated_v, updated_n, x_hat, error, inconsistent, visible.any(axis=1), scale)
 
 
 def axle_bounds(arrays: PlanArrays) -> np.ndarray:

@@ -313,6 +313,9 @@ class ControlState:
         Their vertex counts.
     resume : ndarray, shape (R,)
         The heading a look-ahead unicycle turns back to after a look (rad; NaN: none).
+    bound_scale : ndarray, shape (R,)
+        What the set estimator's bearing bound ``η`` is multiplied by: 1, until a set came out empty
+        (a bound was broken) and the robot widened it (ALGORITHMS §12.2, docs/algorithms.md).
     """
 
     cell: np.ndarray
@@ -330,6 +333,7 @@ class ControlState:
     set_vertices: np.ndarray
     set_count: np.ndarray
     resume: np.ndarray
+    bound_scale: np.ndarray
 
     @classmethod
     def initial(cls, heading: np.ndarray) -> ControlState:
@@ -352,6 +356,7 @@ class ControlState:
             np.zeros((r, MAX_VERTICES, 2)),
             np.zeros(r, np.int64),
             np.full(r, np.nan),
+            np.ones(r),
         )
 
     def take(self, idx: np.ndarray) -> ControlState:

@@ -18,7 +18,7 @@ import math
 
 import numpy as np
 
-from bearnav_cli.runtime import bearing
+from bearnav_cli.runtime import bearing, bounded
 from bearnav_cli.runtime.cell_policy import affine_field, apply_gain, displacement, least_rank_cell, update
 from bearnav_cli.runtime.estimate import Estimate, bounded_update, fuse, measure
 from bearnav_cli.runtime.looking import look_around
@@ -178,6 +178,7 @@ def control(
         state.set_vertices,
         state.set_count,
         state.resume,
+        state.bound_scale,
     )
     # certified (§11.4): a funnel plan, driven by a certified cell's field (not a straight approach),
     # on an estimate whose error bound is within the cell's τ_c; a unicycle only as the
@@ -285,7 +286,25 @@ def bounded_control(
         holder = np.full(r, -1, np.int64)
         open_ = np.flatnonzero(known & ~in_cell)
         holder[open_] = least_rank_cell(arrays, reference[open_], -error[open_])
-        undecided = (holder >= 0) & (error + margin > arrays.tolerance_in(holder) + s.tol)
+        # the set lies wholly in the cell holding p̂ (exactly: its vertices do; the look-ahead point's set is
+        # X_t + λh(θ̂) grown by the swing): the truth is in that cell, and its certified policy applies
+        sure = np.flatnonzero(holder >= 0)
+        if len(sure):
+            offset = (reference[sure] - sets.x_hat[sure])[:, None, :]
+            k = holder[sure]
+            inside = bounded.inside_rows(
+                sets.vertices[sure] + offset, sets.count[sure], arrays.row_A[k], arrays.row_b[k], swing
+            )
+            field = affine_field(arrays, k, reference[sure])
+            size = np.hypot(field[:, 0], field[:, 1])
+            take = inside & (size > 0.0)
+            sure, k = sure[take], k[take]
+            u[sure] = field[take] / size[take, None]
+            last_dir[sure], cell[sure], target[sure], stalled[sure] = u[sure], k, -1, False
+            in_cell[sure], holder[sure] = True, -1
+            move[sure] = error[sure] + margin <= arrays.tolerance_in(k) + s.tol
+        # a robot that has not yet looked (its first set, from one view) looks before it drives uncertified
+        undecided = (holder >= 0) & ((error + margin > arrays.tolerance_in(holder) + s.tol) | ~state.known)
     else:
         undecided = np.zeros(r, bool)
         move = in_cell
@@ -423,6 +442,7 @@ def bounded_control(
         sets.vertices,
         sets.count,
         resume,
+        sets.bound_scale,
     )
     certified = arrays.funnel & move & drive & ~clamped
     if s.dynamics == "unicycle" and not ahead:
