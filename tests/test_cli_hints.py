@@ -174,7 +174,10 @@ def test_the_map_summary_counts_one_obstacle_in_the_singular(cli, write_map):
 def test_lost_runs_name_the_tags_command_and_the_figure_that_shows_them(cli, write_map, tmp_path):
     write_map(dict(BLIND_MAP, name="corners", landmarks=[[0, 3], [0, 0], [4, 0], [4, 3]]), "corners.yaml")
     assert cli("-q", "plan", "corners.yaml").exit_code == 0
-    result = cli("-q", "simulate", "plans/corners/plan.npz", "--fov", "60", "--starts", "random:4")
+    # the filter's robot is lost where it never sees two tags: the hint is the fix rule's `tags --fov`
+    result = cli(
+        "-q", "simulate", "plans/corners/plan.npz", "--fov", "60", "--starts", "random:4", "--estimator", "kalman"
+    )
     assert result.exit_code == 1, result.output
     # -q: the result line and the error, no table, no note
     out_lines = [line for line in result.stdout.splitlines() if line.strip()]
@@ -221,8 +224,9 @@ def test_simulate_words_give_the_loop_back_as_options():
     from bearnav_cli.stages import simulate
 
     params = dataclasses.asdict(simulate.Params(fov=60.0, dynamics="unicycle", occlusion=False))
-    words = simulate_words(params, estimator="set")
-    assert words == ["--dynamics", "unicycle", "--fov", "60", "--no-occlusion", "--estimator", "set"], words
+    words = simulate_words(params, estimator="kalman")
+    assert words == ["--dynamics", "unicycle", "--fov", "60", "--no-occlusion", "--estimator", "kalman"], words
+    assert simulate_words(params, estimator="set") == words[:-2]  # the default is not spelled out
     assert simulate_words(dataclasses.asdict(simulate.Params())) == []
 
 

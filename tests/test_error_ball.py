@@ -152,7 +152,13 @@ def test_no_robot_inside_its_error_ball_collides(name):
     # 2,000 steps: the property is about collisions, and a robot still lost then would only time out
     # later (the made rooms map has two that ran to 4,372 steps, 40% of the test's time)
     params = simulate.Params(
-        dynamics="unicycle", fov=60.0, noise_deg=2.0, record_trajectories=False, seed=1, max_steps=2000
+        dynamics="unicycle",
+        fov=60.0,
+        noise_deg=2.0,
+        record_trajectories=False,
+        seed=1,
+        max_steps=2000,
+        estimator="kalman",  # the 3σ ball is the filter's
     )
     outcome, inside = _drive(plan, starts, params)
     assert not any(inside), "a robot whose estimate's 3σ ball held it collided"

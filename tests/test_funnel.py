@@ -764,18 +764,23 @@ def test_a_robot_outside_every_cell_with_no_node_in_sight_gets_no_command():
     inside = np.asarray(plan.map.raw_obstacles[0].exterior, float).mean(axis=0)[None]  # no sight from here
     assert cell_policy.least_rank_cell(arrays, inside)[0] == -1
     assert cell_policy.approach_target(arrays, inside)[0] == -1
-    s = step.ControlSettings(speed=0.1, dt=0.1, eps_sw=0.02, tol=arrays.tol, measurement="displacement")
     n = len(arrays.landmarks)
-    out = step.control(
-        arrays,
-        s,
-        step.ControlState.initial(np.zeros(1)),
-        np.zeros((1, n, 2)),
-        np.ones((1, n), bool),
-        np.zeros(1),
-        x_true=inside,
-    )
-    assert np.all(out.velocity == 0.0) and out.stalled[0] and not out.certified[0]
+    for estimator in ("kalman", "set"):
+        s = step.ControlSettings(
+            speed=0.1, dt=0.1, eps_sw=0.02, tol=arrays.tol, measurement="displacement", estimator=estimator
+        )
+        out = step.control(
+            arrays,
+            s,
+            step.ControlState.initial(np.zeros(1)),
+            np.zeros((1, n, 2)),
+            np.ones((1, n), bool),
+            np.zeros(1),
+            x_true=inside,
+        )
+        assert np.all(out.velocity == 0.0) and not out.certified[0], estimator
+        # the filter's robot stalls; the set estimator's does not drive there either and looks instead
+        assert out.stalled[0] if estimator == "kalman" else out.looking[0]
 
 
 @pytest.mark.parametrize("seed", [1, 4])

@@ -241,18 +241,21 @@ def test_a_robot_that_may_not_reverse_never_drives_backwards():
     assert runs.certified_fraction < 1.0  # facing away at the start: the clamped turns are not certified
 
 
-def test_the_controller_reports_arrival_of_the_look_ahead_point(tmp_path):
+@pytest.mark.parametrize("estimator", ["set", "kalman"])
+def test_the_controller_reports_arrival_of_the_look_ahead_point(tmp_path, estimator):
     plan = lookahead_plan(reverse=False)
     path = write_plan(tmp_path / "plan.npz", plan)
     assert Controller.from_plan(str(path), dynamics="unicycle").settings.clamp_reverse  # the map's reverse: false
-    ctl = Controller.from_plan(str(path), dynamics="unicycle")
+    ctl = Controller.from_plan(str(path), dynamics="unicycle", estimator=estimator)
     arrays = ctl.arrays
     goal = arrays.goal
     x = goal - np.array([LAMBDA, 0.0])  # the axle λ behind the goal, facing it: p is at the goal
     bearings = arrays.landmarks - x
     bearings /= np.hypot(*bearings.T)[:, None]
-    ctl.command(bearings, np.ones(len(bearings), bool), heading=0.0)
-    np.testing.assert_allclose(ctl.position, goal, atol=1e-9)
+    out = ctl.command(bearings, np.ones(len(bearings), bool), heading=0.0)
+    # the filter takes an exact fix as it is; the set's estimate lies within its bound e of the truth
+    bound = 1e-9 if estimator == "kalman" else ctl.last.error_bound[0]
+    assert np.hypot(*(ctl.position - goal)) <= bound + 1e-12 and len(out) == 2
     assert ctl.arrived
 
 

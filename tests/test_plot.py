@@ -410,7 +410,7 @@ def test_titles_state_the_configuration(figures, small_plan):
         "fov 90°",
         "bearing noise 0.5° (1σ)",
         "unicycle dynamics",
-        "kalman estimator",
+        "set estimator",
     ):
         assert words in sim_title, words
     assert figures["plan"].axes[0].get_title().startswith(f"small — plan: {small_plan.cells.n_cells} funnel cells")

@@ -50,7 +50,8 @@ def test_bearing_paths_equal_displacement_paths_with_full_visibility(plans):
     plan, _ = plans["kitchen"]
     starts = simulate.resolve_starts(plan, params_for(plan, starts="random:40"))
     runs = {
-        mode: simulate.rollout(plan, starts, params_for(plan, measurement=mode, occlusion=False))
+        # the filter takes noise-free fixes as they are (the set estimator still assumes its bound η)
+        mode: simulate.rollout(plan, starts, params_for(plan, measurement=mode, occlusion=False, estimator="kalman"))
         for mode in ("bearing", "displacement")
     }
     a, b = runs["bearing"], runs["displacement"]
@@ -59,11 +60,12 @@ def test_bearing_paths_equal_displacement_paths_with_full_visibility(plans):
     assert (a.outcome == Outcome.SUCCESS).all()
 
 
-def test_runtime_controller_and_simulation_give_the_same_commands(plans):
+@pytest.mark.parametrize("estimator,noise", [("set", {"noise_bound_deg": 0.25}), ("kalman", {"noise_deg": 1.0})])
+def test_runtime_controller_and_simulation_give_the_same_commands(plans, estimator, noise):
     """What is simulated is what runs on the robot: the Controller, fed the simulator's bearings
-    one frame at a time, commands exactly what the vectorised loop applied."""
+    one frame at a time, commands exactly what the vectorised loop applied, with either estimator."""
     plan, path = plans["kitchen"]
-    params = params_for(plan, starts="4.5,6.6", fov=90.0, noise_deg=1.0, dynamics="unicycle")
+    params = params_for(plan, starts="4.5,6.6", fov=90.0, dynamics="unicycle", estimator=estimator, **noise)
     starts = simulate.resolve_starts(plan, params)
     frames = []
     original = runtime.control
@@ -154,7 +156,16 @@ def test_kitchen_random_starts_with_a_narrow_noisy_camera(plans, dynamics):
     (the fixes are fused with odometry; the default 2% wheel slip makes that odometry imperfect;
     ``bench/simulate.py`` measures noise on 1,000 starts)."""
     plan, _ = plans["kitchen"]
-    params = params_for(plan, starts="random:80", fov=60.0, noise_deg=1.0, dynamics=dynamics, record_trajectories=False)
+    # Gaussian noise five times the set estimator's bound is its stress test: this is the filter's
+    params = params_for(
+        plan,
+        starts="random:80",
+        fov=60.0,
+        noise_deg=1.0,
+        dynamics=dynamics,
+        record_trajectories=False,
+        estimator="kalman",
+    )
     assert params.odometry_noise == 0.02
     run = simulate.rollout(plan, simulate.resolve_starts(plan, params), params)
     assert run.success_rate >= 0.95, run.counts()

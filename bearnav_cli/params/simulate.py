@@ -126,7 +126,7 @@ class Params:
         Seeds the bearing noise, the wheel slip and the random starts (separate streams).
     record_trajectories : bool
         Keep every robot's trajectory (``verify`` turns this off).
-    estimator : {"kalman", "set"}
+    estimator : {"set", "kalman"}
         How the robot knows where it is: ``set``, a bound on its position error that holds while
         the errors stay within the robot section's bounds (ALGORITHMS §12.2–12.3): it drives only
         while the bound is within the error the cell

@@ -28,7 +28,7 @@ __all__ = [
 DYNAMICS = ("single", "unicycle")
 MEASUREMENTS = ("bearing", "displacement")
 #: The estimators of the control step: bounded-error sets (ALGORITHMS §12.2) or the scalar filter.
-ESTIMATORS = ("kalman", "set")
+ESTIMATORS = ("set", "kalman")
 #: Bearing reconstructions (§6.2–6.4).
 METHODS = ("lsq", "pair", "rescale")
 #: Reference speed ``v_ref`` of the single integrator (map units / s): the one default of

@@ -68,12 +68,11 @@ class LoopSettings:
     measurement : {"bearing", "displacement"}
         ``bearing``: reconstruct ``ỹ`` and ``x̂`` from bearings (§6); ``displacement``: the
         true displacements, ``x̂ = x`` (paper B).
-    estimator : {"kalman", "set"}
+    estimator : {"set", "kalman"}
         ``set``: the bounded-error sets of ALGORITHMS §12.2 and the certified policy of §12.3 — drive
         only while ``e_t + κℓ + ν ≤ τ_c``, else stop and look (§12.5,
-        :func:`~bearnav_cli.runtime.step.bounded_control`); ``kalman`` (the default until plans are
-        made live, docs/runtime.md): the scalar filter of :func:`~bearnav_cli.runtime.estimate.fuse`
-        with the pace rule.
+        :func:`~bearnav_cli.runtime.step.bounded_control`), the default; ``kalman``: the scalar filter
+        of :func:`~bearnav_cli.runtime.estimate.fuse` with the pace rule (docs/runtime.md).
     keep_clear : bool
         A step the certificate does not cover (error bound above ``δ*``) is slowed so that the
         error ball, grown by the step, stays off the obstacles

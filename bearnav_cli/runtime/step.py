@@ -396,7 +396,9 @@ def bounded_control(
             back[idx[over]] = True
         # the swung p says nothing about the cell the robot will drive in: it keeps the one it had
         cell[returning], target[returning], relocated[returning] = state.cell[returning], state.target[returning], False
-    hold = np.where(drive, 0.0, np.where(known, state.hold + s.dt, 0.0))
+    # the clock of a look runs from the start too: a robot that never sees two landmarks turns all around
+    # and is lost, as the filter's is, instead of waiting for its time to run out
+    hold = np.where(drive, 0.0, state.hold + s.dt)
     looker = Estimate(sets.x_hat, est.var, est.fix, drive | back, known, hold, error)
     scanning, lost, spin, turn, look = look_around(s, state, looker, last_dir, heading, arrays)
     if ahead:
