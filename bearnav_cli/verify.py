@@ -142,7 +142,8 @@ def guarantee(plan: Plan, report: VerifyReport) -> str:
     )
     bounded = (
         f"with bearings erring by at most η = {eta:g}° and wheel slip within {robot['slip']:g} of each step "
-        "(the map's robot section) the `bearnav simulate` robot (its default set estimator) moves only where it knows that much, "
+        "(the map's robot section) the `bearnav simulate` robot (its default set estimator) moves only where it "
+        "knows that much, "
         "and never gets stuck where a look all around is good enough (`--live-fov F` measures where; "
         "`bearnav tags --for live` adds tags until it is everywhere)"
     )
