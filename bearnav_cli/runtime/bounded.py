@@ -80,12 +80,17 @@ def _next_index(vertices: np.ndarray, count: np.ndarray) -> np.ndarray:
     return np.where(j + 1 < count[:, None], j + 1, 0)
 
 
+def _rows_at(values: np.ndarray, index: np.ndarray) -> np.ndarray:
+    """``values[r, index[r, j]]`` for every row ``r`` (``values`` (R, W, ...), ``index`` (R, J)): a gather along
+    axis 1 by plain fancy indexing (``np.take_along_axis`` builds its index in Python on every call)."""
+    return values[np.arange(len(values))[:, None], index]
+
+
 def _compact(candidates: np.ndarray, keep: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The kept candidates of every row moved to the front, in order, and their numbers."""
     count = keep.sum(axis=1).astype(np.int64)
     width = max(int(count.max(initial=0)), 1)
-    order = np.argsort(~keep, axis=1, kind="stable")[:, :width]
-    return np.take_along_axis(candidates, order[..., None], axis=1), count
+    return _rows_at(candidates, np.argsort(~keep, axis=1, kind="stable")[:, :width]), count
 
 
 def clip(
@@ -151,7 +156,7 @@ def _dedupe(vertices: np.ndarray, count: np.ndarray, tol: float) -> tuple[np.nda
         return vertices, count
     valid = valid_vertices(vertices, count)
     nxt = _next_index(vertices, count)
-    gap = vertices - np.take_along_axis(vertices, nxt[..., None], axis=1)
+    gap = vertices - _rows_at(vertices, nxt)
     close = np.hypot(gap[..., 0], gap[..., 1]) <= tol
     # the last of a run of equal vertices stays (a lone vertex is never dropped)
     keep = valid & ~(close & (count[:, None] > 1))
@@ -161,7 +166,7 @@ def _dedupe(vertices: np.ndarray, count: np.ndarray, tol: float) -> tuple[np.nda
 
 def _normals(vertices: np.ndarray, count: np.ndarray) -> np.ndarray:
     """Outward unit normals of the edges ``v_j → v_{j+1}`` of counter-clockwise polygons, (R, W, 2)."""
-    edge = np.take_along_axis(vertices, _next_index(vertices, count)[..., None], axis=1) - vertices
+    edge = _rows_at(vertices, _next_index(vertices, count)) - vertices
     length = np.hypot(edge[..., 0], edge[..., 1])
     with np.errstate(divide="ignore", invalid="ignore"):
         n = np.stack([edge[..., 1], -edge[..., 0]], axis=-1) / length[..., None]
@@ -169,7 +174,7 @@ def _normals(vertices: np.ndarray, count: np.ndarray) -> np.ndarray:
 
 
 def _area(vertices: np.ndarray, count: np.ndarray) -> np.ndarray:
-    nxt = np.take_along_axis(vertices, _next_index(vertices, count)[..., None], axis=1)
+    nxt = _rows_at(vertices, _next_index(vertices, count))
     cross = vertices[..., 0] * nxt[..., 1] - vertices[..., 1] * nxt[..., 0]
     return 0.5 * np.sum(np.where(valid_vertices(vertices, count), cross, 0.0), axis=1)
 
@@ -203,7 +208,7 @@ def grow(
     n = _normals(vertices, count)
     j = np.arange(vertices.shape[1])[None, :]
     before = np.where(j == 0, np.maximum(count[:, None] - 1, 0), j - 1)
-    previous = np.take_along_axis(n, before[..., None], axis=1)  # the normal of the edge into each vertex
+    previous = _rows_at(n, before)  # the normal of the edge into each vertex
     cos_turn = np.clip(np.einsum("rwk,rwk->rw", previous, n), -1.0, 1.0)
     sharp = cos_turn < 0.0
     r = radius[:, None, None]

@@ -325,11 +325,16 @@ def bounded_control(
         slow = idx[pace[idx] < 1.0]
         bent = u[slow]
         for _ in range(BENDS):  # near a face the field may slide along it: bend it inward just enough, if that helps
-            # (a bend turns the look-ahead point's step across the heading, so its own swing grows: bend again)
+            # (a bend turns the look-ahead point's step across the heading, so its own swing grows: bend again,
+            # those still short of a whole step)
             bent = bend_inward(arrays, cell[slow], reference[slow], error[slow], bent, motion(bent, slow))
             better = certified_pace(arrays, cell[slow], reference[slow], error[slow], bent, motion(bent, slow))
             take = better > pace[slow]
             u[slow[take]], pace[slow[take]] = bent[take], better[take]
+            short = pace[slow] < 1.0
+            slow, bent = slow[short], bent[short]
+            if not len(slow):
+                break
         move[idx] = pace[idx] > 0.0
     if arrays.funnel:
         # at the edge of D (a cell holds p̂, e is small, no cell eroded by e does): that cell's field,
