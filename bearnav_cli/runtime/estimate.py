@@ -339,8 +339,21 @@ def bounded_update(
     count = np.where(known, state.set_count, start_n)
     moving = np.flatnonzero(known & (radius > 0.0))
     if len(moving):
-        grown_v, count[moving] = bounded.grow(vertices[moving], count[moving], radius[moving], tol)
-        vertices[moving] = bounded.fit(grown_v, width)
+        grown_v, grown_n = bounded.grow(vertices[moving], count[moving], radius[moving], tol)
+        # the axle is always within B_r: the grown set is cut back to it (a robot by a wall keeps a set that
+        # does not reach through the wall, so it can lie wholly in a cell that reaches the wall, §12.7)
+        box = axle_bounds(arrays)
+        valid = bounded.valid_vertices(grown_v, grown_n)[..., None]
+        out = np.flatnonzero(np.any(valid & ((grown_v < box[:2] - tol) | (grown_v > box[2:] + tol)), axis=(1, 2)))
+        if len(out):
+            cut_v, cut_n = grown_v[out], grown_n[out]
+            for axis, sign, edge in ((0, -1.0, -box[0]), (0, 1.0, box[2]), (1, -1.0, -box[1]), (1, 1.0, box[3])):
+                row = np.zeros((len(out), 2))
+                row[:, axis] = sign
+                cut_v, cut_n = bounded.clip(cut_v, cut_n, row, np.full(len(out), edge), tol)
+            grown_v = bounded.fit(grown_v, max(grown_v.shape[1], cut_v.shape[1])).copy()
+            grown_v[out], grown_n[out] = bounded.fit(cut_v, grown_v.shape[1]), cut_n
+        vertices[moving], count[moving] = bounded.fit(grown_v, width), grown_n
     angle = np.arctan2(bearings[..., 1], bearings[..., 0])
     scale = state.bound_scale.copy()
     eta = s.bearing_bound * scale
