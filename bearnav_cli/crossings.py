@@ -39,8 +39,12 @@ class NearNodes:
     def __init__(self, nodes: np.ndarray, tol: float):
         self.tol = tol
         self.cells: dict[tuple[int, int], list[tuple[float, float]]] = {}
-        for x, y in np.asarray(nodes, float).reshape(-1, 2).tolist():
-            self.add(x, y)
+        pts = np.asarray(nodes, float).reshape(-1, 2)
+        # the cells by numpy (floor of the same quotient as add's), filed in one loop without calls
+        keys = np.floor(pts / tol).astype(np.int64).tolist()
+        setdefault = self.cells.setdefault
+        for (bx, by), (x, y) in zip(keys, pts.tolist(), strict=True):
+            setdefault((bx, by), []).append((x, y))
 
     def add(self, x: float, y: float) -> None:
         """File the node at ``(x, y)``."""
@@ -58,12 +62,40 @@ class NearNodes:
         return True
 
     def clear_of(self, pts: np.ndarray) -> np.ndarray:
-        """Whether every node lies farther than ``tol`` from each point; shape (n,) bool."""
+        """Whether every node lies farther than ``tol`` from each point; shape (n,) bool.
+
+        Only the points with a filed cell among their nine are measured (:meth:`clear`); the others
+        are clear, found by one sorted lookup of all their cells.
+        """
         pts = np.asarray(pts, float).reshape(-1, 2)
-        return np.fromiter((self.clear(x, y) for x, y in pts.tolist()), bool, len(pts))
+        out = np.ones(len(pts), bool)
+        if not len(pts) or not self.cells:
+            return out
+        filed = np.array(list(self.cells), np.int64)
+        cell = np.floor(pts / self.tol).astype(np.int64)
+        # cells as one int64 each: both coordinates offset to be non-negative and below 2**31 (cells are
+        # tol wide, and a map spans about 1e9 tol; points beyond the filed cells ± 1 meet none of them)
+        low = filed.min(axis=0) - 1
+        span = filed.max(axis=0) + 2 - low
+        if np.any(span >= 1 << 31):  # not a map's range of cells: ask each point
+            return np.fromiter((self.clear(x, y) for x, y in pts.tolist()), bool, len(pts))
+        code = np.sort((filed[:, 0] - low[0]) * (1 << 31) + (filed[:, 1] - low[1]))
+        near = np.zeros(len(pts), bool)
+        for dx in (-1, 0, 1):
+            for dy in (-1, 0, 1):
+                q = cell + (dx, dy) - low
+                inside = np.all((q >= 0) & (q < span), axis=1)
+                key = q[:, 0] * (1 << 31) + q[:, 1]
+                at = np.minimum(np.searchsorted(code, key), len(code) - 1)
+                near |= inside & (code[at] == key)
+        ask = np.flatnonzero(near)
+        out[ask] = [self.clear(x, y) for x, y in pts[ask].tolist()]
+        return out
 
 
-def crossing(nodes, parent, e, f, near: NearNodes | None, tol: float) -> tuple[np.ndarray, np.ndarray]:
+def crossing(
+    nodes, parent, e, f, near: NearNodes | None, tol: float, seg: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """Proper crossings of edges ``(e, parent[e])`` and ``(f, parent[f])``, pairwise.
 
     A pair crosses properly when the edges share no endpoint, are not parallel
@@ -84,6 +116,10 @@ def crossing(nodes, parent, e, f, near: NearNodes | None, tol: float) -> tuple[n
         The nodes a crossing point must keep ``tol`` from; None: only the four endpoints.
     tol : float
         The map's tolerance (map units).
+    seg : ndarray, shape (N, 4), optional
+        Each edge's endpoints ``[x_i, y_i, x_parent, y_parent]`` (map units), the same numbers
+        as ``nodes`` and ``parent`` give (RC keeps it beside them: one gather per side instead
+        of two); by default gathered from ``nodes``.
 
     Returns
     -------
@@ -93,7 +129,11 @@ def crossing(nodes, parent, e, f, near: NearNodes | None, tol: float) -> tuple[n
     """
     e, f = np.minimum(e, f), np.maximum(e, f)  # k is computed on the lower edge, whichever side asks
     pe, pf = parent[e], parent[f]
-    a, b, c, d = nodes[e], nodes[pe], nodes[f], nodes[pf]
+    if seg is None:
+        a, b, c, d = nodes[e], nodes[pe], nodes[f], nodes[pf]
+    else:
+        se, sf = seg[e], seg[f]
+        a, b, c, d = se[:, :2], se[:, 2:], sf[:, :2], sf[:, 2:]
     r, s = b - a, d - c
     den = r[:, 0] * s[:, 1] - r[:, 1] * s[:, 0]
     ok = (e != f) & (e != pf) & (pe != f) & (pe != pf)
@@ -101,18 +141,19 @@ def crossing(nodes, parent, e, f, near: NearNodes | None, tol: float) -> tuple[n
     # each further test only for the pairs still in play (few: most candidate pairs miss), where den ≠ 0
     idx = np.flatnonzero(ok)
     w = c[idx] - a[idx]
-    t = (w[:, 0] * s[idx, 1] - w[:, 1] * s[idx, 0]) / den[idx]
-    u = (w[:, 0] * r[idx, 1] - w[:, 1] * r[idx, 0]) / den[idx]
+    s_in, r_in, den_in = s[idx], r[idx], den[idx]
+    t = (w[:, 0] * s_in[:, 1] - w[:, 1] * s_in[:, 0]) / den_in
+    u = (w[:, 0] * r_in[:, 1] - w[:, 1] * r_in[:, 0]) / den_in
     inside = (t > 0) & (t < 1) & (u > 0) & (u < 1)
     idx, t = idx[inside], t[inside]
-    k_in = a[idx] + t[:, None] * r[idx]
-    clear = np.ones(len(idx), bool)
-    for end in (a, b, c, d):
-        clear &= np.hypot(k_in[:, 0] - end[idx, 0], k_in[:, 1] - end[idx, 1]) > tol
     ok[:] = False
-    ok[idx] = clear
     k = np.full((len(e), 2), np.nan)
-    k[idx] = k_in
+    if idx.size:
+        k_in = a[idx] + t[:, None] * r[idx]
+        # k against the four endpoints at once: (4, m) distances, each as np.hypot of one difference
+        gap = k_in[None] - np.stack([a[idx], b[idx], c[idx], d[idx]])
+        ok[idx] = np.all(np.hypot(gap[..., 0], gap[..., 1]) > tol, axis=0)
+        k[idx] = k_in
     if near is not None and ok.any():
         ok[ok] = near.clear_of(k[ok])
     return ok, k
@@ -333,6 +374,7 @@ def split_crossings(
     cap = n0 + len(heap) + 1  # each insertion removes at least one crossing pair
     nodes = np.concatenate([nodes, np.empty((cap - n0, 2))])
     parent = np.concatenate([parent, np.full(cap - n0, -1, np.int64)])
+    seg = np.concatenate([nodes, nodes[np.maximum(parent, 0)]], axis=1)  # each edge's endpoints, for crossing
     # scalar state as Python lists: the loop reads and writes it one item at a time
     xy = nodes[:n0].tolist()
     up = parent[:n0].tolist()
@@ -355,6 +397,7 @@ def split_crossings(
             continue
         if n == len(nodes):  # the bound above holds in exact arithmetic; stay safe under rounding
             nodes, parent = np.concatenate([nodes, nodes]), np.concatenate([parent, parent])
+            seg = np.concatenate([seg, seg])
         k = [kx, ky]
         pi, pj = up[i], up[j]
         c_i = cst[pi] + math.dist(k, xy[pi])
@@ -365,6 +408,8 @@ def split_crossings(
         new = n
         n += 1
         nodes[new], parent[new] = k, p
+        seg[new] = (kx, ky, *xy[p])
+        seg[i, 2:] = seg[j, 2:] = k
         xy.append(k)
         up.append(p)
         cst.append(c_k)
@@ -393,7 +438,7 @@ def split_crossings(
         version[j] += 1
         # re-test the three changed edges against every piece of their origins' neighbours (the
         # new edge lies on i's origin or j's, whose pieces are gathered once)
-        edge_ids, cands = [], []
+        cands = []
         pieces_of: dict[int, np.ndarray] = {}
         for e in (i, j, new):
             o = origin[e]
@@ -405,10 +450,10 @@ def split_crossings(
                     pieces = [piece for s in split.tolist() for piece in extra[s]]
                     cand = np.concatenate([cand, np.array(pieces, np.int64)])
                 pieces_of[o] = cand
-            edge_ids.append(np.full(cand.size, e))
             cands.append(cand)
-        es, fs = np.concatenate(edge_ids), np.concatenate(cands)
-        ok, k = crossing(nodes, parent, es, fs, None, tol)
+        es = np.repeat(np.array([i, j, new]), [c.size for c in cands])
+        fs = np.concatenate(cands)
+        ok, k = crossing(nodes, parent, es, fs, None, tol, seg)
         # the node test waits for the pop, which makes it anyway (nodes are only added): most of
         # these entries go stale before that
         for e, f, (kx, ky) in zip(es[ok].tolist(), fs[ok].tolist(), k[ok].tolist(), strict=True):
