@@ -159,13 +159,73 @@ def crossing(
     return ok, k
 
 
-def _in_subtree(v: int, parent: list[int], roots: tuple[int, int]) -> bool:
-    """Whether ``v`` lies in the subtree of either root: walk up from ``v`` (O(depth))."""
+def _route_cost(
+    q: int, up: list[int], moved: list[bool], base: list[float], length: list[float | None], xy: list, roots
+) -> tuple[float, bool]:
+    """Route length from node ``q`` to the root during RC, and whether ``q`` lies in the subtree of a root.
+
+    RC moves whole subtrees (a split re-hangs ``i`` and ``j`` below the new node), so instead of
+    writing the new costs into every moved subtree (whose sizes grow with the tree), a cost is worked
+    out when asked, by the very sums the writing did: a node with no moved node on its way to the
+    root keeps its input cost ``base``; from the highest moved node down, each cost is its parent's
+    plus the edge's ``math.dist``. The walk up also answers the cycle guard (O(depth) either way).
+
+    Parameters
+    ----------
+    q : int
+        The node.
+    up, moved, base, length, xy : list
+        RC's parents, moved flags (re-hung or added), input costs (map units), cached edge lengths
+        (None: not yet measured) and positions, by node.
+    roots : (int, int)
+        The two nodes whose subtrees the guard asks about.
+
+    Returns
+    -------
+    cost : float
+        Map units, the value the eager propagation gives bit for bit.
+    inside : bool
+        ``q`` is one of ``roots`` or lies below one.
+    """
+    chain = []
+    v, inside = q, False
     while v >= 0:
-        if v in roots:
-            return True
-        v = parent[v]
-    return False
+        inside = inside or v in roots
+        chain.append(v)
+        v = up[v]
+    cost = None
+    for v in reversed(chain):  # root first
+        if cost is None and not moved[v]:
+            continue
+        edge = length[v]
+        if edge is None:
+            edge = length[v] = math.dist(xy[v], xy[up[v]])
+        cost = (base[up[v]] if cost is None else cost) + edge
+    return (base[q] if cost is None else cost), inside
+
+
+def _route_costs(up: list[int], moved: list[bool], base: list[float], length: list[float | None], xy: list) -> list:
+    """:func:`_route_cost` of every node, each worked out once (its parent's first), by node."""
+    n = len(up)
+    cost: list[float | None] = [None] * n
+    touched = [False] * n  # a moved node on the way to the root, itself included
+    cost[0] = base[0]
+    for v in range(1, n):
+        chain = []
+        while cost[v] is None:
+            chain.append(v)
+            v = up[v]
+        for w in reversed(chain):
+            pw = up[w]
+            if moved[w] or touched[pw]:
+                touched[w] = True
+                edge = length[w]
+                if edge is None:
+                    edge = length[w] = math.dist(xy[w], xy[pw])
+                cost[w] = cost[pw] + edge
+            else:
+                cost[w] = base[w]
+    return cost
 
 
 def _box_pairs(nodes, parent, tol: float) -> tuple[np.ndarray, np.ndarray]:
@@ -378,15 +438,13 @@ def split_crossings(
     # scalar state as Python lists: the loop reads and writes it one item at a time
     xy = nodes[:n0].tolist()
     up = parent[:n0].tolist()
-    cst = cost.tolist()
+    base = cost.tolist()  # costs stay consistent without writing into moved subtrees: see _route_cost
+    moved = [False] * n0
     length: list[float | None] = [None] * n0  # math.dist of each edge, filled when first needed
     origin = list(range(n0))
     version = [0] * n0
     extra: dict[int, list[int]] = {}  # origin → nodes added whose edge lies on it
     has_extra = np.zeros(n0, bool)
-    children: list[list[int]] = [[] for _ in range(n0)]
-    for c in range(1, n0):
-        children[up[c]].append(c)
     n = n0
     while heap:
         i, j, vi, vj, kx, ky = heapq.heappop(heap)
@@ -400,11 +458,13 @@ def split_crossings(
             seg = np.concatenate([seg, seg])
         k = [kx, ky]
         pi, pj = up[i], up[j]
-        c_i = cst[pi] + math.dist(k, xy[pi])
-        c_j = cst[pj] + math.dist(k, xy[pj])
-        candidates = ((pi, c_i), (pj, c_j)) if c_i <= c_j else ((pj, c_j), (pi, c_i))
+        cost_i, below_i = _route_cost(pi, up, moved, base, length, xy, (i, j))
+        cost_j, below_j = _route_cost(pj, up, moved, base, length, xy, (i, j))
+        c_i = cost_i + math.dist(k, xy[pi])
+        c_j = cost_j + math.dist(k, xy[pj])
+        candidates = ((pi, c_i, below_i), (pj, c_j, below_j))
         # cycle guard: a parent inside subtree(i) ∪ subtree(j) would hang the new node below itself
-        p, c_k = next((q, c) for q, c in candidates if not _in_subtree(q, up, (i, j)))
+        p = next(q for q, _, below in (candidates if c_i <= c_j else candidates[::-1]) if not below)
         new = n
         n += 1
         nodes[new], parent[new] = k, p
@@ -412,7 +472,7 @@ def split_crossings(
         seg[i, 2:] = seg[j, 2:] = k
         xy.append(k)
         up.append(p)
-        cst.append(c_k)
+        moved.append(True)
         length.append(None)
         version.append(0)
         o_new = origin[i] if p == pi else origin[j]
@@ -420,20 +480,9 @@ def split_crossings(
         extra.setdefault(o_new, []).append(new)
         has_extra[o_new] = True
         near.add(kx, ky)
-        children[pi].remove(i)
-        children[pj].remove(j)
-        children[p].append(new)
-        children.append([i, j])
         parent[i] = parent[j] = up[i] = up[j] = new
+        moved[i] = moved[j] = True
         length[i] = length[j] = None
-        stack = [i, j]  # costs change in the two moved subtrees only
-        while stack:
-            v = stack.pop()
-            edge = length[v]
-            if edge is None:
-                edge = length[v] = math.dist(xy[v], xy[up[v]])
-            cst[v] = cst[up[v]] + edge
-            stack.extend(children[v])
         version[i] += 1
         version[j] += 1
         # re-test the three changed edges against every piece of their origins' neighbours (the
@@ -460,6 +509,7 @@ def split_crossings(
             lo_, hi_ = min(e, f), max(e, f)
             heapq.heappush(heap, (lo_, hi_, version[lo_], version[hi_], kx, ky))
     final = [(e, f) for e, f, ve, vf in blocked if version[e] == ve and version[f] == vf]
+    cst = _route_costs(up, moved, base, length, xy)
     return nodes[:n], parent[:n], np.array(cst), n - n0, _pairs_array(final)
 
 
