@@ -20,6 +20,7 @@ __all__ = [
     "carry",
     "count_crossings",
     "crossing",
+    "edge_ends",
     "may_meet",
     "MEET_SLACK",
     "NearNodes",
@@ -94,7 +95,7 @@ class NearNodes:
 
 
 def crossing(
-    nodes, parent, e, f, near: NearNodes | None, tol: float, seg: np.ndarray | None = None
+    nodes, parent, e, f, near: NearNodes | None, tol: float, ends: np.ndarray | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
     """Proper crossings of edges ``(e, parent[e])`` and ``(f, parent[f])``, pairwise.
 
@@ -103,6 +104,11 @@ def crossing(
     ``tol`` over its length), meet at ``k`` inside both, and ``k`` lies farther than
     ``tol`` from the four endpoints and from every node (``near``; ``None`` leaves
     out this last test).
+
+    Most pairs miss: the crossing parameters ``t = t_n/den`` and ``u = u_n/den`` of a pair can
+    lie in (0, 1) only where ``t_n`` and ``u_n`` have the sign of ``den`` and at most its size
+    (a correctly rounded quotient of a larger numerator is at least 1), so every further test,
+    the division included, runs only for the pairs that pass this, on the same numbers.
 
     Parameters
     ----------
@@ -116,10 +122,10 @@ def crossing(
         The nodes a crossing point must keep ``tol`` from; None: only the four endpoints.
     tol : float
         The map's tolerance (map units).
-    seg : ndarray, shape (N, 4), optional
-        Each edge's endpoints ``[x_i, y_i, x_parent, y_parent]`` (map units), the same numbers
-        as ``nodes`` and ``parent`` give (RC keeps it beside them: one gather per side instead
-        of two); by default gathered from ``nodes``.
+    ends : ndarray, shape (4, N), optional
+        Each edge's endpoints as rows ``x_i, y_i, x_parent, y_parent`` (map units), the numbers
+        ``nodes`` and ``parent`` give (RC keeps it beside them, :func:`edge_ends`); by default
+        gathered from them for the pairs' edges.
 
     Returns
     -------
@@ -128,35 +134,55 @@ def crossing(
         Crossing points (meaningful where ``ok``).
     """
     e, f = np.minimum(e, f), np.maximum(e, f)  # k is computed on the lower edge, whichever side asks
-    pe, pf = parent[e], parent[f]
-    if seg is None:
-        a, b, c, d = nodes[e], nodes[pe], nodes[f], nodes[pf]
+    if ends is None:  # only the pairs' edges: the others' parents need not even be nodes
+        ax, ay, bx, by = np.concatenate([nodes[e], nodes[parent[e]]], axis=1).T
+        cx, cy, dx, dy = np.concatenate([nodes[f], nodes[parent[f]]], axis=1).T
     else:
-        se, sf = seg[e], seg[f]
-        a, b, c, d = se[:, :2], se[:, 2:], sf[:, :2], sf[:, 2:]
-    r, s = b - a, d - c
-    den = r[:, 0] * s[:, 1] - r[:, 1] * s[:, 0]
-    ok = (e != f) & (e != pf) & (pe != f) & (pe != pf)
-    ok &= np.abs(den) > tol * np.maximum(np.hypot(r[:, 0], r[:, 1]), np.hypot(s[:, 0], s[:, 1]))
-    # each further test only for the pairs still in play (few: most candidate pairs miss), where den ≠ 0
-    idx = np.flatnonzero(ok)
-    w = c[idx] - a[idx]
-    s_in, r_in, den_in = s[idx], r[idx], den[idx]
-    t = (w[:, 0] * s_in[:, 1] - w[:, 1] * s_in[:, 0]) / den_in
-    u = (w[:, 0] * r_in[:, 1] - w[:, 1] * r_in[:, 0]) / den_in
-    inside = (t > 0) & (t < 1) & (u > 0) & (u < 1)
-    idx, t = idx[inside], t[inside]
-    ok[:] = False
+        ax, ay, bx, by = ends[:, e]
+        cx, cy, dx, dy = ends[:, f]
+    rx, ry, sx, sy = bx - ax, by - ay, dx - cx, dy - cy
+    den = rx * sy - ry * sx
+    wx, wy = cx - ax, cy - ay
+    t_n, u_n = wx * sy - wy * sx, wx * ry - wy * rx
+    sign, size = np.sign(den), np.abs(den)  # times ±1 or 0: exact
+    t_s, u_s = t_n * sign, u_n * sign
+    idx = np.flatnonzero((t_s > 0) & (t_s <= size) & (u_s > 0) & (u_s <= size))
+    ok = np.zeros(len(e), bool)
     k = np.full((len(e), 2), np.nan)
+    if not idx.size:
+        return ok, k
+    ei, fi = e[idx], f[idx]
+    pe, pf = parent[ei], parent[fi]
+    rx, ry, sx, sy, den = rx[idx], ry[idx], sx[idx], sy[idx], den[idx]
+    keep = (ei != fi) & (ei != pf) & (pe != fi) & (pe != pf)
+    keep &= np.abs(den) > tol * np.maximum(np.hypot(rx, ry), np.hypot(sx, sy))
+    t, u = t_n[idx] / den, u_n[idx] / den
+    keep &= (t > 0) & (t < 1) & (u > 0) & (u < 1)
+    idx, t, rx, ry = idx[keep], t[keep], rx[keep], ry[keep]
     if idx.size:
-        k_in = a[idx] + t[:, None] * r[idx]
+        kx, ky = ax[idx] + t * rx, ay[idx] + t * ry
         # k against the four endpoints at once: (4, m) distances, each as np.hypot of one difference
-        gap = k_in[None] - np.stack([a[idx], b[idx], c[idx], d[idx]])
-        ok[idx] = np.all(np.hypot(gap[..., 0], gap[..., 1]) > tol, axis=0)
-        k[idx] = k_in
+        gx = kx - np.stack([ax[idx], bx[idx], cx[idx], dx[idx]])
+        gy = ky - np.stack([ay[idx], by[idx], cy[idx], dy[idx]])
+        ok[idx] = np.all(np.hypot(gx, gy) > tol, axis=0)
+        k[idx, 0], k[idx, 1] = kx, ky
     if near is not None and ok.any():
         ok[ok] = near.clear_of(k[ok])
     return ok, k
+
+
+def edge_ends(nodes: np.ndarray, parent: np.ndarray) -> np.ndarray:
+    """Each edge's endpoints as rows ``x_i, y_i, x_parent, y_parent``, shape (4, N) (the root's: itself twice).
+
+    Parameters
+    ----------
+    nodes : ndarray, shape (N, 2)
+        Node positions (map units).
+    parent : ndarray of int, shape (N,)
+        ``-1`` at node 0 only.
+    """
+    nodes = np.asarray(nodes, float)
+    return np.ascontiguousarray(np.concatenate([nodes, nodes[np.maximum(parent, 0)]], axis=1).T)
 
 
 def _route_cost(
@@ -434,7 +460,7 @@ def split_crossings(
     cap = n0 + len(heap) + 1  # each insertion removes at least one crossing pair
     nodes = np.concatenate([nodes, np.empty((cap - n0, 2))])
     parent = np.concatenate([parent, np.full(cap - n0, -1, np.int64)])
-    seg = np.concatenate([nodes, nodes[np.maximum(parent, 0)]], axis=1)  # each edge's endpoints, for crossing
+    ends = edge_ends(nodes, parent)  # each edge's endpoints, for crossing
     # scalar state as Python lists: the loop reads and writes it one item at a time
     xy = nodes[:n0].tolist()
     up = parent[:n0].tolist()
@@ -455,7 +481,7 @@ def split_crossings(
             continue
         if n == len(nodes):  # the bound above holds in exact arithmetic; stay safe under rounding
             nodes, parent = np.concatenate([nodes, nodes]), np.concatenate([parent, parent])
-            seg = np.concatenate([seg, seg])
+            ends = np.concatenate([ends, ends], axis=1)
         k = [kx, ky]
         pi, pj = up[i], up[j]
         cost_i, below_i = _route_cost(pi, up, moved, base, length, xy, (i, j))
@@ -468,8 +494,9 @@ def split_crossings(
         new = n
         n += 1
         nodes[new], parent[new] = k, p
-        seg[new] = (kx, ky, *xy[p])
-        seg[i, 2:] = seg[j, 2:] = k
+        ends[:, new] = (kx, ky, *xy[p])
+        ends[2, i] = ends[2, j] = kx
+        ends[3, i] = ends[3, j] = ky
         xy.append(k)
         up.append(p)
         moved.append(True)
@@ -502,7 +529,7 @@ def split_crossings(
             cands.append(cand)
         es = np.repeat(np.array([i, j, new]), [c.size for c in cands])
         fs = np.concatenate(cands)
-        ok, k = crossing(nodes, parent, es, fs, None, tol, seg)
+        ok, k = crossing(nodes, parent, es, fs, None, tol, ends)
         # the node test waits for the pop, which makes it anyway (nodes are only added): most of
         # these entries go stale before that
         for e, f, (kx, ky) in zip(es[ok].tolist(), fs[ok].tolist(), k[ok].tolist(), strict=True):
