@@ -207,10 +207,10 @@ def verdict(results: list[tuple[str, int, dict[str, Any]]], envs: dict[str, Any]
 def main(argv: list[str] | None = None) -> None:
     """Run the benchmark, print the section and, with ``--readme``, record it."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--quick", action="store_true", help="smoke test: 1 round, 1,500 iterations, kitchen only")
+    parser.add_argument("--quick", action="store_true", help="smoke test: 3 rounds, 1,500 iterations, kitchen only")
     parser.add_argument("--readme", action="store_true", help=f"replace the '{SECTION}' section of {README}")
     args = parser.parse_args(argv)
-    rounds = 1 if args.quick else ROUNDS
+    rounds = 3 if args.quick else ROUNDS
     maps = MAPS[:1] if args.quick else MAPS
     counts = ITERATIONS[:1] if args.quick else ITERATIONS
 
