@@ -29,7 +29,6 @@ The markdown goes to stdout; ``--readme`` replaces the ``rrtstar-process`` secti
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import statistics
@@ -50,6 +49,7 @@ from common import (
     load_snapshot,
     machine_line,
     markdown_table,
+    quick_readme_args,
     replace_section,
 )
 from made_maps import KINDS
@@ -206,10 +206,7 @@ def verdict(results: list[tuple[str, int, dict[str, Any]]], envs: dict[str, Any]
 
 def main(argv: list[str] | None = None) -> None:
     """Run the benchmark, print the section and, with ``--readme``, record it."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--quick", action="store_true", help="smoke test: 3 rounds, 1,500 iterations, kitchen only")
-    parser.add_argument("--readme", action="store_true", help=f"replace the '{SECTION}' section of {README}")
-    args = parser.parse_args(argv)
+    args = quick_readme_args(__doc__, SECTION, "smoke test: 3 rounds, 1,500 iterations, kitchen only", argv)
     rounds = 3 if args.quick else ROUNDS
     maps = MAPS[:1] if args.quick else MAPS
     counts = ITERATIONS[:1] if args.quick else ITERATIONS
