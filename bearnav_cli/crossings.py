@@ -5,7 +5,10 @@ every round and in the finishing passes); :func:`count_crossings` counts what is
 all pairs. Speed: the first pass scans every edge pair whose boxes meet (a ``shapely.STRtree``) and keeps,
 per edge, the edges that may meet it (:class:`Neighbours`), against which it re-tests only the split
 edges; a later pass scans only the edges changed since and the pairs the previous pass found blocked by a
-node, and its result is the one a scan of all pairs gives.
+node, and its result is the one a scan of all pairs gives. Per split, the re-test (:func:`crossing`) decides
+most pairs from two numerators before any division, and no cost is written into the moved subtrees (their
+sizes grow with the tree): a cost is summed along the way to the root when asked (:func:`_route_cost`),
+bit for bit the sum the writing made.
 """
 
 from __future__ import annotations
@@ -20,6 +23,7 @@ __all__ = [
     "carry",
     "count_crossings",
     "crossing",
+    "edge_ends",
     "may_meet",
     "MEET_SLACK",
     "NearNodes",
@@ -39,8 +43,12 @@ class NearNodes:
     def __init__(self, nodes: np.ndarray, tol: float):
         self.tol = tol
         self.cells: dict[tuple[int, int], list[tuple[float, float]]] = {}
-        for x, y in np.asarray(nodes, float).reshape(-1, 2).tolist():
-            self.add(x, y)
+        pts = np.asarray(nodes, float).reshape(-1, 2)
+        # the cells by numpy (floor of the same quotient as add's), filed in one loop without calls
+        keys = np.floor(pts / tol).astype(np.int64).tolist()
+        setdefault = self.cells.setdefault
+        for (bx, by), (x, y) in zip(keys, pts.tolist(), strict=True):
+            setdefault((bx, by), []).append((x, y))
 
     def add(self, x: float, y: float) -> None:
         """File the node at ``(x, y)``."""
@@ -58,12 +66,40 @@ class NearNodes:
         return True
 
     def clear_of(self, pts: np.ndarray) -> np.ndarray:
-        """Whether every node lies farther than ``tol`` from each point; shape (n,) bool."""
+        """Whether every node lies farther than ``tol`` from each point; shape (n,) bool.
+
+        Only the points with a filed cell among their nine are measured (:meth:`clear`); the others
+        are clear, found by one sorted lookup of all their cells.
+        """
         pts = np.asarray(pts, float).reshape(-1, 2)
-        return np.fromiter((self.clear(x, y) for x, y in pts.tolist()), bool, len(pts))
+        out = np.ones(len(pts), bool)
+        if not len(pts) or not self.cells:
+            return out
+        filed = np.array(list(self.cells), np.int64)
+        cell = np.floor(pts / self.tol).astype(np.int64)
+        # cells as one int64 each: both coordinates offset to be non-negative and below 2**31 (cells are
+        # tol wide, and a map spans about 1e9 tol; points beyond the filed cells ± 1 meet none of them)
+        low = filed.min(axis=0) - 1
+        span = filed.max(axis=0) + 2 - low
+        if np.any(span >= 1 << 31):  # not a map's range of cells: ask each point
+            return np.fromiter((self.clear(x, y) for x, y in pts.tolist()), bool, len(pts))
+        code = np.sort((filed[:, 0] - low[0]) * (1 << 31) + (filed[:, 1] - low[1]))
+        near = np.zeros(len(pts), bool)
+        for dx in (-1, 0, 1):
+            for dy in (-1, 0, 1):
+                q = cell + (dx, dy) - low
+                inside = np.all((q >= 0) & (q < span), axis=1)
+                key = q[:, 0] * (1 << 31) + q[:, 1]
+                at = np.minimum(np.searchsorted(code, key), len(code) - 1)
+                near |= inside & (code[at] == key)
+        ask = np.flatnonzero(near)
+        out[ask] = [self.clear(x, y) for x, y in pts[ask].tolist()]
+        return out
 
 
-def crossing(nodes, parent, e, f, near: NearNodes | None, tol: float) -> tuple[np.ndarray, np.ndarray]:
+def crossing(
+    nodes, parent, e, f, near: NearNodes | None, tol: float, ends: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """Proper crossings of edges ``(e, parent[e])`` and ``(f, parent[f])``, pairwise.
 
     A pair crosses properly when the edges share no endpoint, are not parallel
@@ -71,6 +107,11 @@ def crossing(nodes, parent, e, f, near: NearNodes | None, tol: float) -> tuple[n
     ``tol`` over its length), meet at ``k`` inside both, and ``k`` lies farther than
     ``tol`` from the four endpoints and from every node (``near``; ``None`` leaves
     out this last test).
+
+    Most pairs miss: the crossing parameters ``t = t_n/den`` and ``u = u_n/den`` of a pair can
+    lie in (0, 1) only where ``t_n`` and ``u_n`` have the sign of ``den`` and at most its size
+    (a correctly rounded quotient of a larger numerator is at least 1), so every further test,
+    the division included, runs only for the pairs that pass this, on the same numbers.
 
     Parameters
     ----------
@@ -84,6 +125,10 @@ def crossing(nodes, parent, e, f, near: NearNodes | None, tol: float) -> tuple[n
         The nodes a crossing point must keep ``tol`` from; None: only the four endpoints.
     tol : float
         The map's tolerance (map units).
+    ends : ndarray, shape (4, N), optional
+        Each edge's endpoints as rows ``x_i, y_i, x_parent, y_parent`` (map units), the numbers
+        ``nodes`` and ``parent`` give (RC keeps it beside them, :func:`edge_ends`); by default
+        gathered from them for the pairs' edges.
 
     Returns
     -------
@@ -92,39 +137,124 @@ def crossing(nodes, parent, e, f, near: NearNodes | None, tol: float) -> tuple[n
         Crossing points (meaningful where ``ok``).
     """
     e, f = np.minimum(e, f), np.maximum(e, f)  # k is computed on the lower edge, whichever side asks
-    pe, pf = parent[e], parent[f]
-    a, b, c, d = nodes[e], nodes[pe], nodes[f], nodes[pf]
-    r, s = b - a, d - c
-    den = r[:, 0] * s[:, 1] - r[:, 1] * s[:, 0]
-    ok = (e != f) & (e != pf) & (pe != f) & (pe != pf)
-    ok &= np.abs(den) > tol * np.maximum(np.hypot(r[:, 0], r[:, 1]), np.hypot(s[:, 0], s[:, 1]))
-    # each further test only for the pairs still in play (few: most candidate pairs miss), where den ≠ 0
-    idx = np.flatnonzero(ok)
-    w = c[idx] - a[idx]
-    t = (w[:, 0] * s[idx, 1] - w[:, 1] * s[idx, 0]) / den[idx]
-    u = (w[:, 0] * r[idx, 1] - w[:, 1] * r[idx, 0]) / den[idx]
-    inside = (t > 0) & (t < 1) & (u > 0) & (u < 1)
-    idx, t = idx[inside], t[inside]
-    k_in = a[idx] + t[:, None] * r[idx]
-    clear = np.ones(len(idx), bool)
-    for end in (a, b, c, d):
-        clear &= np.hypot(k_in[:, 0] - end[idx, 0], k_in[:, 1] - end[idx, 1]) > tol
-    ok[:] = False
-    ok[idx] = clear
+    if ends is None:  # only the pairs' edges: the others' parents need not even be nodes
+        ax, ay, bx, by = np.concatenate([nodes[e], nodes[parent[e]]], axis=1).T
+        cx, cy, dx, dy = np.concatenate([nodes[f], nodes[parent[f]]], axis=1).T
+    else:
+        ax, ay, bx, by = ends[:, e]
+        cx, cy, dx, dy = ends[:, f]
+    rx, ry, sx, sy = bx - ax, by - ay, dx - cx, dy - cy
+    den = rx * sy - ry * sx
+    wx, wy = cx - ax, cy - ay
+    t_n, u_n = wx * sy - wy * sx, wx * ry - wy * rx
+    sign, size = np.sign(den), np.abs(den)  # times ±1 or 0: exact
+    t_s, u_s = t_n * sign, u_n * sign
+    idx = np.flatnonzero((t_s > 0) & (t_s <= size) & (u_s > 0) & (u_s <= size))
+    ok = np.zeros(len(e), bool)
     k = np.full((len(e), 2), np.nan)
-    k[idx] = k_in
+    if not idx.size:
+        return ok, k
+    ei, fi = e[idx], f[idx]
+    pe, pf = parent[ei], parent[fi]
+    rx, ry, sx, sy, den = rx[idx], ry[idx], sx[idx], sy[idx], den[idx]
+    keep = (ei != fi) & (ei != pf) & (pe != fi) & (pe != pf)
+    keep &= np.abs(den) > tol * np.maximum(np.hypot(rx, ry), np.hypot(sx, sy))
+    t, u = t_n[idx] / den, u_n[idx] / den
+    keep &= (t > 0) & (t < 1) & (u > 0) & (u < 1)
+    idx, t, rx, ry = idx[keep], t[keep], rx[keep], ry[keep]
+    if idx.size:
+        kx, ky = ax[idx] + t * rx, ay[idx] + t * ry
+        # k against the four endpoints at once: (4, m) distances, each as np.hypot of one difference
+        gx = kx - np.stack([ax[idx], bx[idx], cx[idx], dx[idx]])
+        gy = ky - np.stack([ay[idx], by[idx], cy[idx], dy[idx]])
+        ok[idx] = np.all(np.hypot(gx, gy) > tol, axis=0)
+        k[idx, 0], k[idx, 1] = kx, ky
     if near is not None and ok.any():
         ok[ok] = near.clear_of(k[ok])
     return ok, k
 
 
-def _in_subtree(v: int, parent: list[int], roots: tuple[int, int]) -> bool:
-    """Whether ``v`` lies in the subtree of either root: walk up from ``v`` (O(depth))."""
+def edge_ends(nodes: np.ndarray, parent: np.ndarray) -> np.ndarray:
+    """Each edge's endpoints as rows ``x_i, y_i, x_parent, y_parent``, shape (4, N) (the root's: itself twice).
+
+    Parameters
+    ----------
+    nodes : ndarray, shape (N, 2)
+        Node positions (map units).
+    parent : ndarray of int, shape (N,)
+        ``-1`` at node 0 only.
+    """
+    nodes = np.asarray(nodes, float)
+    return np.ascontiguousarray(np.concatenate([nodes, nodes[np.maximum(parent, 0)]], axis=1).T)
+
+
+def _route_cost(
+    q: int, up: list[int], moved: list[bool], base: list[float], length: list[float | None], xy: list, roots
+) -> tuple[float, bool]:
+    """Route length from node ``q`` to the root during RC, and whether ``q`` lies in the subtree of a root.
+
+    RC moves whole subtrees (a split re-hangs ``i`` and ``j`` below the new node), so instead of
+    writing the new costs into every moved subtree (whose sizes grow with the tree), a cost is worked
+    out when asked, by the very sums the writing did: a node with no moved node on its way to the
+    root keeps its input cost ``base``; from the highest moved node down, each cost is its parent's
+    plus the edge's ``math.dist``. The walk up also answers the cycle guard (O(depth) either way).
+
+    Parameters
+    ----------
+    q : int
+        The node.
+    up, moved, base, length, xy : list
+        RC's parents, moved flags (re-hung or added), input costs (map units), cached edge lengths
+        (None: not yet measured) and positions, by node.
+    roots : (int, int)
+        The two nodes whose subtrees the guard asks about.
+
+    Returns
+    -------
+    cost : float
+        Map units, the value the eager propagation gives bit for bit.
+    inside : bool
+        ``q`` is one of ``roots`` or lies below one.
+    """
+    chain = []
+    v, inside = q, False
     while v >= 0:
-        if v in roots:
-            return True
-        v = parent[v]
-    return False
+        inside = inside or v in roots
+        chain.append(v)
+        v = up[v]
+    cost = None
+    for v in reversed(chain):  # root first
+        if cost is None and not moved[v]:
+            continue
+        edge = length[v]
+        if edge is None:
+            edge = length[v] = math.dist(xy[v], xy[up[v]])
+        cost = (base[up[v]] if cost is None else cost) + edge
+    return (base[q] if cost is None else cost), inside
+
+
+def _route_costs(up: list[int], moved: list[bool], base: list[float], length: list[float | None], xy: list) -> list:
+    """:func:`_route_cost` of every node, each worked out once (its parent's first), by node."""
+    n = len(up)
+    cost: list[float | None] = [None] * n
+    touched = [False] * n  # a moved node on the way to the root, itself included
+    cost[0] = base[0]
+    for v in range(1, n):
+        chain = []
+        while cost[v] is None:
+            chain.append(v)
+            v = up[v]
+        for w in reversed(chain):
+            pw = up[w]
+            if moved[w] or touched[pw]:
+                touched[w] = True
+                edge = length[w]
+                if edge is None:
+                    edge = length[w] = math.dist(xy[w], xy[pw])
+                cost[w] = cost[pw] + edge
+            else:
+                cost[w] = base[w]
+    return cost
 
 
 def _box_pairs(nodes, parent, tol: float) -> tuple[np.ndarray, np.ndarray]:
@@ -333,18 +463,17 @@ def split_crossings(
     cap = n0 + len(heap) + 1  # each insertion removes at least one crossing pair
     nodes = np.concatenate([nodes, np.empty((cap - n0, 2))])
     parent = np.concatenate([parent, np.full(cap - n0, -1, np.int64)])
+    ends = edge_ends(nodes, parent)  # each edge's endpoints, for crossing
     # scalar state as Python lists: the loop reads and writes it one item at a time
     xy = nodes[:n0].tolist()
     up = parent[:n0].tolist()
-    cst = cost.tolist()
+    base = cost.tolist()  # costs stay consistent without writing into moved subtrees: see _route_cost
+    moved = [False] * n0
     length: list[float | None] = [None] * n0  # math.dist of each edge, filled when first needed
     origin = list(range(n0))
     version = [0] * n0
     extra: dict[int, list[int]] = {}  # origin → nodes added whose edge lies on it
     has_extra = np.zeros(n0, bool)
-    children: list[list[int]] = [[] for _ in range(n0)]
-    for c in range(1, n0):
-        children[up[c]].append(c)
     n = n0
     while heap:
         i, j, vi, vj, kx, ky = heapq.heappop(heap)
@@ -355,19 +484,25 @@ def split_crossings(
             continue
         if n == len(nodes):  # the bound above holds in exact arithmetic; stay safe under rounding
             nodes, parent = np.concatenate([nodes, nodes]), np.concatenate([parent, parent])
+            ends = np.concatenate([ends, ends], axis=1)
         k = [kx, ky]
         pi, pj = up[i], up[j]
-        c_i = cst[pi] + math.dist(k, xy[pi])
-        c_j = cst[pj] + math.dist(k, xy[pj])
-        candidates = ((pi, c_i), (pj, c_j)) if c_i <= c_j else ((pj, c_j), (pi, c_i))
+        cost_i, below_i = _route_cost(pi, up, moved, base, length, xy, (i, j))
+        cost_j, below_j = _route_cost(pj, up, moved, base, length, xy, (i, j))
+        c_i = cost_i + math.dist(k, xy[pi])
+        c_j = cost_j + math.dist(k, xy[pj])
+        candidates = ((pi, c_i, below_i), (pj, c_j, below_j))
         # cycle guard: a parent inside subtree(i) ∪ subtree(j) would hang the new node below itself
-        p, c_k = next((q, c) for q, c in candidates if not _in_subtree(q, up, (i, j)))
+        p = next(q for q, _, below in (candidates if c_i <= c_j else candidates[::-1]) if not below)
         new = n
         n += 1
         nodes[new], parent[new] = k, p
+        ends[:, new] = (kx, ky, *xy[p])
+        ends[2, i] = ends[2, j] = kx
+        ends[3, i] = ends[3, j] = ky
         xy.append(k)
         up.append(p)
-        cst.append(c_k)
+        moved.append(True)
         length.append(None)
         version.append(0)
         o_new = origin[i] if p == pi else origin[j]
@@ -375,25 +510,14 @@ def split_crossings(
         extra.setdefault(o_new, []).append(new)
         has_extra[o_new] = True
         near.add(kx, ky)
-        children[pi].remove(i)
-        children[pj].remove(j)
-        children[p].append(new)
-        children.append([i, j])
         parent[i] = parent[j] = up[i] = up[j] = new
+        moved[i] = moved[j] = True
         length[i] = length[j] = None
-        stack = [i, j]  # costs change in the two moved subtrees only
-        while stack:
-            v = stack.pop()
-            edge = length[v]
-            if edge is None:
-                edge = length[v] = math.dist(xy[v], xy[up[v]])
-            cst[v] = cst[up[v]] + edge
-            stack.extend(children[v])
         version[i] += 1
         version[j] += 1
         # re-test the three changed edges against every piece of their origins' neighbours (the
         # new edge lies on i's origin or j's, whose pieces are gathered once)
-        edge_ids, cands = [], []
+        cands = []
         pieces_of: dict[int, np.ndarray] = {}
         for e in (i, j, new):
             o = origin[e]
@@ -405,16 +529,17 @@ def split_crossings(
                     pieces = [piece for s in split.tolist() for piece in extra[s]]
                     cand = np.concatenate([cand, np.array(pieces, np.int64)])
                 pieces_of[o] = cand
-            edge_ids.append(np.full(cand.size, e))
             cands.append(cand)
-        es, fs = np.concatenate(edge_ids), np.concatenate(cands)
-        ok, k = crossing(nodes, parent, es, fs, None, tol)
+        es = np.repeat(np.array([i, j, new]), [c.size for c in cands])
+        fs = np.concatenate(cands)
+        ok, k = crossing(nodes, parent, es, fs, None, tol, ends)
         # the node test waits for the pop, which makes it anyway (nodes are only added): most of
         # these entries go stale before that
         for e, f, (kx, ky) in zip(es[ok].tolist(), fs[ok].tolist(), k[ok].tolist(), strict=True):
             lo_, hi_ = min(e, f), max(e, f)
             heapq.heappush(heap, (lo_, hi_, version[lo_], version[hi_], kx, ky))
     final = [(e, f) for e, f, ve, vf in blocked if version[e] == ve and version[f] == vf]
+    cst = _route_costs(up, moved, base, length, xy)
     return nodes[:n], parent[:n], np.array(cst), n - n0, _pairs_array(final)
 
 

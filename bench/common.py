@@ -7,6 +7,7 @@ every other section alone, so several benchmarks can share the file.
 
 from __future__ import annotations
 
+import argparse
 import datetime
 import os
 import platform
@@ -188,3 +189,12 @@ def replace_section(name: str, body: str, readme: Path = README) -> None:
     else:
         text = text.rstrip("\n") + "\n\n" + block + "\n"
     readme.write_text(text)
+
+
+def quick_readme_args(doc: str, section: str, quick_help: str, argv: Sequence[str] | None = None) -> argparse.Namespace:
+    """The options every benchmark takes: ``--quick`` (a smoke test, ``quick_help`` says what it runs) and
+    ``--readme`` (replace ``section`` of :data:`README`); the description is ``doc``'s first line."""
+    parser = argparse.ArgumentParser(description=doc.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help=quick_help)
+    parser.add_argument("--readme", action="store_true", help=f"replace the '{section}' section of {README}")
+    return parser.parse_args(argv)

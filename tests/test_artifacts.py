@@ -319,3 +319,18 @@ def test_manifests_record_the_input_relative_to_the_artifact(cli, write_map, sma
         recorded = artifacts.read_manifest(out / name)["input"]["path"]
         assert not os.path.isabs(recorded), (name, recorded)
         assert (out / recorded).resolve() == source.resolve(), (name, recorded)
+
+
+def test_software_versions_are_the_installed_distributions():
+    """The versions read from the dist-info folders' names are importlib.metadata's."""
+    from importlib import metadata
+
+    from bearnav_cli.artifacts import manifest
+
+    for package in ("numpy", "shapely", "scipy", "highspy", "typer"):
+        assert manifest._distribution_version(package) == metadata.version(package)
+    assert manifest._distribution_version("no_such_distribution_here") is None
+    versions = artifacts.software_versions()
+    assert {k: versions[k] for k in ("numpy", "shapely", "scipy", "highspy")} == {
+        k: metadata.version(k) for k in ("numpy", "shapely", "scipy", "highspy")
+    }

@@ -6,6 +6,9 @@ starts at once (bench/README.md "Start-up"; tests/test_cli_startup.py).
 
 import functools
 import json
+import os
+import re
+import sys
 from typing import TYPE_CHECKING, Any, Callable
 
 if TYPE_CHECKING:
@@ -30,10 +33,19 @@ __all__ = [
 ]
 
 
+#: Where rich would print what it prints plainly anywhere else: styles and escapes may appear (a forced
+#: terminal), emoji codes become emoji, ``[tags]`` are markup, tabs and control characters are rewritten.
+_RICH_ENVIRONMENT = ("FORCE_COLOR", "TTY_COMPATIBLE", "TTY_INTERACTIVE", "JUPYTER_COLUMNS", "JUPYTER_LINES")
+_EMOJI_CODE = re.compile(r":\S*:")
+_CONTROL = re.compile(r"[\x00-\x1f\x7f]")
+
+
 class _Console:
     """A rich Console made on first use: importing rich.console takes 20 ms that ``--help`` does not need.
 
-    Everything but :attr:`console` (the Console itself, for rich's own classes) is the Console's.
+    Everything but :attr:`console` (the Console itself, for rich's own classes) is the Console's. A line
+    that rich would write unchanged (:meth:`print`) is written without it: a command whose output goes to
+    a file or a pipe then never imports rich (a fifth of a ``bearnav rrtstar`` process beside the planner).
     """
 
     def __init__(self, stderr: bool = False) -> None:
@@ -47,6 +59,44 @@ class _Console:
 
     def __getattr__(self, name: str) -> Any:
         return getattr(self.console, name)
+
+    def print(self, *objects: Any, **options: Any) -> None:
+        """``Console.print``; a plain line without rich when rich would print exactly the text and a newline.
+
+        That is one string, unhighlighted and soft-wrapped (never cut to a width), going to a stream that
+        is not a terminal while nothing in the environment makes rich style it, holding no control
+        character, no ``[`` (markup) and no ``:…:`` (emoji codes).
+        """
+        text = objects[0] if len(objects) == 1 else None
+        if (
+            type(text) is str
+            and options.get("highlight", True) is False
+            and options.get("soft_wrap") is True
+            and set(options) <= {"highlight", "soft_wrap", "markup"}
+            and "[" not in text
+            and _EMOJI_CODE.search(text) is None
+            and _CONTROL.search(text) is None
+            and self._plain_stream() is not None
+        ):
+            stream = self._plain_stream()
+            try:
+                stream.write(text + "\n")
+                stream.flush()
+            except BrokenPipeError:  # the reader left (``| head``): as rich's Console.on_broken_pipe does
+                os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+                raise SystemExit(1) from None
+            return
+        self.console.print(*objects, **options)
+
+    def _plain_stream(self) -> Any:
+        """The stream rich would write to, if it is not a terminal and nothing forces one; else None."""
+        if any(name in os.environ for name in _RICH_ENVIRONMENT) or "IPython" in sys.modules:
+            return None
+        stream = sys.stderr if self._stderr else sys.stdout
+        try:
+            return None if stream is None or stream.isatty() else stream
+        except (AttributeError, ValueError):  # no isatty, or a closed stream: rich's own rules apply
+            return None
 
 
 out = _Console()
@@ -180,7 +230,8 @@ class _NoProgress:
 
 def progress_bar() -> "Progress | _NoProgress":
     """The stages' progress bars on stderr, transient; none when quiet or not on a terminal."""
-    if Quiet.enabled or not err.is_terminal:
+    # a stream that is plainly not a terminal (:meth:`_Console.print`) needs no rich to say so
+    if Quiet.enabled or err._plain_stream() is not None or not err.is_terminal:
         return _NoProgress()
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 

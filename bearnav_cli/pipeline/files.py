@@ -219,6 +219,7 @@ def run_stage(
     overrides: dict | None = None,
     force: bool = False,
     progress: Progress | None = None,
+    given: StageReport | None = None,
 ) -> StageReport:
     """Run one stage after ``map`` on the artifact at ``input_path``.
 
@@ -240,6 +241,10 @@ def run_stage(
         Run even if the output is fresh.
     progress : callable, optional
         ``progress(done, total)``, called by long stages.
+    given : StageReport, optional
+        The report of the stage that wrote ``input_path`` in this process, under the same lock
+        (:func:`plan`): its artifact and manifest are what the file holds, so the input is taken
+        from them instead of being read, parsed and hashed again.
 
     Returns
     -------
@@ -251,11 +256,13 @@ def run_stage(
     out = Path(out) if out is not None else Path(input_path).with_name(stage.filename)
     _check_outputs(stage, out, (input_path,), force)
     with artifacts.output_folder(out.parent):
-        loaded = load(input_path, stage.input_kind)
-        params = stage_params(name, loaded.artifact, overrides)
-        return _run_and_save(
-            stage, loaded.artifact, params, out, str(input_path), loaded.manifest["content_sha256"], force, progress
-        )
+        if given is not None and given.artifact is not None and given.manifest is not None:
+            artifact, manifest = given.artifact, given.manifest
+        else:
+            loaded = load(input_path, stage.input_kind)
+            artifact, manifest = loaded.artifact, loaded.manifest
+        params = stage_params(name, artifact, overrides)
+        return _run_and_save(stage, artifact, params, out, str(input_path), manifest["content_sha256"], force, progress)
 
 
 def _spec_params(source: Any) -> Any:
@@ -359,6 +366,7 @@ def plan(
                 overrides.get(stage.name),
                 force,
                 progress(stage.name) if progress else None,
+                given=reports[-1],  # what the previous stage wrote (or kept) a moment ago, under this lock
             )
             reports.append(report)
             if on_stage:
