@@ -48,6 +48,7 @@ BENCH := PYTHONPATH=. $(BIN)/python
 bench: $(STAMP)
 	$(BIN)/python -m pip install --quiet ompl
 	$(BENCH) bench/rrtstar.py
+	$(BENCH) bench/rrtstar_process.py --readme
 	$(BENCH) bench/synthesize.py --readme
 	$(BENCH) bench/simulate.py --readme
 	$(BENCH) bench/plan.py --readme
