@@ -9,8 +9,8 @@ it runs (``--full`` runs all of it: 30 min with ``--jobs 1``, 17 min on two proc
 Each configuration is the whole ``bearnav sweep`` command in a subprocess, into an empty store
 (plans included: every run makes its own 8 plans), timed by its wall clock: ``--jobs 1``,
 ``--jobs 2`` and ``--scheduler`` on a ``distributed.LocalCluster`` of 2 single-threaded worker
-processes started beforehand (its start-up is not timed; the workers are warm for the second
-round only in the sense that their imports are done). The three tables must be the same
+processes started just before its own sweep and closed after it (its start-up is not timed; an idle
+cluster beside the other two sweeps took 8% of a core from them). The three tables must be the same
 (every column but the times). The order of the configurations rotates between rounds; times are
 medians. The machine is shared: the load line says how busy it was.
 
@@ -95,22 +95,23 @@ def main() -> None:
     before = load_snapshot()
     times: dict[str, list[float]] = {"--jobs 1": [], "--jobs 2": [], "LocalCluster, 2 workers": []}
     tables: dict[str, list[dict]] = {}
-    with (
-        tempfile.TemporaryDirectory(prefix="bench-sweep-") as tmp,
-        LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster,
-    ):
+    with tempfile.TemporaryDirectory(prefix="bench-sweep-") as tmp:
         sweep_yaml = Path(tmp) / "robustness.yaml"
         sweep_yaml.write_text(yaml.safe_dump(spec, sort_keys=False))
-        configs = {
-            "--jobs 1": ["--jobs", "1"],
-            "--jobs 2": ["--jobs", "2"],
-            "LocalCluster, 2 workers": ["--scheduler", cluster.scheduler_address],
-        }
+        configs = {"--jobs 1": ["--jobs", "1"], "--jobs 2": ["--jobs", "2"], "LocalCluster, 2 workers": None}
         names = list(configs)
         for r in range(args.rounds):
             for name in names[r % len(names) :] + names[: r % len(names)]:
                 store = Path(tmp) / f"store-{r}-{names.index(name)}"
-                seconds = run_sweep(sweep_yaml, store, configs[name])
+                if configs[name] is not None:
+                    seconds = run_sweep(sweep_yaml, store, configs[name])
+                else:
+                    # the cluster lives only for its own sweep: idle, its scheduler (in this process) and its two
+                    # workers took 8% of a core, which a `--jobs 2` sweep beside them lost
+                    with LocalCluster(
+                        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None
+                    ) as cluster:
+                        seconds = run_sweep(sweep_yaml, store, ["--scheduler", cluster.scheduler_address])
                 times[name].append(seconds)
                 tables[name] = table(store)
                 print(f"round {r + 1}: {name}: {seconds:.1f} s", file=sys.stderr, flush=True)
@@ -134,7 +135,8 @@ def main() -> None:
             "is the whole command in a subprocess "
             "into an empty store (its 8 plans included, interpreter start-up included), by wall clock: `--jobs 1`, "
             "`--jobs 2`, and `--scheduler` on a `distributed.LocalCluster` of 2 single-threaded worker processes "
-            "started beforehand (its start-up not timed). "
+            "started just before its own sweep and closed after it (its start-up not timed; idle beside the "
+            "others it took 8% of a core). "
             f"Medians over {args.rounds} round(s), the order rotating. Speed-up = time of `--jobs 1` / time.",
             machine_line(("numpy", "shapely", "distributed")),
             load_line(before, after) + priority_note(),
