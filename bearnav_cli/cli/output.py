@@ -68,25 +68,26 @@ class _Console:
         character, no ``[`` (markup) and no ``:…:`` (emoji codes).
         """
         text = objects[0] if len(objects) == 1 else None
-        if (
-            type(text) is str
+        stream = (
+            self._plain_stream()
+            if type(text) is str
             and options.get("highlight", True) is False
             and options.get("soft_wrap") is True
             and set(options) <= {"highlight", "soft_wrap", "markup"}
             and "[" not in text
             and _EMOJI_CODE.search(text) is None
             and _CONTROL.search(text) is None
-            and self._plain_stream() is not None
-        ):
-            stream = self._plain_stream()
-            try:
-                stream.write(text + "\n")
-                stream.flush()
-            except BrokenPipeError:  # the reader left (``| head``): as rich's Console.on_broken_pipe does
-                os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
-                raise SystemExit(1) from None
+            else None
+        )
+        if stream is None:
+            self.console.print(*objects, **options)
             return
-        self.console.print(*objects, **options)
+        try:
+            stream.write(text + "\n")
+            stream.flush()
+        except BrokenPipeError:  # the reader left (``| head``): as rich's Console.on_broken_pipe does
+            os.dup2(os.open(os.devnull, os.O_WRONLY), stream.fileno())
+            raise SystemExit(1) from None
 
     def _plain_stream(self) -> Any:
         """The stream rich would write to, if it is not a terminal and nothing forces one; else None."""
