@@ -333,7 +333,8 @@ def bounded_update(
     d = s.dt * state.motion
     travelled = np.hypot(d[:, 0], d[:, 1])
     radius = np.where(travelled > 0.0, s.slip * travelled + s.slip_floor, 0.0)
-    start_v, start_n = bounded.box(axle_bounds(arrays), r)
+    box = axle_bounds(arrays)
+    start_v, start_n = bounded.box(box, r)
     known = state.known
     vertices = np.where(known[:, None, None], bounded.translate(state.set_vertices, d), bounded.fit(start_v, width))
     count = np.where(known, state.set_count, start_n)
@@ -342,18 +343,15 @@ def bounded_update(
         grown_v, grown_n = bounded.grow(vertices[moving], count[moving], radius[moving], tol)
         # the axle is always within B_r: the grown set is cut back to it (a robot by a wall keeps a set that
         # does not reach through the wall, so it can lie wholly in a cell that reaches the wall, §12.7)
-        box = axle_bounds(arrays)
+        grown_v = bounded.fit(grown_v, width)  # grow's own new array: written in place below
         valid = bounded.valid_vertices(grown_v, grown_n)[..., None]
         out = np.flatnonzero(np.any(valid & ((grown_v < box[:2] - tol) | (grown_v > box[2:] + tol)), axis=(1, 2)))
-        if len(out):
-            cut_v, cut_n = grown_v[out], grown_n[out]
-            for axis, sign, edge in ((0, -1.0, -box[0]), (0, 1.0, box[2]), (1, -1.0, -box[1]), (1, 1.0, box[3])):
-                row = np.zeros((len(out), 2))
-                row[:, axis] = sign
-                cut_v, cut_n = bounded.clip(cut_v, cut_n, row, np.full(len(out), edge), tol)
-            grown_v = bounded.fit(grown_v, max(grown_v.shape[1], cut_v.shape[1])).copy()
-            grown_v[out], grown_n[out] = bounded.fit(cut_v, grown_v.shape[1]), cut_n
-        vertices[moving], count[moving] = bounded.fit(grown_v, width), grown_n
+        if len(out):  # few: only these are cut, by x ≥ x0, x ≤ x1, y ≥ y0, y ≤ y1 as four rows a·y ≤ b
+            rows = np.broadcast_to(np.array([[-1.0, 0.0], [1.0, 0.0], [0.0, -1.0], [0.0, 1.0]]), (len(out), 4, 2))
+            offsets = np.broadcast_to(np.array([-box[0], box[2], -box[1], box[3]]), (len(out), 4))
+            cut_v, cut_n = bounded.clip_pairs(grown_v[out], grown_n[out], np.arange(len(out)), rows, offsets, tol)
+            grown_v[out], grown_n[out] = bounded.fit(cut_v, width), cut_n
+        vertices[moving], count[moving] = grown_v, grown_n
     angle = np.arctan2(bearings[..., 1], bearings[..., 0])
     scale = state.bound_scale.copy()
     eta = s.bearing_bound * scale

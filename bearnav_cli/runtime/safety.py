@@ -79,6 +79,25 @@ def _row_terms(arrays: PlanArrays, cell: np.ndarray, x_hat: np.ndarray, error: n
     return depth, np.einsum("rqi,ri->rq", A, direction), norm, real
 
 
+def _holding_interval(c0: np.ndarray, c1: np.ndarray, c2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Where ``c0 + c1·p − c2·p² ≥ 0`` (``c2 ≥ 0``): the interval ``[lo, hi]`` of ``p``, elementwise; ``lo > hi``
+    where it holds nowhere."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        # affine (c2 = 0): one root, and the slope's sign says which side holds
+        root = -c0 / c1
+        lo = np.where(c1 > 0.0, root, -np.inf)
+        hi = np.where(c1 < 0.0, root, np.where((c1 == 0.0) & (c0 < 0.0), -np.inf, np.inf))
+        # concave: between the roots of c2·p² − c1·p − c0, without cancellation: q/c2 and −c0/q with
+        # q = (c1 + sign(c1)·√disc)/2 (q = 0 only where c1 = 0 = c0, and then the root is 0)
+        disc = c1 * c1 + 4.0 * c2 * c0
+        q = 0.5 * (c1 + np.copysign(np.sqrt(np.maximum(disc, 0.0)), c1))
+        r1, r2 = q / c2, np.where(q != 0.0, -c0 / q, 0.0)
+        curved, real = c2 > 0.0, disc >= 0.0
+        lo = np.where(curved, np.where(real, np.minimum(r1, r2), np.inf), lo)
+        hi = np.where(curved, np.where(real, np.maximum(r1, r2), -np.inf), hi)
+    return lo, hi
+
+
 def certified_pace(
     arrays: PlanArrays,
     cell: np.ndarray,
@@ -121,20 +140,7 @@ def certified_pace(
     c0 = np.where(real, depth - norm * motion.floor, 1.0)
     c1 = np.where(real, motion.step * (inward - norm * motion.slip), 0.0)
     c2 = np.where(real, curvature, 0.0)
-    disc = c1 * c1 + 4.0 * c2 * c0
-    root = np.sqrt(np.maximum(disc, 0.0))
-    # the roots of c2·p² − c1·p − c0 = 0 without cancellation: q/c2 and −c0/q, q = (c1 + sign(c1)·√disc)/2
-    q = 0.5 * (c1 + np.where(c1 >= 0.0, root, -root))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        r1 = np.where(c2 > 0.0, q / c2, np.where(q > 0.0, np.inf, -np.inf))
-        r2 = np.where(q != 0.0, -c0 / q, np.where(c0 >= 0.0, -np.inf, np.inf))
-    lo, hi = np.minimum(r1, r2), np.maximum(r1, r2)
-    linear = c2 <= 0.0
-    # without curvature f is affine: one root, and the side that holds depends on the slope's sign
-    lo = np.where(linear, np.where(c1 > 0.0, r2, -np.inf), lo)
-    hi = np.where(linear, np.where(c1 > 0.0, np.inf, np.where(c1 < 0.0, r2, np.where(c0 >= 0.0, np.inf, -np.inf))), hi)
-    empty = (disc < 0.0) & ~linear
-    lo, hi = np.where(empty, np.inf, lo), np.where(empty, -np.inf, hi)
+    lo, hi = _holding_interval(c0, c1, c2)
     top = np.minimum(np.min(hi, axis=1, initial=np.inf), 1.0)
     bottom = np.max(lo, axis=1, initial=-np.inf)
     # a hair inside the interval: its ends are roots, where round-off decides the sign

@@ -267,7 +267,8 @@ def bounded_control(
     # κℓ + ν of one step; a measured displacement knows the position itself at every step (paper B, and
     # verify's loop with the exact motion of §7.1): no odometry enters the estimate
     step_len = s.top_speed * s.dt  # ℓ
-    margin = 0.0 if s.measurement == "displacement" else s.slip * step_len + s.slip_floor
+    slip, floor = (0.0, 0.0) if s.measurement == "displacement" else (s.slip, s.slip_floor)
+    margin = slip * step_len + floor
     est = Estimate(
         reference, error**2 / 9.0, sets.seen, known & np.isfinite(error), known, np.where(known, state.hold, 0.0), error
     )
@@ -277,32 +278,27 @@ def bounded_control(
     keep = np.where(swung, -error, error)
     cell, target, last_dir, u, stalled, relocated = follow_fields(arrays, s, state, est, bearings, visible, keep=keep)
     in_cell = (cell >= 0) & (target < 0) & known
-    tau = arrays.tolerance_in(cell)
-    move = in_cell & (error + margin <= tau + s.tol)
+    holder = np.full(r, -1, np.int64)
     if arrays.funnel:
         # a cell grown by e holds p̂ (the robot may be in it) but none eroded by e does: look while a
         # look may tell which (e too large for that cell); with e that small the robot sits at the edge
         # of a cell, and drives on that cell's field, uncertified, until the switch applies
-        holder = np.full(r, -1, np.int64)
         open_ = np.flatnonzero(known & ~in_cell)
         holder[open_] = least_rank_cell(arrays, reference[open_], -error[open_])
-        # the set lies wholly in the cell holding p̂ (exactly: its vertices do; the look-ahead point's set is
-        # X_t + λh(θ̂) grown by the swing): the truth is in that cell, and its certified policy applies
+        # unless the set lies wholly in the cell holding p̂ (exactly: its vertices do; the look-ahead point's
+        # set is X_t + λh(θ̂) grown by the swing): then the truth is in that cell, and its certified policy applies
         sure = np.flatnonzero(holder >= 0)
         if len(sure):
-            offset = (reference[sure] - sets.x_hat[sure])[:, None, :]
             k = holder[sure]
+            offset = (reference[sure] - sets.x_hat[sure])[:, None, :]
             inside = bounded.inside_rows(
                 sets.vertices[sure] + offset, sets.count[sure], arrays.row_A[k], arrays.row_b[k], swing
             )
-            field = affine_field(arrays, k, reference[sure])
-            size = np.hypot(field[:, 0], field[:, 1])
-            take = inside & (size > 0.0)
-            sure, k = sure[take], k[take]
-            u[sure] = field[take] / size[take, None]
-            last_dir[sure], cell[sure], target[sure], stalled[sure] = u[sure], k, -1, False
-            in_cell[sure], holder[sure] = True, -1
-            move[sure] = error[sure] + margin <= arrays.tolerance_in(k) + s.tol
+            field, ok = _unit_field(arrays, k, reference[sure])
+            sure, k = sure[inside & ok], k[inside & ok]
+            u[sure], last_dir[sure] = field[inside & ok], field[inside & ok]
+            cell[sure], target[sure], stalled[sure], in_cell[sure], holder[sure] = k, -1, False, True, -1
+        move = in_cell & (error + margin <= arrays.tolerance_in(cell) + s.tol)
         # a robot that has not yet looked (its first set, from one view) looks before it drives uncertified
         undecided = (holder >= 0) & ((error + margin > arrays.tolerance_in(holder) + s.tol) | ~state.known)
     else:
@@ -314,10 +310,9 @@ def bounded_control(
     pace = np.where(move, 1.0, 0.0)
     if arrays.funnel and move.any():
         idx = np.flatnonzero(move)
+
         # the motion's own error: the odometry bound, and a look-ahead point's swing on the arc its turn
         # rate gives (no odometry enters a measured displacement)
-        slip, floor = (0.0, 0.0) if s.measurement == "displacement" else (s.slip, s.slip_floor)
-
         def motion(direction: np.ndarray, who: np.ndarray) -> StepError:
             return StepError.of(step_len, slip, floor, direction, phi[who], lam if ahead else 0.0)
 
@@ -341,10 +336,7 @@ def bounded_control(
         # uncertified, at the error ball's pace; it leads deeper into the cell, where the switch applies
         edge = np.flatnonzero(outside & (holder >= 0))
         if len(edge):
-            field = affine_field(arrays, holder[edge], reference[edge])
-            norm = np.hypot(field[:, 0], field[:, 1])
-            ok = norm > 0
-            u[edge] = np.where(ok[:, None], field / np.where(ok, norm, 1.0)[:, None], 0.0)
+            u[edge], ok = _unit_field(arrays, holder[edge], reference[edge])
             cell[edge], target[edge] = holder[edge], -1
             last_dir[edge[ok]] = u[edge[ok]]
             # follow_fields found no cell eroded by e nor a node in sight and called it a stall; the field of
@@ -472,6 +464,15 @@ def bounded_control(
         error,
         sets.inconsistent,
     )
+
+
+def _unit_field(arrays: PlanArrays, cell: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The unit direction of each cell's affine field at ``x`` (R, 2; zero where the field vanishes) and where it
+    does not vanish (R,) bool."""
+    field = affine_field(arrays, cell, x)
+    size = np.hypot(field[:, 0], field[:, 1])
+    ok = size > 0.0
+    return np.where(ok[:, None], field / np.where(ok, size, 1.0)[:, None], 0.0), ok
 
 
 def follow_fields(
