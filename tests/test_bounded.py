@@ -312,6 +312,43 @@ def test_a_step_along_a_near_face_goes_at_full_pace():
     assert down[0] == pytest.approx(0.019 / 0.103, rel=1e-6)
 
 
+@pytest.mark.parametrize("seed", [1, 4])
+def test_the_cell_holding_a_set_is_the_least_rank_cell_that_contains_it(seed):
+    """``least_rank_cell_holding`` against shapely on small random sets all over a random plan: the cell it names
+    contains the set (grown by the margin), no cell of lower rank does, and ``-1`` only where no cell does. Sets
+    across the boundary between two cells are among them: there a third cell, or none, holds the set."""
+    from bearnav_cli.runtime import least_rank_cell_holding
+
+    plan = random_plan(seed)
+    arrays = PlanArrays.from_plan(plan)
+    vertices, count = random_polygons(seed, r=300)
+    rng = np.random.default_rng(seed)
+    lo, hi = arrays.bounds[:2], arrays.bounds[2:]
+    size = 0.01 * float(np.hypot(*(hi - lo)))
+    centre = rng.uniform(lo, hi, size=(len(count), 2))
+    vertices = centre[:, None, :] + size * vertices / 3.0
+    margin = rng.choice([0.0, 0.2 * size], len(count))
+    x = vertices[:, 0, :]  # a vertex of each set: the estimate may lie anywhere in it
+    found = least_rank_cell_holding(arrays, x, vertices, count, margin)
+    cells = [
+        shapely.Polygon(arrays.cell_vertices[arrays.cell_vertex_offsets[c] : arrays.cell_vertex_offsets[c + 1]])
+        for c in range(len(arrays.cell_node))
+    ]
+    order = np.lexsort((np.arange(len(cells)), arrays.cell_rank))
+    shrink = 1e-9 * float(np.hypot(*(hi - lo)))
+    for i in range(len(count)):
+        grown = polygon(vertices, count, i).buffer(margin[i] - shrink, join_style="mitre")
+        holding = [c for c in order if cells[c].contains(grown)]
+        if found[i] >= 0:
+            assert cells[found[i]].buffer(shrink).contains(polygon(vertices, count, i).buffer(margin[i] * 0.999))
+            assert not holding or arrays.cell_rank[holding[0]] >= arrays.cell_rank[found[i]]
+        else:
+            assert not holding
+    assert (found >= 0).sum() > 0.3 * len(count)
+    straddling = [i for i in range(len(count)) if least_rank_cell(arrays, x[i : i + 1], margin[i] + size)[0] < 0]
+    assert straddling and any(found[i] >= 0 for i in straddling)
+
+
 LOOP_CASES = [(seed, worst, fov) for seed in (1, 4) for worst in (False, True) for fov in (360.0, 60.0)]
 
 

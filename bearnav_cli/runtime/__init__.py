@@ -34,7 +34,7 @@ _ORIGIN = {
     **dict.fromkeys(("Detection", "Observation", "TagMap", "heading_from_tag", "observe"), "camera"),
     **dict.fromkeys(("Intrinsics", "Mount"), "camera_model"),
     **dict.fromkeys(("affine_field", "apply_gain", "approach_target", "barrier_values", "contains", "displacement",
-                     "field", "funnel_update", "in_safe_set", "least_rank_cell", "locate",
+                     "field", "funnel_update", "in_safe_set", "least_rank_cell", "least_rank_cell_holding", "locate",
                      "nearest_node", "switch", "update", "voronoi_owner"), "cell_policy"),
     "segments_clear": "sight",
     "Controller": "controller",

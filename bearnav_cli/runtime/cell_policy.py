@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from bearnav_cli.runtime import sight
+from bearnav_cli.runtime import bounded, sight
 from bearnav_cli.runtime.plan_arrays import CHUNK, PlanArrays
 from bearnav_cli.runtime.planar import points
 from bearnav_cli.runtime.sight import segments_clear
@@ -40,6 +40,7 @@ __all__ = [
     "funnel_update",
     "in_safe_set",
     "least_rank_cell",
+    "least_rank_cell_holding",
     "locate",
     "nearest_node",
     "switch",
@@ -232,11 +233,51 @@ def least_rank_cell(
     # only the real (robot, candidate) pairs: bins hold 16 cells on average but up to 75 (kitchen)
     r_idx, k_idx = np.nonzero(wanted)
     inside = cell_slack(arrays, cand[r_idx, k_idx], p[r_idx]) >= delta[r_idx] - arrays.tol
-    # the first candidate that holds x: the least rank, then the lower index
-    first = np.full(len(p), cand.shape[1], np.int64)
-    np.minimum.at(first, r_idx[inside], k_idx[inside])
+    return _first_candidate(cand, r_idx[inside], k_idx[inside])
+
+
+def least_rank_cell_holding(
+    arrays: PlanArrays, x: np.ndarray, vertices: np.ndarray, count: np.ndarray, margin: np.ndarray | float = 0.0
+) -> np.ndarray:
+    """The cell of least rank that holds the whole of each set, shape (R,); ``-1`` where none does.
+
+    The truth lies in its estimate set (Lemma 5, ALGORITHMS §12.2), so a cell that holds the set
+    holds the truth, and its certificate applies wherever the estimate ``x`` lies in that set. The
+    test is exact (:func:`~bearnav_cli.runtime.bounded.inside_rows`: a convex set lies in a convex
+    cell when its vertices do). Near a boundary between two cells no cell eroded by ``e`` may hold
+    ``x`` while a third, of higher rank, holds all of the set.
+
+    Parameters
+    ----------
+    arrays : PlanArrays
+        The plan: cell rows, ranks and the spatial index of the cells.
+    x : ndarray, shape (R, 2)
+        A point of each set (its estimate, map units): a cell that holds the set holds it, so the
+        candidates are its cells.
+    vertices, count : ndarray, shapes (R, W, 2), (R,)
+        The padded sets (map units).
+    margin : float or ndarray, shape (R,)
+        Room every vertex must keep inside each row (map units): the set is grown by it.
+    """
+    p = points(x)
+    grow = np.broadcast_to(np.asarray(margin, float), (len(p),))
+    cand = arrays.cells_near(p)
+    r_idx, k_idx = np.nonzero(cand >= 0)
+    # a cell that does not hold x does not hold the set: the cheap test first
+    near = cell_slack(arrays, cand[r_idx, k_idx], p[r_idx]) >= grow[r_idx] - arrays.tol
+    r_idx, k_idx = r_idx[near], k_idx[near]
+    c = cand[r_idx, k_idx]
+    inside = bounded.inside_rows(vertices[r_idx], count[r_idx], arrays.row_A[c], arrays.row_b[c], grow[r_idx])
+    return _first_candidate(cand, r_idx[inside], k_idx[inside])
+
+
+def _first_candidate(cand: np.ndarray, r_idx: np.ndarray, k_idx: np.ndarray) -> np.ndarray:
+    """The first of each row's candidates ``cand`` (R, K) among the pairs ``(r_idx, k_idx)`` that pass, shape (R,);
+    candidates are in (rank, index) order, so the least rank, then the lower index; ``-1`` where none passes."""
+    first = np.full(len(cand), cand.shape[1], np.int64)
+    np.minimum.at(first, r_idx, k_idx)
     found = first < cand.shape[1]
-    out = np.full(len(p), -1, np.int64)
+    out = np.full(len(cand), -1, np.int64)
     out[found] = cand[np.flatnonzero(found), first[found]]
     return out
 

@@ -19,7 +19,7 @@ from bearnav_cli.runtime.plan_arrays import PlanArrays
 from bearnav_cli.runtime.settings import ControlSettings, ControlState
 from bearnav_cli.runtime.sight import in_sight
 
-__all__ = ["LOOK_HEADINGS", "best_bound_heading", "best_view_heading", "look_around", "views"]
+__all__ = ["LOOK_HEADINGS", "best_bound_heading", "best_view_heading", "look_around", "look_time", "views"]
 
 #: Headings tried when a look chooses where to turn (ALGORITHMS §12.5).
 LOOK_HEADINGS = 36
@@ -79,11 +79,9 @@ def look_around(
     else:
         scanning = holding & (est.hold > s.hold_time)
         scan_time = est.hold - s.hold_time
-    # the set estimator always looks on purpose: toward the least one-look bound (ALGORITHMS §12.5)
     bounded = s.estimator == "set"
-    purposeful = (s.look_on_purpose or bounded) and arrays is not None and s.fov < 2.0 * math.pi
-    budget = (3.0 if purposeful else 2.0) * math.pi / s.beta
-    lost = scanning & (scan_time > budget)
+    purposeful = _purposeful(s, arrays)
+    lost = scanning & (scan_time > look_time(s, arrays))
     phi = np.asarray(heading, float).reshape(len(holding))
     # a scan that always turned one way undid the unicycle's turn toward its field
     toward = bearing.wrap(np.arctan2(last_dir[:, 1], last_dir[:, 0]) - phi)
@@ -106,6 +104,17 @@ def look_around(
         done = np.flatnonzero(aiming)[arrived]
         look[done] = np.nan  # reached without a fix: the revolution follows, in the same direction
     return scanning, lost, spin, turn, look
+
+
+def _purposeful(s: ControlSettings, arrays: PlanArrays | None) -> bool:
+    # the set estimator always looks on purpose: toward the least one-look bound (ALGORITHMS §12.5)
+    return (s.look_on_purpose or s.estimator == "set") and arrays is not None and s.fov < 2.0 * math.pi
+
+
+def look_time(s: ControlSettings, arrays: PlanArrays | None = None) -> float:
+    """How long a look may last before the robot is lost (s): one revolution at ``β``, and half a turn more when
+    it first turns on purpose to the best heading (:func:`look_around`)."""
+    return (3.0 if _purposeful(s, arrays) else 2.0) * math.pi / s.beta
 
 
 def best_view_heading(

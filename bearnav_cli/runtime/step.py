@@ -18,10 +18,17 @@ import math
 
 import numpy as np
 
-from bearnav_cli.runtime import bearing, bounded
-from bearnav_cli.runtime.cell_policy import affine_field, apply_gain, displacement, least_rank_cell, update
+from bearnav_cli.runtime import bearing
+from bearnav_cli.runtime.cell_policy import (
+    affine_field,
+    apply_gain,
+    displacement,
+    least_rank_cell,
+    least_rank_cell_holding,
+    update,
+)
 from bearnav_cli.runtime.estimate import Estimate, bounded_update, fuse, measure
-from bearnav_cli.runtime.looking import look_around
+from bearnav_cli.runtime.looking import look_around, look_time
 from bearnav_cli.runtime.plan_arrays import PlanArrays
 from bearnav_cli.runtime.robot import lookahead_command, lookahead_point
 from bearnav_cli.runtime.safety import (
@@ -280,27 +287,27 @@ def bounded_control(
     in_cell = (cell >= 0) & (target < 0) & known
     holder = np.full(r, -1, np.int64)
     if arrays.funnel:
-        # a cell grown by e holds p̂ (the robot may be in it) but none eroded by e does: look while a
-        # look may tell which (e too large for that cell); with e that small the robot sits at the edge
-        # of a cell, and drives on that cell's field, uncertified, until the switch applies
+        # a cell grown by e holds p̂ (the robot may be in it) but none eroded by e does
         open_ = np.flatnonzero(known & ~in_cell)
         holder[open_] = least_rank_cell(arrays, reference[open_], -error[open_])
-        # unless the set lies wholly in the cell holding p̂ (exactly: its vertices do; the look-ahead point's
-        # set is X_t + λh(θ̂) grown by the swing): then the truth is in that cell, and its certified policy applies
-        sure = np.flatnonzero(holder >= 0)
-        if len(sure):
-            k = holder[sure]
-            offset = (reference[sure] - sets.x_hat[sure])[:, None, :]
-            inside = bounded.inside_rows(
-                sets.vertices[sure] + offset, sets.count[sure], arrays.row_A[k], arrays.row_b[k], swing
-            )
-            field, ok = _unit_field(arrays, k, reference[sure])
-            sure, k = sure[inside & ok], k[inside & ok]
-            u[sure], last_dir[sure] = field[inside & ok], field[inside & ok]
+        # unless a cell holds the whole set (exactly: its vertices; the look-ahead point's set is X_t + λh(θ̂)
+        # grown by the swing): then the truth is in that cell, and its certified policy applies; of those cells
+        # the least rank, which need not be the one holding p̂ (near a boundary between two cells, a third may)
+        if len(open_):
+            offset = (reference[open_] - sets.x_hat[open_])[:, None, :]
+            shifted = sets.vertices[open_] + offset
+            k = least_rank_cell_holding(arrays, reference[open_], shifted, sets.count[open_], swing)
+            field, ok = _unit_field(arrays, np.maximum(k, 0), reference[open_])
+            take = (k >= 0) & ok
+            sure, k = open_[take], k[take]
+            u[sure], last_dir[sure] = field[take], field[take]
             cell[sure], target[sure], stalled[sure], in_cell[sure], holder[sure] = k, -1, False, True, -1
         move = in_cell & (error + margin <= arrays.tolerance_in(cell) + s.tol)
-        # a robot that has not yet looked (its first set, from one view) looks before it drives uncertified
-        undecided = (holder >= 0) & ((error + margin > arrays.tolerance_in(holder) + s.tol) | ~state.known)
+        # no cell holds the set: stop and look until one does (ALGORITHMS §12.3 step 4; the look shrinks the set and,
+        # for a look-ahead unicycle, swings it through every heading), and only when a whole look has not told
+        # (worst-case bearings repeat the same set) drive uncertified, rather than stay stuck looking
+        looked = state.known & (state.hold + s.dt >= look_time(s, arrays))
+        undecided = (holder >= 0) & ((error + margin > arrays.tolerance_in(holder) + s.tol) | ~looked)
     else:
         undecided = np.zeros(r, bool)
         move = in_cell
@@ -332,7 +339,7 @@ def bounded_control(
                 break
         move[idx] = pace[idx] > 0.0
     if arrays.funnel:
-        # at the edge of D (a cell holds p̂, e is small, no cell eroded by e does): that cell's field,
+        # at the edge of D after a whole look (a cell grown by e holds p̂, none holds the set): that cell's field,
         # uncertified, at the error ball's pace; it leads deeper into the cell, where the switch applies
         edge = np.flatnonzero(outside & (holder >= 0))
         if len(edge):
