@@ -349,6 +349,64 @@ def test_the_cell_holding_a_set_is_the_least_rank_cell_that_contains_it(seed):
     assert straddling and any(found[i] >= 0 for i in straddling)
 
 
+@pytest.mark.parametrize("seed", [1, 4])
+def test_the_tolerance_at_a_set_keeps_the_certificate_at_every_truth_in_it(seed):
+    """``runtime.tolerance.set_tolerance`` on small random sets in every cell of a random plan: for truths drawn in
+    each set (vertices included) and estimates at that distance in every direction, the barrier rows (L1) and the
+    progress row (L2, rate 0) hold at the truth with the field at the estimate; it is never below ``τ_c``; and a set
+    within reach of the exit face gets no more than ``δ_e,c / 2`` beyond ``τ_c`` (the switch, Theorem 2)."""
+    from bearnav_cli.runtime.tolerance import set_tolerance
+
+    plan = random_plan(seed)
+    arrays = PlanArrays.from_plan(plan)
+    rng = np.random.default_rng(seed)
+    cells = np.flatnonzero(np.isfinite(arrays.exit_inset))  # every edge cell (the goal cell keeps τ_c)
+    k = np.repeat(cells, 6)
+    size = 0.02 * float(np.hypot(*(arrays.bounds[2:] - arrays.bounds[:2])))
+    vertices, count = random_polygons(seed, r=len(k), points=6)
+    # each set around a random point of its cell, shrunk until every vertex lies in the cell
+    starts = arrays.cell_vertex_offsets
+    corners = [arrays.cell_vertices[starts[c] : starts[c + 1]] for c in k]
+    centre = np.array([rng.dirichlet(np.ones(len(w))) @ w for w in corners])
+    scale = np.full(len(k), size / 3.0)
+    for _ in range(40):
+        pts = centre[:, None, :] + scale[:, None, None] * vertices
+        inside = bounded.inside_rows(pts, count, arrays.row_A[k], arrays.row_b[k])
+        scale = np.where(inside, scale, 0.5 * scale)
+    pts = centre[:, None, :] + scale[:, None, None] * vertices
+    assert bounded.inside_rows(pts, count, arrays.row_A[k], arrays.row_b[k]).all()
+    reach = rng.choice([0.0, size], len(k))
+    valid = bounded.valid_vertices(pts, count)
+    tau = set_tolerance(arrays, k, pts, valid, 0.0, reach)
+    assert np.all(tau >= arrays.tolerance_in(k) * (1 - 1e-12))
+    assert np.any(tau > 1.5 * arrays.tolerance_in(k))  # away from the faces and the exit a cell tolerates more
+    depth = np.min(
+        np.where(valid, np.einsum("ri,rwi->rw", arrays.exit_dir[k], pts - arrays.exit_point[k][:, None]), np.inf), 1
+    )
+    near = depth <= reach
+    assert np.all(tau[near] <= np.maximum(0.5 * arrays.exit_inset[k[near]], arrays.tolerance_in(k[near])) * (1 + 1e-12))
+    # truths: the vertices and random points of each set; estimates τ away from them, in 16 directions
+    weights = rng.dirichlet(np.ones(6), size=(len(k), 4)) * valid[:, None, :]
+    weights /= weights.sum(axis=2, keepdims=True)
+    truths = np.concatenate([pts, np.einsum("rtw,rwi->rti", weights, pts)], axis=1)
+    use = np.concatenate([valid, np.ones((len(k), 4), bool)], axis=1)
+    angle = np.linspace(0.0, 2.0 * math.pi, 16, endpoint=False)
+    turn = np.stack([np.cos(angle), np.sin(angle)], axis=1)
+    x = truths[:, :, None, :]
+    x_hat = x + tau[:, None, None, None] * turn[None, None]
+    u = arrays.field_a[k][:, None, None, :] - np.einsum("rij,rtdj->rtdi", arrays.field_M[k], x_hat)
+    scale_u = np.abs(arrays.field_a[k]).max(axis=1) + 1.0
+    n, q = arrays.bar_A[k], arrays.bar_b[k]
+    real = np.isfinite(q)
+    h = np.einsum("rqi,rti->rtq", n, truths) + np.where(real, q, 0.0)[:, None, :]
+    barrier = np.einsum("rqi,rtdi->rtdq", n, u) + arrays.c_h[k][:, None, None, None] * h[:, :, None, :]
+    barrier = np.where(real[:, None, None, :] & use[:, :, None, None], barrier, np.inf)
+    assert barrier.min() >= -1e-9 * scale_u.max(), barrier.min()
+    progress = np.einsum("ri,rtdi->rtd", arrays.exit_dir[k], u)
+    progress = np.where(use[:, :, None], progress, -np.inf)
+    assert progress.max() <= 1e-9 * scale_u.max(), progress.max()
+
+
 LOOP_CASES = [(seed, worst, fov) for seed in (1, 4) for worst in (False, True) for fov in (360.0, 60.0)]
 
 

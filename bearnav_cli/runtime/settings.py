@@ -70,7 +70,8 @@ class LoopSettings:
         true displacements, ``x̂ = x`` (paper B).
     estimator : {"set", "kalman"}
         ``set``: the bounded-error sets of ALGORITHMS §12.2 and the certified policy of §12.3 — drive
-        only while ``e_t + κℓ + ν ≤ τ_c``, else stop and look (§12.5,
+        only while ``e_t + κℓ + ν`` is within what the cell tolerates at the set (at least ``τ_c``), else
+        stop and look (§12.5,
         :func:`~bearnav_cli.runtime.step.bounded_control`), the default; ``kalman``: the scalar filter
         of :func:`~bearnav_cli.runtime.estimate.fuse` with the pace rule (docs/runtime.md).
     keep_clear : bool

@@ -18,7 +18,7 @@ import math
 
 import numpy as np
 
-from bearnav_cli.runtime import bearing
+from bearnav_cli.runtime import bearing, bounded
 from bearnav_cli.runtime.cell_policy import (
     affine_field,
     apply_gain,
@@ -40,6 +40,7 @@ from bearnav_cli.runtime.safety import (
     steer_clear,
 )
 from bearnav_cli.runtime.settings import ControlOutput, ControlSettings, ControlState
+from bearnav_cli.runtime.tolerance import set_tolerance
 from bearnav_cli.runtime.unicycle import heading_allowance, unicycle_command
 
 __all__ = ["STALL_FIELD", "bounded_control", "control", "follow_fields"]
@@ -229,7 +230,8 @@ def bounded_control(
 
     - **in a cell** (the least-rank cell ``k`` with ``p̂ ∈ P_k ⊖ e``, switched to only at lower rank,
       :func:`~bearnav_cli.runtime.cell_policy.update` with erosion ``e``): it **moves** with the cell's
-      field only while ``e + κℓ + ν ≤ τ_c`` (``ℓ = v·dt``); every such step is certified;
+      field only while ``e + κℓ + ν`` is at most ``τ_c`` or what the cell tolerates over the set
+      (:func:`~bearnav_cli.runtime.tolerance.set_tolerance`; ``ℓ = v·dt``); every such step is certified;
     - **maybe in one** (some cell holds ``p̂`` but none eroded by ``e``), or in a cell with too large
       an ``e``: it **stops and looks** (§12.5) — it turns toward the heading from which the plan's
       landmarks promise the smallest one-look bound (:func:`best_bound_heading`), then, if that was
@@ -279,6 +281,41 @@ def bounded_control(
     est = Estimate(
         reference, error**2 / 9.0, sets.seen, known & np.isfinite(error), known, np.where(known, state.hold, 0.0), error
     )
+    # how far the truth moves in a step at most: ℓ, its error, and a look-ahead point's swing on its arc
+    reach = step_len * (1.0 + slip) + floor + (step_len**2 / (2.0 * lam) if ahead else 0.0)
+
+    def step_pace(k: np.ndarray, point: np.ndarray, e: np.ndarray, direction: np.ndarray, heading: np.ndarray):
+        """The certified pace of a step along ``direction`` in cells ``k`` from ``point`` with error ``e``, and the
+        direction bent inward where that lets it go farther (a field may slide along a near face)."""
+
+        # the motion's own error: the odometry bound, and a look-ahead point's swing on the arc its turn
+        # rate gives (no odometry enters a measured displacement)
+        def motion(d: np.ndarray, who: np.ndarray) -> StepError:
+            return StepError.of(step_len, slip, floor, d, heading[who], lam if ahead else 0.0)
+
+        everyone = np.arange(len(k))
+        direction = direction.copy()
+        pace = certified_pace(arrays, k, point, e, direction, motion(direction, everyone))
+        slow = np.flatnonzero(pace < 1.0)
+        bent = direction[slow]
+        for _ in range(BENDS):  # bend inward just enough, if that helps (a bend turns the look-ahead point's step
+            # across the heading, so its own swing grows: bend again, those still short of a whole step)
+            bent = bend_inward(arrays, k[slow], point[slow], e[slow], bent, motion(bent, slow))
+            better = certified_pace(arrays, k[slow], point[slow], e[slow], bent, motion(bent, slow))
+            take = better > pace[slow]
+            direction[slow[take]], pace[slow[take]] = bent[take], better[take]
+            short = pace[slow] < 1.0
+            slow, bent = slow[short], bent[short]
+            if not len(slow):
+                break
+        return direction, pace
+
+    def tolerance_at(who: np.ndarray, k: np.ndarray, point: np.ndarray) -> np.ndarray:
+        """What cells ``k`` tolerate over the sets of robots ``who`` placed at the reference points ``point``."""
+        shifted = sets.vertices[who] + (point - sets.x_hat[who])[:, None, :]
+        valid = bounded.valid_vertices(shifted, sets.count[who])
+        return set_tolerance(arrays, k, shifted, valid, swing, reach)
+
     # the truth is in the active cell (Theorem 2), so its estimate may lie up to e outside it; not after a
     # look-ahead unicycle's look swung p around the axle: then p̂ must lie in a cell eroded by e
     swung = np.isfinite(state.resume) if ahead else np.zeros(r, bool)
@@ -303,6 +340,12 @@ def bounded_control(
             u[sure], last_dir[sure] = field[take], field[take]
             cell[sure], target[sure], stalled[sure], in_cell[sure], holder[sure] = k, -1, False, True, -1
         move = in_cell & (error + margin <= arrays.tolerance_in(cell) + s.tol)
+        # τ_c is the least over the cell; where the robot's set lies, its cell may tolerate more (the certificate
+        # at the truth, runtime.tolerance): a long cell's far end no longer waits for its exit's neck
+        short = np.flatnonzero(in_cell & ~move)
+        if len(short):
+            tau = tolerance_at(short, cell[short], reference[short])
+            move[short] = error[short] + margin <= tau + s.tol
         # no cell holds the set: stop and look until one does (ALGORITHMS §12.3 step 4; the look shrinks the set and,
         # for a look-ahead unicycle, swings it through every heading), and only when a whole look has not told
         # (worst-case bearings repeat the same set) drive uncertified, rather than stay stuck looking
@@ -317,26 +360,7 @@ def bounded_control(
     pace = np.where(move, 1.0, 0.0)
     if arrays.funnel and move.any():
         idx = np.flatnonzero(move)
-
-        # the motion's own error: the odometry bound, and a look-ahead point's swing on the arc its turn
-        # rate gives (no odometry enters a measured displacement)
-        def motion(direction: np.ndarray, who: np.ndarray) -> StepError:
-            return StepError.of(step_len, slip, floor, direction, phi[who], lam if ahead else 0.0)
-
-        pace[idx] = certified_pace(arrays, cell[idx], reference[idx], error[idx], u[idx], motion(u[idx], idx))
-        slow = idx[pace[idx] < 1.0]
-        bent = u[slow]
-        for _ in range(BENDS):  # near a face the field may slide along it: bend it inward just enough, if that helps
-            # (a bend turns the look-ahead point's step across the heading, so its own swing grows: bend again,
-            # those still short of a whole step)
-            bent = bend_inward(arrays, cell[slow], reference[slow], error[slow], bent, motion(bent, slow))
-            better = certified_pace(arrays, cell[slow], reference[slow], error[slow], bent, motion(bent, slow))
-            take = better > pace[slow]
-            u[slow[take]], pace[slow[take]] = bent[take], better[take]
-            short = pace[slow] < 1.0
-            slow, bent = slow[short], bent[short]
-            if not len(slow):
-                break
+        u[idx], pace[idx] = step_pace(cell[idx], reference[idx], error[idx], u[idx], phi[idx])
         move[idx] = pace[idx] > 0.0
     if arrays.funnel:
         # at the edge of D after a whole look (a cell grown by e holds p̂, none holds the set): that cell's field,
@@ -387,11 +411,23 @@ def bounded_control(
                     arrays, there, error[idx], below=np.where(had >= 0, arrays.cell_rank[np.maximum(had, 0)], np.inf)
                 )
                 k = np.where(k >= 0, k, had)
-                # without a cell, the one a robot there would wait in (a cell grown by e holds p̂)
+                held = np.flatnonzero(k >= 0)  # a cell it drives in there: what it tolerates at the set
+                # without a cell, the one a robot there would wait in (a cell grown by e holds p̂): its τ_c, for the
+                # robot there is not in it yet and moves only once e lets a cell hold p̂ eroded by e
                 k = np.where(k >= 0, k, least_rank_cell(arrays, there, -error[idx]))
             else:
-                k = np.full(len(idx), -1)
-            over = error[idx] + margin <= arrays.tolerance_in(k) + s.tol
+                k, held = np.full(len(idx), -1), np.zeros(0, np.int64)
+            tau = arrays.tolerance_in(k)
+            if len(held):
+                tau[held] = tolerance_at(idx[held], k[held], there[held])
+            over = error[idx] + margin <= tau + s.tol
+            # and where the robot may take a step: a large e (a long cell's far end) near a face may leave no pace,
+            # and a look ended there turned back, stood, and began the look again, never turning all around
+            able = np.flatnonzero(over & (k >= 0))
+            if len(able):
+                field, ok = _unit_field(arrays, k[able], there[able])
+                _, pace_there = step_pace(k[able], there[able], error[idx[able]], field, resume[idx[able]])
+                over[able] = ok & (pace_there > 0.0)
             out = np.flatnonzero(k < 0)
             if len(out):
                 # outside D there: the uncertified rules move it only at a positive error-ball pace; a
