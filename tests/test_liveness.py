@@ -121,10 +121,21 @@ def test_a_turn_all_around_gives_a_set_within_the_look_bound(plan, worst):
     assert np.all(error[seen] <= bound[seen] * (1 + 1e-7) + 1e-9)
 
 
-def test_live_means_below_the_margin(wide):
-    np.testing.assert_array_equal(wide.live, wide.eps_look < wide.margin)
-    g = wide.grid
-    np.testing.assert_allclose(wide.margin, wide.tolerance - g.kappa * g.step - g.nu - g.swing)
+@pytest.mark.parametrize("which", ["wide", "narrow"])
+def test_live_means_below_the_margin_at_every_point(which, request):
+    """A cell is live when every grid point's bound is below the margin there: what the certificate tolerates
+    around the point (``runtime.tolerance``), never less than the cell's ``τ_c − κℓ − ν``; so every cell with
+    ``eps_look < margin`` is live, and the margins at the points are larger somewhere."""
+    lv = request.getfixturevalue(which)
+    g = lv.grid
+    np.testing.assert_allclose(lv.margin, lv.tolerance - g.kappa * g.step - g.nu - g.swing)
+    _, eps = g.look(g.arrays.landmarks)
+    at_points = g.pair_margin(eps[g.pair_point])
+    assert np.all(at_points >= lv.margin[g.pair_cell])
+    assert np.any(at_points > 1.5 * lv.margin[g.pair_cell])
+    short = np.bincount(g.pair_cell[eps[g.pair_point] >= at_points], minlength=len(lv.live)) > 0
+    np.testing.assert_array_equal(lv.live, ~short)
+    assert np.all(lv.live[lv.eps_look < lv.margin])
 
 
 def test_eta_star_re_evaluated_is_live(plan, wide):

@@ -12,7 +12,6 @@ import shapely
 
 from bearnav_cli.datatypes import Plan, percent
 from bearnav_cli.liveness.live_grid import LiveGrid, bounds_of, distinct_views, grid
-from bearnav_cli.runtime import PlanArrays
 
 __all__ = ["evaluate", "Liveness", "MAX_ETA_DEG", "measure", "SHRINK", "SHRINK_STEPS"]
 
@@ -38,9 +37,11 @@ class Liveness:
         The same for the look's first view alone: the least one-view bound over the headings
         (``eps_look`` for a camera that sees all around; map units).
     live : ndarray of bool, shape (C,)
-        ``eps_look < margin``.
+        At every grid point of the cell the bound after a look is below the margin there
+        (:meth:`LiveGrid.pair_margin`: what the certificate tolerates around the point, the runtime's
+        rule, never less than ``margin``); so at least where ``eps_look < margin``.
     view_live : ndarray of bool, shape (C,)
-        ``eps_view < margin``: one view at the best heading is enough, no turn all around.
+        The same for the look's first view: one view at the best heading is enough, no turn all around.
     cell_eta_star : ndarray, shape (C,)
         ``η*_c`` (rad): the largest bearing error at which the grid found the cell live; 0 where
         it is never live.
@@ -204,16 +205,18 @@ def evaluate(
     polygons = list(g.polygons)
     # a look ends with a turn all around (§12.5): its set lies in the cones of every landmark in sight
     all_vis, eps_all = g.look(lm) if look is None else look
-    eps_look = _cell_max(eps_all[pair_point], pair_cell, n_cells)
-    live = eps_look < margin
-    cell_eta = _eta_star(arrays, lm, points, pair_cell, pair_point, all_vis, eps_look, margin, eta, live)
+    eps_pair = eps_all[pair_point]
+    eps_look = _cell_max(eps_pair, pair_cell, n_cells)
+    live = _all_below(eps_pair, g, n_cells)
+    cell_eta = _eta_star(g, lm, all_vis, eps_look, live)
     if g.fov >= 2.0 * math.pi:
-        eps_view = eps_look
+        eps_view, view_live = eps_look, live
     else:  # the look's first view, at the best heading
         row_point, row_vis = distinct_views(arrays, points, g.fov, g.max_range, g.headings, lm)
         row_eps = bounds_of(arrays, points[row_point], row_vis, np.full(len(row_point), eta), lm)
-        eps_view = _cell_max(_point_min(row_eps, row_point, len(points))[pair_point], pair_cell, n_cells)
-    view_live = eps_view < margin
+        view_pair = _point_min(row_eps, row_point, len(points))[pair_point]
+        eps_view = _cell_max(view_pair, pair_cell, n_cells)
+        view_live = _all_below(view_pair, g, n_cells)
 
     area, regions = g.area, g.regions
     live_area = sum(float(regions[c].area) for c in np.flatnonzero(live))
@@ -235,22 +238,24 @@ def evaluate(
     )
 
 
+def _all_below(eps_pair: np.ndarray, g: LiveGrid, n_cells: int, cells: np.ndarray | None = None) -> np.ndarray:
+    """Whether every point of each cell has its bound below the margin there (:meth:`LiveGrid.pair_margin`), (C,);
+    ``eps_pair`` of the pairs of ``cells`` only (sorted), when given."""
+    sel = slice(None) if cells is None else np.isin(g.pair_cell, cells)
+    short = eps_pair >= g.pair_margin(eps_pair, sel)
+    failing = np.bincount(g.pair_cell[sel][short], minlength=n_cells) > 0
+    return ~failing
+
+
 def _eta_star(
-    arrays: PlanArrays,
-    landmarks: np.ndarray,
-    points: np.ndarray,
-    pair_cell: np.ndarray,
-    pair_point: np.ndarray,
-    visible: np.ndarray,
-    eps_look: np.ndarray,
-    margin: np.ndarray,
-    eta: float,
-    live: np.ndarray,
+    g: LiveGrid, landmarks: np.ndarray, visible: np.ndarray, eps_look: np.ndarray, live: np.ndarray
 ) -> np.ndarray:
     """``η*_c`` per cell (rad): the linear estimate, re-evaluated on the grid and shrunk until live.
 
-    Every point looks at the landmarks ``visible`` (P, L) (its look all around).
+    Every point looks at the landmarks ``visible`` (P, L) (its look all around). The estimate scales ``η`` by the
+    cell's least margin over its largest bound; the re-evaluation compares each point with its own margin.
     """
+    arrays, points, pair_cell, pair_point, margin, eta = g.arrays, g.points, g.pair_cell, g.pair_point, g.margin, g.eta
     n_cells = len(margin)
     out = np.zeros(n_cells)
     ok = (margin > 0) & (eps_look > 0) & np.isfinite(eps_look)
@@ -266,7 +271,7 @@ def _eta_star(
         pc, pp = pair_cell[sel], pair_point[sel]
         eps_pair = bounds_of(arrays, points[pp], visible[pp], guess[pc], landmarks)
         eps_cell = _cell_max(eps_pair, pc, n_cells)[cells]
-        good = eps_cell < margin[cells]
+        good = _all_below(eps_pair, g, n_cells, cells)[cells]
         out[cells[good]] = np.maximum(out[cells[good]], guess[cells[good]])
         pending[cells[good]] = False
         bad = cells[~good]

@@ -13,7 +13,7 @@ import shapely
 
 from bearnav_cli.datatypes import Plan, active_regions
 from bearnav_cli.errors import InvalidParamsError
-from bearnav_cli.runtime import PlanArrays, estimate, look_bound, looking, robot, settings
+from bearnav_cli.runtime import PlanArrays, estimate, look_bound, looking, robot, settings, tolerance
 
 __all__ = [
     "bounds_of",
@@ -112,11 +112,34 @@ class LiveGrid:
         """The area of ``D``, the union of the cells (map units²)."""
         return float(shapely.union_all(self.polygons).area)
 
-    def point_margin(self) -> np.ndarray:
+    def pair_margin(self, eps: np.ndarray, pairs: Any = slice(None)) -> np.ndarray:
+        """What a look's bound ``eps`` must stay below at each (cell, point) pair (of ``pairs``, an index of the
+        pairs: default all), shape of ``eps``, map units.
+
+        A look from the point ``x`` leaves a set within ``ε`` of it, and the point the plan is about within
+        ``λ`` more: the cell's certificate tolerates, over the disc of radius ``λ + ε + 2λ sin(ψ/2)`` around
+        ``x``, what :func:`~bearnav_cli.runtime.tolerance.set_tolerance` says (the runtime's own rule, at least
+        ``τ_c``), less ``κℓ + ν + 2λ sin(ψ/2)``: never below the cell's ``margin``.
+        """
+        eps = np.asarray(eps, float).reshape(-1)
+        cells, points = self.pair_cell[pairs], self.pair_point[pairs]
+        arrays, lam = self.arrays, float(self.arrays.lookahead)
+        reach = tolerance.step_reach(self.step, self.kappa, self.nu, lam)
+        out = np.empty(len(eps))
+        for start in range(0, len(eps), _ROWS):
+            sl = slice(start, start + _ROWS)
+            cell, x = cells[sl], self.points[points[sl]][:, None, :]
+            grow = lam + eps[sl] + self.swing
+            tau = tolerance.set_tolerance(arrays, cell, x, np.ones((len(cell), 1), bool), grow, reach)
+            out[sl] = tau - (self.kappa * self.step + self.nu + self.swing)
+        return np.maximum(out, self.margin[cells])
+
+    def point_margin(self, eps: np.ndarray | None = None) -> np.ndarray:
         """The least margin of the cells holding each point, shape (P,) map units: below it, every such cell
-        is live there."""
+        is live there; with the points' bounds ``eps`` (P,), the margins :meth:`pair_margin` gives at them."""
+        margin = self.margin[self.pair_cell] if eps is None else self.pair_margin(np.asarray(eps)[self.pair_point])
         out = np.full(len(self.points), np.inf)
-        np.minimum.at(out, self.pair_point, self.margin[self.pair_cell])
+        np.minimum.at(out, self.pair_point, margin)
         return out
 
     def bounds(self, points: np.ndarray, visible: np.ndarray, landmarks: np.ndarray) -> np.ndarray:

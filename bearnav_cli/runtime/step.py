@@ -40,7 +40,7 @@ from bearnav_cli.runtime.safety import (
     steer_clear,
 )
 from bearnav_cli.runtime.settings import ControlOutput, ControlSettings, ControlState
-from bearnav_cli.runtime.tolerance import set_tolerance
+from bearnav_cli.runtime.tolerance import set_tolerance, step_reach
 from bearnav_cli.runtime.unicycle import heading_allowance, unicycle_command
 
 __all__ = ["STALL_FIELD", "bounded_control", "control", "follow_fields"]
@@ -281,8 +281,7 @@ def bounded_control(
     est = Estimate(
         reference, error**2 / 9.0, sets.seen, known & np.isfinite(error), known, np.where(known, state.hold, 0.0), error
     )
-    # how far the truth moves in a step at most: ℓ, its error, and a look-ahead point's swing on its arc
-    reach = step_len * (1.0 + slip) + floor + (step_len**2 / (2.0 * lam) if ahead else 0.0)
+    reach = step_reach(step_len, slip, floor, lam)
 
     def step_pace(k: np.ndarray, point: np.ndarray, e: np.ndarray, direction: np.ndarray, heading: np.ndarray):
         """The certified pace of a step along ``direction`` in cells ``k`` from ``point`` with error ``e``, and the

@@ -23,7 +23,7 @@ import numpy as np
 
 from bearnav_cli.runtime.plan_arrays import PlanArrays
 
-__all__ = ["set_tolerance"]
+__all__ = ["set_tolerance", "step_reach"]
 
 
 def _rows(arrays: PlanArrays, cell: np.ndarray):
@@ -45,6 +45,12 @@ def _rows(arrays: PlanArrays, cell: np.ndarray):
     const = np.concatenate([np.where(real, const_h, np.inf), -np.einsum("ri,ri->r", z, a)[:, None]], axis=1)
     norm = np.concatenate([np.where(real, norm_h, 0.0), np.hypot(mt_z[:, 0], mt_z[:, 1])[:, None]], axis=1)
     return slope, const, norm
+
+
+def step_reach(step: float, slip: float, floor: float, lookahead: float = 0.0) -> float:
+    """How far the truth can move in one step at most (map units): ``ℓ``, the odometry's ``κℓ + ν``, and a look-ahead
+    point's swing ``ℓ²/2λ`` on the arc of its largest turn (:class:`~bearnav_cli.runtime.safety.StepError`)."""
+    return step * (1.0 + slip) + floor + (step * step / (2.0 * lookahead) if lookahead > 0.0 else 0.0)
 
 
 def set_tolerance(

@@ -175,8 +175,10 @@ def propose_live_tags(plan: Any, params: Params = Params(target="live")) -> TagP
         max_range=params.max_range,
     )
     existing = np.asarray(map_.landmarks, float).reshape(-1, 2)
-    need = g.point_margin()
     visible0, eps0 = g.look(existing)
+    # the margin at each point where the look's set is as large as it is now: a tag only makes it smaller, and
+    # the margin larger, so what this asks is enough
+    need = g.point_margin(eps0)
     failing = np.flatnonzero((eps0 >= need) & (need > 0))
     unfixable = np.flatnonzero(need <= 0)  # no look is good enough where a cell has no margin
     pe_grid: EvaluationGrid = perception.evaluation_grid(plan, params.spacing)
