@@ -9,6 +9,7 @@ outside its set, and every certified step ending inside the certified domain.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from types import SimpleNamespace
 
@@ -125,6 +126,47 @@ def test_lemma_5_and_the_static_bound(seed):
     slip *= (size * rng.uniform(0, 1, r) / np.hypot(*slip.T))[:, None]
     predicted, n = bounded.grow(bounded.translate(vertices, move), count, size, 1e-12)
     assert bounded.contains(predicted, n, x + move + slip, 1e-9).all()
+
+
+def test_a_heading_error_turns_the_step_and_the_prediction_holds_it():
+    """``bounded_update`` with a heading error bound ψ: a step commanded through a heading that errs by ψ is turned
+    by ψ, and with its slip it ends within ``(κ + 2 sin(ψ/2))‖d̂‖ + ν`` of the measured one (``ErrorBounds.drift``):
+    the predicted set holds every such truth, and the slip alone would not."""
+    from bearnav_cli.runtime import ControlState
+    from bearnav_cli.runtime.estimate import axle_bounds, bounded_update
+
+    plan = random_plan(1)
+    arrays = PlanArrays.from_plan(plan)
+    psi, kappa = math.radians(3.0), 0.03
+    s = simulate.settings(plan, simulate.Params(estimator="set")).control
+    s = dataclasses.replace(s, heading_bound=psi, slip=kappa)
+    assert s.drift == pytest.approx(kappa + 2.0 * math.sin(0.5 * psi))
+    rng = np.random.default_rng(3)
+    r = 200
+    x = arrays.nodes[rng.choice(len(arrays.nodes), r)]
+    state = ControlState.initial(np.zeros(r))
+    # a small square set around each truth, known
+    half = 0.01 * float(np.hypot(*(arrays.bounds[2:] - arrays.bounds[:2])))
+    square = np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]]) * half
+    vertices = np.zeros((r, bounded.MAX_VERTICES, 2))
+    vertices[:, :4] = x[:, None, :] + square
+    state.set_vertices, state.set_count, state.known = vertices, np.full(r, 4), np.ones(r, bool)
+    state.motion = rng.normal(size=(r, 2)) * s.speed
+    d_hat = s.dt * state.motion
+    turn = rng.choice([-psi, psi], r)
+    c, si = np.cos(turn), np.sin(turn)
+    d = np.column_stack([c * d_hat[:, 0] - si * d_hat[:, 1], si * d_hat[:, 0] + c * d_hat[:, 1]]) * (1.0 + kappa)
+    corner = x + square[rng.integers(0, 4, r)]  # the truth at a corner of its set, where a step leaves it first
+    moved = corner + d
+    nothing = np.zeros((r, len(arrays.landmarks)), bool)
+    bearings = np.zeros((r, len(arrays.landmarks), 2))
+    x0, y0, x1, y1 = axle_bounds(arrays)  # a truth stays in B_r, where the prediction is cut
+    real = (moved[:, 0] > x0) & (moved[:, 0] < x1) & (moved[:, 1] > y0) & (moved[:, 1] < y1)
+    assert real.sum() > 0.8 * r
+    after = bounded_update(arrays, s, state, bearings, nothing, None)
+    assert bounded.contains(after.vertices, after.count, moved, 1e-9)[real].all()
+    slip_only = bounded_update(arrays, dataclasses.replace(s, heading_bound=0.0), state, bearings, nothing, None)
+    assert not bounded.contains(slip_only.vertices, slip_only.count, moved, 1e-9)[real].all()
 
 
 def smallest_circle_radius(points: np.ndarray) -> float:

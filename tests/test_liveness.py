@@ -128,7 +128,7 @@ def test_live_means_below_the_margin_at_every_point(which, request):
     ``eps_look < margin`` is live, and the margins at the points are larger somewhere."""
     lv = request.getfixturevalue(which)
     g = lv.grid
-    np.testing.assert_allclose(lv.margin, lv.tolerance - g.kappa * g.step - g.nu - g.swing)
+    np.testing.assert_allclose(lv.margin, lv.tolerance - g.drift * g.step - g.nu - g.swing)
     _, eps = g.look(g.arrays.landmarks)
     at_points = g.pair_margin(eps[g.pair_point])
     assert np.all(at_points >= lv.margin[g.pair_cell])

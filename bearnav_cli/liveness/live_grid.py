@@ -62,13 +62,16 @@ class LiveGrid:
     pair_cell, pair_point : ndarray of int, shape (M,)
         Which cell holds which point, sorted by cell (a point of several cells is in several pairs).
     tolerance, margin : ndarray, shape (C,)
-        ``τ_c`` and ``τ_c − κℓ − ν − 2λ sin(ψ/2)`` (map units).
+        ``τ_c`` and ``τ_c − (κ + 2 sin(ψ/2))ℓ − ν − 2λ sin(ψ/2)`` (map units).
     eta : float
         The bearing error bound ``η`` (rad).
     fov : float
         The camera's full field of view (rad).
     kappa : float
         The slip ``κ`` (fraction of a step).
+    drift : float
+        ``κ + 2 sin(ψ/2)``: the slip and the turn a heading error ``ψ`` gives a step (fraction of a step,
+        ``runtime.settings.ErrorBounds.drift``).
     nu : float
         The slip floor ``ν`` (map units).
     step : float
@@ -93,6 +96,7 @@ class LiveGrid:
     eta: float
     fov: float
     kappa: float
+    drift: float
     nu: float
     step: float
     swing: float
@@ -124,14 +128,14 @@ class LiveGrid:
         eps = np.asarray(eps, float).reshape(-1)
         cells, points = self.pair_cell[pairs], self.pair_point[pairs]
         arrays, lam = self.arrays, float(self.arrays.lookahead)
-        reach = tolerance.step_reach(self.step, self.kappa, self.nu, lam)
+        reach = tolerance.step_reach(self.step, self.drift, self.nu, lam)
         out = np.empty(len(eps))
         for start in range(0, len(eps), _ROWS):
             sl = slice(start, start + _ROWS)
             cell, x = cells[sl], self.points[points[sl]][:, None, :]
             grow = lam + eps[sl] + self.swing
             tau = tolerance.set_tolerance(arrays, cell, x, np.ones((len(cell), 1), bool), grow, reach)
-            out[sl] = tau - (self.kappa * self.step + self.nu + self.swing)
+            out[sl] = tau - (self.drift * self.step + self.nu + self.swing)
         return np.maximum(out, self.margin[cells])
 
     def point_margin(self, eps: np.ndarray | None = None) -> np.ndarray:
@@ -407,8 +411,9 @@ def grid(
     dt = settings.timing(diagonal, speed)[0]
     step_len = speed * dt
     swing = 2.0 * lam * math.sin(0.5 * math.radians(compass)) if lam > 0 else 0.0
+    drift = settings.ErrorBounds(heading_bound=math.radians(compass), slip=kappa).drift
     tau = np.asarray(arrays.usable_tolerance, float)
-    margin = tau - kappa * step_len - nu - swing
+    margin = tau - drift * step_len - nu - swing
 
     origin = np.asarray(arrays.bounds, float)[:2]
     points, pair_cell, pair_point = _samples(polygons, lam, resolution, origin)
@@ -423,6 +428,7 @@ def grid(
         eta=eta,
         fov=fov,
         kappa=kappa,
+        drift=drift,
         nu=float(nu),
         step=step_len,
         swing=swing,

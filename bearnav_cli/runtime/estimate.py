@@ -332,7 +332,7 @@ def bounded_update(
     width = bounded.MAX_VERTICES  # every stored set has this width (operations cap their counts at it)
     d = s.dt * state.motion
     travelled = np.hypot(d[:, 0], d[:, 1])
-    radius = np.where(travelled > 0.0, s.slip * travelled + s.slip_floor, 0.0)
+    radius = np.where(travelled > 0.0, s.drift * travelled + s.slip_floor, 0.0)
     box = axle_bounds(arrays)
     start_v, start_n = bounded.box(box, r)
     known = state.known

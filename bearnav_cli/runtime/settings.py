@@ -207,6 +207,13 @@ class ErrorBounds:
     slip: float = ROBOT_DEFAULTS["slip"]
     slip_floor: float = 0.0
 
+    @property
+    def drift(self) -> float:
+        """``κ + 2 sin(ψ/2)``: a step commanded (and its displacement measured) in the world frame through a heading
+        that errs by up to ``ψ`` is turned by up to ``ψ``, which moves its end by ``2 sin(ψ/2)`` of its length on
+        top of the slip; the odometry bound of a step ``d̂`` is ``drift·‖d̂‖ + ν``."""
+        return self.slip + 2.0 * math.sin(0.5 * self.heading_bound)
+
 
 # the fields of the groups, in this order: LoopSettings first (its four fields without defaults lead)
 @dataclass(frozen=True)

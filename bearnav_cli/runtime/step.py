@@ -276,7 +276,7 @@ def bounded_control(
     # κℓ + ν of one step; a measured displacement knows the position itself at every step (paper B, and
     # verify's loop with the exact motion of §7.1): no odometry enters the estimate
     step_len = s.top_speed * s.dt  # ℓ
-    slip, floor = (0.0, 0.0) if s.measurement == "displacement" else (s.slip, s.slip_floor)
+    slip, floor = (0.0, 0.0) if s.measurement == "displacement" else (s.drift, s.slip_floor)
     margin = slip * step_len + floor
     est = Estimate(
         reference, error**2 / 9.0, sets.seen, known & np.isfinite(error), known, np.where(known, state.hold, 0.0), error
