@@ -209,13 +209,13 @@ def test_lost_set_estimator_runs_name_tags_for_live(cli, write_map, tmp_path):
         "--estimator",
         "set",
         "--noise-bound-deg",
-        "8",
+        "25",
     )
     assert result.exit_code == 1, result.output
     line = error_line(result)
     assert "lost" in line and "not live" in line, line
     tags, plan, _ = commands(line)
-    assert tags[tags.index("--for") + 1] == "live" and tags[tags.index("--bearing-error-deg") + 1] == "8", line
+    assert tags[tags.index("--for") + 1] == "live" and tags[tags.index("--bearing-error-deg") + 1] == "25", line
     assert plan == ["plan", "corners_tags.yaml"], line
 
 

@@ -49,7 +49,19 @@ def _rows(arrays: PlanArrays, cell: np.ndarray):
 
 def step_reach(step: float, slip: float, floor: float, lookahead: float = 0.0) -> float:
     """How far the truth can move in one step at most (map units): ``ℓ``, the odometry's ``κℓ + ν``, and a look-ahead
-    point's swing ``ℓ²/2λ`` on the arc of its largest turn (:class:`~bearnav_cli.runtime.safety.StepError`)."""
+    point's swing ``ℓ²/2λ`` on the arc of its largest turn (:class:`~bearnav_cli.runtime.safety.StepError`).
+
+    Parameters
+    ----------
+    step : float
+        ``ℓ``, a full step's length (map units).
+    slip : float
+        ``κ`` (with a heading error, ``κ + 2 sin(ψ/2)``; dimensionless).
+    floor : float
+        ``ν`` (map units).
+    lookahead : float
+        ``λ`` (map units); 0 for a robot that is its own reference point.
+    """
     return step * (1.0 + slip) + floor + (step * step / (2.0 * lookahead) if lookahead > 0.0 else 0.0)
 
 
