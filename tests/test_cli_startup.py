@@ -22,6 +22,7 @@ import yaml
 from typer.testing import CliRunner
 
 from bearnav_cli.cli import app
+from bearnav_cli.cli.main import COMMANDS
 from bearnav_cli.cli.plan import PLAN_OPTIONS
 
 from .conftest import REPO, SMALL_MAP
@@ -43,6 +44,8 @@ NOT_FOR_HELP = (
 )
 #: Modules of those packages that import no numpy: the choices and defaults a ``Params`` declaration shows.
 NUMPY_FREE = ("bearnav_cli.runtime", "bearnav_cli.runtime.defaults")
+#: The command modules (:data:`bearnav_cli.cli.main.COMMANDS`), each imported only by its commands.
+COMMAND_MODULES = {f"bearnav_cli.cli.{module}" for module, _function in COMMANDS.values()}
 #: Each artifact kind the map stage and the planning stages write, and the simulation.
 ARTIFACTS = ("map.json", "tree.npz", "simplified.npz", "cells.npz", "plan.npz", "sim.npz")
 
@@ -188,6 +191,21 @@ def test_inspect_imports_the_loader_and_numpy_only(plans):
         "bearnav_cli.runtime.robot",
         "bearnav_cli.runtime.schema",
     ], runtime
+
+
+def test_a_stage_command_imports_its_own_command_module_and_stage_only(plans, tmp_path):
+    """``bearnav rrtstar`` (whose whole process bench/rrtstar_process.py times against OMPL's) imports the
+    command module ``stage`` and no other command's, and of the stages rrtstar only."""
+    codes, modules = run(
+        ["-q", "rrtstar", plans["bare"] / "map.json", "-o", tmp_path / "tree.npz", "--iterations", "50"],
+        params=["rrtstar"],
+    )
+    assert codes == [0]
+    commands = imported(modules, ("bearnav_cli.cli",))
+    assert not [m for m in commands if m in COMMAND_MODULES and m != "bearnav_cli.cli.stage"], commands
+    assert imported(modules, ("bearnav_cli.stages",)) == ["bearnav_cli.stages", "bearnav_cli.stages.rrtstar"]
+    found = imported(modules, HEAVY)
+    assert not found, found
 
 
 def test_inspect_imports_the_stages_the_maps_params_name(plans):
