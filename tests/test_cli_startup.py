@@ -181,11 +181,10 @@ def test_inspect_imports_the_loader_and_numpy_only(plans):
     assert "numpy" in modules and "bearnav_cli.artifacts" in modules  # the check is the loader's, as before
     runtime = imported(modules, ("bearnav_cli.runtime",))
     # the schema, the robot section's defaults the map type reads, and the one copy of the file reader
-    # and the invariants the robot's loader shares (numpy only, no controller); the defaults the declared
-    # ``Params`` show (no numpy), which ``limits`` reads
+    # and the invariants the robot's loader shares (numpy only, no controller); not the defaults the declared
+    # ``Params`` show: no command's ``Params`` is read (``limits`` reads one on first use)
     assert runtime == [
         "bearnav_cli.runtime",
-        "bearnav_cli.runtime.defaults",
         "bearnav_cli.runtime.invariants",
         "bearnav_cli.runtime.plan_file",
         "bearnav_cli.runtime.robot",
@@ -204,6 +203,15 @@ def test_a_stage_command_imports_its_own_command_module_and_stage_only(plans, tm
     commands = imported(modules, ("bearnav_cli.cli",))
     assert not [m for m in commands if m in COMMAND_MODULES and m != "bearnav_cli.cli.stage"], commands
     assert imported(modules, ("bearnav_cli.stages",)) == ["bearnav_cli.stages", "bearnav_cli.stages.rrtstar"]
+    # the ranges of rrtstar's options only (limits.LIMITS reads a command's Params on first use), and the map
+    # stage's circle segments, which the geometry shares
+    params = imported(modules, ("bearnav_cli.params",))
+    assert params == [
+        "bearnav_cli.params",
+        "bearnav_cli.params.declare",
+        "bearnav_cli.params.map_",
+        "bearnav_cli.params.rrtstar",
+    ], params
     found = imported(modules, HEAVY)
     assert not found, found
 
