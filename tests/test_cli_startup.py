@@ -212,6 +212,17 @@ def test_a_stage_command_imports_its_own_command_module_and_stage_only(plans, tm
         "bearnav_cli.params.map_",
         "bearnav_cli.params.rrtstar",
     ], params
+    # a map in, a tree out: the datatypes of the map and the tree (and the shared helpers), not the cells' or the
+    # simulation's (bearnav_cli.datatypes imports a module when one of its names is first used)
+    datatypes = imported(modules, ("bearnav_cli.datatypes",))
+    assert datatypes == [
+        "bearnav_cli.datatypes",
+        "bearnav_cli.datatypes.frozen",
+        "bearnav_cli.datatypes.kinds",
+        "bearnav_cli.datatypes.map_",
+        "bearnav_cli.datatypes.tree",
+        "bearnav_cli.datatypes.words",
+    ], datatypes
     found = imported(modules, HEAVY)
     assert not found, found
 

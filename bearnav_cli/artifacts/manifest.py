@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from bearnav_cli import __version__
-from bearnav_cli.datatypes import Cells, Map, Plan, Simulation, Tree
+from bearnav_cli.datatypes import ArraysOnMap, Map
 from bearnav_cli.runtime import plan_file
 from bearnav_cli.runtime.plan_file import canonical_json
 from bearnav_cli.runtime.schema import ENTRIES, SCHEMAS, STAGES, Entry
@@ -286,6 +286,6 @@ def entries_of(artifact: Any) -> dict[str, Any]:
     """The data entries of an artifact (what is hashed and stored besides the manifest)."""
     if isinstance(artifact, Map):
         return {"map": artifact.to_json_text()}
-    if isinstance(artifact, (Tree, Cells, Plan, Simulation)):
+    if isinstance(artifact, ArraysOnMap):  # a Tree, Cells, Plan or Simulation
         return {"map": embedded_map_text(artifact.map), **artifact.arrays()}
     raise TypeError(f"not an artifact: {type(artifact).__name__}")
