@@ -222,10 +222,11 @@ def test_importing_the_cli_imports_no_heavy_library():
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO, check=True)
     modules = json.loads(out.stdout)
-    # the app and its command table, the output and the map reader the package exports, and the errors: no
-    # command's module (each is imported when its command runs, shows its help or completes), nothing else
+    # the app and its command table, the exits, the output and the map reader the package exports, and the
+    # errors: no command's module (each is imported when its command runs, shows its help or completes)
     assert modules == [
         "bearnav_cli.cli",
+        "bearnav_cli.cli.exits",
         "bearnav_cli.cli.main",
         "bearnav_cli.cli.mapfile",
         "bearnav_cli.cli.output",

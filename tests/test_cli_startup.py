@@ -234,3 +234,30 @@ def test_inspect_imports_the_stages_the_maps_params_name(plans):
     assert imported(modules, ("bearnav_cli.stages",)) == ["bearnav_cli.stages", "bearnav_cli.stages.rrtstar"]
     found = imported(modules, HEAVY)
     assert not found, found
+
+
+#: A program that runs the app after registering an ``atexit`` function (unflushed output) and keeping an
+#: object that says when the interpreter tears it down.
+PROGRAM = """
+import atexit
+class Teardown:
+    def __del__(self):
+        print("torn down", flush=True)
+kept = Teardown()
+atexit.register(lambda: print("atexit ran"))
+from bearnav_cli.cli import app
+app()
+"""
+
+
+@pytest.mark.parametrize("args, code", [(["--version"], 0), (["nope"], 2), (["inspect", "missing.npz"], 3)])
+def test_the_program_ends_without_the_interpreters_teardown(tmp_path, args, code):
+    """Run as ``bearnav``, the app ends once its command is done: the ``atexit`` functions run and stdout is
+    flushed, the modules and objects are not torn down (bench/README.md "RRT* as whole processes"); called from
+    another program (a test, a library) it leaves the exit to Python."""
+    for name, teardown in (("bearnav", False), ("other.py", True)):
+        program = tmp_path / name
+        program.write_text(PROGRAM)
+        done = subprocess.run([sys.executable, str(program), *args], capture_output=True, text=True, cwd=tmp_path)
+        assert done.returncode == code, (name, done.stderr)
+        assert done.stdout.endswith("atexit ran\n" + ("torn down\n" if teardown else "")), (name, done.stdout)

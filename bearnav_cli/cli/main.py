@@ -16,7 +16,9 @@ from typer.core import TyperCommand, TyperGroup
 from typer.models import CommandInfo
 
 from bearnav_cli import __version__
+from bearnav_cli.cli.exits import exit_at_once
 from bearnav_cli.cli.output import QUIET_HELP, Quiet
+from bearnav_cli.cli.startup import AS_PROGRAM
 
 __all__ = ["app", "main"]
 
@@ -154,7 +156,20 @@ class _Group(TyperGroup):
         return super().parse_args(ctx, args)
 
 
-app = typer.Typer(
+class _Program(typer.Typer):
+    """The app; run as the ``bearnav`` program, it ends without the interpreter's teardown
+    (:func:`~bearnav_cli.cli.exits.exit_at_once`), called from Python (a test, a library) as typer's."""
+
+    def __call__(self, *args: Any, **kwargs: Any) -> Any:
+        try:
+            return super().__call__(*args, **kwargs)
+        except SystemExit as exc:
+            if AS_PROGRAM:
+                exit_at_once(exc.code)
+            raise
+
+
+app = _Program(
     cls=_Group,
     add_completion=True,
     no_args_is_help=True,
