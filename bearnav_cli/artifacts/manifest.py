@@ -271,11 +271,13 @@ def make_manifest(
     }
 
 
+@functools.lru_cache(maxsize=4)
 def embedded_map_text(map_: Map) -> str:
     """The map as later artifacts embed it: ``map.json``'s JSON without its provenance ``source``.
 
     Leaving the YAML's name and hash out makes every later artifact depend on the map alone, so
-    the same map gives the same content hashes whatever file (or cached run) it came from.
+    the same map gives the same content hashes whatever file (or cached run) it came from. A map
+    cannot change: the text is made once per map (a stage's manifest hashes it, then its file holds it).
     """
     document = map_.to_json()
     document.pop("source", None)
