@@ -139,7 +139,7 @@ class _Group(TyperGroup):
         self.commands = _Commands()
 
     def list_commands(self, ctx: Any) -> list[str]:
-        return list(self.commands)  # the names: typer's reads every command too
+        return list(self.commands)  # the names only: typer's reads each command (items()), making them all
 
     def format_help(self, ctx: Any, formatter: Any) -> None:
         super(TyperGroup, self).format_help(ctx, formatter)
