@@ -15,6 +15,7 @@ stages below the pipeline can use it.
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Iterator, Mapping
 from typing import Any
 
 from bearnav_cli.errors import InvalidParamsError, ResourceLimitError
@@ -45,21 +46,37 @@ MAX_RUNS = declare.MAX_RUNS
 MAX_STEPS_PER_RUN = declare.MAX_STEPS_PER_RUN
 
 
-def _declared_limits() -> dict[str, dict[str, Range]]:
-    """The declared ranges of every command's fields."""
-    found: dict[str, dict[str, Range]] = {}
-    for command in MODULES:
-        found[command] = {}
-        for field in dataclasses.fields(params_type(command)):
-            declaration = declared(field)
-            if declaration.range is not None:
-                found[command][field.name] = declaration.range
-    return found
+class _DeclaredLimits(Mapping):
+    """The declared ranges of each command's fields, by command, each read from its ``Params`` on first use.
+
+    A stage run imports its own ``Params`` module only (``bearnav rrtstar`` not simulate's or verify's);
+    iterating over every command reads them all.
+    """
+
+    def __init__(self) -> None:
+        self._read: dict[str, dict[str, Range]] = {}
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(MODULES)
+
+    def __len__(self) -> int:
+        return len(MODULES)
+
+    def __getitem__(self, command: str) -> dict[str, Range]:
+        if command not in self._read:
+            if command not in MODULES:
+                raise KeyError(command)
+            self._read[command] = {
+                field.name: declared(field).range
+                for field in dataclasses.fields(params_type(command))
+                if declared(field).range is not None
+            }
+        return self._read[command]
 
 
 #: The range of every numeric parameter, by stage (``verify`` holds the options of ``bearnav verify``): the
 #: ranges :func:`~bearnav_cli.params.declare.param` declares.
-LIMITS: dict[str, dict[str, Range]] = _declared_limits()
+LIMITS: Mapping[str, dict[str, Range]] = _DeclaredLimits()
 
 
 def option_name(stage: str, name: str) -> str:

@@ -12,7 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from bearnav_cli.datatypes import CellFlag, CellStatus, cell_list
+from bearnav_cli.datatypes import cell_list
 
 __all__ = [
     "blind_spots",
@@ -71,6 +71,8 @@ def no_route(nodes: Any, added: Any = None) -> list[Problem]:
 
 def blind_spots(cells: Any) -> list[Problem]:
     """Cells with free points that see fewer than 2 landmarks (:attr:`~bearnav_cli.datatypes.CellFlag.BLIND_SPOT`)."""
+    from bearnav_cli.datatypes.cells import CellFlag  # here: judging a tree (no_route) needs no cells
+
     blind = cells.flagged(CellFlag.BLIND_SPOT)
     if not blind:
         return []
@@ -87,6 +89,8 @@ def cell_problems(cells: Any) -> list[Problem]:
 
 def not_certified(status: Any) -> list[Problem]:
     """Cells whose synthesis failed: not certified or a solver failure (status 2 or 3)."""
+    from bearnav_cli.datatypes.cells import CellStatus  # here: judging a tree (no_route) needs no cells
+
     bad = (status == CellStatus.NOT_CERTIFIED) | (status == CellStatus.SOLVER_FAILURE)
     failed = [int(c) for c in bad.nonzero()[0]]
     if not failed:

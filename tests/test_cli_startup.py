@@ -22,6 +22,7 @@ import yaml
 from typer.testing import CliRunner
 
 from bearnav_cli.cli import app
+from bearnav_cli.cli.main import COMMANDS
 from bearnav_cli.cli.plan import PLAN_OPTIONS
 
 from .conftest import REPO, SMALL_MAP
@@ -43,6 +44,8 @@ NOT_FOR_HELP = (
 )
 #: Modules of those packages that import no numpy: the choices and defaults a ``Params`` declaration shows.
 NUMPY_FREE = ("bearnav_cli.runtime", "bearnav_cli.runtime.defaults")
+#: The command modules (:data:`bearnav_cli.cli.main.COMMANDS`), each imported only by its commands.
+COMMAND_MODULES = {f"bearnav_cli.cli.{module}" for module, _function in COMMANDS.values()}
 #: Each artifact kind the map stage and the planning stages write, and the simulation.
 ARTIFACTS = ("map.json", "tree.npz", "simplified.npz", "cells.npz", "plan.npz", "sim.npz")
 
@@ -178,16 +181,50 @@ def test_inspect_imports_the_loader_and_numpy_only(plans):
     assert "numpy" in modules and "bearnav_cli.artifacts" in modules  # the check is the loader's, as before
     runtime = imported(modules, ("bearnav_cli.runtime",))
     # the schema, the robot section's defaults the map type reads, and the one copy of the file reader
-    # and the invariants the robot's loader shares (numpy only, no controller); the defaults the declared
-    # ``Params`` show (no numpy), which ``limits`` reads
+    # and the invariants the robot's loader shares (numpy only, no controller); not the defaults the declared
+    # ``Params`` show: no command's ``Params`` is read (``limits`` reads one on first use)
     assert runtime == [
         "bearnav_cli.runtime",
-        "bearnav_cli.runtime.defaults",
         "bearnav_cli.runtime.invariants",
         "bearnav_cli.runtime.plan_file",
         "bearnav_cli.runtime.robot",
         "bearnav_cli.runtime.schema",
     ], runtime
+
+
+def test_a_stage_command_imports_its_own_command_module_and_stage_only(plans, tmp_path):
+    """``bearnav rrtstar`` (whose whole process bench/rrtstar_process.py times against OMPL's) imports the
+    command module ``stage`` and no other command's, and of the stages rrtstar only."""
+    codes, modules = run(
+        ["-q", "rrtstar", plans["bare"] / "map.json", "-o", tmp_path / "tree.npz", "--iterations", "50"],
+        params=["rrtstar"],
+    )
+    assert codes == [0]
+    commands = imported(modules, ("bearnav_cli.cli",))
+    assert not [m for m in commands if m in COMMAND_MODULES and m != "bearnav_cli.cli.stage"], commands
+    assert imported(modules, ("bearnav_cli.stages",)) == ["bearnav_cli.stages", "bearnav_cli.stages.rrtstar"]
+    # the ranges of rrtstar's options only (limits.LIMITS reads a command's Params on first use), and the map
+    # stage's circle segments, which the geometry shares
+    params = imported(modules, ("bearnav_cli.params",))
+    assert params == [
+        "bearnav_cli.params",
+        "bearnav_cli.params.declare",
+        "bearnav_cli.params.map_",
+        "bearnav_cli.params.rrtstar",
+    ], params
+    # a map in, a tree out: the datatypes of the map and the tree (and the shared helpers), not the cells' or the
+    # simulation's (bearnav_cli.datatypes imports a module when one of its names is first used)
+    datatypes = imported(modules, ("bearnav_cli.datatypes",))
+    assert datatypes == [
+        "bearnav_cli.datatypes",
+        "bearnav_cli.datatypes.frozen",
+        "bearnav_cli.datatypes.kinds",
+        "bearnav_cli.datatypes.map_",
+        "bearnav_cli.datatypes.tree",
+        "bearnav_cli.datatypes.words",
+    ], datatypes
+    found = imported(modules, HEAVY)
+    assert not found, found
 
 
 def test_inspect_imports_the_stages_the_maps_params_name(plans):
@@ -197,3 +234,30 @@ def test_inspect_imports_the_stages_the_maps_params_name(plans):
     assert imported(modules, ("bearnav_cli.stages",)) == ["bearnav_cli.stages", "bearnav_cli.stages.rrtstar"]
     found = imported(modules, HEAVY)
     assert not found, found
+
+
+#: A program that runs the app after registering an ``atexit`` function (unflushed output) and keeping an
+#: object that says when the interpreter tears it down.
+PROGRAM = """
+import atexit
+class Teardown:
+    def __del__(self):
+        print("torn down", flush=True)
+kept = Teardown()
+atexit.register(lambda: print("atexit ran"))
+from bearnav_cli.cli import app
+app()
+"""
+
+
+@pytest.mark.parametrize("args, code", [(["--version"], 0), (["nope"], 2), (["inspect", "missing.npz"], 3)])
+def test_the_program_ends_without_the_interpreters_teardown(tmp_path, args, code):
+    """Run as ``bearnav``, the app ends once its command is done: the ``atexit`` functions run and stdout is
+    flushed, the modules and objects are not torn down (bench/README.md "RRT* as whole processes"); called from
+    another program (a test, a library) it leaves the exit to Python."""
+    for name, teardown in (("bearnav", False), ("other.py", True)):
+        program = tmp_path / name
+        program.write_text(PROGRAM)
+        done = subprocess.run([sys.executable, str(program), *args], capture_output=True, text=True, cwd=tmp_path)
+        assert done.returncode == code, (name, done.stderr)
+        assert done.stdout.endswith("atexit ran\n" + ("torn down\n" if teardown else "")), (name, done.stdout)

@@ -14,7 +14,7 @@ import dataclasses
 import functools
 import re
 
-from typer.main import get_command_name
+from typer.main import get_command
 from typer.testing import CliRunner
 
 from bearnav_cli import pipeline
@@ -31,8 +31,8 @@ PARAM_ROW = re.compile(r"^\| `([a-z_]+)\.([a-z_]+)` \|", re.M)
 
 
 def command_names() -> list[str]:
-    """Names of the commands registered in the typer app, as the command line spells them."""
-    return [cmd.name or get_command_name(cmd.callback.__name__) for cmd in app.registered_commands]
+    """Names of the commands of the app's group, as the command line spells them."""
+    return list(get_command(app).commands)
 
 
 @functools.cache

@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from bearnav_cli import __version__
-from bearnav_cli.datatypes import Cells, Map, Plan, Simulation, Tree
+from bearnav_cli.datatypes import ArraysOnMap, Map
 from bearnav_cli.runtime import plan_file
 from bearnav_cli.runtime.plan_file import canonical_json
 from bearnav_cli.runtime.schema import ENTRIES, SCHEMAS, STAGES, Entry
@@ -271,11 +271,13 @@ def make_manifest(
     }
 
 
+@functools.lru_cache(maxsize=4)
 def embedded_map_text(map_: Map) -> str:
     """The map as later artifacts embed it: ``map.json``'s JSON without its provenance ``source``.
 
     Leaving the YAML's name and hash out makes every later artifact depend on the map alone, so
-    the same map gives the same content hashes whatever file (or cached run) it came from.
+    the same map gives the same content hashes whatever file (or cached run) it came from. A map
+    cannot change: the text is made once per map (a stage's manifest hashes it, then its file holds it).
     """
     document = map_.to_json()
     document.pop("source", None)
@@ -286,6 +288,6 @@ def entries_of(artifact: Any) -> dict[str, Any]:
     """The data entries of an artifact (what is hashed and stored besides the manifest)."""
     if isinstance(artifact, Map):
         return {"map": artifact.to_json_text()}
-    if isinstance(artifact, (Tree, Cells, Plan, Simulation)):
+    if isinstance(artifact, ArraysOnMap):  # a Tree, Cells, Plan or Simulation
         return {"map": embedded_map_text(artifact.map), **artifact.arrays()}
     raise TypeError(f"not an artifact: {type(artifact).__name__}")

@@ -17,18 +17,7 @@ import numpy as np
 
 from bearnav_cli.artifacts.manifest import KINDS, RETIRED_SCHEMAS, content_hash, kind_of_schema, sha256_text
 from bearnav_cli.artifacts.writing import metrics_path
-from bearnav_cli.datatypes import (
-    CELL_KEYS,
-    PLAN_KEYS,
-    SIMULATION_KEYS,
-    TREE_KEYS,
-    Cells,
-    Map,
-    Plan,
-    Simulation,
-    Tree,
-    validate_artifact,
-)
+from bearnav_cli.datatypes import Map, validate_artifact
 from bearnav_cli.errors import ArtifactError
 from bearnav_cli.runtime import invariants, plan_file
 from bearnav_cli.runtime.plan_file import canonical_json, memory_budget
@@ -337,10 +326,17 @@ def _from_entries(kind: str, entries: dict[str, Any], manifest: dict, check_map:
     if kind == "map":
         return map_
     stats = dict(manifest.get("stats", {}))
+    # each kind's type imported here, for its kind only (loading a tree imports neither cells nor simulation)
     if kind in ("tree", "simplified"):
+        from bearnav_cli.datatypes.tree import TREE_KEYS, Tree
+
         return Tree(map=map_, stats=stats, **{key: entries[key] for key in TREE_KEYS})
     if kind == "simulation":
+        from bearnav_cli.datatypes.simulation import SIMULATION_KEYS, Simulation
+
         return Simulation(map=map_, stats=stats, **{key: entries[key] for key in SIMULATION_KEYS})
+    from bearnav_cli.datatypes.cells import CELL_KEYS, PLAN_KEYS, Cells, Plan
+
     cell_arrays = {key: entries[key] for key in CELL_KEYS}
     if kind == "cells":
         return Cells(map=map_, stats=stats, **cell_arrays)

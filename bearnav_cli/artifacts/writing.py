@@ -10,18 +10,20 @@ from typing import Any, Callable
 
 import numpy as np
 
+from bearnav_cli import datatypes
 from bearnav_cli.artifacts.atomic import write_all
 from bearnav_cli.artifacts.manifest import entries_of, kind_of_schema
-from bearnav_cli.datatypes import Cells, Map, Plan, Simulation, Tree, validate_artifact
+from bearnav_cli.datatypes import validate_artifact
 from bearnav_cli.errors import ArtifactError
 from bearnav_cli.runtime.plan_file import canonical_json
 
 __all__ = ["metrics_path", "output_files", "save"]
 
 
-#: Which Python type each artifact kind holds.
-_TYPES: dict[str, type] = {
-    "map": Map, "tree": Tree, "simplified": Tree, "cells": Cells, "plan": Plan, "simulation": Simulation,
+#: Which Python type each artifact kind holds, by its name in :mod:`bearnav_cli.datatypes` (whose modules are
+#: imported on first use: saving a tree does not import the cells' module).
+_TYPES: dict[str, str] = {
+    "map": "Map", "tree": "Tree", "simplified": "Tree", "cells": "Cells", "plan": "Plan", "simulation": "Simulation",
 }  # fmt: skip
 
 
@@ -56,7 +58,7 @@ def save(path: str | os.PathLike, artifact: Any, manifest: dict, on_commit: Call
         The manifest's schema does not fit the artifact, or the artifact breaks an invariant.
     """
     kind = kind_of_schema(manifest.get("schema", ""))
-    if kind is None or not isinstance(artifact, _TYPES[kind]):
+    if kind is None or not isinstance(artifact, getattr(datatypes, _TYPES[kind])):
         raise ArtifactError(f"manifest schema {manifest.get('schema')!r} does not fit a {type(artifact).__name__}")
     path = Path(path)
     validate_artifact(kind, artifact)

@@ -6,9 +6,10 @@ route), 2 usage, 3 invalid input (one line naming file, field or option and the 
 (SIGTERM, the same line), 70 a bug of bearnav's own (:mod:`~bearnav_cli.cli.exits`).
 
 One module per command (``map_``, ``stage``: rrtstar to synthesize, ``verify``, ``simulate``,
-``plan``, ``inspect_``, ``tags``, ``plot``, ``sweep``), registered on the app in :mod:`~bearnav_cli.cli.main`.
+``plan``, ``inspect_``, ``tags``, ``plot``, ``sweep``), listed in :data:`~bearnav_cli.cli.main.COMMANDS` and
+imported only when its command runs, shows its help or completes.
 No module of the package uses ``from __future__ import annotations``: typer reads the annotations
-of every command on every start, and evaluating them from strings took 4 ms of it (the few names
+of the command it runs on every start, and evaluating them from strings took 4 ms of it (the few names
 imported for type checking are quoted). numpy, scipy, shapely, yaml, logging, rich, the stages and
 the pipeline are imported inside the commands that use them, so that ``bearnav --help`` and
 ``bearnav inspect`` start at once (bench/README.md "Start-up"; tests/test_cli_startup.py).

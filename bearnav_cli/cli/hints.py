@@ -256,7 +256,6 @@ def outcome_failure(
     re-planning command.
     """
     from bearnav_cli import pipeline, verdicts
-    from bearnav_cli.datatypes import Plan
 
     found = pipeline.STAGE_BY_NAME[stage].problems(artifact)
     if not found:
@@ -267,6 +266,8 @@ def outcome_failure(
     if problem.kind == verdicts.NO_ROUTE:
         return f"{problem.text}; `{command_text('bearnav', 'plot', path)}` draws it"
     if problem.kind == verdicts.BLIND_SPOT:
+        from bearnav_cli.datatypes import Plan  # here: a tree's verdict needs no cells' module
+
         if isinstance(artifact, Plan):  # tags places landmarks along a plan's fields
             step = tags_step(path, *camera, plan_words=plan_words)
         else:  # cells.npz: synthesize it first

@@ -1,18 +1,24 @@
 """The ``bearnav`` typer app: its plain help, the group's own options (-q, --version) and its commands.
 
-The commands are defined one module each and registered here, in the order ``bearnav --help``
-lists them.
+The commands are defined one module each and listed here (:data:`COMMANDS`), in the order ``bearnav
+--help`` lists them. A command is made, its module imported, only when it is run, its help shown or
+completed (:class:`_Commands`): ``bearnav rrtstar`` imports none of the other commands' modules.
 """
 
+import importlib
 import inspect
-from typing import Any, Callable, Optional
+from collections.abc import Iterator, Mapping
+from typing import Any
 
 import typer
+import typer.main
 from typer.core import TyperCommand, TyperGroup
+from typer.models import CommandInfo
 
 from bearnav_cli import __version__
-from bearnav_cli.cli import inspect_, map_, plan, plot, simulate, stage, sweep, tags, verify
+from bearnav_cli.cli.exits import exit_at_once
 from bearnav_cli.cli.output import QUIET_HELP, Quiet
+from bearnav_cli.cli.startup import AS_PROGRAM
 
 __all__ = ["app", "main"]
 
@@ -78,8 +84,62 @@ class _Command(TyperCommand):
         _format_help_text(self, ctx, formatter)
 
 
+#: The one command table: each command's module in :mod:`bearnav_cli.cli` and its function, in the order
+#: ``bearnav --help`` lists them.
+COMMANDS = {
+    "map": ("map_", "map_command"),
+    "rrtstar": ("stage", "rrtstar_command"),
+    "simplify": ("stage", "simplify_command"),
+    "decompose": ("stage", "decompose_command"),
+    "synthesize": ("stage", "synthesize_command"),
+    "verify": ("verify", "verify_command"),
+    "simulate": ("simulate", "simulate_command"),
+    "plan": ("plan", "plan_command"),
+    "inspect": ("inspect_", "inspect_command"),
+    "tags": ("tags", "tags_command"),
+    "plot": ("plot", "plot_command"),
+    "sweep": ("sweep", "sweep_command"),
+}
+
+
+class _Commands(Mapping):
+    """The group's commands by name (:data:`COMMANDS`), each a :class:`_Command` made on first use.
+
+    Listing the names imports nothing; the command a start runs (or whose help it prints) is made as
+    typer makes a registered one, from its function, so that its module, and no other command's, is
+    imported.
+    """
+
+    def __init__(self) -> None:
+        self._made: dict[str, Any] = {}
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(COMMANDS)
+
+    def __len__(self) -> int:
+        return len(COMMANDS)
+
+    def __getitem__(self, name: str) -> Any:
+        if name not in self._made:
+            module, function = COMMANDS[name]
+            callback = getattr(importlib.import_module(f"bearnav_cli.cli.{module}"), function)
+            self._made[name] = typer.main.get_command_from_info(
+                CommandInfo(name=name, cls=_Command, callback=callback),
+                pretty_exceptions_short=app.pretty_exceptions_short,
+                rich_markup_mode=app.rich_markup_mode,
+            )
+        return self._made[name]
+
+
 class _Group(TyperGroup):
-    """The ``bearnav`` group, its ``--help`` plain as :class:`_Command`'s."""
+    """The ``bearnav`` group, its ``--help`` plain as :class:`_Command`'s, its commands :class:`_Commands`."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self.commands = _Commands()
+
+    def list_commands(self, ctx: Any) -> list[str]:
+        return list(self.commands)  # the names only: typer's reads each command (items()), making them all
 
     def format_help(self, ctx: Any, formatter: Any) -> None:
         super(TyperGroup, self).format_help(ctx, formatter)
@@ -96,14 +156,20 @@ class _Group(TyperGroup):
         return super().parse_args(ctx, args)
 
 
-class _Typer(typer.Typer):
-    """typer.Typer whose commands are :class:`_Command` (plain ``--help``) unless told otherwise."""
+class _Program(typer.Typer):
+    """The app; run as the ``bearnav`` program, it ends without the interpreter's teardown
+    (:func:`~bearnav_cli.cli.exits.exit_at_once`), called from Python (a test, a library) as typer's."""
 
-    def command(self, name: Optional[str] = None, *, cls: Optional[type] = None, **kwargs: Any) -> Callable:
-        return super().command(name, cls=cls or _Command, **kwargs)
+    def __call__(self, *args: Any, **kwargs: Any) -> Any:
+        try:
+            return super().__call__(*args, **kwargs)
+        except SystemExit as exc:
+            if AS_PROGRAM:
+                exit_at_once(exc.code)
+            raise
 
 
-app = _Typer(
+app = _Program(
     cls=_Group,
     add_completion=True,
     no_args_is_help=True,
@@ -137,21 +203,3 @@ def main(
 ) -> None:
     """Certified bearing-only navigation controllers from a 2-D map."""
     Quiet.enabled = quiet
-
-
-# the one command table: --help lists the commands in the order they are registered
-for _name, _command in (
-    ("map", map_.map_command),
-    ("rrtstar", stage.rrtstar_command),
-    ("simplify", stage.simplify_command),
-    ("decompose", stage.decompose_command),
-    ("synthesize", stage.synthesize_command),
-    ("verify", verify.verify_command),
-    ("simulate", simulate.simulate_command),
-    ("plan", plan.plan_command),
-    ("inspect", inspect_.inspect_command),
-    ("tags", tags.tags_command),
-    ("plot", plot.plot_command),
-    ("sweep", sweep.sweep_command),
-):
-    app.command(_name)(_command)

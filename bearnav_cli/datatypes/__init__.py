@@ -5,9 +5,11 @@ shapes and dtypes and make the arrays read-only, so an artifact cannot be change
 built. The keys, dtypes and shapes come from the one schema declaration,
 :data:`bearnav_cli.runtime.schema.ENTRIES` (shared with the loader, the robot's run-time view and
 the docs test). Serialisation lives in ``artifacts/``; this package knows nothing about files.
-Every name is re-exported here; its modules, each with one job:
+Every name is re-exported here, its module imported when the name is first used; its modules, each
+with one job:
 
-- :mod:`~bearnav_cli.datatypes.frozen` — read-only dicts, and arrays of their declared dtypes and shapes;
+- :mod:`~bearnav_cli.datatypes.frozen` — read-only dicts, arrays of their declared dtypes and shapes, and
+  :class:`ArraysOnMap`, what every artifact but the map is;
 - :mod:`~bearnav_cli.datatypes.words` — counts, shares and cell lists as messages word them;
 - :mod:`~bearnav_cli.datatypes.map_` — :class:`Polygon`, :class:`Map` and the map's invariants;
 - :mod:`~bearnav_cli.datatypes.tree` — :class:`Tree` (``tree.npz``, ``simplified.npz``);
@@ -16,28 +18,43 @@ Every name is re-exported here; its modules, each with one job:
 - :mod:`~bearnav_cli.datatypes.kinds` — every kind's invariants, :func:`validate_artifact`, :func:`replace`.
 """
 
-from bearnav_cli.datatypes.cells import (
-    AREA_QUANTILES,
-    CELL_KEYS,
-    CLAIMS_CERTIFICATE,
-    PLAN_KEYS,
-    CellFlag,
-    Cells,
-    CellStatus,
-    Plan,
-    active_regions,
-    cell_polygons,
-    tolerance_by_area,
-)
-from bearnav_cli.datatypes.frozen import FrozenDict, freeze, frozen_array, ragged, thaw
-from bearnav_cli.datatypes.kinds import INVARIANTS, replace, validate_artifact
-from bearnav_cli.datatypes.map_ import MAP_INVARIANTS, Map, Polygon
-from bearnav_cli.datatypes.simulation import SIMULATION_INVARIANTS, SIMULATION_KEYS, Outcome, Simulation
-from bearnav_cli.datatypes.tree import TREE_INVARIANTS, TREE_KEYS, Tree
-from bearnav_cli.datatypes.words import NEGLIGIBLE_SHARE, cell_list, percent, plural
+import importlib
+from typing import Any
+
+#: Where each name of ``__all__`` is defined: a module is imported when one of its names is first used
+#: (PEP 562), so that ``bearnav rrtstar`` (a map in, a tree out) imports neither the cells' nor the
+#: simulation's module.
+_ORIGIN = {
+    **dict.fromkeys(("AREA_QUANTILES", "CELL_KEYS", "CLAIMS_CERTIFICATE", "PLAN_KEYS", "CellFlag", "Cells",
+                     "CellStatus", "Plan", "active_regions", "cell_polygons", "tolerance_by_area"), "cells"),
+    **dict.fromkeys(("ArraysOnMap", "FrozenDict", "freeze", "frozen_array", "ragged", "thaw"), "frozen"),
+    **dict.fromkeys(("INVARIANTS", "replace", "validate_artifact"), "kinds"),
+    **dict.fromkeys(("MAP_INVARIANTS", "Map", "Polygon"), "map_"),
+    **dict.fromkeys(("SIMULATION_INVARIANTS", "SIMULATION_KEYS", "Outcome", "Simulation"), "simulation"),
+    **dict.fromkeys(("TREE_INVARIANTS", "TREE_KEYS", "Tree"), "tree"),
+    **dict.fromkeys(("NEGLIGIBLE_SHARE", "cell_list", "percent", "plural"), "words"),
+}  # fmt: skip
+#: The submodules, also attributes of the package once imported.
+_SUBMODULES = ("cells", "frozen", "kinds", "map_", "simulation", "tree", "words")
+
+
+def __getattr__(name: str) -> Any:
+    if name in _SUBMODULES:
+        return importlib.import_module(f"{__name__}.{name}")
+    if name in _ORIGIN:
+        value = getattr(importlib.import_module(f"{__name__}.{_ORIGIN[name]}"), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *__all__, *_SUBMODULES})
+
 
 __all__ = [
     "AREA_QUANTILES",
+    "ArraysOnMap",
     "CELL_KEYS",
     "CLAIMS_CERTIFICATE",
     "active_regions",

@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 import shapely
 
-from bearnav_cli.datatypes.frozen import data_keys, freeze, freeze_fields, ragged
+from bearnav_cli.datatypes.frozen import ArraysOnMap, data_keys, freeze, freeze_fields, ragged
 from bearnav_cli.datatypes.map_ import Map
 from bearnav_cli.runtime.invariants import cell_areas, check_cells_form, check_plan_form
 from bearnav_cli.runtime.schema import ENTRIES
@@ -60,7 +60,7 @@ class CellFlag(enum.IntFlag):
 
 
 @dataclass(frozen=True, eq=False)  # arrays inside: identity equality, a hash that works
-class Cells:
+class Cells(ArraysOnMap):
     """Convex cells with their CLF and CBF rows, one per tree node (``cells.npz``, ALGORITHMS §4).
 
     C cells, R half-plane rows, V vertices, H barrier rows, L landmarks. Cell ``c``
@@ -294,7 +294,7 @@ PLAN_KEYS = tuple(name for name in ENTRIES["plan"] if name not in ENTRIES["cells
 
 
 @dataclass(frozen=True, eq=False)  # arrays inside: identity equality, a hash that works
-class Plan:
+class Plan(ArraysOnMap):
     """Cells with a synthesised, certified controller each (``plan.npz``, DESIGN §3.2, ALGORITHMS §5).
 
     Attributes

@@ -14,7 +14,17 @@ from bearnav_cli.errors import ArtifactError
 from bearnav_cli.runtime.invariants import ragged_problem
 from bearnav_cli.runtime.schema import ENTRIES
 
-__all__ = ["data_keys", "freeze", "freeze_fields", "FrozenDict", "frozen_array", "ragged", "thaw"]
+__all__ = ["ArraysOnMap", "data_keys", "freeze", "freeze_fields", "FrozenDict", "frozen_array", "ragged", "thaw"]
+
+
+class ArraysOnMap:
+    """What every artifact but the map is (:class:`Tree`, :class:`Cells`, :class:`Plan`, :class:`Simulation`):
+    arrays made on a map, its ``map`` embedded in its file beside its ``arrays()``.
+
+    :func:`bearnav_cli.artifacts.entries_of` tells them by it, importing none of their modules.
+    """
+
+    __slots__ = ()
 
 
 class FrozenDict(dict):

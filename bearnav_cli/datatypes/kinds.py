@@ -6,25 +6,41 @@ from __future__ import annotations
 import dataclasses
 from typing import Any
 
-from bearnav_cli.datatypes.cells import Plan
 from bearnav_cli.datatypes.map_ import MAP_INVARIANTS
-from bearnav_cli.datatypes.simulation import SIMULATION_INVARIANTS
 from bearnav_cli.datatypes.tree import TREE_INVARIANTS
 from bearnav_cli.runtime.invariants import CELLS_INVARIANTS, PLAN_INVARIANTS, Invariant, validate
 
 __all__ = ["INVARIANTS", "replace", "validate_artifact"]
 
 
+def _invariants(kind: str) -> tuple[Invariant, ...]:
+    """The invariants of one artifact kind (``artifacts.KINDS`` names them): a simulation's from its module,
+    imported here, so that checking a map or a tree does not import it."""
+    if kind == "simulation":
+        from bearnav_cli.datatypes.simulation import SIMULATION_INVARIANTS
+
+        return SIMULATION_INVARIANTS
+    return {
+        "map": MAP_INVARIANTS,
+        "tree": TREE_INVARIANTS,
+        "simplified": TREE_INVARIANTS,
+        "cells": CELLS_INVARIANTS,
+        "plan": CELLS_INVARIANTS + PLAN_INVARIANTS,
+    }[kind]
+
+
+def __getattr__(name: str) -> Any:
+    # INVARIANTS, made on first use (PEP 562): it holds the simulation's
+    if name == "INVARIANTS":
+        found = {kind: _invariants(kind) for kind in ("map", "tree", "simplified", "cells", "plan", "simulation")}
+        globals()[name] = found
+        return found
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
 #: The invariants of each artifact kind (``artifacts.KINDS`` names); every kind but ``map`` also checks
-#: its embedded map against :data:`MAP_INVARIANTS` (fields ``map.NAME``).
-INVARIANTS: dict[str, tuple[Invariant, ...]] = {
-    "map": MAP_INVARIANTS,
-    "tree": TREE_INVARIANTS,
-    "simplified": TREE_INVARIANTS,
-    "cells": CELLS_INVARIANTS,
-    "plan": CELLS_INVARIANTS + PLAN_INVARIANTS,
-    "simulation": SIMULATION_INVARIANTS,
-}
+#: its embedded map against :data:`MAP_INVARIANTS` (fields ``map.NAME``). Made on first use.
+INVARIANTS: dict[str, tuple[Invariant, ...]]
 
 
 def validate_artifact(kind: str, artifact: Any, check_map: bool = True) -> None:
@@ -55,7 +71,7 @@ def validate_artifact(kind: str, artifact: Any, check_map: bool = True) -> None:
         validate(CELLS_INVARIANTS, artifact.cells)
         validate(PLAN_INVARIANTS, artifact)
         return
-    validate(INVARIANTS[kind], artifact)
+    validate(_invariants(kind), artifact)
 
 
 def replace(artifact: Any, **changes: Any) -> Any:
@@ -73,6 +89,8 @@ def replace(artifact: Any, **changes: Any) -> Any:
     Any
         The new artifact, checked by its type.
     """
+    from bearnav_cli.datatypes.cells import Plan  # here: a tree or a map is replaced without the cells' module
+
     if isinstance(artifact, Plan) and "map" in changes:
         changes["cells"] = dataclasses.replace(changes.get("cells", artifact.cells), map=changes.pop("map"))
     return dataclasses.replace(artifact, **changes)

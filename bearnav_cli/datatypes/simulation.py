@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from bearnav_cli.datatypes.frozen import data_keys, freeze, freeze_fields
+from bearnav_cli.datatypes.frozen import ArraysOnMap, data_keys, freeze, freeze_fields
 from bearnav_cli.datatypes.map_ import Map
 from bearnav_cli.errors import ArtifactError
 from bearnav_cli.runtime.invariants import Invariant
@@ -38,7 +38,7 @@ SIMULATION_KEYS = data_keys("simulation")
 
 
 @dataclass(frozen=True, eq=False)  # arrays inside: identity equality, a hash that works
-class Simulation:
+class Simulation(ArraysOnMap):
     """The closed-loop runs of ``bearnav simulate`` (``sim.npz``; metrics in ``sim.json``), R runs.
 
     What :func:`bearnav_cli.stages.simulate.rollout` returns (``stats`` empty) and what

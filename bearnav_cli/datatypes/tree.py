@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from bearnav_cli.datatypes.frozen import data_keys, freeze, freeze_fields
+from bearnav_cli.datatypes.frozen import ArraysOnMap, data_keys, freeze, freeze_fields
 from bearnav_cli.datatypes.map_ import Map
 from bearnav_cli.errors import ArtifactError
 from bearnav_cli.runtime.invariants import TREE_SHAPE as _TREE_SHAPE
@@ -18,7 +18,7 @@ __all__ = ["Tree", "TREE_INVARIANTS", "TREE_KEYS"]
 
 
 @dataclass(frozen=True, eq=False)  # arrays inside: identity equality, a hash that works
-class Tree:
+class Tree(ArraysOnMap):
     """A tree rooted at the goal, with the RRT* collision samples (ALGORITHMS §2–3).
 
     Used for both ``tree.npz`` (schema ``bearnav.tree/1``) and ``simplified.npz``

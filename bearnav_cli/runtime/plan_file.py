@@ -16,6 +16,7 @@ so that the robot and ``bearnav inspect`` refuse the same files (DESIGN ยง3.1, ย
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import io
 import json
@@ -93,14 +94,8 @@ def content_hash(entries: dict[str, Any]) -> str:
     with their dtype string (``<f8``), shape and C-order bytes.
     """
     if "map" in entries:
-        try:
-            document = json.loads(entries["map"])
-        except (TypeError, ValueError):  # a damaged entry: hashed as it is, its loader names the problem
-            document = None
-        if isinstance(document, dict):
-            for name in UNHASHED_MAP_FIELDS:
-                document.pop(name, None)
-            entries = {**entries, "map": canonical_json(document)}
+        value = entries["map"]
+        entries = {**entries, "map": (_hashed_map_text if isinstance(value, str) else _map_to_hash)(value)}
     digest = hashlib.sha256()
     for key in sorted(entries):
         value = entries[key]
@@ -112,6 +107,25 @@ def content_hash(entries: dict[str, Any]) -> str:
             digest.update(f"{key}|{array.dtype.str}|{array.shape}|".encode())
             digest.update(array.tobytes())
     return digest.hexdigest()
+
+
+def _map_to_hash(value: Any) -> Any:
+    """The map entry :func:`content_hash` hashes: its JSON object as canonical JSON without
+    :data:`UNHASHED_MAP_FIELDS`; anything else as it is (a damaged entry: its loader names the problem)."""
+    try:
+        document = json.loads(value)
+    except (TypeError, ValueError):
+        return value
+    if not isinstance(document, dict):
+        return value
+    for name in UNHASHED_MAP_FIELDS:
+        document.pop(name, None)
+    return canonical_json(document)
+
+
+#: :func:`_map_to_hash` of a text, made once per text: ``bearnav plan`` hashes the same embedded map in each of
+#: its artifacts, and a loaded artifact's once more.
+_hashed_map_text = functools.lru_cache(maxsize=4)(_map_to_hash)
 
 
 # --------------------------------------------------------------------------- reading
