@@ -226,8 +226,9 @@ def whole_process_text(w: dict[str, Any], rounds: int) -> str:
         f"Whole process, median of {w['runs']} runs: {plan:.2f} s in the inherited environment ({verdicts(plan)}), "
         f"{cached:.2f} s with byte-code caches ({verdicts(cached)}); "
         + (
-            "this machine sets `PYTHONDONTWRITEBYTECODE=1`, so without the cache prefix every start compiles "
-            f"`bearnav_cli` ({med['import'] - med['import_cached']:.2f} s more for the imports). "
+            "this machine sets `PYTHONDONTWRITEBYTECODE=1`: without the cache prefix a start reads only the byte-code "
+            "`make` compiled at install (`compileall`) and compiles any module changed since "
+            f"({med['import'] - med['import_cached']:+.2f} s for the imports). "
             if w["no_bytecode"]
             else ""
         )

@@ -14,7 +14,8 @@ and writing the tree included:
 The maps are those of ``bench/rrtstar.py`` (kitchen, box500, office), written once to ``map.json``
 by ``bearnav map``. Per map and iteration count, ``ROUNDS`` rounds (seed = round), in each round
 every command once, the order rotating; medians. Two environments, side by side: the inherited one
-(where ``PYTHONDONTWRITEBYTECODE`` may be set, so that every start compiles ``bearnav_cli``) and
+(where ``PYTHONDONTWRITEBYTECODE`` may be set, so that a start reads only the byte-code ``make`` compiled at
+install and compiles any ``bearnav_cli`` module changed since) and
 byte-code caching on, the caches in a temporary ``PYTHONPYCACHEPREFIX`` warmed by one run of each
 command. Each run's in-process planning time (our ``tree.npz`` manifest's ``elapsed_s``, the
 OMPL script's ``solve_s``) is read too, so the rest (start-up, imports, map, writing) shows.
