@@ -65,7 +65,7 @@ MAPS = (
     ("office", "office", 1.0),
 )
 ITERATIONS = (1500, 10_000)
-ROUNDS = 5
+ROUNDS = 11
 #: The issue's bound on the whole-process ratio (ours / OMPL).
 RATIO_TARGET = 1.2
 OMPL_SCRIPT = BENCH_DIR / "ompl_rrtstar.py"

@@ -261,3 +261,34 @@ def test_the_program_ends_without_the_interpreters_teardown(tmp_path, args, code
         done = subprocess.run([sys.executable, str(program), *args], capture_output=True, text=True, cwd=tmp_path)
         assert done.returncode == code, (name, done.stderr)
         assert done.stdout.endswith("atexit ran\n" + ("torn down\n" if teardown else "")), (name, done.stdout)
+
+
+#: A program that reports whether the garbage collector runs while a command does its work.
+COLLECTOR = """
+import atexit, gc, sys
+import bearnav_cli.pipeline as pipeline
+from bearnav_cli.cli import app
+seen = []
+real = pipeline.reset_activity
+def spy(*args, **kwargs):
+    seen.append(gc.isenabled())
+    return real(*args, **kwargs)
+pipeline.reset_activity = spy
+importing = gc.isenabled()
+atexit.register(lambda: print("importing", importing, "command", seen, "frozen", gc.get_freeze_count() > 0,
+                              file=sys.stderr, flush=True))
+app()
+"""
+
+
+def test_the_program_collects_no_garbage_while_it_imports(tmp_path, plans):
+    """Run as ``bearnav``, the collector is off while Python imports (nothing it makes is garbage) and back on,
+    with the start-up's objects frozen, when the command works; a test or a library keeps its collector."""
+    for name, program_run in (("bearnav", True), ("other.py", False)):
+        program = tmp_path / name
+        program.write_text(COLLECTOR)
+        args = [sys.executable, str(program), "inspect", str(plans["bare"] / "plan.npz")]
+        done = subprocess.run(args, capture_output=True, text=True, cwd=tmp_path)
+        assert done.returncode == 0, (name, done.stderr)
+        expected = f"importing {not program_run} command [True] frozen {program_run}"
+        assert expected in done.stderr, (name, done.stderr)

@@ -9,6 +9,7 @@ itself how many of its jobs are stored).
 
 import atexit
 import functools
+import gc
 import os
 import signal
 import sys
@@ -104,6 +105,9 @@ def handles_errors(command: Callable) -> Callable:
     def wrapper(*args: Any, **kwargs: Any) -> Any:
         from bearnav_cli import pipeline
 
+        if AS_PROGRAM and not gc.isenabled():  # the start-up's objects (cli.startup) stay out of every collection
+            gc.freeze()
+            gc.enable()
         setup_logging()
         pipeline.reset_activity()
         _SIGNALLED.clear()
