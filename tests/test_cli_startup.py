@@ -42,8 +42,9 @@ NOT_FOR_HELP = (
     "bearnav_cli.runtime",
     "bearnav_cli.stages",
 )
-#: Modules of those packages that import no numpy: the choices and defaults a ``Params`` declaration shows.
-NUMPY_FREE = ("bearnav_cli.runtime", "bearnav_cli.runtime.defaults")
+#: Modules of those packages that import no numpy: the choices and defaults a ``Params`` declaration shows, and
+#: the packages' lazy names.
+NUMPY_FREE = ("bearnav_cli.runtime", "bearnav_cli.runtime.defaults", "bearnav_cli.runtime.lazy")
 #: The command modules (:data:`bearnav_cli.cli.main.COMMANDS`), each imported only by its commands.
 COMMAND_MODULES = {f"bearnav_cli.cli.{module}" for module, _function in COMMANDS.values()}
 #: Each artifact kind the map stage and the planning stages write, and the simulation.
@@ -186,6 +187,7 @@ def test_inspect_imports_the_loader_and_numpy_only(plans):
     assert runtime == [
         "bearnav_cli.runtime",
         "bearnav_cli.runtime.invariants",
+        "bearnav_cli.runtime.lazy",
         "bearnav_cli.runtime.plan_file",
         "bearnav_cli.runtime.robot",
         "bearnav_cli.runtime.schema",

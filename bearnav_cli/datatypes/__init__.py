@@ -18,8 +18,7 @@ with one job:
 - :mod:`~bearnav_cli.datatypes.kinds` — every kind's invariants, :func:`validate_artifact`, :func:`replace`.
 """
 
-import importlib
-from typing import Any
+from bearnav_cli.runtime.lazy import lazy_names
 
 #: Where each name of ``__all__`` is defined: a module is imported when one of its names is first used
 #: (PEP 562), so that ``bearnav rrtstar`` (a map in, a tree out) imports neither the cells' nor the
@@ -38,18 +37,7 @@ _ORIGIN = {
 _SUBMODULES = ("cells", "frozen", "kinds", "map_", "simulation", "tree", "words")
 
 
-def __getattr__(name: str) -> Any:
-    if name in _SUBMODULES:
-        return importlib.import_module(f"{__name__}.{name}")
-    if name in _ORIGIN:
-        value = getattr(importlib.import_module(f"{__name__}.{_ORIGIN[name]}"), name)
-        globals()[name] = value
-        return value
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def __dir__() -> list[str]:
-    return sorted({*globals(), *__all__, *_SUBMODULES})
+__getattr__, __dir__ = lazy_names(__name__, globals(), _ORIGIN, _SUBMODULES)
 
 
 __all__ = [

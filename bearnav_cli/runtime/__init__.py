@@ -25,8 +25,7 @@
 same step.
 """
 
-import importlib
-from typing import Any
+from bearnav_cli.runtime.lazy import lazy_names
 
 #: Where each name of ``__all__`` is defined: the submodules are imported when a name is first used
 #: (PEP 562), so that reading ``runtime.schema`` (every artifact load) does not import the controller.
@@ -72,18 +71,7 @@ _SUBMODULES = (
 )
 
 
-def __getattr__(name: str) -> Any:
-    if name in _SUBMODULES:
-        return importlib.import_module(f"{__name__}.{name}")
-    if name in _ORIGIN:
-        value = getattr(importlib.import_module(f"{__name__}.{_ORIGIN[name]}"), name)
-        globals()[name] = value
-        return value
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def __dir__() -> list[str]:
-    return sorted({*globals(), *__all__, *_SUBMODULES})
+__getattr__, __dir__ = lazy_names(__name__, globals(), _ORIGIN, _SUBMODULES)
 
 
 #: Every name of ``_ORIGIN``, and the two submodules the package has always exported.
