@@ -309,11 +309,27 @@ def bounded_control(
                 break
         return direction, pace
 
-    def tolerance_at(who: np.ndarray, k: np.ndarray, point: np.ndarray) -> np.ndarray:
-        """What cells ``k`` tolerate over the sets of robots ``who`` placed at the reference points ``point``."""
-        shifted = sets.vertices[who] + (point - sets.x_hat[who])[:, None, :]
-        valid = bounded.valid_vertices(shifted, sets.count[who])
-        return set_tolerance(arrays, k, shifted, valid, swing, reach)
+    def placed(who: np.ndarray, point: np.ndarray) -> np.ndarray:
+        """The sets of robots ``who`` moved with their estimates to the reference points ``point`` (the look-ahead
+        point's set is ``X_t + λh(θ)``), (R', W, 2)."""
+        return sets.vertices[who] + (point - sets.x_hat[who])[:, None, :]
+
+    def certified_step(who, k, point, heading, direction, local):
+        """Whether robots ``who`` may step in cells ``k`` from the reference points ``point`` at ``heading``: their
+        error within what the cell tolerates (over their sets, where ``local``: the truth is known to be in that
+        cell; else ``τ_c``), and the step's certified pace and (bent) direction, both 0 where they may not."""
+        e = error[who]
+        tau = arrays.tolerance_in(k)
+        short = np.flatnonzero(local & (e + margin > tau + s.tol))
+        if len(short):  # τ_c is the least over the cell; where the set lies, the cell may tolerate more
+            at = placed(who[short], point[short])
+            valid = bounded.valid_vertices(at, sets.count[who[short]])
+            tau[short] = set_tolerance(arrays, k[short], at, valid, swing, reach)
+        direction, pace = direction.copy(), np.zeros(len(k))
+        go = np.flatnonzero(e + margin <= tau + s.tol)
+        if len(go):
+            direction[go], pace[go] = step_pace(k[go], point[go], e[go], direction[go], heading[go])
+        return direction, pace
 
     # the truth is in the active cell (Theorem 2), so its estimate may lie up to e outside it; not after a
     # look-ahead unicycle's look swung p around the axle: then p̂ must lie in a cell eroded by e
@@ -330,21 +346,14 @@ def bounded_control(
         # grown by the swing): then the truth is in that cell, and its certified policy applies; of those cells
         # the least rank, which need not be the one holding p̂ (near a boundary between two cells, a third may)
         if len(open_):
-            offset = (reference[open_] - sets.x_hat[open_])[:, None, :]
-            shifted = sets.vertices[open_] + offset
-            k = least_rank_cell_holding(arrays, reference[open_], shifted, sets.count[open_], swing)
-            field, ok = _unit_field(arrays, np.maximum(k, 0), reference[open_])
-            take = (k >= 0) & ok
-            sure, k = open_[take], k[take]
-            u[sure], last_dir[sure] = field[take], field[take]
+            k = least_rank_cell_holding(
+                arrays, reference[open_], placed(open_, reference[open_]), sets.count[open_], swing
+            )
+            sure, k = open_[k >= 0], k[k >= 0]
+            field, ok = _unit_field(arrays, k, reference[sure])
+            sure, k, field = sure[ok], k[ok], field[ok]
+            u[sure], last_dir[sure] = field, field
             cell[sure], target[sure], stalled[sure], in_cell[sure], holder[sure] = k, -1, False, True, -1
-        move = in_cell & (error + margin <= arrays.tolerance_in(cell) + s.tol)
-        # τ_c is the least over the cell; where the robot's set lies, its cell may tolerate more (the certificate
-        # at the truth, runtime.tolerance): a long cell's far end no longer waits for its exit's neck
-        short = np.flatnonzero(in_cell & ~move)
-        if len(short):
-            tau = tolerance_at(short, cell[short], reference[short])
-            move[short] = error[short] + margin <= tau + s.tol
         # no cell holds the set: stop and look until one does (ALGORITHMS §12.3 step 4; the look shrinks the set and,
         # for a look-ahead unicycle, swings it through every heading), and only when a whole look has not told
         # (worst-case bearings repeat the same set) drive uncertified, rather than stay stuck looking
@@ -352,14 +361,16 @@ def bounded_control(
         undecided = (holder >= 0) & ((error + margin > arrays.tolerance_in(holder) + s.tol) | ~looked)
     else:
         undecided = np.zeros(r, bool)
-        move = in_cell
     # undecided robots have not chosen a cell: they look before any approach
     cell, target = np.where(undecided, -1, cell), np.where(undecided, -1, target)
     outside = known & ~in_cell & ~undecided
+    move = in_cell.copy()
     pace = np.where(move, 1.0, 0.0)
     if arrays.funnel and move.any():
+        # the truth is in the active cell: what that cell tolerates over the set (runtime.tolerance; a long cell's
+        # far end no longer waits for its exit's neck), and the certified pace
         idx = np.flatnonzero(move)
-        u[idx], pace[idx] = step_pace(cell[idx], reference[idx], error[idx], u[idx], phi[idx])
+        u[idx], pace[idx] = certified_step(idx, cell[idx], reference[idx], phi[idx], u[idx], True)
         move[idx] = pace[idx] > 0.0
     if arrays.funnel:
         # at the edge of D after a whole look (a cell grown by e holds p̂, none holds the set): that cell's field,
@@ -410,22 +421,19 @@ def bounded_control(
                     arrays, there, error[idx], below=np.where(had >= 0, arrays.cell_rank[np.maximum(had, 0)], np.inf)
                 )
                 k = np.where(k >= 0, k, had)
-                held = np.flatnonzero(k >= 0)  # a cell it drives in there: what it tolerates at the set
+                local = k >= 0  # a cell it drives in there: what it tolerates over its set
                 # without a cell, the one a robot there would wait in (a cell grown by e holds p̂): its τ_c, for the
                 # robot there is not in it yet and moves only once e lets a cell hold p̂ eroded by e
                 k = np.where(k >= 0, k, least_rank_cell(arrays, there, -error[idx]))
             else:
-                k, held = np.full(len(idx), -1), np.zeros(0, np.int64)
-            tau = arrays.tolerance_in(k)
-            if len(held):
-                tau[held] = tolerance_at(idx[held], k[held], there[held])
-            over = error[idx] + margin <= tau + s.tol
-            # and where the robot may take a step: a large e (a long cell's far end) near a face may leave no pace,
-            # and a look ended there turned back, stood, and began the look again, never turning all around
-            able = np.flatnonzero(over & (k >= 0))
+                k, local = np.full(len(idx), -1), np.zeros(len(idx), bool)
+            # the look is over where the robot may step there (a large e near a face may leave no pace: a look ended
+            # there turned back, stood, and began the look again, never turning all around)
+            over = np.zeros(len(idx), bool)
+            able = np.flatnonzero(k >= 0)
             if len(able):
                 field, ok = _unit_field(arrays, k[able], there[able])
-                _, pace_there = step_pace(k[able], there[able], error[idx[able]], field, resume[idx[able]])
+                _, pace_there = certified_step(idx[able], k[able], there[able], resume[idx[able]], field, local[able])
                 over[able] = ok & (pace_there > 0.0)
             out = np.flatnonzero(k < 0)
             if len(out):
