@@ -238,10 +238,9 @@ def evaluate(
     )
 
 
-def _all_below(eps_pair: np.ndarray, g: LiveGrid, n_cells: int, cells: np.ndarray | None = None) -> np.ndarray:
+def _all_below(eps_pair: np.ndarray, g: LiveGrid, n_cells: int, sel: Any = slice(None)) -> np.ndarray:
     """Whether every point of each cell has its bound below the margin there (:meth:`LiveGrid.pair_margin`), (C,);
-    ``eps_pair`` of the pairs of ``cells`` only (sorted), when given."""
-    sel = slice(None) if cells is None else np.isin(g.pair_cell, cells)
+    ``eps_pair`` of the pairs ``sel`` selects (an index of the grid's pairs), default all."""
     short = eps_pair >= g.pair_margin(eps_pair, sel)
     failing = np.bincount(g.pair_cell[sel][short], minlength=n_cells) > 0
     return ~failing
@@ -271,7 +270,7 @@ def _eta_star(
         pc, pp = pair_cell[sel], pair_point[sel]
         eps_pair = bounds_of(arrays, points[pp], visible[pp], guess[pc], landmarks)
         eps_cell = _cell_max(eps_pair, pc, n_cells)[cells]
-        good = _all_below(eps_pair, g, n_cells, cells)[cells]
+        good = _all_below(eps_pair, g, n_cells, sel)[cells]
         out[cells[good]] = np.maximum(out[cells[good]], guess[cells[good]])
         pending[cells[good]] = False
         bad = cells[~good]

@@ -135,7 +135,7 @@ class LiveGrid:
             cell, x = cells[sl], self.points[points[sl]][:, None, :]
             grow = lam + eps[sl] + self.swing
             tau = tolerance.set_tolerance(arrays, cell, x, np.ones((len(cell), 1), bool), grow, reach)
-            out[sl] = tau - (self.drift * self.step + self.nu + self.swing)
+            out[sl] = tau - _allowance(self.drift, self.step, self.nu, self.swing)
         return np.maximum(out, self.margin[cells])
 
     def point_margin(self, eps: np.ndarray | None = None) -> np.ndarray:
@@ -316,6 +316,12 @@ def bounds_of(
     return out
 
 
+def _allowance(drift: float, step: float, nu: float, swing: float) -> float:
+    """What a step (``(κ + 2 sin(ψ/2))ℓ + ν``) and a look-ahead point's swing (``2λ sin(ψ/2)``) take from the
+    error a cell tolerates, map units: the margin a look's bound must stay below is the rest."""
+    return drift * step + nu + swing
+
+
 def grid(
     plan: Plan,
     eta_deg: float | None = None,
@@ -413,7 +419,7 @@ def grid(
     swing = 2.0 * lam * math.sin(0.5 * math.radians(compass)) if lam > 0 else 0.0
     drift = settings.ErrorBounds(heading_bound=math.radians(compass), slip=kappa).drift
     tau = np.asarray(arrays.usable_tolerance, float)
-    margin = tau - drift * step_len - nu - swing
+    margin = tau - _allowance(drift, step_len, nu, swing)
 
     origin = np.asarray(arrays.bounds, float)[:2]
     points, pair_cell, pair_point = _samples(polygons, lam, resolution, origin)
