@@ -278,25 +278,22 @@ def growth(iteration_counts: tuple[int, ...], runs: int) -> str:
     simplify, reason = load_simplify()
     times: dict[int, list[float]] = {n: [] for n in iteration_counts}
     simplify_times: dict[int, list[float]] = {n: [] for n in iteration_counts}
-    # one untimed round first: what a process does once (simplify imports scipy.spatial, a fifth of a
-    # second, for its first k-d tree query at the largest size) is not growth, and with three runs it
-    # would decide the median
-    for n in iteration_counts:
-        _, tree = run_ours(map_, space, step, n, runs)
-        if simplify is not None:
-            try:
-                simplify.run(tree)
-            except Exception as exc:  # report, do not fail the benchmark
-                simplify, reason = None, f"simplify.run raised {type(exc).__name__}: {exc}"
-    for seed in range(runs):  # round-robin over the sizes so load from elsewhere hits all alike
+    # round -1 is not timed: what a process does once (simplify imports scipy.spatial, a fifth of a second,
+    # for its first k-d tree query at the largest size) is not growth, and with three runs it would decide
+    # the median; then round-robin over the sizes so load from elsewhere hits all alike
+    for seed in range(-1, runs):
         for n in iteration_counts:
-            result, tree = run_ours(map_, space, step, n, seed)
-            times[n].append(result.seconds)
+            result, tree = run_ours(map_, space, step, n, seed if seed >= 0 else runs)
+            seconds = None
             if simplify is not None:
                 try:
-                    simplify_times[n].append(timed(simplify.run, tree)[0])
+                    seconds = timed(simplify.run, tree)[0]
                 except Exception as exc:  # report, do not fail the benchmark
                     simplify, reason = None, f"simplify.run raised {type(exc).__name__}: {exc}"
+            if seed >= 0:
+                times[n].append(result.seconds)
+                if seconds is not None:
+                    simplify_times[n].append(seconds)
     t_rrt = {n: statistics.median(times[n]) for n in iteration_counts}
     log("growth: " + ", ".join(f"{n}: {t:.3f} s" for n, t in t_rrt.items()))
 

@@ -252,17 +252,27 @@ app()
 """
 
 
+def run_named(tmp_path: Path, source: str, *args: str) -> list[tuple[bool, subprocess.CompletedProcess]]:
+    """``source`` run as a program named ``bearnav`` (the ``bearnav`` program) and as ``other.py`` (a program that
+    uses the app), with ``args``: ``[(True, done), (False, done)]``."""
+    runs = []
+    for name in ("bearnav", "other.py"):
+        program = tmp_path / name
+        program.write_text(source)
+        done = subprocess.run([sys.executable, str(program), *args], capture_output=True, text=True, cwd=tmp_path)
+        runs.append((name == "bearnav", done))
+    return runs
+
+
 @pytest.mark.parametrize("args, code", [(["--version"], 0), (["nope"], 2), (["inspect", "missing.npz"], 3)])
 def test_the_program_ends_without_the_interpreters_teardown(tmp_path, args, code):
     """Run as ``bearnav``, the app ends once its command is done: the ``atexit`` functions run and stdout is
     flushed, the modules and objects are not torn down (bench/README.md "RRT* as whole processes"); called from
     another program (a test, a library) it leaves the exit to Python."""
-    for name, teardown in (("bearnav", False), ("other.py", True)):
-        program = tmp_path / name
-        program.write_text(PROGRAM)
-        done = subprocess.run([sys.executable, str(program), *args], capture_output=True, text=True, cwd=tmp_path)
-        assert done.returncode == code, (name, done.stderr)
-        assert done.stdout.endswith("atexit ran\n" + ("torn down\n" if teardown else "")), (name, done.stdout)
+    for as_program, done in run_named(tmp_path, PROGRAM, *args):
+        assert done.returncode == code, (as_program, done.stderr)
+        teardown = "" if as_program else "torn down\n"
+        assert done.stdout.endswith("atexit ran\n" + teardown), (as_program, done.stdout)
 
 
 #: A program that reports whether the garbage collector runs while a command does its work.
@@ -286,11 +296,7 @@ app()
 def test_the_program_collects_no_garbage_while_it_imports(tmp_path, plans):
     """Run as ``bearnav``, the collector is off while Python imports (nothing it makes is garbage) and back on,
     with the start-up's objects frozen, when the command works; a test or a library keeps its collector."""
-    for name, program_run in (("bearnav", True), ("other.py", False)):
-        program = tmp_path / name
-        program.write_text(COLLECTOR)
-        args = [sys.executable, str(program), "inspect", str(plans["bare"] / "plan.npz")]
-        done = subprocess.run(args, capture_output=True, text=True, cwd=tmp_path)
-        assert done.returncode == 0, (name, done.stderr)
-        expected = f"importing {not program_run} command [True] frozen {program_run}"
-        assert expected in done.stderr, (name, done.stderr)
+    for as_program, done in run_named(tmp_path, COLLECTOR, "inspect", str(plans["bare"] / "plan.npz")):
+        assert done.returncode == 0, (as_program, done.stderr)
+        expected = f"importing {not as_program} command [True] frozen {as_program}"
+        assert expected in done.stderr, (as_program, done.stderr)
