@@ -50,6 +50,9 @@ STALL_FIELD = 1e-6
 #: How many times a step that slides along a near face is bent inward (:func:`~bearnav_cli.runtime.safety.bend_inward`)
 #: before the best pace found is taken: each bend is sized for the step's error at the last direction.
 BENDS = 3
+#: How many headings, evenly spaced, a look-ahead unicycle without a cell tries for one that starts the certificate
+#: (5° apart: ``p`` moves ``0.09λ`` between two).
+HEADINGS = 72
 
 
 def control(
@@ -331,6 +334,34 @@ def bounded_control(
             direction[go], pace[go] = step_pace(k[go], point[go], e[go], direction[go], heading[go])
         return direction, pace
 
+    def certified_heading(who: np.ndarray, prefer: np.ndarray) -> np.ndarray:
+        """A heading for each look-ahead unicycle ``who`` from which the whole set of ``p`` lies in a cell and a
+        certified step exists there, shape (R',); NaN where no candidate heading has one.
+
+        Turning in place leaves the body where it is and swings ``p`` on its circle around the axle, so a robot
+        without a cell may start the certificate at any heading (ALGORITHMS §12.3 step 4, §12.6): of
+        :data:`HEADINGS` headings evenly spaced from ``prefer``, the least-rank cell's, the nearest to ``prefer``
+        among equals."""
+        n = len(who)
+        ring = np.arange(HEADINGS)
+        # 0, +Δ, −Δ, +2Δ, … : the first of equals is the least turn from ``prefer``
+        offsets = (2.0 * math.pi / HEADINGS) * np.where(ring % 2, (ring + 1) // 2, -(ring // 2))
+        theta = prefer[:, None] + offsets[None, :]
+        rep, th = np.repeat(who, HEADINGS), theta.ravel()
+        point = lookahead_point(sets.x_hat[rep], th, lam)
+        k = least_rank_cell_holding(arrays, point, placed(rep, point), sets.count[rep], swing)
+        j = np.flatnonzero(k >= 0)
+        rank = np.full(len(k), np.inf)
+        if len(j):
+            field, ok = _unit_field(arrays, k[j], point[j])
+            _, pace = certified_step(rep[j], k[j], point[j], th[j], field, np.ones(len(j), bool))
+            j = j[ok & (pace > 0.0)]
+            rank[j] = arrays.cell_rank[k[j]]
+        rank = rank.reshape(n, HEADINGS)
+        best = np.argmin(rank, axis=1)
+        rows = np.arange(n)
+        return np.where(np.isfinite(rank[rows, best]), bearing.wrap(theta[rows, best]), np.nan)
+
     # the truth is in the active cell (Theorem 2), so its estimate may lie up to e outside it; not after a
     # look-ahead unicycle's look swung p around the axle: then p̂ must lie in a cell eroded by e
     swung = np.isfinite(state.resume) if ahead else np.zeros(r, bool)
@@ -440,6 +471,13 @@ def bounded_control(
                 # outside D there: the uncertified rules move it only at a positive error-ball pace; a
                 # look ended at pace 0 turned back to wait, and waiting began the look again
                 over[out] = error_ball_pace(arrays, s, k[out], there[out], error[idx[out]])[0] > 0.0
+            if arrays.funnel:
+                # a robot without a cell turns to any heading that starts the certificate, not only back
+                free = np.flatnonzero(had < 0)
+                if len(free):
+                    theta = certified_heading(idx[free], resume[idx[free]])
+                    got = np.isfinite(theta)
+                    resume[idx[free[got]]], over[free[got]] = theta[got], True
             back[idx[over]] = True
         # the swung p says nothing about the cell the robot will drive in: it keeps the one it had
         cell[returning], target[returning], relocated[returning] = state.cell[returning], state.target[returning], False
