@@ -128,6 +128,48 @@ def test_lemma_5_and_the_static_bound(seed):
     assert bounded.contains(predicted, n, x + move + slip, 1e-9).all()
 
 
+@pytest.mark.parametrize("seed", range(4))
+def test_the_heading_from_the_bearings_holds_the_compass_error_and_narrows_it(seed):
+    """``common_rotation`` (ALGORITHMS §12.1): every bearing of a view turned by the same compass error ``r``
+    (``|r| ≤ ψ``) plus its own camera error (``≤ η``, at the bound or drawn within it): the interval it returns holds
+    ``r`` and is never wider than the compass's, the set clipped by its cones holds the truth, and with three or
+    more landmarks around the robot it bounds the heading far more tightly than the compass alone."""
+    rng = np.random.default_rng(seed)
+    r, n_lm = 300, 6
+    eta, psi = math.radians(0.2), math.radians(rng.choice([1.0, 3.0, 10.0]))
+    landmarks = rng.uniform(0, 10, size=(n_lm, 2))
+    x = rng.uniform(0.5, 9.5, size=(r, 2))
+    visible = rng.random((r, n_lm)) < 0.7
+    d = landmarks[None] - x[:, None]
+    truth = np.arctan2(d[..., 1], d[..., 0])
+    compass = rng.uniform(-psi, psi, r)
+    compass[: r // 3] = rng.choice([-psi, psi], r // 3)  # a third at the compass's bound
+    camera = rng.uniform(-eta, eta, truth.shape)
+    camera[r // 2 :] = rng.choice([-eta, eta], camera[r // 2 :].shape)  # half at the camera's bound
+    measured = truth + compass[:, None] + camera
+    bounds = np.array([0.0, 0.0, 10.0, 10.0])
+    start_v, start_n = bounded.box(bounds, r)
+    # a prior set, as the prediction gives one: a square around each truth
+    prior_v, prior_n = bounded.intersect_cones(start_v, start_n, landmarks, truth, np.ones_like(visible), 0.05)
+    middle, half = bounded.common_rotation(
+        prior_v, prior_n, landmarks, measured, visible, np.full(r, eta), np.full(r, psi), 1e-9
+    )
+    assert np.all(half <= psi + 1e-15)
+    assert np.all(np.abs(compass - middle) <= half * (1 + 1e-9) + 1e-12)
+    vertices, count = bounded.intersect_cones(
+        prior_v, prior_n, landmarks, measured - middle[:, None], visible, eta + half, 1e-9
+    )
+    assert bounded.contains(vertices, count, x, 1e-9).all()
+    seeing = np.count_nonzero(visible, axis=1)
+    assert np.all(half[seeing < 2] == psi)  # one bearing says nothing about the heading
+    # three or more in view: the interval is set by the bearings (a few camera bounds wide), not by the compass
+    many = seeing >= 3
+    assert np.median(half[many]) < 0.5 * psi
+    # and the set is no wider than the compass's cones give
+    wide_v, wide_n = bounded.intersect_cones(prior_v, prior_n, landmarks, measured, visible, eta + psi, 1e-9)
+    assert np.all(bounded.diameter(vertices, count) <= bounded.diameter(wide_v, wide_n) + 1e-9)
+
+
 def test_a_heading_error_turns_the_step_and_the_prediction_holds_it():
     """``bounded_update`` with a heading error bound ψ: a step commanded through a heading that errs by ψ is turned
     by ψ, and with its slip it ends within ``(κ + 2 sin(ψ/2))‖d̂‖ + ν`` of the measured one (``ErrorBounds.drift``):
@@ -449,13 +491,16 @@ def test_the_tolerance_at_a_set_keeps_the_certificate_at_every_truth_in_it(seed)
     assert progress.max() <= 1e-9 * scale_u.max(), progress.max()
 
 
-LOOP_CASES = [(seed, worst, fov) for seed in (1, 4) for worst in (False, True) for fov in (360.0, 60.0)]
+LOOP_CASES = [(seed, worst, fov, None) for seed in (1, 4) for worst in (False, True) for fov in (360.0, 60.0)]
+# a compass that errs by up to 2° on top of the camera's 0.25°: a bias per run, ±2° under the worst case
+LOOP_CASES += [(1, False, 60.0, 2.0), (4, True, 60.0, 2.0)]
 
 
-@pytest.mark.parametrize("seed,worst,fov", LOOP_CASES)
-def test_the_set_estimator_keeps_the_truth_and_the_certificate(seed, worst, fov):
+@pytest.mark.parametrize("seed,worst,fov,compass", LOOP_CASES)
+def test_the_set_estimator_keeps_the_truth_and_the_certificate(seed, worst, fov, compass):
     """estimator = set under bounded noise: no collision, no step with the truth outside its set, no empty set,
-    and every certified step ends in the certified domain D (Theorem 2, in discrete time)."""
+    and every certified step ends in the certified domain D (Theorem 2, in discrete time); with a compass that
+    errs too, the heading the bearings bound (``common_rotation``) keeps all of it."""
     plan = random_plan(seed)
     arrays = PlanArrays.from_plan(plan)
     params = simulate.Params(
@@ -463,6 +508,7 @@ def test_the_set_estimator_keeps_the_truth_and_the_certificate(seed, worst, fov)
         noise_bound_deg=0.25,
         noise_worst=worst,
         fov=fov,
+        compass_error_deg=compass,
         starts="domain:12",
         seed=seed,
         record_trajectories=False,
@@ -539,10 +585,11 @@ def test_a_bad_noise_bound_names_the_field(value):
     assert info.value.field == "noise_bound_deg"
 
 
-@pytest.mark.parametrize("worst", [False, True])
-def test_the_look_ahead_unicycle_under_the_set_estimator(worst):
+@pytest.mark.parametrize(("worst", "compass"), [(False, None), (True, None), (False, 2.0), (True, 2.0)])
+def test_the_look_ahead_unicycle_under_the_set_estimator(worst, compass):
     """A look-ahead unicycle (ALGORITHMS §12.6) with a 60° camera: the look swings its point around the axle,
-    and still no certified step ends outside D, the truth never leaves its set, nothing collides."""
+    and still no certified step ends outside D, the truth never leaves its set, nothing collides; with a compass
+    that errs by up to 2°, its point's estimate and every command turn with the heading it reads."""
     from bearnav_cli import pipeline
     from tests.conftest import build_map
     from tests.funnel_maps import ITERATIONS, random_spec
@@ -558,6 +605,7 @@ def test_the_look_ahead_unicycle_under_the_set_estimator(worst):
         dynamics="unicycle",
         noise_bound_deg=0.25,
         noise_worst=worst,
+        compass_error_deg=compass,
         fov=60.0,
         starts="domain:8",
         max_steps=600,

@@ -36,6 +36,7 @@ __all__ = [
     "box",
     "clip_pairs",
     "centre",
+    "common_rotation",
     "clip",
     "cone_rows",
     "contains",
@@ -47,6 +48,11 @@ __all__ = [
     "valid_vertices",
 ]
 
+#: :func:`common_rotation` cuts the interval of the heading error into this many parts per level, and narrows it
+#: this many levels: the interval it keeps is at most ``2/ROTATION_PARTS**ROTATION_LEVELS`` of the compass's wider
+#: than the rotations that fit the bearings.
+ROTATION_PARTS = 4
+ROTATION_LEVELS = 3
 #: Widest vertex array kept: a set with more vertices is merged down (outward) to this many. A set
 #: rarely has more than 12 (the kitchen's 28 tags all around: at most 10 in 1,000 runs).
 MAX_VERTICES = 24
@@ -359,6 +365,83 @@ def intersect_cones(
     eta_pairs = np.broadcast_to(np.asarray(eta, float), (len(visible),))[rob]
     a, b = cone_rows(np.asarray(landmarks, float)[lm], np.asarray(angle, float)[rob, lm], eta_pairs)  # (P, 2, 2)
     return clip_pairs(vertices, count, rob, a, b, tol)
+
+
+def common_rotation(
+    vertices: np.ndarray,
+    count: np.ndarray,
+    landmarks: np.ndarray,
+    angle: np.ndarray,
+    visible: np.ndarray,
+    eta: np.ndarray,
+    psi: np.ndarray,
+    tol: float = 0.0,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The heading error bounded by the bearings themselves (ALGORITHMS §12.1): an interval ``[m − ψ', m + ψ']``
+    that holds the compass's error ``r``, with ``ψ' ≤ ψ``.
+
+    A world-frame bearing is the compass heading plus the camera's bearing, so every bearing of one view errs
+    by the same ``r`` (``|r| ≤ ψ``) plus its own camera error (``≤ η``): the truth lies in
+    ``X ∩ ∩_k W(l_k, φ̃_k − r)`` with cones of half-angle ``η``, and a rotation ``r`` for which that set is
+    empty is not the error. The test is exact for a whole interval ``[c − h, c + h]`` of rotations at once:
+    each cone of half-angle ``η`` around ``φ̃_k − r`` lies in the cone of half-angle ``η + h`` around
+    ``φ̃_k − c``, so where the wider cones miss the set, every rotation of the interval does. The interval
+    ``[−ψ, ψ]`` is cut into :data:`ROTATION_PARTS` parts, the parts so ruled out are dropped, and what is left
+    is cut again, :data:`ROTATION_LEVELS` times. The set clipped by the cones of half-angle ``η + ψ'`` around
+    ``φ̃_k − m`` then holds the truth (each cone around ``φ̃_k − r`` lies in it), and is never wider than
+    the cones of ``η + ψ`` around ``φ̃_k`` the compass alone gives.
+
+    Parameters
+    ----------
+    vertices, count : ndarray, shapes (R, W, 2), (R,)
+        The sets before this view's bearings (the prediction ``X_t⁻``, map units).
+    landmarks : ndarray, shape (L, 2)
+        Landmark positions (map units).
+    angle : ndarray, shape (R, L)
+        Measured world-frame bearing angles ``φ̃`` (rad): compass heading plus camera bearing.
+    visible : ndarray of bool, shape (R, L)
+        Which landmarks each robot sees.
+    eta, psi : ndarray, shape (R,)
+        The camera's bound ``η`` and the compass's ``ψ`` (rad; ``η + ψ < π/2``).
+    tol : float
+        Outside slack of every clip (map units).
+
+    Returns
+    -------
+    middle, half : ndarray, shape (R,)
+        ``m`` and ``ψ'`` (rad): ``m = 0``, ``ψ' = ψ`` where the bearings rule nothing out (fewer than two in
+        view, or every rotation ruled out: then a bound was broken, and the update says so).
+    """
+    psi = np.asarray(psi, float)
+    lo, hi = -psi.copy(), psi.copy()
+    todo = np.flatnonzero((np.count_nonzero(visible, axis=1) >= 2) & (psi > 0.0) & (count > 0))
+    parts = np.arange(ROTATION_PARTS)
+    for _ in range(ROTATION_LEVELS):
+        if not len(todo):
+            break
+        h = (hi[todo] - lo[todo]) / (2 * ROTATION_PARTS)
+        centres = lo[todo][:, None] + h[:, None] * (2 * parts + 1)  # (T, P)
+        rep = np.repeat(todo, ROTATION_PARTS)
+        _, n = intersect_cones(
+            vertices[rep],
+            count[rep],
+            landmarks,
+            angle[rep] - centres.reshape(-1, 1),
+            visible[rep],
+            eta[rep] + np.repeat(h, ROTATION_PARTS),
+            tol,
+        )
+        fits = (n > 0).reshape(-1, ROTATION_PARTS)
+        some = fits.any(axis=1)
+        rows = np.arange(len(todo))
+        first = np.argmax(fits, axis=1)
+        last = ROTATION_PARTS - 1 - np.argmax(fits[:, ::-1], axis=1)
+        # nothing fits: a bound was broken, or round-off at a narrow level; the interval before stays (it held
+        # every rotation that fits)
+        lo[todo] = np.where(some, centres[rows, first] - h, lo[todo])
+        hi[todo] = np.where(some, centres[rows, last] + h, hi[todo])
+        todo = todo[some]
+    return 0.5 * (lo + hi), 0.5 * (hi - lo)
 
 
 def clip_pairs(

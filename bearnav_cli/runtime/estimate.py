@@ -296,7 +296,10 @@ def bounded_update(
     Predict: ``X_t⁻ = (X_{t−1} + d̂_t) ⊕ B(κ‖d̂_t‖ + ν)`` with ``d̂_t = dt·motion`` the last command's
     displacement (rows moved outward, :func:`~bearnav_cli.runtime.bounded.grow`); a step that does not
     translate (standing, or a unicycle turning about its axle) adds nothing. Update: ``X_t = X_t⁻ ∩
-    ∩_{k visible} W(l_k, φ̃_k)`` with the cones of half-angle ``η`` (``s.bearing_bound``). A robot
+    ∩_{k visible} W(l_k, φ̃_k)`` with the cones of half-angle ``η`` (``s.bearing_bound``); with a compass
+    bound ``ψ > 0`` (``s.heading_bound``, a share of ``η``), the view's bearings bound the common heading
+    error themselves (:func:`~bearnav_cli.runtime.bounded.common_rotation`): the cones turn back by its
+    middle and have the half-angle ``η − ψ`` plus its half-width, never more than ``η``. A robot
     without a set yet (``state.known`` False) starts from ``B_r`` (:func:`axle_bounds`).
     Displacement mode measures the position itself: ``X_t = {x}``, ``e_t = 0``.
 
@@ -355,6 +358,15 @@ def bounded_update(
     angle = np.arctan2(bearings[..., 1], bearings[..., 0])
     scale = state.bound_scale.copy()
     eta = s.bearing_bound * scale
+    if s.heading_bound > 0.0:
+        # every bearing of a view shares the compass's error: where the view bounds it more tightly than ψ, the cones
+        # turn back by the middle of that bound and widen by its half-width only (§12.1's heading from bearings)
+        camera = (s.bearing_bound - s.heading_bound) * scale
+        middle, half = bounded.common_rotation(
+            vertices, count, arrays.landmarks, angle, visible, camera, s.heading_bound * scale, tol
+        )
+        angle = angle - middle[:, None]
+        eta = camera + half
     updated_v, updated_n = bounded.intersect_cones(vertices, count, arrays.landmarks, angle, visible, eta, tol)
     updated_v, updated_n = bounded.fit(updated_v, width).copy(), updated_n.copy()
     inconsistent = (updated_n == 0) & (count > 0)

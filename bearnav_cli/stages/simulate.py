@@ -282,11 +282,27 @@ def make_camera(
 
 
 def world_bound(params: Params, s: Settings) -> float | None:
-    """The bound on the simulated world's bearing errors (rad): ``noise_bound_deg``; with ``noise_worst``
-    alone the bound the robot assumes (``η``); ``None``: Gaussian ``noise_deg``."""
+    """The bound on the simulated camera's bearing errors (rad): ``noise_bound_deg``; with ``noise_worst``
+    alone the camera's share of the bound the robot assumes (``η − ψ``: the compass errs too,
+    :func:`compass_errors`); ``None``: Gaussian ``noise_deg``."""
     if params.noise_bound_deg is not None:
         return math.radians(params.noise_bound_deg)
-    return s.control.bearing_bound if params.noise_worst else None
+    return s.control.bearing_bound - s.control.heading_bound if params.noise_worst else None
+
+
+def compass_errors(params: Params, s: Settings, runs: int) -> np.ndarray | None:
+    """Each run's compass error (rad, shape (R,)) under bounded noise, or ``None`` (a true heading).
+
+    The robot's bound ``ψ`` (``compass_error_deg``) where it has one: a bias drawn once per run, uniform in
+    ``[−ψ, ψ]`` (a magnetometer indoors errs by a slowly varying bias), or ``±ψ`` in turn under ``noise_worst``.
+    Gaussian noise (``noise_deg``) keeps the true heading: it stresses the bearings alone.
+    """
+    psi = s.control.heading_bound
+    if psi <= 0.0 or world_bound(params, s) is None:
+        return None
+    if params.noise_worst:
+        return np.where(np.arange(runs) % 2, -psi, psi)
+    return np.random.default_rng([params.seed, 4]).uniform(-psi, psi, runs)
 
 
 def nearest_obstacle(arrays: PlanArrays) -> Callable[[np.ndarray], np.ndarray]:
@@ -379,6 +395,7 @@ def start_loop(
         world.landmarks,
         lookahead,
         window=PROGRESS_WINDOW,
+        compass=compass_errors(params, s, len(x0)),
     )
     if blocked.any():
         log.warning("%d starts are not free: counted as collisions", int(np.count_nonzero(blocked)))

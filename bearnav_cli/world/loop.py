@@ -17,7 +17,7 @@ import numpy as np
 
 from bearnav_cli import runtime
 from bearnav_cli.datatypes import Outcome
-from bearnav_cli.runtime import ControlState, PlanArrays
+from bearnav_cli.runtime import ControlState, PlanArrays, bearing
 from bearnav_cli.runtime import bounded as runtime_bounded
 from bearnav_cli.runtime import robot as runtime_robot
 from bearnav_cli.world.camera import Camera
@@ -65,6 +65,9 @@ class Loop:
         ``λ`` (map units): the plan is about the point ``λ`` ahead of the axle.
     window : int
         The no-progress window (steps with a fix).
+    compass : ndarray, shape (R,), optional
+        Each run's compass error (rad): the heading the robot reads is the true one plus it, so every world-frame
+        bearing it forms turns by it, and a world-frame command it gives is turned back by it; default none.
     """
 
     def __init__(
@@ -82,8 +85,10 @@ class Loop:
         lookahead: float = 0.0,
         *,
         window: int,
+        compass: np.ndarray | None = None,
     ):
         r = len(starts)
+        self.compass = np.zeros(r) if compass is None else np.asarray(compass, float).reshape(r)
         self.arrays, self.camera, self.base, self.contact = arrays, camera, base, contact
         self.s, self.params, self.limits = s, params, limits
         self.window = int(window)
@@ -151,6 +156,10 @@ class Loop:
             if not active.size:
                 return active
         bearings, seen = self.measure(active, p)
+        compass = self.compass[active]
+        biased = bool(compass.any())
+        if biased:  # the robot turns its camera's bearings into the world frame with the heading it reads
+            bearings = bearing.rotated(bearings, np.broadcast_to(compass[:, None], bearings.shape[:2]))
         measured = (self.world[None] - p[:, None, :]) if self.moved_world else None
         out = runtime.control(
             arrays,
@@ -158,7 +167,7 @@ class Loop:
             self.state.take(active),
             bearings,
             seen,
-            self.phi[active],
+            self.phi[active] + compass,
             x_true=p,
             displacements=measured,
         )
@@ -186,9 +195,13 @@ class Loop:
             if not active.size:
                 return active
         velocity, forward, turn, scanning, fix = command
-        q, self.phi[active] = self.base.step(
-            active, p, self.phi[active], velocity, forward, turn, scanning, self.state.last_dir[active]
-        )
+        last_dir = self.state.last_dir[active]
+        if biased:  # a world-frame command goes to the wheels through the heading read: it turns by −(compass error)
+            # (a unicycle's forward speed and turn rate do not; its true heading carries them)
+            back = -self.compass[active]
+            velocity = bearing.rotated(velocity[:, None, :], back[:, None])[:, 0]
+            last_dir = bearing.rotated(last_dir[:, None, :], back[:, None])[:, 0]
+        q, self.phi[active] = self.base.step(active, p, self.phi[active], velocity, forward, turn, scanning, last_dir)
         free = self.contact.free(p, q)
         if params.record_trajectories:
             self.trace.append((active, ref, self.state.cell[active].copy(), heading))
