@@ -11,14 +11,16 @@ point ``λ``, :data:`LOOKAHEAD`):
    the set estimator with errors uniform within the bound and with every error at the bound
    (``--noise-worst``), and the ``kalman`` runtime on the same starts and errors; for the single
    integrator also both under Gaussian σ = 1° noise (the stress test: the set estimator then assumes
-   the map's η = 0.2°, and its bounds are broken).
+   the map's η = 0.2°, and its bounds are broken); and the set estimator with a camera that errs by
+   0.2° and a compass that errs by ``ψ`` (``--compass``, a bias per run): the heading is bounded from
+   the bearings too (``bounded.common_rotation``).
 
 Reported per run set: success from D, collisions, steps with the truth outside the set (containment
 violations), empty sets, the certified share of the steps that moved, looks per run and their mean
 length, the mean run time, and the wall time of the whole simulation with its ratio to ``kalman``'s
 (the budget: at most 2×).
 
-    PYTHONPATH=. python bench/bounded.py [--starts 1000] [--eta 0.25] [--maps kitchen,...] [--readme]
+    PYTHONPATH=. python bench/bounded.py [--starts 1000] [--eta 0.25] [--compass 3] [--maps kitchen,...] [--readme]
 """
 
 from __future__ import annotations
@@ -33,6 +35,8 @@ from bearnav_cli.stages import simulate
 from bearnav_cli.stages.map_ import MapSource
 
 SECTION = "bounded"
+#: The camera's own bound in the compass rows (degrees): ALGORITHMS §12.1's default ``η_cam``.
+CAMERA = 0.2
 #: The look-ahead λ each map's unicycle is planned with (map units): about 1% of its diagonal, and
 #: at least its speed over a turn rate of 1 rad/s.
 LOOKAHEAD = {
@@ -89,6 +93,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--starts", type=int, default=1000)
     parser.add_argument("--eta", type=float, default=0.25, help="world-frame bearing error bound, degrees")
+    parser.add_argument("--compass", type=float, default=3.0, help="the compass's error bound ψ, degrees (0: no row)")
     parser.add_argument("--maps", default=",".join(LOOKAHEAD))
     parser.add_argument("--readme", action="store_true", help=f"replace the '{SECTION}' section of bench/README.md")
     args = parser.parse_args()
@@ -125,13 +130,29 @@ def main() -> None:
             worst, _ = one(plan, f"{tag}: set, worst", starts, estimator="set", noise_worst=True, **base)
             uniform[-1] += f" ({t_set / t_kalman:.2f}×)"
             rows += [kalman, uniform, worst]
+            if (
+                args.compass > 0.0
+            ):  # a camera within 0.2° and a compass within ψ: η = 0.2° + ψ, narrowed by the bearings
+                bias = {"dynamics": dynamics, "noise_bound_deg": CAMERA, "compass_error_deg": args.compass}
+                rows += [
+                    one(
+                        plan,
+                        f"{tag}: set, camera {CAMERA}° + compass {args.compass:g}°{w}",
+                        starts,
+                        estimator="set",
+                        noise_worst=bool(w),
+                        **bias,
+                    )[0]
+                    for w in ("", ", worst")
+                ]
             if dynamics == "single":  # the stress test: Gaussian σ = 1°, beyond any bound the robot assumes
                 stress = {"dynamics": dynamics, "noise_deg": 1.0}
                 rows += [
                     one(plan, f"{tag}: kalman, Gaussian σ=1°", starts, estimator="kalman", **stress)[0],
                     one(plan, f"{tag}: set, Gaussian σ=1°", starts, estimator="set", **stress)[0],
                 ]
-            print(*(" | ".join(map(str, r)) for r in rows[-(5 if dynamics == "single" else 3) :]), sep="\n", flush=True)
+            shown = (5 if dynamics == "single" else 3) + (2 if args.compass > 0.0 else 0)
+            print(*(" | ".join(map(str, r)) for r in rows[-shown:]), sep="\n", flush=True)
     live_headers = [
         "plan",
         "tags of the map",
@@ -161,8 +182,9 @@ def main() -> None:
         + markdown_table(live_headers, live_rows)
         + f"\n\n{args.starts} starts uniform in D, 60° camera, bearing errors within η = {args.eta}° "
         f"(world frame), "
-        f"odometry within κ‖d̂‖ + ν (κ = 0.03, ν = 1e-4·D). {machine_line(('numpy', 'shapely'))}\n\n"
-        + markdown_table(headers, rows)
+        f"odometry within κ‖d̂‖ + ν (κ = 0.03, ν = 1e-4·D); in the compass rows the camera errs within {CAMERA}° "
+        f"and the compass by a bias per run within ψ = {args.compass:g}° (±ψ under worst), and the robot bounds its "
+        f"heading from the bearings as well. {machine_line(('numpy', 'shapely'))}\n\n" + markdown_table(headers, rows)
     )
     print(body)
     if args.readme:
