@@ -410,6 +410,37 @@ def test_least_rank_cell_and_funnel_update():
     assert not relocated.any() and np.all(target == -1)
 
 
+@pytest.mark.parametrize("grow_bins", [0.3, 1.0, 2.5])
+def test_a_cell_grown_by_e_is_found_wherever_the_point_is_within_e_of_it(grow_bins):
+    """``least_rank_cell`` with a negative erosion (the cell grown by ``e``) finds a cell for every point within ``e``
+    of one, however far outside that cell's bounding box (the spatial index lists a cell only in the bins its box
+    meets; a point just outside the box was missed: a start at the edge of D then took the uncertified approach at
+    once), and never a cell of higher rank than the least-rank cell within ``e``."""
+    plan = make_plan(2, 0)
+    cells = plan.cells
+    arrays = PlanArrays.from_plan(plan)
+    rng = np.random.default_rng(5)
+    e = grow_bins * float(arrays.bin_size.min())
+    polygons = [shapely.Polygon(cells.vertices(c)) for c in range(cells.n_cells)]
+    # points just outside D, within e of it, and anywhere
+    ring = shapely.union_all(polygons).buffer(0.9 * e).difference(shapely.union_all(polygons))
+    near = shapely.points(rng.uniform(*np.array(ring.bounds).reshape(2, 2), (4000, 2)))
+    outside = shapely.get_coordinates(near[shapely.contains(ring, near)])[:400]
+    x = np.concatenate([outside, sample_in_cells(cells, 100, rng)])
+    dist = np.stack([shapely.distance(poly, shapely.points(x)) for poly in polygons], axis=1)
+    within = dist <= e * (1 - 1e-9)
+    rank = np.where(within, cells.cell_rank[None, :], np.inf)
+    expect = np.where(within.any(axis=1), np.argmin(rank, axis=1), -1)
+    got = cell_policy.least_rank_cell(arrays, x, -e)
+    assert np.all(got[expect >= 0] >= 0)
+    found = np.flatnonzero(got >= 0)
+    assert np.all(cells.cell_rank[got[found]] <= np.where(expect[found] >= 0, cells.cell_rank[expect[found]], np.inf))
+    # what it found is a cell grown by e: every row's slack at least −e
+    for i in found:
+        A, b = unit_rows(cells.vertices(got[i]))
+        assert np.all(A @ x[i] <= b + e + plan.map.tol)
+
+
 # --------------------------------------------------------------------------- 3. tampered plans
 
 

@@ -226,7 +226,8 @@ def least_rank_cell(
     """
     p = points(x)
     delta = np.broadcast_to(np.asarray(erosion, float), (len(p),))
-    cand = arrays.cells_near(p)  # (R, K) in (rank, index) order, -1 padding
+    # (R, K) in (rank, index) order, -1 padding; a cell grown by e may hold p from a bin its box does not meet
+    cand = arrays.cells_near(p, np.maximum(-delta, 0.0))
     wanted = cand >= 0
     if below is not None:
         wanted &= arrays.cell_rank[np.maximum(cand, 0)] < np.asarray(below, float)[:, None]

@@ -183,6 +183,8 @@ class PlanArrays:
         Derived: width and height of one index bin (map units).
     bin_shape : tuple of int
         Derived: ``(INDEX_BINS, INDEX_BINS)``, the bins along x and y (unitless).
+    cell_order : ndarray of int64, shape (C,)
+        Derived: each cell's place in (rank, index) order (the order of a bin's cells).
     free_bounds : ndarray of float64, shape (4,)
         Derived: ``B_r``, ``bounds`` shrunk by ``robot_radius + lookahead`` on every side (map units).
     tol : float
@@ -253,6 +255,7 @@ class PlanArrays:
     bin_origin: np.ndarray = dataclasses.field(init=False, repr=False)
     bin_size: np.ndarray = dataclasses.field(init=False, repr=False)
     bin_shape: tuple = dataclasses.field(init=False, repr=False)
+    cell_order: np.ndarray = dataclasses.field(init=False, repr=False)
     free_bounds: np.ndarray = dataclasses.field(init=False, repr=False)
     tol: float = dataclasses.field(init=False, repr=False)
     node_cell: np.ndarray = dataclasses.field(init=False, repr=False)
@@ -341,13 +344,40 @@ class PlanArrays:
         put(self, "bin_origin", _readonly(origin, float))
         put(self, "bin_size", _readonly(size, float))
         put(self, "bin_shape", shape)
+        place = np.empty(c, np.int64)
+        place[order] = np.arange(c)
+        put(self, "cell_order", _readonly(place, np.int64))
 
-    def cells_near(self, x: np.ndarray) -> np.ndarray:
+    def cells_near(self, x: np.ndarray, reach: np.ndarray | float = 0.0) -> np.ndarray:
         """Candidate cells of each point (those whose bounding box meets its bin), shape (R, K), padded with ``-1``,
-        in (rank, index) order."""
+        in (rank, index) order.
+
+        With ``reach`` (R,) or one (map units): the candidates of every bin the square of half-side ``reach``
+        around the point meets, so that a cell within ``reach`` of the point is among them (a cell grown by ``e``
+        may hold a point outside its bounding box's bins); a cell may then appear twice.
+        """
         p = np.asarray(x, float).reshape(-1, 2)
-        ij = np.clip(np.floor((p - self.bin_origin) / self.bin_size).astype(np.int64), 0, np.array(self.bin_shape) - 1)
-        return self.bin_cells[ij[:, 0] * self.bin_shape[1] + ij[:, 1]]
+        top = np.array(self.bin_shape) - 1
+        ij = np.clip(np.floor((p - self.bin_origin) / self.bin_size).astype(np.int64), 0, top)
+        reach = np.broadcast_to(np.asarray(reach, float), (len(p),))
+        if not np.any(reach > 0.0):
+            return self.bin_cells[ij[:, 0] * self.bin_shape[1] + ij[:, 1]]
+        r = np.maximum(reach, 0.0)[:, None]
+        lo = np.clip(np.floor((p - r - self.bin_origin) / self.bin_size).astype(np.int64), 0, top)
+        hi = np.clip(np.floor((p + r - self.bin_origin) / self.bin_size).astype(np.int64), 0, top)
+        span = int((hi - lo).max()) + 1
+        parts = []
+        for di in range(span):
+            for dj in range(span):
+                i, j = np.minimum(lo[:, 0] + di, hi[:, 0]), np.minimum(lo[:, 1] + dj, hi[:, 1])
+                part = self.bin_cells[i * self.bin_shape[1] + j]
+                # a bin past the square repeats its last row or column: not a candidate twice
+                past = ((lo[:, 0] + di > hi[:, 0]) | (lo[:, 1] + dj > hi[:, 1]))[:, None]
+                parts.append(np.where(past, -1, part))
+        cand = np.concatenate(parts, axis=1)
+        key = np.where(cand >= 0, self.cell_order[np.maximum(cand, 0)], len(self.cell_order))
+        cand = np.take_along_axis(cand, np.argsort(key, axis=1, kind="stable"), axis=1)
+        return cand[:, : max(1, int(np.count_nonzero(cand >= 0, axis=1).max(initial=0)))]
 
     def _check_shapes(self, n: int, c: int, n_lm: int) -> None:
         rows = int(self.cell_row_offsets[-1]) if len(self.cell_row_offsets) else -1
