@@ -123,11 +123,11 @@ def test_exception_during_save_leaves_no_file(cli, write_map, small_spec, tmp_pa
     loaded = artifacts.load(tmp_path / "plans" / "small" / "tree.npz", "tree")
     target = tmp_path / "out" / "tree.npz"
 
-    def broken(handle, **arrays):
+    def broken(handle, arrays):
         handle.write(b"PK\x03\x04 half an archive")
         raise RuntimeError("disk full")
 
-    monkeypatch.setattr(np, "savez_compressed", broken)
+    monkeypatch.setattr(artifacts.writing, "_write_npz", broken)
     with pytest.raises(RuntimeError):
         artifacts.save(target, loaded.artifact, loaded.manifest)
     assert not target.exists()
@@ -334,3 +334,23 @@ def test_software_versions_are_the_installed_distributions():
     assert {k: versions[k] for k in ("numpy", "shapely", "scipy", "highspy")} == {
         k: metadata.version(k) for k in ("numpy", "shapely", "scipy", "highspy")
     }
+
+
+def test_a_map_text_made_from_its_document_hashes_as_one_parsed_back(small_spec):
+    """``plan_file.map_text`` writes the canonical text of a map document and what its content hash hashes from
+    the document itself: the same texts as writing it and parsing it back (map.json as read, a stage's map as
+    embedded), with and without the fields left out of the hash."""
+    from bearnav_cli.runtime import plan_file
+
+    from .conftest import build_map
+
+    document = build_map(small_spec).to_json()
+    document["params"] = {"rrtstar": {"seed": 3, "step": 0.5}, "simulate": {"starts": [[1.0, 2.0]]}}
+    for doc in (document, {k: v for k, v in document.items() if k != "source"}, {"name": "x", "bounds": [0, 1]}):
+        text = plan_file.map_text(doc)
+        assert text == plan_file.canonical_json(doc)
+        remembered = plan_file.content_hash({"map": text})
+        plan_file._HASHED_MAP_TEXTS.clear()
+        assert plan_file.content_hash({"map": text}) == remembered
+    # a key json.dumps would write as a string: the plain canonical text, nothing remembered from the document
+    assert plan_file.map_text({1: "a", 2: "b"}) == plan_file.canonical_json({1: "a", 2: "b"}) == '{"1":"a","2":"b"}'

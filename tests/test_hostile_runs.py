@@ -127,11 +127,11 @@ def test_sigint_inside_an_extension_import_is_an_interrupt_not_an_internal_error
 
 
 def test_sigint_while_an_artifact_is_written_leaves_no_temp_file(tmp_path, monkeypatch, built):
-    def half_then_interrupt(handle, **arrays):
+    def half_then_interrupt(handle, arrays):
         handle.write(b"PK\x03\x04 half an archive")
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(np, "savez_compressed", half_then_interrupt)
+    monkeypatch.setattr(artifacts.writing, "_write_npz", half_then_interrupt)
     result = invoke("simplify", built["tree"], "-o", tmp_path / "s.npz")
     assert_clean_failure(result, 130, ("interrupted; nothing written for simplify",))
     assert list(tmp_path.iterdir()) == []

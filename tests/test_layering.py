@@ -177,6 +177,8 @@ FILE_METHODS = {
     "write_bytes",
     "savez",
     "savez_compressed",
+    "ZipFile",
+    "write_array",
     "savefig",
     "mkdir",
     "unlink",

@@ -193,12 +193,8 @@ def _distribution_version(package: str) -> str | None:
     """
     prefix, suffix = package.lower().replace("-", "_") + "-", ".dist-info"
     for entry in sys.path:
-        try:
-            names = os.listdir(entry or ".")
-        except OSError:  # a zip, a missing folder
-            continue
-        for name in names:
-            if name.endswith(suffix) and name.lower().startswith(prefix):
+        for name in _dist_infos(entry):
+            if name.lower().startswith(prefix):
                 return name[len(prefix) : -len(suffix)]
     from importlib import metadata
 
@@ -206,6 +202,16 @@ def _distribution_version(package: str) -> str | None:
         return metadata.version(package)
     except metadata.PackageNotFoundError:
         return None
+
+
+@functools.cache
+def _dist_infos(entry: str) -> tuple[str, ...]:
+    """The ``.dist-info`` folders in one ``sys.path`` entry (none in a zip or a missing folder), listed once
+    per process for every package looked up (site-packages holds a few hundred names)."""
+    try:
+        return tuple(name for name in os.listdir(entry or ".") if name.endswith(".dist-info"))
+    except OSError:
+        return ()
 
 
 def params_dict(params: Any) -> dict:
@@ -281,7 +287,7 @@ def embedded_map_text(map_: Map) -> str:
     """
     document = map_.to_json()
     document.pop("source", None)
-    return canonical_json(document)
+    return plan_file.map_text(document)
 
 
 def entries_of(artifact: Any) -> dict[str, Any]:

@@ -66,7 +66,7 @@ def read_file(path: Path) -> bytes:
     return read_input(path, ArtifactError)
 
 
-def _parse_json(path: Path, data: bytes) -> tuple[dict, dict[str, Any]]:
+def _parse_json(path: Path, data: bytes) -> tuple[dict, dict[str, Any], dict]:
     try:
         document = json.loads(data.decode("utf-8"))
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
@@ -78,16 +78,18 @@ def _parse_json(path: Path, data: bytes) -> tuple[dict, dict[str, Any]]:
         raise ArtifactError("no manifest object (not a bearnav artifact)", file=str(path), field="manifest")
     if manifest.get("schema") == KINDS["simulation"].schema:
         raise ArtifactError("holds a simulation's metrics; give its sim.npz", file=str(path))
-    return manifest, {"map": canonical_json(document)}
+    # the text and what its content hash hashes, both made from the document parsed here (plan_file.map_text)
+    return manifest, {"map": plan_file.map_text(document)}, document
 
 
-def _parse_npz(path: Path, data: bytes) -> tuple[dict, dict[str, Any]]:
+def _parse_npz(path: Path, data: bytes) -> tuple[dict, dict[str, Any], None]:
     # the robot's reader (runtime.plan_file), within this process's budget (a test lowers it)
-    return plan_file.parse_npz(data, str(path), memory_budget())
+    return (*plan_file.parse_npz(data, str(path), memory_budget()), None)
 
 
-def _read_raw(path: Path) -> tuple[dict, dict[str, Any]]:
-    """Manifest and data entries of any artifact file (npz or JSON, told apart by content)."""
+def _read_raw(path: Path) -> tuple[dict, dict[str, Any], dict | None]:
+    """Manifest and data entries of any artifact file (npz or JSON, told apart by content), and the map
+    document of a JSON file (its ``map`` entry parsed, less the manifest) or None."""
     data = read_file(path)
     if data.startswith(_NPY_MAGIC) or data.startswith(ZIP_MAGIC) or path.suffix.lower() == ".npz":
         return _parse_npz(path, data)
@@ -139,7 +141,7 @@ def _check_manifest(manifest: dict, path: Path, expect: tuple[str, ...] | None) 
 def read_manifest(path: str | os.PathLike) -> dict:
     """The checked manifest of any artifact file (for freshness checks and tests)."""
     path = Path(path)
-    manifest, _ = _read_raw(path)
+    manifest, _, _ = _read_raw(path)
     _check_manifest(manifest, path, None)
     return manifest
 
@@ -208,7 +210,7 @@ def load(path: str | os.PathLike, expect: str | tuple[str, ...] | None = None) -
         (corruption or tampering), or an invariant of ``datatypes.INVARIANTS`` that does not hold.
     """
     path = Path(path)
-    manifest, entries = _read_raw(path)
+    manifest, entries, document = _read_raw(path)
     wanted = (expect,) if isinstance(expect, str) else expect
     kind = _check_manifest(manifest, path, wanted)
     plan_file.check_entries(kind, entries, str(path))
@@ -222,7 +224,7 @@ def load(path: str | os.PathLike, expect: str | tuple[str, ...] | None = None) -
         _check_companion(path, manifest)
     map_digest = sha256_text(entries["map"])
     try:
-        artifact = _from_entries(kind, entries, manifest, check_map=map_digest not in _CHECKED_MAPS)
+        artifact = _from_entries(kind, entries, manifest, map_digest not in _CHECKED_MAPS, document)
         _CHECKED_MAPS.add(map_digest)
         validate_artifact(kind, artifact, check_map=False)
     except ArtifactError as exc:
@@ -302,9 +304,10 @@ def fresh(path: str | os.PathLike, kind: str, key: str, input_hash: str) -> Load
     return loaded
 
 
-def _parse_map(text: str) -> Map:
+def _parse_map(text: str, document: dict | None = None) -> Map:
+    """The map of a ``map`` entry; ``document`` is that text parsed already (``map.json``'s), when it was."""
     try:
-        document = json.loads(text)
+        document = json.loads(text) if document is None else document
     except json.JSONDecodeError as exc:
         raise ArtifactError(f"not valid JSON ({exc})", field="map") from exc
     if not isinstance(document, dict):
@@ -312,12 +315,14 @@ def _parse_map(text: str) -> Map:
     return Map.from_json(document)
 
 
-def _from_entries(kind: str, entries: dict[str, Any], manifest: dict, check_map: bool = True) -> Any:
-    """The typed artifact; the map is parsed and (when ``check_map``) checked first, so that an error
-    about it names ``map.FIELD`` rather than an array built on it."""
+def _from_entries(
+    kind: str, entries: dict[str, Any], manifest: dict, check_map: bool = True, document: dict | None = None
+) -> Any:
+    """The typed artifact; the map is parsed (unless ``document`` is its ``map`` entry parsed) and (when
+    ``check_map``) checked first, so that an error about it names ``map.FIELD`` rather than an array built on it."""
     prefix = "" if kind == "map" else "map."
     try:
-        map_ = _parse_map(entries["map"])
+        map_ = _parse_map(entries["map"], document)
         if check_map:
             validate_artifact("map", map_)
     except ArtifactError as exc:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import io
 import json
 import os
+import zipfile
 from pathlib import Path
 from typing import Any, Callable
 
@@ -19,6 +20,12 @@ from bearnav_cli.runtime.plan_file import canonical_json
 
 __all__ = ["metrics_path", "output_files", "save"]
 
+
+#: The deflate level of an npz's members. numpy's ``savez_compressed`` takes zlib's default (6); level 3 writes a
+#: tree or a plan in about two thirds of the time for files 4-13% larger (the kitchen's: 1.7 ms instead of 2.7 for
+#: ``tree.npz``, 4.7 instead of 7.3 for ``plan.npz``), most of it the embedded map's text (UTF-32 in an npz).
+#: Any level reads the same.
+NPZ_DEFLATE_LEVEL = 3
 
 #: Which Python type each artifact kind holds, by its name in :mod:`bearnav_cli.datatypes` (whose modules are
 #: imported on first use: saving a tree does not import the cells' module).
@@ -71,13 +78,23 @@ def save(path: str | os.PathLike, artifact: Any, manifest: dict, on_commit: Call
     else:
         arrays = {key: (np.array(value) if isinstance(value, str) else value) for key, value in entries.items()}
         arrays["manifest"] = np.array(canonical_json(manifest))
-        files.append((path, lambda handle: np.savez_compressed(handle, **arrays)))
+        files.append((path, lambda handle: _write_npz(handle, arrays)))
     if kind == "simulation":
         # sim.json next to sim.npz: the metrics, for people and scripts that do not read npz
         metrics = json.dumps({"manifest": manifest, "metrics": manifest.get("stats", {})}, indent=1, sort_keys=True)
         files.append((metrics_path(path), lambda handle: handle.write((metrics + "\n").encode())))
     write_all(files, on_commit)
     return path
+
+
+def _write_npz(handle: io.BufferedWriter, arrays: dict[str, np.ndarray]) -> None:
+    """``np.savez_compressed(handle, **arrays)`` at :data:`NPZ_DEFLATE_LEVEL`: the same members (``NAME.npy``,
+    numpy's format, zip64 as numpy forces it), deflated at that level."""
+    deflated = zipfile.ZIP_DEFLATED
+    with zipfile.ZipFile(handle, "w", deflated, allowZip64=True, compresslevel=NPZ_DEFLATE_LEVEL) as archive:
+        for key, value in arrays.items():
+            with archive.open(key + ".npy", "w", force_zip64=True) as member:
+                np.lib.format.write_array(member, np.asanyarray(value), allow_pickle=False)
 
 
 def metrics_path(path: str | os.PathLike) -> Path:

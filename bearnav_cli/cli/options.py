@@ -8,10 +8,12 @@ They are ``typer.core.TyperOption`` objects, the class of typer's own options, m
 typer function turns them into click options.
 """
 
+import functools
 import inspect
 from typing import Any, Callable, Optional
 
 import typer
+from typer.core import TyperOption
 
 from bearnav_cli.cli.exits import EXIT_INVALID, fail
 from bearnav_cli.cli.fields import ParamField, params_fields
@@ -139,6 +141,27 @@ def option_help(command: str, field: ParamField, *, with_default: bool = True, p
     return prefix + text + (f" ({'; '.join(notes)})" if notes else "") + "."
 
 
+class _ParamOption(TyperOption):
+    """A generated option whose help text (:func:`option_help`) is made when something first reads it (the
+    help, a completion, the documentation), not on every start: making the help of a stage's options
+    compiles and runs a dozen regular expressions (2-3 ms of a ``bearnav rrtstar`` process that shows none)."""
+
+    _make_help: Optional[Callable[[], str]] = None
+
+    @property
+    def help(self) -> Optional[str]:
+        if self._make_help is not None:
+            make, self._make_help = self._make_help, None
+            text = make()
+            self._help = inspect.cleandoc(text) if text else text  # as TyperOption does with a help it is given
+        return self._help
+
+    @help.setter
+    def help(self, value: Optional[str]) -> None:
+        self._help = value
+        self._make_help = None
+
+
 def params_options(
     command: str, *, only: tuple[str, ...] | None = None, defaults: bool = False, prefix: str = ""
 ) -> list[Any]:
@@ -151,8 +174,6 @@ def params_options(
     defaults instead, shown in the help as typer shows a default (``[default: 200]``). Fields declared
     without an option (``params:`` only) are left out; ``only`` keeps just those fields.
     """
-    from typer.core import TyperOption
-
     options = []
     for field in params_fields(command):
         if (field.option is None and only is None) or (only is not None and field.name not in only):
@@ -161,19 +182,17 @@ def params_options(
             raise TypeError(f"option {field.name}: a {field.kind} needs typer's conversion")
         name = field.option or "--" + field.name.replace("_", "-")
         flag = field.kind is bool
-        help_text = option_help(command, field, with_default=not defaults, prefix=prefix)
         # what typer.Option(default, declared, help=...) in a signature makes: a bool is a flag with its
         # off-switch (click's own bool type), any other kind click's type of that Python type
-        options.append(
-            TyperOption(
-                param_decls=[field.name, f"{name}/{field.off}" if flag else name],
-                type=None if flag else field.kind,
-                is_flag=flag or None,
-                default=field.default if defaults else None,
-                show_default=True,
-                help=help_text,
-            )
+        option = _ParamOption(
+            param_decls=[field.name, f"{name}/{field.off}" if flag else name],
+            type=None if flag else field.kind,
+            is_flag=flag or None,
+            default=field.default if defaults else None,
+            show_default=True,
         )
+        option._make_help = functools.partial(option_help, command, field, with_default=not defaults, prefix=prefix)
+        options.append(option)
     return options
 
 

@@ -4,6 +4,7 @@ meaning (:func:`validate_artifact`) and :func:`replace`."""
 from __future__ import annotations
 
 import dataclasses
+import weakref
 from typing import Any
 
 from bearnav_cli.datatypes.map_ import MAP_INVARIANTS
@@ -43,6 +44,17 @@ def __getattr__(name: str) -> Any:
 INVARIANTS: dict[str, tuple[Invariant, ...]]
 
 
+#: The maps that passed :data:`MAP_INVARIANTS` in this process: a map cannot change (a frozen dataclass of
+#: read-only arrays), so a stage's output is not checked again for the map its input was checked for.
+_VALID_MAPS: weakref.WeakSet[Any] = weakref.WeakSet()
+
+
+def _check_map(map_: Any, prefix: str = "") -> None:
+    if map_ not in _VALID_MAPS:
+        validate(MAP_INVARIANTS, map_, prefix=prefix)
+        _VALID_MAPS.add(map_)
+
+
 def validate_artifact(kind: str, artifact: Any, check_map: bool = True) -> None:
     """Check what ``artifact`` (of ``kind``) means: its map's invariants, then its own.
 
@@ -54,7 +66,8 @@ def validate_artifact(kind: str, artifact: Any, check_map: bool = True) -> None:
         The artifact to check; a plan is checked as its ``cells``, then as a plan.
     check_map : bool, default True
         Also run :data:`MAP_INVARIANTS` on the map (its fields named ``map.…``); False when
-        the map was checked already (a loader that read it once).
+        the map was checked already (a loader that read it once). A map object that passed once in
+        this process is not checked again.
 
     Raises
     ------
@@ -63,10 +76,10 @@ def validate_artifact(kind: str, artifact: Any, check_map: bool = True) -> None:
     """
     if kind == "map":
         if check_map:
-            validate(MAP_INVARIANTS, artifact)
+            _check_map(artifact)
         return
     if check_map:
-        validate(MAP_INVARIANTS, artifact.map, prefix="map.")
+        _check_map(artifact.map, prefix="map.")
     if kind == "plan":
         validate(CELLS_INVARIANTS, artifact.cells)
         validate(PLAN_INVARIANTS, artifact)

@@ -16,7 +16,6 @@ so that the robot and ``bearnav inspect`` refuse the same files (DESIGN ยง3.1, ย
 
 from __future__ import annotations
 
-import functools
 import hashlib
 import io
 import json
@@ -46,6 +45,7 @@ __all__ = [
     "load_plan",
     "LoadedPlan",
     "MANIFEST_FIELDS",
+    "map_text",
     "memory_budget",
     "parse_npz",
     "plan_view",
@@ -123,9 +123,42 @@ def _map_to_hash(value: Any) -> Any:
     return canonical_json(document)
 
 
-#: :func:`_map_to_hash` of a text, made once per text: ``bearnav plan`` hashes the same embedded map in each of
-#: its artifacts, and a loaded artifact's once more.
-_hashed_map_text = functools.lru_cache(maxsize=4)(_map_to_hash)
+#: :func:`_map_to_hash` of the map texts met last (text -> what is hashed), made once per text: ``bearnav plan``
+#: hashes the same embedded map in each of its artifacts, and a loaded artifact's once more.
+_HASHED_MAP_TEXTS: dict[str, Any] = {}
+_HASHED_MAP_TEXTS_KEPT = 4
+
+
+def _hashed_map_text(text: str) -> Any:
+    """:func:`_map_to_hash` of ``text``, remembered (:data:`_HASHED_MAP_TEXTS`)."""
+    found = _HASHED_MAP_TEXTS.get(text)
+    if found is None:
+        found = _map_to_hash(text)
+        _remember_hashed_map_text(text, found)
+    return found
+
+
+def _remember_hashed_map_text(text: str, hashed: Any) -> None:
+    while len(_HASHED_MAP_TEXTS) >= _HASHED_MAP_TEXTS_KEPT:  # the oldest goes first (dicts keep their order)
+        del _HASHED_MAP_TEXTS[next(iter(_HASHED_MAP_TEXTS))]
+    _HASHED_MAP_TEXTS[text] = hashed
+
+
+def map_text(document: dict[str, Any]) -> str:
+    """``canonical_json(document)`` of a map document (str keys, JSON values), and what :func:`content_hash`
+    hashes for that text, made from the same document and remembered: hashing the text later does not parse
+    it back (half a millisecond to two of a ``map.json`` read or a stage's output written).
+    """
+    if not all(isinstance(key, str) for key in document):  # json.dumps would write other keys as strings
+        return canonical_json(document)
+    # canonical JSON of an object is "{" + its sorted "key":value pairs joined by "," + "}": each value's text
+    # is made once, for both texts
+    pieces = {key: f"{canonical_json(key)}:{canonical_json(value)}" for key, value in sorted(document.items())}
+    text = "{" + ",".join(pieces.values()) + "}"
+    if text not in _HASHED_MAP_TEXTS:
+        hashed = "{" + ",".join(piece for key, piece in pieces.items() if key not in UNHASHED_MAP_FIELDS) + "}"
+        _remember_hashed_map_text(text, hashed)
+    return text
 
 
 # --------------------------------------------------------------------------- reading
