@@ -227,28 +227,6 @@ def test_a_stage_command_imports_its_own_command_module_and_stage_only(plans, tm
     ], datatypes
     found = imported(modules, HEAVY)
     assert not found, found
-    # nothing on its way logs: the loggers are set up if and when logging is imported (cli.output.setup_logging)
-    assert "logging" not in modules
-
-
-#: In a fresh interpreter: the command line's logging set-up, then a module that logs is imported and warns.
-WARN = """
-import sys
-from bearnav_cli.cli import output
-output.setup_logging()
-assert "logging" not in sys.modules
-from bearnav_cli.stages import simplify
-assert "logging" in sys.modules and not [f for f in sys.meta_path if f is output._AfterLoggingImport]
-simplify.log.warning("a warning [1]")
-output.setup_logging()  # once logging is there: set up at once, one handler still
-simplify.log.warning("another")
-"""
-
-
-def test_a_module_that_logs_after_the_set_up_prints_its_warnings():
-    done = subprocess.run([sys.executable, "-c", WARN], capture_output=True, text=True, cwd=REPO)
-    assert done.returncode == 0, done.stderr
-    assert done.stderr.splitlines() == ["warning: a warning [1]", "warning: another"]
 
 
 def test_inspect_imports_the_stages_the_maps_params_name(plans):

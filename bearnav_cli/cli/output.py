@@ -145,54 +145,7 @@ def _warning_handler() -> type:
 
 
 def setup_logging() -> None:
-    """Send the ``bearnav_cli`` loggers' warnings to stderr, one line each (once per process).
-
-    Nothing logs before :mod:`logging` is imported, and only the modules that log import it (``simplify``,
-    ``synthesize``, ``verify`` ...): until one of them is, the loggers are set up right after ``logging``
-    loads (:class:`_AfterLoggingImport`), so that a command whose modules log nothing does not import it
-    (2 ms of a ``bearnav rrtstar`` process).
-    """
-    if "logging" in sys.modules:
-        _configure_logging()
-    elif _AfterLoggingImport not in sys.meta_path:
-        sys.meta_path.insert(0, _AfterLoggingImport)
-
-
-class _AfterLoggingImport:
-    """A meta path finder for :mod:`logging` alone: the finders after it find the module, and its loader sets up
-    the loggers (:func:`_configure_logging`) as soon as the module is loaded. It leaves ``sys.meta_path`` at once."""
-
-    @classmethod
-    def find_spec(cls, name: str, path: Any = None, target: Any = None) -> Any:
-        if name != "logging":
-            return None
-        sys.meta_path.remove(cls)
-        import importlib.util
-
-        spec = importlib.util.find_spec(name)
-        if spec is not None and spec.loader is not None:
-            spec.loader = _ThenConfigure(spec.loader)
-        return spec
-
-
-class _ThenConfigure:
-    """A module's own loader, which then calls :func:`_configure_logging`."""
-
-    def __init__(self, loader: Any) -> None:
-        self._loader = loader
-
-    def __getattr__(self, name: str) -> Any:  # get_source, is_package ...: the module's loader's
-        return getattr(self._loader, name)
-
-    def create_module(self, spec: Any) -> Any:
-        return self._loader.create_module(spec)
-
-    def exec_module(self, module: Any) -> None:
-        self._loader.exec_module(module)
-        _configure_logging()
-
-
-def _configure_logging() -> None:
+    """Send the ``bearnav_cli`` loggers' warnings to stderr, one line each (once per process)."""
     import logging
 
     handler = _warning_handler()
