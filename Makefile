@@ -52,6 +52,9 @@ BENCH := PYTHONPATH=. $(BIN)/python
 
 bench: $(STAMP)
 	$(BIN)/python -m pip install --quiet ompl
+	# the byte-code of what changed since the install: a whole process measured in the inherited environment
+	# (bench/rrtstar_process.py, bench/plan.py) would compile it again at every start
+	$(BIN)/python -m compileall -q bearnav_cli
 	$(BENCH) bench/rrtstar.py
 	$(BENCH) bench/rrtstar_process.py --readme
 	$(BENCH) bench/synthesize.py --readme
