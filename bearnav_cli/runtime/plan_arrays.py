@@ -354,30 +354,48 @@ class PlanArrays:
 
         With ``reach`` (R,) or one (map units): the candidates of every bin the square of half-side ``reach``
         around the point meets, so that a cell within ``reach`` of the point is among them (a cell grown by ``e``
-        may hold a point outside its bounding box's bins); a cell may then appear twice.
+        may hold a point outside its bounding box's bins); a cell may then appear twice. A square over more than
+        2 × 2 bins takes every cell.
         """
         p = np.asarray(x, float).reshape(-1, 2)
         top = np.array(self.bin_shape) - 1
         ij = np.clip(np.floor((p - self.bin_origin) / self.bin_size).astype(np.int64), 0, top)
-        reach = np.broadcast_to(np.asarray(reach, float), (len(p),))
-        if not np.any(reach > 0.0):
-            return self.bin_cells[ij[:, 0] * self.bin_shape[1] + ij[:, 1]]
-        r = np.maximum(reach, 0.0)[:, None]
+        own = self.bin_cells[ij[:, 0] * self.bin_shape[1] + ij[:, 1]]
+        r = np.broadcast_to(np.maximum(np.asarray(reach, float), 0.0), (len(p),))[:, None]
+        if not np.any(r > 0.0):
+            return own
         lo = np.clip(np.floor((p - r - self.bin_origin) / self.bin_size).astype(np.int64), 0, top)
         hi = np.clip(np.floor((p + r - self.bin_origin) / self.bin_size).astype(np.int64), 0, top)
-        span = int((hi - lo).max()) + 1
+        wide = np.flatnonzero(np.any(lo != hi, axis=1))  # a square inside its own bin has that bin's cells
+        if not len(wide):
+            return own
+        lo, hi = lo[wide], hi[wide]
+        # a square over more than 2 × 2 bins (a large e: a robot's first sets span the map) takes every cell, in
+        # (rank, index) order; the cell rows decide which hold the point
+        every = np.argsort(self.cell_order)
+        far = np.any(hi - lo > 1, axis=1)
         parts = []
-        for di in range(span):
-            for dj in range(span):
+        for di in range(2):
+            for dj in range(2):
                 i, j = np.minimum(lo[:, 0] + di, hi[:, 0]), np.minimum(lo[:, 1] + dj, hi[:, 1])
                 part = self.bin_cells[i * self.bin_shape[1] + j]
                 # a bin past the square repeats its last row or column: not a candidate twice
-                past = ((lo[:, 0] + di > hi[:, 0]) | (lo[:, 1] + dj > hi[:, 1]))[:, None]
+                past = ((lo[:, 0] + di > hi[:, 0]) | (lo[:, 1] + dj > hi[:, 1]) | far)[:, None]
                 parts.append(np.where(past, -1, part))
         cand = np.concatenate(parts, axis=1)
-        key = np.where(cand >= 0, self.cell_order[np.maximum(cand, 0)], len(self.cell_order))
-        cand = np.take_along_axis(cand, np.argsort(key, axis=1, kind="stable"), axis=1)
-        return cand[:, : max(1, int(np.count_nonzero(cand >= 0, axis=1).max(initial=0)))]
+        key = np.where(cand >= 0, self.cell_order[np.maximum(cand, 0)], len(every))
+        cand = np.take_along_axis(cand, np.argsort(key, axis=1), axis=1)
+        width = max(
+            own.shape[1], int(np.count_nonzero(cand >= 0, axis=1).max(initial=0)), len(every) if far.any() else 0
+        )
+        out = np.full((len(p), width), -1, np.int64)
+        out[:, : own.shape[1]] = own
+        near = cand[:, :width]
+        out[wide, : near.shape[1]] = near
+        out[wide, near.shape[1] :] = -1
+        if far.any():
+            out[wide[far], : len(every)] = every
+        return out
 
     def _check_shapes(self, n: int, c: int, n_lm: int) -> None:
         rows = int(self.cell_row_offsets[-1]) if len(self.cell_row_offsets) else -1
