@@ -443,11 +443,18 @@ def bounded_control(
         if returning.any():  # the look is over when e would let it move where it was (or it was outside D)
             idx = np.flatnonzero(returning)
             there = lookahead_point(sets.x_hat[idx], resume[idx], lam)
+            over = np.zeros(len(idx), bool)
             if arrays.funnel:
+                had = state.cell[idx]
+                # a robot without a cell turns to any heading that starts the certificate, not only back
+                free = np.flatnonzero(had < 0)
+                if len(free):
+                    theta = certified_heading(idx[free], resume[idx[free]])
+                    got = np.isfinite(theta)
+                    resume[idx[free[got]]], over[free[got]] = theta[got], True
                 # in the cell it will drive in there: the one it keeps, unless a cell of lower rank
                 # holds p̂ eroded by e (the switch); the least-rank cell merely holding p̂ may have a
                 # larger τ_c, and a look ended on it turned back into a cell that made it look again
-                had = state.cell[idx]
                 k = least_rank_cell(
                     arrays, there, error[idx], below=np.where(had >= 0, arrays.cell_rank[np.maximum(had, 0)], np.inf)
                 )
@@ -460,24 +467,16 @@ def bounded_control(
                 k, local = np.full(len(idx), -1), np.zeros(len(idx), bool)
             # the look is over where the robot may step there (a large e near a face may leave no pace: a look ended
             # there turned back, stood, and began the look again, never turning all around)
-            over = np.zeros(len(idx), bool)
-            able = np.flatnonzero(k >= 0)
+            able = np.flatnonzero((k >= 0) & ~over)
             if len(able):
                 field, ok = _unit_field(arrays, k[able], there[able])
                 _, pace_there = certified_step(idx[able], k[able], there[able], resume[idx[able]], field, local[able])
                 over[able] = ok & (pace_there > 0.0)
-            out = np.flatnonzero(k < 0)
+            out = np.flatnonzero((k < 0) & ~over)
             if len(out):
                 # outside D there: the uncertified rules move it only at a positive error-ball pace; a
                 # look ended at pace 0 turned back to wait, and waiting began the look again
                 over[out] = error_ball_pace(arrays, s, k[out], there[out], error[idx[out]])[0] > 0.0
-            if arrays.funnel:
-                # a robot without a cell turns to any heading that starts the certificate, not only back
-                free = np.flatnonzero(had < 0)
-                if len(free):
-                    theta = certified_heading(idx[free], resume[idx[free]])
-                    got = np.isfinite(theta)
-                    resume[idx[free[got]]], over[free[got]] = theta[got], True
             back[idx[over]] = True
         # the swung p says nothing about the cell the robot will drive in: it keeps the one it had
         cell[returning], target[returning], relocated[returning] = state.cell[returning], state.target[returning], False
