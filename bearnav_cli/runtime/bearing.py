@@ -212,7 +212,8 @@ def noisy_bearings(x: Any, landmarks: Any, sigma: float, rng: np.random.Generato
 
 
 def rotated(unit: np.ndarray, eps: np.ndarray) -> np.ndarray:
-    """Unit bearings ``unit`` (R, L, 2) turned counter-clockwise by the angles ``eps`` (R, L) rad."""
+    """Unit bearings ``unit`` (R, L, 2) turned counter-clockwise by the angles ``eps`` (R, L) rad; any plane vectors
+    ``(..., 2)`` with angles that broadcast to their leading shape."""
     c, s = np.cos(eps), np.sin(eps)
     return np.stack([c * unit[..., 0] - s * unit[..., 1], s * unit[..., 0] + c * unit[..., 1]], axis=-1)
 

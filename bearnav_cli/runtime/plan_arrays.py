@@ -370,31 +370,26 @@ class PlanArrays:
         if not len(wide):
             return own
         lo, hi = lo[wide], hi[wide]
-        # a square over more than 2 × 2 bins (a large e: a robot's first sets span the map) takes every cell, in
-        # (rank, index) order; the cell rows decide which hold the point
-        every = np.argsort(self.cell_order)
         far = np.any(hi - lo > 1, axis=1)
         parts = []
         for di in range(2):
             for dj in range(2):
                 i, j = np.minimum(lo[:, 0] + di, hi[:, 0]), np.minimum(lo[:, 1] + dj, hi[:, 1])
-                part = self.bin_cells[i * self.bin_shape[1] + j]
                 # a bin past the square repeats its last row or column: not a candidate twice
-                past = ((lo[:, 0] + di > hi[:, 0]) | (lo[:, 1] + dj > hi[:, 1]) | far)[:, None]
-                parts.append(np.where(past, -1, part))
+                past = (lo[:, 0] + di > hi[:, 0]) | (lo[:, 1] + dj > hi[:, 1]) | far
+                parts.append(np.where(past[:, None], -1, self.bin_cells[i * self.bin_shape[1] + j]))
         cand = np.concatenate(parts, axis=1)
-        key = np.where(cand >= 0, self.cell_order[np.maximum(cand, 0)], len(every))
+        key = np.where(cand >= 0, self.cell_order[np.maximum(cand, 0)], self.n_cells)
         cand = np.take_along_axis(cand, np.argsort(key, axis=1), axis=1)
-        width = max(
-            own.shape[1], int(np.count_nonzero(cand >= 0, axis=1).max(initial=0)), len(every) if far.any() else 0
-        )
+        # a square over more than 2 × 2 bins (a large e: a robot's first sets span the map) takes every cell, in
+        # (rank, index) order; the cell rows decide which hold the point
+        width = max(own.shape[1], int(np.count_nonzero(cand >= 0, axis=1).max(initial=0)), self.n_cells * far.any())
         out = np.full((len(p), width), -1, np.int64)
         out[:, : own.shape[1]] = own
-        near = cand[:, :width]
-        out[wide, : near.shape[1]] = near
-        out[wide, near.shape[1] :] = -1
+        out[wide] = -1
+        out[wide, : min(width, cand.shape[1])] = cand[:, :width]
         if far.any():
-            out[wide[far], : len(every)] = every
+            out[wide[far], : self.n_cells] = np.argsort(self.cell_order)
         return out
 
     def _check_shapes(self, n: int, c: int, n_lm: int) -> None:

@@ -159,7 +159,7 @@ class Loop:
         compass = self.compass[active]
         biased = bool(compass.any())
         if biased:  # the robot turns its camera's bearings into the world frame with the heading it reads
-            bearings = bearing.rotated(bearings, np.broadcast_to(compass[:, None], bearings.shape[:2]))
+            bearings = bearing.rotated(bearings, compass[:, None])
         measured = (self.world[None] - p[:, None, :]) if self.moved_world else None
         out = runtime.control(
             arrays,
@@ -199,8 +199,7 @@ class Loop:
         if biased:  # a world-frame command goes to the wheels through the heading read: it turns by −(compass error)
             # (a unicycle's forward speed and turn rate do not; its true heading carries them)
             back = -self.compass[active]
-            velocity = bearing.rotated(velocity[:, None, :], back[:, None])[:, 0]
-            last_dir = bearing.rotated(last_dir[:, None, :], back[:, None])[:, 0]
+            velocity, last_dir = bearing.rotated(velocity, back), bearing.rotated(last_dir, back)
         q, self.phi[active] = self.base.step(active, p, self.phi[active], velocity, forward, turn, scanning, last_dir)
         free = self.contact.free(p, q)
         if params.record_trajectories:
