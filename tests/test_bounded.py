@@ -10,6 +10,7 @@ outside its set, and every certified step ending inside the certified domain.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from types import SimpleNamespace
 
@@ -585,18 +586,24 @@ def test_a_bad_noise_bound_names_the_field(value):
     assert info.value.field == "noise_bound_deg"
 
 
-@pytest.mark.parametrize(("worst", "compass"), [(False, None), (True, None), (False, 2.0), (True, 2.0)])
-def test_the_look_ahead_unicycle_under_the_set_estimator(worst, compass):
-    """A look-ahead unicycle (ALGORITHMS §12.6) with a 60° camera: the look swings its point around the axle,
-    and still no certified step ends outside D, the truth never leaves its set, nothing collides; with a compass
-    that errs by up to 2°, its point's estimate and every command turn with the heading it reads."""
+@functools.cache
+def lookahead_plan():
+    """The plan of ``funnel_maps.random_spec(4)`` for a look-ahead unicycle, ``λ = 0.1`` (once per process)."""
     from bearnav_cli import pipeline
     from tests.conftest import build_map
     from tests.funnel_maps import ITERATIONS, random_spec
 
     spec = random_spec(4, ITERATIONS)
     spec["robot"] = {"lookahead": 0.1}
-    plan = pipeline.compute(build_map(spec))["plan"]
+    return pipeline.compute(build_map(spec))["plan"]
+
+
+@pytest.mark.parametrize(("worst", "compass"), [(False, None), (True, None), (False, 2.0), (True, 2.0)])
+def test_the_look_ahead_unicycle_under_the_set_estimator(worst, compass):
+    """A look-ahead unicycle (ALGORITHMS §12.6) with a 60° camera: the look swings its point around the axle,
+    and still no certified step ends outside D, the truth never leaves its set, nothing collides; with a compass
+    that errs by up to 2°, its point's estimate and every command turn with the heading it reads."""
+    plan = lookahead_plan()
     arrays = PlanArrays.from_plan(plan)
     assert arrays.lookahead == pytest.approx(0.1)
     # safety, not arrival, is asserted: 8 starts for their first 600 steps (most look around for most of a run)
@@ -620,6 +627,54 @@ def test_the_look_ahead_unicycle_under_the_set_estimator(worst, compass):
     assert sim.stats["estimator_counts"]["containment_violations"] == 0
     assert sim.counts()["collision"] == 0 and not outside
     assert sim.certified_steps.sum() > 0
+
+
+def test_a_look_ahead_unicycle_in_d_drives_uncertified_only_after_turning_all_around():
+    """A start in D whose set no cell holds looks until one does (ALGORITHMS §12.3 step 4); only once its look
+    has turned through every heading (a 60° camera: at least 300°) may it take the uncertified step at the edge
+    of D (the straight approach to a node is another rule's). A look that ended after one step, turned back and
+    began again never turned past its first view (a bug this test caught).
+
+    Worst-case bearings, every step of the first 150, from where such looks happen: the cells' corners on the
+    edge of D, pulled 1% toward the centre."""
+    plan = lookahead_plan()
+    arrays = PlanArrays.from_plan(plan)
+    cells = [
+        shapely.Polygon(arrays.cell_vertices[a:b])
+        for a, b in zip(arrays.cell_vertex_offsets[:-1], arrays.cell_vertex_offsets[1:], strict=True)
+    ]
+    edge = shapely.union_all(cells).boundary
+    corners = np.vstack(
+        [np.asarray(c.exterior.coords)[:-1] * 0.99 + 0.01 * np.asarray(c.centroid.coords) for c in cells]
+    )
+    starts = corners[shapely.distance(edge, shapely.points(corners)) < 0.02][:120]
+    fov = 60.0
+    params = simulate.Params(
+        estimator="set",
+        dynamics="unicycle",
+        noise_bound_deg=0.25,
+        noise_worst=True,
+        fov=fov,
+        record_trajectories=False,
+    )
+    loop, active, _ = simulate.start_loop(plan, starts, params)
+    r = len(loop.x)
+    # the headings each run has faced since it last moved: an interval of the unwrapped heading
+    low, high, unwrapped = loop.phi.copy(), loop.phi.copy(), loop.phi.copy()
+    for _ in range(150):
+        if not active.size:
+            break
+        x, phi, certified = loop.x.copy(), loop.phi.copy(), loop.certified.copy()
+        active = loop.step(active)
+        unwrapped = unwrapped + np.angle(np.exp(1j * (loop.phi - phi)))
+        moved = np.hypot(*(loop.x - x).T) > 0.0
+        # the uncertified steps of a robot without a cell (not those of the straight approach to a node)
+        bad = np.flatnonzero(moved & (loop.certified == certified) & (loop.state.target < 0))
+        span = high[bad] - low[bad]
+        assert np.all(span >= math.radians(360.0 - fov) - 1e-9), np.degrees(span)
+        low, high = np.minimum(low, unwrapped), np.maximum(high, unwrapped)
+        low[moved], high[moved] = unwrapped[moved], unwrapped[moved]
+    assert r >= 40 and loop.certified.sum() > 0
 
 
 def test_an_estimate_trace_holds_the_truth_and_draws(tmp_path):

@@ -465,14 +465,18 @@ def bounded_control(
                 k = np.where(k >= 0, k, least_rank_cell(arrays, there, -error[idx]))
             else:
                 k, local = np.full(len(idx), -1), np.zeros(len(idx), bool)
+            # a robot without a cell ends its look early only at a certified heading: turned back, it is undecided
+            # until its whole look is done and looks again (a look ended one step in by the rules below, over and
+            # over, never turned past its first view, and its set stayed that view's)
+            waiting = (had < 0) & ~looked[idx] if arrays.funnel else np.zeros(len(idx), bool)
             # the look is over where the robot may step there (a large e near a face may leave no pace: a look ended
             # there turned back, stood, and began the look again, never turning all around)
-            able = np.flatnonzero((k >= 0) & ~over)
+            able = np.flatnonzero((k >= 0) & ~over & ~waiting)
             if len(able):
                 field, ok = _unit_field(arrays, k[able], there[able])
                 _, pace_there = certified_step(idx[able], k[able], there[able], resume[idx[able]], field, local[able])
                 over[able] = ok & (pace_there > 0.0)
-            out = np.flatnonzero((k < 0) & ~over)
+            out = np.flatnonzero((k < 0) & ~over & ~waiting)
             if len(out):
                 # outside D there: the uncertified rules move it only at a positive error-ball pace; a
                 # look ended at pace 0 turned back to wait, and waiting began the look again
