@@ -130,7 +130,8 @@ def guarantee(plan: Plan, report: VerifyReport) -> str:
         measured += (
             f", and at η = {math.degrees(report.liveness.grid.eta):.3g}°: "
             f"{report.liveness.live_fraction:.0%} of the certified area where a look all around is sure to "
-            "be good enough (on a grid)"
+            f"be good enough, {report.liveness.start_fraction:.0%} where a robot is also sure to find the cell it "
+            "starts in (on a grid)"
         )
     proven = (
         f"proven from the plan file, {who} that starts in the certified area ({percent(comp.coverage_free)} of "

@@ -16,8 +16,10 @@ point ``λ``, :data:`LOOKAHEAD`):
    the bearings too (``bounded.common_rotation``).
 
 Reported per run set: success from D, collisions, steps with the truth outside the set (containment
-violations), empty sets, the certified share of the steps that moved, looks per run and their mean
-length, the mean run time, and the wall time of the whole simulation with its ratio to ``kalman``'s
+violations), empty sets, the certified share of the steps that moved, the runs that took a step that was
+not, and how many of those started where ``bearnav verify``'s liveness says a start is sure to find its
+cell after a look (``LiveGrid.sure_start``; the table of liveness gives that share of ``D``), looks per run
+and their mean length, the mean run time, and the wall time of the whole simulation with its ratio to ``kalman``'s
 (the budget: at most 2×).
 
     PYTHONPATH=. python bench/bounded.py [--starts 1000] [--eta 0.25] [--compass 3] [--maps kitchen,...] [--readme]
@@ -27,12 +29,16 @@ from __future__ import annotations
 
 import argparse
 import math
+from dataclasses import replace
 
+import numpy as np
 from common import machine_line, markdown_table, measured_maps, replace_section, timed
 
 from bearnav_cli import liveness, pipeline, tags
+from bearnav_cli.runtime import PlanArrays, robot
 from bearnav_cli.stages import simulate
 from bearnav_cli.stages.map_ import MapSource
+from bearnav_cli.world.motion import initial_headings
 
 SECTION = "bounded"
 #: The camera's own bound in the compass rows (degrees): ALGORITHMS §12.1's default ``η_cam``.
@@ -66,12 +72,34 @@ def certified_cell(m: dict) -> str:
     return f"{share} ({uncertified:,} of {moved:,} not)"
 
 
+def sure_starts(plan, params, x0: np.ndarray) -> np.ndarray:
+    """Whether each start is one ``bearnav verify``'s liveness calls sure to find its cell after a look all around
+    (``LiveGrid.sure_start`` at the start's axle, the camera's place), shape (R,) bool."""
+    arrays = PlanArrays.from_plan(plan)
+    lam = arrays.lookahead if params.dynamics == "unicycle" else 0.0
+    axle = robot.lookahead_point(x0, initial_headings(arrays, x0), -lam)
+    g = liveness.grid(plan, params.noise_bound_deg)
+    return g.sure_start(axle, g.look(arrays.landmarks, axle)[1])
+
+
+def uncertified_cell(uncertified: np.ndarray, sure: np.ndarray) -> str:
+    """The runs that took a step that was not certified, and how many of them started where a start is sure."""
+    return f"{int(np.count_nonzero(uncertified))} ({int(np.count_nonzero(uncertified & sure))})"
+
+
 def one(plan, label: str, starts: str, **options) -> tuple[list, float]:
     # defaults, then the map's own `params: simulate` (the paper maps drive at 1 unit/s), then these, as `bearnav
     # simulate` resolves them
     overrides = {"starts": starts, "fov": 60.0, "record_trajectories": False, **options}
     params = pipeline.resolve_params("simulate", plan.map.params, overrides)
-    seconds, sim = timed(simulate.run, plan, params)
+    x0 = simulate.resolve_starts(plan, params)
+    uncertified = np.zeros(len(x0), bool)
+
+    def watch(runs, x, certified):
+        uncertified[runs[~certified]] = True
+
+    seconds, sim = timed(simulate.rollout, plan, x0, params, on_step=watch)
+    sim = replace(sim, stats={**simulate.metrics(sim), **sim.stats})
     m = sim.stats
     looks = m.get("looks_per_run")
     row = [
@@ -81,6 +109,7 @@ def one(plan, label: str, starts: str, **options) -> tuple[list, float]:
         m["containment_violations"],
         m["inconsistencies"],
         certified_cell(m),
+        uncertified_cell(uncertified, sure_starts(plan, params, x0) if uncertified.any() else uncertified),
         "—" if looks is None else f"{looks:.1f}",
         "—" if m.get("look_time_mean_s") is None else f"{m['look_time_mean_s']:.2f} s",
         f"{m['time_mean_s']:.0f} s" if m.get("time_mean_s") else "—",
@@ -120,6 +149,7 @@ def main() -> None:
                     f"{100 * before.live_fraction:.1f}% → {100 * now.live_fraction:.1f}%",
                     f"{math.degrees(before.eta_star):.3f}° → {math.degrees(now.eta_star):.3f}°",
                     f"{100 * now.view_fraction:.1f}%",
+                    f"{100 * now.start_fraction:.1f}%",
                     f"{100 * wider.live_fraction:.1f}%",
                 ]
             )
@@ -161,6 +191,7 @@ def main() -> None:
         f"live at η = {args.eta}° (before → after)",
         "η* (before → after)",
         "live after one view (no turn all around)",
+        "sure start (after a look)",
         "live at η = 0.5°",
     ]
     headers = [
@@ -170,6 +201,7 @@ def main() -> None:
         "truth outside set",
         "empty sets",
         "certified moving steps",
+        "runs not certified (from sure starts)",
         "looks / run",
         "mean look",
         "mean run",

@@ -11,7 +11,8 @@ import shapely
 
 from bearnav_cli import liveness, verify
 from bearnav_cli.errors import InvalidParamsError
-from bearnav_cli.runtime import PlanArrays, bounded, estimate, look_bound, looking
+from bearnav_cli.runtime import PlanArrays, bounded, estimate, least_rank_cell, look_bound, looking
+from bearnav_cli.runtime.cell_policy import least_rank_cell_holding
 
 from .conftest import random_plan
 from .handmade import hand_map, hand_plan
@@ -119,6 +120,40 @@ def test_a_turn_all_around_gives_a_set_within_the_look_bound(plan, worst):
     seen = all_around.sum(axis=1) >= 2
     assert seen.sum() > 100
     assert np.all(error[seen] <= bound[seen] * (1 + 1e-7) + 1e-9)
+
+
+@pytest.mark.parametrize("worst", [False, True])
+def test_a_sure_start_finds_a_cell_that_holds_its_set_after_a_look(plan, narrow, worst):
+    """Where the grid calls a start sure (``LiveGrid.sure_start``), a look all around with every bearing within
+    η (uniform, or at ±η) leaves a set that a cell holds whole, and the cell lets it move (its bound below the
+    cell's margin): §12.3 step 4 starts it. At the edge of D no start is sure; most of D is."""
+    g, arrays = narrow.grid, PlanArrays.from_plan(plan)
+    rng = np.random.default_rng(11)
+    square = g.points[: g.grid_points]
+    inside = square[least_rank_cell(arrays, square) >= 0]
+    x = inside[rng.choice(len(inside), min(300, len(inside)), replace=False)]
+    visible, eps = g.look(arrays.landmarks, x)
+    sure = g.sure_start(x, eps)
+    assert 0.5 < sure.mean() < 1.0 and 0.5 < narrow.start_fraction <= 1.0
+    eta = g.eta
+    d = arrays.landmarks[None] - x[:, None]
+    error = (rng.choice([-1.0, 1.0], visible.shape) if worst else rng.uniform(-1.0, 1.0, visible.shape)) * eta
+    vertices, count = bounded.intersect_cones(
+        *bounded.box(estimate.axle_bounds(arrays), len(x)),
+        arrays.landmarks,
+        np.arctan2(d[..., 1], d[..., 0]) + error,
+        visible,
+        eta,
+        arrays.tol,
+    )
+    x_hat, _ = bounded.centre(vertices, count)
+    k = least_rank_cell_holding(arrays, x_hat[sure], vertices[sure], count[sure])
+    assert np.all(k >= 0), int(np.count_nonzero(k < 0))
+    # the corners of the cells on the edge of D (pulled 0.1% inside) are never sure starts
+    corners = g.points[g.grid_points :]
+    edge = shapely.distance(shapely.union_all(g.polygons).boundary, shapely.points(corners)) < 1e-3 * plan.map.diagonal
+    assert edge.sum() > 10
+    assert not g.sure_start(corners[edge], g.look(arrays.landmarks, corners[edge])[1]).any()
 
 
 @pytest.mark.parametrize("which", ["wide", "narrow"])

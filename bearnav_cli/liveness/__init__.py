@@ -35,6 +35,10 @@ cell holding the point, ``datatypes.active_regions``) is live, over the area of 
 covers. The cells of a plan overlap a great deal (the kitchen's areas sum to 4.5 times its ``D``),
 so neither is a sum of cell areas.
 
+The **start fraction** (:attr:`Liveness.start_fraction`, :meth:`LiveGrid.sure_start`) is what §12.5 leaves
+out: the share of ``D``'s grid points from which a start is sure, after a look all around, to find a cell
+that holds its whole set (§12.3 step 4). Within about ``ε`` of the edge of ``D`` no look can show that.
+
 :func:`measure` returns a :class:`Liveness`; ``bearnav verify --live-fov`` prints it and
 ``bearnav plot --color-by live`` draws it. Nothing here prints, plots or writes files.
 Every name is re-exported here; the modules, each with one job:

@@ -12,6 +12,7 @@ import shapely
 
 from bearnav_cli.datatypes import Plan, percent
 from bearnav_cli.liveness.live_grid import LiveGrid, bounds_of, distinct_views, grid
+from bearnav_cli.runtime import least_rank_cell
 
 __all__ = ["evaluate", "Liveness", "MAX_ETA_DEG", "measure", "SHRINK", "SHRINK_STEPS"]
 
@@ -56,6 +57,10 @@ class Liveness:
         The same for ``view_live`` (``≤ live_fraction``).
     cover_fraction : float
         Area of the union of the live cells over the area of ``D``, in [0, 1] (``≥ live_fraction``).
+    start_fraction : float
+        The fraction of ``D`` (its grid points) from which a start is sure to find, after a look all around,
+        a cell that holds its whole set and lets it move (:meth:`LiveGrid.sure_start`, §12.3 step 4): a start
+        within about ``ε`` of the edge of ``D`` may look and still not know it is in ``D``, in [0, 1].
     grid : LiveGrid
         Where and at what it was measured: the bearing error ``η``, the camera, the slip, the grid,
         and each cell's ``margin`` and ``tolerance`` (also properties of this object).
@@ -71,6 +76,7 @@ class Liveness:
     live_fraction: float
     view_fraction: float
     cover_fraction: float
+    start_fraction: float
     grid: LiveGrid
 
     @property
@@ -97,7 +103,8 @@ class Liveness:
         return (
             f"liveness at a bearing error of {math.degrees(g.eta):.3g}°, {camera}{reach}, wheel slip {g.kappa:g}: "
             f"{percent(self.live_fraction)} of the certified area live ({self.n_live}/{len(self.live)} cells; "
-            f"{percent(self.view_fraction)} after one view, without turning all around); the largest bearing error "
+            f"{percent(self.view_fraction)} after one view, without turning all around; {percent(self.start_fraction)} "
+            "where a start is sure to find its cell after one look); the largest bearing error "
             f"every cell is live at: {math.degrees(self.eta_star):.3g}°; measured on a {g.resolution:.3g}-map-unit "
             f"grid with {heads}, a measurement, not a proof"
         )
@@ -123,6 +130,7 @@ class Liveness:
             "live_fraction": self.live_fraction,
             "view_fraction": self.view_fraction,
             "cover_fraction": self.cover_fraction,
+            "start_fraction": self.start_fraction,
             "live_cells": self.n_live,
             "eta_star_deg": math.degrees(self.eta_star),
             "per_cell": {
@@ -223,6 +231,10 @@ def evaluate(
     view_area = sum(float(regions[c].area) for c in np.flatnonzero(view_live))
     cover = float(shapely.union_all([polygons[c] for c in np.flatnonzero(live)]).area) if live.any() else 0.0
     points_per_cell = np.bincount(pair_cell, minlength=n_cells)
+    # the starts: the square grid's points in D (evenly spread), the camera there
+    square = points[: g.grid_points]
+    in_d = np.flatnonzero(least_rank_cell(arrays, square) >= 0)
+    sure = g.sure_start(square[in_d], eps_all[in_d])
     return Liveness(
         eps_look=eps_look,
         eps_view=eps_view,
@@ -234,6 +246,7 @@ def evaluate(
         live_fraction=min(1.0, live_area / area) if area > 0 else 0.0,
         view_fraction=min(1.0, view_area / area) if area > 0 else 0.0,
         cover_fraction=min(1.0, cover / area) if area > 0 else 0.0,
+        start_fraction=float(np.mean(sure)) if len(sure) else 0.0,
         grid=g,
     )
 

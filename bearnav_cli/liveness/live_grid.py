@@ -13,7 +13,17 @@ import shapely
 
 from bearnav_cli.datatypes import Plan, active_regions
 from bearnav_cli.errors import InvalidParamsError
-from bearnav_cli.runtime import PlanArrays, estimate, look_bound, looking, robot, settings, tolerance
+from bearnav_cli.runtime import (
+    PlanArrays,
+    bounded,
+    estimate,
+    least_rank_cell,
+    look_bound,
+    looking,
+    robot,
+    settings,
+    tolerance,
+)
 
 __all__ = [
     "bounds_of",
@@ -59,6 +69,9 @@ class LiveGrid:
         The cells.
     points : ndarray, shape (P, 2)
         The grid points and every cell's extra points (map units).
+    grid_points : int
+        How many of ``points`` come first and are the square grid's (evenly spread: fractions of area are
+        counted on them).
     pair_cell, pair_point : ndarray of int, shape (M,)
         Which cell holds which point, sorted by cell (a point of several cells is in several pairs).
     tolerance, margin : ndarray, shape (C,)
@@ -89,6 +102,7 @@ class LiveGrid:
     arrays: PlanArrays
     polygons: tuple
     points: np.ndarray
+    grid_points: int
     pair_cell: np.ndarray
     pair_point: np.ndarray
     tolerance: np.ndarray
@@ -145,6 +159,40 @@ class LiveGrid:
         out = np.full(len(self.points), np.inf)
         np.minimum.at(out, self.pair_point, margin)
         return out
+
+    def sure_start(self, points: np.ndarray, eps: np.ndarray) -> np.ndarray:
+        """Whether a robot whose camera stands at each point, after a look that errs by at most ``eps`` there,
+        is sure to find a cell that holds its whole set and lets it move, shape (P,) bool.
+
+        ALGORITHMS §12.3 step 4 starts a robot only in a cell that holds its set (its estimate eroded by its
+        error), and §12.5's liveness says nothing of that: within about ``ε`` of the edge of ``D`` no look
+        places the set in a cell, though the truth is in one. A look's set ``X`` holds the truth and is at
+        most ``ε/RADIUS_PER_WIDTH`` wide (:func:`~bearnav_cli.runtime.look_bound.look_bound`), so it lies in
+        every cell that the disc of that radius around the truth (grown by the look-ahead point's swing)
+        lies in, and the cell lets it move where ``ε`` is below the cell's margin. A look-ahead robot turns
+        in place to place its point: any of :data:`HEADINGS` headings will do.
+
+        Parameters
+        ----------
+        points : ndarray, shape (P, 2)
+            Where the camera (the axle) stands (map units).
+        eps : ndarray, shape (P,)
+            The bound of the look there (map units; ``inf``: no fix).
+        """
+        x = np.asarray(points, float).reshape(-1, 2)
+        eps = np.asarray(eps, float).reshape(-1)
+        arrays, lam = self.arrays, float(self.arrays.lookahead)
+        reach = np.where(np.isfinite(eps), eps / bounded.RADIUS_PER_WIDTH + self.swing, np.inf)
+        sure = np.zeros(len(x), bool)
+        turns = np.linspace(0.0, 2.0 * math.pi, HEADINGS, endpoint=False) if lam > 0 else np.zeros(1)
+        for theta in turns:
+            open_ = np.flatnonzero(~sure & np.isfinite(reach))
+            if not len(open_):
+                break
+            k = least_rank_cell(arrays, robot.lookahead_point(x[open_], np.full(len(open_), theta), lam), reach[open_])
+            held = k >= 0
+            sure[open_[held]] = eps[open_[held]] < self.margin[k[held]]
+        return sure
 
     def bounds(self, points: np.ndarray, visible: np.ndarray, landmarks: np.ndarray) -> np.ndarray:
         """``ε(x, S)`` of each point with the landmarks it sees, shape (P,) map units.
@@ -210,10 +258,11 @@ def _polygons(arrays: PlanArrays) -> list[shapely.Polygon]:
 
 def _samples(
     polygons: list[shapely.Polygon], grow: float, spacing: float, origin: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, int, np.ndarray, np.ndarray]:
     """The points of every cell: shared grid points (deduplicated) and each cell's own extras.
 
-    Returns the points (P, 2), and the pairs ``(cell, point)`` as two index arrays sorted by cell.
+    Returns the points (P, 2), how many of them (first) are the grid's, and the pairs ``(cell, point)`` as
+    two index arrays sorted by cell.
     """
     keys, key_cell, extra, extra_cell = [], [], [], []
     for c, poly in enumerate(polygons):
@@ -237,7 +286,7 @@ def _samples(
     cell = np.concatenate([*key_cell, *extra_cell])
     point = np.concatenate([inverse.ravel(), len(grid) + np.arange(len(extras))])
     order = np.argsort(cell, kind="stable")
-    return points, cell[order], point[order]
+    return points, len(grid), cell[order], point[order]
 
 
 def distinct_views(
@@ -422,11 +471,12 @@ def grid(
     margin = tau - _allowance(drift, step_len, nu, swing)
 
     origin = np.asarray(arrays.bounds, float)[:2]
-    points, pair_cell, pair_point = _samples(polygons, lam, resolution, origin)
+    points, grid_points, pair_cell, pair_point = _samples(polygons, lam, resolution, origin)
     return LiveGrid(
         arrays=arrays,
         polygons=tuple(polygons),
         points=points,
+        grid_points=grid_points,
         pair_cell=pair_cell,
         pair_point=pair_point,
         tolerance=tau,

@@ -433,7 +433,8 @@ def rollout(
         landmark positions are what the camera sees. The controllers, cells and goal stay
         the plan's. Default: the plan's map.
     on_step : callable, optional
-        ``on_step(runs, x, certified)`` after every step: the runs (int, (K,)) that moved, their true
+        ``on_step(runs, x, certified)`` after every step: the runs (int, (K,)) that moved (a command that
+        translates them: not a robot standing or turning in place to look), their true
         positions after the step (K, 2; a look-ahead unicycle's look-ahead point ``x + λh``, the point
         the plan is about) and whether that step was certified (bool, (K,)), e.g. for ``verify`` to
         check every true position against the certified domain.
@@ -453,9 +454,9 @@ def rollout(
         if on_step is None:
             active = loop.step(active)
         else:
-            steps, certified = loop.steps.copy(), loop.certified.copy()
+            translated, certified = loop.moved.copy(), loop.certified.copy()
             active = loop.step(active)
-            moved = np.flatnonzero(loop.steps > steps)
+            moved = np.flatnonzero(loop.moved > translated)
             on_step(moved, loop.reference(loop.x[moved], loop.phi[moved]), loop.certified[moved] > certified[moved])
         iteration += 1
         if progress is not None and iteration % PROGRESS_EVERY == 0:
