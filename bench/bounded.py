@@ -151,6 +151,7 @@ def main() -> None:
                     f"{100 * now.view_fraction:.1f}%",
                     f"{100 * now.start_fraction:.1f}%",
                     f"{100 * wider.live_fraction:.1f}%",
+                    f"{math.degrees(wider.eta_star):.3f}°",
                 ]
             )
             print(" | ".join(map(str, live_rows[-1])), flush=True)
@@ -193,6 +194,7 @@ def main() -> None:
         "live after one view (no turn all around)",
         "sure start (after a look)",
         "live at η = 0.5°",
+        "η* measured at 0.5°",
     ]
     headers = [
         "plan: estimator",

@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 import shapely
 
+from bearnav_cli.datatypes import cell_polygons
 from bearnav_cli.runtime import PlanArrays, bounded, least_rank_cell, look_bound
 from bearnav_cli.runtime.safety import StepError, certified_pace
 from bearnav_cli.stages import simulate
@@ -598,6 +599,13 @@ def lookahead_plan():
     return pipeline.compute(build_map(spec))["plan"]
 
 
+def lookahead_params(**options) -> simulate.Params:
+    """The set estimator's look-ahead unicycle with a 60° camera and bearings within 0.25°, and ``options``."""
+    return simulate.Params(
+        estimator="set", dynamics="unicycle", noise_bound_deg=0.25, fov=60.0, record_trajectories=False, **options
+    )
+
+
 @pytest.mark.parametrize(("worst", "compass"), [(False, None), (True, None), (False, 2.0), (True, 2.0)])
 def test_the_look_ahead_unicycle_under_the_set_estimator(worst, compass):
     """A look-ahead unicycle (ALGORITHMS §12.6) with a 60° camera: the look swings its point around the axle,
@@ -607,17 +615,7 @@ def test_the_look_ahead_unicycle_under_the_set_estimator(worst, compass):
     arrays = PlanArrays.from_plan(plan)
     assert arrays.lookahead == pytest.approx(0.1)
     # safety, not arrival, is asserted: 8 starts for their first 600 steps (most look around for most of a run)
-    params = simulate.Params(
-        estimator="set",
-        dynamics="unicycle",
-        noise_bound_deg=0.25,
-        noise_worst=worst,
-        compass_error_deg=compass,
-        fov=60.0,
-        starts="domain:8",
-        max_steps=600,
-        record_trajectories=False,
-    )
+    params = lookahead_params(noise_worst=worst, compass_error_deg=compass, starts="domain:8", max_steps=600)
     outside = []
 
     def watch(runs, x, certified):
@@ -638,25 +636,13 @@ def test_a_look_ahead_unicycle_in_d_drives_uncertified_only_after_turning_all_ar
     Worst-case bearings, every step of the first 150, from where such looks happen: the cells' corners on the
     edge of D, pulled 1% toward the centre."""
     plan = lookahead_plan()
-    arrays = PlanArrays.from_plan(plan)
-    cells = [
-        shapely.Polygon(arrays.cell_vertices[a:b])
-        for a, b in zip(arrays.cell_vertex_offsets[:-1], arrays.cell_vertex_offsets[1:], strict=True)
-    ]
+    cells = cell_polygons(plan.cells)
     edge = shapely.union_all(cells).boundary
     corners = np.vstack(
         [np.asarray(c.exterior.coords)[:-1] * 0.99 + 0.01 * np.asarray(c.centroid.coords) for c in cells]
     )
     starts = corners[shapely.distance(edge, shapely.points(corners)) < 0.02][:120]
-    fov = 60.0
-    params = simulate.Params(
-        estimator="set",
-        dynamics="unicycle",
-        noise_bound_deg=0.25,
-        noise_worst=True,
-        fov=fov,
-        record_trajectories=False,
-    )
+    params = lookahead_params(noise_worst=True)
     loop, active, _ = simulate.start_loop(plan, starts, params)
     r = len(loop.x)
     # the headings each run has faced since it last moved: an interval of the unwrapped heading
@@ -671,7 +657,7 @@ def test_a_look_ahead_unicycle_in_d_drives_uncertified_only_after_turning_all_ar
         # the uncertified steps of a robot without a cell (not those of the straight approach to a node)
         bad = np.flatnonzero(moved & (loop.certified == certified) & (loop.state.target < 0))
         span = high[bad] - low[bad]
-        assert np.all(span >= math.radians(360.0 - fov) - 1e-9), np.degrees(span)
+        assert np.all(span >= math.radians(360.0 - params.fov) - 1e-9), np.degrees(span)
         low, high = np.minimum(low, unwrapped), np.maximum(high, unwrapped)
         low[moved], high[moved] = unwrapped[moved], unwrapped[moved]
     assert r >= 40 and loop.certified.sum() > 0
