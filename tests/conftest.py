@@ -83,12 +83,16 @@ def planned_small_map(tmp_path_factory: pytest.TempPathFactory, name: str = "sma
 
 
 @functools.cache
-def random_plan(seed: int):
-    """The plan of ``funnel_maps.random_spec(seed)`` (computed in memory once per test process)."""
+def random_plan(seed: int, lookahead: float = 0.0):
+    """The plan of ``funnel_maps.random_spec(seed)`` (computed in memory once per test process); with a
+    ``lookahead`` for a look-ahead unicycle's point (ALGORITHMS §12.6)."""
     from bearnav_cli import pipeline
     from tests.funnel_maps import ITERATIONS, random_spec
 
-    return pipeline.compute(build_map(random_spec(seed, ITERATIONS)))["plan"]
+    spec = random_spec(seed, ITERATIONS)
+    if lookahead:
+        spec["robot"] = {"lookahead": lookahead}
+    return pipeline.compute(build_map(spec))["plan"]
 
 
 def build_made(made) -> map_.Map:

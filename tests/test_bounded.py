@@ -10,7 +10,6 @@ outside its set, and every certified step ending inside the certified domain.
 from __future__ import annotations
 
 import dataclasses
-import functools
 import math
 from types import SimpleNamespace
 
@@ -587,16 +586,9 @@ def test_a_bad_noise_bound_names_the_field(value):
     assert info.value.field == "noise_bound_deg"
 
 
-@functools.cache
 def lookahead_plan():
     """The plan of ``funnel_maps.random_spec(4)`` for a look-ahead unicycle, ``λ = 0.1`` (once per process)."""
-    from bearnav_cli import pipeline
-    from tests.conftest import build_map
-    from tests.funnel_maps import ITERATIONS, random_spec
-
-    spec = random_spec(4, ITERATIONS)
-    spec["robot"] = {"lookahead": 0.1}
-    return pipeline.compute(build_map(spec))["plan"]
+    return random_plan(4, 0.1)
 
 
 def lookahead_params(**options) -> simulate.Params:

@@ -122,11 +122,15 @@ def test_a_turn_all_around_gives_a_set_within_the_look_bound(plan, worst):
     assert np.all(error[seen] <= bound[seen] * (1 + 1e-7) + 1e-9)
 
 
-@pytest.mark.parametrize("worst", [False, True])
-def test_a_sure_start_finds_a_cell_that_holds_its_set_after_a_look(plan, narrow, worst):
+@pytest.mark.parametrize(("lookahead", "worst"), [(0.0, False), (0.0, True), (0.1, True)])
+def test_a_sure_start_finds_a_cell_that_holds_its_set_after_a_look(plan, narrow, lookahead, worst):
     """Where the grid calls a start sure (``LiveGrid.sure_start``), a look all around with every bearing within
-    η (uniform, or at ±η) leaves a set that a cell holds whole, and the cell lets it move (its bound below the
-    cell's margin): §12.3 step 4 starts it. At the edge of D no start is sure; most of D is."""
+    η (uniform, or at ±η) leaves a set that a cell holds whole, for a look-ahead robot at one of the headings it
+    may turn to: §12.3 step 4 starts it. At the edge of D no start is sure (a robot without a look-ahead); most
+    of D is."""
+    if lookahead:
+        plan = random_plan(4, lookahead)
+        narrow = measure(plan, 0.25, 60.0)
     g, arrays = narrow.grid, PlanArrays.from_plan(plan)
     rng = np.random.default_rng(11)
     square = g.points[: g.grid_points]
@@ -147,8 +151,13 @@ def test_a_sure_start_finds_a_cell_that_holds_its_set_after_a_look(plan, narrow,
         arrays.tol,
     )
     x_hat, _ = bounded.centre(vertices, count)
-    k = least_rank_cell_holding(arrays, x_hat[sure], vertices[sure], count[sure])
-    assert np.all(k >= 0), int(np.count_nonzero(k < 0))
+    held = np.zeros(len(x), bool)
+    for theta in np.linspace(0.0, 2.0 * math.pi, liveness.HEADINGS, endpoint=False) if lookahead else [0.0]:
+        ahead = lookahead * np.array([math.cos(theta), math.sin(theta)])
+        held |= least_rank_cell_holding(arrays, x_hat + ahead, vertices + ahead, count) >= 0
+    assert np.all(held[sure]), int(np.count_nonzero(~held[sure]))
+    if lookahead:  # a look-ahead robot turns its point away from the edge: its camera there may be sure
+        return
     # the corners of the cells on the edge of D (pulled 0.1% inside) are never sure starts
     corners = g.points[g.grid_points :]
     edge = shapely.distance(shapely.union_all(g.polygons).boundary, shapely.points(corners)) < 1e-3 * plan.map.diagonal

@@ -12,7 +12,7 @@ import shapely
 
 from bearnav_cli.datatypes import Plan, percent
 from bearnav_cli.liveness.live_grid import LiveGrid, bounds_of, distinct_views, grid
-from bearnav_cli.runtime import least_rank_cell
+from bearnav_cli.runtime import least_rank_cell, robot
 
 __all__ = ["evaluate", "Liveness", "MAX_ETA_DEG", "measure", "SHRINK", "SHRINK_STEPS"]
 
@@ -23,6 +23,8 @@ SHRINK = 0.9
 SHRINK_STEPS = 12
 #: Largest ``η*_c`` reported (degrees): the 2η cones stay below 90°.
 MAX_ETA_DEG = 22.5
+#: The headings of a look-ahead robot's starts, one per grid point (rad): ``π(3 − √5)`` apart, evenly spread.
+GOLDEN_ANGLE = math.pi * (3.0 - math.sqrt(5.0))
 
 
 @dataclass(frozen=True, eq=False)
@@ -60,7 +62,9 @@ class Liveness:
     start_fraction : float
         The fraction of ``D`` (its grid points) from which a start is sure to find, after a look all around,
         a cell that holds its whole set and lets it move (:meth:`LiveGrid.sure_start`, §12.3 step 4): a start
-        within about ``ε`` of the edge of ``D`` may look and still not know it is in ``D``, in [0, 1].
+        within about ``ε`` of the edge of ``D`` may look and still not know it is in ``D``, in [0, 1]. A
+        look-ahead robot's start is its point in ``D`` at any heading, its camera ``λ`` behind (one heading per
+        point, :data:`GOLDEN_ANGLE` apart).
     grid : LiveGrid
         Where and at what it was measured: the bearing error ``η``, the camera, the slip, the grid,
         and each cell's ``margin`` and ``tolerance`` (also properties of this object).
@@ -231,10 +235,15 @@ def evaluate(
     view_area = sum(float(regions[c].area) for c in np.flatnonzero(view_live))
     cover = float(shapely.union_all([polygons[c] for c in np.flatnonzero(live)]).area) if live.any() else 0.0
     points_per_cell = np.bincount(pair_cell, minlength=n_cells)
-    # the starts: the square grid's points in D (evenly spread), the camera there
+    # the starts: the square grid's points in D (evenly spread); a look-ahead robot's camera stands λ behind its
+    # point, at any heading: one per point, spread by the golden angle, so that the share is over headings too
     square = points[: g.grid_points]
     in_d = np.flatnonzero(least_rank_cell(arrays, square) >= 0)
-    sure = g.sure_start(square[in_d], eps_all[in_d])
+    camera, eps_start = square[in_d], eps_all[in_d]
+    if arrays.lookahead > 0:
+        camera = robot.lookahead_point(camera, GOLDEN_ANGLE * np.arange(len(in_d)), -float(arrays.lookahead))
+        eps_start = g.look(lm, camera)[1]
+    sure = g.sure_start(camera, eps_start)
     return Liveness(
         eps_look=eps_look,
         eps_view=eps_view,
