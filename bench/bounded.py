@@ -124,8 +124,11 @@ def main() -> None:
     parser.add_argument("--eta", type=float, default=0.25, help="world-frame bearing error bound, degrees")
     parser.add_argument("--compass", type=float, default=3.0, help="the compass's error bound ψ, degrees (0: no row)")
     parser.add_argument("--maps", default=",".join(LOOKAHEAD))
+    parser.add_argument("--live-only", action="store_true", help="liveness and tags only: no closed-loop runs")
     parser.add_argument("--readme", action="store_true", help=f"replace the '{SECTION}' section of bench/README.md")
     args = parser.parse_args()
+    if args.live_only and args.readme:
+        parser.error("--readme writes the runs' table too: leave out --live-only")
     starts = f"domain:{args.starts}"
     every = measured_maps()
     rows, live_rows = [], []
@@ -155,6 +158,8 @@ def main() -> None:
                 ]
             )
             print(" | ".join(map(str, live_rows[-1])), flush=True)
+            if args.live_only:
+                continue
             base = {"dynamics": dynamics, "noise_bound_deg": args.eta}
             kalman, t_kalman = one(plan, f"{tag}: kalman", starts, estimator="kalman", **base)
             uniform, t_set = one(plan, f"{tag}: set", starts, estimator="set", **base)
@@ -214,12 +219,16 @@ def main() -> None:
         f"(`tags.propose_live_tags`), then planned again with those tags. Liveness measured by "
         f"`bearnav verify --live-fov 60` on the default grid; a look turns all around.\n\n"
         + markdown_table(live_headers, live_rows)
-        + f"\n\n{args.starts} starts uniform in D, 60° camera, bearing errors within η = {args.eta}° "
-        f"(world frame), "
-        f"odometry within κ‖d̂‖ + ν (κ = 0.03, ν = 1e-4·D); in the compass rows the camera errs within {CAMERA}° "
-        f"and the compass by a bias per run within ψ = {args.compass:g}° (±ψ under worst), and the robot bounds its "
-        f"heading from the bearings as well. {machine_line(('numpy', 'shapely'))}\n\n" + markdown_table(headers, rows)
     )
+    if not args.live_only:
+        body += (
+            f"\n\n{args.starts} starts uniform in D, 60° camera, bearing errors within η = {args.eta}° "
+            f"(world frame), "
+            f"odometry within κ‖d̂‖ + ν (κ = 0.03, ν = 1e-4·D); in the compass rows the camera errs within {CAMERA}° "
+            f"and the compass by a bias per run within ψ = {args.compass:g}° (±ψ under worst), and the robot bounds "
+            f"its heading from the bearings as well. {machine_line(('numpy', 'shapely'))}\n\n"
+            + markdown_table(headers, rows)
+        )
     print(body)
     if args.readme:
         replace_section(SECTION, body)
