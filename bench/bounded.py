@@ -72,19 +72,23 @@ def certified_cell(m: dict) -> str:
     return f"{share} ({uncertified:,} of {moved:,} not)"
 
 
-def sure_starts(plan, params, x0: np.ndarray) -> np.ndarray:
+def sure_starts(plan, params, x0: np.ndarray) -> np.ndarray | None:
     """Whether each start is one ``bearnav verify``'s liveness calls sure to find its cell after a look all around
-    (``LiveGrid.sure_start`` at the start's axle, the camera's place), shape (R,) bool."""
+    (``LiveGrid.sure_start`` at the start's axle, the camera's place, at the world-frame bound: camera and
+    compass), shape (R,) bool; None under Gaussian noise (no bound)."""
+    if params.noise_bound_deg is None:
+        return None
     arrays = PlanArrays.from_plan(plan)
     lam = arrays.lookahead if params.dynamics == "unicycle" else 0.0
     axle = robot.lookahead_point(x0, initial_headings(arrays, x0), -lam)
-    g = liveness.grid(plan, params.noise_bound_deg)
+    g = liveness.grid(plan, params.noise_bound_deg + (params.compass_error_deg or 0.0))
     return g.sure_start(axle, g.look(arrays.landmarks, axle)[1])
 
 
-def uncertified_cell(uncertified: np.ndarray, sure: np.ndarray) -> str:
+def uncertified_cell(uncertified: np.ndarray, sure: np.ndarray | None) -> str:
     """The runs that took a step that was not certified, and how many of them started where a start is sure."""
-    return f"{int(np.count_nonzero(uncertified))} ({int(np.count_nonzero(uncertified & sure))})"
+    count = f"{int(np.count_nonzero(uncertified))}"
+    return count if sure is None else f"{count} ({int(np.count_nonzero(uncertified & sure))})"
 
 
 def one(plan, label: str, starts: str, **options) -> tuple[list, float]:
