@@ -19,6 +19,7 @@ import shapely
 
 from bearnav_cli.datatypes import cell_polygons
 from bearnav_cli.runtime import PlanArrays, bounded, least_rank_cell, look_bound
+from bearnav_cli.runtime.cell_policy import cell_slack
 from bearnav_cli.runtime.safety import StepError, certified_pace
 from bearnav_cli.stages import simulate
 from tests.conftest import random_plan
@@ -619,25 +620,32 @@ def test_the_look_ahead_unicycle_under_the_set_estimator(worst, compass):
     assert sim.certified_steps.sum() > 0
 
 
-def test_a_look_ahead_unicycle_in_d_drives_uncertified_only_after_turning_all_around():
-    """A start in D whose set no cell holds looks until one does (ALGORITHMS §12.3 step 4); only once its look
-    has turned through every heading (a 60° camera: at least 300°) may it take the uncertified step at the edge
-    of D (the straight approach to a node is another rule's). A look that ended after one step, turned back and
-    began again never turned past its first view (a bug this test caught).
+@pytest.mark.parametrize("worst", [False, True])
+def test_a_look_ahead_unicycle_at_the_edge_of_d(worst):
+    """Starts where the set estimator's rules meet the edge of D: the cells' corners on it, pulled 1% toward the
+    centre; every step of the first 150.
 
-    Worst-case bearings, every step of the first 150, from where such looks happen: the cells' corners on the
-    edge of D, pulled 1% toward the centre."""
+    - Every certified step ends inside the cell it drove in (Theorem 2, (L1)): the truth is in that cell. Two
+      rules gave a robot a cell without that: an approach arriving near its node, and the uncertified step at
+      the edge of D, whose cell the next step took for the robot's (bugs this test caught, 3 cm outside).
+    - A start in D whose set no cell holds looks until one does (ALGORITHMS §12.3 step 4); only once its look
+      has turned through every heading (a 60° camera: at least 300°) since its last certified step may it take
+      the uncertified steps at the edge of D (the straight approach to a node is another rule's). A look that
+      ended after one step, turned back and began again never turned past its first view (a bug this test
+      caught)."""
     plan = lookahead_plan()
+    arrays = PlanArrays.from_plan(plan)
     cells = cell_polygons(plan.cells)
     edge = shapely.union_all(cells).boundary
     corners = np.vstack(
         [np.asarray(c.exterior.coords)[:-1] * 0.99 + 0.01 * np.asarray(c.centroid.coords) for c in cells]
     )
     starts = corners[shapely.distance(edge, shapely.points(corners)) < 0.02][:120]
-    params = lookahead_params(noise_worst=True)
+    params = lookahead_params(noise_worst=worst)
     loop, active, _ = simulate.start_loop(plan, starts, params)
     r = len(loop.x)
-    # the headings each run has faced since it last moved: an interval of the unwrapped heading
+    # the headings each run has faced since its last certified step: an interval of the unwrapped heading (a run
+    # that took an uncertified step at the edge of D drives on so, without looking again, until it is certified)
     low, high, unwrapped = loop.phi.copy(), loop.phi.copy(), loop.phi.copy()
     for _ in range(150):
         if not active.size:
@@ -646,12 +654,15 @@ def test_a_look_ahead_unicycle_in_d_drives_uncertified_only_after_turning_all_ar
         active = loop.step(active)
         unwrapped = unwrapped + np.angle(np.exp(1j * (loop.phi - phi)))
         moved = np.hypot(*(loop.x - x).T) > 0.0
+        sure = np.flatnonzero(moved & (loop.certified > certified))
+        depth = cell_slack(arrays, loop.state.cell[sure], loop.reference(loop.x[sure], loop.phi[sure]))
+        assert np.all(depth >= -arrays.tol), depth.min()
         # the uncertified steps of a robot without a cell (not those of the straight approach to a node)
         bad = np.flatnonzero(moved & (loop.certified == certified) & (loop.state.target < 0))
         span = high[bad] - low[bad]
         assert np.all(span >= math.radians(360.0 - params.fov) - 1e-9), np.degrees(span)
         low, high = np.minimum(low, unwrapped), np.maximum(high, unwrapped)
-        low[moved], high[moved] = unwrapped[moved], unwrapped[moved]
+        low[sure], high[sure] = unwrapped[sure], unwrapped[sure]
     assert r >= 40 and loop.certified.sum() > 0
 
 

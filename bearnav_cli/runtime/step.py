@@ -22,6 +22,7 @@ from bearnav_cli.runtime import bearing, bounded
 from bearnav_cli.runtime.cell_policy import (
     affine_field,
     apply_gain,
+    cell_slack,
     displacement,
     least_rank_cell,
     least_rank_cell_holding,
@@ -367,6 +368,13 @@ def bounded_control(
     swung = np.isfinite(state.resume) if ahead else np.zeros(r, bool)
     keep = np.where(swung, -error, error)
     cell, target, last_dir, u, stalled, relocated = follow_fields(arrays, s, state, est, bearings, visible, keep=keep)
+    if arrays.funnel:
+        # a cell a robot did not keep must hold p̂ eroded by e; an approach within eps_sw of its node takes the
+        # node's cell (cell_policy.funnel_update) without asking that (certified steps ended 3 cm outside their
+        # cell, from starts at the corners of D after a look-ahead look): then the robot has no cell yet
+        came = np.flatnonzero((cell >= 0) & (target < 0) & ((cell != state.cell) | (state.target >= 0)))
+        unsure = came[cell_slack(arrays, cell[came], reference[came]) < error[came] - arrays.tol]
+        cell[unsure] = -1
     in_cell = (cell >= 0) & (target < 0) & known
     holder = np.full(r, -1, np.int64)
     if arrays.funnel:
@@ -403,10 +411,16 @@ def bounded_control(
         idx = np.flatnonzero(move)
         u[idx], pace[idx] = certified_step(idx, cell[idx], reference[idx], phi[idx], u[idx], True)
         move[idx] = pace[idx] > 0.0
+    # robots driving a cell's field without knowing the truth is in it: the state keeps no cell for them
+    unsure = np.zeros(r, bool)
     if arrays.funnel:
         # at the edge of D after a whole look (a cell grown by e holds p̂, none holds the set): that cell's field,
-        # uncertified, at the error ball's pace; it leads deeper into the cell, where the switch applies
+        # uncertified, at the error ball's pace; it leads deeper into the cell, where the switch applies. The
+        # cell is not the robot's yet (kept, the next step took the truth to be in it and certified steps that
+        # ended outside it), and nor is the look undone: it drives on so, without looking again, until a cell
+        # holds its set or p̂ eroded by e
         edge = np.flatnonzero(outside & (holder >= 0))
+        unsure[edge] = True
         if len(edge):
             u[edge], ok = _unit_field(arrays, holder[edge], reference[edge])
             cell[edge], target[edge] = holder[edge], -1
@@ -486,7 +500,7 @@ def bounded_control(
         cell[returning], target[returning], relocated[returning] = state.cell[returning], state.target[returning], False
     # the clock of a look runs from the start too: a robot that never sees two landmarks turns all around
     # and is lost, as the filter's is, instead of waiting for its time to run out
-    hold = np.where(drive, 0.0, state.hold + s.dt)
+    hold = np.where(drive & ~unsure, 0.0, state.hold + s.dt)
     looker = Estimate(sets.x_hat, est.var, est.fix, drive | back, known, hold, error)
     scanning, lost, spin, turn, look = look_around(s, state, looker, last_dir, heading, arrays)
     if ahead:
@@ -517,7 +531,7 @@ def bounded_control(
         forward, motion = forward * pace, motion * pace[:, None]
         turn = np.where(scanning, turn, turn_cmd)
     new = ControlState(
-        cell,
+        np.where(unsure, -1, cell),
         target,
         last_dir,
         hold,
