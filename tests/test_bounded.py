@@ -620,10 +620,9 @@ def test_the_look_ahead_unicycle_under_the_set_estimator(worst, compass):
     assert sim.certified_steps.sum() > 0
 
 
-@pytest.mark.parametrize("worst", [False, True])
-def test_a_look_ahead_unicycle_at_the_edge_of_d(worst):
+def test_a_look_ahead_unicycle_at_the_edge_of_d():
     """Starts where the set estimator's rules meet the edge of D: the cells' corners on it, pulled 1% toward the
-    centre; every step of the first 150.
+    centre; worst-case bearings, every step of the first 150.
 
     - Every certified step ends inside the cell it drove in (Theorem 2, (L1)): the truth is in that cell. Two
       rules gave a robot a cell without that: an approach arriving near its node, and the uncertified step at
@@ -640,8 +639,8 @@ def test_a_look_ahead_unicycle_at_the_edge_of_d(worst):
     corners = np.vstack(
         [np.asarray(c.exterior.coords)[:-1] * 0.99 + 0.01 * np.asarray(c.centroid.coords) for c in cells]
     )
-    starts = corners[shapely.distance(edge, shapely.points(corners)) < 0.02][:120]
-    params = lookahead_params(noise_worst=worst)
+    starts = corners[shapely.distance(edge, shapely.points(corners)) < 0.02][:60]
+    params = lookahead_params(noise_worst=True)
     loop, active, _ = simulate.start_loop(plan, starts, params)
     r = len(loop.x)
     # the headings each run has faced since its last certified step: an interval of the unwrapped heading (a run
