@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import argparse
 import math
-from dataclasses import replace
 
 import numpy as np
 from common import machine_line, markdown_table, measured_maps, replace_section, timed
@@ -72,12 +71,10 @@ def certified_cell(m: dict) -> str:
     return f"{share} ({uncertified:,} of {moved:,} not)"
 
 
-def sure_starts(plan, params, x0: np.ndarray) -> np.ndarray | None:
+def sure_starts(plan, params, x0: np.ndarray) -> np.ndarray:
     """Whether each start is one ``bearnav verify``'s liveness calls sure to find its cell after a look all around
     (``LiveGrid.sure_start`` at the start's axle, the camera's place, at the world-frame bound: camera and
-    compass), shape (R,) bool; None under Gaussian noise (no bound)."""
-    if params.noise_bound_deg is None:
-        return None
+    compass), shape (R,) bool; bounded noise only."""
     arrays = PlanArrays.from_plan(plan)
     lam = arrays.lookahead if params.dynamics == "unicycle" else 0.0
     axle = robot.lookahead_point(x0, initial_headings(arrays, x0), -lam)
@@ -96,14 +93,18 @@ def one(plan, label: str, starts: str, **options) -> tuple[list, float]:
     # simulate` resolves them
     overrides = {"starts": starts, "fov": 60.0, "record_trajectories": False, **options}
     params = pipeline.resolve_params("simulate", plan.map.params, overrides)
-    x0 = simulate.resolve_starts(plan, params)
-    uncertified = np.zeros(len(x0), bool)
+    not_certified: list[np.ndarray] = []
 
     def watch(runs, x, certified):
-        uncertified[runs[~certified]] = True
+        not_certified.append(runs[~certified])
 
-    seconds, sim = timed(simulate.rollout, plan, x0, params, on_step=watch)
-    sim = replace(sim, stats={**simulate.metrics(sim), **sim.stats})
+    seconds, sim = timed(simulate.run, plan, params, on_step=watch)
+    uncertified = np.zeros(len(sim), bool)
+    uncertified[np.concatenate([np.zeros(0, np.int64), *not_certified])] = True
+    # which of them started sure of their cell; Gaussian noise has no bound to be sure within
+    sure = None
+    if params.noise_bound_deg is not None:
+        sure = sure_starts(plan, params, sim.starts) if uncertified.any() else uncertified
     m = sim.stats
     looks = m.get("looks_per_run")
     row = [
@@ -113,7 +114,7 @@ def one(plan, label: str, starts: str, **options) -> tuple[list, float]:
         m["containment_violations"],
         m["inconsistencies"],
         certified_cell(m),
-        uncertified_cell(uncertified, sure_starts(plan, params, x0) if uncertified.any() else uncertified),
+        uncertified_cell(uncertified, sure),
         "—" if looks is None else f"{looks:.1f}",
         "—" if m.get("look_time_mean_s") is None else f"{m['look_time_mean_s']:.2f} s",
         f"{m['time_mean_s']:.0f} s" if m.get("time_mean_s") else "—",
@@ -170,9 +171,8 @@ def main() -> None:
             worst, _ = one(plan, f"{tag}: set, worst", starts, estimator="set", noise_worst=True, **base)
             uniform[-1] += f" ({t_set / t_kalman:.2f}×)"
             rows += [kalman, uniform, worst]
-            if (
-                args.compass > 0.0
-            ):  # a camera within 0.2° and a compass within ψ: η = 0.2° + ψ, narrowed by the bearings
+            # a camera within 0.2° and a compass within ψ: η = 0.2° + ψ, narrowed by the bearings
+            if args.compass > 0.0:
                 bias = {"dynamics": dynamics, "noise_bound_deg": CAMERA, "compass_error_deg": args.compass}
                 rows += [
                     one(

@@ -26,7 +26,7 @@ import shapely
 
 from bearnav_cli import artifacts, cell_fields, cell_landmarks, composition, liveness, pipeline, verify, verify_checks
 from bearnav_cli.cell_lp import CellProblem, min_norm_gain
-from bearnav_cli.datatypes import CellStatus, Outcome, replace
+from bearnav_cli.datatypes import CellStatus, Outcome, cell_polygons, replace
 from bearnav_cli.geometry import DEFAULT_CLEARANCE, FreeSpace
 from bearnav_cli.lp import LpSolver
 from bearnav_cli.runtime import cell_policy, certificate
@@ -423,7 +423,7 @@ def test_a_cell_grown_by_e_is_found_wherever_the_point_is_within_e_of_it(grow_bi
     arrays = PlanArrays.from_plan(plan)
     rng = np.random.default_rng(5)
     e = grow_bins * float(arrays.bin_size.min())
-    polygons = [shapely.Polygon(cells.vertices(c)) for c in range(cells.n_cells)]
+    polygons = list(cell_polygons(cells))
     # points just outside D, within e of it, and anywhere
     ring = shapely.union_all(polygons).buffer(0.9 * e).difference(shapely.union_all(polygons))
     near = shapely.points(rng.uniform(*np.array(ring.bounds).reshape(2, 2), (4000, 2)))

@@ -373,8 +373,7 @@ def bounded_control(
         # node's cell (cell_policy.funnel_update) without asking that (certified steps ended 3 cm outside their
         # cell, from starts at the corners of D after a look-ahead look): then the robot has no cell yet
         came = np.flatnonzero((cell >= 0) & (target < 0) & ((cell != state.cell) | (state.target >= 0)))
-        unsure = came[cell_slack(arrays, cell[came], reference[came]) < error[came] - arrays.tol]
-        cell[unsure] = -1
+        cell[came[cell_slack(arrays, cell[came], reference[came]) < error[came] - arrays.tol]] = -1
     in_cell = (cell >= 0) & (target < 0) & known
     holder = np.full(r, -1, np.int64)
     if arrays.funnel:

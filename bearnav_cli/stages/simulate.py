@@ -602,7 +602,12 @@ def _finite_or_none(value: float) -> float | None:
     return value if math.isfinite(value) else None
 
 
-def run(plan, params: Params = Params(), progress: Callable[[int, int], None] | None = None) -> Simulation:
+def run(
+    plan,
+    params: Params = Params(),
+    progress: Callable[[int, int], None] | None = None,
+    on_step: Callable[[np.ndarray, np.ndarray, np.ndarray], None] | None = None,
+) -> Simulation:
     """``bearnav simulate``: the starts of ``params.starts`` run through :func:`rollout`.
 
     Parameters
@@ -613,6 +618,8 @@ def run(plan, params: Params = Params(), progress: Callable[[int, int], None] | 
         The loop's parameters; ``params.starts`` names the starts (:func:`resolve_starts`).
     progress : callable, optional
         ``progress(finished_runs, R)`` every few steps.
+    on_step : callable, optional
+        As :func:`rollout`'s.
 
     Returns
     -------
@@ -620,7 +627,7 @@ def run(plan, params: Params = Params(), progress: Callable[[int, int], None] | 
         What :func:`rollout` returns, with the :func:`metrics` (and the camera's report, if any)
         as its ``stats``.
     """
-    sim = rollout(plan, resolve_starts(plan, params), params, progress)
+    sim = rollout(plan, resolve_starts(plan, params), params, progress, on_step=on_step)
     return replace(sim, stats={**metrics(sim), **sim.stats})
 
 
